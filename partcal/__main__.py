@@ -1,0 +1,7 @@
+"""``python -m partcal``."""
+
+import sys
+
+from .cli import main
+
+sys.exit(main())

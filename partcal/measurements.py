@@ -1,0 +1,225 @@
+"""The measurement CSV contract: read, validate and write measured poses.
+
+One row per pose, one header line, ``#`` comment lines allowed. Columns:
+``q1..qN`` (joint angles, degrees), ``x_nom, y_nom, z_nom`` (nominal tool
+position, mm; optional when a robot model is given), ``x_meas, y_meas,
+z_meas`` (measured position, mm) and an optional text column ``set``. Other
+columns are accepted and ignored. Errors are ``measured - nominal``.
+
+Every problem is reported once, as ``FILE:LINE: column 'NAME': what was wrong``,
+where LINE is the line number an editor shows.
+"""
+
+from __future__ import annotations
+
+import csv
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ._io import atomic_write
+from ._validation import check_array
+from .errors import DataError
+from .kinematics import MAX_JOINTS, Robot, joint_columns, load_robot
+
+NOMINAL = ("x_nom", "y_nom", "z_nom")
+MEASURED = ("x_meas", "y_meas", "z_meas")
+_JOINT = re.compile(r"^q(\d+)$")
+
+
+@dataclass(frozen=True, eq=False)
+class Measurements:
+    """Measured poses of one data set.
+
+    Attributes
+    ----------
+    q_deg : ndarray, shape (n, N)
+        Commanded joint angles, degrees.
+    nominal_mm, measured_mm : ndarray, shape (n, 3)
+        Nominal (controller model) and measured tool positions, mm.
+    name : str
+        The data set's name (the file stem by default).
+    labels : tuple of str, optional
+        The ``set`` column, when present.
+    """
+
+    q_deg: NDArray[np.float64]
+    nominal_mm: NDArray[np.float64]
+    measured_mm: NDArray[np.float64]
+    name: str = "measurements"
+    labels: tuple[str, ...] | None = field(default=None)
+
+    def __post_init__(self):
+        q = check_array(self.q_deg, "q_deg", min_rows=1)
+        n = q.shape[0]
+        if not 1 <= q.shape[1] <= MAX_JOINTS:
+            raise DataError(f"q_deg must have 1..{MAX_JOINTS} columns, got {q.shape[1]}")
+        for attr in ("nominal_mm", "measured_mm"):
+            arr = check_array(getattr(self, attr), attr, columns=3)
+            if arr.shape[0] != n:
+                raise DataError(f"{attr} has {arr.shape[0]} rows but q_deg has {n}")
+            object.__setattr__(self, attr, arr)
+        object.__setattr__(self, "q_deg", q)
+        if self.labels is not None and len(self.labels) != n:
+            raise DataError(f"labels has {len(self.labels)} entries but q_deg has {n} rows")
+
+    def __len__(self) -> int:
+        return self.q_deg.shape[0]
+
+    @property
+    def n_joints(self) -> int:
+        return self.q_deg.shape[1]
+
+    @property
+    def errors_mm(self) -> NDArray[np.float64]:
+        """Position errors ``measured - nominal``, shape (n, 3), mm."""
+        return self.measured_mm - self.nominal_mm
+
+
+def read_measurements(path: str | Path, robot: str | Robot | None = None, *, name: str | None = None
+                      ) -> Measurements:
+    """Read a measurement CSV.
+
+    Parameters
+    ----------
+    path : str or Path
+    robot : str or Robot, optional
+        Used to compute the nominal positions by forward kinematics when the
+        file has no ``x_nom, y_nom, z_nom`` columns.
+    name : str, optional
+        Data set name; default the file name without extension.
+
+    Raises
+    ------
+    DataError
+        For any malformed content, naming the file, line and column.
+    """
+    path = Path(path)
+    rows = list(_rows(path))
+    if not rows:
+        raise DataError(f"{path}: empty file: expected a header line such as 'q1,...,x_meas,y_meas,z_meas'")
+    header_line, header = rows[0]
+    header = [h.strip() for h in header]
+    columns = _check_header(path, header_line, header, has_robot=robot is not None)
+    data = rows[1:]
+    if not data:
+        raise DataError(f"{path}:{header_line}: the header is not followed by any data row")
+    q_cols, nom_cols = columns["q"], columns["nom"]
+    numeric = q_cols + (nom_cols or []) + columns["meas"]
+    values = np.empty((len(data), len(numeric)))
+    for r, (line, cells) in enumerate(data):
+        if len(cells) != len(header):
+            raise DataError(f"{path}:{line}: expected {len(header)} cells as in the header, got {len(cells)}")
+        for c, col in enumerate(numeric):
+            values[r, c] = _number(path, line, header[col], cells[col])
+    n_q = len(q_cols)
+    q = values[:, :n_q]
+    meas = values[:, -3:]
+    if nom_cols:
+        nominal = values[:, n_q:n_q + 3]
+    else:
+        model = load_robot(robot)
+        if model.n_joints != n_q:
+            raise DataError(f"{path}: the file has {n_q} joint columns but robot {model.name!r} has "
+                            f"{model.n_joints} joints")
+        nominal = model.positions(q)
+    labels = None
+    if columns["set"] is not None:
+        labels = tuple(cells[columns["set"]].strip() for _, cells in data)
+    return Measurements(q_deg=q, nominal_mm=nominal, measured_mm=meas,
+                        name=name if name is not None else path.stem, labels=labels)
+
+
+def _rows(path: Path):
+    """Yield ``(line_number, cells)`` for the header and data lines, skipping comments and blanks."""
+    try:
+        handle = path.open(newline="", encoding="utf-8")
+    except FileNotFoundError:
+        raise DataError(f"{path}: no such file") from None
+    except OSError as exc:
+        raise DataError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    with handle:
+        try:
+            for number, text in enumerate(handle, start=1):
+                stripped = text.strip()
+                if not stripped or stripped.startswith("#"):
+                    continue
+                yield number, next(csv.reader([text]))
+        except UnicodeDecodeError as exc:
+            raise DataError(f"{path}: not a UTF-8 text file ({exc.reason} at byte {exc.start})") from None
+
+
+def _check_header(path: Path, line: int, header: list[str], *, has_robot: bool) -> dict:
+    where = f"{path}:{line}"
+    seen: dict[str, int] = {}
+    for i, col in enumerate(header):
+        if col in seen:
+            raise DataError(f"{where}: column {col!r} appears twice (columns {seen[col] + 1} and {i + 1})")
+        seen[col] = i
+    joints = sorted(int(m.group(1)) for col in header if (m := _JOINT.match(col)))
+    if not joints:
+        raise DataError(f"{where}: no joint columns: expected q1..qN (degrees), N in 1..{MAX_JOINTS}")
+    if joints != list(range(1, len(joints) + 1)) or len(joints) > MAX_JOINTS:
+        expected = f"q1..q{min(len(joints), MAX_JOINTS)}"
+        bad = next((f"q{j}" for j, k in zip(joints, range(1, len(joints) + 1)) if j != k), f"q{joints[-1]}")
+        raise DataError(f"{where}: column {bad!r}: joint columns must run q1..qN without gaps, "
+                        f"N <= {MAX_JOINTS}; expected {expected}")
+    for col in MEASURED:
+        if col not in seen:
+            raise DataError(f"{where}: column {col!r} is missing (required: {', '.join(MEASURED)})")
+    present = [c for c in NOMINAL if c in seen]
+    if 0 < len(present) < 3:
+        missing = next(c for c in NOMINAL if c not in seen)
+        raise DataError(f"{where}: column {missing!r} is missing (give all of {', '.join(NOMINAL)} or none)")
+    if not present and not has_robot:
+        raise DataError(f"{where}: columns {', '.join(NOMINAL)} are missing; give them, or a robot model "
+                        "to compute nominal positions by forward kinematics")
+    return {
+        "q": [seen[c] for c in joint_columns(len(joints))],
+        "nom": [seen[c] for c in NOMINAL] if present else None,
+        "meas": [seen[c] for c in MEASURED],
+        "set": seen.get("set"),
+    }
+
+
+def _number(path: Path, line: int, column: str, cell: str) -> float:
+    text = cell.strip()
+    try:
+        value = float(text)
+    except ValueError:
+        value = None
+    if value is None or not np.isfinite(value):
+        shown = "an empty cell" if not text else repr(text)
+        raise DataError(f"{path}:{line}: column {column!r}: expected a finite number, got {shown}")
+    return value
+
+
+def write_measurements(m: Measurements, path: str | Path, *, comment: str | None = None) -> None:
+    """Write measurements as a CSV that :func:`read_measurements` reads back.
+
+    Angles are written with 6 decimals (micro-degrees) and positions with 6
+    decimals (nanometres), so files are identical whenever the data are.
+    The file is written to a temporary name and renamed when complete.
+    """
+    header = joint_columns(m.n_joints) + list(NOMINAL) + list(MEASURED)
+    if m.labels is not None:
+        header.append("set")
+    with atomic_write(path, newline="") as handle:
+        for text in (comment or "").splitlines():
+            handle.write(f"# {text}\n")
+        handle.write(",".join(header) + "\n")
+        numbers = np.hstack([m.q_deg, m.nominal_mm, m.measured_mm])
+        for i, row in enumerate(numbers):
+            cells = [f"{v:.6f}" for v in row]
+            if m.labels is not None:
+                cells.append(_quote(m.labels[i]))
+            handle.write(",".join(cells) + "\n")
+
+
+def _quote(text: str) -> str:
+    if any(ch in text for ch in ',"\n\r'):
+        return '"' + text.replace('"', '""') + '"'
+    return text

@@ -1,0 +1,321 @@
+"""A virtual robot: the "true" machine behind the nominal model, and a laser tracker.
+
+The true robot differs from its nominal DH model by the error sources the
+paper names: link length, offset and twist deviations and joint zero offsets
+(random, per DH row), a tool-fixture error, a misaligned base frame, joint
+compliance under gravity (lumped masses, configuration dependent) and a
+cyclic gear-transmission error. The tracker adds a scale error of its own
+(its ppm accuracy) and averages noisy readings (its ppm repeatability). All
+of it comes from one YAML file and one seed; see ``docs/virtual_robot.md``.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ._yamlio import Section, load_yaml, range_check
+from .errors import ConfigError
+from .kinematics import Robot, joint_columns, load_robot
+from .measurements import Measurements, write_measurements
+from .trajectories import PATHS, paper_path
+
+log = logging.getLogger(__name__)
+GRAVITY_M_S2 = 9.80665
+
+
+@dataclass(frozen=True)
+class Compliance:
+    """Gravity sag of one joint: ``dq = torque / stiffness``.
+
+    The torque is that of point masses at DH frame origins about the z axis
+    of the pivot frame, with gravity along ``-z`` of the base.
+    """
+
+    joint: int                      # 1-based actuated joint that deflects
+    pivot_frame: int                # DH frame whose z axis is the hinge
+    mass_frames: tuple[int, ...]    # frames carrying the lumped masses
+    masses_kg: tuple[float, ...]
+    stiffness_nm_per_deg: float
+
+    def deflection_deg(self, origins: NDArray[np.float64], axes: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Joint deflection in degrees for frames ``(n, R + 1, 3)``."""
+        pivot, axis = origins[:, self.pivot_frame], axes[:, self.pivot_frame]
+        torque = np.zeros(origins.shape[0])
+        for frame, kg in zip(self.mass_frames, self.masses_kg):
+            lever_m = (origins[:, frame] - pivot) / 1000.0
+            force = np.array([0.0, 0.0, -kg * GRAVITY_M_S2])
+            torque += np.einsum("ij,ij->i", axis, np.cross(lever_m, force))
+        return torque / self.stiffness_nm_per_deg
+
+
+@dataclass(frozen=True)
+class Tracker:
+    """Laser tracker: scale error (accuracy) and averaged reading noise (repeatability)."""
+
+    position_mm: NDArray[np.float64]
+    accuracy_ppm: float
+    repeatability_ppm: float
+    readings: int
+
+
+@dataclass(frozen=True, eq=False)
+class VirtualRobot:
+    """The nominal model, the true robot, and the tracker that measures it."""
+
+    nominal: Robot
+    true: Robot
+    base_rotation: NDArray[np.float64]
+    base_mm: NDArray[np.float64]
+    compliance: tuple[Compliance, ...]
+    gear: tuple[tuple[int, float, float, float], ...]   # (joint, amplitude_deg, cycles_per_rev, phase_deg)
+    tracker: Tracker
+    tracker_scale: float
+
+    def actual_joints(self, q_deg: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Joint angles the arm really takes when ``q_deg`` is commanded."""
+        q = self.nominal.check_joints(q_deg).copy()
+        for joint, amp, cycles, phase in self.gear:
+            q[:, joint - 1] += amp * np.sin(np.radians(cycles * q[:, joint - 1] + phase))
+        if self.compliance:
+            origins, axes = self.true.frames(q)
+            for c in self.compliance:
+                q[:, c.joint - 1] += c.deflection_deg(origins, axes)
+        return q
+
+    def true_positions(self, q_deg) -> NDArray[np.float64]:
+        """Noise-free positions the true robot reaches, ``(n, 3)`` mm in the base frame."""
+        p = self.true.positions(self.actual_joints(q_deg))
+        return p @ self.base_rotation.T + self.base_mm
+
+    def measure(self, q_deg, rng: np.random.Generator) -> NDArray[np.float64]:
+        """What the tracker reports: the mean of ``readings`` noisy readings per pose."""
+        p = self.true_positions(q_deg)
+        t = self.tracker
+        dist = np.linalg.norm(p - t.position_mm, axis=1)
+        scaled = t.position_mm + (1.0 + self.tracker_scale) * (p - t.position_mm)
+        sigma = t.repeatability_ppm * 1e-6 * dist
+        noise = rng.standard_normal((p.shape[0], t.readings, 3)).mean(axis=1)
+        return scaled + sigma[:, None] * noise
+
+
+def _rotation_deg(rx: float, ry: float, rz: float) -> NDArray[np.float64]:
+    cx, sx, cy, sy, cz, sz = (f(np.radians(a)) for a in (rx, ry, rz) for f in (np.cos, np.sin))
+    rot_x = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
+    rot_y = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
+    rot_z = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
+    return rot_z @ rot_y @ rot_x
+
+
+@dataclass(frozen=True)
+class Study:
+    """A parsed virtual-experiment config: the robot and the data sets to produce."""
+
+    robot: VirtualRobot
+    seed: int
+    output: Path
+    datasets: dict[str, dict]
+    ranges_deg: dict[int, tuple[float, float]]
+    fixed_deg: dict[int, float]
+    source: Path
+
+
+def load_study(path: str | Path) -> Study:
+    """Read a virtual-experiment YAML (``configs/sk120_virtual.yaml``)."""
+    path = Path(path)
+    data, lines = load_yaml(path)
+    top = Section(data, "", lines, str(path))
+    nominal = load_robot(_robot_path(top.get("robot", "str"), path))
+    seed = top.get("seed", "int", check=range_check(0, integer=True))
+    output = Path(os.path.normpath(path.parent / top.get("output", "str")))
+    seeds = np.random.SeedSequence(seed).spawn(2)
+    rng = np.random.default_rng(seeds[0])
+    errors = top.section("errors", required=True)
+    true, base_rot, base_mm = _true_robot(nominal, errors, rng)
+    compliance = _compliance(errors, nominal)
+    gear = _gear(errors, nominal)
+    tr = top.section("tracker", required=True)
+    tracker = Tracker(
+        position_mm=np.asarray(tr.get("position_mm", "list", check=_vector3), dtype=float),
+        accuracy_ppm=tr.get("accuracy_ppm", "float", check=range_check(0)),
+        repeatability_ppm=tr.get("repeatability_ppm", "float", check=range_check(0)),
+        readings=tr.get("readings", "int", check=range_check(1, 10_000, integer=True)))
+    tr.done()
+    errors.done()
+    scale = np.random.default_rng(seeds[1]).uniform(-1, 1) * tracker.accuracy_ppm * 1e-6
+    sampling = top.section("sampling", required=True)
+    ranges = _joint_map(sampling, "ranges_deg", nominal, pairs=True)
+    fixed = _joint_map(sampling, "fixed_deg", nominal, pairs=False)
+    sampling.done()
+    datasets = _datasets(top.section("datasets", required=True))
+    top.done()
+    robot = VirtualRobot(nominal, true, base_rot, base_mm, compliance, gear, tracker, scale)
+    return Study(robot, seed, output, datasets, ranges, fixed, path)
+
+
+def _robot_path(name: str, config: Path) -> str:
+    candidate = config.parent / name
+    return str(candidate) if candidate.suffix in (".yaml", ".yml") and candidate.exists() else name
+
+
+def _vector3(value) -> str | None:
+    ok = len(value) == 3 and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
+    return None if ok else "a list of three numbers"
+
+
+def _true_robot(nominal: Robot, errors: Section, rng: np.random.Generator):
+    dh = errors.section("dh_sigma", required=True)
+    length = dh.get("length_mm", "float", check=range_check(0))
+    twist = dh.get("twist_deg", "float", check=range_check(0))
+    zero = dh.get("zero_offset_deg", "float", check=range_check(0))
+    dh.done()
+    rows = nominal.alpha_deg.size
+    deviations = rng.standard_normal((4, rows)) * np.array([[length], [length], [twist], [zero]])
+    tool = np.asarray(errors.get("tool_mm", "list", check=_vector3), dtype=float)
+    base = errors.section("base", required=True)
+    rot = _rotation_deg(*base.get("rotation_deg", "list", check=_vector3))
+    shift = np.asarray(base.get("translation_mm", "list", check=_vector3), dtype=float)
+    base.done()
+    true = nominal.replace(a_mm=nominal.a_mm + deviations[0], d_mm=nominal.d_mm + deviations[1],
+                           alpha_deg=nominal.alpha_deg + deviations[2],
+                           theta_offset_deg=nominal.theta_offset_deg + deviations[3],
+                           tool_mm=nominal.tool_mm + tool)
+    return true, rot, shift
+
+
+def _compliance(errors: Section, robot: Robot) -> tuple[Compliance, ...]:
+    out = []
+    items = errors.get("compliance", "list", default=[])
+    n_frames = robot.alpha_deg.size + 1
+    for i, item in enumerate(items):
+        sec = Section(item, f"{errors.path('compliance')}[{i}]", errors.lines, errors.source)
+        joint = sec.get("joint", "int", check=range_check(1, robot.n_joints, integer=True))
+        pivot = sec.get("pivot_frame", "int", check=range_check(0, n_frames - 1, integer=True))
+        stiff = sec.get("stiffness_Nm_per_deg", "float", check=range_check(1e-9))
+        frames, kgs = [], []
+        for k, m in enumerate(sec.get("masses", "list")):
+            ms = Section(m, f"{sec.path('masses')}[{k}]", sec.lines, sec.source)
+            frames.append(ms.get("frame", "int", check=range_check(0, n_frames - 1, integer=True)))
+            kgs.append(ms.get("kg", "float", check=range_check(0)))
+            ms.done()
+        sec.done()
+        out.append(Compliance(joint, pivot, tuple(frames), tuple(kgs), stiff))
+    return tuple(out)
+
+
+def _gear(errors: Section, robot: Robot) -> tuple:
+    out = []
+    for i, item in enumerate(errors.get("gear", "list", default=[])):
+        sec = Section(item, f"{errors.path('gear')}[{i}]", errors.lines, errors.source)
+        out.append((sec.get("joint", "int", check=range_check(1, robot.n_joints, integer=True)),
+                    sec.get("amplitude_deg", "float", check=range_check(0)),
+                    sec.get("cycles_per_rev", "float", check=range_check(0)),
+                    sec.get("phase_deg", "float", default=0.0)))
+        sec.done()
+    return tuple(out)
+
+
+def _joint_map(sec: Section, key: str, robot: Robot, pairs: bool) -> dict:
+    sub = sec.section(key)
+    names = joint_columns(robot.n_joints)
+    out = {}
+    for j, name in enumerate(names, start=1):
+        if not sub.has(name):
+            continue
+        if pairs:
+            lo, hi = sub.get(name, "list", check=lambda v: None if len(v) == 2 and v[0] < v[1]
+                             else "[low, high] with low < high")
+            out[j] = (float(lo), float(hi))
+        else:
+            out[j] = sub.get(name, "float")
+    sub.done()
+    return out
+
+
+def _datasets(sec: Section) -> dict[str, dict]:
+    out = {}
+    for name in list(sec.data):
+        item = sec.section(name)
+        if item.has("sample") == item.has("path"):
+            item.fail(item.where, "give exactly one of 'sample: N' (sampled configurations) or "
+                                  f"'path: NAME' ({', '.join(PATHS)})")
+        if item.has("sample"):
+            spec = {"sample": item.get("sample", "int", check=range_check(1, 10**7, integer=True))}
+        else:
+            spec = {"path": item.get("path", "str", check=lambda v: None if v in PATHS
+                                     else "one of " + ", ".join(PATHS)),
+                    "start_mm": item.get("start_mm", "list", default=None, check=_vector3)}
+        item.done()
+        out[name] = spec
+    if not out:
+        sec.fail(sec.where, "lists no data set")
+    return out
+
+
+def sample_configurations(robot: Robot, n: int, ranges_deg: dict, fixed_deg: dict,
+                          rng: np.random.Generator, oversample: int = 20) -> NDArray[np.float64]:
+    """``n`` well-spread joint configurations within ranges, limits and constraints.
+
+    Draws ``oversample * n`` uniform candidates, keeps the admissible ones and
+    picks ``n`` of them by farthest-point selection in range-normalised joint
+    space, so the set covers every active joint's range evenly.
+    """
+    lo = robot.limits_deg[:, 0].copy()
+    hi = robot.limits_deg[:, 1].copy()
+    for j, (a, b) in ranges_deg.items():
+        lo[j - 1], hi[j - 1] = max(a, lo[j - 1]), min(b, hi[j - 1])
+    cand = rng.uniform(lo, hi, size=(oversample * n, robot.n_joints))
+    for j, value in fixed_deg.items():
+        cand[:, j - 1] = value
+    cand = cand[robot.within_limits(cand)]
+    if cand.shape[0] < n:
+        raise ConfigError(f"only {cand.shape[0]} admissible configurations among {oversample * n} candidates; "
+                         "widen sampling.ranges_deg")
+    span = np.where(hi > lo, hi - lo, 1.0)
+    unit = (cand - lo) / span
+    chosen = [int(np.argmin(np.linalg.norm(unit - 0.5, axis=1)))]
+    dist = np.linalg.norm(unit - unit[chosen[0]], axis=1)
+    for _ in range(n - 1):
+        k = int(np.argmax(dist))
+        chosen.append(k)
+        dist = np.minimum(dist, np.linalg.norm(unit - unit[k], axis=1))
+    return cand[chosen]
+
+
+def simulate(study: Study) -> dict[str, Measurements]:
+    """Produce every data set of a study (deterministic for its seed)."""
+    vr = study.robot
+    out = {}
+    children = np.random.SeedSequence(study.seed).spawn(2 + len(study.datasets))[2:]
+    for (name, spec), child in zip(study.datasets.items(), children):
+        rng = np.random.default_rng(child)
+        if "sample" in spec:
+            q = sample_configurations(vr.nominal, spec["sample"], study.ranges_deg, study.fixed_deg, rng)
+        else:
+            targets = paper_path(spec["path"], spec["start_mm"])
+            seed = vr.nominal.home_deg.copy()
+            for j, value in study.fixed_deg.items():
+                seed[j - 1] = value
+            q = vr.nominal.inverse_path(targets, seed, fixed=tuple(study.fixed_deg))
+        nominal = vr.nominal.positions(q)
+        out[name] = Measurements(q, nominal, vr.measure(q, rng), name=name, labels=(name,) * len(q))
+        log.info("simulated %s: %d poses", name, len(q))
+    return out
+
+
+def write_study(study: Study, data: dict[str, Measurements]) -> list[Path]:
+    """Write each data set to ``<output>/<name>.csv``; return the paths."""
+    paths = []
+    for name, m in data.items():
+        target = study.output / f"{name}.csv"
+        note = (f"Virtual {study.robot.nominal.name}, data set '{name}', simulated by partcal from "
+                f"{study.source.name} with seed {study.seed}.\nRegenerate with: partcal simulate "
+                f"configs/{study.source.name}. Do not edit by hand.")
+        write_measurements(m, target, comment=note)
+        paths.append(target)
+    return paths

@@ -1,0 +1,79 @@
+"""The measurement CSV contract (CONTRACTS.md section 1)."""
+
+import numpy as np
+import pytest
+
+from partcal import DataError, Measurements, read_measurements, write_measurements
+
+HEADER = "q1,q2,x_nom,y_nom,z_nom,x_meas,y_meas,z_meas"
+
+
+def write(tmp_path, text, name="m.csv"):
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+def test_round_trip_and_errors(tmp_path):
+    rng = np.random.default_rng(0)
+    m = Measurements(rng.uniform(-90, 90, (7, 6)), rng.uniform(-1e3, 1e3, (7, 3)),
+                     rng.uniform(-1e3, 1e3, (7, 3)), name="demo", labels=("a,b",) * 7)
+    path = tmp_path / "demo.csv"
+    write_measurements(m, path, comment="two\nlines")
+    back = read_measurements(path)
+    np.testing.assert_allclose(back.q_deg, m.q_deg, atol=5e-7)
+    np.testing.assert_allclose(back.errors_mm, m.measured_mm - m.nominal_mm, atol=2e-6)
+    assert back.labels == m.labels and back.name == "demo" and len(back) == 7
+    write_measurements(back, tmp_path / "again.csv", comment="two\nlines")
+    assert (tmp_path / "again.csv").read_bytes() == path.read_bytes()
+
+
+def test_comments_blank_lines_and_extra_columns(tmp_path):
+    path = write(tmp_path, "# a comment\n\nq1,note,x_nom,y_nom,z_nom,x_meas,y_meas,z_meas\n"
+                           "# inside\n10,hello,1,2,3,1.5,2,2\n")
+    m = read_measurements(path)
+    assert m.q_deg.tolist() == [[10.0]]
+    assert m.errors_mm.tolist() == [[0.5, 0.0, -1.0]]
+
+
+def test_nominal_from_forward_kinematics(tmp_path, sk120):
+    path = write(tmp_path, "q1,q2,q3,q4,q5,q6,x_meas,y_meas,z_meas\n0,-90,-180,0,0,0,1858.65,0,1555.32\n")
+    m = read_measurements(path, robot="motoman_sk120")
+    np.testing.assert_allclose(m.nominal_mm, [[1857.65, 0.0, 1555.32]], atol=1e-9)
+    np.testing.assert_allclose(m.errors_mm, [[1.0, 0.0, 0.0]], atol=1e-9)
+
+
+@pytest.mark.parametrize("text, match", [
+    ("", r"m.csv: empty file"),
+    ("# only a comment\n", r"m.csv: empty file"),
+    (HEADER + "\n", r"m.csv:1: the header is not followed by any data row"),
+    ("q1,q2,x_nom,y_nom,z_nom,x_meas,y_meas\n1,2,3,4,5,6,7\n", r"m.csv:1: column 'z_meas' is missing"),
+    ("q1,q2,x_nom,z_nom,x_meas,y_meas,z_meas\n1,2,3,4,5,6,7\n", r"m.csv:1: column 'y_nom' is missing"),
+    ("q1,q2,x_meas,y_meas,z_meas\n1,2,3,4,5\n", r"m.csv:1: columns x_nom, y_nom, z_nom are missing"),
+    ("q1,q2,q1,x_nom,y_nom,z_nom,x_meas,y_meas,z_meas\n", r"m.csv:1: column 'q1' appears twice \(columns 1 and 3\)"),
+    ("q1,q2,q4,x_nom,y_nom,z_nom,x_meas,y_meas,z_meas\n", r"m.csv:1: column 'q4': joint columns must run q1..qN"),
+    ("x_nom,y_nom,z_nom,x_meas,y_meas,z_meas\n1,2,3,4,5,6\n", r"m.csv:1: no joint columns"),
+    (HEADER + "\n1,2,3,4,5,6,7,8\n1,2,3,nan,5,6,7,8\n", r"m.csv:3: column 'y_nom': expected a finite number, got 'nan'"),
+    (HEADER + "\n1,2,3,4,5,6,7,8\n1,abc,3,4,5,6,7,8\n", r"m.csv:3: column 'q2': expected a finite number, got 'abc'"),
+    ("# c\n" + HEADER + "\n1,2,3,4,5,,7,8\n", r"m.csv:3: column 'x_meas': expected a finite number, got an empty cell"),
+    (HEADER + "\n1,2,3,4,5,6,7,8\n1,2,3,4,5,6,7\n", r"m.csv:3: expected 8 cells as in the header, got 7"),
+    (HEADER + "\n1,2,3,4,5,6,7,inf\n", r"m.csv:2: column 'z_meas': expected a finite number, got 'inf'"),
+])
+def test_bad_files_get_one_clear_error(tmp_path, text, match):
+    with pytest.raises(DataError, match=match):
+        read_measurements(write(tmp_path, text))
+
+
+def test_missing_file_and_joint_mismatch_with_robot(tmp_path):
+    with pytest.raises(DataError, match=r"nope.csv: no such file"):
+        read_measurements(tmp_path / "nope.csv")
+    path = write(tmp_path, "q1,q2,x_meas,y_meas,z_meas\n1,2,3,4,5\n")
+    with pytest.raises(DataError, match=r"2 joint columns but robot 'motoman_sk120' has 6 joints"):
+        read_measurements(path, robot="motoman_sk120")
+
+
+def test_measurements_record_checks_shapes():
+    with pytest.raises(DataError, match=r"nominal_mm has 2 rows but q_deg has 1"):
+        Measurements(np.zeros((1, 6)), np.zeros((2, 3)), np.zeros((1, 3)))
+    with pytest.raises(DataError, match=r"Expected measured_mm with shape \(n, 3\)"):
+        Measurements(np.zeros((1, 6)), np.zeros((1, 3)), np.zeros((1, 2)))

@@ -1,0 +1,108 @@
+"""The virtual SK120 and the shipped data."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from conftest import ROOT
+from partcal import ConfigError, read_measurements
+from partcal.metrics import rms_per_axis
+from partcal.simulate import load_study, simulate, write_study
+from partcal.trajectories import rectangle, spiral
+
+CONFIG = ROOT / "configs" / "sk120_virtual.yaml"
+SHIPPED = ROOT / "data" / "sk120"
+NAMES = ["identification", "test_rectangle", "test_spiral_xy", "test_spiral_yz"]
+
+
+@pytest.fixture(scope="module")
+def regenerated(tmp_path_factory):
+    study = load_study(CONFIG)
+    out = tmp_path_factory.mktemp("sk120")
+    study = dataclasses.replace(study, output=out)
+    data = simulate(study)
+    write_study(study, data)
+    return out, data
+
+
+def test_shipped_data_regenerate_bit_for_bit(regenerated):
+    out, _ = regenerated
+    for name in NAMES:
+        assert (out / f"{name}.csv").read_bytes() == (SHIPPED / f"{name}.csv").read_bytes(), name
+
+
+def test_sizes_and_start_points():
+    sets = {name: read_measurements(SHIPPED / f"{name}.csv") for name in NAMES}
+    assert [len(sets[n]) for n in NAMES] == [85, 200, 200, 200]
+    np.testing.assert_allclose(sets["test_rectangle"].nominal_mm[0], [1100, 800, 600], atol=1e-6)
+    np.testing.assert_allclose(sets["test_spiral_xy"].nominal_mm[0], [1200, -600, 600], atol=1e-6)
+    np.testing.assert_allclose(sets["test_spiral_yz"].nominal_mm[0], [500, 500, 1400], atol=1e-6)
+    for m in sets.values():
+        assert np.all(m.q_deg[:, 3:5] == 0.0)     # the wrist stays at q4 = q5 = 0
+
+
+def test_paths_follow_the_paper_formulas():
+    # Archimedes spiral r = phi, x = W r cos phi, y = W r sin phi, W = 20, step 5 pi / 200.
+    k = 37
+    phi = k * 5 * np.pi / 200
+    path = spiral((1200, -600, 600), "xy")
+    np.testing.assert_allclose(path[k, :2], [1200 + 20 * phi * np.cos(phi), -600 + 20 * phi * np.sin(phi)])
+    assert path[-1, 2] == pytest.approx(1000.0) and np.all(np.diff(path[:, 2]) > 0)
+    yz = spiral((500, 500, 1400), "yz")
+    np.testing.assert_allclose(yz[k, 1:], [500 + 20 * phi * np.cos(phi), 1400 + 20 * phi * np.sin(phi)])
+    rect = rectangle()
+    sides = np.linalg.norm(np.diff(np.vstack([rect, rect[:1]]), axis=0), axis=1)
+    np.testing.assert_allclose(sides, np.repeat([1200 / 50, np.hypot(200, 500) / 50, 1200 / 50,
+                                                  np.hypot(200, 500) / 50], 50))
+
+
+def test_uncompensated_errors_in_the_range_of_table_2(regenerated):
+    _, data = regenerated
+    paper = np.array([8.0, 7.5, 17.9])
+    ratio = rms_per_axis(data["identification"].errors_mm) / paper
+    assert np.all((ratio > 0.5) & (ratio < 2.0)), ratio
+
+
+def test_identification_spreads_over_the_sampled_ranges(regenerated):
+    _, data = regenerated
+    q = data["identification"].q_deg
+    for j, (lo, hi) in {0: (-60, 60), 1: (-160, -100), 2: (-205, -145), 5: (-90, 90)}.items():
+        assert q[:, j].min() < lo + 0.15 * (hi - lo) and q[:, j].max() > hi - 0.15 * (hi - lo)
+
+
+def test_error_sources_each_change_the_measurements():
+    study = load_study(CONFIG)
+    vr = study.robot
+    q = data_q = np.array([[0, -120, -170, 0, 0, 0], [30, -140, -190, 0, 0, 45]], dtype=float)
+    nominal = vr.nominal.positions(q)
+    assert np.all(np.linalg.norm(vr.true_positions(q) - nominal, axis=1) > 1.0)
+    stiff = dataclasses.replace(vr, compliance=())
+    sag = vr.true_positions(data_q)[:, 2] - stiff.true_positions(data_q)[:, 2]
+    assert np.all(sag < -1.0)     # gravity pulls the tool down
+    no_gear = dataclasses.replace(vr, gear=())
+    assert np.abs(vr.true_positions(q) - no_gear.true_positions(q)).max() > 0.1
+
+
+def test_tracker_noise_is_small_and_averaged():
+    study = load_study(CONFIG)
+    q = np.tile([[0.0, -120, -170, 0, 0, 0]], (2000, 1))
+    measured = study.robot.measure(q, np.random.default_rng(3))
+    spread = measured.std(axis=0)
+    # 5 ppm at ~2.5 m is 12.5 um per reading; the mean of 100 readings: ~1.25 um
+    assert np.all(spread < 3e-3) and np.all(spread > 3e-4)
+
+
+def test_config_errors_name_key_and_line(tmp_path):
+    text = CONFIG.read_text().replace("  readings: 100", "  readings: 100\n  readngs: 3")
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(text)
+    line = next(i for i, t in enumerate(text.splitlines(), 1) if t.startswith("  readngs: 3"))
+    with pytest.raises(ConfigError, match=rf"bad.yaml: tracker.readngs \(line {line}\): unknown key; did you mean 'readings'\?"):
+        load_study(bad)
+    bad.write_text(CONFIG.read_text().replace("seed: 2006", "seed: -1"))
+    with pytest.raises(ConfigError, match=r"seed \(line \d+\): must be an int in \[0, inf\]; got -1"):
+        load_study(bad)
+    bad.write_text(CONFIG.read_text().replace("seed: 2006", "seed: 1\nseed: 2"))
+    with pytest.raises(ConfigError, match=r"seed \(line \d+\): duplicate key"):
+        load_study(bad)

@@ -11,6 +11,8 @@ from .errors import ConfigError, DataError, ModelFileError, PartcalError, Unreac
 from .kinematics import Robot, available_robots, load_robot
 from .measurements import Measurements, read_measurements, write_measurements
 from .metrics import rms_per_axis, summary
+from .models import ErrorModel
+from .swarm import SwarmConfig, SwarmResult, minimize
 
 __all__ = [
     "__version__",
@@ -18,4 +20,5 @@ __all__ = [
     "Robot", "available_robots", "load_robot",
     "Measurements", "read_measurements", "write_measurements",
     "rms_per_axis", "summary",
+    "ErrorModel", "SwarmConfig", "SwarmResult", "minimize",
 ]

@@ -1,0 +1,140 @@
+"""Feature maps: ordinary polynomials (with or without cross terms) and Fourier polynomials.
+
+Inputs are joint angles in degrees (``kind="joint"``) or Cartesian positions in
+mm (``kind="cartesian"``). Inside, each input is centred and scaled from the
+training data: polynomials use ``u = (x - centre) / half_range`` so that x and
+x² are not nearly collinear; Fourier terms use the joint angle in radians (a
+joint is periodic) or ``pi/2 * u`` for a position (the data span half a
+period). Inputs that are constant in the training data carry no information
+and are left out (the paper's q4 = q5 = 0).
+
+Terms follow the paper: ``1, u1, u1², ..., u2, ...`` (eq. 7) and
+``1, cos(phi_i), sin(phi_i), ..., cos(r phi_i), sin(r phi_i)`` (eq. 5).
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+from math import comb
+
+import numpy as np
+from numpy.typing import NDArray
+
+
+@dataclass(frozen=True)
+class Scaling:
+    """Per-input centring and scaling learnt from training data.
+
+    ``active`` marks the inputs that vary in the data; the others are ignored.
+    """
+
+    centre: NDArray[np.float64]
+    scale: NDArray[np.float64]
+    active: NDArray[np.bool_]
+
+    @classmethod
+    def fit(cls, X: NDArray[np.float64]) -> "Scaling":
+        lo, hi = X.min(axis=0), X.max(axis=0)
+        half = (hi - lo) / 2.0
+        active = half > 1e-12 * np.maximum(1.0, np.abs(hi))
+        return cls(centre=(hi + lo) / 2.0, scale=np.where(active, half, 1.0), active=active)
+
+    def to_dict(self) -> dict:
+        return {"centre": self.centre.tolist(), "scale": self.scale.tolist(), "active": self.active.tolist()}
+
+
+@dataclass(frozen=True)
+class Basis:
+    """A feature map. ``kind``: ``polynomial`` or ``fourier``; ``inputs``: ``joint`` or ``cartesian``.
+
+    ``order`` is the polynomial degree or the number of harmonics.
+    """
+
+    kind: str
+    inputs: str
+    order: int
+    cross_terms: bool = False
+
+    def terms(self, scaling: Scaling) -> list[tuple]:
+        """The terms, as exponent tuples (polynomial) or ``(trig, input, harmonic)`` (Fourier)."""
+        active = np.flatnonzero(scaling.active)
+        d = scaling.active.size
+        if self.kind == "fourier":
+            return [("1", -1, 0)] + [(trig, int(i), q) for q in range(1, self.order + 1)
+                                     for i in active for trig in ("cos", "sin")]
+        if self.cross_terms:
+            out = []
+            for total in range(self.order + 1):
+                for combo in itertools.combinations_with_replacement(active, total):
+                    exps = [0] * d
+                    for i in combo:
+                        exps[i] += 1
+                    out.append(tuple(exps))
+            return out
+        out = [(0,) * d]
+        for i in active:
+            for k in range(1, self.order + 1):
+                exps = [0] * d
+                exps[i] = k
+                out.append(tuple(exps))
+        return out
+
+    def n_terms(self, n_active: int) -> int:
+        """Number of terms per output for ``n_active`` varying inputs."""
+        if self.kind == "fourier":
+            return 1 + 2 * self.order * n_active
+        if self.cross_terms:
+            return comb(n_active + self.order, self.order)
+        return 1 + self.order * n_active
+
+    def angles(self, X: NDArray[np.float64], scaling: Scaling) -> NDArray[np.float64]:
+        """The Fourier phase of every input, radians."""
+        if self.inputs == "joint":
+            return np.radians(X)
+        return (np.pi / 2.0) * (X - scaling.centre) / scaling.scale
+
+    def transform(self, X: NDArray[np.float64], scaling: Scaling, terms: list[tuple] | None = None
+                  ) -> NDArray[np.float64]:
+        """Feature matrix, shape ``(n, n_terms)``, for inputs ``(n, d)`` in contract units."""
+        terms = self.terms(scaling) if terms is None else terms
+        out = np.empty((X.shape[0], len(terms)))
+        if self.kind == "fourier":
+            phi = self.angles(X, scaling)
+            for t, (trig, i, q) in enumerate(terms):
+                out[:, t] = 1.0 if trig == "1" else (np.cos if trig == "cos" else np.sin)(q * phi[:, i])
+            return out
+        u = (X - scaling.centre) / scaling.scale
+        powers = [np.ones_like(u), u]
+        for _ in range(2, self.order + 1):
+            powers.append(powers[-1] * u)
+        for t, exps in enumerate(terms):
+            col = np.ones(X.shape[0])
+            for i, k in enumerate(exps):
+                if k:
+                    col = col * powers[k][:, i]
+            out[:, t] = col
+        return out
+
+
+# ---------------------------------------------------------------------- raw-unit equations
+def raw_polynomial(terms: list[tuple], coefs: NDArray[np.float64], scaling: Scaling) -> dict[tuple, float]:
+    """Re-express a polynomial in scaled inputs as one in raw inputs.
+
+    ``sum_t c_t prod_i ((x_i - m_i) / s_i)^a_ti`` is expanded binomially into
+    ``{exponents: coefficient}`` over the raw inputs ``x_i``.
+
+    >>> s = Scaling(np.array([10.0]), np.array([2.0]), np.array([True]))
+    >>> raw_polynomial([(0,), (1,), (2,)], np.array([1.0, 2.0, 4.0]), s)   # 1 + 2u + 4u², u = (x-10)/2
+    {(0,): 91.0, (1,): -19.0, (2,): 1.0}
+    """
+    out: dict[tuple, float] = {}
+    for exps, c in zip(terms, coefs):
+        parts = []   # per input: list of (power, factor) from ((x - m) / s)^a
+        for i, a in enumerate(exps):
+            m, s = scaling.centre[i], scaling.scale[i]
+            parts.append([(j, comb(a, j) * (-m) ** (a - j) / s**a) for j in range(a + 1)])
+        for choice in itertools.product(*parts):
+            key = tuple(j for j, _ in choice)
+            out[key] = float(out.get(key, 0.0) + c * np.prod([f for _, f in choice]))
+    return dict(sorted(out.items(), key=lambda kv: (sum(kv[0]), [-k for k in kv[0]])))

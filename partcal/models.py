@@ -1,0 +1,257 @@
+"""``ErrorModel``: position errors as a polynomial or Fourier series of the inputs.
+
+A scikit-learn regressor. The coefficients of each output (x, y, z) are found
+by least squares (``solver="lstsq"``, the exact optimum of the RMS) or by a
+particle swarm (``solver="pso"``, the paper's method) minimising a fitness:
+``rms`` (the paper's), ``max`` (largest absolute error: a Chebyshev fit that
+bounds the worst case) or ``mae`` (mean absolute error).
+
+The swarm searches orthonormal coordinates of the feature matrix
+(``Phi = U S V^T``, coefficients ``V S^-1 z``). In them the sum of squared
+errors is ``|z|^2 - 2 z.b + |y|^2`` with ``b = U^T y``: the RMS of every
+particle costs O(terms), whatever the number of samples, and the RMS surface
+is a sphere, which a swarm searches well. The search box ``|z_k| <=
+bound_scale |y|`` contains the least-squares optimum (``|b| <= |y|``). Every
+PSO fit of an RMS model records ``rms_ratio_``, its RMS over the
+least-squares RMS on the same data (1.0 is optimal).
+"""
+
+from __future__ import annotations
+
+import logging
+from numbers import Integral
+
+import numpy as np
+from numpy.typing import NDArray
+from sklearn.base import BaseEstimator, RegressorMixin
+from sklearn.utils import check_random_state
+from sklearn.utils.validation import check_is_fitted, validate_data
+
+from ._validation import check_choice, check_int, param_error
+from .bases import Basis, Scaling, raw_polynomial
+from .errors import PartcalError
+from .swarm import SwarmConfig, SwarmResult, minimize
+
+log = logging.getLogger(__name__)
+INPUTS = ("cartesian", "joint")
+BASES = ("polynomial", "fourier")
+SOLVERS = ("pso", "lstsq")
+FITNESSES = ("rms", "max", "mae")
+
+
+class ErrorModel(RegressorMixin, BaseEstimator):
+    """Position-error model, linear in its coefficients.
+
+    Parameters
+    ----------
+    inputs : {"cartesian", "joint"}
+        What ``X`` holds: positions in mm (CI) or joint angles in degrees (AI).
+    basis : {"polynomial", "fourier"}
+    degree : int in [1, 8]
+        Polynomial degree (1 = the paper's FDP, 2 = SDP).
+    harmonics : int in [1, 8]
+        Fourier harmonics ``r`` (eq. 5).
+    cross_terms : bool
+        Polynomial only: all products of inputs up to ``degree`` instead of
+        the paper's sum of one-input polynomials.
+    solver : {"pso", "lstsq"}
+    pso : SwarmConfig, optional
+        Swarm settings; default ``SwarmConfig()``.
+    fitness : {"rms", "max", "mae"}
+        What the swarm minimises (least squares always minimises the RMS).
+    random_state : None, int, numpy RandomState or Generator
+
+    Attributes
+    ----------
+    coef_ : ndarray, shape (n_terms, n_outputs)
+        Coefficients of the scaled features (see :meth:`equations` for raw units).
+    scaling_ : Scaling
+    terms_ : list
+    train_rms_ : ndarray, shape (n_outputs,)
+        RMS error per output on the training data.
+    lstsq_rms_ : ndarray, shape (n_outputs,)
+        The least-squares RMS on the same data.
+    rms_ratio_ : float
+        3-D RMS of this fit over that of least squares (1.0 for lstsq).
+    swarm_results_ : list of SwarmResult
+        One per output for ``solver="pso"``, with the best-fitness history.
+
+    Examples
+    --------
+    >>> X = np.random.default_rng(0).uniform(-500, 500, (50, 3))
+    >>> y = 0.5 + 0.002 * X
+    >>> model = ErrorModel(degree=1, solver="lstsq").fit(X, y)
+    >>> bool(np.abs(model.predict(X) - y).max() < 1e-9)
+    True
+    """
+
+    def __init__(self, *, inputs="cartesian", basis="polynomial", degree=1, harmonics=1,
+                 cross_terms=False, solver="pso", pso=None, fitness="rms", random_state=None):
+        self.inputs = inputs
+        self.basis = basis
+        self.degree = degree
+        self.harmonics = harmonics
+        self.cross_terms = cross_terms
+        self.solver = solver
+        self.pso = pso
+        self.fitness = fitness
+        self.random_state = random_state
+
+    # ------------------------------------------------------------------ parameters
+    def _check_params(self) -> tuple[Basis, SwarmConfig]:
+        own = type(self).__name__
+        check_choice(own, "inputs", self.inputs, INPUTS)
+        check_choice(own, "basis", self.basis, BASES)
+        check_int(own, "degree", self.degree, 1, 8)
+        check_int(own, "harmonics", self.harmonics, 1, 8)
+        check_choice(own, "solver", self.solver, SOLVERS)
+        check_choice(own, "fitness", self.fitness, FITNESSES)
+        if not isinstance(self.cross_terms, (bool, np.bool_)):
+            raise param_error(own, "cross_terms", "a bool", self.cross_terms)
+        if self.cross_terms and self.basis != "polynomial":
+            raise param_error(own, "cross_terms", "False for the fourier basis", self.cross_terms)
+        if self.solver == "lstsq" and self.fitness != "rms":
+            raise param_error(own, "fitness", "'rms' with solver='lstsq' (use solver='pso')", self.fitness)
+        if self.pso is not None and not isinstance(self.pso, SwarmConfig):
+            raise param_error(own, "pso", "a SwarmConfig or None", self.pso)
+        order = self.degree if self.basis == "polynomial" else self.harmonics
+        return Basis(self.basis, self.inputs, order, bool(self.cross_terms)), self.pso or SwarmConfig()
+
+    def n_coefficients(self, n_inputs: int, n_outputs: int = 3) -> int:
+        """Number of coefficients for ``n_inputs`` varying inputs and ``n_outputs`` outputs."""
+        basis, _ = self._check_params()
+        return basis.n_terms(n_inputs) * n_outputs
+
+    # ------------------------------------------------------------------ fitting
+    def fit(self, X, y):
+        """Fit the coefficients to errors ``y`` (n, 3) mm at inputs ``X`` (n, d). Returns self."""
+        return self._fit(X, y, None)
+
+    def _fit(self, X, y, sample_weight):
+        basis, swarm = self._check_params()
+        X, y = validate_data(self, X, y, multi_output=True, y_numeric=True, dtype=np.float64)
+        self._y_1d = y.ndim == 1
+        Y = y.reshape(len(y), -1)
+        scaling = Scaling.fit(X)
+        terms = basis.terms(scaling)
+        n, m = X.shape[0], len(terms)
+        if n < m:
+            raise PartcalError(
+                f"{type(self).__name__} with {m} terms per output ({self._describe()}) needs at least "
+                f"{m} samples; got {n} sample{'s' if n != 1 else ''}")
+        weights = np.ones(n) if sample_weight is None else np.asarray(sample_weight, dtype=float)
+        phi = basis.transform(X, scaling, terms)
+        sqrt_w = np.sqrt(weights)
+        U, s, Vt = np.linalg.svd(phi * sqrt_w[:, None], full_matrices=False)
+        keep = s > s[0] * max(n, m) * np.finfo(float).eps
+        U, s, Vt = U[:, keep], s[keep], Vt[keep]
+        to_coef = Vt.T / s                                          # z -> coefficients
+        Yw = Y * sqrt_w[:, None]
+        z_ls = U.T @ Yw                                             # (r, outputs)
+        coef_ls = to_coef @ z_ls
+        total_w = weights.sum()
+        lstsq_sse = np.maximum((Yw * Yw).sum(axis=0) - (z_ls * z_ls).sum(axis=0), 0.0)
+        self.swarm_results_ = []
+        if self.solver == "lstsq":
+            coef = coef_ls
+        else:
+            seeds = np.random.SeedSequence(_seed_from(self.random_state)).spawn(Y.shape[1])
+            coef = np.empty_like(coef_ls)
+            for a in range(Y.shape[1]):
+                res = self._swarm_axis(phi @ to_coef, Y[:, a], Yw[:, a], U, z_ls[:, a], weights, swarm, seeds[a])
+                coef[:, a] = to_coef @ res.x
+                self.swarm_results_.append(res)
+        self.coef_ = coef
+        self.scaling_, self.terms_, self.basis_ = scaling, terms, basis
+        resid = Y - phi @ coef
+        self.train_rms_ = np.sqrt((weights[:, None] * resid**2).sum(axis=0) / total_w)
+        self.lstsq_rms_ = np.sqrt(lstsq_sse / total_w)
+        best = np.sqrt(lstsq_sse.sum() / total_w)
+        self.rms_ratio_ = float(np.sqrt((self.train_rms_**2).sum()) / best) if best > 0 else 1.0
+        return self
+
+    def _swarm_axis(self, A, y, yw, U, b, weights, cfg: SwarmConfig, seed) -> SwarmResult:
+        """Minimise the fitness of one output over the orthonormal coordinates ``z``."""
+        total_w, yy = weights.sum(), float(yw @ yw)
+        if self.fitness == "rms":
+            def fun(Z):
+                sse = np.einsum("pk,pk->p", Z, Z) - 2.0 * (Z @ b) + yy
+                return np.sqrt(np.maximum(sse, 0.0) / total_w)
+            x0 = None
+        else:
+            w_max = weights.max()
+
+            def fun(Z):
+                r = np.abs(y[:, None] - A @ Z.T)                    # (n, particles)
+                if self.fitness == "max":
+                    return (weights[:, None] * r).max(axis=0) / w_max
+                return (weights @ r) / total_w
+            x0 = b          # the least-squares fit as one particle: never worse than it
+        half = cfg.bound_scale * max(np.sqrt(yy), 1e-12)
+        return minimize(fun, np.full(b.size, -half), np.full(b.size, half), cfg,
+                        random_state=np.random.default_rng(seed), x0=x0)
+
+    # ------------------------------------------------------------------ prediction
+    def predict(self, X) -> NDArray[np.float64]:
+        """Predicted errors, shape (n, n_outputs) mm (1-D if fitted on a 1-D ``y``)."""
+        check_is_fitted(self, "coef_")
+        X = validate_data(self, X, reset=False, dtype=np.float64)
+        out = self.basis_.transform(X, self.scaling_, self.terms_) @ self.coef_
+        return out[:, 0] if self._y_1d else out
+
+    def equations(self, input_names=None, output_names=("dx", "dy", "dz"), precision: int = 6) -> list[str]:
+        """The fitted functions in raw units (mm, degrees), one line per output.
+
+        Polynomials are expanded into powers of the raw inputs, like the
+        paper's eqs. (9)-(20); Fourier terms are written with their phase.
+        """
+        check_is_fitted(self, "coef_")
+        d = self.n_features_in_
+        if input_names is None:
+            input_names = ["x", "y", "z"] if self.inputs == "cartesian" and d == 3 else (
+                [f"q{i + 1}" for i in range(d)] if self.inputs == "joint" else [f"x{i + 1}" for i in range(d)])
+        outs = list(output_names)[: self.coef_.shape[1]] + [f"e{k + 1}" for k in range(len(output_names), self.coef_.shape[1])]
+        return [f"{name} = {self._equation(a, input_names, precision)}" for a, name in enumerate(outs)]
+
+    def _equation(self, a: int, names, precision: int) -> str:
+        fmt = f"{{:+.{precision}g}}"
+        parts = []
+        if self.basis == "polynomial":
+            for exps, c in raw_polynomial(self.terms_, self.coef_[:, a], self.scaling_).items():
+                mono = "*".join(f"{names[i]}^{k}" if k > 1 else names[i] for i, k in enumerate(exps) if k)
+                parts.append(fmt.format(c) + (f"*{mono}" if mono else ""))
+        else:
+            s = self.scaling_
+            for (trig, i, q), c in zip(self.terms_, self.coef_[:, a]):
+                if trig == "1":
+                    parts.append(fmt.format(c))
+                    continue
+                if self.inputs == "joint":
+                    arg = f"{q * np.pi / 180:.{precision}g}*{names[i]}"
+                else:
+                    k = q * np.pi / 2 / s.scale[i]
+                    arg = f"{k:.{precision}g}*{names[i]} {-k * s.centre[i]:+.{precision}g}"
+                parts.append(f"{fmt.format(c)}*{trig}({arg})")
+        text = " ".join(parts)
+        return text[1:] if text.startswith("+") else text
+
+    def _describe(self) -> str:
+        if self.basis == "polynomial":
+            kind = {1: "first", 2: "second"}.get(self.degree, f"degree-{self.degree}")
+            return f"{kind}-degree polynomial{' with cross terms' if self.cross_terms else ''} of {self.inputs} inputs"
+        return f"Fourier series with {self.harmonics} harmonic(s) of {self.inputs} inputs"
+
+    def __sklearn_tags__(self):
+        tags = super().__sklearn_tags__()
+        tags.target_tags.multi_output = True
+        tags.target_tags.single_output = True
+        return tags
+
+
+def _seed_from(random_state) -> int:
+    """One integer seed from None, an int, a RandomState or a Generator."""
+    if isinstance(random_state, np.random.Generator):
+        return int(random_state.integers(2**32))
+    if isinstance(random_state, Integral):
+        return int(random_state)
+    return int(check_random_state(random_state).randint(2**32))

@@ -1,0 +1,234 @@
+"""Particle swarm optimisation, vectorised over the whole swarm.
+
+The objective takes every particle at once, ``fun(X) -> f`` with ``X`` of
+shape ``(particles, dims)``, so there is no Python loop over particles.
+Randomness comes from one ``random_state``.
+
+Update rules (``SwarmConfig.rule``):
+
+``constriction`` (default)
+    Clerc and Kennedy (2002): ``v = chi (v + c1 r1 (p - x) + c2 r2 (g - x))``
+    with ``chi = 2 / |2 - phi - sqrt(phi^2 - 4 phi)|``, ``phi = c1 + c2 > 4``
+    (``chi = 0.7298`` for ``c1 = c2 = 2.05``).
+``inertia``
+    Shi and Eberhart: ``v = w v + c1 r1 (p - x) + c2 r2 (g - x)``, ``w``
+    falling linearly from ``inertia[0]`` to ``inertia[1]``.
+``paper``
+    The basic update of Kennedy and Eberhart used in the paper,
+    ``v = v + c1 r1 (p - x) + c2 r2 (g - x)``.
+
+Without damping the basic update diverges (the "swarm explosion"). Here every
+rule clamps each velocity component to ``vmax`` times the width of the search
+box, and ``vmax`` cannot be switched off, so no setting can explode.
+
+Boundary rule: a coordinate that leaves the box is put on the wall and its
+velocity component set to zero (absorbing walls).
+
+Topologies: ``global`` (every particle follows the swarm's best) and ``ring``
+(each follows the best of itself and ``neighbours`` particles on either side
+in index order; slower to converge, less prone to premature collapse).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ._validation import check_choice, check_int, check_real, param_error
+
+RULES = ("constriction", "inertia", "paper")
+TOPOLOGIES = ("global", "ring")
+
+
+@dataclass(frozen=True)
+class SwarmConfig:
+    """Settings of the particle swarm.
+
+    Attributes
+    ----------
+    particles : int
+        Swarm size.
+    iterations : int
+        Maximum number of iterations (velocity updates).
+    c1, c2 : float
+        Cognitive (own best) and social (neighbourhood best) coefficients.
+    rule : {"constriction", "inertia", "paper"}
+    topology : {"global", "ring"}
+    neighbours : int
+        Ring topology: particles on each side in a neighbourhood.
+    inertia : (float, float)
+        Start and end inertia weight for ``rule="inertia"``.
+    vmax : float
+        Velocity clamp as a fraction of the search box width, in (0, 1].
+    bound_scale : float
+        For error models: half-width of the search box in the orthonormal
+        coefficient coordinates, in units of the norm of the target data. With
+        1 or more the box provably contains the least-squares optimum.
+    stop_fitness : float or None
+        Stop as soon as the best fitness is at or below this value.
+    patience, ftol : int or None, float
+        Stop when the best fitness improved by less than ``ftol`` (relative)
+        over the last ``patience`` iterations; ``patience=None`` disables it.
+    """
+
+    particles: int = 50
+    iterations: int = 1000
+    c1: float = 2.05
+    c2: float = 2.05
+    rule: str = "constriction"
+    topology: str = "global"
+    neighbours: int = 1
+    inertia: tuple[float, float] = (0.9, 0.4)
+    vmax: float = 0.5
+    bound_scale: float = 1.0
+    stop_fitness: float | None = None
+    patience: int | None = 100
+    ftol: float = 1e-10
+
+    def __post_init__(self):
+        own = "SwarmConfig"
+        check_int(own, "particles", self.particles, 2, 100_000)
+        check_int(own, "iterations", self.iterations, 1, 10_000_000)
+        check_real(own, "c1", self.c1, 0.0, 10.0)
+        check_real(own, "c2", self.c2, 0.0, 10.0)
+        check_choice(own, "rule", self.rule, RULES)
+        check_choice(own, "topology", self.topology, TOPOLOGIES)
+        check_int(own, "neighbours", self.neighbours, 1, max(1, (self.particles - 1) // 2))
+        check_real(own, "vmax", self.vmax, 0.0, 1.0, low_open=True)
+        check_real(own, "bound_scale", self.bound_scale, 0.0, 1e6, low_open=True)
+        check_real(own, "ftol", self.ftol, 0.0, 1.0)
+        if self.patience is not None:
+            check_int(own, "patience", self.patience, 1)
+        if self.stop_fitness is not None:
+            check_real(own, "stop_fitness", self.stop_fitness)
+        if self.rule == "constriction" and self.c1 + self.c2 <= 4.0:
+            raise param_error(own, "c1 + c2", "greater than 4 for the constriction rule", self.c1 + self.c2)
+        if (not isinstance(self.inertia, (tuple, list)) or len(self.inertia) != 2
+                or not all(isinstance(w, (int, float)) and 0.0 <= w <= 1.2 for w in self.inertia)):
+            raise param_error(own, "inertia", "a pair (start, end) of weights in [0, 1.2]", self.inertia)
+
+    @classmethod
+    def paper(cls, rule: str = "constriction") -> "SwarmConfig":
+        """The paper's settings: 100 particles, 200 iterations, c1 = c2 = 2.05, no early stop."""
+        return cls(particles=100, iterations=200, c1=2.05, c2=2.05, rule=rule, patience=None)
+
+    @property
+    def chi(self) -> float:
+        """The constriction factor for ``c1 + c2``."""
+        phi = self.c1 + self.c2
+        return 2.0 / abs(2.0 - phi - np.sqrt(phi * phi - 4.0 * phi))
+
+    def to_dict(self) -> dict:
+        return {k: (list(v) if isinstance(v, tuple) else v) for k, v in self.__dict__.items()}
+
+
+@dataclass
+class SwarmResult:
+    """Outcome of :func:`minimize` (like ``scipy.optimize.OptimizeResult``)."""
+
+    x: NDArray[np.float64]
+    fun: float
+    nit: int
+    nfev: int
+    success: bool
+    message: str
+    history: NDArray[np.float64] = field(repr=False)   # best fitness after each iteration (index 0: start)
+
+
+def minimize(
+    fun: Callable[[NDArray[np.float64]], NDArray[np.float64]],
+    lower, upper, config: SwarmConfig | None = None, *, random_state=None,
+    callback: Callable[[int, NDArray[np.float64], float], bool | None] | None = None, x0=None,
+) -> SwarmResult:
+    """Minimise ``fun`` over the box ``[lower, upper]`` with a particle swarm.
+
+    Parameters
+    ----------
+    fun : callable
+        ``fun(X)`` with ``X`` of shape ``(particles, dims)`` returns the
+        fitness of every particle, shape ``(particles,)``. NaN counts as +inf.
+    lower, upper : array-like, shape (dims,)
+    config : SwarmConfig, optional
+    random_state : None, int or numpy.random.Generator
+    callback : callable, optional
+        ``callback(iteration, best_x, best_fun)``; returning True stops.
+    x0 : array-like, shape (dims,), optional
+        Placed as the first particle (clipped to the box).
+
+    Examples
+    --------
+    >>> res = minimize(lambda X: np.sum((X - 1.5) ** 2, axis=1), [-5, -5], [5, 5], random_state=0)
+    >>> res.x.round(6).tolist(), res.success
+    ([1.5, 1.5], True)
+    """
+    cfg = config or SwarmConfig()
+    rng = np.random.default_rng(random_state)
+    lo, hi = np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)
+    if lo.shape != hi.shape or lo.ndim != 1 or not np.all(hi > lo):
+        raise param_error("minimize", "lower/upper", "1-D bounds of equal length with upper > lower",
+                          (lo.tolist(), hi.tolist()))
+    n, dims = cfg.particles, lo.size
+    vmax = cfg.vmax * (hi - lo)
+    x = rng.uniform(lo, hi, size=(n, dims))
+    if x0 is not None:
+        x[0] = np.clip(np.asarray(x0, dtype=float), lo, hi)
+    v = np.zeros_like(x)
+    f = _evaluate(fun, x)
+    best_x, best_f = x.copy(), f.copy()
+    history = [best_f.min()]
+    message, success, it = "reached the iteration limit", False, 0
+    chi = cfg.chi if cfg.rule == "constriction" else 1.0
+    for it in range(1, cfg.iterations + 1):
+        guide = best_x[_neighbourhood_best(best_f, cfg)]
+        r1, r2 = rng.random((2, n, dims))
+        pull = cfg.c1 * r1 * (best_x - x) + cfg.c2 * r2 * (guide - x)
+        if cfg.rule == "inertia":
+            w = cfg.inertia[0] + (cfg.inertia[1] - cfg.inertia[0]) * (it - 1) / max(cfg.iterations - 1, 1)
+            v = w * v + pull
+        else:
+            v = chi * (v + pull)
+        np.clip(v, -vmax, vmax, out=v)
+        x = x + v
+        outside = (x < lo) | (x > hi)
+        if outside.any():
+            np.clip(x, lo, hi, out=x)
+            v[outside] = 0.0
+        f = _evaluate(fun, x)
+        better = f < best_f
+        best_x[better], best_f[better] = x[better], f[better]
+        g = int(np.argmin(best_f))
+        history.append(best_f[g])
+        if callback is not None and callback(it, best_x[g].copy(), float(best_f[g])):
+            message, success = "stopped by the callback", True
+            break
+        if cfg.stop_fitness is not None and best_f[g] <= cfg.stop_fitness:
+            message, success = "reached the stop threshold", True
+            break
+        if cfg.patience is not None and it >= cfg.patience:
+            past = history[-cfg.patience - 1]
+            if past - best_f[g] <= cfg.ftol * max(abs(best_f[g]), 1e-300):
+                message, success = f"converged: improvement below ftol over {cfg.patience} iterations", True
+                break
+    g = int(np.argmin(best_f))
+    return SwarmResult(x=best_x[g].copy(), fun=float(best_f[g]), nit=it, nfev=n * (it + 1),
+                       success=success, message=message, history=np.asarray(history))
+
+
+def _evaluate(fun, x: NDArray[np.float64]) -> NDArray[np.float64]:
+    f = np.asarray(fun(x), dtype=float)
+    if f.shape != (x.shape[0],):
+        raise param_error("minimize", "fun", f"a function returning shape ({x.shape[0]},)", f.shape)
+    return np.where(np.isnan(f), np.inf, f)
+
+
+def _neighbourhood_best(best_f: NDArray[np.float64], cfg: SwarmConfig) -> NDArray[np.intp]:
+    """Index of the best personal best in each particle's neighbourhood."""
+    n = best_f.size
+    if cfg.topology == "global":
+        return np.full(n, int(np.argmin(best_f)))
+    offsets = np.arange(-cfg.neighbours, cfg.neighbours + 1)
+    idx = (np.arange(n)[None, :] + offsets[:, None]) % n          # (2k+1, n)
+    return idx[np.argmin(best_f[idx], axis=0), np.arange(n)]

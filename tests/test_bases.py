@@ -1,0 +1,39 @@
+"""Feature maps and raw-unit equations."""
+
+import numpy as np
+import pytest
+
+from partcal.bases import Basis, Scaling, raw_polynomial
+
+
+def test_scaling_maps_training_range_to_unit_and_drops_constant_inputs():
+    X = np.array([[0.0, 5.0, 1.0], [10.0, 5.0, 3.0]])
+    s = Scaling.fit(X)
+    assert s.active.tolist() == [True, False, True]
+    np.testing.assert_allclose((X - s.centre) / s.scale, [[-1, 0, -1], [1, 0, 1]])
+
+
+def test_polynomial_terms_follow_the_paper_order():
+    s = Scaling.fit(np.array([[0.0, 0.0], [2.0, 4.0]]))
+    basis = Basis("polynomial", "cartesian", 2)
+    assert basis.terms(s) == [(0, 0), (1, 0), (2, 0), (0, 1), (0, 2)]      # 1, u1, u1², u2, u2²
+    phi = basis.transform(np.array([[2.0, 1.0]]), s)                        # u = (1, -0.5)
+    np.testing.assert_allclose(phi, [[1, 1, 1, -0.5, 0.25]])
+    cross = Basis("polynomial", "cartesian", 2, cross_terms=True)
+    assert len(cross.terms(s)) == 6 == cross.n_terms(2)                     # 1, u1, u2, u1², u1u2, u2²
+
+
+def test_fourier_terms_use_joint_angles_in_radians():
+    s = Scaling.fit(np.array([[0.0], [90.0]]))
+    basis = Basis("fourier", "joint", 2)
+    phi = basis.transform(np.array([[30.0]]), s)
+    c, si = np.cos(np.pi / 6), np.sin(np.pi / 6)
+    np.testing.assert_allclose(phi, [[1, c, si, np.cos(np.pi / 3), np.sin(np.pi / 3)]])
+    assert basis.n_terms(6) == 25                # 25 per axis: 75 for x, y, z
+
+
+def test_raw_polynomial_with_cross_terms():
+    # c = 3 + 2 u v with u = (x - 1)/2, v = (y + 2)/4  ->  3 + (x - 1)(y + 2)/4 = 2.5 + x/2 - y/4 + xy/4
+    s = Scaling(np.array([1.0, -2.0]), np.array([2.0, 4.0]), np.array([True, True]))
+    raw = raw_polynomial([(0, 0), (1, 1)], np.array([3.0, 2.0]), s)
+    assert raw == pytest.approx({(0, 0): 2.5, (1, 0): 0.5, (0, 1): -0.25, (1, 1): 0.25})

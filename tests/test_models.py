@@ -1,0 +1,129 @@
+"""ErrorModel: scikit-learn contract, solvers, fitness functions."""
+
+import numpy as np
+import pytest
+from sklearn.utils.estimator_checks import parametrize_with_checks
+
+from conftest import ROOT
+from partcal import PartcalError, read_measurements
+from partcal.models import ErrorModel
+from partcal.swarm import SwarmConfig
+
+IDENT = ROOT / "data" / "sk120" / "identification.csv"
+PAPER_MODELS = {
+    "FDP(CI)": dict(inputs="cartesian", degree=1), "SDP(CI)": dict(inputs="cartesian", degree=2),
+    "FDP(AI)": dict(inputs="joint", degree=1), "SDP(AI)": dict(inputs="joint", degree=2),
+}
+
+
+def _expected_failures(estimator):
+    if estimator.basis == "fourier":
+        # 11 samples with 10 inputs cannot determine 21 Fourier terms: the model refuses, never guesses
+        return {"check_regressor_multioutput": "fewer samples than coefficients is refused"}
+    return {}
+
+
+@parametrize_with_checks([ErrorModel(), ErrorModel(solver="lstsq", cross_terms=True),
+                          ErrorModel(inputs="joint", basis="fourier", solver="lstsq")],
+                         expected_failed_checks=_expected_failures)
+def test_sklearn_compatible(estimator, check):
+    check(estimator)
+
+
+@pytest.fixture(scope="module")
+def ident():
+    m = read_measurements(IDENT)
+    return {"cartesian": m.nominal_mm, "joint": m.q_deg}, m.errors_mm
+
+
+def normal_equations(phi, y):
+    """Least squares by the normal equations: independent of the SVD used in the model."""
+    return np.linalg.solve(phi.T @ phi, phi.T @ y)
+
+
+def test_lstsq_matches_normal_equations_on_raw_features(ident):
+    X, y = ident
+    q = X["joint"][:, [0, 1, 2, 5]]                    # q4 = q5 = 0 carry nothing
+    phi = np.hstack([np.ones((len(q), 1)), np.radians(q)])   # the paper's FDP(AI), eq. (7)
+    expected = phi @ normal_equations(phi, y)
+    model = ErrorModel(inputs="joint", degree=1, solver="lstsq").fit(X["joint"], y)
+    np.testing.assert_allclose(model.predict(X["joint"]), expected, atol=1e-8)
+    assert model.coef_.size == 15                       # the paper's 15 FDP parameters
+    np.testing.assert_allclose(model.train_rms_, np.sqrt(np.mean((y - expected) ** 2, axis=0)))
+
+
+@pytest.mark.parametrize("name", PAPER_MODELS)
+def test_pso_with_paper_settings_reaches_least_squares(ident, name):
+    X, y = ident
+    kw = PAPER_MODELS[name]
+    ratios = [ErrorModel(**kw, pso=SwarmConfig.paper(), random_state=s).fit(X[kw["inputs"]], y).rms_ratio_
+              for s in range(10)]
+    assert np.median(ratios) < 1.001 and max(ratios) < 1.01, ratios
+    assert min(ratios) >= 1.0 - 1e-12                   # least squares is the optimum of the RMS
+
+
+def test_chebyshev_fit_bounds_the_worst_case(ident):
+    X, y = ident
+    ls = ErrorModel(inputs="cartesian", degree=1, solver="lstsq").fit(X["cartesian"], y)
+    cheb = ErrorModel(inputs="cartesian", degree=1, fitness="max", random_state=0).fit(X["cartesian"], y)
+    worst_ls = np.abs(y - ls.predict(X["cartesian"])).max(axis=0)
+    worst_cheb = np.abs(y - cheb.predict(X["cartesian"])).max(axis=0)
+    assert np.all(worst_cheb <= worst_ls + 1e-12)
+    assert np.all(worst_cheb < 0.95 * worst_ls)        # and it really improves on it here
+    mae = ErrorModel(inputs="cartesian", degree=1, fitness="mae", random_state=0).fit(X["cartesian"], y)
+    assert np.all(np.abs(y - mae.predict(X["cartesian"])).mean(0) <= np.abs(y - ls.predict(X["cartesian"])).mean(0))
+
+
+def test_same_seed_same_fit(ident):
+    X, y = ident
+    a = ErrorModel(degree=2, random_state=3).fit(X["cartesian"], y)
+    b = ErrorModel(degree=2, random_state=3).fit(X["cartesian"], y)
+    assert np.array_equal(a.coef_, b.coef_)
+
+
+def test_equations_in_raw_units_reproduce_predictions(ident):
+    X, y = ident
+    model = ErrorModel(inputs="cartesian", degree=2, solver="lstsq").fit(X["cartesian"], y)
+    eqs = model.equations(precision=17)
+    assert eqs[0].startswith("dx = ") and "x^2" in eqs[0]
+    p = X["cartesian"][:5]
+    env = {"x": p[:, 0], "y": p[:, 1], "z": p[:, 2]}
+    for a, eq in enumerate(eqs):
+        value = eval(eq.split("=", 1)[1].replace("^", "**"), {}, env)
+        np.testing.assert_allclose(value, model.predict(p)[:, a], rtol=1e-9, atol=1e-9)
+    fourier = ErrorModel(inputs="joint", basis="fourier", solver="lstsq").fit(X["joint"], y)
+    env = {f"q{i + 1}": X["joint"][:5, i] for i in range(6)} | {"cos": np.cos, "sin": np.sin}
+    for a, eq in enumerate(fourier.equations(precision=17)):
+        value = eval(eq.split("=", 1)[1], {}, env)
+        np.testing.assert_allclose(value, fourier.predict(X["joint"][:5])[:, a], rtol=1e-9, atol=1e-9)
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    (dict(degree=0), r"The 'degree' parameter of ErrorModel must be an int in \[1, 8\]. Got 0 instead."),
+    (dict(harmonics=9), r"The 'harmonics' parameter of ErrorModel must be an int in \[1, 8\]. Got 9 instead."),
+    (dict(inputs="polar"), r"The 'inputs' parameter of ErrorModel must be one of 'cartesian', 'joint'. Got 'polar' instead."),
+    (dict(basis="spline"), r"The 'basis' parameter of ErrorModel must be one of 'polynomial', 'fourier'. Got 'spline' instead."),
+    (dict(solver="adam"), r"The 'solver' parameter of ErrorModel must be one of 'pso', 'lstsq'. Got 'adam' instead."),
+    (dict(fitness="r2"), r"The 'fitness' parameter of ErrorModel must be one of 'rms', 'max', 'mae'. Got 'r2' instead."),
+    (dict(solver="lstsq", fitness="max"), r"The 'fitness' parameter of ErrorModel must be 'rms' with solver='lstsq'"),
+    (dict(basis="fourier", cross_terms=True), r"The 'cross_terms' parameter of ErrorModel must be False for the fourier basis"),
+    (dict(pso={"particles": 10}), r"The 'pso' parameter of ErrorModel must be a SwarmConfig or None"),
+])
+def test_bad_parameters_are_named(kwargs, message):
+    with pytest.raises(PartcalError, match=message):
+        ErrorModel(**kwargs).fit(np.random.default_rng(0).normal(size=(30, 3)), np.zeros((30, 3)))
+
+
+def test_bad_arrays(ident):
+    X, y = ident
+    with pytest.raises(PartcalError, match=r"with 7 terms per output \(second-degree polynomial of cartesian inputs\) needs at least 7 samples; got 5 samples"):
+        ErrorModel(degree=2).fit(X["cartesian"][:5], y[:5])
+    bad = X["cartesian"].copy()
+    bad[3, 1] = np.nan
+    with pytest.raises(ValueError, match="NaN"):
+        ErrorModel().fit(bad, y)
+    with pytest.raises(ValueError, match="inconsistent numbers of samples"):
+        ErrorModel().fit(X["cartesian"], y[:-1])
+    model = ErrorModel(solver="lstsq").fit(X["cartesian"], y)
+    with pytest.raises(ValueError, match="X has 6 features, but ErrorModel is expecting 3"):
+        model.predict(X["joint"])

@@ -1,0 +1,91 @@
+"""The particle swarm optimiser."""
+
+import numpy as np
+import pytest
+
+from partcal import PartcalError
+from partcal.swarm import SwarmConfig, minimize
+
+
+def sphere(X):
+    return np.sum((X - 0.7) ** 2, axis=1)
+
+
+def rosenbrock(X):
+    return np.sum(100.0 * (X[:, 1:] - X[:, :-1] ** 2) ** 2 + (1 - X[:, :-1]) ** 2, axis=1)
+
+
+@pytest.mark.parametrize("rule", ["constriction", "inertia", "paper"])
+@pytest.mark.parametrize("topology", ["global", "ring"])
+def test_sphere_optimum_found_by_every_rule_and_topology(rule, topology):
+    # inertia and paper rules stall for long stretches before improving again: no early stop
+    cfg = SwarmConfig(rule=rule, topology=topology, iterations=2000, vmax=0.1,
+                      patience=100 if rule == "constriction" else None)
+    res = minimize(sphere, np.full(5, -5.0), np.full(5, 5.0), cfg, random_state=1)
+    if rule == "paper":     # the undamped rule keeps jittering at the clamp size: near, never exact
+        assert res.fun < 0.05
+    else:
+        np.testing.assert_allclose(res.x, 0.7, atol=1e-6)
+    assert res.fun == pytest.approx(sphere(res.x[None])[0])
+    assert res.nfev == cfg.particles * (res.nit + 1)
+    assert np.all(np.diff(res.history) <= 0)     # the best never gets worse
+
+
+def test_rosenbrock_in_two_dimensions():
+    res = minimize(rosenbrock, [-2.0, -2.0], [2.0, 2.0], SwarmConfig(iterations=3000, patience=None),
+                   random_state=0)
+    np.testing.assert_allclose(res.x, [1.0, 1.0], atol=1e-4)
+
+
+def test_same_seed_same_result_different_seeds_both_converge():
+    a = minimize(sphere, -np.ones(4), np.ones(4), random_state=42)
+    b = minimize(sphere, -np.ones(4), np.ones(4), random_state=42)
+    c = minimize(sphere, -np.ones(4), np.ones(4), random_state=43)
+    assert np.array_equal(a.x, b.x) and np.array_equal(a.history, b.history)
+    assert not np.array_equal(a.history, c.history)
+    np.testing.assert_allclose(c.x, 0.7, atol=1e-6)
+
+
+def test_paper_rule_cannot_explode():
+    # The basic update without damping diverges; the mandatory clamp keeps every particle in the box.
+    seen = []
+    cfg = SwarmConfig(rule="paper", particles=30, iterations=300, patience=None)
+    res = minimize(lambda X: seen.append(np.abs(X).max()) or sphere(X), -np.ones(3), np.ones(3), cfg,
+                   random_state=0)
+    assert max(seen) <= 1.0 and np.isfinite(res.fun)
+
+
+def test_stop_threshold_callback_and_iteration_limit():
+    res = minimize(sphere, -np.ones(3), np.ones(3), SwarmConfig(stop_fitness=1e-2), random_state=0)
+    assert res.success and res.message == "reached the stop threshold" and res.fun <= 1e-2
+    calls = []
+    res = minimize(sphere, -np.ones(3), np.ones(3), random_state=0,
+                   callback=lambda it, x, f: calls.append(it) or it == 5)
+    assert res.nit == 5 and calls == [1, 2, 3, 4, 5] and res.message == "stopped by the callback"
+    res = minimize(sphere, -np.ones(3), np.ones(3), SwarmConfig(iterations=3, patience=None), random_state=0)
+    assert not res.success and res.message == "reached the iteration limit" and res.history.size == 4
+
+
+def test_constriction_factor():
+    assert SwarmConfig().chi == pytest.approx(0.72984, abs=1e-5)
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    (dict(particles=1), r"The 'particles' parameter of SwarmConfig must be an int in \[2, 100000\]. Got 1 instead."),
+    (dict(rule="wild"), r"The 'rule' parameter of SwarmConfig must be one of 'constriction', 'inertia', 'paper'. Got 'wild' instead."),
+    (dict(topology="star"), r"The 'topology' parameter of SwarmConfig must be one of 'global', 'ring'. Got 'star' instead."),
+    (dict(vmax=0.0), r"The 'vmax' parameter of SwarmConfig must be a real number in \(0.0, 1.0\]. Got 0.0 instead."),
+    (dict(c1=1.0, c2=1.0), r"The 'c1 \+ c2' parameter of SwarmConfig must be greater than 4 for the constriction rule. Got 2.0 instead."),
+    (dict(inertia=(0.9,)), r"The 'inertia' parameter of SwarmConfig must be a pair \(start, end\)"),
+    (dict(patience=0), r"The 'patience' parameter of SwarmConfig must be an int >= 1. Got 0 instead."),
+])
+def test_bad_parameters_are_named(kwargs, message):
+    with pytest.raises(PartcalError, match=message):
+        SwarmConfig(**kwargs)
+
+
+def test_bad_bounds_and_objective():
+    with pytest.raises(PartcalError, match="upper > lower"):
+        minimize(sphere, [1.0], [0.0])
+    with pytest.raises(PartcalError, match=r"returning shape \(50,\)"):
+        minimize(lambda X: X, [0.0, 0.0], [1.0, 1.0])

@@ -12,7 +12,7 @@ from .kinematics import Robot, available_robots, load_robot
 from .measurements import Measurements, read_measurements, write_measurements
 from .metrics import rms_per_axis, summary
 from .models import ErrorModel
-from .swarm import SwarmConfig, SwarmResult, minimize
+from .swarm import SwarmConfig, SwarmResult, minimize, minimize_batch
 
 __all__ = [
     "__version__",
@@ -20,5 +20,5 @@ __all__ = [
     "Robot", "available_robots", "load_robot",
     "Measurements", "read_measurements", "write_measurements",
     "rms_per_axis", "summary",
-    "ErrorModel", "SwarmConfig", "SwarmResult", "minimize",
+    "ErrorModel", "SwarmConfig", "SwarmResult", "minimize", "minimize_batch",
 ]

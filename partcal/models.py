@@ -30,7 +30,7 @@ from sklearn.utils.validation import check_is_fitted, validate_data
 from ._validation import check_choice, check_int, param_error
 from .bases import Basis, Scaling, raw_polynomial
 from .errors import PartcalError
-from .swarm import SwarmConfig, SwarmResult, minimize
+from .swarm import SwarmConfig, SwarmResult, minimize_batch
 
 log = logging.getLogger(__name__)
 INPUTS = ("cartesian", "joint")
@@ -156,11 +156,8 @@ class ErrorModel(RegressorMixin, BaseEstimator):
             coef = coef_ls
         else:
             seeds = np.random.SeedSequence(_seed_from(self.random_state)).spawn(Y.shape[1])
-            coef = np.empty_like(coef_ls)
-            for a in range(Y.shape[1]):
-                res = self._swarm_axis(phi @ to_coef, Y[:, a], Yw[:, a], U, z_ls[:, a], weights, swarm, seeds[a])
-                coef[:, a] = to_coef @ res.x
-                self.swarm_results_.append(res)
+            self.swarm_results_ = self._swarm(phi @ to_coef, Y, Yw, z_ls, weights, swarm, seeds)
+            coef = to_coef @ np.stack([res.x for res in self.swarm_results_], axis=1)
         self.coef_ = coef
         self.scaling_, self.terms_, self.basis_ = scaling, terms, basis
         resid = Y - phi @ coef
@@ -170,26 +167,31 @@ class ErrorModel(RegressorMixin, BaseEstimator):
         self.rms_ratio_ = float(np.sqrt((self.train_rms_**2).sum()) / best) if best > 0 else 1.0
         return self
 
-    def _swarm_axis(self, A, y, yw, U, b, weights, cfg: SwarmConfig, seed) -> SwarmResult:
-        """Minimise the fitness of one output over the orthonormal coordinates ``z``."""
-        total_w, yy = weights.sum(), float(yw @ yw)
+    def _swarm(self, A, Y, Yw, B, weights, cfg: SwarmConfig, seeds) -> list[SwarmResult]:
+        """Minimise the fitness of every output at once, over the orthonormal coordinates ``z``.
+
+        ``A`` maps ``z`` to predictions, ``B`` (r, outputs) is the least-squares
+        optimum ``U^T y`` of each output.
+        """
+        total_w = weights.sum()
+        yy = (Yw * Yw).sum(axis=0)
         if self.fitness == "rms":
-            def fun(Z):
-                sse = np.einsum("pk,pk->p", Z, Z) - 2.0 * (Z @ b) + yy
-                return np.sqrt(np.maximum(sse, 0.0) / total_w)
+            def fun(Z, which):
+                sse = np.einsum("bpk,bpk->bp", Z, Z) - 2.0 * np.einsum("bpk,kb->bp", Z, B[:, which])
+                return np.sqrt(np.maximum(sse + yy[which, None], 0.0) / total_w)
             x0 = None
         else:
             w_max = weights.max()
 
-            def fun(Z):
-                r = np.abs(y[:, None] - A @ Z.T)                    # (n, particles)
+            def fun(Z, which):
+                r = np.abs(Y.T[which, None, :] - np.einsum("nk,bpk->bpn", A, Z))   # (b, particles, n)
                 if self.fitness == "max":
-                    return (weights[:, None] * r).max(axis=0) / w_max
-                return (weights @ r) / total_w
-            x0 = b          # the least-squares fit as one particle: never worse than it
-        half = cfg.bound_scale * max(np.sqrt(yy), 1e-12)
-        return minimize(fun, np.full(b.size, -half), np.full(b.size, half), cfg,
-                        random_state=np.random.default_rng(seed), x0=x0)
+                    return (r * weights).max(axis=2) / w_max
+                return (r @ weights) / total_w
+            x0 = B.T        # the least-squares fit as one particle: never worse than it
+        half = cfg.bound_scale * np.maximum(np.sqrt(yy), 1e-12)[:, None] * np.ones((1, B.shape[0]))
+        return minimize_batch(fun, -half, half, cfg, x0=x0,
+                              random_states=[np.random.default_rng(s) for s in seeds])
 
     # ------------------------------------------------------------------ prediction
     def predict(self, X) -> NDArray[np.float64]:

@@ -86,7 +86,7 @@ class SwarmConfig:
     bound_scale: float = 1.0
     stop_fitness: float | None = None
     patience: int | None = 100
-    ftol: float = 1e-10
+    ftol: float = 1e-8
 
     def __post_init__(self):
         own = "SwarmConfig"
@@ -164,71 +164,143 @@ def minimize(
     >>> res.x.round(6).tolist(), res.success
     ([1.5, 1.5], True)
     """
-    cfg = config or SwarmConfig()
-    rng = np.random.default_rng(random_state)
     lo, hi = np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)
-    if lo.shape != hi.shape or lo.ndim != 1 or not np.all(hi > lo):
+    if lo.shape != hi.shape or lo.ndim != 1:
         raise param_error("minimize", "lower/upper", "1-D bounds of equal length with upper > lower",
                           (lo.tolist(), hi.tolist()))
-    n, dims = cfg.particles, lo.size
-    vmax = cfg.vmax * (hi - lo)
-    x = rng.uniform(lo, hi, size=(n, dims))
+    batch_cb = None
+    if callback is not None:
+        def batch_cb(it, best_x, best_f):
+            return callback(it, best_x[0], float(best_f[0]))
+    return minimize_batch(lambda X, which: fun(X[0])[None], lo[None], hi[None], config,
+                          random_states=[random_state], callback=batch_cb,
+                          x0=None if x0 is None else np.asarray(x0, dtype=float)[None])[0]
+
+
+def minimize_batch(
+    fun: Callable[[NDArray[np.float64], NDArray[np.intp]], NDArray[np.float64]],
+    lower, upper, config: SwarmConfig | None = None, *, random_states,
+    callback: Callable[[int, NDArray[np.float64], NDArray[np.float64]], bool | None] | None = None,
+    x0=None,
+) -> list[SwarmResult]:
+    """Run independent swarms for ``B`` problems of equal dimension in one vectorised loop.
+
+    Small swarms spend most of their time in Python overhead per iteration;
+    running several problems (the x, y, z outputs of a model, or every region
+    of a partitioned model) together shares that overhead. Each problem draws
+    from its own random stream and stops on its own criteria, so its result
+    is the same alone or in a batch.
+
+    Parameters
+    ----------
+    fun : callable
+        ``fun(X, which)`` with ``X`` of shape ``(b, particles, dims)`` for the
+        problems ``which`` (indices into the batch, shape ``(b,)``) returns
+        shape ``(b, particles)``. Problems that have stopped are not evaluated.
+    lower, upper : array-like, shape (B, dims)
+    random_states : sequence of B seeds or Generators
+    callback : callable, optional
+        ``callback(iteration, best_x (B, dims), best_fun (B,))``; True stops all.
+    x0 : array-like, shape (B, dims), optional
+        Placed as the first particle of each swarm.
+    """
+    cfg = config or SwarmConfig()
+    lo, hi = np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)
+    if lo.shape != hi.shape or lo.ndim != 2 or not np.all(hi > lo):
+        raise param_error("minimize", "lower/upper", "bounds of equal shape with upper > lower",
+                          (lo.tolist(), hi.tolist()))
+    n_prob, n, dims = lo.shape[0], cfg.particles, lo.shape[1]
+    if len(random_states) != n_prob:
+        raise param_error("minimize_batch", "random_states", f"{n_prob} seeds, one per problem",
+                          len(random_states))
+    rngs = [np.random.default_rng(r) for r in random_states]
+    lo3, hi3 = lo[:, None, :], hi[:, None, :]
+    vmax = cfg.vmax * (hi3 - lo3)
+    x = np.stack([g.uniform(lo[b], hi[b], size=(n, dims)) for b, g in enumerate(rngs)])
     if x0 is not None:
-        x[0] = np.clip(np.asarray(x0, dtype=float), lo, hi)
+        x[:, 0] = np.clip(np.asarray(x0, dtype=float), lo, hi)
     v = np.zeros_like(x)
-    f = _evaluate(fun, x)
+    active = np.arange(n_prob)
+    f = _evaluate(fun, x, active)
     best_x, best_f = x.copy(), f.copy()
-    history = [best_f.min()]
-    message, success, it = "reached the iteration limit", False, 0
+    history = [[row.min()] for row in best_f]
+    nit = np.zeros(n_prob, dtype=int)
+    messages = ["reached the iteration limit"] * n_prob
+    success = np.zeros(n_prob, dtype=bool)
     chi = cfg.chi if cfg.rule == "constriction" else 1.0
     for it in range(1, cfg.iterations + 1):
-        guide = best_x[_neighbourhood_best(best_f, cfg)]
-        r1, r2 = rng.random((2, n, dims))
-        pull = cfg.c1 * r1 * (best_x - x) + cfg.c2 * r2 * (guide - x)
+        # while every problem runs, work on views; afterwards on copies of the running ones
+        sel = slice(None) if active.size == n_prob else active
+        xa, va, pa, fa = x[sel], v[sel], best_x[sel], best_f[sel]
+        guide = _guides(pa, fa, cfg)
+        r = np.stack([rngs[b].random((2, n, dims)) for b in active], axis=1)
+        pull = cfg.c1 * r[0] * (pa - xa) + cfg.c2 * r[1] * (guide - xa)
         if cfg.rule == "inertia":
             w = cfg.inertia[0] + (cfg.inertia[1] - cfg.inertia[0]) * (it - 1) / max(cfg.iterations - 1, 1)
-            v = w * v + pull
+            va = w * va + pull
         else:
-            v = chi * (v + pull)
-        np.clip(v, -vmax, vmax, out=v)
-        x = x + v
-        outside = (x < lo) | (x > hi)
+            va = chi * (va + pull)
+        np.clip(va, -vmax[sel], vmax[sel], out=va)
+        xa = xa + va
+        outside = (xa < lo3[sel]) | (xa > hi3[sel])
         if outside.any():
-            np.clip(x, lo, hi, out=x)
-            v[outside] = 0.0
-        f = _evaluate(fun, x)
-        better = f < best_f
-        best_x[better], best_f[better] = x[better], f[better]
-        g = int(np.argmin(best_f))
-        history.append(best_f[g])
-        if callback is not None and callback(it, best_x[g].copy(), float(best_f[g])):
-            message, success = "stopped by the callback", True
-            break
-        if cfg.stop_fitness is not None and best_f[g] <= cfg.stop_fitness:
-            message, success = "reached the stop threshold", True
-            break
-        if cfg.patience is not None and it >= cfg.patience:
-            past = history[-cfg.patience - 1]
-            if past - best_f[g] <= cfg.ftol * max(abs(best_f[g]), 1e-300):
-                message, success = f"converged: improvement below ftol over {cfg.patience} iterations", True
+            np.clip(xa, lo3[sel], hi3[sel], out=xa)
+            va[outside] = 0.0
+        fa_new = _evaluate(fun, xa, active)
+        better = fa_new < fa
+        pa[better], fa[better] = xa[better], fa_new[better]
+        x[sel], v[sel], best_x[sel], best_f[sel] = xa, va, pa, fa
+        nit[active] = it
+        done = np.zeros(active.size, dtype=bool)
+        for k, b in enumerate(active):
+            history[b].append(fa[k].min())
+            if cfg.stop_fitness is not None and history[b][-1] <= cfg.stop_fitness:
+                messages[b], success[b], done[k] = "reached the stop threshold", True, True
+            elif cfg.patience is not None and it >= cfg.patience:
+                best_now, past = history[b][-1], history[b][-cfg.patience - 1]
+                if past - best_now <= cfg.ftol * max(abs(best_now), 1e-300):
+                    messages[b] = f"converged: improvement below ftol over {cfg.patience} iterations"
+                    success[b], done[k] = True, True
+        if callback is not None:
+            g = np.argmin(best_f, axis=1)
+            if callback(it, best_x[np.arange(n_prob), g].copy(), best_f[np.arange(n_prob), g].copy()):
+                for b in active[~done]:
+                    messages[b], success[b] = "stopped by the callback", True
                 break
-    g = int(np.argmin(best_f))
-    return SwarmResult(x=best_x[g].copy(), fun=float(best_f[g]), nit=it, nfev=n * (it + 1),
-                       success=success, message=message, history=np.asarray(history))
+        active = active[~done]
+        if active.size == 0:
+            break
+    out = []
+    for b in range(n_prob):
+        g = int(np.argmin(best_f[b]))
+        out.append(SwarmResult(x=best_x[b, g].copy(), fun=float(best_f[b, g]), nit=int(nit[b]),
+                               nfev=n * (int(nit[b]) + 1), success=bool(success[b]), message=messages[b],
+                               history=np.asarray(history[b])))
+    return out
 
 
-def _evaluate(fun, x: NDArray[np.float64]) -> NDArray[np.float64]:
-    f = np.asarray(fun(x), dtype=float)
-    if f.shape != (x.shape[0],):
-        raise param_error("minimize", "fun", f"a function returning shape ({x.shape[0]},)", f.shape)
+def _evaluate(fun, x: NDArray[np.float64], which: NDArray[np.intp]) -> NDArray[np.float64]:
+    f = np.asarray(fun(x, which), dtype=float)
+    if f.shape != x.shape[:2]:
+        want = f"({x.shape[1]},)" if x.shape[0] == 1 else str(x.shape[:2])
+        raise param_error("minimize", "fun", f"a function returning shape {want}",
+                          f.shape[1:] if x.shape[0] == 1 else f.shape)
     return np.where(np.isnan(f), np.inf, f)
 
 
-def _neighbourhood_best(best_f: NDArray[np.float64], cfg: SwarmConfig) -> NDArray[np.intp]:
-    """Index of the best personal best in each particle's neighbourhood."""
-    n = best_f.size
+def _guides(best_x: NDArray[np.float64], best_f: NDArray[np.float64], cfg: SwarmConfig) -> NDArray[np.float64]:
+    """The neighbourhood best each particle is pulled towards, shape (B, n, dims)."""
     if cfg.topology == "global":
-        return np.full(n, int(np.argmin(best_f)))
+        return best_x[np.arange(best_f.shape[0]), np.argmin(best_f, axis=1)][:, None, :]
+    return np.take_along_axis(best_x, _neighbourhood_best(best_f, cfg)[:, :, None], axis=1)
+
+
+def _neighbourhood_best(best_f: NDArray[np.float64], cfg: SwarmConfig) -> NDArray[np.intp]:
+    """Index of the best personal best in each particle's neighbourhood, shape (B, n)."""
+    n_prob, n = best_f.shape
+    if cfg.topology == "global":
+        return np.repeat(np.argmin(best_f, axis=1)[:, None], n, axis=1)
     offsets = np.arange(-cfg.neighbours, cfg.neighbours + 1)
     idx = (np.arange(n)[None, :] + offsets[:, None]) % n          # (2k+1, n)
-    return idx[np.argmin(best_f[idx], axis=0), np.arange(n)]
+    choice = np.argmin(best_f[:, idx], axis=1)                     # (B, n)
+    return idx[choice, np.arange(n)[None, :]]

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from partcal import PartcalError
-from partcal.swarm import SwarmConfig, minimize
+from partcal.swarm import SwarmConfig, minimize, minimize_batch
 
 
 def sphere(X):
@@ -89,3 +89,18 @@ def test_bad_bounds_and_objective():
         minimize(sphere, [1.0], [0.0])
     with pytest.raises(PartcalError, match=r"returning shape \(50,\)"):
         minimize(lambda X: X, [0.0, 0.0], [1.0, 1.0])
+
+
+def test_batch_gives_each_problem_its_solo_result():
+    centres = np.array([[0.3, -0.2, 0.1], [-0.5, 0.5, 0.0], [0.9, 0.9, -0.9]])
+
+    def batch_fun(X, which):
+        return np.sum((X - centres[which][:, None, :]) ** 2, axis=2)
+
+    lower, upper = -np.ones((3, 3)), np.ones((3, 3))
+    batch = minimize_batch(batch_fun, lower, upper, random_states=[5, 6, 7])
+    for k in range(3):
+        solo = minimize(lambda X: np.sum((X - centres[k]) ** 2, axis=1), lower[k], upper[k], random_state=5 + k)
+        assert np.array_equal(solo.x, batch[k].x) and solo.nit == batch[k].nit
+        np.testing.assert_allclose(batch[k].x, centres[k], atol=1e-6)
+    assert len({r.nit for r in batch}) > 1      # each stopped on its own

@@ -10,8 +10,10 @@ except PackageNotFoundError:  # running from a source tree without installing
 from .errors import ConfigError, DataError, ModelFileError, PartcalError, UnreachableError
 from .kinematics import Robot, available_robots, load_robot
 from .measurements import Measurements, read_measurements, write_measurements
-from .metrics import rms_per_axis, summary
+from .metrics import ExtrapolationWarning, cross_validated_rms, rms_per_axis, summary
 from .models import ErrorModel
+from .partition import KMeansPartition, Octree
+from .partitioned import PartitionedErrorModel, select_granularity
 from .swarm import SwarmConfig, SwarmResult, minimize, minimize_batch
 
 __all__ = [
@@ -19,6 +21,7 @@ __all__ = [
     "ConfigError", "DataError", "ModelFileError", "PartcalError", "UnreachableError",
     "Robot", "available_robots", "load_robot",
     "Measurements", "read_measurements", "write_measurements",
-    "rms_per_axis", "summary",
+    "ExtrapolationWarning", "cross_validated_rms", "rms_per_axis", "summary",
+    "KMeansPartition", "Octree", "PartitionedErrorModel", "select_granularity",
     "ErrorModel", "SwarmConfig", "SwarmResult", "minimize", "minimize_batch",
 ]

@@ -105,15 +105,18 @@ class Basis:
                 out[:, t] = 1.0 if trig == "1" else (np.cos if trig == "cos" else np.sin)(q * phi[:, i])
             return out
         u = (X - scaling.centre) / scaling.scale
-        powers = [np.ones_like(u), u]
+        powers = [None, u]
         for _ in range(2, self.order + 1):
             powers.append(powers[-1] * u)
         for t, exps in enumerate(terms):
-            col = np.ones(X.shape[0])
-            for i, k in enumerate(exps):
-                if k:
-                    col = col * powers[k][:, i]
-            out[:, t] = col
+            factors = [(i, k) for i, k in enumerate(exps) if k]
+            if not factors:
+                out[:, t] = 1.0
+                continue
+            i, k = factors[0]
+            out[:, t] = powers[k][:, i]
+            for i, k in factors[1:]:
+                out[:, t] *= powers[k][:, i]
         return out
 
 

@@ -28,3 +28,52 @@ def summary(errors_mm: NDArray[np.float64]) -> dict:
         "max_3d": float(norms.max()),
         "p95_3d": float(np.percentile(norms, 95)),
     }
+
+
+def cross_validated_rms(model, X, y, *, folds: int = 5, random_state=0) -> float:
+    """Pooled 3-D RMS of k-fold held-out predictions (shuffled folds), mm.
+
+    Every sample is predicted once by a model fitted without it; the result is
+    ``sqrt(mean(|e|^2))`` over all samples, comparable across models.
+    """
+    from sklearn.base import clone
+    from sklearn.model_selection import KFold
+
+    X, y = np.asarray(X, dtype=float), np.asarray(y, dtype=float)
+    resid = np.empty_like(y)
+    for train, test in KFold(n_splits=folds, shuffle=True, random_state=random_state).split(X):
+        resid[test] = y[test] - clone(model).fit(X[train], y[train]).predict(X[test])
+    return float(np.sqrt(np.mean(np.sum(resid.reshape(len(y), -1) ** 2, axis=1))))
+
+
+class ExtrapolationWarning(UserWarning):
+    """Predictions were requested far from the data a model was fitted on."""
+
+
+def distance_outside_boxes(X: NDArray[np.float64], low: NDArray[np.float64], high: NDArray[np.float64],
+                           chunk: int = 20_000) -> NDArray[np.float64]:
+    """Distance from each point to the nearest of ``R`` axis-aligned boxes (0 inside one), shape (n,).
+
+    ``low`` and ``high`` have shape ``(R, d)``.
+
+    >>> distance_outside_boxes(np.array([[3.0, 0.0]]), np.array([[0.0, 0.0]]), np.array([[1.0, 1.0]])).tolist()
+    [2.0]
+    """
+    out = np.empty(X.shape[0])
+    for start in range(0, X.shape[0], chunk):
+        x = X[start:start + chunk, None, :]
+        gap = np.maximum(0.0, np.maximum(low[None] - x, x - high[None]))
+        out[start:start + chunk] = np.sqrt(np.einsum("nrd,nrd->nr", gap, gap)).min(axis=1)
+    return out
+
+
+def warn_far(distances: NDArray[np.float64], limit: float, stacklevel: int = 3) -> NDArray[np.bool_]:
+    """Issue one :class:`ExtrapolationWarning` for points farther than ``limit``; return the mask."""
+    import warnings
+
+    far = distances > limit
+    if far.any():
+        warnings.warn(f"{int(far.sum())} of {len(far)} points lie more than {limit:g} input units outside "
+                      f"the sampled workspace (up to {distances.max():.4g}); their predicted errors are "
+                      "extrapolations", ExtrapolationWarning, stacklevel=stacklevel)
+    return far

@@ -30,6 +30,7 @@ from sklearn.utils.validation import check_is_fitted, validate_data
 from ._validation import check_choice, check_int, param_error
 from .bases import Basis, Scaling, raw_polynomial
 from .errors import PartcalError
+from .metrics import distance_outside_boxes, warn_far
 from .swarm import SwarmConfig, SwarmResult, minimize_batch
 
 log = logging.getLogger(__name__)
@@ -160,6 +161,7 @@ class ErrorModel(RegressorMixin, BaseEstimator):
             coef = to_coef @ np.stack([res.x for res in self.swarm_results_], axis=1)
         self.coef_ = coef
         self.scaling_, self.terms_, self.basis_ = scaling, terms, basis
+        self.data_bounds_ = np.stack([X.min(axis=0), X.max(axis=0)])
         resid = Y - phi @ coef
         self.train_rms_ = np.sqrt((weights[:, None] * resid**2).sum(axis=0) / total_w)
         self.lstsq_rms_ = np.sqrt(lstsq_sse / total_w)
@@ -200,6 +202,19 @@ class ErrorModel(RegressorMixin, BaseEstimator):
         X = validate_data(self, X, reset=False, dtype=np.float64)
         out = self.basis_.transform(X, self.scaling_, self.terms_) @ self.coef_
         return out[:, 0] if self._y_1d else out
+
+    def distance_to_data(self, X) -> NDArray[np.float64]:
+        """Distance of each point outside the bounding box of the training inputs, shape (n,).
+
+        0 inside; a large value means the prediction is an extrapolation.
+        """
+        check_is_fitted(self, "coef_")
+        X = validate_data(self, X, reset=False, dtype=np.float64)
+        return distance_outside_boxes(X, self.data_bounds_[:1], self.data_bounds_[1:])
+
+    def warn_if_extrapolating(self, X, limit: float = 50.0) -> NDArray[np.bool_]:
+        """Warn (``ExtrapolationWarning``) about points farther than ``limit``; return the mask."""
+        return warn_far(self.distance_to_data(X), limit)
 
     def equations(self, input_names=None, output_names=("dx", "dy", "dz"), precision: int = 6) -> list[str]:
         """The fitted functions in raw units (mm, degrees), one line per output.

@@ -127,3 +127,16 @@ def test_bad_arrays(ident):
     model = ErrorModel(solver="lstsq").fit(X["cartesian"], y)
     with pytest.raises(ValueError, match="X has 6 features, but ErrorModel is expecting 3"):
         model.predict(X["joint"])
+
+
+def test_global_model_flags_extrapolation(ident):
+    from partcal import ExtrapolationWarning
+
+    X, y = ident
+    model = ErrorModel(solver="lstsq").fit(X["cartesian"], y)
+    assert np.all(model.distance_to_data(X["cartesian"]) == 0)
+    top = X["cartesian"][:, 2].max()
+    point = np.array([[X["cartesian"][0, 0], X["cartesian"][0, 1], top + 400.0]])
+    assert model.distance_to_data(point)[0] == pytest.approx(400.0)
+    with pytest.warns(ExtrapolationWarning, match="1 of 1 points"):
+        model.warn_if_extrapolating(point, limit=100.0)

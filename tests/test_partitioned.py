@@ -1,0 +1,123 @@
+"""PartitionedErrorModel: continuity, reproducibility, accuracy, extrapolation."""
+
+import dataclasses
+import warnings
+
+import numpy as np
+import pytest
+
+from conftest import ROOT
+from partcal import PartcalError
+from partcal.models import ErrorModel
+from partcal.partition import KMeansPartition, Octree
+from partcal.metrics import ExtrapolationWarning
+from partcal.partitioned import PartitionedErrorModel, select_granularity
+from partcal.simulate import load_study, simulate
+
+
+def smooth_field(n=3000, seed=0):
+    rng = np.random.default_rng(seed)
+    X = rng.uniform([-1000, -1000, -500], [1000, 1000, 1500], size=(n, 3))
+    y = np.c_[np.sin(X[:, 0] / 300), np.cos(X[:, 1] / 400), X[:, 2] / 1000 * np.sin(X[:, 0] / 500)]
+    return X, y
+
+
+def crossings(model, a, b, step=0.5):
+    """Points on segment a-b where the hard region changes (found at a coarse step)."""
+    t = np.arange(0, np.linalg.norm(b - a), step)
+    P = a + t[:, None] * (b - a) / np.linalg.norm(b - a)
+    return P, np.flatnonzero(np.diff(model.partition_.assign(P)))
+
+
+@pytest.mark.parametrize("spec", [Octree(max_depth=2), KMeansPartition(n_regions=12)])
+def test_blend_is_continuous_and_hard_jumps(spec):
+    X, y = smooth_field()
+    local = ErrorModel(degree=2, solver="lstsq")
+    blended = PartitionedErrorModel(partition=spec, local=local, random_state=0).fit(X, y)
+    hard = PartitionedErrorModel(partition=spec, local=local, blend="hard", random_state=0).fit(X, y)
+    a, b = np.array([-900.0, -700, -300]), np.array([900.0, 800, 1300])
+    P, cross = crossings(blended, a, b)
+    assert cross.size >= 2
+    coarse = np.linalg.norm(np.diff(blended.predict(P), axis=0), axis=1) / 0.5
+    lipschitz = 2.0 * coarse.max()          # a bound on the slope, from a coarse scan of the segment
+    direction = (b - a) / np.linalg.norm(b - a)
+    worst_hard = 0.0
+    for i in cross:
+        for h in (1e-2, 1e-4):
+            fine = P[i] + np.arange(-5000, 5001)[:, None] * h * direction      # +-0.5 mm (h=1e-4) around it
+            d_blend = np.linalg.norm(np.diff(blended.predict(fine), axis=0), axis=1)
+            assert d_blend.max() <= lipschitz * h
+            d_hard = np.linalg.norm(np.diff(hard.predict(fine), axis=0), axis=1)
+            worst_hard = max(worst_hard, d_hard.max() / (lipschitz * h))
+    assert worst_hard > 100       # the hard switch jumps: far beyond any slope bound
+
+
+def test_results_do_not_depend_on_n_jobs_and_follow_the_seed():
+    X, y = smooth_field(1500)
+    local = ErrorModel(degree=1, solver="pso")
+    one = PartitionedErrorModel(partition=Octree(max_depth=1), local=local, n_jobs=1, random_state=7).fit(X, y)
+    two = PartitionedErrorModel(partition=Octree(max_depth=1), local=local, n_jobs=2, random_state=7).fit(X, y)
+    np.testing.assert_array_equal(one.predict(X), two.predict(X))
+    other = PartitionedErrorModel(partition=Octree(max_depth=1), local=local, random_state=8).fit(X, y)
+    assert not np.array_equal(one.models_[0].coef_, other.models_[0].coef_)
+
+
+def test_regions_get_enough_samples_by_default():
+    X, y = smooth_field(2000)
+    model = PartitionedErrorModel(partition=Octree(max_depth=4), local=ErrorModel(degree=2, solver="lstsq"),
+                                  random_state=0).fit(X, y)
+    assert model.min_samples_ == 3 * 7               # three samples per SDP(CI) term
+    assert model.region_counts_.min() >= model.min_samples_
+    with pytest.raises(PartcalError, match=r"a region needs at least 21 samples \(7 terms per output\); got 15"):
+        PartitionedErrorModel(local=ErrorModel(degree=2)).fit(X[:15], y[:15])
+
+
+def test_extrapolation_is_flagged():
+    X, y = smooth_field(1500)
+    model = PartitionedErrorModel(partition=Octree(max_depth=1), local=ErrorModel(solver="lstsq")).fit(X, y)
+    assert np.all(model.distance_to_data(X) == 0)
+    far = np.array([[0.0, 0.0, 3500.0]])          # 2 m above the highest sample
+    labels = model.partition_.assign(X)
+    expected = min(np.linalg.norm(np.clip(far[0], X[labels == r].min(0), X[labels == r].max(0)) - far[0])
+                   for r in range(model.partition_.n_regions))       # nearest point of any region's box
+    assert model.distance_to_data(far)[0] == pytest.approx(expected, rel=1e-12)
+    assert expected > 1999
+    with pytest.warns(ExtrapolationWarning, match=r"1 of 2 points lie more than 50 input units outside the sampled workspace \(up to 2001\)"):
+        model.warn_if_extrapolating(np.vstack([X[:1], far]))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        model.warn_if_extrapolating(X[:10])
+
+
+def test_select_granularity_reports_every_candidate():
+    X, y = smooth_field(1500)
+    template = PartitionedErrorModel(partition=KMeansPartition(), local=ErrorModel(solver="lstsq"), random_state=0)
+    best, table = select_granularity(template, X, y, [2, 4, 8], folds=3)
+    assert [row["granularity"] for row in table] == [2, 4, 8]
+    assert best.partition.n_regions == min(table, key=lambda r: r["cv_rms_3d"])["granularity"]
+    assert table[-1]["cv_rms_3d"] < table[0]["cv_rms_3d"]      # finer is better on this smooth field
+
+
+@pytest.fixture(scope="module")
+def dense_sk120():
+    study = load_study(ROOT / "configs" / "sk120_virtual.yaml")
+    sets = {"dense": {"sample": 2000}} | {k: v for k, v in study.datasets.items() if k.startswith("test_")}
+    return simulate(dataclasses.replace(study, datasets=sets))
+
+
+def test_partitioning_beats_the_global_model_on_the_dense_virtual_sk120(dense_sk120):
+    train = dense_sk120["dense"]
+    X, y = train.nominal_mm, train.errors_mm
+    tests = [m for name, m in dense_sk120.items() if name != "dense"]
+
+    def rms_3d(model, m):
+        return np.sqrt(np.mean(np.sum((m.errors_mm - model.predict(m.nominal_mm)) ** 2, axis=1)))
+
+    for degree in (1, 2):
+        local = ErrorModel(degree=degree, solver="lstsq")
+        best, _ = select_granularity(PartitionedErrorModel(partition=Octree(), local=local, random_state=0),
+                                     X, y, [1, 2, 3], folds=5)
+        best.fit(X, y)
+        glob = ErrorModel(degree=degree, solver="lstsq").fit(X, y)
+        for m in tests:
+            assert rms_3d(best, m) < 0.5 * rms_3d(glob, m), (degree, m.name)

@@ -1,5 +1,5 @@
 # The two commands of the quick start; each sets up what it needs from nothing.
-#   make run    create .venv, install partcal, run the main job on the shipped example data
+#   make run    create .venv, install partcal, run the paper study on the shipped virtual-SK120 data
 #   make test   create .venv, install partcal with its test tools, run the whole suite
 PYTHON ?= python3
 VENV   := .venv
@@ -15,7 +15,7 @@ $(STAMP): pyproject.toml
 	touch $@
 
 run: $(STAMP)
-	$(BIN)/partcal simulate configs/sk120_virtual.yaml
+	$(BIN)/partcal run configs/paper_sk120.yaml
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -n 2

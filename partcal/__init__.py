@@ -14,6 +14,7 @@ from .metrics import ExtrapolationWarning, cross_validated_rms, rms_per_axis, su
 from .models import ErrorModel
 from .partition import KMeansPartition, Octree
 from .partitioned import PartitionedErrorModel, select_granularity
+from .predictor import Predictor, load_predictor
 from .swarm import SwarmConfig, SwarmResult, minimize, minimize_batch
 
 __all__ = [
@@ -23,5 +24,6 @@ __all__ = [
     "Measurements", "read_measurements", "write_measurements",
     "ExtrapolationWarning", "cross_validated_rms", "rms_per_axis", "summary",
     "KMeansPartition", "Octree", "PartitionedErrorModel", "select_granularity",
+    "Predictor", "load_predictor",
     "ErrorModel", "SwarmConfig", "SwarmResult", "minimize", "minimize_batch",
 ]

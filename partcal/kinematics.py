@@ -417,3 +417,27 @@ def joint_columns(n_joints: int) -> list[str]:
     if not 1 <= n_joints <= MAX_JOINTS:
         raise DataError(f"a robot has 1..{MAX_JOINTS} joints, got {n_joints}")
     return [f"q{j}" for j in range(1, n_joints + 1)]
+
+
+def _expression(offset: float, coeffs: NDArray[np.float64]) -> str | float:
+    """Inverse of :func:`parse_theta`: ``(180, [0, -1, 1])`` -> ``'180.0 - q2 + q3'``."""
+    parts = [repr(float(offset))] if offset else []
+    for j, c in enumerate(coeffs, start=1):
+        if c:
+            mag = "" if abs(c) == 1 else f"{abs(float(c))!r}*"
+            sign = "-" if c < 0 else "+"
+            parts.append(f"{sign} {mag}q{j}" if parts else f"{'-' if c < 0 else ''}{mag}q{j}")
+    return " ".join(parts) if parts else 0.0
+
+
+def robot_to_dict(robot: Robot) -> dict:
+    """The robot as the mapping :func:`robot_from_dict` reads (exact round trip)."""
+    return {
+        "name": robot.name, "joints": robot.n_joints,
+        "links": [{"theta": _expression(off, c), "d": float(d), "a": float(a), "alpha": float(al)}
+                  for off, c, d, a, al in zip(robot.theta_offset_deg, robot.coupling, robot.d_mm, robot.a_mm,
+                                              robot.alpha_deg)],
+        "tool_mm": robot.tool_mm.tolist(), "limits_deg": robot.limits_deg.tolist(),
+        "home_deg": robot.home_deg.tolist(),
+        "constraints_deg": [{"expr": _expression(0.0, c), "range": [lo, hi]} for c, lo, hi in robot.constraints],
+    }

@@ -223,3 +223,39 @@ def _quote(text: str) -> str:
     if any(ch in text for ch in ',"\n\r'):
         return '"' + text.replace('"', '""') + '"'
     return text
+
+
+def read_columns(path: str | Path, alternatives: list[list[str]], optional: list[str] = ()
+                 ) -> tuple[list[str], NDArray[np.float64], NDArray[np.float64] | None]:
+    """Read numeric columns from a CSV: the first group of ``alternatives`` present, plus ``optional``.
+
+    Returns the chosen column names, their values ``(n, k)``, and the optional
+    columns' values (or None when absent). Errors name file, line and column.
+    """
+    path = Path(path)
+    rows = list(_rows(path))
+    if not rows:
+        raise DataError(f"{path}: empty file: expected a header line with {', '.join(alternatives[0])}")
+    line, header = rows[0]
+    header = [h.strip() for h in header]
+    seen: dict[str, int] = {}
+    for i, col in enumerate(header):
+        if col in seen:
+            raise DataError(f"{path}:{line}: column {col!r} appears twice (columns {seen[col] + 1} and {i + 1})")
+        seen[col] = i
+    chosen = next((group for group in alternatives if all(c in seen for c in group)), None)
+    if chosen is None:
+        wanted = " or ".join(",".join(g) for g in alternatives)
+        missing = next(c for c in alternatives[0] if c not in seen)
+        raise DataError(f"{path}:{line}: column {missing!r} is missing (expected columns {wanted})")
+    extra = list(optional) if optional and all(c in seen for c in optional) else []
+    if not rows[1:]:
+        raise DataError(f"{path}:{line}: the header is not followed by any data row")
+    values = np.empty((len(rows) - 1, len(chosen) + len(extra)))
+    for r, (number, cells) in enumerate(rows[1:]):
+        if len(cells) != len(header):
+            raise DataError(f"{path}:{number}: expected {len(header)} cells as in the header, got {len(cells)}")
+        for c, col in enumerate(chosen + extra):
+            values[r, c] = _number(path, number, col, cells[seen[col]])
+    k = len(chosen)
+    return chosen, values[:, :k], (values[:, k:] if extra else None)

@@ -324,4 +324,5 @@ def _build_kmeans(X, n_regions: int, min_samples: int, random_state, width: floa
 
 
 def check_width(value) -> float:
-    return check_real("PartitionedErrorModel", "blend_width", value, 0.0, 10.0, low_open=True)
+    """Blend widths below sqrt(3) / 3 would leave octree box corners outside every kernel."""
+    return check_real("PartitionedErrorModel", "blend_width", value, 0.6, 10.0)

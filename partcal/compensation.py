@@ -1,0 +1,82 @@
+"""False-target error correction: command p' such that the robot, erring by e, reaches p.
+
+Cartesian models solve ``p' + e(p') = p`` by the fixed-point iteration
+``p'_{k+1} = p - e(p'_k)``. It converges when the error field changes by less
+than 1 mm per mm, which holds by orders of magnitude for robot errors (a few
+mm over metres); points that do not reach the tolerance are reported, never
+silently returned. Joint models solve ``FK(q') + e(q') = p`` the same way,
+with the IK turning each corrected target into joint angles (warm-started
+from the previous iterate, joints the model never saw move kept fixed).
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .kinematics import Robot
+
+
+class CompensationWarning(UserWarning):
+    """Some targets did not converge to the requested tolerance."""
+
+
+@dataclass(frozen=True)
+class CompensationResult:
+    """Commanded positions (and joints for joint models), with per-target convergence.
+
+    ``residual_mm`` is the predicted miss after compensation: ``|p' + e(p') - p|``.
+    """
+
+    commanded_mm: NDArray[np.float64]
+    joints_deg: NDArray[np.float64] | None
+    iterations: NDArray[np.int64]
+    residual_mm: NDArray[np.float64]
+    converged: NDArray[np.bool_]
+
+    def warn_unconverged(self, tol_mm: float) -> None:
+        bad = np.flatnonzero(~self.converged)
+        if bad.size:
+            listed = ", ".join(f"#{i} ({self.residual_mm[i]:.3g} mm)" for i in bad[:5])
+            more = f" and {bad.size - 5} more" if bad.size > 5 else ""
+            warnings.warn(f"{bad.size} of {len(self.converged)} targets did not converge to {tol_mm:g} mm: "
+                          f"{listed}{more}", CompensationWarning, stacklevel=3)
+
+
+def false_target(predict: Callable[[NDArray[np.float64]], NDArray[np.float64]], targets_mm: NDArray[np.float64],
+                 *, tol_mm: float = 1e-4, max_iter: int = 50) -> CompensationResult:
+    """Fixed-point false targets for a Cartesian error model ``predict(positions) -> errors``."""
+    cmd = targets_mm - predict(targets_mm)
+    iterations = np.ones(len(targets_mm), dtype=np.int64)
+    for _ in range(max_iter - 1):
+        miss = cmd + predict(cmd) - targets_mm
+        active = np.linalg.norm(miss, axis=1) > tol_mm
+        if not active.any():
+            break
+        cmd[active] -= miss[active]               # = target - e(cmd)
+        iterations[active] += 1
+    residual = np.linalg.norm(cmd + predict(cmd) - targets_mm, axis=1)
+    return CompensationResult(cmd, None, iterations, residual, residual <= tol_mm)
+
+
+def false_target_joints(predict: Callable[[NDArray[np.float64]], NDArray[np.float64]], robot: Robot,
+                        targets_mm: NDArray[np.float64], seeds_deg: NDArray[np.float64], fixed: tuple[int, ...],
+                        *, tol_mm: float = 1e-4, max_iter: int = 50) -> CompensationResult:
+    """False targets for a joint-angle error model ``predict(q_deg) -> errors``, via the robot's IK."""
+    q = robot.inverse(targets_mm, seeds_deg, fixed=fixed).q_deg
+    iterations = np.zeros(len(targets_mm), dtype=np.int64)
+    for _ in range(max_iter):
+        miss = robot.positions(q) + predict(q) - targets_mm
+        active = np.linalg.norm(miss, axis=1) > tol_mm
+        if not active.any():
+            break
+        cmd = targets_mm[active] - predict(q[active])
+        q[active] = robot.inverse(cmd, q[active], fixed=fixed).q_deg
+        iterations[active] += 1
+    reached = robot.positions(q)
+    residual = np.linalg.norm(reached + predict(q) - targets_mm, axis=1)
+    return CompensationResult(reached, q, iterations, residual, residual <= tol_mm)

@@ -1,0 +1,244 @@
+"""Batch-run configuration: YAML into frozen dataclasses, validated with key paths and lines.
+
+The format is documented in ``docs/config.md``. Paths are relative to the YAML
+file. Every problem is reported once as ``FILE: models[2].partition.max_depth
+(line 31): must be an int in [0, 8]; got 9``; unknown keys are refused with a
+"did you mean" when a known key is close.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+from ._yamlio import Section, load_yaml, range_check
+from .errors import PartcalError
+from .models import ErrorModel
+from .partition import KMeansPartition, Octree
+from .partitioned import PartitionedErrorModel
+from .swarm import RULES, TOPOLOGIES, SwarmConfig
+
+_SWARM_KEYS = {"particles": "int", "iterations": "int", "c1": "float", "c2": "float", "rule": "str",
+               "topology": "str", "neighbours": "int", "inertia": "list", "vmax": "float",
+               "bound_scale": "float", "stop_fitness": "float", "patience": "int", "ftol": "float"}
+
+
+@dataclass(frozen=True)
+class PartitionSpec:
+    method: str                      # "octree" | "kmeans"
+    sizes: tuple[int, ...]           # max_depth or n_regions; several = choose by cross-validation
+    min_samples: int | None = None
+    blend: str = "gaussian"
+    blend_width: float = 0.7
+
+    def build(self, size: int):
+        cls = Octree if self.method == "octree" else KMeansPartition
+        key = "max_depth" if self.method == "octree" else "n_regions"
+        return cls(**{key: size, "min_samples": self.min_samples})
+
+
+@dataclass(frozen=True)
+class ModelSpec:
+    """One entry of the registry: what to fit, how, and how to partition."""
+
+    name: str
+    inputs: str = "cartesian"
+    basis: str = "polynomial"
+    degree: int = 1
+    harmonics: int = 1
+    cross_terms: bool = False
+    solver: str = "pso"
+    fitness: str = "rms"
+    swarm: dict = field(default_factory=dict)
+    partition: PartitionSpec | None = None
+
+    @property
+    def slug(self) -> str:
+        """A file-name-safe form of the name: ``SDP(CI) octree`` -> ``sdp-ci-octree``."""
+        return re.sub(r"[^a-z0-9]+", "-", self.name.lower()).strip("-") or "model"
+
+    def local(self, random_state: int | None) -> ErrorModel:
+        pso = SwarmConfig(**self.swarm) if self.solver == "pso" else None
+        return ErrorModel(inputs=self.inputs, basis=self.basis, degree=self.degree, harmonics=self.harmonics,
+                          cross_terms=self.cross_terms, solver=self.solver, pso=pso, fitness=self.fitness,
+                          random_state=random_state)
+
+    def build(self, random_state: int | None, size: int | None = None):
+        """The estimator, unfitted (``size`` picks one granularity of the partition)."""
+        local = self.local(random_state)
+        if self.partition is None:
+            return local
+        p = self.partition
+        return PartitionedErrorModel(partition=p.build(size if size is not None else p.sizes[0]), local=local,
+                                     blend=p.blend, blend_width=p.blend_width, random_state=random_state)
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    """A batch run: data, models, and where the results go."""
+
+    name: str
+    source: Path
+    identification: Path
+    tests: dict[str, Path]
+    models: tuple[ModelSpec, ...]
+    output: Path
+    robot: str | None = None
+    seed: int = 0
+    n_jobs: int = 1
+    cv_folds: int = 5
+    dask_address: str | None = None
+    virtual_robot: Path | None = None
+
+    def resolved(self) -> dict:
+        """The configuration with every default filled in (written beside the results)."""
+        out = asdict(self)
+        out["source"] = str(self.source)
+        out["identification"] = str(self.identification)
+        out["tests"] = {k: str(v) for k, v in self.tests.items()}
+        out["output"] = str(self.output)
+        out["virtual_robot"] = str(self.virtual_robot) if self.virtual_robot else None
+        for m in out["models"]:
+            if m["partition"]:
+                m["partition"]["sizes"] = list(m["partition"]["sizes"])
+        return out
+
+
+def load_config(path: str | Path) -> RunConfig:
+    """Read and validate a batch-run YAML (see ``docs/config.md``)."""
+    path = Path(path)
+    data, lines = load_yaml(path)
+    top = Section(data, "", lines, str(path))
+    base = path.parent
+    name = top.get("name", "str", check=lambda v: None if v.strip() else "a non-empty text")
+    robot = top.get("robot", "str", default=None)
+    if robot is not None:
+        from .kinematics import load_robot
+        candidate = base / robot
+        robot_ref = str(candidate) if candidate.suffix in (".yaml", ".yml") else robot
+        try:
+            load_robot(robot_ref)
+        except PartcalError as exc:
+            top.fail("robot", str(exc))
+        robot = robot_ref
+    seed = top.get("seed", "int", default=0, check=range_check(0, 2**32 - 1, integer=True))
+    n_jobs = top.get("n_jobs", "int", default=1, check=lambda v: None if v == -1 or v >= 1 else "-1 or >= 1")
+    cv_folds = top.get("cv_folds", "int", default=5, check=range_check(2, 100, integer=True))
+    dask = top.section("dask")
+    address = dask.get("address", "str", default=None) if dask.data else None
+    dask.done()
+    data_sec = top.section("data", required=True)
+    ident = _existing(data_sec, "identification", base)
+    tests_sec = data_sec.section("tests")
+    tests = {}
+    for key in tests_sec.data:
+        tests[str(key)] = _existing(tests_sec, key, base)
+    if "identification" in tests:
+        tests_sec.fail(tests_sec.path("identification"), "a test set may not be called 'identification'")
+    data_sec.done()
+    models_raw = top.get("models", "list", check=lambda v: None if v else "a non-empty list")
+    models = tuple(_model(Section(m, f"models[{i}]", lines, str(path)))
+                   for i, m in enumerate(models_raw))
+    names = [m.name for m in models]
+    for i, m in enumerate(models):
+        if names.index(m.name) != i:
+            top.fail(f"models[{i}].name", f"duplicate model name {m.name!r}")
+        if [x.slug for x in models].index(m.slug) != i:
+            top.fail(f"models[{i}].name", f"{m.name!r} gives the same file name ({m.slug}) as another model")
+    verify = top.section("verify")
+    virtual = None
+    if verify.data:
+        virtual = _existing(verify, "virtual_robot", base)
+    verify.done()
+    default_out = base.parent / "reports" / name
+    output = Path(os.path.normpath(base / top.get("output", "str"))) if top.has("output") else default_out
+    top.done()
+    return RunConfig(name=name, source=path, identification=ident, tests=tests, models=models,
+                     output=Path(os.path.normpath(output)), robot=robot, seed=seed, n_jobs=n_jobs,
+                     cv_folds=cv_folds, dask_address=address, virtual_robot=virtual)
+
+
+def _existing(sec: Section, key: str, base: Path) -> Path:
+    rel = sec.get(key, "str")
+    target = Path(os.path.normpath(base / rel))
+    if not target.is_file():
+        sec.fail(sec.path(key), f"no such file: {target}")
+    return target
+
+
+def _model(sec: Section) -> ModelSpec:
+    name = sec.get("name", "str", check=lambda v: None if v.strip() else "a non-empty text")
+    choice = _choice_check
+    kw = dict(
+        name=name,
+        inputs=sec.get("inputs", "str", default="cartesian", check=choice("cartesian", "joint")),
+        basis=sec.get("basis", "str", default="polynomial", check=choice("polynomial", "fourier")),
+        degree=sec.get("degree", "int", default=1, check=range_check(1, 8, integer=True)),
+        harmonics=sec.get("harmonics", "int", default=1, check=range_check(1, 8, integer=True)),
+        cross_terms=sec.get("cross_terms", "bool", default=False),
+    )
+    if kw["cross_terms"] and kw["basis"] != "polynomial":
+        sec.fail(sec.path("cross_terms"), "must be false for the fourier basis")
+    solver = sec.section("solver")
+    method = solver.get("method", "str", default="pso", check=choice("pso", "lstsq"))
+    fitness = solver.get("fitness", "str", default="rms", check=choice("rms", "max", "mae"))
+    if method == "lstsq" and fitness != "rms":
+        solver.fail(solver.path("fitness"), "must be 'rms' with method: lstsq (least squares minimises the RMS)")
+    swarm = {}
+    for key, kind in _SWARM_KEYS.items():
+        if solver.has(key):
+            if method != "pso":
+                solver.fail(solver.path(key), "applies to method: pso only")
+            value = solver.data[key]
+            if value is None and key in ("patience", "stop_fitness"):
+                solver.get(key, "any")
+                swarm[key] = None
+                continue
+            if key == "rule":
+                swarm[key] = solver.get(key, "str", check=choice(*RULES))
+            elif key == "topology":
+                swarm[key] = solver.get(key, "str", check=choice(*TOPOLOGIES))
+            elif key == "inertia":
+                swarm[key] = tuple(solver.get(key, "list"))
+            else:
+                swarm[key] = solver.get(key, kind)
+    if swarm:
+        try:
+            SwarmConfig(**swarm)
+        except PartcalError as exc:
+            solver.fail(solver.where, str(exc))
+    solver.done()
+    kw.update(solver=method, fitness=fitness, swarm=swarm)
+    part = sec.section("partition")
+    partition = None
+    if part.data:
+        kind = part.get("method", "str", check=choice("octree", "kmeans"))
+        size_key = "max_depth" if kind == "octree" else "n_regions"
+        low, high = (0, 8) if kind == "octree" else (1, 4096)
+        raw = part.get(size_key, "any", default=3 if kind == "octree" else 8)
+        sizes = raw if isinstance(raw, list) else [raw]
+        for v in sizes:
+            if not isinstance(v, int) or isinstance(v, bool) or not low <= v <= high:
+                part.fail(part.path(size_key), f"must be an int in [{low}, {high}] (or a list of them, chosen "
+                                              f"by cross-validation); got {v!r}")
+        min_samples = part.get("min_samples", "int", default=None, check=range_check(1, integer=True))
+        part.done()
+        blend = sec.section("blend")
+        bmethod = blend.get("method", "str", default="gaussian", check=choice("gaussian", "hard"))
+        width = blend.get("width", "float", default=0.7, check=range_check(0.6, 10.0))
+        blend.done()
+        partition = PartitionSpec(kind, tuple(sizes), min_samples, bmethod, width)
+    else:
+        part.done()
+        if sec.has("blend"):
+            sec.fail(sec.path("blend"), "needs a partition")
+    sec.done()
+    return ModelSpec(**kw, partition=partition)
+
+
+def _choice_check(*allowed: str):
+    def check(value):
+        return None if value in allowed else "one of " + ", ".join(repr(a) for a in allowed)
+    return check

@@ -1,0 +1,119 @@
+"""Run outputs: metrics.json, model files, per-point predictions, the resolved config, the report.
+
+Everything is written into a temporary folder beside the output folder and
+swapped in when complete: a failed or interrupted run leaves the previous
+results untouched, and a rerun replaces the folder as a whole.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import shutil
+import tempfile
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import yaml
+
+from . import __version__
+from .errors import PartcalError
+from .kinematics import joint_columns
+from .persist import save_model
+from .registry import RunResult
+
+log = logging.getLogger(__name__)
+BEST_REASON = "lowest {folds}-fold cross-validated 3-D RMS on the identification set"
+
+
+def check_writable(output: Path) -> None:
+    """Fail early, before any fitting, if the output folder cannot be created or replaced."""
+    parent = output.parent
+    try:
+        parent.mkdir(parents=True, exist_ok=True)
+        probe = tempfile.mkdtemp(prefix=f".{output.name}.probe-", dir=parent)
+        os.rmdir(probe)
+    except OSError as exc:
+        raise PartcalError(f"{output}: cannot write the output folder here ({exc.strerror or exc})") from None
+    if output.exists() and not output.is_dir():
+        raise PartcalError(f"{output}: exists and is not a folder; refusing to replace it")
+
+
+def metrics_document(result: RunResult) -> dict:
+    """The content of ``metrics.json`` (CONTRACTS.md section 4)."""
+    cfg = result.config
+    models = {}
+    for r in result.models:
+        entry = {"file": f"models/{r.spec.slug}.json", "fit_seconds": round(r.fit_seconds, 4)}
+        entry.update(r.metrics)
+        entry["cv"] = {"folds": cfg.cv_folds, "rms_3d": r.cv_rms_3d}
+        entry["inputs"], entry["solver"], entry["regions"] = r.spec.inputs, r.spec.solver, r.n_regions
+        if r.rms_ratio is not None:
+            entry["pso_rms_ratio"] = r.rms_ratio
+        if r.granularity is not None:
+            entry["granularity"] = r.granularity
+        if r.compensation:
+            entry["compensation"] = r.compensation
+        models[r.spec.name] = entry
+    return {
+        "partcal_version": __version__, "name": cfg.name, "seed": cfg.seed,
+        "datasets": {name: {"n": len(m)} for name, m in result.datasets.items()},
+        "uncompensated": result.uncompensated,
+        "models": models,
+        "best": result.best,
+        "best_reason": BEST_REASON.format(folds=cfg.cv_folds),
+    }
+
+
+def write_run(result: RunResult, render: Callable[[RunResult, Path], None] | None = None) -> Path:
+    """Write all outputs of a run atomically; return the output folder."""
+    output = result.config.output
+    check_writable(output)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{output.name}.partial-", dir=output.parent))
+    try:
+        _write_all(result, tmp)
+        if render is not None:
+            render(result, tmp)
+        os.chmod(tmp, 0o755)
+        if output.exists():
+            old = Path(tempfile.mkdtemp(prefix=f".{output.name}.old-", dir=output.parent))
+            os.rmdir(old)
+            output.rename(old)
+            tmp.rename(output)
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            tmp.rename(output)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return output
+
+
+def _write_all(result: RunResult, folder: Path) -> None:
+    cfg = result.config
+    (folder / "models").mkdir()
+    for r in result.models:
+        extra = {"cv_rms_3d": r.cv_rms_3d, "fit_seconds": round(r.fit_seconds, 4),
+                 "identification": r.metrics["identification"], "seed": cfg.seed, "run": cfg.name}
+        save_model(r.model, folder / "models" / f"{r.spec.slug}.json", name=r.spec.name, robot=result.robot,
+                   extra=extra)
+        pred_dir = folder / "predictions" / r.spec.slug
+        pred_dir.mkdir(parents=True)
+        for name, m in result.datasets.items():
+            _write_predictions(pred_dir / f"{name}.csv", m, r.predictions[name])
+    (folder / "metrics.json").write_text(json.dumps(metrics_document(result), indent=1) + "\n")
+    resolved = {"partcal_version": __version__, **cfg.resolved()}
+    (folder / "config.resolved.yaml").write_text(yaml.safe_dump(resolved, sort_keys=False))
+
+
+def _write_predictions(path: Path, m, predicted) -> None:
+    """Per point: joints, nominal position, measured and predicted errors (full precision)."""
+    header = joint_columns(m.n_joints) + ["x_nom", "y_nom", "z_nom", "dx_meas", "dy_meas", "dz_meas",
+                                          "dx_pred", "dy_pred", "dz_pred"]
+    values = np.hstack([m.q_deg, m.nominal_mm, m.errors_mm, predicted])
+    with path.open("w") as handle:
+        handle.write(",".join(header) + "\n")
+        for row in values:
+            handle.write(",".join(repr(float(v)) for v in row) + "\n")

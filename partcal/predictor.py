@@ -1,0 +1,129 @@
+"""The downstream ``Predictor``: load a model file, predict errors, compensate targets.
+
+Usage, with a model file from ``partcal run``::
+
+    from partcal import load_predictor
+
+    p = load_predictor("reports/paper_sk120/models/sdp-ci.json")
+    p.predict(positions=[[1100, 800, 600]])      # predicted error (measured - nominal), mm
+    p.compensate([[1100, 800, 600]])             # the position to command instead, mm
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ._validation import check_array
+from .compensation import CompensationResult, false_target, false_target_joints
+from .errors import DataError
+from .kinematics import Robot, robot_from_dict
+from .partitioned import PartitionedErrorModel, _raw_predict
+from .persist import load_model
+
+
+class Predictor:
+    """Predict position errors and compensate targets with a fitted model.
+
+    Attributes
+    ----------
+    name : str
+    inputs : "cartesian" or "joint"
+    robot : Robot or None
+        The robot the model was fitted for (needed for joint models'
+        compensation, and to accept joints for Cartesian models).
+    document : dict
+        The model file's content (fit statistics under ``"fit"``).
+    """
+
+    def __init__(self, model, document: dict, robot: Robot | None = None):
+        self.model, self.document, self.robot = model, document, robot
+        self.name = document.get("name", "")
+        self.inputs = document["inputs"]
+        self.n_inputs = int(document["n_inputs"])
+
+    def __repr__(self) -> str:
+        return f"Predictor({self.name!r}, inputs={self.inputs!r}, kind={self.document['kind']!r})"
+
+    def _errors(self, X: NDArray[np.float64]) -> NDArray[np.float64]:
+        if isinstance(self.model, PartitionedErrorModel):
+            return self.model.predict(X)
+        return _raw_predict(self.model, X)
+
+    def predict(self, positions=None, joints=None) -> NDArray[np.float64]:
+        """Predicted errors (measured - nominal), shape (n, 3) mm.
+
+        Cartesian models take ``positions`` (n, 3) mm, or ``joints`` when the
+        model file carries a robot; joint models take ``joints`` (n, N) degrees.
+        """
+        return self._errors(self._inputs(positions, joints))
+
+    def _inputs(self, positions, joints) -> NDArray[np.float64]:
+        if (positions is None) == (joints is None):
+            raise DataError("give exactly one of positions= (mm) or joints= (degrees)")
+        if self.inputs == "joint":
+            if joints is None:
+                raise DataError("this model takes joint angles: pass joints= (degrees); to reach Cartesian "
+                                "targets use compensate(), which solves the inverse kinematics")
+            return check_array(joints, "joints", columns=self.n_inputs)
+        if positions is not None:
+            return check_array(positions, "positions", columns=3)
+        if self.robot is None:
+            raise DataError("this Cartesian model's file names no robot, so joints cannot be converted: "
+                            "pass positions= (mm)")
+        return self.robot.positions(check_array(joints, "joints", columns=self.robot.n_joints))
+
+    def compensate(self, targets_mm, joints=None, *, tol_mm: float = 1e-4, max_iter: int = 50) -> NDArray[np.float64]:
+        """Commanded ("false target") positions, shape (n, 3) mm, so that the robot reaches the targets.
+
+        Targets that do not converge to ``tol_mm`` raise a ``CompensationWarning``
+        naming them; :meth:`compensate_full` returns the details.
+        """
+        return self.compensate_full(targets_mm, joints, tol_mm=tol_mm, max_iter=max_iter).commanded_mm
+
+    def compensate_full(self, targets_mm, joints=None, *, tol_mm: float = 1e-4, max_iter: int = 50
+                        ) -> CompensationResult:
+        """Like :meth:`compensate`, with joints (joint models), iterations and residuals per target.
+
+        ``joints`` (n, N) degrees are IK seeds for joint models (default: the
+        robot's home pose, with the joints the model never saw move held at
+        their value in the training data).
+        """
+        targets = check_array(targets_mm, "targets_mm", columns=3)
+        if self.inputs == "cartesian":
+            result = false_target(self._errors, targets, tol_mm=tol_mm, max_iter=max_iter)
+        else:
+            if self.robot is None:
+                raise DataError("compensating a joint model needs its robot, and this model file names none")
+            fixed, values = self._fixed_joints()
+            if joints is None:
+                seeds = np.tile(self.robot.home_deg, (len(targets), 1))
+                seeds[:, [j - 1 for j in fixed]] = values
+            else:
+                seeds = check_array(joints, "joints", columns=self.robot.n_joints)
+                if seeds.shape[0] != targets.shape[0]:
+                    raise DataError(f"joints has {seeds.shape[0]} rows but targets_mm has {targets.shape[0]}")
+            result = false_target_joints(self._errors, self.robot, targets, seeds, fixed, tol_mm=tol_mm,
+                                         max_iter=max_iter)
+        result.warn_unconverged(tol_mm)
+        return result
+
+    def _fixed_joints(self) -> tuple[tuple[int, ...], NDArray[np.float64]]:
+        """Joints constant in the training data (the model cannot know what moving them does)."""
+        models = self.model.models_ if isinstance(self.model, PartitionedErrorModel) else [self.model]
+        active = np.any([m.scaling_.active for m in models], axis=0)
+        fixed = tuple(int(j) + 1 for j in np.flatnonzero(~active))
+        return fixed, np.array([models[0].scaling_.centre[j - 1] for j in fixed])
+
+    def distance_to_data(self, positions=None, joints=None) -> NDArray[np.float64]:
+        """How far each input lies outside the training data (0 inside), input units."""
+        return self.model.distance_to_data(self._inputs(positions, joints))
+
+
+def load_predictor(path: str | Path) -> Predictor:
+    """Load a model file written by ``partcal run`` (or :func:`partcal.persist.save_model`)."""
+    model, doc = load_model(path)
+    robot = robot_from_dict(doc["robot"], source=str(path)) if doc.get("robot") else None
+    return Predictor(model, doc, robot)

@@ -1,0 +1,82 @@
+"""Batch-run YAML: defaults, paths, and one clear error per problem."""
+
+from pathlib import Path
+
+import pytest
+
+from conftest import ROOT
+from partcal import ConfigError
+from partcal.config import load_config
+
+DATA = ROOT / "data" / "sk120"
+BASE = f"""name: demo
+robot: motoman_sk120
+data:
+  identification: {DATA / 'identification.csv'}
+  tests:
+    rectangle: {DATA / 'test_rectangle.csv'}
+models:
+  - name: FDP(CI)
+    degree: 1
+    solver: {{method: pso, particles: 30, iterations: 50}}
+  - name: SDP octree
+    degree: 2
+    solver: {{method: lstsq}}
+    partition: {{method: octree, max_depth: [1, 2]}}
+    blend: {{method: hard}}
+"""
+
+
+def write(tmp_path, text):
+    path = tmp_path / "configs" / "run.yaml"
+    path.parent.mkdir(exist_ok=True)
+    path.write_text(text)
+    return path
+
+
+def test_defaults_and_paths(tmp_path):
+    cfg = load_config(write(tmp_path, BASE))
+    assert cfg.seed == 0 and cfg.n_jobs == 1 and cfg.cv_folds == 5 and cfg.dask_address is None
+    assert cfg.output == tmp_path / "reports" / "demo"               # reports/<name> beside configs/
+    assert cfg.models[0].swarm == {"particles": 30, "iterations": 50}
+    part = cfg.models[1].partition
+    assert part.method == "octree" and part.sizes == (1, 2) and part.blend == "hard"
+    assert cfg.models[1].slug == "sdp-octree"
+    relative = write(tmp_path, BASE.replace(str(DATA / "identification.csv"), "../data.csv")
+                     .replace("name: demo", "name: demo\noutput: ../out/here"))
+    (tmp_path / "data.csv").write_text("x")
+    cfg = load_config(relative)
+    assert cfg.identification == tmp_path / "data.csv" and cfg.output == tmp_path / "out" / "here"
+
+
+@pytest.mark.parametrize("old, new, message", [
+    ("    degree: 2\n", "    degree: 0\n", r"models\[1\]\.degree \(line {line}\): must be an int in \[1, 8\]; got 0"),
+    ("max_depth: [1, 2]", "max_depth: [1, 9]", r"models\[1\]\.partition\.max_depth \(line {line}\): must be an int in \[0, 8\]"),
+    ("    degree: 1\n", "    degre: 1\n", r"models\[0\]\.degre \(line {line}\): unknown key; did you mean 'degree'\?"),
+    ("particles: 30", "particles: many", r"models\[0\]\.solver\.particles \(line {line}\): must be an integer; got 'many'"),
+    ("particles: 30", "particles: 1", r"models\[0\]\.solver \(line {line}\): The 'particles' parameter of SwarmConfig must be an int in \[2, 100000\]"),
+    ("method: lstsq}", "method: lstsq, particles: 10}", r"models\[1\]\.solver\.particles \(line {line}\): applies to method: pso only"),
+    ("name: SDP octree", "name: FDP(CI)", r"models\[1\]\.name \(line {line}\): duplicate model name 'FDP\(CI\)'"),
+    ("robot: motoman_sk120", "robot: motoman_sk12", r"robot \(line {line}\): robot 'motoman_sk12': no such file, and not a built-in robot"),
+    ("test_rectangle.csv", "missing.csv", r"data\.tests\.rectangle \(line {line}\): no such file: .*missing\.csv"),
+    ("name: demo\n", "name: demo\nseed: -3\n", r"seed \(line {line}\): must be an int in \[0, 4294967295\]; got -3"),
+])
+def test_errors_name_path_and_line(tmp_path, old, new, message):
+    text = BASE.replace(old, new, 1)
+    pos = BASE.index(old)       # the edited line: where the replacement starts, plus lines it adds before
+    line = BASE[:pos].count("\n") + 1 + new.rstrip("\n").count("\n")
+    with pytest.raises(ConfigError, match=message.format(line=line)):
+        load_config(write(tmp_path, text))
+
+
+def test_broken_yaml_names_its_line(tmp_path):
+    text = BASE.replace("  tests:\n", "  tests: [\n")
+    with pytest.raises(ConfigError, match=r"run\.yaml \(line \d+\): not valid YAML"):
+        load_config(write(tmp_path, text))
+
+
+def test_shipped_configs_load():
+    for name in ("paper_sk120.yaml", "partitioned_sk120.yaml"):
+        cfg = load_config(ROOT / "configs" / name)
+        assert cfg.output == ROOT / "reports" / cfg.name and cfg.virtual_robot is not None
+    assert Path(ROOT / "configs" / "paper_sk120.yaml").exists()

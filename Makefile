@@ -6,6 +6,10 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
+SYSTEM := $(VENV)/.system-packages
+# Debian packages the report tests use: the browser, and Mesa's EGL for off-screen 3-D pictures
+DEBS   := chromium libegl1 libegl-mesa0 libgl1-mesa-dri
+
 .PHONY: run test bench clean
 
 $(STAMP): pyproject.toml
@@ -14,10 +18,18 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m pip install --quiet -e '.[test]'
 	touch $@
 
+$(SYSTEM):
+	@missing=""; for p in $(DEBS); do dpkg -s $$p >/dev/null 2>&1 || missing="$$missing $$p"; done; \
+	if [ -n "$$missing" ]; then \
+	  echo "installing Debian packages:$$missing"; \
+	  apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $$missing >/dev/null; \
+	fi
+	mkdir -p $(VENV) && touch $@
+
 run: $(STAMP)
 	$(BIN)/partcal run configs/paper_sk120.yaml
 
-test: $(STAMP)
+test: $(STAMP) $(SYSTEM)
 	$(BIN)/python -m pytest -n 2
 
 bench: $(STAMP)

@@ -249,8 +249,8 @@ class ErrorModel(RegressorMixin, BaseEstimator):
                     k = q * np.pi / 2 / s.scale[i]
                     arg = f"{k:.{precision}g}*{names[i]} {-k * s.centre[i]:+.{precision}g}"
                 parts.append(f"{fmt.format(c)}*{trig}({arg})")
-        text = " ".join(parts)
-        return text[1:] if text.startswith("+") else text
+        text = " ".join(f"{p[0]} {p[1:]}" for p in parts)        # "+0.5*x" -> "+ 0.5*x"
+        return text[2:] if text.startswith("+ ") else "-" + text[2:]
 
     def _describe(self) -> str:
         if self.basis == "polynomial":

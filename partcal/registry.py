@@ -45,7 +45,6 @@ class ModelResult:
     predictions: dict[str, NDArray[np.float64]]
     rms_ratio: float | None = None
     granularity: list[dict] | None = None
-    histories: list[NDArray[np.float64]] = field(default_factory=list)
     compensation: dict[str, dict] = field(default_factory=dict)
 
     @property
@@ -103,13 +102,8 @@ def fit_model(spec: ModelSpec, seed: int, data: dict[str, Measurements], folds: 
     predictions = {name: estimator.predict(model_inputs(spec.inputs, m)) for name, m in data.items()}
     metrics = {name: summary(m.errors_mm - predictions[name]) for name, m in data.items()}
     locals_ = estimator.models_ if isinstance(estimator, PartitionedErrorModel) else [estimator]
-    ratio = None
-    histories = []
-    if spec.solver == "pso":
-        ratios = [m.rms_ratio_ for m in locals_]
-        ratio = float(np.max(ratios))
-        histories = [r.history for m in locals_ for r in m.swarm_results_]
-    return ModelResult(spec, estimator, fit_seconds, cv, metrics, predictions, ratio, granularity, histories)
+    ratio = float(max(m.rms_ratio_ for m in locals_)) if spec.solver == "pso" else None
+    return ModelResult(spec, estimator, fit_seconds, cv, metrics, predictions, ratio, granularity)
 
 
 @contextmanager

@@ -1,0 +1,199 @@
+"""The HTML report of a batch run: one self-contained page, readable offline.
+
+``render_report(result, folder)`` writes ``folder/index.html``: a summary, the
+comparison table in the layout of the paper's Table 2, errors along each data
+set, 3-D pictures of the partitions, swarm convergence, the fitted equations
+and the compensation check. Figures are embedded (SVG for 2-D, PNG for 3-D);
+the page requests nothing from any network. Every user-supplied string is
+escaped by the template engine.
+"""
+
+from __future__ import annotations
+
+import base64
+import datetime as _dt
+import logging
+import time
+from importlib import resources
+from pathlib import Path
+
+import jinja2
+import numpy as np
+
+from .. import __version__
+from ..models import ErrorModel
+from ..partitioned import PartitionedErrorModel
+from ..registry import ModelResult, RunResult
+from . import figures
+from .scene import render_scenes
+
+log = logging.getLogger(__name__)
+
+
+def render_report(result: RunResult, folder: Path, *, screenshot: bool = False) -> Path:
+    """Write ``index.html`` (and ``report.png`` with ``screenshot=True``) into ``folder``."""
+    start = time.perf_counter()
+    env = jinja2.Environment(autoescape=True, undefined=jinja2.StrictUndefined)
+    template = env.from_string(resources.files(__package__).joinpath("template.html").read_text())
+    html = template.render(**context(result))
+    path = Path(folder) / "index.html"
+    path.write_text(html, encoding="utf-8")
+    log.info("report: %s (%.0f kB) in %.1f s", path, path.stat().st_size / 1024, time.perf_counter() - start)
+    if screenshot:
+        from .browser import open_report
+
+        open_report(path, Path(folder) / "report.png")
+    return path
+
+
+def _b64(text: str | bytes) -> str:
+    return base64.b64encode(text.encode() if isinstance(text, str) else text).decode("ascii")
+
+
+def context(result: RunResult) -> dict:
+    """Everything the template shows, computed from a finished run."""
+    cfg = result.config
+    by_name = {r.spec.name: r for r in result.models}
+    best = by_name[result.best]
+    ranked = sorted(result.models, key=lambda r: r.cv_rms_3d)
+    global_best = next((r for r in ranked if not isinstance(r.model, PartitionedErrorModel)), None)
+    part_best = next((r for r in ranked if isinstance(r.model, PartitionedErrorModel)), None)
+    shown = [r for r in (global_best, part_best) if r is not None]
+    return {
+        "name": cfg.name, "version": __version__, "seed": cfg.seed, "seconds": result.seconds,
+        "date": _dt.datetime.now().strftime("%Y-%m-%d %H:%M"), "config_path": str(cfg.source),
+        "folds": cfg.cv_folds, "models": result.models,
+        "best": {"name": best.spec.name, "cv": best.cv_rms_3d},
+        "best_reason": f"lowest {cfg.cv_folds}-fold CV 3-D RMS on the identification set",
+        "datasets": [{"name": n, "n": len(m), "bounds": [f"{lo:.0f} to {hi:.0f}" for lo, hi in
+                                                         zip(m.nominal_mm.min(0), m.nominal_mm.max(0))]}
+                     for n, m in result.datasets.items()],
+        "families": family_sentences(result),
+        "table": comparison_rows(result),
+        "granularity": granularity_rows(result),
+        "shown_models": [r.spec.name for r in shown],
+        "error_figures": [{"name": n,
+                           "path_svg": _b64(figures.errors_along_path(n, m.errors_mm, {r.spec.name: r.predictions[n] for r in shown})),
+                           "hist_svg": _b64(figures.residual_histogram(n, m.errors_mm, {r.spec.name: r.predictions[n] for r in shown}))}
+                          for n, m in result.datasets.items()],
+        "scenes": scene_entries(result),
+        "convergence_svg": _optional_b64(figures.convergence({r.spec.name: r.model for r in result.models
+                                                              if r.spec.solver == "pso"})),
+        "equations": [{"name": r.spec.name, "lines": r.model.equations(input_names=None, precision=4)}
+                      for r in result.models if isinstance(r.model, ErrorModel)],
+        **compensation_entries(result),
+    }
+
+
+def granularity_rows(result: RunResult) -> list[dict]:
+    """CV score of every candidate granularity; the chosen one (first of the lowest) marked."""
+    rows = []
+    for r in result.models:
+        if not r.granularity:
+            continue
+        chosen = min(range(len(r.granularity)), key=lambda i: r.granularity[i]["cv_rms_3d"])
+        rows += [{"model": r.spec.name, "granularity": g["granularity"], "regions": g["regions"],
+                  "cv": g["cv_rms_3d"], "chosen": i == chosen} for i, g in enumerate(r.granularity)]
+    return rows
+
+
+def _optional_b64(svg: str | None) -> str | None:
+    return _b64(svg) if svg else None
+
+
+def comparison_rows(result: RunResult) -> list[dict]:
+    """Table rows: uncompensated, then every model; cells carry their exact value for checks."""
+    names = list(result.datasets)
+    rows = []
+
+    def cells_for(stats: dict, r: ModelResult | None) -> list[dict]:
+        cells = []
+        for n in names:
+            s = stats[n]
+            values = [*s["rms"], s["rms_3d"], s["max_3d"]]
+            for key, v in zip(("x", "y", "z", "3d", "max"), values):
+                cells.append({"key": f"{n}.{key}", "value": v, "text": f"{v:.2f}"})
+        extra = [("cv", r.cv_rms_3d if r else None, "{:.3f}"), ("regions", r.n_regions if r else None, "{}"),
+                 ("fit_seconds", r.fit_seconds if r else None, "{:.2f}"),
+                 ("pso_ratio", r.rms_ratio if r else None, "{:.6f}")]
+        for key, v, fmt in extra:
+            cells.append({"key": key, "value": v, "text": fmt.format(v) if v is not None else "–"})
+        return cells
+
+    rows.append({"name": "uncompensated", "uncompensated": True, "cells": cells_for(result.uncompensated, None)})
+    for r in result.models:
+        rows.append({"name": r.spec.name, "uncompensated": False, "cells": cells_for(r.metrics, r)})
+    for col in range(len(rows[0]["cells"])):       # best per column among the models
+        if rows[0]["cells"][col]["key"] in ("regions", "fit_seconds", "pso_ratio"):
+            continue
+        values = [row["cells"][col]["value"] for row in rows[1:]]
+        low = min(v for v in values if v is not None)
+        for row in rows[1:]:
+            row["cells"][col]["best"] = row["cells"][col]["value"] == low
+    for row in rows:
+        for cell in row["cells"]:
+            cell.setdefault("best", False)
+    return rows
+
+
+def family_sentences(result: RunResult) -> list[str]:
+    """One sentence per model family (global/partitioned x Cartesian/joint inputs) on its gain."""
+    tests = [n for n in result.datasets if n != "identification"] or ["identification"]
+    families: dict[str, list[ModelResult]] = {}
+    for r in result.models:
+        kind = "partitioned" if isinstance(r.model, PartitionedErrorModel) else "global"
+        inputs = "Cartesian-input" if r.spec.inputs == "cartesian" else "joint-input"
+        families.setdefault(f"{kind.capitalize()} {inputs} models", []).append(r)
+    out = []
+    for family, members in families.items():
+        best = min(members, key=lambda r: r.cv_rms_3d)
+        before = np.mean([result.uncompensated[n]["rms_3d"] for n in tests])
+        after = np.mean([best.metrics[n]["rms_3d"] for n in tests])
+        cuts = [100 * (1 - best.metrics[n]["rms_3d"] / result.uncompensated[n]["rms_3d"]) for n in tests]
+        out.append(f"{family} ({len(members)}): the best by CV, {best.spec.name}, brings the mean 3-D RMS on "
+                   f"{'the test sets' if tests != ['identification'] else 'the identification set'} from "
+                   f"{before:.2f} to {after:.2f} mm ({min(cuts):.0f}–{max(cuts):.0f}% less).")
+    return out
+
+
+def scene_entries(result: RunResult) -> list[dict]:
+    """3-D pictures of every partitioned model (rendered in a child process)."""
+    ident = result.datasets["identification"]
+    tests = {n: m for n, m in result.datasets.items() if n != "identification"}
+    specs, captions = {}, {}
+    for r in result.models:
+        if not isinstance(r.model, PartitionedErrorModel):
+            continue
+        part = r.model.partition_
+        X = ident.q_deg if r.spec.inputs == "joint" else ident.nominal_mm
+        spec = {"points": ident.nominal_mm, "labels": part.assign(X),
+                "boxes": part.boxes[np.unique(part.kernel_region, return_index=True)[1]] if part.kind == "octree"
+                else np.zeros((0, 2, 3)), "n_paths": len(tests)}
+        residuals = [np.linalg.norm(m.errors_mm - r.predictions[n], axis=1) for n, m in tests.items()]
+        for k, (m, res) in enumerate(zip(tests.values(), residuals)):
+            spec[f"path{k}"], spec[f"residual{k}"] = m.nominal_mm, res
+        spec["residual_max"] = max([float(x.max()) for x in residuals] + [1e-9])
+        if part.kind == "octree" and r.spec.inputs == "cartesian":
+            spec["boxes"] = part.boxes[[int(np.flatnonzero(part.kernel_region == g)[0]) for g in range(part.n_regions)]]
+        specs[r.spec.name] = spec
+        space = "joint space" if r.spec.inputs == "joint" else "the Cartesian workspace"
+        captions[r.spec.name] = (f"{part.n_regions} {'octree cells' if part.kind == 'octree' else 'k-means regions'} "
+                                 f"in {space}; identification points coloured by region"
+                                 f"{', octree cells as boxes' if part.kind == 'octree' else ''}; test paths coloured "
+                                 "by the residual error after the model's prediction.")
+    pngs, problem = render_scenes(specs)
+    if problem:
+        log.warning("report: %s", problem)
+    return [{"name": name, "caption": captions[name], "png": _b64(pngs[name]) if name in pngs else None,
+             "note": f"No picture: {problem or 'rendering unavailable'}. The rest of the report is complete."}
+            for name in specs]
+
+
+def compensation_entries(result: RunResult) -> dict:
+    rows = [(r.spec.name, n, c["before"]["rms_3d"], c["predicted_residual"]["rms_3d"], c["after"]["rms_3d"],
+             f"{c['converged']}/{c['n']}") for r in result.models for n, c in r.compensation.items()]
+    if not rows:
+        return {"compensation": [], "compensation_svg": None}
+    return {"compensation": [{"model": m, "dataset": d, "before": b, "predicted": p, "after": a, "converged": c}
+                             for m, d, b, p, a, c in rows],
+            "compensation_svg": _b64(figures.compensation_bars([row[:5] for row in rows]))}

@@ -15,6 +15,7 @@ from pathlib import Path
 
 from ._yamlio import Section, load_yaml, range_check
 from .errors import PartcalError
+from .kinematics import load_robot, robot_reference
 from .models import ErrorModel
 from .partition import KMeansPartition, Octree
 from .partitioned import PartitionedErrorModel
@@ -115,9 +116,7 @@ def load_config(path: str | Path) -> RunConfig:
     name = top.get("name", "str", check=lambda v: None if v.strip() else "a non-empty text")
     robot = top.get("robot", "str", default=None)
     if robot is not None:
-        from .kinematics import load_robot
-        candidate = base / robot
-        robot_ref = str(candidate) if candidate.suffix in (".yaml", ".yml") else robot
+        robot_ref = robot_reference(robot, base)
         try:
             load_robot(robot_ref)
         except PartcalError as exc:

@@ -354,6 +354,12 @@ def load_robot(name_or_path: str | Path | Robot) -> Robot:
     return robot_from_dict(spec, source=str(path))
 
 
+def robot_reference(name: str, base: Path) -> str:
+    """A robot named in a config: a ``.yaml`` path relative to the config's folder, or a built-in name."""
+    candidate = base / name
+    return str(candidate) if candidate.suffix in (".yaml", ".yml") else name
+
+
 _ROBOT_KEYS = {"name", "description", "joints", "links", "tool_mm", "limits_deg", "home_deg",
                "constraints_deg", "base"}
 

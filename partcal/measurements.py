@@ -98,23 +98,10 @@ def read_measurements(path: str | Path, robot: str | Robot | None = None, *, nam
         For any malformed content, naming the file, line and column.
     """
     path = Path(path)
-    rows = list(_rows(path))
-    if not rows:
-        raise DataError(f"{path}: empty file: expected a header line such as 'q1,...,x_meas,y_meas,z_meas'")
-    header_line, header = rows[0]
-    header = [h.strip() for h in header]
-    columns = _check_header(path, header_line, header, has_robot=robot is not None)
-    data = rows[1:]
-    if not data:
-        raise DataError(f"{path}:{header_line}: the header is not followed by any data row")
+    line, header, seen, data = _table(path, "q1,...,x_meas,y_meas,z_meas")
+    columns = _check_header(path, line, header, seen, has_robot=robot is not None)
     q_cols, nom_cols = columns["q"], columns["nom"]
-    numeric = q_cols + (nom_cols or []) + columns["meas"]
-    values = np.empty((len(data), len(numeric)))
-    for r, (line, cells) in enumerate(data):
-        if len(cells) != len(header):
-            raise DataError(f"{path}:{line}: expected {len(header)} cells as in the header, got {len(cells)}")
-        for c, col in enumerate(numeric):
-            values[r, c] = _number(path, line, header[col], cells[col])
+    values = _numbers(path, line, header, data, q_cols + (nom_cols or []) + columns["meas"])
     n_q = len(q_cols)
     q = values[:, :n_q]
     meas = values[:, -3:]
@@ -152,13 +139,36 @@ def _rows(path: Path):
             raise DataError(f"{path}: not a UTF-8 text file ({exc.reason} at byte {exc.start})") from None
 
 
-def _check_header(path: Path, line: int, header: list[str], *, has_robot: bool) -> dict:
-    where = f"{path}:{line}"
+def _table(path: Path, expected: str) -> tuple[int, list[str], dict[str, int], list]:
+    """Header line number, column names, their positions, and the data rows; refuses empty files
+    and duplicate columns."""
+    rows = list(_rows(path))
+    if not rows:
+        raise DataError(f"{path}: empty file: expected a header line such as '{expected}'")
+    line, header = rows[0][0], [h.strip() for h in rows[0][1]]
     seen: dict[str, int] = {}
     for i, col in enumerate(header):
         if col in seen:
-            raise DataError(f"{where}: column {col!r} appears twice (columns {seen[col] + 1} and {i + 1})")
+            raise DataError(f"{path}:{line}: column {col!r} appears twice (columns {seen[col] + 1} and {i + 1})")
         seen[col] = i
+    return line, header, seen, rows[1:]
+
+
+def _numbers(path: Path, line: int, header: list[str], data: list, columns: list[int]) -> NDArray[np.float64]:
+    """The given columns of every data row as floats, shape (rows, len(columns)); at least one row."""
+    if not data:
+        raise DataError(f"{path}:{line}: the header is not followed by any data row")
+    values = np.empty((len(data), len(columns)))
+    for r, (number, cells) in enumerate(data):
+        if len(cells) != len(header):
+            raise DataError(f"{path}:{number}: expected {len(header)} cells as in the header, got {len(cells)}")
+        for c, col in enumerate(columns):
+            values[r, c] = _number(path, number, header[col], cells[col])
+    return values
+
+
+def _check_header(path: Path, line: int, header: list[str], seen: dict[str, int], *, has_robot: bool) -> dict:
+    where = f"{path}:{line}"
     joints = sorted(int(m.group(1)) for col in header if (m := _JOINT.match(col)))
     if not joints:
         raise DataError(f"{where}: no joint columns: expected q1..qN (degrees), N in 1..{MAX_JOINTS}")
@@ -233,29 +243,13 @@ def read_columns(path: str | Path, alternatives: list[list[str]], optional: list
     columns' values (or None when absent). Errors name file, line and column.
     """
     path = Path(path)
-    rows = list(_rows(path))
-    if not rows:
-        raise DataError(f"{path}: empty file: expected a header line with {', '.join(alternatives[0])}")
-    line, header = rows[0]
-    header = [h.strip() for h in header]
-    seen: dict[str, int] = {}
-    for i, col in enumerate(header):
-        if col in seen:
-            raise DataError(f"{path}:{line}: column {col!r} appears twice (columns {seen[col] + 1} and {i + 1})")
-        seen[col] = i
+    line, header, seen, data = _table(path, ",".join(alternatives[0]))
     chosen = next((group for group in alternatives if all(c in seen for c in group)), None)
     if chosen is None:
         wanted = " or ".join(",".join(g) for g in alternatives)
         missing = next(c for c in alternatives[0] if c not in seen)
         raise DataError(f"{path}:{line}: column {missing!r} is missing (expected columns {wanted})")
     extra = list(optional) if optional and all(c in seen for c in optional) else []
-    if not rows[1:]:
-        raise DataError(f"{path}:{line}: the header is not followed by any data row")
-    values = np.empty((len(rows) - 1, len(chosen) + len(extra)))
-    for r, (number, cells) in enumerate(rows[1:]):
-        if len(cells) != len(header):
-            raise DataError(f"{path}:{number}: expected {len(header)} cells as in the header, got {len(cells)}")
-        for c, col in enumerate(chosen + extra):
-            values[r, c] = _number(path, number, col, cells[seen[col]])
+    values = _numbers(path, line, header, data, [seen[c] for c in chosen + extra])
     k = len(chosen)
     return chosen, values[:, :k], (values[:, k:] if extra else None)

@@ -40,7 +40,20 @@ SOLVERS = ("pso", "lstsq")
 FITNESSES = ("rms", "max", "mae")
 
 
-class ErrorModel(RegressorMixin, BaseEstimator):
+class MultiOutputRegressor(RegressorMixin, BaseEstimator):
+    """What partcal's estimators share: multi-output tags and 1-D targets kept 1-D."""
+
+    def _shape_output(self, out: NDArray[np.float64]) -> NDArray[np.float64]:
+        return out[:, 0] if self._y_1d else out
+
+    def __sklearn_tags__(self):
+        tags = super().__sklearn_tags__()
+        tags.target_tags.multi_output = True
+        tags.target_tags.single_output = True
+        return tags
+
+
+class ErrorModel(MultiOutputRegressor):
     """Position-error model, linear in its coefficients.
 
     Parameters
@@ -200,8 +213,7 @@ class ErrorModel(RegressorMixin, BaseEstimator):
         """Predicted errors, shape (n, n_outputs) mm (1-D if fitted on a 1-D ``y``)."""
         check_is_fitted(self, "coef_")
         X = validate_data(self, X, reset=False, dtype=np.float64)
-        out = self.basis_.transform(X, self.scaling_, self.terms_) @ self.coef_
-        return out[:, 0] if self._y_1d else out
+        return self._shape_output(self.basis_.transform(X, self.scaling_, self.terms_) @ self.coef_)
 
     def distance_to_data(self, X) -> NDArray[np.float64]:
         """Distance of each point outside the bounding box of the training inputs, shape (n,).
@@ -257,13 +269,6 @@ class ErrorModel(RegressorMixin, BaseEstimator):
             kind = {1: "first", 2: "second"}.get(self.degree, f"degree-{self.degree}")
             return f"{kind}-degree polynomial{' with cross terms' if self.cross_terms else ''} of {self.inputs} inputs"
         return f"Fourier series with {self.harmonics} harmonic(s) of {self.inputs} inputs"
-
-    def __sklearn_tags__(self):
-        tags = super().__sklearn_tags__()
-        tags.target_tags.multi_output = True
-        tags.target_tags.single_output = True
-        return tags
-
 
 def _seed_from(random_state) -> int:
     """One integer seed from None, an int, a RandomState or a Generator."""

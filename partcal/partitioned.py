@@ -17,21 +17,21 @@ from numbers import Integral
 import numpy as np
 from joblib import Parallel, delayed
 from numpy.typing import NDArray
-from sklearn.base import BaseEstimator, RegressorMixin, clone
+from sklearn.base import clone
 from sklearn.utils.validation import check_is_fitted, validate_data
 
 from ._validation import check_choice, check_int, param_error
 from .blending import block_weights
 from .errors import PartcalError
 from .metrics import cross_validated_rms, distance_outside_boxes, warn_far
-from .models import ErrorModel, _seed_from
+from .models import ErrorModel, MultiOutputRegressor, _seed_from
 from .partition import KMeansPartition, Octree, Partition, check_width
 
 log = logging.getLogger(__name__)
 MIN_SAMPLES_PER_TERM = 3
 
 
-class PartitionedErrorModel(RegressorMixin, BaseEstimator):
+class PartitionedErrorModel(MultiOutputRegressor):
     """Error model made of local models on workspace regions.
 
     Parameters
@@ -150,7 +150,7 @@ class PartitionedErrorModel(RegressorMixin, BaseEstimator):
                 elif keep.size:
                     block[keep] += wr[keep, None] * _raw_predict(model, xb[keep])
             out[rows] = block
-        return out[:, 0] if self._y_1d else out
+        return self._shape_output(out)
 
     def distance_to_data(self, X) -> NDArray[np.float64]:
         """How far each point lies outside the sampled workspace, shape (n,), input units.
@@ -166,13 +166,6 @@ class PartitionedErrorModel(RegressorMixin, BaseEstimator):
     def warn_if_extrapolating(self, X, limit: float = 50.0) -> NDArray[np.bool_]:
         """Warn (``ExtrapolationWarning``) about points farther than ``limit`` from the data; return the mask."""
         return warn_far(self.distance_to_data(X), limit)
-
-    def __sklearn_tags__(self):
-        tags = super().__sklearn_tags__()
-        tags.target_tags.multi_output = True
-        tags.target_tags.single_output = True
-        return tags
-
 
 def _raw_predict(model: ErrorModel, X) -> NDArray[np.float64]:
     """A fitted ErrorModel's prediction on trusted arrays (no validation: the hot path)."""

@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 
 from ._yamlio import Section, load_yaml, range_check
 from .errors import ConfigError
-from .kinematics import Robot, joint_columns, load_robot
+from .kinematics import Robot, joint_columns, load_robot, robot_reference
 from .measurements import Measurements, write_measurements
 from .trajectories import PATHS, paper_path
 
@@ -130,7 +130,7 @@ def load_study(path: str | Path) -> Study:
     path = Path(path)
     data, lines = load_yaml(path)
     top = Section(data, "", lines, str(path))
-    nominal = load_robot(_robot_path(top.get("robot", "str"), path))
+    nominal = load_robot(robot_reference(top.get("robot", "str"), path.parent))
     seed = top.get("seed", "int", check=range_check(0, integer=True))
     output = Path(os.path.normpath(path.parent / top.get("output", "str")))
     seeds = np.random.SeedSequence(seed).spawn(2)
@@ -156,11 +156,6 @@ def load_study(path: str | Path) -> Study:
     top.done()
     robot = VirtualRobot(nominal, true, base_rot, base_mm, compliance, gear, tracker, scale)
     return Study(robot, seed, output, datasets, ranges, fixed, path)
-
-
-def _robot_path(name: str, config: Path) -> str:
-    candidate = config.parent / name
-    return str(candidate) if candidate.suffix in (".yaml", ".yml") and candidate.exists() else name
 
 
 def _vector3(value) -> str | None:

@@ -1,5 +1,11 @@
-"""partcal: predict and correct the positioning errors of robot manipulators."""
+"""partcal: predict and correct the positioning errors of robot manipulators.
 
+The public names below are imported on first use (PEP 562), so that the
+command line starts quickly and ``partcal --version`` does not load
+scikit-learn; ``from partcal import ErrorModel`` works as usual.
+"""
+
+from importlib import import_module
 from importlib.metadata import PackageNotFoundError, version as _version
 
 try:
@@ -7,23 +13,28 @@ try:
 except PackageNotFoundError:  # running from a source tree without installing
     __version__ = "0.1.0"
 
-from .errors import ConfigError, DataError, ModelFileError, PartcalError, UnreachableError
-from .kinematics import Robot, available_robots, load_robot
-from .measurements import Measurements, read_measurements, write_measurements
-from .metrics import ExtrapolationWarning, cross_validated_rms, rms_per_axis, summary
-from .models import ErrorModel
-from .partition import KMeansPartition, Octree
-from .partitioned import PartitionedErrorModel, select_granularity
-from .predictor import Predictor, load_predictor
-from .swarm import SwarmConfig, SwarmResult, minimize, minimize_batch
+_EXPORTS = {
+    "errors": ["ConfigError", "DataError", "ModelFileError", "PartcalError", "UnreachableError"],
+    "kinematics": ["Robot", "available_robots", "load_robot"],
+    "measurements": ["Measurements", "read_measurements", "write_measurements"],
+    "metrics": ["ExtrapolationWarning", "cross_validated_rms", "rms_per_axis", "summary"],
+    "models": ["ErrorModel"],
+    "swarm": ["SwarmConfig", "SwarmResult", "minimize", "minimize_batch"],
+    "partition": ["KMeansPartition", "Octree"],
+    "partitioned": ["PartitionedErrorModel", "select_granularity"],
+    "predictor": ["Predictor", "load_predictor"],
+}
+_WHERE = {name: module for module, names in _EXPORTS.items() for name in names}
+__all__ = ["__version__", *_WHERE]
 
-__all__ = [
-    "__version__",
-    "ConfigError", "DataError", "ModelFileError", "PartcalError", "UnreachableError",
-    "Robot", "available_robots", "load_robot",
-    "Measurements", "read_measurements", "write_measurements",
-    "ExtrapolationWarning", "cross_validated_rms", "rms_per_axis", "summary",
-    "KMeansPartition", "Octree", "PartitionedErrorModel", "select_granularity",
-    "Predictor", "load_predictor",
-    "ErrorModel", "SwarmConfig", "SwarmResult", "minimize", "minimize_batch",
-]
+
+def __getattr__(name: str):
+    if name in _WHERE:
+        value = getattr(import_module(f".{_WHERE[name]}", __name__), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'partcal' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(__all__)

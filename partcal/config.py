@@ -21,6 +21,8 @@ from .partition import KMeansPartition, Octree
 from .partitioned import PartitionedErrorModel
 from .swarm import RULES, TOPOLOGIES, SwarmConfig
 
+RESERVED_NAMES = {"identification", "file", "fit_seconds", "cv", "inputs", "solver", "regions", "pso_rms_ratio",
+                  "granularity", "compensation"}
 _SWARM_KEYS = {"particles": "int", "iterations": "int", "c1": "float", "c2": "float", "rule": "str",
                "topology": "str", "neighbours": "int", "inertia": "list", "vmax": "float",
                "bound_scale": "float", "stop_fitness": "float", "patience": "int", "ftol": "float"}
@@ -134,8 +136,9 @@ def load_config(path: str | Path) -> RunConfig:
     tests = {}
     for key in tests_sec.data:
         tests[str(key)] = _existing(tests_sec, key, base)
-    if "identification" in tests:
-        tests_sec.fail(tests_sec.path("identification"), "a test set may not be called 'identification'")
+    for reserved in RESERVED_NAMES & set(tests):     # they share a JSON object with these keys in metrics.json
+        tests_sec.fail(tests_sec.path(reserved), f"a test set may not be called {reserved!r} (reserved: "
+                                                 f"{', '.join(sorted(RESERVED_NAMES))})")
     data_sec.done()
     models_raw = top.get("models", "list", check=lambda v: None if v else "a non-empty list")
     models = tuple(_model(Section(m, f"models[{i}]", lines, str(path)))

@@ -60,6 +60,7 @@ def test_defaults_and_paths(tmp_path):
     ("robot: motoman_sk120", "robot: motoman_sk12", r"robot \(line {line}\): robot 'motoman_sk12': no such file, and not a built-in robot"),
     ("test_rectangle.csv", "missing.csv", r"data\.tests\.rectangle \(line {line}\): no such file: .*missing\.csv"),
     ("name: demo\n", "name: demo\nseed: -3\n", r"seed \(line {line}\): must be an int in \[0, 4294967295\]; got -3"),
+    ("    rectangle:", "    cv:", r"data\.tests\.cv \(line {line}\): a test set may not be called 'cv' \(reserved: "),
 ])
 def test_errors_name_path_and_line(tmp_path, old, new, message):
     text = BASE.replace(old, new, 1)

@@ -165,15 +165,13 @@ def test_cli_run_prints_table_2_and_bad_input_keeps_earlier_outputs(tmp_path):
         assert res.stderr.count("\n") == 1 and "Traceback" not in res.stderr, (label, res.stderr)
         assert expected[label] in res.stderr, (label, res.stderr)
         assert (cfg.output / "metrics.json").read_bytes() == metrics, label
-    cfg.source.write_text(text.replace("name: small", f"name: small\noutput: {tmp_path / 'ro' / 'out'}"))
-    (tmp_path / "ro").mkdir()
-    (tmp_path / "ro").chmod(0o500)
-    try:
-        res = cli("run", str(cfg.source), "-q")
-        if res.returncode != 0 or not (tmp_path / "ro" / "out").exists():    # root may still write
-            assert res.returncode == 2 and "cannot write the output folder" in res.stderr
-    finally:
-        (tmp_path / "ro").chmod(0o700)
+    blocker = tmp_path / "not_a_folder"          # a file where a folder must be: unwritable even for root
+    blocker.write_text("x")
+    cfg.source.write_text(text.replace("name: small", f"name: small\noutput: {blocker / 'out'}"))
+    res = cli("run", str(cfg.source), "-q")
+    assert res.returncode == 2 and res.stderr.count("\n") == 1, res.stderr
+    assert f"{blocker / 'out'}: cannot write the output folder here" in res.stderr
+    assert (cfg.output / "metrics.json").read_bytes() == metrics
 
 
 def test_cli_predict_and_compensate(small_run, tmp_path):

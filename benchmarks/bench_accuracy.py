@@ -52,7 +52,6 @@ def main() -> None:
                     rows.append([f"{train_name} ({len(train)})", f"{label} {type(spec).__name__}", "-",
                                  f"({exc})"] + ["-"] * 3)
                     continue
-                best.fit(X, y)
                 cv = min(r["cv_rms_3d"] for r in table)
                 rows.append([f"{train_name} ({len(train)})", f"{label} {type(spec).__name__}",
                              f"{best.partition_.n_regions} regions", f"{cv:.2f}"]

@@ -361,7 +361,7 @@ def robot_reference(name: str, base: Path) -> str:
 
 
 _ROBOT_KEYS = {"name", "description", "joints", "links", "tool_mm", "limits_deg", "home_deg",
-               "constraints_deg", "base"}
+               "constraints_deg"}
 
 
 def robot_from_dict(spec: dict, source: str = "robot") -> Robot:

@@ -249,7 +249,11 @@ def read_columns(path: str | Path, alternatives: list[list[str]], optional: list
         wanted = " or ".join(",".join(g) for g in alternatives)
         missing = next(c for c in alternatives[0] if c not in seen)
         raise DataError(f"{path}:{line}: column {missing!r} is missing (expected columns {wanted})")
-    extra = list(optional) if optional and all(c in seen for c in optional) else []
+    present = [c for c in optional if c in seen]
+    if present and len(present) < len(optional):
+        missing = next(c for c in optional if c not in seen)
+        raise DataError(f"{path}:{line}: column {missing!r} is missing (give all of {', '.join(optional)} or none)")
+    extra = list(optional) if present else []
     values = _numbers(path, line, header, data, [seen[c] for c in chosen + extra])
     k = len(chosen)
     return chosen, values[:, :k], (values[:, k:] if extra else None)

@@ -131,11 +131,6 @@ class ErrorModel(MultiOutputRegressor):
         order = self.degree if self.basis == "polynomial" else self.harmonics
         return Basis(self.basis, self.inputs, order, bool(self.cross_terms)), self.pso or SwarmConfig()
 
-    def n_coefficients(self, n_inputs: int, n_outputs: int = 3) -> int:
-        """Number of coefficients for ``n_inputs`` varying inputs and ``n_outputs`` outputs."""
-        basis, _ = self._check_params()
-        return basis.n_terms(n_inputs) * n_outputs
-
     # ------------------------------------------------------------------ fitting
     def fit(self, X, y):
         """Fit the coefficients to errors ``y`` (n, 3) mm at inputs ``X`` (n, d). Returns self."""
@@ -213,7 +208,11 @@ class ErrorModel(MultiOutputRegressor):
         """Predicted errors, shape (n, n_outputs) mm (1-D if fitted on a 1-D ``y``)."""
         check_is_fitted(self, "coef_")
         X = validate_data(self, X, reset=False, dtype=np.float64)
-        return self._shape_output(self.basis_.transform(X, self.scaling_, self.terms_) @ self.coef_)
+        return self._shape_output(self._predict_trusted(X))
+
+    def _predict_trusted(self, X: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Prediction ``(n, n_outputs)`` on validated arrays (no checks: the hot path of blends)."""
+        return self.basis_.transform(X, self.scaling_, self.terms_) @ self.coef_
 
     def distance_to_data(self, X) -> NDArray[np.float64]:
         """Distance of each point outside the bounding box of the training inputs, shape (n,).

@@ -146,9 +146,9 @@ class PartitionedErrorModel(MultiOutputRegressor):
                 model = self.models_[region]
                 keep = np.flatnonzero(wr)
                 if 2 * keep.size > wr.size:     # most rows: evaluate all, cheaper than gathering
-                    block += wr[:, None] * _raw_predict(model, xb)
+                    block += wr[:, None] * model._predict_trusted(xb)
                 elif keep.size:
-                    block[keep] += wr[keep, None] * _raw_predict(model, xb[keep])
+                    block[keep] += wr[keep, None] * model._predict_trusted(xb[keep])
             out[rows] = block
         return self._shape_output(out)
 
@@ -166,11 +166,6 @@ class PartitionedErrorModel(MultiOutputRegressor):
     def warn_if_extrapolating(self, X, limit: float = 50.0) -> NDArray[np.bool_]:
         """Warn (``ExtrapolationWarning``) about points farther than ``limit`` from the data; return the mask."""
         return warn_far(self.distance_to_data(X), limit)
-
-def _raw_predict(model: ErrorModel, X) -> NDArray[np.float64]:
-    """A fitted ErrorModel's prediction on trusted arrays (no validation: the hot path)."""
-    return model.basis_.transform(X, model.scaling_, model.terms_) @ model.coef_
-
 
 def _fit_region(model: ErrorModel, X, Y, weights) -> ErrorModel:
     return model._fit(X, Y, weights)
@@ -190,19 +185,20 @@ def select_granularity(model: PartitionedErrorModel, X, y, grid, *, folds: int =
     Returns
     -------
     best : PartitionedErrorModel
-        Unfitted, with the granularity of lowest CV 3-D RMS.
+        The candidate of lowest CV 3-D RMS, fitted on all of ``X, y``.
     table : list of dict
         ``{"granularity", "cv_rms_3d", "regions"}`` per candidate (regions from a fit on all data).
     """
     check_int("select_granularity", "folds", folds, 2)
     _, spec = model._resolved()
     key = "max_depth" if isinstance(spec, Octree) else "n_regions"
-    table = []
+    table, fitted = [], []
     for value in grid:
         candidate = clone(model).set_params(partition=type(spec)(**{**spec.__dict__, key: value}))
         score = cross_validated_rms(candidate, X, y, folds=folds, random_state=random_state)
-        regions = clone(candidate).fit(X, y).partition_.n_regions
+        fitted.append(candidate.fit(X, y))
+        regions = candidate.partition_.n_regions
         table.append({"granularity": int(value), "cv_rms_3d": score, "regions": int(regions)})
         log.info("%s=%s: CV RMS %.4f over %d regions", key, value, score, regions)
-    best = min(table, key=lambda row: row["cv_rms_3d"])
-    return clone(model).set_params(partition=type(spec)(**{**spec.__dict__, key: best["granularity"]})), table
+    best = min(range(len(table)), key=lambda i: table[i]["cv_rms_3d"])
+    return fitted[best], table

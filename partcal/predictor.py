@@ -20,7 +20,7 @@ from ._validation import check_array
 from .compensation import CompensationResult, false_target, false_target_joints
 from .errors import DataError
 from .kinematics import Robot, robot_from_dict
-from .partitioned import PartitionedErrorModel, _raw_predict
+from .partitioned import PartitionedErrorModel
 from .persist import load_model
 
 
@@ -50,7 +50,7 @@ class Predictor:
     def _errors(self, X: NDArray[np.float64]) -> NDArray[np.float64]:
         if isinstance(self.model, PartitionedErrorModel):
             return self.model.predict(X)
-        return _raw_predict(self.model, X)
+        return self.model._predict_trusted(X)
 
     def predict(self, positions=None, joints=None) -> NDArray[np.float64]:
         """Predicted errors (measured - nominal), shape (n, 3) mm.

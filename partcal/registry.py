@@ -90,12 +90,11 @@ def fit_model(spec: ModelSpec, seed: int, data: dict[str, Measurements], folds: 
     start = time.perf_counter()
     if spec.partition is not None and len(spec.partition.sizes) > 1:
         estimator, granularity = select_granularity(spec.build(seed), X, y, spec.partition.sizes, folds=folds,
-                                                    random_state=seed)
+                                                    random_state=seed)       # returned fitted
         cv = min(row["cv_rms_3d"] for row in granularity)
     else:
-        estimator = spec.build(seed)
+        estimator = spec.build(seed).fit(X, y)
         cv = None
-    estimator.fit(X, y)
     fit_seconds = time.perf_counter() - start
     if cv is None:
         cv = cross_validated_rms(spec.build(seed), X, y, folds=folds, random_state=seed)

@@ -121,9 +121,6 @@ class SwarmConfig:
         phi = self.c1 + self.c2
         return 2.0 / abs(2.0 - phi - np.sqrt(phi * phi - 4.0 * phi))
 
-    def to_dict(self) -> dict:
-        return {k: (list(v) if isinstance(v, tuple) else v) for k, v in self.__dict__.items()}
-
 
 @dataclass
 class SwarmResult:

@@ -127,5 +127,7 @@ def test_robot_yaml_errors_name_the_field():
         robot_from_dict({**spec, "links": [{"theta": "q2", "d": 0, "a": 1, "alpha": 0}]})
     with pytest.raises(ConfigError, match="unknown key"):
         robot_from_dict({**spec, "colour": "red"})
+    with pytest.raises(ConfigError, match="base: unknown key"):      # not supported: refused, never ignored
+        robot_from_dict({**spec, "base": {"xyz": [0, 0, 100]}})
     with pytest.raises(ConfigError, match="not a built-in robot"):
         load_robot("no_such_robot")

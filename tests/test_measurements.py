@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from partcal import DataError, Measurements, read_measurements, write_measurements
+from partcal.measurements import read_columns
 
 HEADER = "q1,q2,x_nom,y_nom,z_nom,x_meas,y_meas,z_meas"
 
@@ -77,3 +78,14 @@ def test_measurements_record_checks_shapes():
         Measurements(np.zeros((1, 6)), np.zeros((2, 3)), np.zeros((1, 3)))
     with pytest.raises(DataError, match=r"Expected measured_mm with shape \(n, 3\)"):
         Measurements(np.zeros((1, 6)), np.zeros((1, 3)), np.zeros((1, 2)))
+
+
+def test_read_columns_alternatives_and_partial_optional_columns(tmp_path):
+    path = write(tmp_path, "# c\nx_nom,y_nom,z_nom,q1,q2\n1,2,3,4,5\n")
+    cols, values, extra = read_columns(path, [["x", "y", "z"], ["x_nom", "y_nom", "z_nom"]], ["q1", "q2"])
+    assert cols == ["x_nom", "y_nom", "z_nom"] and values.tolist() == [[1, 2, 3]] and extra.tolist() == [[4, 5]]
+    assert read_columns(path, [["x_nom", "y_nom", "z_nom"]])[2] is None
+    with pytest.raises(DataError, match=r"m.csv:2: column 'q3' is missing \(give all of q1, q2, q3 or none\)"):
+        read_columns(path, [["x_nom", "y_nom", "z_nom"]], ["q1", "q2", "q3"])
+    with pytest.raises(DataError, match=r"m.csv:2: column 'x' is missing \(expected columns x,y,z\)"):
+        read_columns(path, [["x", "y", "z"]])

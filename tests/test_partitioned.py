@@ -94,7 +94,9 @@ def test_select_granularity_reports_every_candidate():
     template = PartitionedErrorModel(partition=KMeansPartition(), local=ErrorModel(solver="lstsq"), random_state=0)
     best, table = select_granularity(template, X, y, [2, 4, 8], folds=3)
     assert [row["granularity"] for row in table] == [2, 4, 8]
-    assert best.partition.n_regions == min(table, key=lambda r: r["cv_rms_3d"])["granularity"]
+    chosen = min(table, key=lambda r: r["cv_rms_3d"])
+    assert best.partition.n_regions == chosen["granularity"]
+    assert best.partition_.n_regions == chosen["regions"]          # returned fitted on all the data
     assert table[-1]["cv_rms_3d"] < table[0]["cv_rms_3d"]      # finer is better on this smooth field
 
 
@@ -117,7 +119,6 @@ def test_partitioning_beats_the_global_model_on_the_dense_virtual_sk120(dense_sk
         local = ErrorModel(degree=degree, solver="lstsq")
         best, _ = select_granularity(PartitionedErrorModel(partition=Octree(), local=local, random_state=0),
                                      X, y, [1, 2, 3], folds=5)
-        best.fit(X, y)
         glob = ErrorModel(degree=degree, solver="lstsq").fit(X, y)
         for m in tests:
             assert rms_3d(best, m) < 0.5 * rms_3d(glob, m), (degree, m.name)

@@ -14,7 +14,7 @@ import numpy as np  # noqa: E402
 from _table import best_time, print_table  # noqa: E402
 
 from partcal import load_robot  # noqa: E402
-from partcal.trajectories import PATHS, paper_path  # noqa: E402
+from partcal.robot.trajectories import PATHS, paper_path  # noqa: E402
 
 
 def main() -> None:

@@ -15,7 +15,7 @@ except PackageNotFoundError:  # running from a source tree without installing
 
 _EXPORTS = {
     "errors": ["ConfigError", "DataError", "ModelFileError", "PartcalError", "UnreachableError"],
-    "kinematics": ["Robot", "available_robots", "load_robot"],
+    "robot.kinematics": ["Robot", "available_robots", "load_robot"],
     "measurements": ["Measurements", "read_measurements", "write_measurements"],
     "metrics": ["ExtrapolationWarning", "cross_validated_rms", "rms_per_axis", "summary"],
     "models": ["ErrorModel"],

@@ -120,7 +120,7 @@ def results_table(result) -> str:
 
 def _cmd_predict(args) -> int:
     from ._io import atomic_write
-    from .kinematics import joint_columns
+    from .robot.kinematics import joint_columns
     from .measurements import read_columns
     from .predictor import load_predictor
 
@@ -145,8 +145,8 @@ def _cmd_compensate(args) -> int:
     import warnings
 
     from ._io import atomic_write
-    from .compensation import CompensationWarning
-    from .kinematics import joint_columns
+    from .robot.compensation import CompensationWarning
+    from .robot.kinematics import joint_columns
     from .measurements import read_columns
     from .predictor import load_predictor
 

@@ -15,7 +15,7 @@ from pathlib import Path
 
 from ._yamlio import Section, load_yaml, range_check
 from .errors import PartcalError
-from .kinematics import load_robot, robot_reference
+from .robot.kinematics import load_robot, robot_reference
 from .models import ErrorModel
 from .partition import KMeansPartition, Octree
 from .partitioned import PartitionedErrorModel

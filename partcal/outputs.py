@@ -20,7 +20,7 @@ import yaml
 
 from . import __version__
 from .errors import PartcalError
-from .kinematics import joint_columns
+from .robot.kinematics import joint_columns
 from .persist import save_model
 from .registry import RunResult
 

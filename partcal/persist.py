@@ -19,7 +19,7 @@ from . import __version__
 from ._io import atomic_write
 from .bases import Basis, Scaling
 from .errors import ModelFileError
-from .kinematics import Robot, robot_from_dict, robot_to_dict
+from .robot.kinematics import Robot, robot_from_dict, robot_to_dict
 from .models import ErrorModel
 from .partition import Partition
 from .partitioned import PartitionedErrorModel

@@ -17,9 +17,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ._validation import check_array
-from .compensation import CompensationResult, false_target, false_target_joints
+from .robot.compensation import CompensationResult, false_target, false_target_joints
 from .errors import DataError
-from .kinematics import Robot, robot_from_dict
+from .robot.kinematics import Robot, robot_from_dict
 from .partitioned import PartitionedErrorModel
 from .persist import load_model
 

@@ -23,7 +23,7 @@ from numpy.typing import NDArray
 
 from .config import ModelSpec, RunConfig
 from .errors import ConfigError, DataError
-from .kinematics import Robot, load_robot
+from .robot.kinematics import Robot, load_robot
 from .measurements import Measurements, read_measurements
 from .metrics import cross_validated_rms, summary
 from .models import ErrorModel

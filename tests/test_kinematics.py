@@ -6,8 +6,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from partcal import ConfigError, UnreachableError, load_robot
-from partcal.kinematics import parse_theta, robot_from_dict
-from partcal.trajectories import paper_path
+from partcal.robot.kinematics import parse_theta, robot_from_dict
+from partcal.robot.trajectories import paper_path
 
 # Hand derivations (written out step by step, not computed by partcal):
 # q = (0, -90, -180, 0, 0, 0). Row 1 (a = 215, alpha = -90): shoulder at (215, 0, 0),

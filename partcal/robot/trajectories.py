@@ -13,8 +13,8 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from ._validation import check_array
-from .errors import ConfigError
+from .._validation import check_array
+from ..errors import ConfigError
 
 PATHS = ("rectangle", "spiral_xy", "spiral_yz")
 DEFAULT_STARTS = {"rectangle": (1100.0, 800.0, 600.0), "spiral_xy": (1200.0, -600.0, 600.0),

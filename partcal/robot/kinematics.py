@@ -21,12 +21,12 @@ import numpy as np
 import yaml
 from numpy.typing import NDArray
 
-from ._validation import check_array
-from .errors import ConfigError, DataError, UnreachableError
+from .._validation import check_array
+from ..errors import ConfigError, DataError, UnreachableError
 
 MAX_JOINTS = 12
 _CHUNK = 4096
-_BUILTIN_DIR = Path(__file__).parent / "robots"
+_BUILTIN_DIR = Path(__file__).parent / "builtin"
 _TERM = re.compile(r"\s*([+-]?)\s*(?:(\d+(?:\.\d*)?|\.\d+)\s*\*?\s*)?(q(\d+))?\s*")
 
 

@@ -1,0 +1,9 @@
+"""Robot geometry: DH kinematics with coupled joints, the built-in robots, test paths, false targets.
+
+The lowest layer above the foundation: it knows joint angles and positions,
+nothing about measurement files or error models.
+"""
+
+from .kinematics import IKResult, Robot, available_robots, joint_columns, load_robot
+
+__all__ = ["IKResult", "Robot", "available_robots", "joint_columns", "load_robot"]

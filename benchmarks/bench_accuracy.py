@@ -20,7 +20,7 @@ from partcal.metrics import cross_validated_rms  # noqa: E402
 from partcal.models import ErrorModel  # noqa: E402
 from partcal.partition import KMeansPartition, Octree  # noqa: E402
 from partcal.partitioned import PartitionedErrorModel, select_granularity  # noqa: E402
-from partcal.simulate import load_study, simulate  # noqa: E402
+from partcal.data.simulate import load_study, simulate  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 TESTS = ["test_rectangle", "test_spiral_xy", "test_spiral_yz"]

@@ -31,7 +31,7 @@ import numpy as np  # noqa: E402
 from _table import print_table  # noqa: E402
 
 from partcal.models import ErrorModel  # noqa: E402
-from partcal.simulate import load_study, sample_configurations  # noqa: E402
+from partcal.data.simulate import load_study, sample_configurations  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SEEDS = range(7)

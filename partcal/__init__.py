@@ -16,7 +16,7 @@ except PackageNotFoundError:  # running from a source tree without installing
 _EXPORTS = {
     "errors": ["ConfigError", "DataError", "ModelFileError", "PartcalError", "UnreachableError"],
     "robot.kinematics": ["Robot", "available_robots", "load_robot"],
-    "measurements": ["Measurements", "read_measurements", "write_measurements"],
+    "data.measurements": ["Measurements", "read_measurements", "write_measurements"],
     "metrics": ["ExtrapolationWarning", "cross_validated_rms", "rms_per_axis", "summary"],
     "models": ["ErrorModel"],
     "swarm": ["SwarmConfig", "SwarmResult", "minimize", "minimize_batch"],

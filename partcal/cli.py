@@ -29,7 +29,7 @@ PAPER_UNCOMPENSATED = {
 
 def _cmd_simulate(args) -> int:
     from .metrics import rms_per_axis
-    from .simulate import load_study, simulate, write_study
+    from .data.simulate import load_study, simulate, write_study
 
     start = time.perf_counter()
     study = load_study(args.config)
@@ -121,7 +121,7 @@ def results_table(result) -> str:
 def _cmd_predict(args) -> int:
     from ._io import atomic_write
     from .robot.kinematics import joint_columns
-    from .measurements import read_columns
+    from .data.measurements import read_columns
     from .predictor import load_predictor
 
     predictor = load_predictor(args.model)
@@ -147,7 +147,7 @@ def _cmd_compensate(args) -> int:
     from ._io import atomic_write
     from .robot.compensation import CompensationWarning
     from .robot.kinematics import joint_columns
-    from .measurements import read_columns
+    from .data.measurements import read_columns
     from .predictor import load_predictor
 
     predictor = load_predictor(args.model)

@@ -24,7 +24,7 @@ from numpy.typing import NDArray
 from .config import ModelSpec, RunConfig
 from .errors import ConfigError, DataError
 from .robot.kinematics import Robot, load_robot
-from .measurements import Measurements, read_measurements
+from .data.measurements import Measurements, read_measurements
 from .metrics import cross_validated_rms, summary
 from .models import ErrorModel
 from .partitioned import PartitionedErrorModel, select_granularity
@@ -154,7 +154,7 @@ def run(config: RunConfig, progress: Callable[[int, int, str], None] | None = No
 def _virtual_robot(config: RunConfig, robot: Robot | None):
     if config.virtual_robot is None:
         return None
-    from .simulate import load_study
+    from .data.simulate import load_study
 
     study = load_study(config.virtual_robot)
     if robot is None or study.robot.nominal.name != robot.name:

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from partcal import DataError, Measurements, read_measurements, write_measurements
-from partcal.measurements import read_columns
+from partcal.data.measurements import read_columns
 
 HEADER = "q1,q2,x_nom,y_nom,z_nom,x_meas,y_meas,z_meas"
 

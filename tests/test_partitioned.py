@@ -12,7 +12,7 @@ from partcal.models import ErrorModel
 from partcal.partition import KMeansPartition, Octree
 from partcal.metrics import ExtrapolationWarning
 from partcal.partitioned import PartitionedErrorModel, select_granularity
-from partcal.simulate import load_study, simulate
+from partcal.data.simulate import load_study, simulate
 
 
 def smooth_field(n=3000, seed=0):

@@ -8,7 +8,7 @@ import pytest
 from conftest import ROOT
 from partcal import ConfigError, read_measurements
 from partcal.metrics import rms_per_axis
-from partcal.simulate import load_study, simulate, write_study
+from partcal.data.simulate import load_study, simulate, write_study
 from partcal.robot.trajectories import rectangle, spiral
 
 CONFIG = ROOT / "configs" / "sk120_virtual.yaml"

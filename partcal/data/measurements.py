@@ -20,10 +20,10 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from ._io import atomic_write
-from ._validation import check_array
-from .errors import DataError
-from .robot.kinematics import MAX_JOINTS, Robot, joint_columns, load_robot
+from .._io import atomic_write
+from .._validation import check_array
+from ..errors import DataError
+from ..robot.kinematics import MAX_JOINTS, Robot, joint_columns, load_robot
 
 NOMINAL = ("x_nom", "y_nom", "z_nom")
 MEASURED = ("x_meas", "y_meas", "z_meas")

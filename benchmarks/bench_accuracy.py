@@ -17,9 +17,9 @@ import numpy as np  # noqa: E402
 from _table import print_table  # noqa: E402
 
 from partcal.metrics import cross_validated_rms  # noqa: E402
-from partcal.models import ErrorModel  # noqa: E402
-from partcal.partition import KMeansPartition, Octree  # noqa: E402
-from partcal.partitioned import PartitionedErrorModel, select_granularity  # noqa: E402
+from partcal.models.series import ErrorModel  # noqa: E402
+from partcal.models.partition import KMeansPartition, Octree  # noqa: E402
+from partcal.models.partitioned import PartitionedErrorModel, select_granularity  # noqa: E402
 from partcal.data.simulate import load_study, simulate  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))

@@ -18,10 +18,10 @@ _EXPORTS = {
     "robot.kinematics": ["Robot", "available_robots", "load_robot"],
     "data.measurements": ["Measurements", "read_measurements", "write_measurements"],
     "metrics": ["ExtrapolationWarning", "cross_validated_rms", "rms_per_axis", "summary"],
-    "models": ["ErrorModel"],
-    "swarm": ["SwarmConfig", "SwarmResult", "minimize", "minimize_batch"],
-    "partition": ["KMeansPartition", "Octree"],
-    "partitioned": ["PartitionedErrorModel", "select_granularity"],
+    "models.series": ["ErrorModel"],
+    "models.swarm": ["SwarmConfig", "SwarmResult", "minimize", "minimize_batch"],
+    "models.partition": ["KMeansPartition", "Octree"],
+    "models.partitioned": ["PartitionedErrorModel", "select_granularity"],
     "predictor": ["Predictor", "load_predictor"],
 }
 _WHERE = {name: module for module, names in _EXPORTS.items() for name in names}

@@ -20,7 +20,7 @@ from ._validation import check_array
 from .robot.compensation import CompensationResult, false_target, false_target_joints
 from .errors import DataError
 from .robot.kinematics import Robot, robot_from_dict
-from .partitioned import PartitionedErrorModel
+from .models.partitioned import PartitionedErrorModel
 from .persist import load_model
 
 

@@ -26,8 +26,8 @@ from .errors import ConfigError, DataError
 from .robot.kinematics import Robot, load_robot
 from .data.measurements import Measurements, read_measurements
 from .metrics import cross_validated_rms, summary
-from .models import ErrorModel
-from .partitioned import PartitionedErrorModel, select_granularity
+from .models.series import ErrorModel
+from .models.partitioned import PartitionedErrorModel, select_granularity
 from .predictor import Predictor
 
 log = logging.getLogger(__name__)

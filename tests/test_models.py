@@ -6,8 +6,8 @@ from sklearn.utils.estimator_checks import parametrize_with_checks
 
 from conftest import ROOT
 from partcal import PartcalError, read_measurements
-from partcal.models import ErrorModel
-from partcal.swarm import SwarmConfig
+from partcal.models.series import ErrorModel
+from partcal.models.swarm import SwarmConfig
 
 IDENT = ROOT / "data" / "sk120" / "identification.csv"
 PAPER_MODELS = {

@@ -6,8 +6,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from partcal import PartcalError
-from partcal.blending import R1, block_weights, cutoff
-from partcal.partition import KMeansPartition, Octree, Partition
+from partcal.models.blending import R1, block_weights, cutoff
+from partcal.models.partition import KMeansPartition, Octree, Partition
 
 
 def cloud(seed, n=800, hole=True):

@@ -8,10 +8,10 @@ import pytest
 
 from conftest import ROOT
 from partcal import PartcalError
-from partcal.models import ErrorModel
-from partcal.partition import KMeansPartition, Octree
+from partcal.models.series import ErrorModel
+from partcal.models.partition import KMeansPartition, Octree
 from partcal.metrics import ExtrapolationWarning
-from partcal.partitioned import PartitionedErrorModel, select_granularity
+from partcal.models.partitioned import PartitionedErrorModel, select_granularity
 from partcal.data.simulate import load_study, simulate
 
 

@@ -7,9 +7,9 @@ import pytest
 
 from conftest import ROOT
 from partcal import ModelFileError, load_robot, read_measurements
-from partcal.models import ErrorModel
-from partcal.partition import KMeansPartition, Octree
-from partcal.partitioned import PartitionedErrorModel
+from partcal.models.series import ErrorModel
+from partcal.models.partition import KMeansPartition, Octree
+from partcal.models.partitioned import PartitionedErrorModel
 from partcal.persist import load_model, save_model
 from partcal.predictor import load_predictor
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from partcal import PartcalError
-from partcal.swarm import SwarmConfig, minimize, minimize_batch
+from partcal.models.swarm import SwarmConfig, minimize, minimize_batch
 
 
 def sphere(X):

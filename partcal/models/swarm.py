@@ -37,7 +37,7 @@ from typing import Callable
 import numpy as np
 from numpy.typing import NDArray
 
-from ._validation import check_choice, check_int, check_real, param_error
+from .._validation import check_choice, check_int, check_real, param_error
 
 RULES = ("constriction", "inertia", "paper")
 TOPOLOGIES = ("global", "ring")

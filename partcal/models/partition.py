@@ -23,9 +23,9 @@ from numpy.typing import NDArray
 from scipy.spatial import Delaunay, QhullError, cKDTree
 from sklearn.cluster import KMeans
 
-from ._validation import check_int, check_real, param_error
+from .._validation import check_int, check_real, param_error
 from .blending import R1
-from .errors import PartcalError
+from ..errors import PartcalError
 
 _BOUNDARY = 1e300   # a "box face at infinity" on the outside of the root cell
 

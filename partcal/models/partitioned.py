@@ -20,11 +20,11 @@ from numpy.typing import NDArray
 from sklearn.base import clone
 from sklearn.utils.validation import check_is_fitted, validate_data
 
-from ._validation import check_choice, check_int, param_error
+from .._validation import check_choice, check_int, param_error
 from .blending import block_weights
-from .errors import PartcalError
-from .metrics import cross_validated_rms, distance_outside_boxes, warn_far
-from .models import ErrorModel, MultiOutputRegressor, _seed_from
+from ..errors import PartcalError
+from ..metrics import cross_validated_rms, distance_outside_boxes, warn_far
+from .series import ErrorModel, MultiOutputRegressor, _seed_from
 from .partition import KMeansPartition, Octree, Partition, check_width
 
 log = logging.getLogger(__name__)

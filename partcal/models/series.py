@@ -27,10 +27,10 @@ from sklearn.base import BaseEstimator, RegressorMixin
 from sklearn.utils import check_random_state
 from sklearn.utils.validation import check_is_fitted, validate_data
 
-from ._validation import check_choice, check_int, param_error
+from .._validation import check_choice, check_int, param_error
 from .bases import Basis, Scaling, raw_polynomial
-from .errors import PartcalError
-from .metrics import distance_outside_boxes, warn_far
+from ..errors import PartcalError
+from ..metrics import distance_outside_boxes, warn_far
 from .swarm import SwarmConfig, SwarmResult, minimize_batch
 
 log = logging.getLogger(__name__)

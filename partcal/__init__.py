@@ -22,7 +22,7 @@ _EXPORTS = {
     "models.swarm": ["SwarmConfig", "SwarmResult", "minimize", "minimize_batch"],
     "models.partition": ["KMeansPartition", "Octree"],
     "models.partitioned": ["PartitionedErrorModel", "select_granularity"],
-    "predictor": ["Predictor", "load_predictor"],
+    "study.predictor": ["Predictor", "load_predictor"],
 }
 _WHERE = {name: module for module, names in _EXPORTS.items() for name in names}
 __all__ = ["__version__", *_WHERE]

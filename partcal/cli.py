@@ -69,9 +69,9 @@ class Progress:
 
 
 def _cmd_run(args) -> int:
-    from .config import load_config
-    from .outputs import check_writable, write_run
-    from .registry import run
+    from .study.config import load_config
+    from .study.outputs import check_writable, write_run
+    from .study.registry import run
 
     config = load_config(args.config)
     check_writable(config.output)
@@ -122,7 +122,7 @@ def _cmd_predict(args) -> int:
     from ._io import atomic_write
     from .robot.kinematics import joint_columns
     from .data.measurements import read_columns
-    from .predictor import load_predictor
+    from .study.predictor import load_predictor
 
     predictor = load_predictor(args.model)
     if predictor.inputs == "cartesian":
@@ -148,7 +148,7 @@ def _cmd_compensate(args) -> int:
     from .robot.compensation import CompensationWarning
     from .robot.kinematics import joint_columns
     from .data.measurements import read_columns
-    from .predictor import load_predictor
+    from .study.predictor import load_predictor
 
     predictor = load_predictor(args.model)
     n_q = predictor.robot.n_joints if predictor.robot is not None else 0

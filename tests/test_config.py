@@ -6,7 +6,7 @@ import pytest
 
 from conftest import ROOT
 from partcal import ConfigError
-from partcal.config import load_config
+from partcal.study.config import load_config
 
 DATA = ROOT / "data" / "sk120"
 BASE = f"""name: demo

@@ -10,8 +10,8 @@ from partcal import ModelFileError, load_robot, read_measurements
 from partcal.models.series import ErrorModel
 from partcal.models.partition import KMeansPartition, Octree
 from partcal.models.partitioned import PartitionedErrorModel
-from partcal.persist import load_model, save_model
-from partcal.predictor import load_predictor
+from partcal.study.persist import load_model, save_model
+from partcal.study.predictor import load_predictor
 
 IDENT = read_measurements(ROOT / "data" / "sk120" / "identification.csv")
 MODELS = [

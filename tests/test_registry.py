@@ -10,10 +10,10 @@ import pytest
 
 from conftest import ROOT
 from partcal import load_predictor, read_measurements
-from partcal.config import load_config
+from partcal.study.config import load_config
 from partcal.metrics import summary
-from partcal.outputs import write_run
-from partcal.registry import run
+from partcal.study.outputs import write_run
+from partcal.study.registry import run
 
 DATA = ROOT / "data" / "sk120"
 CONFIG = f"""name: small
@@ -98,7 +98,7 @@ def test_metrics_equal_those_recomputed_from_predictions_and_model_files(small_r
 
 
 def test_same_config_same_metrics_for_any_n_jobs(small_run, tmp_path):
-    from partcal.outputs import metrics_document
+    from partcal.study.outputs import metrics_document
 
     result, _ = small_run
     two = run(config(tmp_path, n_jobs=2))
@@ -107,7 +107,7 @@ def test_same_config_same_metrics_for_any_n_jobs(small_run, tmp_path):
 
 def test_dask_cluster_gives_the_same_metrics(small_run, tmp_path):
     distributed = pytest.importorskip("distributed")
-    from partcal.outputs import metrics_document
+    from partcal.study.outputs import metrics_document
 
     result, _ = small_run
     with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False, protocol="tcp", host="127.0.0.1",

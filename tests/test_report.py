@@ -7,9 +7,9 @@ import html5lib
 import pytest
 
 from conftest import ROOT
-from partcal.config import load_config
-from partcal.outputs import write_run
-from partcal.registry import run
+from partcal.study.config import load_config
+from partcal.study.outputs import write_run
+from partcal.study.registry import run
 from partcal.report import render_report
 
 DATA = ROOT / "data" / "sk120"

@@ -23,7 +23,7 @@ import numpy as np
 from .. import __version__
 from ..models.series import ErrorModel
 from ..models.partitioned import PartitionedErrorModel
-from ..registry import ModelResult, RunResult
+from ..study.registry import ModelResult, RunResult
 from . import figures
 from .scene import render_scenes
 

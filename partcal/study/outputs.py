@@ -18,9 +18,9 @@ from typing import Callable
 import numpy as np
 import yaml
 
-from . import __version__
-from .errors import PartcalError
-from .robot.kinematics import joint_columns
+from .. import __version__
+from ..errors import PartcalError
+from ..robot.kinematics import joint_columns
 from .persist import save_model
 from .registry import RunResult
 

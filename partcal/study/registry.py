@@ -22,12 +22,12 @@ from joblib import Parallel, delayed, parallel_config
 from numpy.typing import NDArray
 
 from .config import ModelSpec, RunConfig
-from .errors import ConfigError, DataError
-from .robot.kinematics import Robot, load_robot
-from .data.measurements import Measurements, read_measurements
-from .metrics import cross_validated_rms, summary
-from .models.series import ErrorModel
-from .models.partitioned import PartitionedErrorModel, select_granularity
+from ..errors import ConfigError, DataError
+from ..robot.kinematics import Robot, load_robot
+from ..data.measurements import Measurements, read_measurements
+from ..metrics import cross_validated_rms, summary
+from ..models.series import ErrorModel
+from ..models.partitioned import PartitionedErrorModel, select_granularity
 from .predictor import Predictor
 
 log = logging.getLogger(__name__)
@@ -154,7 +154,7 @@ def run(config: RunConfig, progress: Callable[[int, int, str], None] | None = No
 def _virtual_robot(config: RunConfig, robot: Robot | None):
     if config.virtual_robot is None:
         return None
-    from .data.simulate import load_study
+    from ..data.simulate import load_study
 
     study = load_study(config.virtual_robot)
     if robot is None or study.robot.nominal.name != robot.name:

@@ -13,13 +13,13 @@ import re
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-from ._yamlio import Section, load_yaml, range_check
-from .errors import PartcalError
-from .robot.kinematics import load_robot, robot_reference
-from .models.series import ErrorModel
-from .models.partition import KMeansPartition, Octree
-from .models.partitioned import PartitionedErrorModel
-from .models.swarm import RULES, TOPOLOGIES, SwarmConfig
+from .._yamlio import Section, load_yaml, range_check
+from ..errors import PartcalError
+from ..robot.kinematics import load_robot, robot_reference
+from ..models.series import ErrorModel
+from ..models.partition import KMeansPartition, Octree
+from ..models.partitioned import PartitionedErrorModel
+from ..models.swarm import RULES, TOPOLOGIES, SwarmConfig
 
 RESERVED_NAMES = {"identification", "file", "fit_seconds", "cv", "inputs", "solver", "regions", "pso_rms_ratio",
                   "granularity", "compensation"}

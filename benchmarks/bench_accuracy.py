@@ -16,11 +16,11 @@ sys.path.insert(0, os.path.dirname(__file__))
 import numpy as np  # noqa: E402
 from _table import print_table  # noqa: E402
 
+from partcal.data.simulate import load_study, simulate  # noqa: E402
 from partcal.metrics import cross_validated_rms  # noqa: E402
-from partcal.models.series import ErrorModel  # noqa: E402
 from partcal.models.partition import KMeansPartition, Octree  # noqa: E402
 from partcal.models.partitioned import PartitionedErrorModel, select_granularity  # noqa: E402
-from partcal.data.simulate import load_study, simulate  # noqa: E402
+from partcal.models.series import ErrorModel  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 TESTS = ["test_rectangle", "test_spiral_xy", "test_spiral_yz"]

@@ -16,9 +16,9 @@ sys.path.insert(0, os.path.dirname(__file__))
 import numpy as np  # noqa: E402
 from _table import best_time, print_table  # noqa: E402
 
-from partcal.models.series import ErrorModel  # noqa: E402
 from partcal.models.partition import KMeansPartition, Octree  # noqa: E402
 from partcal.models.partitioned import PartitionedErrorModel  # noqa: E402
+from partcal.models.series import ErrorModel  # noqa: E402
 
 LOW, HIGH = np.array([-1000.0, -1000, -500]), np.array([1000.0, 1000, 1500])
 

@@ -30,8 +30,8 @@ sys.path.insert(0, os.path.dirname(__file__))
 import numpy as np  # noqa: E402
 from _table import print_table  # noqa: E402
 
-from partcal.models.series import ErrorModel  # noqa: E402
 from partcal.data.simulate import load_study, sample_configurations  # noqa: E402
+from partcal.models.series import ErrorModel  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SEEDS = range(7)

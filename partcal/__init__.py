@@ -6,7 +6,8 @@ scikit-learn; ``from partcal import ErrorModel`` works as usual.
 """
 
 from importlib import import_module
-from importlib.metadata import PackageNotFoundError, version as _version
+from importlib.metadata import PackageNotFoundError
+from importlib.metadata import version as _version
 
 try:
     __version__ = _version("partcal")

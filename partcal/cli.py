@@ -28,8 +28,8 @@ PAPER_UNCOMPENSATED = {
 
 
 def _cmd_simulate(args) -> int:
-    from .metrics import rms_per_axis
     from .data.simulate import load_study, simulate, write_study
+    from .metrics import rms_per_axis
 
     start = time.perf_counter()
     study = load_study(args.config)
@@ -120,8 +120,8 @@ def results_table(result) -> str:
 
 def _cmd_predict(args) -> int:
     from ._io import atomic_write
-    from .robot.kinematics import joint_columns
     from .data.measurements import read_columns
+    from .robot.kinematics import joint_columns
     from .study.predictor import load_predictor
 
     predictor = load_predictor(args.model)
@@ -145,9 +145,9 @@ def _cmd_compensate(args) -> int:
     import warnings
 
     from ._io import atomic_write
+    from .data.measurements import read_columns
     from .robot.compensation import CompensationWarning
     from .robot.kinematics import joint_columns
-    from .data.measurements import read_columns
     from .study.predictor import load_predictor
 
     predictor = load_predictor(args.model)

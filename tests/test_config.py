@@ -3,8 +3,8 @@
 from pathlib import Path
 
 import pytest
-
 from conftest import ROOT
+
 from partcal import ConfigError
 from partcal.study.config import load_config
 

@@ -2,9 +2,9 @@
 
 import numpy as np
 import pytest
+from conftest import ROOT
 from sklearn.utils.estimator_checks import parametrize_with_checks
 
-from conftest import ROOT
 from partcal import PartcalError, read_measurements
 from partcal.models.series import ErrorModel
 from partcal.models.swarm import SwarmConfig

@@ -69,18 +69,6 @@ def test_blend_weights_are_a_partition_of_unity_equal_to_the_all_kernel_blend(se
         assert np.all(raw[~reached] == 0)       # unreached points fall back to their own region only
 
 
-def test_octree_neighbours_share_faces():
-    X = np.random.default_rng(0).uniform(0, 1000, size=(4000, 3))
-    P = Octree(max_depth=1).build(X, 50)
-    assert P.n_regions == 8
-    for r, nb in enumerate(P.neighbours):
-        # in a 2x2x2 grid a cell touches 3 others by a face, never its diagonal opposite
-        assert len(nb) == 3 and r not in nb
-        for other in nb:
-            assert r in P.neighbours[other]
-            assert np.count_nonzero(~np.isclose(P.centres[r], P.centres[other])) == 1
-
-
 def test_partition_round_trips_as_plain_data():
     X = cloud(3)
     for spec in SPECS:

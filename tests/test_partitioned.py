@@ -5,14 +5,14 @@ import warnings
 
 import numpy as np
 import pytest
-
 from conftest import ROOT
+
 from partcal import PartcalError
-from partcal.models.series import ErrorModel
-from partcal.models.partition import KMeansPartition, Octree
-from partcal.metrics import ExtrapolationWarning
-from partcal.models.partitioned import PartitionedErrorModel, select_granularity
 from partcal.data.simulate import load_study, simulate
+from partcal.metrics import ExtrapolationWarning
+from partcal.models.partition import KMeansPartition, Octree
+from partcal.models.partitioned import PartitionedErrorModel, select_granularity
+from partcal.models.series import ErrorModel
 
 
 def smooth_field(n=3000, seed=0):

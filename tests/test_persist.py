@@ -4,12 +4,12 @@ import json
 
 import numpy as np
 import pytest
-
 from conftest import ROOT
+
 from partcal import ModelFileError, load_robot, read_measurements
-from partcal.models.series import ErrorModel
 from partcal.models.partition import KMeansPartition, Octree
 from partcal.models.partitioned import PartitionedErrorModel
+from partcal.models.series import ErrorModel
 from partcal.study.persist import load_model, save_model
 from partcal.study.predictor import load_predictor
 

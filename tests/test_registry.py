@@ -7,11 +7,11 @@ import sys
 
 import numpy as np
 import pytest
-
 from conftest import ROOT
+
 from partcal import load_predictor, read_measurements
-from partcal.study.config import load_config
 from partcal.metrics import summary
+from partcal.study.config import load_config
 from partcal.study.outputs import write_run
 from partcal.study.registry import run
 

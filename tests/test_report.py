@@ -5,12 +5,12 @@ import shutil
 
 import html5lib
 import pytest
-
 from conftest import ROOT
+
+from partcal.report import render_report
 from partcal.study.config import load_config
 from partcal.study.outputs import write_run
 from partcal.study.registry import run
-from partcal.report import render_report
 
 DATA = ROOT / "data" / "sk120"
 EVIL = 'FDP <script>alert("x")</script> & co'

@@ -4,11 +4,11 @@ import dataclasses
 
 import numpy as np
 import pytest
-
 from conftest import ROOT
+
 from partcal import ConfigError, read_measurements
-from partcal.metrics import rms_per_axis
 from partcal.data.simulate import load_study, simulate, write_study
+from partcal.metrics import rms_per_axis
 from partcal.robot.trajectories import rectangle, spiral
 
 CONFIG = ROOT / "configs" / "sk120_virtual.yaml"

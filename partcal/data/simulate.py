@@ -22,8 +22,8 @@ from numpy.typing import NDArray
 from .._yamlio import Section, load_yaml, range_check
 from ..errors import ConfigError
 from ..robot.kinematics import Robot, joint_columns, load_robot, robot_reference
-from .measurements import Measurements, write_measurements
 from ..robot.trajectories import PATHS, paper_path
+from .measurements import Measurements, write_measurements
 
 log = logging.getLogger(__name__)
 GRAVITY_M_S2 = 9.80665

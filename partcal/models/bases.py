@@ -22,6 +22,22 @@ import numpy as np
 from numpy.typing import NDArray
 
 
+def varying_inputs(X: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """Which columns of ``X`` (n, d) vary: the one rule for "this input is constant", shape (d,).
+
+    A column varies when its range exceeds ``1e-12`` of its magnitude (or of 1
+    for values near zero), so a joint held at -90 or 30 degrees is as constant
+    as one held at 0. Constant inputs carry no information: bases leave them
+    out, partitions do not split or blend along them, and compensation holds
+    those joints where the training data had them.
+
+    >>> varying_inputs(np.array([[0.0, 30.0, 1.0], [5.0, 30.0, 1.0 + 1e-15]])).tolist()
+    [True, False, False]
+    """
+    lo, hi = X.min(axis=0), X.max(axis=0)
+    return (hi - lo) > 1e-12 * np.maximum(1.0, np.maximum(np.abs(lo), np.abs(hi)))
+
+
 @dataclass(frozen=True)
 class Scaling:
     """Per-input centring and scaling learnt from training data.
@@ -37,7 +53,7 @@ class Scaling:
     def fit(cls, X: NDArray[np.float64]) -> "Scaling":
         lo, hi = X.min(axis=0), X.max(axis=0)
         half = (hi - lo) / 2.0
-        active = half > 1e-12 * np.maximum(1.0, np.abs(hi))
+        active = varying_inputs(X)
         return cls(centre=(hi + lo) / 2.0, scale=np.where(active, half, 1.0), active=active)
 
     def to_dict(self) -> dict:

@@ -1,10 +1,10 @@
-"""Workspace partitions: an adaptive octree and k-means, with neighbours and blend kernels.
+"""Workspace partitions: an adaptive octree and k-means, with their blend kernels.
 
 ``Octree`` and ``KMeansPartition`` are settings (what a user writes);
 ``build(X, min_samples, random_state)`` returns a fitted :class:`Partition`,
 plain arrays that tell which region any point belongs to (also outside the
-data's bounding box), which kernels may weigh on it (see ``blending``), and
-which regions are neighbours. ``Partition.to_dict`` / ``from_dict`` turn it
+data's bounding box), and which kernels may weigh on it (see ``blending``).
+``Partition.to_dict`` / ``from_dict`` turn it
 into JSON-ready data for model files and pictures.
 
 No region is ever left with fewer samples than ``min_samples``: an octree
@@ -20,12 +20,12 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial import Delaunay, QhullError, cKDTree
+from scipy.spatial import cKDTree
 from sklearn.cluster import KMeans
 
 from .._validation import check_int, check_real, param_error
-from .blending import R1
 from ..errors import PartcalError
+from .blending import R1
 
 _BOUNDARY = 1e300   # a "box face at infinity" on the outside of the root cell
 
@@ -80,7 +80,6 @@ class Partition:
     kind : "octree" or "kmeans"
     n_regions : int
     centres, sigmas : (M, d) blend kernels; ``kernel_region`` (M,) maps them to regions
-    neighbours : list of int arrays, face (octree) or Delaunay (k-means) neighbours per region
     boxes : (M, 2, d) octree leaf boxes (low, high) or None
     tree : dict of octree node arrays (``centre``, ``child``, ``leaf``) or None
     cand : (M, K) candidate kernels per octree leaf, -1 padded, or None
@@ -92,7 +91,6 @@ class Partition:
     centres: NDArray[np.float64]
     sigmas: NDArray[np.float64]
     kernel_region: NDArray[np.intp]
-    neighbours: list
     boxes: NDArray[np.float64] | None = None
     tree: dict | None = None
     cand: NDArray[np.intp] | None = None
@@ -168,8 +166,7 @@ class Partition:
     # -------------------------------------------------------------- plain data
     def to_dict(self) -> dict:
         out = {"kind": self.kind, "n_regions": int(self.n_regions), "centres": self.centres.tolist(),
-               "sigmas": self.sigmas.tolist(), "kernel_region": self.kernel_region.tolist(),
-               "neighbours": [n.tolist() for n in self.neighbours]}
+               "sigmas": self.sigmas.tolist(), "kernel_region": self.kernel_region.tolist()}
         if self.kind == "octree":
             out["boxes"] = self.boxes.tolist()
             out["tree"] = {k: v.tolist() for k, v in self.tree.items()}
@@ -180,8 +177,7 @@ class Partition:
     def from_dict(cls, data: dict) -> "Partition":
         arr = np.asarray
         kw = dict(kind=data["kind"], n_regions=int(data["n_regions"]), centres=arr(data["centres"], float),
-                  sigmas=arr(data["sigmas"], float), kernel_region=arr(data["kernel_region"], np.intp),
-                  neighbours=[arr(n, np.intp) for n in data["neighbours"]])
+                  sigmas=arr(data["sigmas"], float), kernel_region=arr(data["kernel_region"], np.intp))
         if data["kind"] == "octree":
             kw.update(boxes=arr(data["boxes"], float), cand=arr(data["cand"], np.intp),
                       own=arr(data["own"], np.intp),
@@ -242,8 +238,7 @@ def _build_octree(X, max_depth: int, min_samples: int, width: float) -> Partitio
     n_regions = int(proper.sum())
     tree = {"centre": np.array(node_centre), "child": np.array(node_child, dtype=np.intp),
             "leaf": np.array(node_leaf, dtype=np.intp)}
-    return Partition("octree", n_regions, box_centres, sigmas, region,
-                     _face_neighbours(boxes, region, n_regions), boxes=boxes, tree=tree, cand=cand, own=own)
+    return Partition("octree", n_regions, box_centres, sigmas, region, boxes=boxes, tree=tree, cand=cand, own=own)
 
 
 def _leaf_candidates(grown, centres, sigmas, chunk: int = 256):
@@ -261,32 +256,6 @@ def _leaf_candidates(grown, centres, sigmas, chunk: int = 256):
         cand[i, : len(r)] = r
         own[i] = int(np.flatnonzero(r == i)[0])
     return cand, own
-
-
-def _face_neighbours(boxes, region, n_regions: int, chunk: int = 256) -> list:
-    """Regions whose leaf boxes share a face (touch on one axis, overlap on the others)."""
-    low, high = boxes[:, 0], boxes[:, 1]
-    tol = 1e-9 * np.maximum(1.0, np.abs(boxes).max())
-    pairs = set()
-    for start in range(0, len(boxes), chunk):
-        lo_a, hi_a = low[start:start + chunk, None], high[start:start + chunk, None]
-        touch = (np.abs(hi_a - low[None]) < tol) | (np.abs(lo_a - high[None]) < tol)       # (b, M, d)
-        overlap = (np.minimum(hi_a, high[None]) - np.maximum(lo_a, low[None])) > tol
-        n_touch, n_overlap = touch.sum(axis=2), overlap.sum(axis=2)
-        face = (n_touch == 1) & (n_overlap == boxes.shape[2] - 1)
-        for i, j in zip(*np.nonzero(face)):
-            a, b = region[start + i], region[j]
-            if a != b:
-                pairs.add((min(a, b), max(a, b)))
-    return _adjacency(pairs, n_regions)
-
-
-def _adjacency(pairs, n: int) -> list:
-    nb = [set() for _ in range(n)]
-    for a, b in pairs:
-        nb[a].add(b)
-        nb[b].add(a)
-    return [np.array(sorted(s), dtype=np.intp) for s in nb]
 
 
 # ---------------------------------------------------------------------- k-means
@@ -312,15 +281,7 @@ def _build_kmeans(X, n_regions: int, min_samples: int, random_state, width: floa
     floor = 1e-3 * np.maximum(X.std(axis=0), 1e-12)
     sigmas = width * np.sqrt(3.0) * np.maximum(spread, floor)
     m = len(centres)
-    if m > X.shape[1] + 1:
-        try:
-            tri = Delaunay(centres)
-            pairs = {(min(a, b), max(a, b)) for s in tri.simplices for a in s for b in s if a != b}
-        except QhullError:
-            pairs = {(a, b) for a in range(m) for b in range(a + 1, m)}
-    else:
-        pairs = {(a, b) for a in range(m) for b in range(a + 1, m)}
-    return Partition("kmeans", m, centres, sigmas, np.arange(m), _adjacency(pairs, m))
+    return Partition("kmeans", m, centres, sigmas, np.arange(m))
 
 
 def check_width(value) -> float:

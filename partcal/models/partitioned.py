@@ -21,17 +21,19 @@ from sklearn.base import clone
 from sklearn.utils.validation import check_is_fitted, validate_data
 
 from .._validation import check_choice, check_int, param_error
-from .blending import block_weights
 from ..errors import PartcalError
 from ..metrics import cross_validated_rms, distance_outside_boxes, warn_far
-from .series import ErrorModel, MultiOutputRegressor, _seed_from
+from .base import ErrorModelBase, seed_from
+from .bases import varying_inputs
+from .blending import block_weights
 from .partition import KMeansPartition, Octree, Partition, check_width
+from .series import ErrorModel
 
 log = logging.getLogger(__name__)
 MIN_SAMPLES_PER_TERM = 3
 
 
-class PartitionedErrorModel(MultiOutputRegressor):
+class PartitionedErrorModel(ErrorModelBase):
     """Error model made of local models on workspace regions.
 
     Parameters
@@ -93,13 +95,12 @@ class PartitionedErrorModel(MultiOutputRegressor):
         X, y = validate_data(self, X, y, multi_output=True, y_numeric=True, dtype=np.float64)
         self._y_1d = y.ndim == 1
         Y = y.reshape(len(y), -1)
-        active = np.ptp(X, axis=0) > 0
-        terms = local._check_params()[0].n_terms(int(active.sum()))
+        terms = local._check_params()[0].n_terms(int(varying_inputs(X).sum()))
         min_samples = spec.min_samples or MIN_SAMPLES_PER_TERM * terms
         if X.shape[0] < min_samples:
             raise PartcalError(f"{type(self).__name__}: a region needs at least {min_samples} samples "
                                f"({terms} terms per output); got {X.shape[0]} samples in all")
-        seed = _seed_from(self.random_state)
+        seed = seed_from(self.random_state)
         partition = spec.build(X, min_samples, seed, self.blend_width)
         groups = self._training_groups(partition, X)
         seeds = np.random.SeedSequence(seed).spawn(partition.n_regions)

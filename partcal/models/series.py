@@ -19,18 +19,16 @@ least-squares RMS on the same data (1.0 is optimal).
 from __future__ import annotations
 
 import logging
-from numbers import Integral
 
 import numpy as np
 from numpy.typing import NDArray
-from sklearn.base import BaseEstimator, RegressorMixin
-from sklearn.utils import check_random_state
 from sklearn.utils.validation import check_is_fitted, validate_data
 
 from .._validation import check_choice, check_int, param_error
-from .bases import Basis, Scaling, raw_polynomial
 from ..errors import PartcalError
 from ..metrics import distance_outside_boxes, warn_far
+from .base import ErrorModelBase, seed_from
+from .bases import Basis, Scaling, raw_polynomial
 from .swarm import SwarmConfig, SwarmResult, minimize_batch
 
 log = logging.getLogger(__name__)
@@ -40,20 +38,7 @@ SOLVERS = ("pso", "lstsq")
 FITNESSES = ("rms", "max", "mae")
 
 
-class MultiOutputRegressor(RegressorMixin, BaseEstimator):
-    """What partcal's estimators share: multi-output tags and 1-D targets kept 1-D."""
-
-    def _shape_output(self, out: NDArray[np.float64]) -> NDArray[np.float64]:
-        return out[:, 0] if self._y_1d else out
-
-    def __sklearn_tags__(self):
-        tags = super().__sklearn_tags__()
-        tags.target_tags.multi_output = True
-        tags.target_tags.single_output = True
-        return tags
-
-
-class ErrorModel(MultiOutputRegressor):
+class ErrorModel(ErrorModelBase):
     """Position-error model, linear in its coefficients.
 
     Parameters
@@ -164,7 +149,7 @@ class ErrorModel(MultiOutputRegressor):
         if self.solver == "lstsq":
             coef = coef_ls
         else:
-            seeds = np.random.SeedSequence(_seed_from(self.random_state)).spawn(Y.shape[1])
+            seeds = np.random.SeedSequence(seed_from(self.random_state)).spawn(Y.shape[1])
             self.swarm_results_ = self._swarm(phi @ to_coef, Y, Yw, z_ls, weights, swarm, seeds)
             coef = to_coef @ np.stack([res.x for res in self.swarm_results_], axis=1)
         self.coef_ = coef
@@ -268,11 +253,3 @@ class ErrorModel(MultiOutputRegressor):
             kind = {1: "first", 2: "second"}.get(self.degree, f"degree-{self.degree}")
             return f"{kind}-degree polynomial{' with cross terms' if self.cross_terms else ''} of {self.inputs} inputs"
         return f"Fourier series with {self.harmonics} harmonic(s) of {self.inputs} inputs"
-
-def _seed_from(random_state) -> int:
-    """One integer seed from None, an int, a RandomState or a Generator."""
-    if isinstance(random_state, np.random.Generator):
-        return int(random_state.integers(2**32))
-    if isinstance(random_state, Integral):
-        return int(random_state)
-    return int(check_random_state(random_state).randint(2**32))

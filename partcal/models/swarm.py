@@ -211,69 +211,95 @@ def minimize_batch(
         raise param_error("minimize_batch", "random_states", f"{n_prob} seeds, one per problem",
                           len(random_states))
     rngs = [np.random.default_rng(r) for r in random_states]
-    lo3, hi3 = lo[:, None, :], hi[:, None, :]
-    vmax = cfg.vmax * (hi3 - lo3)
     x = np.stack([g.uniform(lo[b], hi[b], size=(n, dims)) for b, g in enumerate(rngs)])
     if x0 is not None:
         x[:, 0] = np.clip(np.asarray(x0, dtype=float), lo, hi)
-    v = np.zeros_like(x)
+    s = _Swarm.start(x, _evaluate(fun, x, np.arange(n_prob)))
     active = np.arange(n_prob)
-    f = _evaluate(fun, x, active)
-    best_x, best_f = x.copy(), f.copy()
-    history = [[row.min()] for row in best_f]
-    nit = np.zeros(n_prob, dtype=int)
-    messages = ["reached the iteration limit"] * n_prob
-    success = np.zeros(n_prob, dtype=bool)
-    chi = cfg.chi if cfg.rule == "constriction" else 1.0
     for it in range(1, cfg.iterations + 1):
         # while every problem runs, work on views; afterwards on copies of the running ones
         sel = slice(None) if active.size == n_prob else active
-        xa, va, pa, fa = x[sel], v[sel], best_x[sel], best_f[sel]
-        guide = _guides(pa, fa, cfg)
         r = np.stack([rngs[b].random((2, n, dims)) for b in active], axis=1)
-        pull = cfg.c1 * r[0] * (pa - xa) + cfg.c2 * r[1] * (guide - xa)
+        s.step(sel, r, cfg, it, lo[:, None, :], hi[:, None, :], lambda xa: _evaluate(fun, xa, active))
+        s.nit[active] = it
+        done = s.check_stops(active, it, cfg)
+        if callback is not None and callback(it, *s.best()):
+            for b in active[~done]:
+                s.messages[b], s.success[b] = "stopped by the callback", True
+            break
+        active = active[~done]
+        if active.size == 0:
+            break
+    return s.results(n)
+
+
+@dataclass
+class _Swarm:
+    """The state of ``B`` swarms of ``n`` particles: positions, velocities, personal bests, history."""
+
+    x: NDArray[np.float64]            # (B, n, dims)
+    v: NDArray[np.float64]
+    best_x: NDArray[np.float64]
+    best_f: NDArray[np.float64]       # (B, n)
+    history: list                     # per problem: best fitness after each iteration
+    nit: NDArray[np.int_]
+    messages: list
+    success: NDArray[np.bool_]
+
+    @classmethod
+    def start(cls, x: NDArray[np.float64], f: NDArray[np.float64]) -> "_Swarm":
+        b = x.shape[0]
+        return cls(x, np.zeros_like(x), x.copy(), f.copy(), [[row.min()] for row in f], np.zeros(b, dtype=int),
+                   ["reached the iteration limit"] * b, np.zeros(b, dtype=bool))
+
+    def step(self, sel, r, cfg: SwarmConfig, it: int, lo3, hi3, evaluate) -> None:
+        """One velocity and position update of the selected swarms, absorbing walls, new personal bests."""
+        xa, va, pa, fa = self.x[sel], self.v[sel], self.best_x[sel], self.best_f[sel]
+        lo3, hi3 = lo3[sel], hi3[sel]
+        pull = cfg.c1 * r[0] * (pa - xa) + cfg.c2 * r[1] * (_guides(pa, fa, cfg) - xa)
         if cfg.rule == "inertia":
             w = cfg.inertia[0] + (cfg.inertia[1] - cfg.inertia[0]) * (it - 1) / max(cfg.iterations - 1, 1)
             va = w * va + pull
         else:
-            va = chi * (va + pull)
-        np.clip(va, -vmax[sel], vmax[sel], out=va)
+            va = (cfg.chi if cfg.rule == "constriction" else 1.0) * (va + pull)
+        vmax = cfg.vmax * (hi3 - lo3)
+        np.clip(va, -vmax, vmax, out=va)
         xa = xa + va
-        outside = (xa < lo3[sel]) | (xa > hi3[sel])
+        outside = (xa < lo3) | (xa > hi3)
         if outside.any():
-            np.clip(xa, lo3[sel], hi3[sel], out=xa)
+            np.clip(xa, lo3, hi3, out=xa)
             va[outside] = 0.0
-        fa_new = _evaluate(fun, xa, active)
+        fa_new = evaluate(xa)
         better = fa_new < fa
         pa[better], fa[better] = xa[better], fa_new[better]
-        x[sel], v[sel], best_x[sel], best_f[sel] = xa, va, pa, fa
-        nit[active] = it
+        self.x[sel], self.v[sel], self.best_x[sel], self.best_f[sel] = xa, va, pa, fa
+
+    def check_stops(self, active: NDArray[np.intp], it: int, cfg: SwarmConfig) -> NDArray[np.bool_]:
+        """Record each running problem's best; return which of them stop now (threshold or patience)."""
         done = np.zeros(active.size, dtype=bool)
         for k, b in enumerate(active):
-            history[b].append(fa[k].min())
-            if cfg.stop_fitness is not None and history[b][-1] <= cfg.stop_fitness:
-                messages[b], success[b], done[k] = "reached the stop threshold", True, True
+            self.history[b].append(self.best_f[b].min())
+            if cfg.stop_fitness is not None and self.history[b][-1] <= cfg.stop_fitness:
+                self.messages[b], self.success[b], done[k] = "reached the stop threshold", True, True
             elif cfg.patience is not None and it >= cfg.patience:
-                best_now, past = history[b][-1], history[b][-cfg.patience - 1]
+                best_now, past = self.history[b][-1], self.history[b][-cfg.patience - 1]
                 if past - best_now <= cfg.ftol * max(abs(best_now), 1e-300):
-                    messages[b] = f"converged: improvement below ftol over {cfg.patience} iterations"
-                    success[b], done[k] = True, True
-        if callback is not None:
-            g = np.argmin(best_f, axis=1)
-            if callback(it, best_x[np.arange(n_prob), g].copy(), best_f[np.arange(n_prob), g].copy()):
-                for b in active[~done]:
-                    messages[b], success[b] = "stopped by the callback", True
-                break
-        active = active[~done]
-        if active.size == 0:
-            break
-    out = []
-    for b in range(n_prob):
-        g = int(np.argmin(best_f[b]))
-        out.append(SwarmResult(x=best_x[b, g].copy(), fun=float(best_f[b, g]), nit=int(nit[b]),
-                               nfev=n * (int(nit[b]) + 1), success=bool(success[b]), message=messages[b],
-                               history=np.asarray(history[b])))
-    return out
+                    self.messages[b] = f"converged: improvement below ftol over {cfg.patience} iterations"
+                    self.success[b], done[k] = True, True
+        return done
+
+    def best(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """The best position ``(B, dims)`` and fitness ``(B,)`` of every swarm (copies)."""
+        g = np.argmin(self.best_f, axis=1)
+        rows = np.arange(self.best_f.shape[0])
+        return self.best_x[rows, g].copy(), self.best_f[rows, g].copy()
+
+    def results(self, particles: int) -> list[SwarmResult]:
+        best_x, best_f = self.best()
+        return [SwarmResult(x=best_x[b], fun=float(best_f[b]), nit=int(self.nit[b]),
+                            nfev=particles * (int(self.nit[b]) + 1), success=bool(self.success[b]),
+                            message=self.messages[b], history=np.asarray(self.history[b]))
+                for b in range(len(best_f))]
 
 
 def _evaluate(fun, x: NDArray[np.float64], which: NDArray[np.intp]) -> NDArray[np.float64]:

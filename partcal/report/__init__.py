@@ -21,8 +21,8 @@ import jinja2
 import numpy as np
 
 from .. import __version__
-from ..models.series import ErrorModel
 from ..models.partitioned import PartitionedErrorModel
+from ..models.series import ErrorModel
 from ..study.registry import ModelResult, RunResult
 from . import figures
 from .scene import render_scenes

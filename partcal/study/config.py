@@ -15,11 +15,11 @@ from pathlib import Path
 
 from .._yamlio import Section, load_yaml, range_check
 from ..errors import PartcalError
-from ..robot.kinematics import load_robot, robot_reference
-from ..models.series import ErrorModel
 from ..models.partition import KMeansPartition, Octree
 from ..models.partitioned import PartitionedErrorModel
+from ..models.series import ErrorModel
 from ..models.swarm import RULES, TOPOLOGIES, SwarmConfig
+from ..robot.kinematics import load_robot, robot_reference
 
 RESERVED_NAMES = {"identification", "file", "fit_seconds", "cv", "inputs", "solver", "regions", "pso_rms_ratio",
                   "granularity", "compensation"}
@@ -171,6 +171,7 @@ def _existing(sec: Section, key: str, base: Path) -> Path:
 
 
 def _model(sec: Section) -> ModelSpec:
+    """One entry of ``models``: the basis keys, then ``solver``, ``partition`` and ``blend``."""
     name = sec.get("name", "str", check=lambda v: None if v.strip() else "a non-empty text")
     choice = _choice_check
     kw = dict(
@@ -183,61 +184,71 @@ def _model(sec: Section) -> ModelSpec:
     )
     if kw["cross_terms"] and kw["basis"] != "polynomial":
         sec.fail(sec.path("cross_terms"), "must be false for the fourier basis")
-    solver = sec.section("solver")
+    method, fitness, swarm = _solver(sec.section("solver"))
+    kw.update(solver=method, fitness=fitness, swarm=swarm)
+    partition = _partition(sec)
+    sec.done()
+    return ModelSpec(**kw, partition=partition)
+
+
+def _solver(solver: Section) -> tuple[str, str, dict]:
+    """``solver``: the method, the fitness and the swarm settings (checked by ``SwarmConfig``)."""
+    choice = _choice_check
     method = solver.get("method", "str", default="pso", check=choice("pso", "lstsq"))
     fitness = solver.get("fitness", "str", default="rms", check=choice("rms", "max", "mae"))
     if method == "lstsq" and fitness != "rms":
         solver.fail(solver.path("fitness"), "must be 'rms' with method: lstsq (least squares minimises the RMS)")
     swarm = {}
     for key, kind in _SWARM_KEYS.items():
-        if solver.has(key):
-            if method != "pso":
-                solver.fail(solver.path(key), "applies to method: pso only")
-            value = solver.data[key]
-            if value is None and key in ("patience", "stop_fitness"):
-                solver.get(key, "any")
-                swarm[key] = None
-                continue
-            if key == "rule":
-                swarm[key] = solver.get(key, "str", check=choice(*RULES))
-            elif key == "topology":
-                swarm[key] = solver.get(key, "str", check=choice(*TOPOLOGIES))
-            elif key == "inertia":
-                swarm[key] = tuple(solver.get(key, "list"))
-            else:
-                swarm[key] = solver.get(key, kind)
+        if not solver.has(key):
+            continue
+        if method != "pso":
+            solver.fail(solver.path(key), "applies to method: pso only")
+        if solver.data[key] is None and key in ("patience", "stop_fitness"):
+            solver.get(key, "any")
+            swarm[key] = None
+        elif key == "rule":
+            swarm[key] = solver.get(key, "str", check=choice(*RULES))
+        elif key == "topology":
+            swarm[key] = solver.get(key, "str", check=choice(*TOPOLOGIES))
+        elif key == "inertia":
+            swarm[key] = tuple(solver.get(key, "list"))
+        else:
+            swarm[key] = solver.get(key, kind)
     if swarm:
         try:
             SwarmConfig(**swarm)
         except PartcalError as exc:
             solver.fail(solver.where, str(exc))
     solver.done()
-    kw.update(solver=method, fitness=fitness, swarm=swarm)
+    return method, fitness, swarm
+
+
+def _partition(sec: Section) -> PartitionSpec | None:
+    """``partition`` and ``blend`` of a model entry (``blend`` needs a partition)."""
+    choice = _choice_check
     part = sec.section("partition")
-    partition = None
-    if part.data:
-        kind = part.get("method", "str", check=choice("octree", "kmeans"))
-        size_key = "max_depth" if kind == "octree" else "n_regions"
-        low, high = (0, 8) if kind == "octree" else (1, 4096)
-        raw = part.get(size_key, "any", default=3 if kind == "octree" else 8)
-        sizes = raw if isinstance(raw, list) else [raw]
-        for v in sizes:
-            if not isinstance(v, int) or isinstance(v, bool) or not low <= v <= high:
-                part.fail(part.path(size_key), f"must be an int in [{low}, {high}] (or a list of them, chosen "
-                                              f"by cross-validation); got {v!r}")
-        min_samples = part.get("min_samples", "int", default=None, check=range_check(1, integer=True))
-        part.done()
-        blend = sec.section("blend")
-        bmethod = blend.get("method", "str", default="gaussian", check=choice("gaussian", "hard"))
-        width = blend.get("width", "float", default=0.7, check=range_check(0.6, 10.0))
-        blend.done()
-        partition = PartitionSpec(kind, tuple(sizes), min_samples, bmethod, width)
-    else:
+    if not part.data:
         part.done()
         if sec.has("blend"):
             sec.fail(sec.path("blend"), "needs a partition")
-    sec.done()
-    return ModelSpec(**kw, partition=partition)
+        return None
+    kind = part.get("method", "str", check=choice("octree", "kmeans"))
+    size_key = "max_depth" if kind == "octree" else "n_regions"
+    low, high = (0, 8) if kind == "octree" else (1, 4096)
+    raw = part.get(size_key, "any", default=3 if kind == "octree" else 8)
+    sizes = raw if isinstance(raw, list) else [raw]
+    for v in sizes:
+        if not isinstance(v, int) or isinstance(v, bool) or not low <= v <= high:
+            part.fail(part.path(size_key), f"must be an int in [{low}, {high}] (or a list of them, chosen "
+                                          f"by cross-validation); got {v!r}")
+    min_samples = part.get("min_samples", "int", default=None, check=range_check(1, integer=True))
+    part.done()
+    blend = sec.section("blend")
+    bmethod = blend.get("method", "str", default="gaussian", check=choice("gaussian", "hard"))
+    width = blend.get("width", "float", default=0.7, check=range_check(0.6, 10.0))
+    blend.done()
+    return PartitionSpec(kind, tuple(sizes), min_samples, bmethod, width)
 
 
 def _choice_check(*allowed: str):

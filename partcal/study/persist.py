@@ -17,12 +17,12 @@ import numpy as np
 
 from .. import __version__
 from .._io import atomic_write
-from ..models.bases import Basis, Scaling
 from ..errors import ModelFileError
-from ..robot.kinematics import Robot, robot_from_dict, robot_to_dict
-from ..models.series import ErrorModel
+from ..models.bases import Basis, Scaling
 from ..models.partition import Partition
 from ..models.partitioned import PartitionedErrorModel
+from ..models.series import ErrorModel
+from ..robot.kinematics import Robot, robot_from_dict, robot_to_dict
 
 FORMAT = "partcal-model"
 VERSION = 1

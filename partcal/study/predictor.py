@@ -17,10 +17,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .._validation import check_array
-from ..robot.compensation import CompensationResult, false_target, false_target_joints
 from ..errors import DataError
-from ..robot.kinematics import Robot, robot_from_dict
 from ..models.partitioned import PartitionedErrorModel
+from ..robot.compensation import CompensationResult, false_target, false_target_joints
+from ..robot.kinematics import Robot, robot_from_dict
 from .persist import load_model
 
 

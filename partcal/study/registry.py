@@ -21,13 +21,14 @@ import numpy as np
 from joblib import Parallel, delayed, parallel_config
 from numpy.typing import NDArray
 
-from .config import ModelSpec, RunConfig
-from ..errors import ConfigError, DataError
-from ..robot.kinematics import Robot, load_robot
 from ..data.measurements import Measurements, read_measurements
+from ..errors import ConfigError, DataError
 from ..metrics import cross_validated_rms, summary
-from ..models.series import ErrorModel
+from ..models.bases import varying_inputs
 from ..models.partitioned import PartitionedErrorModel, select_granularity
+from ..models.series import ErrorModel
+from ..robot.kinematics import Robot, load_robot
+from .config import ModelSpec, RunConfig
 from .predictor import Predictor
 
 log = logging.getLogger(__name__)
@@ -182,7 +183,7 @@ def verify_compensation(result: ModelResult, data: dict[str, Measurements], robo
         if result.spec.inputs == "joint":
             q_cmd = comp.joints_deg
         else:     # the controller turns the false target into joints with its nominal model
-            fixed = tuple(int(j) + 1 for j in np.flatnonzero(np.ptp(m.q_deg, axis=0) == 0))
+            fixed = tuple(int(j) + 1 for j in np.flatnonzero(~varying_inputs(m.q_deg)))
             q_cmd = robot.inverse(comp.commanded_mm, m.q_deg, fixed=fixed).q_deg
         rng = np.random.default_rng([seed, k])
         reached = virtual.measure(q_cmd, rng)

@@ -1,0 +1,173 @@
+"""The package layout: every module in the layer table, no import upwards or sideways."""
+
+import ast
+import re
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import ROOT
+
+PACKAGE = ROOT / "partcal"
+TABLE = re.compile(r"^\| (\d+) \| `(partcal/[\w/]+\.py)` \|", re.MULTILINE)
+
+
+def layer_table() -> dict[str, int]:
+    """``{"partcal/robot/kinematics.py": 1, ...}`` from docs/architecture.md."""
+    return {path: int(layer) for layer, path in TABLE.findall((ROOT / "docs" / "architecture.md").read_text())}
+
+
+def module_name(path: Path) -> str:
+    parts = list(path.relative_to(ROOT).with_suffix("").parts)
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def imported_modules(me: str, source: str) -> list[tuple[int, str]]:
+    """Every partcal module that the file ``me`` (repo-relative) imports anywhere, as ``(line, dotted name)``."""
+    path = ROOT / me
+    package = module_name(path) if path.name == "__init__.py" else module_name(path).rsplit(".", 1)[0]
+    out = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Import):
+            out += [(node.lineno, a.name) for a in node.names if a.name.split(".")[0] == "partcal"]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.split(".")[: len(package.split(".")) - node.level + 1]
+                target = ".".join(base + ([node.module] if node.module else []))
+            else:
+                target = node.module or ""
+            if target.split(".")[0] != "partcal":
+                continue
+            # "from . import x" may name a module x of that package
+            for alias in node.names:
+                candidate = f"{target}.{alias.name}"
+                out.append((node.lineno, candidate if _file_of(candidate) else target))
+    return out
+
+
+def _file_of(dotted: str) -> str | None:
+    rel = Path(*dotted.split("."))
+    for candidate in (rel.with_suffix(".py"), rel / "__init__.py"):
+        if (ROOT / candidate).is_file():
+            return candidate.as_posix()
+    return None
+
+
+def test_every_module_is_in_the_layer_table():
+    table = layer_table()
+    files = sorted(p.relative_to(ROOT).as_posix() for p in PACKAGE.rglob("*.py"))
+    assert [f for f in files if f not in table] == [], "add these modules to docs/architecture.md"
+    assert [f for f in table if f not in files] == [], "docs/architecture.md lists modules that do not exist"
+    assert len([p for p in PACKAGE.glob("*.py")]) <= 8
+
+
+def violations(me: str, source: str, table: dict[str, int]) -> list[str]:
+    """The imports of file ``me`` that go to a higher layer or a sibling folder of the same layer."""
+    out = []
+    for line, dotted in imported_modules(me, source):
+        target = _file_of(dotted)
+        if target is None:
+            out.append(f"{me}:{line}: imports {dotted}, which is not a module of partcal")
+            continue
+        same_folder = Path(target).parent == Path(me).parent
+        if not (table[target] < table[me] or (table[target] == table[me] and same_folder)):
+            out.append(f"{me}:{line} (layer {table[me]}) imports {dotted} (layer {table[target]})")
+    return out
+
+
+def test_no_module_imports_from_a_higher_layer_or_a_sibling_folder():
+    table = layer_table()
+    problems = []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        me = path.relative_to(ROOT).as_posix()
+        problems += violations(me, path.read_text(), table)
+    assert problems == []
+
+
+def test_the_checker_refuses_upward_and_sideways_imports():
+    table = layer_table()
+    code = textwrap.dedent("""
+        from ..errors import PartcalError
+        def later():
+            from ..study import config
+            import partcal.models.series
+    """)
+    assert violations("partcal/robot/kinematics.py", code, table) == [
+        "partcal/robot/kinematics.py:4 (layer 1) imports partcal.study.config (layer 3)",
+        "partcal/robot/kinematics.py:5 (layer 1) imports partcal.models.series (layer 2)",
+    ]
+    sideways = violations("partcal/data/measurements.py", "from ..models.bases import varying_inputs\n", table)
+    assert sideways == ["partcal/data/measurements.py:1 (layer 2) imports partcal.models.bases (layer 2)"]
+    assert violations("partcal/study/config.py", "from ..models import series\nfrom . import persist\n", table) == []
+
+
+def test_subpackages_import():
+    code = "import partcal, partcal.robot, partcal.data, partcal.models, partcal.study, partcal.report"
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+
+
+def test_old_model_files_still_load():
+    """Files written by partcal 0.1.0 (before the layout change) load and predict as a fresh fit does."""
+    from partcal import ErrorModel, KMeansPartition, Octree, PartitionedErrorModel, load_predictor, read_measurements
+
+    m = read_measurements(ROOT / "data" / "sk120" / "identification.csv")
+    fresh = {
+        "v0.1_sdp-ci.json": (ErrorModel(degree=2, solver="lstsq").fit(m.nominal_mm, m.errors_mm), "positions"),
+        "v0.1_fdp-ci-octree.json": (PartitionedErrorModel(partition=Octree(max_depth=1, min_samples=12),
+                                                          local=ErrorModel(solver="lstsq"), random_state=0)
+                                    .fit(m.nominal_mm, m.errors_mm), "positions"),
+        "v0.1_fdp-ai-kmeans.json": (PartitionedErrorModel(partition=KMeansPartition(3),
+                                                          local=ErrorModel(inputs="joint", solver="lstsq"),
+                                                          random_state=0).fit(m.q_deg, m.errors_mm), "joints"),
+    }
+    for name, (model, kind) in fresh.items():
+        p = load_predictor(ROOT / "tests" / "fixtures" / name)
+        X = m.nominal_mm if kind == "positions" else m.q_deg
+        np.testing.assert_allclose(p.predict(**{kind: X}), model.predict(X), atol=1e-9, err_msg=name)
+
+
+def readme_python_example() -> str:
+    text = (ROOT / "README.md").read_text()
+    blocks = re.findall(r"```python\n(.*?)```", text, re.DOTALL)
+    assert len(blocks) == 1, "the README has one Python example"
+    return blocks[0]
+
+
+def test_readme_python_example_runs(tmp_path):
+    """The README's Python example, executed as written (after a run made the model file it loads)."""
+    from partcal import read_measurements
+    from partcal.robot.trajectories import paper_path
+    from partcal.study.config import load_config
+    from partcal.study.outputs import write_run
+    from partcal.study.registry import run
+
+    work = tmp_path / "work"
+    (work / "data").mkdir(parents=True)
+    (work / "data" / "sk120").symlink_to(ROOT / "data" / "sk120")
+    (work / "configs").mkdir()
+    text = (ROOT / "configs" / "paper_sk120.yaml").read_text()
+    text = text.replace("../data/", str(ROOT / "data") + "/").replace("sk120_virtual.yaml", str(ROOT / "configs" / "sk120_virtual.yaml"))
+    text = text.replace("patience: null", "patience: 30")      # a short swarm: the example needs a model file, not the paper's numbers
+    (work / "configs" / "paper_sk120.yaml").write_text(text)
+    write_run(run(load_config(work / "configs" / "paper_sk120.yaml")))
+    assert (work / "reports" / "paper_sk120" / "models" / "sdp-ci.json").is_file()
+    targets = paper_path("rectangle")[:20]
+    namespace = {"targets_mm": targets, "positions_mm": targets}
+    code = readme_python_example()
+    import os
+    here = os.getcwd()
+    os.chdir(work)
+    try:
+        exec(compile(code, "README.md", "exec"), namespace)      # noqa: S102 - our own README
+    finally:
+        os.chdir(here)
+    m = read_measurements(ROOT / "data" / "sk120" / "identification.csv")
+    assert namespace["m"].errors_mm.shape == (85, 3)
+    np.testing.assert_allclose(namespace["p"].compensate(targets) + namespace["p"].predict(
+        positions=namespace["p"].compensate(targets)), targets, atol=1e-3)
+    assert namespace["regional"].partition_.n_regions >= 1
+    np.testing.assert_array_equal(namespace["m"].q_deg, m.q_deg)

@@ -169,6 +169,8 @@ def _show(value: Any) -> str:
 def range_check(low: float | None = None, high: float | None = None, *, integer: bool = False):
     """A ``check`` for :meth:`Section.get`: a number in ``[low, high]``."""
     def check(value):
+        if value != value or value in (float("inf"), float("-inf")):     # NaN and infinities
+            return f"a finite {'int' if integer else 'number'}"
         if (low is not None and value < low) or (high is not None and value > high):
             what = "an int" if integer else "a number"
             lo = "-inf" if low is None else low

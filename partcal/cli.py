@@ -105,8 +105,9 @@ def results_table(result) -> str:
     for r in result.models:
         lines.append(row(r.spec.name, r.metrics))
     best = next(r for r in result.models if r.spec.name == result.best)
-    lines.append(f"best by {result.config.cv_folds}-fold CV on the identification set: {best.spec.name} "
-                 f"(CV 3-D RMS {best.cv_rms_3d:.3f} mm)")
+    rule = "validation 3-D RMS" if result.config.rank_by == "validation" else "CV 3-D RMS"
+    lines.append(f"best: {best.spec.name} ({rule} {best.score(result.config.rank_by):.3f} mm), chosen by the "
+                 f"{result.best_reason}")
     comp = [r for r in result.models if r.compensation]
     if comp:
         lines.append("")

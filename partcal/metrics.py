@@ -30,18 +30,38 @@ def summary(errors_mm: NDArray[np.float64]) -> dict:
     }
 
 
-def cross_validated_rms(model, X, y, *, folds: int = 5, random_state=0) -> float:
-    """Pooled 3-D RMS of k-fold held-out predictions (shuffled folds), mm.
+def kfold_splits(n: int, folds: int, random_state: int = 0) -> list[tuple[NDArray[np.intp], NDArray[np.intp]]]:
+    """Shuffled k-fold ``(train, test)`` index pairs for ``n`` samples (scikit-learn's ``KFold``).
+
+    A batch run draws these once, from its seed, and scores every model on the
+    same folds, so that the ranking compares models and not luck.
+
+    >>> [test.tolist() for _, test in kfold_splits(4, 2, random_state=0)]
+    [[1, 3], [0, 2]]
+    """
+    from sklearn.model_selection import KFold
+
+    return list(KFold(n_splits=folds, shuffle=True, random_state=random_state).split(np.zeros((n, 1))))
+
+
+def cross_validated_rms(model, X, y, *, folds=5, random_state=0) -> float:
+    """Pooled 3-D RMS of k-fold held-out predictions, mm.
 
     Every sample is predicted once by a model fitted without it; the result is
     ``sqrt(mean(|e|^2))`` over all samples, comparable across models.
+
+    Parameters
+    ----------
+    folds : int or list of (train, test) index arrays
+        The number of shuffled folds (drawn with ``random_state``), or the
+        folds themselves (see :func:`kfold_splits`).
     """
     from sklearn.base import clone
-    from sklearn.model_selection import KFold
 
     X, y = np.asarray(X, dtype=float), np.asarray(y, dtype=float)
+    splits = kfold_splits(len(X), folds, random_state) if isinstance(folds, int) else folds
     resid = np.empty_like(y)
-    for train, test in KFold(n_splits=folds, shuffle=True, random_state=random_state).split(X):
+    for train, test in splits:
         resid[test] = y[test] - clone(model).fit(X[train], y[train]).predict(X[test])
     return float(np.sqrt(np.mean(np.sum(resid.reshape(len(y), -1) ** 2, axis=1))))
 

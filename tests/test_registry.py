@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from conftest import ROOT
 
-from partcal import load_predictor, read_measurements
+from partcal import ConfigError, load_predictor, read_measurements
 from partcal.metrics import summary
 from partcal.study.config import load_config
 from partcal.study.outputs import write_run
@@ -50,6 +50,7 @@ def without_timings(doc):
     doc = json.loads(json.dumps(doc))
     for entry in doc["models"].values():
         entry.pop("fit_seconds")
+        entry.pop("cv_seconds")
     return doc
 
 
@@ -68,6 +69,8 @@ def test_outputs_follow_the_contract(small_run):
     assert set(doc["models"]) == {"FDP(CI)", "SDP(AI)", "FDP(CI) k-means"}
     best_cv = min(doc["models"].values(), key=lambda m: m["cv"]["rms_3d"])
     assert doc["models"][doc["best"]] is not None and doc["models"][doc["best"]]["cv"] == best_cv["cv"]
+    assert doc["rank_by"] == "cv" and "3-fold cross-validated" in doc["best_reason"]
+    assert doc["models"]["FDP(CI) k-means"]["cv"]["nested"] is True and doc["models"]["FDP(CI)"]["cv"]["nested"] is False
     for slug in ("fdp-ci", "sdp-ai", "fdp-ci-k-means"):
         assert (out / "models" / f"{slug}.json").is_file()
         for ds in ("identification", "rectangle", "spiral_yz"):
@@ -202,3 +205,115 @@ def test_cli_predict_and_compensate(small_run, tmp_path):
     assert header[-9:] == ["x_cmd", "y_cmd", "z_cmd"] + [f"q{j}_cmd" for j in range(1, 7)]
     res = cli("predict", str(out / "models" / "sdp-ai.json"), str(pts), "-o", str(tmp_path / "x.csv"))
     assert res.returncode == 2 and "column 'q1' is missing (expected columns q1,q2,q3,q4,q5,q6)" in res.stderr
+
+
+RANKING = f"""name: ranking
+seed: 11
+cv_folds: 5
+@RANK@
+data:
+  identification: {DATA / 'identification.csv'}
+  @VALIDATION@
+  tests:
+    rectangle: {DATA / 'test_rectangle.csv'}
+models:
+  - {{name: A, degree: 2, solver: {{method: lstsq}}}}
+  - {{name: B, degree: 2, solver: {{method: lstsq}}}}
+  - {{name: C, degree: 2, solver: {{method: lstsq}}}}
+  - {{name: AI3, inputs: joint, degree: 3, solver: {{method: lstsq}}}}
+  - name: grid
+    inputs: joint
+    degree: 1
+    solver: {{method: lstsq}}
+    partition: {{method: kmeans, n_regions: [1, 2, 3]}}
+"""
+
+
+def ranking_config(tmp_path, rank="", validation=""):
+    path = tmp_path / "configs" / "ranking.yaml"
+    path.parent.mkdir(exist_ok=True)
+    path.write_text(RANKING.replace("@RANK@", rank).replace("@VALIDATION@", validation))
+    return load_config(path)
+
+
+@pytest.fixture(scope="module")
+def ranking_run(tmp_path_factory):
+    return run(ranking_config(tmp_path_factory.mktemp("ranking")))
+
+
+def test_every_model_is_scored_on_the_same_folds(ranking_run):
+    """Identical models get identical CV scores (each used to get its own split: 5.91, 6.13, 6.27 mm)."""
+    from sklearn.model_selection import KFold
+
+    scores = {r.spec.name: r.cv_rms_3d for r in ranking_run.models}
+    assert scores["A"] == scores["B"] == scores["C"]
+    # and that score is the 5-fold CV on KFold(shuffle, random_state=run seed), computed here by hand
+    m = read_measurements(DATA / "identification.csv")
+    X, y = m.nominal_mm, m.errors_mm
+    resid = np.empty_like(y)
+    for train, test in KFold(5, shuffle=True, random_state=11).split(X):
+        u = (X - (X[train].max(0) + X[train].min(0)) / 2) / ((X[train].max(0) - X[train].min(0)) / 2)
+        phi = np.hstack([np.ones((len(X), 1)), u, u**2])
+        coef = np.linalg.lstsq(phi[train], y[train], rcond=None)[0]
+        resid[test] = y[test] - phi[test] @ coef
+    assert scores["A"] == pytest.approx(np.sqrt(np.mean(np.sum(resid**2, axis=1))), rel=1e-9)
+
+
+def test_granularity_lists_are_scored_by_nested_cv(ranking_run):
+    """The granularity is chosen inside each outer training fold, not on the folds that score it."""
+    from sklearn.model_selection import KFold
+
+    from partcal import ErrorModel, KMeansPartition, PartitionedErrorModel
+
+    r = next(r for r in ranking_run.models if r.spec.name == "grid")
+    m = read_measurements(DATA / "identification.csv")
+    X, y = m.q_deg, m.errors_mm
+
+    def cv(model, Xs, ys, seed):
+        res = np.empty_like(ys)
+        for tr, te in KFold(5, shuffle=True, random_state=seed).split(Xs):
+            res[te] = ys[te] - model.fit(Xs[tr], ys[tr]).predict(Xs[te])
+        return np.sqrt(np.mean(np.sum(res**2, axis=1)))
+
+    def candidate(k):
+        return PartitionedErrorModel(partition=KMeansPartition(n_regions=k), local=ErrorModel(inputs="joint", solver="lstsq"),
+                                     random_state=r.model.random_state)
+
+    resid = np.empty_like(y)
+    for train, test in KFold(5, shuffle=True, random_state=11).split(X):
+        inner = [cv(candidate(k), X[train], y[train], 11) for k in (1, 2, 3)]
+        best = (1, 2, 3)[int(np.argmin(inner))]
+        resid[test] = y[test] - candidate(best).fit(X[train], y[train]).predict(X[test])
+    nested = np.sqrt(np.mean(np.sum(resid**2, axis=1)))
+    assert r.nested and r.cv_rms_3d == pytest.approx(nested, rel=1e-9)
+    table_min = min(row["cv_rms_3d"] for row in r.granularity)
+    assert r.cv_rms_3d > 1.02 * table_min     # today's score was that flattering minimum over the same folds
+    assert set(r.granularity[0]) == {"granularity", "cv_rms_3d", "regions"}
+
+
+def test_fit_seconds_is_the_final_fit_and_cv_time_is_separate(ranking_run):
+    for r in ranking_run.models:
+        assert r.fit_seconds > 0 and r.cv_seconds > 0
+    grid = next(r for r in ranking_run.models if r.spec.name == "grid")
+    plain = next(r for r in ranking_run.models if r.spec.name == "A")
+    # nested CV fits 5 x 3 x 5 + 3 x 5 models; the final fit is one: CV time dwarfs it
+    assert grid.cv_seconds > 10 * grid.fit_seconds and plain.cv_seconds > 2 * plain.fit_seconds
+
+
+def test_rank_by_validation(tmp_path):
+    validation = f"validation: {DATA / 'test_spiral_xy.csv'}"
+    cfg = ranking_config(tmp_path, "rank_by: validation", validation)
+    result = run(cfg)
+    scores = {r.spec.name: r.metrics["validation"]["rms_3d"] for r in result.models}
+    assert result.best == min(scores, key=scores.get)
+    m = read_measurements(DATA / "test_spiral_xy.csv")
+    best = next(r for r in result.models if r.spec.name == result.best)
+    X = m.q_deg if best.spec.inputs == "joint" else m.nominal_mm
+    assert scores[result.best] == pytest.approx(summary(m.errors_mm - best.model.predict(X))["rms_3d"], rel=1e-12)
+    from partcal.study.outputs import metrics_document
+    doc = metrics_document(result)
+    assert doc["rank_by"] == "validation" and "validation set test_spiral_xy.csv" in doc["best_reason"]
+    cv_best = min(result.models, key=lambda r: r.cv_rms_3d).spec.name
+    assert cv_best != result.best       # on this data the two rules disagree: the rule matters
+    with pytest.raises(ConfigError, match=r"rank_by \(line 4\): 'validation' needs data.validation"):
+        ranking_config(tmp_path, "rank_by: validation")

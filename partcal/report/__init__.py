@@ -55,7 +55,7 @@ def context(result: RunResult) -> dict:
     cfg = result.config
     by_name = {r.spec.name: r for r in result.models}
     best = by_name[result.best]
-    ranked = sorted(result.models, key=lambda r: r.cv_rms_3d)
+    ranked = sorted(result.models, key=lambda r: r.score(cfg.rank_by))
     global_best = next((r for r in ranked if not isinstance(r.model, PartitionedErrorModel)), None)
     part_best = next((r for r in ranked if isinstance(r.model, PartitionedErrorModel)), None)
     shown = [r for r in (global_best, part_best) if r is not None]
@@ -63,8 +63,8 @@ def context(result: RunResult) -> dict:
         "name": cfg.name, "version": __version__, "seed": cfg.seed, "seconds": result.seconds,
         "date": _dt.datetime.now().strftime("%Y-%m-%d %H:%M"), "config_path": str(cfg.source),
         "folds": cfg.cv_folds, "models": result.models,
-        "best": {"name": best.spec.name, "cv": best.cv_rms_3d},
-        "best_reason": f"lowest {cfg.cv_folds}-fold CV 3-D RMS on the identification set",
+        "best": {"name": best.spec.name, "score": best.score(cfg.rank_by)},
+        "best_reason": result.best_reason,
         "datasets": [{"name": n, "n": len(m), "bounds": [f"{lo:.0f} to {hi:.0f}" for lo, hi in
                                                          zip(m.nominal_mm.min(0), m.nominal_mm.max(0))]}
                      for n, m in result.datasets.items()],
@@ -146,11 +146,11 @@ def family_sentences(result: RunResult) -> list[str]:
         families.setdefault(f"{kind.capitalize()} {inputs} models", []).append(r)
     out = []
     for family, members in families.items():
-        best = min(members, key=lambda r: r.cv_rms_3d)
+        best = min(members, key=lambda r: r.score(result.config.rank_by))
         before = np.mean([result.uncompensated[n]["rms_3d"] for n in tests])
         after = np.mean([best.metrics[n]["rms_3d"] for n in tests])
         cuts = [100 * (1 - best.metrics[n]["rms_3d"] / result.uncompensated[n]["rms_3d"]) for n in tests]
-        out.append(f"{family} ({len(members)}): the best by CV, {best.spec.name}, brings the mean 3-D RMS on "
+        out.append(f"{family} ({len(members)}): the best by {'validation' if result.config.rank_by == 'validation' else 'CV'}, {best.spec.name}, brings the mean 3-D RMS on "
                    f"{'the test sets' if tests != ['identification'] else 'the identification set'} from "
                    f"{before:.2f} to {after:.2f} mm ({min(cuts):.0f}–{max(cuts):.0f}% less).")
     return out

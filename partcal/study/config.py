@@ -21,8 +21,22 @@ from ..models.series import ErrorModel
 from ..models.swarm import RULES, TOPOLOGIES, SwarmConfig
 from ..robot.kinematics import load_robot, robot_reference
 
-RESERVED_NAMES = {"identification", "file", "fit_seconds", "cv", "inputs", "solver", "regions", "pso_rms_ratio",
-                  "granularity", "compensation"}
+RESERVED_NAMES = {"identification", "validation", "file", "fit_seconds", "cv_seconds", "cv", "inputs", "solver",
+                  "regions", "pso_rms_ratio", "granularity", "compensation"}
+RANK_RULES = ("cv", "validation")
+_SAFE_NAME = re.compile(r"^[A-Za-z0-9_.-]+$")
+
+
+def safe_name(value: str) -> str | None:
+    """A ``check`` for names that become file or folder names: ``None`` if safe, else what is expected.
+
+    >>> safe_name("paper_sk120"), safe_name("../etc") is not None, safe_name("a/b") is not None
+    (None, True, True)
+    """
+    if _SAFE_NAME.match(value) and ".." not in value and not value.startswith("."):
+        return None
+    return ("a name of letters, digits, '_', '.' and '-' (it names files and folders: no '/', no '..', "
+            "no leading '.')")
 _SWARM_KEYS = {"particles": "int", "iterations": "int", "c1": "float", "c2": "float", "rule": "str",
                "topology": "str", "neighbours": "int", "inertia": "list", "vmax": "float",
                "bound_scale": "float", "stop_fitness": "float", "patience": "int", "ftol": "float"}
@@ -94,11 +108,20 @@ class RunConfig:
     cv_folds: int = 5
     dask_address: str | None = None
     virtual_robot: Path | None = None
+    rank_by: str = "cv"
+    validation: Path | None = None
+    lines: dict = field(default_factory=dict, compare=False, repr=False)   # key path -> line, for messages
+
+    def fail(self, where: str, message: str):
+        """Raise a :class:`ConfigError` naming this file, the key path ``where`` and its line."""
+        Section({}, where, self.lines, str(self.source)).fail(where, message)
 
     def resolved(self) -> dict:
         """The configuration with every default filled in (written beside the results)."""
         out = asdict(self)
+        del out["lines"]
         out["source"] = str(self.source)
+        out["validation"] = str(self.validation) if self.validation else None
         out["identification"] = str(self.identification)
         out["tests"] = {k: str(v) for k, v in self.tests.items()}
         out["output"] = str(self.output)
@@ -115,7 +138,7 @@ def load_config(path: str | Path) -> RunConfig:
     data, lines = load_yaml(path)
     top = Section(data, "", lines, str(path))
     base = path.parent
-    name = top.get("name", "str", check=lambda v: None if v.strip() else "a non-empty text")
+    name = top.get("name", "str", check=safe_name)
     robot = top.get("robot", "str", default=None)
     if robot is not None:
         robot_ref = robot_reference(robot, base)
@@ -127,14 +150,21 @@ def load_config(path: str | Path) -> RunConfig:
     seed = top.get("seed", "int", default=0, check=range_check(0, 2**32 - 1, integer=True))
     n_jobs = top.get("n_jobs", "int", default=1, check=lambda v: None if v == -1 or v >= 1 else "-1 or >= 1")
     cv_folds = top.get("cv_folds", "int", default=5, check=range_check(2, 100, integer=True))
+    rank_by = top.get("rank_by", "str", default="cv", check=_choice_check(*RANK_RULES))
     dask = top.section("dask")
     address = dask.get("address", "str", default=None) if dask.data else None
     dask.done()
     data_sec = top.section("data", required=True)
     ident = _existing(data_sec, "identification", base)
+    validation = _existing(data_sec, "validation", base) if data_sec.has("validation") else None
+    if rank_by == "validation" and validation is None:
+        top.fail("rank_by", "'validation' needs data.validation: FILE, a held-out set measured near the task")
     tests_sec = data_sec.section("tests")
     tests = {}
     for key in tests_sec.data:
+        problem = safe_name(str(key))
+        if problem:
+            tests_sec.fail(tests_sec.path(str(key)), f"the test-set name {str(key)!r} must be {problem}")
         tests[str(key)] = _existing(tests_sec, key, base)
     for reserved in RESERVED_NAMES & set(tests):     # they share a JSON object with these keys in metrics.json
         tests_sec.fail(tests_sec.path(reserved), f"a test set may not be called {reserved!r} (reserved: "
@@ -159,7 +189,8 @@ def load_config(path: str | Path) -> RunConfig:
     top.done()
     return RunConfig(name=name, source=path, identification=ident, tests=tests, models=models,
                      output=Path(os.path.normpath(output)), robot=robot, seed=seed, n_jobs=n_jobs,
-                     cv_folds=cv_folds, dask_address=address, virtual_robot=virtual)
+                     cv_folds=cv_folds, dask_address=address, virtual_robot=virtual, rank_by=rank_by,
+                     validation=validation, lines=lines)
 
 
 def _existing(sec: Section, key: str, base: Path) -> Path:
@@ -186,7 +217,7 @@ def _model(sec: Section) -> ModelSpec:
         sec.fail(sec.path("cross_terms"), "must be false for the fourier basis")
     method, fitness, swarm = _solver(sec.section("solver"))
     kw.update(solver=method, fitness=fitness, swarm=swarm)
-    partition = _partition(sec)
+    partition = _partition(sec, kw["inputs"])
     sec.done()
     return ModelSpec(**kw, partition=partition)
 
@@ -224,7 +255,7 @@ def _solver(solver: Section) -> tuple[str, str, dict]:
     return method, fitness, swarm
 
 
-def _partition(sec: Section) -> PartitionSpec | None:
+def _partition(sec: Section, inputs: str) -> PartitionSpec | None:
     """``partition`` and ``blend`` of a model entry (``blend`` needs a partition)."""
     choice = _choice_check
     part = sec.section("partition")
@@ -234,10 +265,14 @@ def _partition(sec: Section) -> PartitionSpec | None:
             sec.fail(sec.path("blend"), "needs a partition")
         return None
     kind = part.get("method", "str", check=choice("octree", "kmeans"))
+    if kind == "octree" and inputs == "joint":
+        part.fail(part.path("method"), "octree splits the Cartesian workspace; for joint inputs use method: kmeans")
     size_key = "max_depth" if kind == "octree" else "n_regions"
     low, high = (0, 8) if kind == "octree" else (1, 4096)
     raw = part.get(size_key, "any", default=3 if kind == "octree" else 8)
     sizes = raw if isinstance(raw, list) else [raw]
+    if not sizes:
+        part.fail(part.path(size_key), "must be an int or a non-empty list of ints; got an empty list")
     for v in sizes:
         if not isinstance(v, int) or isinstance(v, bool) or not low <= v <= high:
             part.fail(part.path(size_key), f"must be an int in [{low}, {high}] (or a list of them, chosen "

@@ -25,7 +25,6 @@ from .persist import save_model
 from .registry import RunResult
 
 log = logging.getLogger(__name__)
-BEST_REASON = "lowest {folds}-fold cross-validated 3-D RMS on the identification set"
 
 
 def check_writable(output: Path) -> None:
@@ -46,9 +45,10 @@ def metrics_document(result: RunResult) -> dict:
     cfg = result.config
     models = {}
     for r in result.models:
-        entry = {"file": f"models/{r.spec.slug}.json", "fit_seconds": round(r.fit_seconds, 4)}
+        entry = {"file": f"models/{r.spec.slug}.json", "fit_seconds": round(r.fit_seconds, 4),
+                 "cv_seconds": round(r.cv_seconds, 4)}
         entry.update(r.metrics)
-        entry["cv"] = {"folds": cfg.cv_folds, "rms_3d": r.cv_rms_3d}
+        entry["cv"] = {"folds": cfg.cv_folds, "rms_3d": r.cv_rms_3d, "nested": r.nested}
         entry["inputs"], entry["solver"], entry["regions"] = r.spec.inputs, r.spec.solver, r.n_regions
         if r.rms_ratio is not None:
             entry["pso_rms_ratio"] = r.rms_ratio
@@ -62,8 +62,9 @@ def metrics_document(result: RunResult) -> dict:
         "datasets": {name: {"n": len(m)} for name, m in result.datasets.items()},
         "uncompensated": result.uncompensated,
         "models": models,
+        "rank_by": cfg.rank_by,
         "best": result.best,
-        "best_reason": BEST_REASON.format(folds=cfg.cv_folds),
+        "best_reason": result.best_reason,
     }
 
 

@@ -2,7 +2,11 @@
 
 Every model is fitted on the identification set, evaluated on every data set
 and by k-fold cross-validation on the identification set, and ranked by its
-cross-validated 3-D RMS (never by a test set). Models run in parallel with
+cross-validated 3-D RMS (``rank_by: cv``) or by its 3-D RMS on a held-out
+validation set (``rank_by: validation``); never by a test set. Every model is
+cross-validated on the same folds, drawn once from the run seed; a model
+with a list of granularities is scored by nested cross-validation (the
+granularity is chosen inside each outer training fold). Models run in parallel with
 joblib (``n_jobs``; a Dask cluster when the config gives its address); each
 gets its own child seed, so results do not depend on ``n_jobs`` or the order
 in which jobs finish. With a virtual robot, compensation is verified end to
@@ -23,9 +27,10 @@ from numpy.typing import NDArray
 
 from ..data.measurements import Measurements, read_measurements
 from ..errors import ConfigError, DataError
-from ..metrics import cross_validated_rms, summary
+from ..metrics import cross_validated_rms, kfold_splits, summary
 from ..models.bases import varying_inputs
-from ..models.partitioned import PartitionedErrorModel, select_granularity
+from ..models.partitioned import (MIN_SAMPLES_PER_TERM, PartitionedErrorModel, nested_cross_validated_rms,
+                                  select_granularity)
 from ..models.series import ErrorModel
 from ..robot.kinematics import Robot, load_robot
 from .config import ModelSpec, RunConfig
@@ -40,13 +45,19 @@ class ModelResult:
 
     spec: ModelSpec
     model: ErrorModel | PartitionedErrorModel
-    fit_seconds: float
-    cv_rms_3d: float
+    fit_seconds: float                  # the final fit on the identification set, nothing else
+    cv_rms_3d: float                    # on the run's shared folds; nested for granularity lists
     metrics: dict[str, dict]
     predictions: dict[str, NDArray[np.float64]]
     rms_ratio: float | None = None
     granularity: list[dict] | None = None
     compensation: dict[str, dict] = field(default_factory=dict)
+    cv_seconds: float = 0.0             # cross-validation (and the granularity choice)
+    nested: bool = False
+
+    def score(self, rank_by: str) -> float:
+        """The number the run ranks by: CV 3-D RMS, or 3-D RMS on the validation set (mm)."""
+        return self.cv_rms_3d if rank_by == "cv" else self.metrics["validation"]["rms_3d"]
 
     @property
     def n_regions(self) -> int:
@@ -63,13 +74,27 @@ class RunResult:
     best: str
     seconds: float
 
+    @property
+    def best_reason(self) -> str:
+        """Which rule chose ``best``, in words (metrics.json, the report and the printed table say it)."""
+        return rank_reason(self.config)
+
+
+def rank_reason(config: RunConfig) -> str:
+    """The ranking rule of a run, in words."""
+    if config.rank_by == "validation":
+        return f"lowest 3-D RMS on the validation set {config.validation.name} (held out, never fitted)"
+    return (f"lowest {config.cv_folds}-fold cross-validated 3-D RMS on the identification set (the same folds "
+            "for every model; nested for granularity lists)")
+
 
 def load_datasets(config: RunConfig) -> tuple[dict[str, Measurements], Robot | None]:
     """Read the identification and test sets; all must have the same joints."""
     robot = load_robot(config.robot) if config.robot else None
     data = {"identification": read_measurements(config.identification, robot, name="identification")}
     n = data["identification"].n_joints
-    for name, path in config.tests.items():
+    extra = {"validation": config.validation} if config.validation else {}
+    for name, path in {**extra, **config.tests}.items():
         m = read_measurements(path, robot, name=name)
         if m.n_joints != n:
             raise DataError(f"{path}: test set {name!r} has {m.n_joints} joint columns (q1..q{m.n_joints}) "
@@ -78,32 +103,90 @@ def load_datasets(config: RunConfig) -> tuple[dict[str, Measurements], Robot | N
     return data, robot
 
 
+def check_run(config: RunConfig, data: dict[str, Measurements]) -> None:
+    """Refuse, before anything is fitted, every model the identification set cannot support.
+
+    Checks the identification set (at least two poses, some input that
+    varies) and, for every model, that the smallest cross-validation training
+    fold (the inner folds of nested CV for granularity lists) holds enough
+    samples for its terms (series models) or for one region (partitioned
+    models). Errors name the config file, the key path and its line.
+    """
+    ident = data["identification"]
+    n, k = len(ident), config.cv_folds
+    if n < 2:
+        config.fail("data.identification", f"{config.identification} holds {n} pose; a fit needs at least 2")
+    if n < k:
+        config.fail("cv_folds", f"{k} folds need at least {k} identification poses; "
+                                f"{config.identification} holds {n}")
+    smallest = n - -(-n // k)                  # the smallest training fold: n - ceil(n / k)
+    for i, spec in enumerate(config.models):
+        X = model_inputs(spec.inputs, ident)
+        varying = int(varying_inputs(X).sum())
+        if varying == 0:
+            what = "joint angle" if spec.inputs == "joint" else "nominal coordinate"
+            config.fail(_key(config, i, "inputs"), f"every {what} of the identification set "
+                                                    f"{config.identification} is constant: nothing to fit")
+        terms = spec.local(None)._check_params()[0].n_terms(varying)
+        where, need, what = _key(config, i, "degree" if spec.basis == "polynomial" else "harmonics"), terms, \
+            f"{terms} terms per output ({varying} varying {spec.inputs} inputs)"
+        train = smallest
+        if spec.partition is not None:
+            need = spec.partition.min_samples or MIN_SAMPLES_PER_TERM * terms
+            if spec.partition.min_samples is not None and spec.partition.min_samples < terms:
+                config.fail(_key(config, i, "partition.min_samples"),
+                            f"must be at least the local model's {what}; got {spec.partition.min_samples}")
+            what = f"one region of {need} samples ({what})"
+            if len(spec.partition.sizes) > 1:         # nested CV: the inner folds are smaller still
+                train = smallest - -(-smallest // k)
+        if train < need:
+            config.fail(where, f"{spec.name!r} needs {what}, but the smallest cross-validation training fold "
+                               f"of the {n}-pose identification set holds {train} samples")
+
+
+def _key(config: RunConfig, i: int, key: str) -> str:
+    """``models[i].key`` if the config file wrote that key, else ``models[i]`` (for its line)."""
+    path = f"models[{i}].{key}"
+    return path if path in config.lines else f"models[{i}]"
+
+
 def model_inputs(inputs: str, m: Measurements) -> NDArray[np.float64]:
     """What a model reads from a data set: nominal positions (mm) or joint angles (degrees)."""
     return m.nominal_mm if inputs == "cartesian" else m.q_deg
 
 
-def fit_model(spec: ModelSpec, seed: int, data: dict[str, Measurements], folds: int) -> ModelResult:
-    """Fit one registry entry and evaluate it (runs in a joblib worker)."""
+def fit_model(spec: ModelSpec, seed: int, data: dict[str, Measurements], folds: list, run_seed: int = 0
+              ) -> ModelResult:
+    """Fit one registry entry and evaluate it (runs in a joblib worker).
+
+    ``folds`` are the run's shared ``(train, test)`` index pairs on the
+    identification set; ``run_seed`` draws the inner folds of nested CV.
+    """
     ident = data["identification"]
     X, y = model_inputs(spec.inputs, ident), ident.errors_mm
-    granularity = None
+    granularity, nested = None, False
     start = time.perf_counter()
     if spec.partition is not None and len(spec.partition.sizes) > 1:
-        estimator, granularity = select_granularity(spec.build(seed), X, y, spec.partition.sizes, folds=folds,
-                                                    random_state=seed)       # returned fitted
-        cv = min(row["cv_rms_3d"] for row in granularity)
+        sizes = spec.partition.sizes
+        cv = nested_cross_validated_rms(spec.build(seed), X, y, sizes, folds=folds, inner_folds=len(folds),
+                                        random_state=run_seed)
+        estimator, granularity = select_granularity(spec.build(seed), X, y, sizes, folds=folds)  # returned fitted
+        chosen = min(granularity, key=lambda row: row["cv_rms_3d"])
+        fit_seconds = chosen["fit_seconds"]
+        granularity = [{k: v for k, v in row.items() if k != "fit_seconds"} for row in granularity]
+        cv_seconds, nested = time.perf_counter() - start - fit_seconds, True
     else:
+        cv = cross_validated_rms(spec.build(seed), X, y, folds=folds)
+        cv_seconds = time.perf_counter() - start
+        start = time.perf_counter()
         estimator = spec.build(seed).fit(X, y)
-        cv = None
-    fit_seconds = time.perf_counter() - start
-    if cv is None:
-        cv = cross_validated_rms(spec.build(seed), X, y, folds=folds, random_state=seed)
+        fit_seconds = time.perf_counter() - start
     predictions = {name: estimator.predict(model_inputs(spec.inputs, m)) for name, m in data.items()}
     metrics = {name: summary(m.errors_mm - predictions[name]) for name, m in data.items()}
     locals_ = estimator.models_ if isinstance(estimator, PartitionedErrorModel) else [estimator]
     ratio = float(max(m.rms_ratio_ for m in locals_)) if spec.solver == "pso" else None
-    return ModelResult(spec, estimator, fit_seconds, cv, metrics, predictions, ratio, granularity)
+    return ModelResult(spec, estimator, fit_seconds, cv, metrics, predictions, ratio, granularity,
+                       cv_seconds=cv_seconds, nested=nested)
 
 
 @contextmanager
@@ -133,9 +216,11 @@ def run(config: RunConfig, progress: Callable[[int, int, str], None] | None = No
     """Fit and evaluate every model of ``config``; verify compensation when a virtual robot is given."""
     start = time.perf_counter()
     data, robot = load_datasets(config)
+    check_run(config, data)
     virtual = _virtual_robot(config, robot)
     seeds = [int(s.generate_state(1)[0]) for s in np.random.SeedSequence(config.seed).spawn(len(config.models))]
-    jobs = [delayed(fit_model)(spec, seed, data, config.cv_folds) for spec, seed in zip(config.models, seeds)]
+    folds = kfold_splits(len(data["identification"]), config.cv_folds, config.seed)    # one split for every model
+    jobs = [delayed(fit_model)(spec, seed, data, folds, config.seed) for spec, seed in zip(config.models, seeds)]
     results: list[ModelResult] = []
     with _backend(config):
         stream = Parallel(n_jobs=config.n_jobs, return_as="generator")(jobs)
@@ -148,7 +233,7 @@ def run(config: RunConfig, progress: Callable[[int, int, str], None] | None = No
         for result in results:
             result.compensation = verify_compensation(result, data, robot, virtual, config.seed)
     uncompensated = {name: summary(m.errors_mm) for name, m in data.items()}
-    best = min(results, key=lambda r: r.cv_rms_3d).spec.name
+    best = min(results, key=lambda r: r.score(config.rank_by)).spec.name
     return RunResult(config, data, robot, uncompensated, results, best, time.perf_counter() - start)
 
 

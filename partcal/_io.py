@@ -18,6 +18,8 @@ def atomic_write(path: str | Path, mode: str = "w", **kwargs):
     previous content.
     """
     path = Path(path)
+    if path.is_dir():
+        raise PartcalError(f"{path}: is a folder; give the name of a file to write")
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
@@ -31,3 +33,27 @@ def atomic_write(path: str | Path, mode: str = "w", **kwargs):
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+def check_folder_writable(folder: str | Path) -> None:
+    """Fail early, before long work, if files cannot be created in ``folder`` (created if missing)."""
+    folder = Path(folder)
+    if folder.exists() and not folder.is_dir():
+        raise PartcalError(f"{folder}: exists and is not a folder")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        fd, probe = tempfile.mkstemp(prefix=".probe-", dir=folder)
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as exc:
+        raise PartcalError(f"{folder}: cannot write here ({exc.strerror or exc})") from None
+
+
+def replace_all(pairs: list[tuple[Path, Path]]) -> None:
+    """Rename every finished temporary file over its target, after all of them were written.
+
+    Callers write each file to a temporary name first; only when all exist are
+    they renamed, so a failure while writing leaves every old file as it was.
+    """
+    for tmp, path in pairs:
+        os.replace(tmp, path)

@@ -7,6 +7,7 @@ and what was got.
 
 from __future__ import annotations
 
+import re
 from numbers import Integral, Real
 from typing import Any
 
@@ -98,3 +99,18 @@ def check_choice(owner: str, name: str, value: Any, choices: tuple[str, ...]) ->
     if not isinstance(value, str) or value not in choices:
         raise param_error(owner, name, "one of " + ", ".join(repr(c) for c in choices), value)
     return value
+
+
+_SAFE_NAME = re.compile(r"^[A-Za-z0-9_.-]+$")
+
+
+def safe_name(value: str) -> str | None:
+    """A ``check`` for names that become file or folder names: ``None`` if safe, else what is expected.
+
+    >>> safe_name("paper_sk120"), safe_name("../etc") is not None, safe_name("a/b") is not None
+    (None, True, True)
+    """
+    if _SAFE_NAME.match(value) and ".." not in value and not value.startswith("."):
+        return None
+    return ("a name of letters, digits, '_', '.' and '-' (it names files and folders: no '/', no '..', "
+            "no leading '.')")

@@ -1,7 +1,8 @@
 """The ``partcal`` command line: argument parsing, progress output and exit codes.
 
 Exit codes: 0 success, 2 bad input (one line on stderr, no traceback),
-1 internal failure.
+3 compensation left targets unconverged or unreachable (the output marks
+them), 1 internal failure.
 """
 
 from __future__ import annotations
@@ -28,11 +29,13 @@ PAPER_UNCOMPENSATED = {
 
 
 def _cmd_simulate(args) -> int:
+    from ._io import check_folder_writable
     from .data.simulate import load_study, simulate, write_study
     from .metrics import rms_per_axis
 
     start = time.perf_counter()
     study = load_study(args.config)
+    check_folder_writable(study.output)          # before the simulation, not after
     data = simulate(study)
     paths = write_study(study, data)
     print(f"Virtual {study.robot.nominal.name}, seed {study.seed}: uncompensated RMS error (mm)")
@@ -74,6 +77,14 @@ def _cmd_run(args) -> int:
     from .study.registry import run
 
     config = load_config(args.config)
+    if args.check:
+        from .study.registry import check_run, load_datasets
+
+        data, _ = load_datasets(config)
+        check_run(config, data)
+        sizes = ", ".join(f"{name} {len(m)}" for name, m in data.items())
+        print(f"{args.config}: OK: {len(config.models)} models; data sets (poses): {sizes}; nothing fitted")
+        return 0
     check_writable(config.output)
     progress = Progress(args.quiet, f"partcal {__version__}: run {config.name!r}, {len(config.models)} models, "
                                     f"{1 + len(config.tests)} data sets, seed {config.seed}")
@@ -155,11 +166,9 @@ def _cmd_compensate(args) -> int:
     n_q = predictor.robot.n_joints if predictor.robot is not None else 0
     optional = joint_columns(n_q) if predictor.inputs == "joint" else []
     cols, targets, seeds = read_columns(args.targets, [["x", "y", "z"]], optional)
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always", CompensationWarning)
+    with warnings.catch_warnings():       # exit code 3 and one line below say it instead
+        warnings.simplefilter("ignore", CompensationWarning)
         result = predictor.compensate_full(targets, seeds)
-    for w in caught:
-        print(f"partcal: warning: {w.message}", file=sys.stderr)
     header, parts = list(cols), [targets]
     if seeds is not None:
         header += optional
@@ -169,16 +178,26 @@ def _cmd_compensate(args) -> int:
     if result.joints_deg is not None:
         header += [f"{c}_cmd" for c in joint_columns(n_q)]
         parts.append(result.joints_deg)
-    _write_table(args.output, header, np.hstack(parts), atomic_write)
-    print(f"compensated {len(targets)} targets ({int(result.converged.sum())} converged): {args.output}")
+    _write_table(args.output, header + ["converged"], np.hstack(parts), atomic_write,
+                 flags=result.converged)
+    bad = np.flatnonzero(~result.converged)
+    if bad.size:
+        first = int(bad[0])
+        print(f"partcal: {bad.size} of {len(targets)} targets did not converge or are unreachable (first: data "
+              f"row {first + 1} of {args.targets}, target {targets[first].round(3).tolist()} mm, predicted miss "
+              f"{result.residual_mm[first]:.3g} mm); {args.output} marks them converged=false", file=sys.stderr)
+        return 3
+    print(f"compensated {len(targets)} targets (all converged): {args.output}")
     return 0
 
 
-def _write_table(path, header, values, atomic_write) -> None:
+def _write_table(path, header, values, atomic_write, flags=None) -> None:
+    """Numbers with 6 decimals; ``flags`` (one bool per row) as a last column of true/false."""
     with atomic_write(path) as handle:
         handle.write(",".join(header) + "\n")
-        for row in values:
-            handle.write(",".join(f"{v:.6f}" for v in row) + "\n")
+        for k, row in enumerate(values):
+            cells = [f"{v:.6f}" for v in row] + ([("true" if flags[k] else "false")] if flags is not None else [])
+            handle.write(",".join(cells) + "\n")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -192,6 +211,8 @@ def build_parser() -> argparse.ArgumentParser:
     run = sub.add_parser("run", help="fit and compare the models of a batch-run YAML; write metrics, models, report")
     run.add_argument("config", help="batch-run YAML, e.g. configs/paper_sk120.yaml")
     run.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
+    run.add_argument("--check", action="store_true",
+                     help="only check the config and its data (every problem a fit would meet); fit nothing")
     run.add_argument("--screenshot", action="store_true",
                      help="also save a full-page screenshot of the report (needs chromium)")
     run.set_defaults(func=_cmd_run)
@@ -203,7 +224,9 @@ def build_parser() -> argparse.ArgumentParser:
     comp = sub.add_parser("compensate", help="false targets that make the robot reach the given targets")
     comp.add_argument("model", help="model file (models/<name>.json of a run)")
     comp.add_argument("targets", help="CSV with x,y,z (mm); joint models also read q1..qN as IK seeds")
-    comp.add_argument("-o", "--output", required=True, help="CSV to write (targets + x_cmd,y_cmd,z_cmd[,qK_cmd])")
+    comp.add_argument("-o", "--output", required=True,
+                      help="CSV to write (targets + x_cmd,y_cmd,z_cmd[,qK_cmd],converged); exit code 3 when any "
+                           "target did not converge")
     comp.set_defaults(func=_cmd_compensate)
     return parser
 

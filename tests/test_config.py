@@ -1,7 +1,6 @@
 """Batch-run YAML: defaults, paths, and one clear error per problem."""
 
-from pathlib import Path
-
+import numpy as np
 import pytest
 from conftest import ROOT
 
@@ -61,11 +60,22 @@ def test_defaults_and_paths(tmp_path):
     ("test_rectangle.csv", "missing.csv", r"data\.tests\.rectangle \(line {line}\): no such file: .*missing\.csv"),
     ("name: demo\n", "name: demo\nseed: -3\n", r"seed \(line {line}\): must be an int in \[0, 4294967295\]; got -3"),
     ("    rectangle:", "    cv:", r"data\.tests\.cv \(line {line}\): a test set may not be called 'cv' \(reserved: "),
+    ("    rectangle:", "    validation:", r"data\.tests\.validation \(line {line}\): a test set may not be called 'validation'"),
+    ("    rectangle:", "    ../up:", r"data\.tests\.\.\./up \(line {line}\): the test-set name '\.\./up' must be a name of letters"),
+    ("    rectangle:", "    'a b':", r"the test-set name 'a b' must be a name of letters, digits"),
+    ("name: demo\n", "name: ../demo\n", r"name \(line {line}\): must be a name of letters, digits, '_', '\.' and '-' .*; got '\.\./demo'"),
+    ("name: demo\n", "name: a/b\n", r"name \(line {line}\): must be a name of letters.*got 'a/b'"),
+    ("max_depth: [1, 2]", "max_depth: []", r"models\[1\]\.partition\.max_depth \(line {line}\): must be an int or a non-empty list of ints; got an empty list"),
+    ("{method: hard}", "{method: gaussian, width: .nan}", r"models\[1\]\.blend\.width \(line {line}\): must be a finite number; got nan"),
+    ("    degree: 2\n    solver: {method: lstsq}\n", "    degree: 2\n    inputs: joint\n    solver: {method: lstsq}\n", r"models\[1\]\.partition\.method \(line {line}\): octree splits the Cartesian workspace; for joint inputs use method: kmeans"),
+    ("name: demo\n", "name: demo\nrank_by: best\n", r"rank_by \(line {line}\): must be one of 'cv', 'validation'; got 'best'"),
 ])
 def test_errors_name_path_and_line(tmp_path, old, new, message):
     text = BASE.replace(old, new, 1)
     pos = BASE.index(old)       # the edited line: where the replacement starts, plus lines it adds before
     line = BASE[:pos].count("\n") + 1 + new.rstrip("\n").count("\n")
+    if "octree splits" in message:      # the partition key, two lines below the replaced block
+        line += 1
     with pytest.raises(ConfigError, match=message.format(line=line)):
         load_config(write(tmp_path, text))
 
@@ -77,7 +87,52 @@ def test_broken_yaml_names_its_line(tmp_path):
 
 
 def test_shipped_configs_load():
+    paper = load_config(ROOT / "configs" / "paper_sk120.yaml")
+    assert [m.name for m in paper.models] == ["FDP(CI)", "FDP(AI)", "SDP(CI)", "SDP(AI)"]     # Table 2's four
+    assert [(m.inputs, m.degree) for m in paper.models] == [("cartesian", 1), ("joint", 1), ("cartesian", 2),
+                                                            ("joint", 2)]
+    assert all(m.swarm == {"particles": 100, "iterations": 200, "c1": 2.05, "c2": 2.05, "patience": None}
+               for m in paper.models)                                       # the paper's swarm settings
+    assert set(paper.tests) == {"rectangle", "spiral_xy", "spiral_yz"}
     for name in ("paper_sk120.yaml", "partitioned_sk120.yaml"):
         cfg = load_config(ROOT / "configs" / name)
-        assert cfg.output == ROOT / "reports" / cfg.name and cfg.virtual_robot is not None
-    assert Path(ROOT / "configs" / "paper_sk120.yaml").exists()
+        assert cfg.output == ROOT / "reports" / cfg.name and cfg.virtual_robot == ROOT / "configs" / "sk120_virtual.yaml"
+        assert cfg.identification == ROOT / "data" / "sk120" / "identification.csv" and cfg.rank_by == "cv"
+
+
+def data_file(tmp_path, rows, name="few.csv"):
+    """A measurement CSV of the given joint rows (six joints), nominal = measured + 1 mm."""
+    lines = ["q1,q2,q3,q4,q5,q6,x_nom,y_nom,z_nom,x_meas,y_meas,z_meas"]
+    lines += [",".join(str(v) for v in [*q, *p, *(np.asarray(p) + 1)]) for q, p in rows]
+    path = tmp_path / name
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+@pytest.mark.parametrize("case, message", [
+    ("one row", r"data\.identification \(line 4\): .*few\.csv holds 1 pose; a fit needs at least 2"),
+    ("constant", r"models\[0\] \(line 8\): every nominal coordinate of the identification set .*few\.csv is constant"),
+    ("too few for folds", r"models\[1\]\.degree \(line 12\): 'SDP octree' needs one region of 21 samples \(7 terms per output \(3 varying cartesian inputs\)\), but the smallest cross-validation training fold of the 20-pose identification set holds \d+ samples"),
+])
+def test_data_problems_are_found_before_any_fit(tmp_path, case, message):
+    from partcal.study.registry import check_run, load_datasets
+
+    rng = np.random.default_rng(0)
+    if case == "one row":
+        rows = [((0, -120, -170, 0, 0, 0), (1000.0, 0.0, 500.0))]
+    elif case == "constant":
+        rows = [((0, -120, -170, 0, 0, 0), (1000.0, 0.0, 500.0))] * 10
+    else:
+        rows = [((0, -120, -170, 0, 0, 0), tuple(rng.uniform(0, 1000, 3))) for _ in range(20)]
+    text = BASE.replace(str(DATA / "identification.csv"), str(data_file(tmp_path, rows)))
+    text = text.replace("    degree: 2\n", "    degree: 2\n    inputs: cartesian\n") if case == "constant" else text
+    cfg = load_config(write(tmp_path, text))
+    data, _ = load_datasets(cfg)
+    with pytest.raises(ConfigError, match=message):
+        check_run(cfg, data)
+
+
+def test_a_nan_width_used_to_pass(tmp_path):
+    # range checks compared NaN with < and >, which are both False: NaN slipped through
+    with pytest.raises(ConfigError, match="must be a finite number; got nan"):
+        load_config(write(tmp_path, BASE.replace("{method: hard}", "{method: gaussian, width: .nan}")))

@@ -1,13 +1,18 @@
 """Kinematics of DH chains and the Motoman SK120 (paper, Table 1)."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+import partcal
 from partcal import ConfigError, UnreachableError, load_robot
 from partcal.robot.kinematics import parse_theta, robot_from_dict
 from partcal.robot.trajectories import paper_path
+
+ROBOTS = Path(partcal.__file__).parent / "robot" / "builtin"
 
 # Hand derivations (written out step by step, not computed by partcal):
 # q = (0, -90, -180, 0, 0, 0). Row 1 (a = 215, alpha = -90): shoulder at (215, 0, 0),
@@ -131,3 +136,19 @@ def test_robot_yaml_errors_name_the_field():
         robot_from_dict({**spec, "base": {"xyz": [0, 0, 100]}})
     with pytest.raises(ConfigError, match="not a built-in robot"):
         load_robot("no_such_robot")
+
+
+def test_robot_yaml_is_read_like_a_run_config(tmp_path):
+    """Line numbers, duplicate keys refused, and numbers that must be numbers (today: a bare ValueError)."""
+    text = (ROBOTS / "motoman_sk120.yaml").read_text()
+    bad = tmp_path / "r.yaml"
+    bad.write_text(text.replace("{theta: q1,                d: 0,    a: 215,", "{theta: q1,                d: zero, a: 215,"))
+    line = next(i for i, t in enumerate(bad.read_text().splitlines(), 1) if "d: zero" in t)
+    with pytest.raises(ConfigError, match=rf"r.yaml: links\[0\]\.d \(line {line}\): must be a finite number; got 'zero'"):
+        load_robot(bad)
+    bad.write_text(text.replace("joints: 6\n", "joints: 6\njoints: 7\n"))
+    with pytest.raises(ConfigError, match=r"r.yaml: joints \(line \d+\): duplicate key \(first at line \d+\)"):
+        load_robot(bad)
+    bad.write_text(text.replace("tool_mm: [205.32, 0.0, 112.65]", "tool_mm: [205.32, true, 112.65]"))
+    with pytest.raises(ConfigError, match=r"r.yaml: tool_mm\[1\] \(line \d+\): must be a finite number; got True"):
+        load_robot(bad)

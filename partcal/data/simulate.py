@@ -19,6 +19,8 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from .._io import check_folder_writable, replace_all
+from .._validation import safe_name
 from .._yamlio import Section, load_yaml, range_check
 from ..errors import ConfigError
 from ..robot.kinematics import Robot, joint_columns, load_robot, robot_reference
@@ -235,6 +237,9 @@ def _joint_map(sec: Section, key: str, robot: Robot, pairs: bool) -> dict:
 def _datasets(sec: Section) -> dict[str, dict]:
     out = {}
     for name in list(sec.data):
+        problem = safe_name(str(name))
+        if problem:
+            sec.fail(sec.path(str(name)), f"the data-set name {str(name)!r} must be {problem}")
         item = sec.section(name)
         if item.has("sample") == item.has("path"):
             item.fail(item.where, "give exactly one of 'sample: N' (sampled configurations) or "
@@ -304,13 +309,24 @@ def simulate(study: Study) -> dict[str, Measurements]:
 
 
 def write_study(study: Study, data: dict[str, Measurements]) -> list[Path]:
-    """Write each data set to ``<output>/<name>.csv``; return the paths."""
-    paths = []
-    for name, m in data.items():
-        target = study.output / f"{name}.csv"
-        note = (f"Virtual {study.robot.nominal.name}, data set '{name}', simulated by partcal from "
-                f"{study.source.name} with seed {study.seed}.\nRegenerate with: partcal simulate "
-                f"configs/{study.source.name}. Do not edit by hand.")
-        write_measurements(m, target, comment=note)
-        paths.append(target)
-    return paths
+    """Write each data set to ``<output>/<name>.csv`` and return the paths.
+
+    The files are replaced as a set: all are written to temporary names first
+    and renamed only when every one of them is complete.
+    """
+    check_folder_writable(study.output)
+    pending = []
+    try:
+        for name, m in data.items():
+            target = study.output / f"{name}.csv"
+            note = (f"Virtual {study.robot.nominal.name}, data set '{name}', simulated by partcal from "
+                    f"{study.source.name} with seed {study.seed}.\nRegenerate with: partcal simulate "
+                    f"configs/{study.source.name}. Do not edit by hand.")
+            tmp = study.output / f".{name}.csv.partial"
+            write_measurements(m, tmp, comment=note)
+            pending.append((tmp, target))
+        replace_all(pending)
+    finally:
+        for tmp, _ in pending:
+            tmp.unlink(missing_ok=True)
+    return [target for _, target in pending]

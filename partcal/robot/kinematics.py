@@ -18,10 +18,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import yaml
 from numpy.typing import NDArray
 
 from .._validation import check_array
+from .._yamlio import load_yaml
 from ..errors import ConfigError, DataError, UnreachableError
 
 MAX_JOINTS = 12
@@ -347,11 +347,8 @@ def load_robot(name_or_path: str | Path | Robot) -> Robot:
     if not path.is_file():
         raise ConfigError(f"robot {text!r}: no such file, and not a built-in robot "
                           f"(built-ins: {', '.join(available_robots())})")
-    try:
-        spec = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"{path}: not valid YAML: {exc}") from None
-    return robot_from_dict(spec, source=str(path))
+    spec, lines = load_yaml(path)
+    return robot_from_dict(spec, source=str(path), lines=lines)
 
 
 def robot_reference(name: str, base: Path) -> str:
@@ -364,10 +361,31 @@ _ROBOT_KEYS = {"name", "description", "joints", "links", "tool_mm", "limits_deg"
                "constraints_deg"}
 
 
-def robot_from_dict(spec: dict, source: str = "robot") -> Robot:
-    """Build a :class:`Robot` from its YAML mapping (see ``docs/robots.md``)."""
+def robot_from_dict(spec: dict, source: str = "robot", lines: dict[str, int] | None = None) -> Robot:
+    """Build a :class:`Robot` from its YAML mapping (see ``docs/robots.md``).
+
+    ``lines`` (key path -> line, from :func:`partcal._yamlio.load_yaml`) puts
+    the line of the bad key into every message.
+    """
+    lines = lines or {}
+
     def fail(where: str, msg: str):
-        raise ConfigError(f"{source}: {where}: {msg}")
+        line = lines.get(where)
+        raise ConfigError(f"{source}: {where}{f' (line {line})' if line else ''}: {msg}")
+
+    def number(where: str, value) -> float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
+            fail(where, f"must be a finite number; got {value!r}")
+        return float(value)
+
+    def numbers(where: str, value, shape: tuple[int, ...], what: str) -> NDArray[np.float64]:
+        arr = np.asarray(value if isinstance(value, list) else [value], dtype=object)
+        if arr.shape != shape:
+            fail(where, f"expected {what}; got {value!r}")
+        for index in np.ndindex(arr.shape):
+            at = where + "".join(f"[{k}]" for k in index)
+            number(at if at in lines else where, arr[index])
+        return arr.astype(float)
 
     if not isinstance(spec, dict):
         fail("top level", f"expected a mapping, got {type(spec).__name__}")
@@ -388,27 +406,23 @@ def robot_from_dict(spec: dict, source: str = "robot") -> Robot:
             off, coeffs = parse_theta(link["theta"], n)
         except ConfigError as exc:
             fail(f"links[{i}].theta", str(exc))
-        rows.append((float(link["alpha"]), float(link["d"]), float(link["a"]), off, coeffs))
+        rows.append((*(number(f"links[{i}].{key}", link[key]) for key in ("alpha", "d", "a")), off, coeffs))
     if not rows:
         fail("links", "needs at least one DH row")
     coupling = np.array([r[4] for r in rows])
     unused = [f"q{j + 1}" for j in range(n) if not coupling[:, j].any()]
     if unused:
         fail("links", f"joint(s) {', '.join(unused)} appear in no theta expression")
-    limits = np.asarray(spec["limits_deg"], dtype=float)
-    if limits.shape != (n, 2) or np.any(limits[:, 0] >= limits[:, 1]):
+    limits = numbers("limits_deg", spec["limits_deg"], (n, 2), f"{n} pairs [low, high] with low < high")
+    if np.any(limits[:, 0] >= limits[:, 1]):
         fail("limits_deg", f"expected {n} pairs [low, high] with low < high; got {spec['limits_deg']!r}")
-    home = np.asarray(spec.get("home_deg", limits.mean(axis=1)), dtype=float)
-    if home.shape != (n,):
-        fail("home_deg", f"expected {n} angles; got {spec.get('home_deg')!r}")
-    tool = np.asarray(spec.get("tool_mm", [0, 0, 0]), dtype=float)
-    if tool.shape != (3,):
-        fail("tool_mm", f"expected [x, y, z]; got {spec.get('tool_mm')!r}")
+    home = numbers("home_deg", spec["home_deg"], (n,), f"{n} angles") if "home_deg" in spec else limits.mean(axis=1)
+    tool = numbers("tool_mm", spec.get("tool_mm", [0, 0, 0]), (3,), "[x, y, z]")
     constraints = []
     for i, c in enumerate(spec.get("constraints_deg") or []):
         try:
             _, coeffs = parse_theta(c["expr"], n)
-            low, high = (float(v) for v in c["range"])
+            low, high = (number(f"constraints_deg[{i}].range", v) for v in c["range"])
         except (KeyError, TypeError, ValueError, ConfigError) as exc:
             fail(f"constraints_deg[{i}]", f"expected {{expr: 'q2 - q3', range: [low, high]}}: {exc}")
         constraints.append((coeffs, low, high))

@@ -13,6 +13,7 @@ import re
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+from .._validation import safe_name
 from .._yamlio import Section, load_yaml, range_check
 from ..errors import PartcalError
 from ..models.partition import KMeansPartition, Octree
@@ -24,19 +25,6 @@ from ..robot.kinematics import load_robot, robot_reference
 RESERVED_NAMES = {"identification", "validation", "file", "fit_seconds", "cv_seconds", "cv", "inputs", "solver",
                   "regions", "pso_rms_ratio", "granularity", "compensation"}
 RANK_RULES = ("cv", "validation")
-_SAFE_NAME = re.compile(r"^[A-Za-z0-9_.-]+$")
-
-
-def safe_name(value: str) -> str | None:
-    """A ``check`` for names that become file or folder names: ``None`` if safe, else what is expected.
-
-    >>> safe_name("paper_sk120"), safe_name("../etc") is not None, safe_name("a/b") is not None
-    (None, True, True)
-    """
-    if _SAFE_NAME.match(value) and ".." not in value and not value.startswith("."):
-        return None
-    return ("a name of letters, digits, '_', '.' and '-' (it names files and folders: no '/', no '..', "
-            "no leading '.')")
 _SWARM_KEYS = {"particles": "int", "iterations": "int", "c1": "float", "c2": "float", "rule": "str",
                "topology": "str", "neighbours": "int", "inertia": "list", "vmax": "float",
                "bound_scale": "float", "stop_fitness": "float", "patience": "int", "ftol": "float"}

@@ -29,8 +29,12 @@ from ..data.measurements import Measurements, read_measurements
 from ..errors import ConfigError, DataError
 from ..metrics import cross_validated_rms, kfold_splits, summary
 from ..models.bases import varying_inputs
-from ..models.partitioned import (MIN_SAMPLES_PER_TERM, PartitionedErrorModel, nested_cross_validated_rms,
-                                  select_granularity)
+from ..models.partitioned import (
+    MIN_SAMPLES_PER_TERM,
+    PartitionedErrorModel,
+    nested_cross_validated_rms,
+    select_granularity,
+)
 from ..models.series import ErrorModel
 from ..robot.kinematics import Robot, load_robot
 from .config import ModelSpec, RunConfig

@@ -55,5 +55,11 @@ def replace_all(pairs: list[tuple[Path, Path]]) -> None:
     Callers write each file to a temporary name first; only when all exist are
     they renamed, so a failure while writing leaves every old file as it was.
     """
+    for _, path in pairs:          # what would stop a rename is found before the first one
+        if Path(path).is_dir():
+            raise PartcalError(f"{path}: is a folder; cannot replace it with a file (no file was changed)")
     for tmp, path in pairs:
-        os.replace(tmp, path)
+        try:
+            os.replace(tmp, path)
+        except OSError as exc:
+            raise PartcalError(f"{path}: cannot write ({exc.strerror or exc})") from None

@@ -1,12 +1,20 @@
 """The command line: exit codes and messages."""
 
+import csv
 import shutil
 import subprocess
 import sys
 
+import numpy as np
+import pytest
+
 from conftest import ROOT
 
 import partcal
+from partcal import read_measurements
+from partcal.metrics import rms_per_axis
+
+DATA = ROOT / "data" / "sk120"
 
 
 def run(*args, cwd=None):
@@ -18,15 +26,42 @@ def test_version():
     assert res.returncode == 0 and res.stdout.strip() == f"partcal {partcal.__version__}"
 
 
-def test_simulate_prints_table_and_writes_files(tmp_path):
+def test_simulate_prints_what_it_wrote(tmp_path):
     cfg = tmp_path / "configs"
     cfg.mkdir()
     shutil.copy(ROOT / "configs" / "sk120_virtual.yaml", cfg / "sk120_virtual.yaml")
     res = run("simulate", str(cfg / "sk120_virtual.yaml"))
     assert res.returncode == 0, res.stderr
-    assert "identification" in res.stdout and "8.0 / 7.5 / 17.9" in res.stdout
-    assert sorted(p.name for p in (tmp_path / "data" / "sk120").iterdir()) == [
+    out = tmp_path / "data" / "sk120"
+    assert sorted(p.name for p in out.iterdir()) == [
         "identification.csv", "test_rectangle.csv", "test_spiral_xy.csv", "test_spiral_yz.csv"]
+    rows = {line.split()[0]: line.split() for line in res.stdout.splitlines()[2:6]}
+    for name in ("identification", "test_rectangle", "test_spiral_xy", "test_spiral_yz"):
+        m = read_measurements(out / f"{name}.csv")
+        assert int(rows[name][1]) == len(m)
+        np.testing.assert_allclose([float(v) for v in rows[name][2:5]], rms_per_axis(m.errors_mm), atol=0.006)
+
+
+def test_simulate_checks_the_folder_first_and_replaces_files_as_a_set(tmp_path):
+    cfg = tmp_path / "configs"
+    cfg.mkdir()
+    text = (ROOT / "configs" / "sk120_virtual.yaml").read_text()
+    (cfg / "v.yaml").write_text(text.replace("output: ../data/sk120", "output: ../blocked/out"))
+    (tmp_path / "blocked").write_text("a file where a folder must be")
+    res = run("simulate", str(cfg / "v.yaml"))
+    assert res.returncode == 2 and res.stderr.count("\n") == 1, res.stderr
+    assert "blocked/out: cannot write here" in res.stderr and "Virtual" not in res.stdout    # refused before simulating
+    (cfg / "v.yaml").write_text(text.replace("output: ../data/sk120", "output: ../out"))
+    out = tmp_path / "out"
+    out.mkdir()
+    for name in ("identification", "test_rectangle", "test_spiral_xy", "test_spiral_yz"):
+        (out / f"{name}.csv").write_text("old\n")
+    (out / "test_spiral_xy.csv").unlink()
+    (out / "test_spiral_xy.csv").mkdir()          # one target cannot be replaced: none may be
+    res = run("simulate", str(cfg / "v.yaml"))
+    assert res.returncode == 2, res.stderr
+    assert all((out / f"{n}.csv").read_text() == "old\n" for n in ("identification", "test_rectangle", "test_spiral_yz"))
+    assert [p.name for p in out.iterdir() if p.name.startswith(".")] == []
 
 
 def test_bad_input_exits_2_with_one_line(tmp_path):
@@ -34,3 +69,46 @@ def test_bad_input_exits_2_with_one_line(tmp_path):
     assert res.returncode == 2
     assert res.stderr.count("\n") == 1 and "missing.yaml: no such file" in res.stderr
     assert "Traceback" not in res.stderr
+
+
+@pytest.fixture(scope="module")
+def joint_model(tmp_path_factory):
+    from partcal import ErrorModel, load_robot
+    from partcal.study.persist import save_model
+
+    m = read_measurements(DATA / "identification.csv")
+    path = tmp_path_factory.mktemp("model") / "sdp-ai.json"
+    save_model(ErrorModel(inputs="joint", degree=2, solver="lstsq").fit(m.q_deg, m.errors_mm), path,
+               robot=load_robot("motoman_sk120"))
+    return path
+
+
+def test_compensate_marks_unconverged_targets_and_exits_3(joint_model, tmp_path):
+    m = read_measurements(DATA / "test_rectangle.csv")
+    targets = tmp_path / "targets.csv"
+    rows = [m.nominal_mm[0], [9000.0, 0.0, 0.0], m.nominal_mm[1]]        # the middle one is 9 m away
+    targets.write_text("x,y,z\n" + "\n".join(",".join(f"{v:.6f}" for v in p) for p in rows) + "\n")
+    out = tmp_path / "cmd.csv"
+    res = run("compensate", str(joint_model), str(targets), "-o", str(out))
+    assert res.returncode == 3, res.stderr
+    assert res.stderr.count("\n") == 1
+    assert "1 of 3 targets did not converge or are unreachable (first: data row 2 of" in res.stderr
+    with open(out) as handle:
+        flags = [r["converged"] for r in csv.DictReader(handle)]
+    assert flags == ["true", "false", "true"]
+    targets.write_text("x,y,z\n" + "\n".join(",".join(f"{v:.6f}" for v in p) for p in m.nominal_mm[:3]) + "\n")
+    res = run("compensate", str(joint_model), str(targets), "-o", str(out))
+    assert res.returncode == 0 and res.stderr == "", res.stderr
+    with open(out) as handle:
+        assert [r["converged"] for r in csv.DictReader(handle)] == ["true"] * 3
+
+
+def test_output_naming_a_folder_is_refused(joint_model, tmp_path):
+    m = read_measurements(DATA / "identification.csv")
+    points = tmp_path / "q.csv"
+    points.write_text("q1,q2,q3,q4,q5,q6\n" + ",".join(f"{v:.6f}" for v in m.q_deg[0]) + "\n")
+    folder = tmp_path / "a_folder"
+    folder.mkdir()
+    res = run("predict", str(joint_model), str(points), "-o", str(folder))
+    assert res.returncode == 2 and res.stderr.count("\n") == 1, res.stderr
+    assert f"{folder}: is a folder; give the name of a file to write" in res.stderr

@@ -200,6 +200,19 @@ def _write_table(path, header, values, atomic_write, flags=None) -> None:
             handle.write(",".join(cells) + "\n")
 
 
+def _cmd_equations(args) -> int:
+    from .errors import ModelFileError
+    from .models.series import ErrorModel
+    from .study.predictor import load_predictor
+
+    predictor = load_predictor(args.model)
+    if not isinstance(predictor.model, ErrorModel):
+        raise ModelFileError(f"{args.model}: a {predictor.document['kind']} model has no single equation per "
+                             "axis; equations are printed for global series models")
+    print("\n".join(predictor.model.equations(precision=args.digits)))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="partcal", description=__doc__.splitlines()[0])
     parser.add_argument("--version", action="version", version=f"partcal {__version__}")
@@ -228,6 +241,12 @@ def build_parser() -> argparse.ArgumentParser:
                       help="CSV to write (targets + x_cmd,y_cmd,z_cmd[,qK_cmd],converged); exit code 3 when any "
                            "target did not converge")
     comp.set_defaults(func=_cmd_compensate)
+    eqs = sub.add_parser("equations", help="print a series model's fitted equations in mm and degrees")
+    eqs.add_argument("model", help="model file (models/<name>.json of a run)")
+    eqs.add_argument("--digits", type=int, default=None,
+                     help="round to this many significant digits (default: full precision, which reproduces "
+                          "the model's predictions)")
+    eqs.set_defaults(func=_cmd_equations)
     return parser
 
 

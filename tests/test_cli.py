@@ -112,3 +112,16 @@ def test_output_naming_a_folder_is_refused(joint_model, tmp_path):
     res = run("predict", str(joint_model), str(points), "-o", str(folder))
     assert res.returncode == 2 and res.stderr.count("\n") == 1, res.stderr
     assert f"{folder}: is a folder; give the name of a file to write" in res.stderr
+
+
+def test_equations_command_prints_what_predicts(joint_model):
+    from partcal import load_predictor
+
+    res = run("equations", str(joint_model))
+    assert res.returncode == 0, res.stderr
+    lines = res.stdout.splitlines()
+    assert [line.split(" = ")[0] for line in lines] == ["dx", "dy", "dz"]
+    m = read_measurements(DATA / "test_rectangle.csv")
+    env = {f"q{i + 1}": m.q_deg[:, i] for i in range(6)}
+    values = np.column_stack([eval(line.split("=", 1)[1].replace("^", "**"), {}, env) for line in lines])  # noqa: S307
+    np.testing.assert_allclose(values, load_predictor(joint_model).predict(joints=m.q_deg), rtol=0, atol=1e-6)

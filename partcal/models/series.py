@@ -212,39 +212,65 @@ class ErrorModel(ErrorModelBase):
         """Warn (``ExtrapolationWarning``) about points farther than ``limit``; return the mask."""
         return warn_far(self.distance_to_data(X), limit)
 
-    def equations(self, input_names=None, output_names=("dx", "dy", "dz"), precision: int = 6) -> list[str]:
+    def equations(self, input_names=None, output_names=("dx", "dy", "dz"), precision: int | None = None
+                  ) -> list[str]:
         """The fitted functions in raw units (mm, degrees), one line per output.
 
         Polynomials are expanded into powers of the raw inputs, like the
-        paper's eqs. (9)-(20); Fourier terms are written with their phase.
+        paper's eqs. (9)-(20), when that form is exact to 1e-9 mm over the
+        data; otherwise (high degrees of inputs far from zero, such as joint
+        angles near -170 degrees) into powers of the centred inputs, e.g.
+        ``(q3 + 170.5)^4``, which lose no digits. Fourier terms are written
+        with their phase.
+        Numbers are written in full (``repr``) precision, so the printed
+        equations reproduce :meth:`predict` (to 1e-6 mm up to degree 8);
+        ``precision`` rounds them to that many significant digits for reading.
         """
         check_is_fitted(self, "coef_")
         d = self.n_features_in_
         if input_names is None:
             input_names = ["x", "y", "z"] if self.inputs == "cartesian" and d == 3 else (
                 [f"q{i + 1}" for i in range(d)] if self.inputs == "joint" else [f"x{i + 1}" for i in range(d)])
-        outs = list(output_names)[: self.coef_.shape[1]] + [f"e{k + 1}" for k in range(len(output_names), self.coef_.shape[1])]
+        n_out = self.coef_.shape[1]
+        outs = list(output_names)[:n_out] + [f"e{k + 1}" for k in range(len(output_names), n_out)]
         return [f"{name} = {self._equation(a, input_names, precision)}" for a, name in enumerate(outs)]
 
-    def _equation(self, a: int, names, precision: int) -> str:
-        fmt = f"{{:+.{precision}g}}"
+    def _equation(self, a: int, names, precision: int | None) -> str:
+        def num(value: float, sign: bool = True) -> str:
+            text = repr(float(value)) if precision is None else f"{float(value):.{precision}g}"
+            return ("+" + text if sign and not text.startswith("-") else text)
+
         parts = []
         if self.basis == "polynomial":
-            for exps, c in raw_polynomial(self.terms_, self.coef_[:, a], self.scaling_).items():
-                mono = "*".join(f"{names[i]}^{k}" if k > 1 else names[i] for i, k in enumerate(exps) if k)
-                parts.append(fmt.format(c) + (f"*{mono}" if mono else ""))
+            raw = raw_polynomial(self.terms_, self.coef_[:, a], self.scaling_)
+            reach = np.abs(self.data_bounds_).max(axis=0)          # largest |input| in the data
+            rounding = 1e3 * np.finfo(float).eps * sum(abs(c) * np.prod(reach ** np.array(e)) for e, c in raw.items())
+            if rounding <= 1e-9:        # the paper's form: powers of the raw inputs, exact to 1e-9 mm here
+                for exps, c in raw.items():
+                    mono = "*".join(f"{names[i]}^{k}" if k > 1 else names[i] for i, k in enumerate(exps) if k)
+                    parts.append(num(c) + (f"*{mono}" if mono else ""))
+            else:                       # expanding would cancel digits: powers of the centred inputs instead
+                s = self.scaling_
+                for exps, c in zip(self.terms_, self.coef_[:, a]):
+                    factors = []
+                    for i, k in enumerate(exps):
+                        if k:
+                            c = c / s.scale[i] ** k
+                            shifted = f"({names[i]} {num(-s.centre[i])[0]} {num(-s.centre[i])[1:]})"
+                            factors.append(f"{shifted}^{k}" if k > 1 else shifted)
+                    parts.append(num(c) + ("*" + "*".join(factors) if factors else ""))
         else:
             s = self.scaling_
             for (trig, i, q), c in zip(self.terms_, self.coef_[:, a]):
                 if trig == "1":
-                    parts.append(fmt.format(c))
+                    parts.append(num(c))
                     continue
                 if self.inputs == "joint":
-                    arg = f"{q * np.pi / 180:.{precision}g}*{names[i]}"
+                    arg = f"{num(q * np.pi / 180, sign=False)}*{names[i]}"
                 else:
                     k = q * np.pi / 2 / s.scale[i]
-                    arg = f"{k:.{precision}g}*{names[i]} {-k * s.centre[i]:+.{precision}g}"
-                parts.append(f"{fmt.format(c)}*{trig}({arg})")
+                    arg = f"{num(k, sign=False)}*{names[i]} {num(-k * s.centre[i])}"
+                parts.append(f"{num(c)}*{trig}({arg})")
         text = " ".join(f"{p[0]} {p[1:]}" for p in parts)        # "+0.5*x" -> "+ 0.5*x"
         return text[2:] if text.startswith("+ ") else "-" + text[2:]
 

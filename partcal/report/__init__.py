@@ -79,7 +79,7 @@ def context(result: RunResult) -> dict:
         "scenes": scene_entries(result),
         "convergence_svg": _optional_b64(figures.convergence({r.spec.name: r.model for r in result.models
                                                               if r.spec.solver == "pso"})),
-        "equations": [{"name": r.spec.name, "lines": r.model.equations(input_names=None, precision=4)}
+        "equations": [{"name": r.spec.name, "lines": r.model.equations()}
                       for r in result.models if isinstance(r.model, ErrorModel)],
         **compensation_entries(result),
     }

@@ -58,7 +58,8 @@ def test_pso_with_paper_settings_reaches_least_squares(ident, name):
     kw = PAPER_MODELS[name]
     ratios = [ErrorModel(**kw, pso=SwarmConfig.paper(), random_state=s).fit(X[kw["inputs"]], y).rms_ratio_
               for s in range(10)]
-    assert np.median(ratios) < 1.001 and max(ratios) < 1.01, ratios
+    # the measured excess over the least-squares optimum is about 1e-11: 1e-6 lets no real regression through
+    assert max(ratios) <= 1.0 + 1e-6, ratios
     assert min(ratios) >= 1.0 - 1e-12                   # least squares is the optimum of the RMS
 
 

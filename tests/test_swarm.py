@@ -46,13 +46,23 @@ def test_same_seed_same_result_different_seeds_both_converge():
     np.testing.assert_allclose(c.x, 0.7, atol=1e-6)
 
 
-def test_paper_rule_cannot_explode():
-    # The basic update without damping diverges; the mandatory clamp keeps every particle in the box.
+@pytest.mark.parametrize("rule", ["paper", "inertia", "constriction"])
+def test_velocity_clamp_bounds_every_step(rule):
+    """No particle moves more than vmax x box width per iteration in any coordinate (the clamp holds).
+
+    The box alone cannot show this: positions are put back on the walls, so a
+    test of positions passes even with an exploding swarm. The steps between
+    successive evaluations of each particle are what the clamp limits.
+    """
     seen = []
-    cfg = SwarmConfig(rule="paper", particles=30, iterations=300, patience=None)
-    res = minimize(lambda X: seen.append(np.abs(X).max()) or sphere(X), -np.ones(3), np.ones(3), cfg,
+    vmax, width = 0.05, 8.0
+    cfg = SwarmConfig(rule=rule, particles=30, iterations=200, patience=None, vmax=vmax)
+    res = minimize(lambda X: seen.append(X.copy()) or sphere(X), np.full(3, -4.0), np.full(3, 4.0), cfg,
                    random_state=0)
-    assert max(seen) <= 1.0 and np.isfinite(res.fun)
+    steps = np.abs(np.diff(np.stack(seen), axis=0))           # (iterations, particles, dims)
+    assert steps.max() <= vmax * width * (1 + 1e-12) and np.isfinite(res.fun)
+    assert steps.max() > 0.9 * vmax * width                   # the clamp is reached: the bound is what holds them
+
 
 
 def test_stop_threshold_callback_and_iteration_limit():

@@ -4,6 +4,7 @@ import json
 
 import numpy as np
 import pytest
+from sklearn.base import clone
 from conftest import ROOT
 
 from partcal import ModelFileError, load_robot, read_measurements
@@ -57,10 +58,78 @@ def test_damaged_and_foreign_files_are_refused(tmp_path):
     refused({k: v for k, v in good.items() if k != "kind"}, r"field 'kind': missing")
     coef = json.loads(json.dumps(good))
     coef["model"]["coef"] = coef["model"]["coef"][:-1]
-    refused(coef, r"field 'model.coef': expected finite numbers of shape \(4, 3\); got shape \(3, 3\)")
+    refused(coef, r"field 'model.coef': expected shape \(4, 3\); got shape \(3, 3\)")
     nan = json.loads(json.dumps(good))
     nan["model"]["scaling"]["centre"][0] = "NaN"
-    refused(nan, r"field 'model.scaling.centre': holds a non-finite value")
+    refused(nan, r"field 'model.scaling.centre': expected float values; found str 'NaN'")
     refused([1, 2], r"field 'top level': expected an object; got list")
     with pytest.raises(ModelFileError, match=r"nope.json: no such model file"):
         load_model(tmp_path / "nope.json")
+
+
+def edited(doc, path, value):
+    """A deep copy of ``doc`` with the field at ``path`` (keys and indices) set to ``value``."""
+    out = json.loads(json.dumps(doc))
+    target = out
+    for key in path[:-1]:
+        target = target[key]
+    target[path[-1]] = value(target[path[-1]]) if callable(value) else value
+    return out
+
+
+@pytest.fixture(scope="module")
+def saved(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("files")
+    out = {}
+    for name, (inputs, model) in {"global": MODELS[0], "octree": MODELS[3], "kmeans": MODELS[4]}.items():
+        X = IDENT.nominal_mm if inputs == "cartesian" else IDENT.q_deg
+        model = clone(model).fit(X, IDENT.errors_mm)
+        save_model(model, tmp / f"{name}.json", robot=load_robot("motoman_sk120"))
+        out[name] = json.loads((tmp / f"{name}.json").read_text())
+    return out
+
+
+# Each edit used to load and then predict -inf, 1e300 or a silently wrong value (or crash later).
+SEMANTIC = [
+    ("global", ["model", "scaling", "scale", 0], 1e-300, r"'model.scaling.scale': disagrees with data_bounds"),
+    ("global", ["model", "scaling", "scale", 1], -2.0, r"'model.scaling.scale': disagrees with data_bounds"),
+    ("global", ["model", "scaling", "centre", 2], lambda v: v + 100.0, r"'model.scaling.centre': disagrees with data_bounds"),
+    ("global", ["model", "terms", 1], [9, 0, 0], r"'model.terms': are not the 7 terms of a polynomial basis of order 2"),
+    ("global", ["model", "basis"], "fourier", r"'model.terms\[0\]': expected \[\"1\"\|\"cos\"\|\"sin\", input, harmonic\]"),
+    ("global", ["model", "order"], 3, r"'model.terms': are not the 10 terms of a polynomial basis of order 3"),
+    ("global", ["model", "coef", 2, 0], 1e300, r"'model.coef': predicts 1e\+300 mm within the box of its data"),
+    ("global", ["model", "coef", 0, 1], "0.5", r"'model.coef': expected float values; found str '0.5'"),
+    ("global", ["model", "coef", 0, 1], True, r"'model.coef': expected float values; found bool True"),
+    ("global", ["model", "scaling", "active", 0], 1, r"'model.scaling.active': expected bool values; found int 1"),
+    ("global", ["n_inputs"], 3.0, r"'n_inputs': expected int; got float 3.0"),
+    ("global", ["model", "data_bounds", 0, 0], lambda v: v + 1e4, r"'model.data_bounds': a low bound exceeds its high bound"),
+    ("global", ["model", "solver"], "magic", r"'model.solver': expected one of 'pso', 'lstsq'; got 'magic'"),
+    ("octree", ["blend", "method"], "cubic", r"'blend.method': expected one of 'gaussian', 'hard'; got 'cubic'"),
+    ("octree", ["blend", "width"], -1.0, r"'blend.width': expected a finite number in \[0.6, 10.0\]"),
+    ("octree", ["partition", "kind"], "voronoi", r"'partition.kind': expected one of 'octree', 'kmeans'; got 'voronoi'"),
+    ("octree", ["partition", "sigmas", 0, 0], 0.0, r"'partition.sigmas': kernel widths must be > 0"),
+    ("octree", ["partition", "kernel_region", 0], 99, r"'partition.kernel_region': must map the \d+ kernels onto all regions"),
+    ("octree", ["partition", "tree", "child", 0], 10**6, r"'partition.tree.child': child indices must point forward"),
+    ("octree", ["partition", "tree", "leaf"], lambda v: [len(v) + 5 if x >= 0 else x for x in v], r"'partition.tree.leaf': every node is either split"),
+    ("octree", ["partition", "cand", 0, 0], 10**6, r"'partition.cand': candidate kernels must be -1 \(padding\) or in"),
+    ("octree", ["partition", "own", 0], 10**6, r"'partition.own': each leaf's own kernel must be listed"),
+    ("octree", ["regions", 0, "coef", 0, 0], -1e300, r"'regions\[0\].coef': predicts"),
+    ("kmeans", ["partition", "kernel_region"], lambda v: list(reversed(v)), r"'partition.kernel_region': a k-means partition has one kernel per region"),
+    ("kmeans", ["partition", "centres", 0, 0], "x", r"'partition.centres': expected float values; found str 'x'"),
+    ("kmeans", ["n_inputs"], 5, r"'n_inputs': a joint model of robot 'motoman_sk120' takes 6 joints; got 5"),
+]
+
+
+@pytest.mark.parametrize("kind, path, value, message", SEMANTIC)
+def test_files_are_checked_for_meaning(saved, tmp_path, kind, path, value, message):
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps(edited(saved[kind], path, value)))
+    with pytest.raises(ModelFileError, match="bad.json: field " + message):
+        load_model(bad)
+
+
+def test_the_saved_files_themselves_load(saved, tmp_path):
+    for name, doc in saved.items():
+        path = tmp_path / f"{name}.json"
+        path.write_text(json.dumps(doc))
+        load_model(path)

@@ -17,12 +17,12 @@ import numpy as np
 
 from .. import __version__
 from .._io import atomic_write
-from ..errors import ModelFileError
+from ..errors import ModelFileError, PartcalError
 from ..models.bases import Basis, Scaling
 from ..models.partition import Partition
 from ..models.partitioned import PartitionedErrorModel
-from ..models.series import ErrorModel
-from ..robot.kinematics import Robot, robot_from_dict, robot_to_dict
+from ..models.series import FITNESSES, SOLVERS, ErrorModel
+from ..robot.kinematics import MAX_JOINTS, Robot, robot_from_dict, robot_to_dict
 
 FORMAT = "partcal-model"
 VERSION = 1
@@ -81,7 +81,15 @@ def load_model(path: str | Path) -> tuple[Any, dict]:
 
 
 def model_from_dict(doc: Any, source: str = "model") -> Any:
-    """Rebuild a fitted model from :func:`model_to_dict` output, checking every field."""
+    """Rebuild a fitted model from :func:`model_to_dict` output, checking every field for meaning.
+
+    Beyond types and shapes: scales are positive and agree with the data
+    bounds they came from, the terms are exactly those of the basis and
+    degree, region and tree indices are in range, kernel widths are positive,
+    and the model predicts finite, plausible errors (under 1 km) across the
+    box of its data. A file that fails any of these is refused naming the
+    field, never used to predict ``-inf`` or ``1e300``.
+    """
     r = _Reader(doc, source, "")
     if r.get("format", str) != FORMAT:
         r.fail("format", f"expected {FORMAT!r}; this is not a partcal model file")
@@ -89,68 +97,159 @@ def model_from_dict(doc: Any, source: str = "model") -> Any:
     if version != VERSION:
         r.fail("version", f"this partcal reads version {VERSION}; the file has version {version} "
                           f"(written by partcal {doc.get('partcal_version', '?')})")
-    kind = r.get("kind", str)
-    n_in, n_out = r.get("n_inputs", int), r.get("n_outputs", int)
-    inputs = r.get("inputs", str)
-    if inputs not in ("cartesian", "joint"):
-        r.fail("inputs", f"expected 'cartesian' or 'joint'; got {inputs!r}")
-    if doc.get("robot") is not None:
+    kind = r.choice("kind", ("global", "partitioned"))
+    n_in, n_out = r.integer("n_inputs", 1, MAX_JOINTS), r.integer("n_outputs", 1, 3)
+    inputs = r.choice("inputs", ("cartesian", "joint"))
+    if r.get("robot", (dict, type(None))) is not None:
         try:
-            robot_from_dict(r.get("robot", dict), source=f"{source}: robot")
-        except Exception as exc:  # noqa: BLE001 - any damage in the robot section is a file error
+            robot = robot_from_dict(doc["robot"], source=f"{source}: robot")
+        except PartcalError as exc:
             raise ModelFileError(str(exc)) from None
+        if inputs == "joint" and robot.n_joints != n_in:
+            r.fail("n_inputs", f"a joint model of robot {robot.name!r} takes {robot.n_joints} joints; got {n_in}")
     if kind == "global":
-        return _global_from(r.sub("model"), inputs, n_in, n_out)
-    if kind == "partitioned":
-        try:
-            partition = Partition.from_dict(r.get("partition", dict))
-        except (KeyError, TypeError, ValueError) as exc:
-            r.fail("partition", f"damaged ({type(exc).__name__}: {exc})")
-        regions = r.get("regions", list)
-        if len(regions) != partition.n_regions:
-            r.fail("regions", f"expected {partition.n_regions} region models; got {len(regions)}")
-        blend = r.sub("blend")
-        model = PartitionedErrorModel(blend=blend.get("method", str), blend_width=blend.get("width", float))
-        model.models_ = [_global_from(r.sub(f"regions[{i}]", item), inputs, n_in, n_out)
-                         for i, item in enumerate(regions)]
-        model.partition_ = partition
-        model.region_bounds_ = r.array("region_bounds", (partition.n_regions, 2, n_in))
-        model.region_counts_ = np.asarray(r.get("region_counts", list), dtype=np.intp)
-        model.min_samples_ = r.get("min_samples", int)
-        model.n_features_in_ = n_in
-        model._y_1d = False
-        model.local = ErrorModel(inputs=inputs)
-        return model
-    r.fail("kind", f"expected 'global' or 'partitioned'; got {kind!r}")
+        model = _global_from(r.sub("model"), inputs, n_in, n_out)
+    else:
+        model = _partitioned_from(r, inputs, n_in, n_out)
+    _check_plausible(r, model, n_in)
+    return model
+
+
+def _partitioned_from(r: "_Reader", inputs: str, n_in: int, n_out: int) -> PartitionedErrorModel:
+    blend = r.sub("blend")
+    model = PartitionedErrorModel(blend=blend.choice("method", ("gaussian", "hard")),
+                                  blend_width=blend.number("width", 0.6, 10.0))
+    partition = _partition_from(r.sub("partition"))
+    m = partition.n_regions
+    regions = r.get("regions", list)
+    if len(regions) != m:
+        r.fail("regions", f"expected {m} region models (partition.n_regions); got {len(regions)}")
+    model.models_ = [_global_from(r.sub(f"regions[{i}]", item), inputs, n_in, n_out) for i, item in enumerate(regions)]
+    model.partition_ = partition
+    model.region_bounds_ = r.array("region_bounds", (m, 2, n_in))
+    if np.any(model.region_bounds_[:, 0] > model.region_bounds_[:, 1]):
+        r.fail("region_bounds", "a low bound exceeds its high bound")
+    model.region_counts_ = r.array("region_counts", (m,), int)
+    model.min_samples_ = r.integer("min_samples", 1)
+    if np.any(model.region_counts_ < 0):
+        r.fail("region_counts", "counts must be >= 0")
+    model.n_features_in_ = n_in
+    model._y_1d = False
+    model.local = ErrorModel(inputs=inputs)
+    return model
+
+
+def _partition_from(p: "_Reader") -> Partition:
+    """A partition, with every index in range and every kernel width positive."""
+    kind = p.choice("kind", ("octree", "kmeans"))
+    m = p.integer("n_regions", 1)
+    centres = p.array("centres", (None, None))
+    k, d = centres.shape
+    sigmas = p.array("sigmas", (k, d))
+    if np.any(sigmas <= 0):
+        p.fail("sigmas", "kernel widths must be > 0")
+    kernel_region = p.array("kernel_region", (k,), int)
+    if np.any((kernel_region < 0) | (kernel_region >= m)) or np.unique(kernel_region).size != m:
+        p.fail("kernel_region", f"must map the {k} kernels onto all regions 0..{m - 1}")
+    if kind == "kmeans":
+        if k != m or np.any(kernel_region != np.arange(m)):
+            p.fail("kernel_region", f"a k-means partition has one kernel per region: 0..{m - 1}")
+        return Partition("kmeans", m, centres, sigmas, kernel_region)
+    boxes = p.array("boxes", (k, 2, d))
+    if np.any(boxes[:, 0] > boxes[:, 1]):
+        p.fail("boxes", "a low corner exceeds its high corner")
+    tree = p.sub("tree")
+    node_centre = tree.array("centre", (None, d))
+    nodes = node_centre.shape[0]
+    child, leaf = tree.array("child", (nodes,), int), tree.array("leaf", (nodes,), int)
+    inner = child >= 0
+    if np.any(child[inner] + 2**d > nodes) or np.any(child < -1) or np.any(child[inner] <= np.flatnonzero(inner)):
+        tree.fail("child", f"child indices must point forward to {2**d} nodes within the {nodes} nodes")
+    if np.any(inner == (leaf >= 0)) or np.any(leaf >= k) or np.any(leaf < -1):
+        tree.fail("leaf", f"every node is either split (child >= 0) or a leaf with an index in 0..{k - 1}")
+    cand = p.array("cand", (k, None), int)
+    own = p.array("own", (k,), int)
+    if np.any((cand < -1) | (cand >= k)):
+        p.fail("cand", f"candidate kernels must be -1 (padding) or in 0..{k - 1}")
+    if np.any((own < 0) | (own >= cand.shape[1])) or np.any(cand[np.arange(k), own] != np.arange(k)):
+        p.fail("own", "each leaf's own kernel must be listed at its 'own' column of 'cand'")
+    return Partition("octree", m, centres, sigmas, kernel_region, boxes=boxes, cand=cand, own=own,
+                     tree={"centre": node_centre, "child": child, "leaf": leaf})
 
 
 def _global_from(r: "_Reader", inputs: str, n_in: int, n_out: int) -> ErrorModel:
-    basis = r.get("basis", str)
-    if basis not in ("polynomial", "fourier"):
-        r.fail("basis", f"expected 'polynomial' or 'fourier'; got {basis!r}")
-    order = r.get("order", int)
+    basis = r.choice("basis", ("polynomial", "fourier"))
+    order = r.integer("order", 1, 8)
     cross = r.get("cross_terms", bool)
+    if cross and basis != "polynomial":
+        r.fail("cross_terms", "must be false for the fourier basis")
+    bounds = r.array("data_bounds", (2, n_in))
+    if np.any(bounds[0] > bounds[1]):
+        r.fail("data_bounds", "a low bound exceeds its high bound")
     s = r.sub("scaling")
-    scaling = Scaling(s.array("centre", (n_in,)), s.array("scale", (n_in,)),
-                      s.array("active", (n_in,)).astype(bool))
+    scaling = Scaling(s.array("centre", (n_in,)), s.array("scale", (n_in,)), s.array("active", (n_in,), bool))
+    expected = Scaling.fit(bounds)          # what the fit derived from the same bounds
+    if not np.array_equal(scaling.active, expected.active):
+        s.fail("active", f"must mark the inputs that vary within data_bounds: {expected.active.tolist()}")
+    for key in ("centre", "scale"):
+        if not np.allclose(getattr(scaling, key), getattr(expected, key), rtol=1e-12, atol=0):
+            s.fail(key, f"disagrees with data_bounds (expected {getattr(expected, key).tolist()})")
+    basis_ = Basis(basis, inputs, order, cross)
+    want = basis_.terms(scaling)
     raw_terms = r.get("terms", list)
-    terms = [tuple(t) if basis == "polynomial" else (t[0], int(t[1]), int(t[2])) for t in raw_terms]
-    if basis == "polynomial" and not all(len(t) == n_in and all(isinstance(k, int) for k in t) for t in terms):
-        r.fail("terms", f"expected lists of {n_in} integer exponents")
-    coef = r.array("coef", (len(terms), n_out))
+    terms = _terms(r, raw_terms, basis)
+    if terms != want:
+        r.fail("terms", f"are not the {len(want)} terms of a {basis} basis of order {order} over the varying "
+                        f"inputs (exponents beyond the degree, or a basis that does not match)")
     model = ErrorModel(inputs=inputs, basis=basis, degree=order if basis == "polynomial" else 1,
                        harmonics=order if basis == "fourier" else 1, cross_terms=cross,
-                       solver=r.get("solver", str), fitness=r.get("fitness", str))
-    model.coef_, model.scaling_, model.terms_ = coef, scaling, terms
-    model.basis_ = Basis(basis, inputs, order, cross)
+                       solver=r.choice("solver", SOLVERS), fitness=r.choice("fitness", FITNESSES))
+    model.coef_, model.scaling_, model.terms_, model.basis_ = r.array("coef", (len(terms), n_out)), scaling, terms, basis_
     model.n_features_in_ = n_in
     model._y_1d = False
-    model.data_bounds_ = r.array("data_bounds", (2, n_in))
+    model.data_bounds_ = bounds
     model.train_rms_ = r.array("train_rms", (n_out,))
     model.lstsq_rms_ = r.array("lstsq_rms", (n_out,))
-    model.rms_ratio_ = r.get("rms_ratio", float)
+    model.rms_ratio_ = r.number("rms_ratio", 0.0)
+    if np.any(model.train_rms_ < 0) or np.any(model.lstsq_rms_ < 0):
+        r.fail("train_rms", "RMS values must be >= 0")
     model.swarm_results_ = []
     return model
+
+
+def _terms(r: "_Reader", raw: list, basis: str) -> list[tuple]:
+    """Terms as tuples, with the element types checked (no strings for numbers, no booleans)."""
+    out = []
+    for i, t in enumerate(raw):
+        ok = isinstance(t, list) and (
+            all(_is_int(k) for k in t) if basis == "polynomial"
+            else len(t) == 3 and t[0] in ("1", "cos", "sin") and _is_int(t[1]) and _is_int(t[2]))
+        if not ok:
+            r.fail(f"terms[{i}]", "expected a list of integer exponents" if basis == "polynomial"
+                   else "expected [\"1\"|\"cos\"|\"sin\", input, harmonic]")
+        out.append(tuple(t) if basis == "polynomial" else (t[0], int(t[1]), int(t[2])))
+    return out
+
+
+def _is_int(value) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def _check_plausible(r: "_Reader", model, n_in: int, limit_mm: float = 1e6) -> None:
+    """The model must predict finite errors under ``limit_mm`` at the corners and centre of its data box."""
+    locals_ = model.models_ if isinstance(model, PartitionedErrorModel) else [model]
+    lo = np.min([m.data_bounds_[0] for m in locals_], axis=0)
+    hi = np.max([m.data_bounds_[1] for m in locals_], axis=0)
+    corners = lo + (hi - lo) * ((np.arange(2 ** min(n_in, 10))[:, None] >> np.arange(n_in)) & 1)
+    with np.errstate(all="ignore"):
+        for k, local in enumerate(locals_):
+            pred = local._predict_trusted(np.vstack([corners, (lo + hi) / 2]))
+            if not np.all(np.isfinite(pred)) or np.abs(pred).max() > limit_mm:
+                where = "model.coef" if len(locals_) == 1 and not isinstance(model, PartitionedErrorModel) \
+                    else f"regions[{k}].coef"
+                worst = np.abs(pred).max() if np.all(np.isfinite(pred)) else "a non-finite value"
+                r.fail(where, f"predicts {worst} mm within the box of its data (limit {limit_mm:g} mm): "
+                              "the coefficients are damaged")
 
 
 class _Reader:
@@ -171,24 +270,64 @@ class _Reader:
         if key not in self.doc:
             self.fail(key, "missing")
         value = self.doc[key]
-        ok = isinstance(value, kind) and not (kind in (int, float) and isinstance(value, bool))
-        if kind is float and isinstance(value, int) and not isinstance(value, bool):
+        kinds = kind if isinstance(kind, tuple) else (kind,)
+        ok = isinstance(value, kinds) and not (isinstance(value, bool) and bool not in kinds)
+        if float in kinds and _is_int(value):
             ok, value = True, float(value)
         if not ok:
-            self.fail(key, f"expected {kind.__name__}; got {type(value).__name__}")
+            names = " or ".join("null" if k is type(None) else k.__name__ for k in kinds)
+            self.fail(key, f"expected {names}; got {type(value).__name__} {value!r}"[:200])
+        return value
+
+    def choice(self, key: str, allowed: tuple[str, ...]) -> str:
+        value = self.get(key, str)
+        if value not in allowed:
+            self.fail(key, f"expected one of {', '.join(map(repr, allowed))}; got {value!r}")
+        return value
+
+    def integer(self, key: str, low: int, high: int | None = None) -> int:
+        value = self.get(key, int)
+        if value < low or (high is not None and value > high):
+            self.fail(key, f"expected an integer in [{low}, {high if high is not None else 'inf'}]; got {value}")
+        return value
+
+    def number(self, key: str, low: float | None = None, high: float | None = None) -> float:
+        value = self.get(key, float)
+        if not np.isfinite(value) or (low is not None and value < low) or (high is not None and value > high):
+            self.fail(key, f"expected a finite number in [{low}, {high}]; got {value!r}")
         return value
 
     def sub(self, key: str, value: Any = None) -> "_Reader":
         doc = self.get(key, dict) if value is None else value
         return _Reader(doc, self.source, self.path(key) if value is None else key)
 
-    def array(self, key: str, shape: tuple) -> np.ndarray:
+    def array(self, key: str, shape: tuple, kind=float) -> np.ndarray:
+        """A nested list of ``kind`` (float: numbers, not strings or booleans; int; bool) of ``shape``.
+
+        ``None`` in ``shape`` accepts any size on that axis.
+        """
+        value = self.get(key, list)
+        check = {float: lambda v: isinstance(v, (int, float)) and not isinstance(v, bool),
+                 int: _is_int, bool: lambda v: isinstance(v, bool)}[kind]
+
+        def walk(v, depth):
+            if depth == len(shape):
+                if not check(v):
+                    self.fail(key, f"expected {kind.__name__} values; found {type(v).__name__} {v!r}"[:200])
+                return
+            if not isinstance(v, list):
+                self.fail(key, f"expected nested lists of shape {shape}; found {type(v).__name__}")
+            for item in v:
+                walk(item, depth + 1)
+
+        walk(value, 0)
         try:
-            arr = np.asarray(self.get(key, list), dtype=float)
+            arr = np.array(value, dtype=kind if kind is not int else np.intp)
         except (TypeError, ValueError):
-            self.fail(key, "expected an array of numbers")
-        if arr.shape != shape:
-            self.fail(key, f"expected finite numbers of shape {shape}; got shape {arr.shape}")
-        if not np.all(np.isfinite(arr)):
+            self.fail(key, f"expected a regular array of shape {shape}")
+        if arr.ndim != len(shape) or any(w is not None and w != a for w, a in zip(shape, arr.shape)):
+            want = tuple("n" if w is None else w for w in shape)
+            self.fail(key, f"expected shape {want}; got shape {arr.shape}")
+        if kind is float and not np.all(np.isfinite(arr)):
             self.fail(key, "holds a non-finite value (NaN or infinity)")
         return arr

@@ -48,6 +48,8 @@ def test_damaged_and_foreign_files_are_refused(tmp_path):
 
     def refused(doc, match):
         bad = tmp_path / "bad.json"
+        if isinstance(doc, dict):
+            doc = {k: v for k, v in doc.items() if k != "checksum"}    # edits on purpose: the field checks must hold
         bad.write_text(doc if isinstance(doc, str) else json.dumps(doc))
         with pytest.raises(ModelFileError, match=match):
             load_model(bad)
@@ -123,7 +125,9 @@ SEMANTIC = [
 @pytest.mark.parametrize("kind, path, value, message", SEMANTIC)
 def test_files_are_checked_for_meaning(saved, tmp_path, kind, path, value, message):
     bad = tmp_path / "bad.json"
-    bad.write_text(json.dumps(edited(saved[kind], path, value)))
+    doc = edited(saved[kind], path, value)
+    del doc["checksum"]             # an edit made on purpose: the meaning checks alone must catch it
+    bad.write_text(json.dumps(doc))
     with pytest.raises(ModelFileError, match="bad.json: field " + message):
         load_model(bad)
 
@@ -133,3 +137,15 @@ def test_the_saved_files_themselves_load(saved, tmp_path):
         path = tmp_path / f"{name}.json"
         path.write_text(json.dumps(doc))
         load_model(path)
+
+
+def test_a_number_changed_after_writing_is_refused_by_the_checksum(saved, tmp_path):
+    doc = edited(saved["global"], ["model", "coef", 0, 0], lambda v: v + 5.0)     # plausible, and wrong
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps(doc))
+    with pytest.raises(ModelFileError, match=r"bad.json: field 'checksum': does not match the content"):
+        load_model(bad)
+    del doc["checksum"]                                 # a deliberate edit: accepted, and used as written
+    bad.write_text(json.dumps(doc))
+    model, _ = load_model(bad)
+    assert model.coef_[0, 0] == saved["global"]["model"]["coef"][0][0] + 5.0

@@ -13,6 +13,7 @@ positions go out as ``(n, 3)`` arrays in mm. Radians live only inside.
 from __future__ import annotations
 
 import dataclasses
+import math
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -374,7 +375,8 @@ def robot_from_dict(spec: dict, source: str = "robot", lines: dict[str, int] | N
         raise ConfigError(f"{source}: {where}{f' (line {line})' if line else ''}: {msg}")
 
     def number(where: str, value) -> float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
+                or abs(value) > 1e300:
             fail(where, f"must be a finite number; got {value!r}")
         return float(value)
 
@@ -398,8 +400,11 @@ def robot_from_dict(spec: dict, source: str = "robot", lines: dict[str, int] | N
     n = spec["joints"]
     if not isinstance(n, int) or not 1 <= n <= MAX_JOINTS:
         fail("joints", f"must be an int in [1, {MAX_JOINTS}]; got {n!r}")
+    for key, kind in (("links", list), ("constraints_deg", (list, type(None)))):
+        if not isinstance(spec.get(key), kind):
+            fail(key, f"expected a list; got {spec.get(key)!r}"[:200])
     rows = []
-    for i, link in enumerate(spec["links"] or []):
+    for i, link in enumerate(spec["links"]):
         if not isinstance(link, dict) or set(link) != {"theta", "d", "a", "alpha"}:
             fail(f"links[{i}]", f"expected a mapping with theta, d, a, alpha; got {link!r}")
         try:
@@ -420,6 +425,8 @@ def robot_from_dict(spec: dict, source: str = "robot", lines: dict[str, int] | N
     tool = numbers("tool_mm", spec.get("tool_mm", [0, 0, 0]), (3,), "[x, y, z]")
     constraints = []
     for i, c in enumerate(spec.get("constraints_deg") or []):
+        if not isinstance(c, dict) or not isinstance(c.get("range"), list) or len(c["range"]) != 2:
+            fail(f"constraints_deg[{i}]", f"expected {{expr: 'q2 - q3', range: [low, high]}}; got {c!r}"[:200])
         try:
             _, coeffs = parse_theta(c["expr"], n)
             low, high = (number(f"constraints_deg[{i}].range", v) for v in c["range"])

@@ -9,6 +9,7 @@ model predicts bit for bit what the saved one did.
 
 from __future__ import annotations
 
+import hashlib
 import json
 from pathlib import Path
 from typing import Any
@@ -59,9 +60,24 @@ def _global_dict(m: ErrorModel) -> dict:
             "lstsq_rms": m.lstsq_rms_.tolist(), "rms_ratio": m.rms_ratio_}
 
 
+def checksum(doc: dict) -> str:
+    """SHA-256 of a model document without its ``checksum`` field (canonical JSON: sorted keys)."""
+    body = {k: v for k, v in doc.items() if k != "checksum"}
+    text = json.dumps(body, sort_keys=True, separators=(",", ":"))
+    return "sha256:" + hashlib.sha256(text.encode("utf-8")).hexdigest()
+
+
 def save_model(model, path: str | Path, **kwargs) -> None:
-    """Write a model file atomically (see :func:`model_to_dict` for the keywords)."""
-    text = json.dumps(model_to_dict(model, **kwargs), indent=1)
+    """Write a model file atomically (see :func:`model_to_dict` for the keywords).
+
+    The file carries a ``checksum`` of its content: a number changed by hand
+    (or by a damaged copy) is refused on loading instead of predicting
+    silently wrong errors. Delete the field to accept deliberate edits; the
+    meaning checks still apply.
+    """
+    doc = model_to_dict(model, **kwargs)
+    doc["checksum"] = checksum(doc)
+    text = json.dumps(doc, indent=1)
     with atomic_write(path) as handle:
         handle.write(text + "\n")
 
@@ -70,7 +86,9 @@ def load_model(path: str | Path) -> tuple[Any, dict]:
     """Read a model file; return ``(model, document)``. Raises :class:`ModelFileError`."""
     path = Path(path)
     try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
+        doc = json.loads(path.read_text(encoding="utf-8"), object_pairs_hook=_no_duplicates)
+    except _DuplicateKey as exc:
+        raise ModelFileError(f"{path}: field {exc.args[0]!r} appears twice in one object") from None
     except FileNotFoundError:
         raise ModelFileError(f"{path}: no such model file") from None
     except (OSError, UnicodeDecodeError) as exc:
@@ -78,6 +96,20 @@ def load_model(path: str | Path) -> tuple[Any, dict]:
     except json.JSONDecodeError as exc:
         raise ModelFileError(f"{path}: not a partcal model file (invalid JSON at line {exc.lineno}: {exc.msg})") from None
     return model_from_dict(doc, source=str(path)), doc
+
+
+class _DuplicateKey(Exception):
+    pass
+
+
+def _no_duplicates(pairs: list[tuple[str, Any]]) -> dict:
+    """JSON objects with a key twice are refused (the standard reader silently keeps the last)."""
+    out = {}
+    for key, value in pairs:
+        if key in out:
+            raise _DuplicateKey(key)
+        out[key] = value
+    return out
 
 
 def model_from_dict(doc: Any, source: str = "model") -> Any:
@@ -93,6 +125,9 @@ def model_from_dict(doc: Any, source: str = "model") -> Any:
     r = _Reader(doc, source, "")
     if r.get("format", str) != FORMAT:
         r.fail("format", f"expected {FORMAT!r}; this is not a partcal model file")
+    if "checksum" in doc and r.get("checksum", str) != checksum(doc):
+        r.fail("checksum", "does not match the content: the file was changed after partcal wrote it (delete "
+                           "this field to accept a deliberate edit)")
     version = r.get("version", int)
     if version != VERSION:
         r.fail("version", f"this partcal reads version {VERSION}; the file has version {version} "

@@ -107,6 +107,12 @@ def results_table(result) -> str:
     best = next(r for r in result.models if r.spec.name == result.best)
     lines.append(f"best by {result.config.cv_folds}-fold CV on the identification set: {best.spec.name} "
                  f"(CV 3-D RMS {best.cv_rms_3d:.3f} mm)")
+    regs = getattr(result, "registrations", {})
+    for reg in {id(r): r for r in regs.values()}.values():
+        sets = ", ".join(n for n, r in regs.items() if r is reg)
+        lines.append(f"tracker registration ({sets}): {reg.n_poses} poses, residual 3-D RMS {reg.rms_3d:.3f} mm, "
+                     f"max {reg.max_3d:.3f} mm, tool [{', '.join(f'{v:.3f}' for v in reg.tool_mm)}] mm "
+                     f"({'fitted' if reg.fit_tool else 'given'}), condition {reg.condition:.1f}")
     comp = [r for r in result.models if r.compensation]
     if comp:
         lines.append("")

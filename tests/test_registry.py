@@ -12,7 +12,7 @@ from conftest import ROOT
 from partcal import load_predictor, read_measurements
 from partcal.metrics import summary
 from partcal.study.config import load_config
-from partcal.study.outputs import write_run
+from partcal.study.outputs import metrics_document, write_run
 from partcal.study.registry import run
 
 DATA = ROOT / "data" / "sk120"
@@ -202,3 +202,108 @@ def test_cli_predict_and_compensate(small_run, tmp_path):
     assert header[-9:] == ["x_cmd", "y_cmd", "z_cmd"] + [f"q{j}_cmd" for j in range(1, 7)]
     res = cli("predict", str(out / "models" / "sdp-ai.json"), str(pts), "-o", str(tmp_path / "x.csv"))
     assert res.returncode == 2 and "column 'q1' is missing (expected columns q1,q2,q3,q4,q5,q6)" in res.stderr
+
+
+def tracker_files(tmp_path, rot, t, names=("identification", "test_rectangle")):
+    """The virtual SK120's data as a tracker would export them: measured points only, in a tracker frame
+    ``p_base = rot @ p + t``, semicolons, decimal commas, radians, metres, foreign column names."""
+    out = {}
+    for name in names:
+        m = read_measurements(DATA / f"{name}.csv")
+        seen = (m.measured_mm - t) @ rot
+        lines = ["stamp;" + ";".join(f"axis_{j}" for j in range(1, 7)) + ";smr_x;smr_y;smr_z;temp"]
+        for i, (q, p) in enumerate(zip(m.q_deg, seen)):
+            cells = [f"{i}"] + [repr(float(v)) for v in np.radians(q)] + [repr(float(v)) for v in p / 1000] + ["21.5"]
+            lines.append(";".join(c.replace(".", ",") for c in cells))
+        out[name] = tmp_path / f"{name}_tracker.csv"
+        out[name].write_text("\n".join(lines) + "\n")
+    return out
+
+
+TRACKER_FORMAT = """  format:
+    delimiter: ";"
+    decimal: ","
+    columns: {q1: axis_1, q2: axis_2, q3: axis_3, q4: axis_4, q5: axis_5, q6: axis_6,
+              x_meas: smr_x, y_meas: smr_y, z_meas: smr_z}
+    joint_unit: rad
+    length_unit: m
+"""
+
+
+def tracker_config(tmp_path, files, fmt=TRACKER_FORMAT, extra=""):
+    text = f"""name: tracked
+robot: motoman_sk120
+cv_folds: 3
+data:
+{fmt}  frame: tracker
+  identification: {files['identification']}
+  tests:
+    rectangle: {files['test_rectangle']}
+{extra}models:
+  - {{name: FDP(CI), degree: 1, solver: {{method: lstsq}}}}
+  - {{name: SDP(AI), inputs: joint, degree: 2, solver: {{method: lstsq}}}}
+"""
+    path = tmp_path / "configs" / "tracked.yaml"
+    path.parent.mkdir(exist_ok=True)
+    path.write_text(text)
+    return load_config(path)
+
+
+def test_a_tracker_run_recovers_the_known_frame_and_writes_reusable_base_frame_data(tmp_path):
+    from scipy.spatial.transform import Rotation
+
+    rot = Rotation.from_rotvec([0.4, -2.1, 1.3]).as_matrix()
+    t = np.array([3500.0, -1200.0, 800.0])
+    base = tmp_path / "base"
+    base.mkdir()
+    plain = tracker_files(base, np.eye(3), np.zeros(3))        # the same data, measured in the base frame
+    ref = run(tracker_config(base, plain))
+    moved = tracker_files(tmp_path, rot, t)
+    result = run(tracker_config(tmp_path, moved))
+    out = write_run(result)
+    doc = json.loads((out / "metrics.json").read_text())
+    reg, ref_reg = doc["registration"], ref.registrations["identification"]
+    # p_base = R_ref (rot p + t) + t_ref: the known frame composed with the base-frame data's own registration
+    expected_rot = ref_reg.rotation @ rot
+    np.testing.assert_allclose(Rotation.from_rotvec(reg["rotation_deg"], degrees=True).as_matrix(), expected_rot,
+                               atol=1e-9)
+    np.testing.assert_allclose(reg["translation_mm"], ref_reg.rotation @ t + ref_reg.translation_mm, atol=1e-6)
+    np.testing.assert_allclose(reg["tool_mm"], ref_reg.tool_mm, atol=1e-6)
+    assert reg["shared_by"] == ["identification", "rectangle"] and "own" not in reg and reg["n"] == 85
+    assert reg["rms_3d"] == pytest.approx(ref_reg.rms_3d, abs=1e-9) and reg["condition"] < 100
+    for name, m in result.datasets.items():      # same optimum, up to the solver's tolerance
+        np.testing.assert_allclose(m.errors_mm, ref.datasets[name].errors_mm, atol=1e-5)
+    assert np.all(np.abs(result.datasets["rectangle"].errors_mm).max(axis=0) < 50)     # mm, not metres
+    assert result.robot.tool_mm.tolist() == list(reg["tool_mm"])
+    assert json.loads((out / "models" / "sdp-ai.json").read_text())["robot"]["tool_mm"] == reg["tool_mm"]
+    # the registered data, in the contract, reproduce the run's errors when read back as they are
+    for name in ("identification", "rectangle"):
+        back = read_measurements(out / "data" / f"{name}.csv")
+        np.testing.assert_allclose(back.errors_mm, result.datasets[name].errors_mm, atol=2e-6)
+        np.testing.assert_allclose(back.q_deg, result.datasets[name].q_deg, atol=1e-6)
+    assert "registered on the identification set (85 poses" in (out / "data" / "rectangle.csv").read_text()
+
+
+def test_a_test_set_from_another_tracker_position_gets_its_own_frame(tmp_path, caplog):
+    from scipy.spatial.transform import Rotation
+
+    files = tracker_files(tmp_path, Rotation.from_rotvec([0, 0, 1.0]).as_matrix(), np.array([2000.0, 0, 0]))
+    (tmp_path / "moved").mkdir()
+    files.update(tracker_files(tmp_path / "moved", Rotation.from_rotvec([0, 0, -2.0]).as_matrix(),
+                               np.array([0.0, 3000, 0]), names=("test_rectangle",)))
+    with caplog.at_level("WARNING"):
+        shared = run(tracker_config(tmp_path, files))
+    assert shared.uncompensated["rectangle"]["rms_3d"] > 1000               # the wrong frame: metres off
+    assert "test set 'rectangle'" in caplog.text and "was the tracker moved?" in caplog.text
+    cfg = tracker_config(tmp_path, files)
+    text = cfg.source.read_text().replace(f"rectangle: {files['test_rectangle']}",
+                                          f"rectangle: {{file: {files['test_rectangle']}, registration: own}}")
+    cfg.source.write_text(text)
+    result = run(load_config(cfg.source))
+    own = result.registrations["rectangle"]
+    ident = result.registrations["identification"]
+    assert own is not ident and not own.fit_tool and own.tool_mm.tolist() == ident.tool_mm.tolist()
+    assert result.uncompensated["rectangle"]["rms_3d"] == pytest.approx(own.rms_3d, rel=1e-9)
+    assert result.uncompensated["rectangle"]["rms_3d"] < 30
+    doc = json.loads(json.dumps(metrics_document(result)))
+    assert doc["registration"]["shared_by"] == ["identification"] and list(doc["registration"]["own"]) == ["rectangle"]

@@ -82,7 +82,23 @@ def context(result: RunResult) -> dict:
         "equations": [{"name": r.spec.name, "lines": r.model.equations(input_names=None, precision=4)}
                       for r in result.models if isinstance(r.model, ErrorModel)],
         **compensation_entries(result),
+        "registration": registration_rows(result),
     }
+
+
+def registration_rows(result: RunResult) -> list[dict]:
+    """One row per tracker registration of the run (none when the data were in the base frame)."""
+    regs = result.registrations
+    rows = []
+    for reg in {id(r): r for r in regs.values()}.values():
+        sets = [name for name, r in regs.items() if r is reg]
+        rows.append({"sets": ", ".join(sets), "fitted_on": "identification" if "identification" in sets else sets[0],
+                     "n": reg.n_poses, "rms": reg.rms_3d, "max": reg.max_3d, "condition": reg.condition,
+                     "rotation": " ".join(f"{v:.4f}" for v in reg.rotation_deg),
+                     "translation": " ".join(f"{v:.2f}" for v in reg.translation_mm),
+                     "tool": " ".join(f"{v:.3f}" for v in reg.tool_mm),
+                     "tool_how": "fitted" if reg.fit_tool else "given"})
+    return rows
 
 
 def granularity_rows(result: RunResult) -> list[dict]:

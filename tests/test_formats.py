@@ -67,9 +67,12 @@ def test_a_mapped_column_wins_over_an_unmapped_one_of_the_contract_name(tmp_path
     ({"decimal": ",", "delimiter": ";"}, CONTRACT.replace(",", ";") + "1;2;0;0;0;1_0;4;5\n",
      r"f.csv:2: column 'x_meas': expected a finite number, got '1_0'"),
     ({"columns": {"q1": "axis_1"}}, "axis_1;q2;x_nom;y_nom;z_nom;x_meas;y_meas;z_meas\n1;2;0;0;0;3;4;5\n",
-     r"f.csv:1: column 'axis_1' is missing \(the format maps q1 to it\); the header has one column containing "
-     r"';': is the delimiter ';'\?"),
-    ({"delimiter": ";"}, CONTRACT + "1,2,0,0,0,3,4,5\n", r"f.csv:1: no joint columns"),
+     r"f.csv:1: the header is one column containing ';', but the delimiter is ',': is it ';'\? \(set the format's "
+     r"delimiter\)"),
+    ({"delimiter": ";"}, CONTRACT + "1,2,0,0,0,3,4,5\n", r"f.csv:1: the header is one column containing ',', but the "
+                                                         r"delimiter is ';'"),
+    ({"delimiter": "|"}, "q1;q2\n1;2\n", r"f.csv:1: the header is one column containing ';'"),
+    ({"delimiter": ";"}, "q1 q2 x_meas\n1 2 3\n", r"f.csv:1: no joint columns"),
     ({"columns": {"z_meas": "Z"}}, CONTRACT.replace("z_meas", "Z").replace("y_meas", "Y") + "1,2,0,0,0,3,4,5\n",
      r"f.csv:1: column 'y_meas' is missing \(required: x_meas, y_meas, Z\)"),
 ])

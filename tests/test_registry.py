@@ -307,3 +307,55 @@ def test_a_test_set_from_another_tracker_position_gets_its_own_frame(tmp_path, c
     assert result.uncompensated["rectangle"]["rms_3d"] < 30
     doc = json.loads(json.dumps(metrics_document(result)))
     assert doc["registration"]["shared_by"] == ["identification"] and list(doc["registration"]["own"]) == ["rectangle"]
+
+
+def test_cli_predict_and_compensate_read_a_foreign_format(small_run, tmp_path):
+    _, out = small_run
+    m = read_measurements(DATA / "test_rectangle.csv")
+    pts = tmp_path / "points.csv"
+    pts.write_text("id;X [m];Y [m];Z [m]\n" + "\n".join(
+        f"{i};" + ";".join(repr(float(v)).replace(".", ",") for v in p / 1000) for i, p in enumerate(m.nominal_mm[:10])))
+    fmt = tmp_path / "fmt.yaml"
+    fmt.write_text('delimiter: ";"\ndecimal: ","\nlength_unit: m\ncolumns: {x: "X [m]", y: "Y [m]", z: "Z [m]"}\n')
+    res = cli("predict", str(out / "models" / "fdp-ci.json"), str(pts), "-o", str(tmp_path / "p.csv"), "--format", str(fmt))
+    assert res.returncode == 0, res.stderr
+    with open(tmp_path / "p.csv") as handle:
+        rows = list(csv.DictReader(handle))
+    assert list(rows[0]) == ["x", "y", "z", "dx", "dy", "dz"]                  # the contract's names and units
+    np.testing.assert_allclose([[float(r[k]) for k in "xyz"] for r in rows], m.nominal_mm[:10], atol=1e-6)
+    expected = load_predictor(out / "models" / "fdp-ci.json").predict(positions=m.nominal_mm[:10])
+    np.testing.assert_allclose([[float(r[k]) for k in ("dx", "dy", "dz")] for r in rows], expected, atol=1e-6)
+    res = cli("compensate", str(out / "models" / "fdp-ci.json"), str(pts), "-o", str(tmp_path / "c.csv"),
+              "--format", str(fmt))
+    assert res.returncode == 0, res.stderr
+    res = cli("predict", str(out / "models" / "fdp-ci.json"), str(pts), "-o", str(tmp_path / "p.csv"))
+    assert res.returncode == 2 and "points.csv:1: the header is one column containing ';'" in res.stderr
+    fmt.write_text('delimiter: ";"\ndecimal: ";"\n')
+    res = cli("predict", str(out / "models" / "fdp-ci.json"), str(pts), "-o", str(tmp_path / "p.csv"), "--format", str(fmt))
+    assert res.returncode == 2 and res.stderr.count("\n") == 1
+    assert "fmt.yaml: decimal (line 2): must be '.' or ','; got ';'" in res.stderr
+
+
+def test_cli_import_config_writes_the_runs_data_without_fitting(tmp_path):
+    from scipy.spatial.transform import Rotation
+
+    files = tracker_files(tmp_path, Rotation.from_rotvec([0.1, 0.2, 0.3]).as_matrix(), np.array([100.0, 200, 300]))
+    cfg = tracker_config(tmp_path, files)
+    res = cli("import", "--config", str(cfg.source), "-o", str(tmp_path / "converted"))
+    assert res.returncode == 0, res.stderr
+    assert "tracker registration (identification, rectangle): 85 poses" in res.stdout
+    assert "wrote 2 data sets (identification: 85, rectangle: 200)" in res.stdout
+    result = run(cfg)
+    out = write_run(result)
+    for name in ("identification", "rectangle"):
+        assert (tmp_path / "converted" / f"{name}.csv").read_bytes() == (out / "data" / f"{name}.csv").read_bytes()
+    res = cli("import", "--config", str(cfg.source))
+    assert res.returncode == 2 and "import --config: give the output folder with -o FOLDER" in res.stderr
+    few = cfg.source.read_text().replace(f"identification: {files['identification']}",
+                                         f"identification: {{file: {files['identification']}, rows: '1-3'}}")
+    cfg.source.write_text(few)
+    res = cli("run", str(cfg.source), "-q")
+    assert res.returncode == 2 and res.stderr.count("\n") == 1 and "Traceback" not in res.stderr
+    assert "identification_tracker.csv (identification): a tracker registration with the tool needs at least 4 poses " \
+           "(9 parameters); got 3" in res.stderr
+    assert (out / "metrics.json").exists()                      # the earlier results stay

@@ -190,6 +190,9 @@ def _table(path: Path, expected: str, fmt: MeasurementFormat = _CONTRACT
     if not rows:
         raise DataError(f"{path}: empty file: expected a header line such as '{expected}'")
     line, names = rows[0][0], [h.strip() for h in rows[0][1]]
+    hint = _delimiter_hint(names, fmt)
+    if hint:        # no measurement file has a single column: the delimiter is wrong
+        raise DataError(f"{path}:{line}: {hint}")
     position: dict[str, int] = {}
     for i, col in enumerate(names):
         if col in position:
@@ -199,8 +202,7 @@ def _table(path: Path, expected: str, fmt: MeasurementFormat = _CONTRACT
     labels = [repr(col) for col in names]
     for contract, column in fmt.columns.items():
         if column not in position:
-            raise DataError(f"{path}:{line}: column {column!r} is missing (the format maps {contract} to it)"
-                            f"{_delimiter_hint(names, fmt)}")
+            raise DataError(f"{path}:{line}: column {column!r} is missing (the format maps {contract} to it)")
         seen[contract] = position[column]
         labels[position[column]] = fmt.label(contract)
     return line, labels, seen, rows[1:]
@@ -211,7 +213,8 @@ def _delimiter_hint(names: list[str], fmt: MeasurementFormat) -> str:
     if len(names) == 1:
         for other in (";", ",", "\t", "|"):
             if other != fmt.delimiter and other in names[0]:
-                return f"; the header has one column containing {other!r}: is the delimiter {other!r}?"
+                return (f"the header is one column containing {other!r}, but the delimiter is {fmt.delimiter!r}: "
+                        f"is it {other!r}? (set the format's delimiter)")
     return ""
 
 

@@ -119,37 +119,42 @@ def _write_all(result: RunResult, folder: Path) -> None:
         for name, m in result.datasets.items():
             _write_predictions(pred_dir / f"{name}.csv", m, r.predictions[name])
     if cfg.data_options.converted:
-        write_datasets(result, folder / "data")
+        write_datasets(cfg, result.datasets, result.registrations, folder / "data")
     (folder / "metrics.json").write_text(json.dumps(metrics_document(result), indent=1) + "\n")
     resolved = {"partcal_version": __version__, **cfg.resolved()}
     (folder / "config.resolved.yaml").write_text(yaml.safe_dump(resolved, sort_keys=False))
 
 
-def write_datasets(result: RunResult, folder: Path) -> list[Path]:
-    """The run's data sets as contract CSVs (degrees, mm, base frame): ``folder/<data set>.csv``.
+def write_datasets(config, datasets: dict, registrations: dict, folder: Path) -> list[Path]:
+    """Data sets as contract CSVs (degrees, mm, base frame): ``folder/<data set>.csv``.
 
-    Written when the run converted its data (a format, a row subset or a
-    tracker registration), so the converted data can be reused as they are.
+    A run writes them when it converted its data (a format, a row subset or a
+    tracker registration), so the converted data can be reused as they are;
+    ``partcal import --config`` writes them without fitting anything. Each
+    file is written atomically; a header comment says where it came from.
     """
-    cfg, opts = result.config, result.config.data_options
+    opts = config.data_options
     folder.mkdir(parents=True, exist_ok=True)
     paths = []
-    for name, m in result.datasets.items():
-        source = cfg.identification if name == "identification" else cfg.tests[name]
-        lines = [f"{name} of run {cfg.name!r} (partcal {__version__}), converted to degrees and mm from {source}"]
+    for name, m in datasets.items():
+        source = config.identification if name == "identification" else config.tests[name]
+        lines = [f"{name} of run {config.name!r} (partcal {__version__}), converted to degrees and mm from {source}"]
         if name in opts.rows:
             lines.append(f"data rows {opts.rows[name].text or 'all'}, every {opts.rows[name].every}")
-        if name in result.registrations:
-            reg = result.registrations[name]
-            how = "registered on this set" if reg is not result.registrations["identification"] else \
-                "registered on the identification set"
-            lines.append(f"base frame: tracker frame {how} ({reg.n_poses} poses, RMS {reg.rms_3d:.4f} mm); "
-                         f"rotation vector {_triple(reg.rotation_deg)} deg, translation {_triple(reg.translation_mm)} mm, "
-                         f"tool {_triple(reg.tool_mm)} mm in the flange frame")
+        if name in registrations:
+            lines.append(registration_comment(registrations[name], registrations[name] is registrations["identification"]))
         path = folder / f"{name}.csv"
         write_measurements(m, path, comment="\n".join(lines))
         paths.append(path)
     return paths
+
+
+def registration_comment(reg, shared: bool) -> str:
+    """One line on a registration for the header of a converted CSV."""
+    how = "registered on the identification set" if shared else "registered on this set"
+    return (f"base frame: tracker frame {how} ({reg.n_poses} poses, RMS {reg.rms_3d:.4f} mm); rotation vector "
+            f"{_triple(reg.rotation_deg)} deg, translation {_triple(reg.translation_mm)} mm, tool "
+            f"{_triple(reg.tool_mm)} mm in the flange frame")
 
 
 def _triple(values) -> str:

@@ -165,11 +165,24 @@ def family_sentences(result: RunResult) -> list[str]:
         best = min(members, key=lambda r: r.cv_rms_3d)
         before = np.mean([result.uncompensated[n]["rms_3d"] for n in tests])
         after = np.mean([best.metrics[n]["rms_3d"] for n in tests])
-        cuts = [100 * (1 - best.metrics[n]["rms_3d"] / result.uncompensated[n]["rms_3d"]) for n in tests]
+        changes = [100 * (best.metrics[n]["rms_3d"] / result.uncompensated[n]["rms_3d"] - 1) for n in tests]
         out.append(f"{family} ({len(members)}): the best by CV, {best.spec.name}, brings the mean 3-D RMS on "
                    f"{'the test sets' if tests != ['identification'] else 'the identification set'} from "
-                   f"{before:.2f} to {after:.2f} mm ({min(cuts):.0f}–{max(cuts):.0f}% less).")
+                   f"{before:.2f} to {after:.2f} mm ({_change_text(changes)}).")
     return out
+
+
+def _change_text(changes: list[float]) -> str:
+    """``"12–40% less"``, ``"5% more"`` or ``"from 13% less to 95% more"`` for per-set changes in percent."""
+    lo, hi = min(changes), max(changes)
+
+    def one(v):
+        return f"{abs(v):.0f}% {'less' if v < 0 else 'more'}"
+    if hi < 0:
+        return f"{-hi:.0f}–{-lo:.0f}% less" if round(lo) != round(hi) else one(lo)
+    if lo >= 0:
+        return f"{lo:.0f}–{hi:.0f}% more" if round(lo) != round(hi) else one(hi)
+    return f"from {one(lo)} to {one(hi)}"
 
 
 def scene_entries(result: RunResult) -> list[dict]:

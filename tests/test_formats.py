@@ -171,3 +171,6 @@ def test_tracker_frame_needs_a_robot_and_refuses_nominal_columns(tmp_path):
     six = write(tmp_path, "q1,q2,q3,q4,q5,q6,x_nom,y_nom,z_nom,x_meas,y_meas,z_meas\n" + "0," * 11 + "0\n", "six.csv")
     with pytest.raises(DataError, match=r"six.csv:1: column 'x_nom': with frame: tracker the nominal positions"):
         read_measurements(six, "motoman_sk120", frame="tracker")
+    with pytest.raises(DataError, match=r"The 'frame' parameter of read_measurements must be 'base' or 'tracker'\. "
+                                        r"Got 'Tracker' instead"):
+        read_measurements(six, "motoman_sk120", frame="Tracker")

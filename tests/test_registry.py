@@ -284,6 +284,19 @@ def test_a_tracker_run_recovers_the_known_frame_and_writes_reusable_base_frame_d
     assert "registered on the identification set (85 poses" in (out / "data" / "rectangle.csv").read_text()
 
 
+def test_a_given_tool_is_used_as_it_is(tmp_path):
+    files = tracker_files(tmp_path, np.eye(3), np.array([0.0, 0, 1000]))
+    result = run(tracker_config(tmp_path, files, extra="registration: {tool_mm: [205, 0, 113], fit_tool: false}\n"))
+    doc = metrics_document(result)
+    assert doc["registration"]["tool_mm"] == [205.0, 0.0, 113.0] and doc["registration"]["fit_tool"] is False
+    assert result.robot.tool_mm.tolist() == [205.0, 0.0, 113.0]
+    from partcal import load_robot
+
+    given = load_robot("motoman_sk120").replace(tool_mm=np.array([205.0, 0.0, 113.0]))
+    nominal = given.positions(result.datasets["identification"].q_deg)              # FK with the given tool
+    np.testing.assert_allclose(result.datasets["identification"].nominal_mm, nominal, atol=1e-9)
+
+
 def test_a_test_set_from_another_tracker_position_gets_its_own_frame(tmp_path, caplog):
     from scipy.spatial.transform import Rotation
 

@@ -121,6 +121,8 @@ def read_measurements(path: str | Path, robot: str | Robot | None = None, *, nam
     DataError
         For any malformed content, naming the file, line and column.
     """
+    if frame not in ("base", "tracker"):
+        raise DataError(f"The 'frame' parameter of read_measurements must be 'base' or 'tracker'. Got {frame!r} instead.")
     path = Path(path)
     fmt = fmt or _CONTRACT
     line, header, seen, data = _table(path, "q1,...,x_meas,y_meas,z_meas", fmt)

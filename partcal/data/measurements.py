@@ -122,7 +122,8 @@ def read_measurements(path: str | Path, robot: str | Robot | None = None, *, nam
         For any malformed content, naming the file, line and column.
     """
     if frame not in ("base", "tracker"):
-        raise DataError(f"The 'frame' parameter of read_measurements must be 'base' or 'tracker'. Got {frame!r} instead.")
+        raise DataError(f"The 'frame' parameter of read_measurements must be 'base' or 'tracker'. "
+                        f"Got {frame!r} instead.")
     path = Path(path)
     fmt = fmt or _CONTRACT
     line, header, seen, data = _table(path, "q1,...,x_meas,y_meas,z_meas", fmt)

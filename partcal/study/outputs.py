@@ -23,6 +23,7 @@ from ..data.measurements import write_measurements
 from ..errors import PartcalError
 from ..robot.kinematics import joint_columns
 from .persist import save_model
+from .config import RunConfig
 from .registry import RunResult
 
 log = logging.getLogger(__name__)
@@ -125,7 +126,7 @@ def _write_all(result: RunResult, folder: Path) -> None:
     (folder / "config.resolved.yaml").write_text(yaml.safe_dump(resolved, sort_keys=False))
 
 
-def write_datasets(config, datasets: dict, registrations: dict, folder: Path) -> list[Path]:
+def write_datasets(config: RunConfig, datasets: dict, registrations: dict, folder: Path) -> list[Path]:
     """Data sets as contract CSVs (degrees, mm, base frame): ``folder/<data set>.csv``.
 
     A run writes them when it converted its data (a format, a row subset or a
@@ -142,7 +143,8 @@ def write_datasets(config, datasets: dict, registrations: dict, folder: Path) ->
         if name in opts.rows:
             lines.append(f"data rows {opts.rows[name].text or 'all'}, every {opts.rows[name].every}")
         if name in registrations:
-            lines.append(registration_comment(registrations[name], registrations[name] is registrations["identification"]))
+            reg = registrations[name]
+            lines.append(registration_comment(reg, shared=reg is registrations["identification"]))
         path = folder / f"{name}.csv"
         write_measurements(m, path, comment="\n".join(lines))
         paths.append(path)

@@ -18,6 +18,8 @@ _EXPORTS = {
     "errors": ["ConfigError", "DataError", "ModelFileError", "PartcalError", "UnreachableError"],
     "robot.kinematics": ["Robot", "available_robots", "load_robot"],
     "data.measurements": ["Measurements", "read_measurements", "write_measurements"],
+    "data.formats": ["MeasurementFormat", "RowSelection", "load_format"],
+    "data.registration": ["Registration", "register_tracker"],
     "metrics": ["ExtrapolationWarning", "cross_validated_rms", "rms_per_axis", "summary"],
     "models.series": ["ErrorModel"],
     "models.swarm": ["SwarmConfig", "SwarmResult", "minimize", "minimize_batch"],

@@ -80,7 +80,7 @@ def _cmd_run(args) -> int:
     if args.check:
         from .study.registry import check_run, load_datasets
 
-        data, _ = load_datasets(config)
+        data, _, _ = load_datasets(config)
         check_run(config, data)
         sizes = ", ".join(f"{name} {len(m)}" for name, m in data.items())
         print(f"{args.config}: OK: {len(config.models)} models; data sets (poses): {sizes}; nothing fitted")
@@ -119,6 +119,9 @@ def results_table(result) -> str:
     rule = "validation 3-D RMS" if result.config.rank_by == "validation" else "CV 3-D RMS"
     lines.append(f"best: {best.spec.name} ({rule} {best.score(result.config.rank_by):.3f} mm), chosen by the "
                  f"{result.best_reason}")
+    regs = result.registrations
+    for reg in {id(r): r for r in regs.values()}.values():
+        lines.append(_registration_line(reg, [n for n, r in regs.items() if r is reg]))
     comp = [r for r in result.models if r.compensation]
     if comp:
         lines.append("")
@@ -137,11 +140,12 @@ def _cmd_predict(args) -> int:
     from .study.predictor import load_predictor
 
     predictor = load_predictor(args.model)
+    fmt = _format(args)
     if predictor.inputs == "cartesian":
-        cols, X, _ = read_columns(args.input, [["x", "y", "z"], ["x_nom", "y_nom", "z_nom"]])
+        cols, X, _ = read_columns(args.input, [["x", "y", "z"], ["x_nom", "y_nom", "z_nom"]], fmt=fmt)
         errors = predictor.predict(positions=X)
     else:
-        cols, X, _ = read_columns(args.input, [joint_columns(predictor.n_inputs)])
+        cols, X, _ = read_columns(args.input, [joint_columns(predictor.n_inputs)], fmt=fmt)
         errors = predictor.predict(joints=X)
     _write_table(args.output, cols + ["dx", "dy", "dz"], np.hstack([X, errors]), atomic_write)
     far = predictor.distance_to_data(**({"positions": X} if predictor.inputs == "cartesian" else {"joints": X}))
@@ -165,7 +169,7 @@ def _cmd_compensate(args) -> int:
     predictor = load_predictor(args.model)
     n_q = predictor.robot.n_joints if predictor.robot is not None else 0
     optional = joint_columns(n_q) if predictor.inputs == "joint" else []
-    cols, targets, seeds = read_columns(args.targets, [["x", "y", "z"]], optional)
+    cols, targets, seeds = read_columns(args.targets, [["x", "y", "z"]], optional, fmt=_format(args))
     with warnings.catch_warnings():       # exit code 3 and one line below say it instead
         warnings.simplefilter("ignore", CompensationWarning)
         result = predictor.compensate_full(targets, seeds)
@@ -189,6 +193,74 @@ def _cmd_compensate(args) -> int:
         return 3
     print(f"compensated {len(targets)} targets (all converged): {args.output}")
     return 0
+
+
+def _format(args):
+    """The ``--format FILE.yaml`` of a command, or None for the contract."""
+    if not getattr(args, "format", None):
+        return None
+    from .data.formats import load_format
+
+    return load_format(args.format)
+
+
+def _cmd_import(args) -> int:
+    if (args.input is None) == (args.config is None):
+        raise PartcalError("import: give either an input file or --config RUN.yaml (not both)")
+    if args.config is not None:
+        return _import_run(args)
+    import numpy as np
+
+    from .data.formats import RowSelection
+    from .data.measurements import read_measurements, write_measurements
+    from .data.registration import register_tracker, registered
+    from .robot.kinematics import load_robot
+
+    if args.output is None:
+        raise PartcalError("import: give the CSV to write with -o OUT.csv")
+    if args.frame == "tracker" and not args.robot:
+        raise PartcalError("import: --frame tracker needs --robot (a built-in name or a robot YAML)")
+    rows = RowSelection.parse(args.rows, args.every) if (args.rows or args.every != 1) else None
+    robot = load_robot(args.robot) if args.robot else None
+    m = read_measurements(args.input, robot, fmt=_format(args), rows=rows, frame=args.frame)
+    lines = [f"imported from {args.input} by partcal {__version__}: degrees, mm"]
+    if args.frame == "tracker":
+        reg = register_tracker(robot, m.q_deg, m.measured_mm, tool_mm=args.tool_mm, fit_tool=args.tool_mm is None,
+                               source=str(args.input))
+        m = registered(m, robot, reg)
+        from .study.outputs import registration_comment
+
+        lines.append(registration_comment(reg, shared=False))
+        print(_registration_line(reg))
+    write_measurements(m, args.output, comment="\n".join(lines))
+    rms = float(np.sqrt(np.mean(np.sum(m.errors_mm**2, axis=1))))
+    print(f"wrote {len(m)} poses to {args.output} (errors: 3-D RMS {rms:.3f} mm)")
+    return 0
+
+
+def _import_run(args) -> int:
+    from pathlib import Path
+
+    from .study.config import load_config
+    from .study.outputs import write_datasets
+    from .study.registry import load_datasets
+
+    if args.output is None:
+        raise PartcalError("import --config: give the output folder with -o FOLDER")
+    config = load_config(args.config)
+    datasets, _, registrations = load_datasets(config)
+    for reg in {id(r): r for r in registrations.values()}.values():
+        print(_registration_line(reg, [n for n, r in registrations.items() if r is reg]))
+    paths = write_datasets(config, datasets, registrations, Path(args.output))
+    print(f"wrote {len(paths)} data sets ({', '.join(f'{n}: {len(m)}' for n, m in datasets.items())}) to {args.output}")
+    return 0
+
+
+def _registration_line(reg, sets=None) -> str:
+    where = f" ({', '.join(sets)})" if sets else ""
+    return (f"tracker registration{where}: {reg.n_poses} poses, residual 3-D RMS {reg.rms_3d:.3f} mm, max "
+            f"{reg.max_3d:.3f} mm, tool [{', '.join(f'{v:.3f}' for v in reg.tool_mm)}] mm "
+            f"({'fitted' if reg.fit_tool else 'given'}), condition {reg.condition:.1f}")
 
 
 def _write_table(path, header, values, atomic_write, flags=None) -> None:
@@ -233,6 +305,8 @@ def build_parser() -> argparse.ArgumentParser:
     pred.add_argument("model", help="model file (models/<name>.json of a run)")
     pred.add_argument("input", help="CSV with x,y,z (mm) for Cartesian models or q1..qN (deg) for joint models")
     pred.add_argument("-o", "--output", required=True, help="CSV to write (inputs + dx,dy,dz)")
+    pred.add_argument("--format", metavar="FILE.yaml", help="the input's format (delimiter, decimal, columns, "
+                                                            "units), see docs/data.md")
     pred.set_defaults(func=_cmd_predict)
     comp = sub.add_parser("compensate", help="false targets that make the robot reach the given targets")
     comp.add_argument("model", help="model file (models/<name>.json of a run)")
@@ -240,6 +314,8 @@ def build_parser() -> argparse.ArgumentParser:
     comp.add_argument("-o", "--output", required=True,
                       help="CSV to write (targets + x_cmd,y_cmd,z_cmd[,qK_cmd],converged); exit code 3 when any "
                            "target did not converge")
+    comp.add_argument("--format", metavar="FILE.yaml", help="the targets' format (delimiter, decimal, columns, "
+                                                            "units), see docs/data.md")
     comp.set_defaults(func=_cmd_compensate)
     eqs = sub.add_parser("equations", help="print a series model's fitted equations in mm and degrees")
     eqs.add_argument("model", help="model file (models/<name>.json of a run)")
@@ -247,6 +323,20 @@ def build_parser() -> argparse.ArgumentParser:
                      help="round to this many significant digits (default: full precision, which reproduces "
                           "the model's predictions)")
     eqs.set_defaults(func=_cmd_equations)
+    imp = sub.add_parser("import", help="convert a foreign measurement file (or a run's data) into contract CSVs")
+    imp.add_argument("input", nargs="?", help="the file to convert (or use --config)")
+    imp.add_argument("-o", "--output", help="CSV to write; with --config, the folder for <data set>.csv")
+    imp.add_argument("--format", metavar="FILE.yaml", help="the input's format, see docs/data.md")
+    imp.add_argument("--robot", help="robot (built-in name or YAML) for nominal positions by forward kinematics")
+    imp.add_argument("--frame", choices=("base", "tracker"), default="base",
+                     help="tracker: register the file's tracker frame (and tool offset) on its own poses")
+    imp.add_argument("--tool-mm", nargs=3, type=float, metavar=("X", "Y", "Z"),
+                     help="with --frame tracker: the known target offset in the flange frame (not fitted then)")
+    imp.add_argument("--rows", help="data rows to keep, e.g. '1-600' or '1-100, 201-300'")
+    imp.add_argument("--every", type=int, default=1, help="keep every k-th of the rows")
+    imp.add_argument("--config", metavar="RUN.yaml",
+                     help="convert the data of a run config (format, subsets, registration) without fitting")
+    imp.set_defaults(func=_cmd_import)
     return parser
 
 

@@ -127,7 +127,7 @@ def test_data_problems_are_found_before_any_fit(tmp_path, case, message):
     text = BASE.replace(str(DATA / "identification.csv"), str(data_file(tmp_path, rows)))
     text = text.replace("    degree: 2\n", "    degree: 2\n    inputs: cartesian\n") if case == "constant" else text
     cfg = load_config(write(tmp_path, text))
-    data, _ = load_datasets(cfg)
+    data, _, _ = load_datasets(cfg)
     with pytest.raises(ConfigError, match=message):
         check_run(cfg, data)
 
@@ -136,3 +136,81 @@ def test_a_nan_width_used_to_pass(tmp_path):
     # range checks compared NaN with < and >, which are both False: NaN slipped through
     with pytest.raises(ConfigError, match="must be a finite number; got nan"):
         load_config(write(tmp_path, BASE.replace("{method: hard}", "{method: gaussian, width: .nan}")))
+
+
+TRACKER = f"""name: real
+robot: universal_robots_ur10
+data:
+  format:
+    delimiter: ";"
+    decimal: ","
+    columns: {{q1: j1, x_meas: mx}}
+    joint_unit: rad
+    length_unit: m
+  frame: tracker
+  identification: {{file: {DATA / 'identification.csv'}, rows: "1-40", every: 2}}
+  tests:
+    same: {DATA / 'test_rectangle.csv'}
+    moved: {{file: {DATA / 'test_spiral_xy.csv'}, registration: own}}
+registration: {{tool_mm: [0, 0.5, 93], fit_tool: false}}
+models:
+  - {{name: FDP, solver: {{method: lstsq}}}}
+"""
+
+
+def test_format_frame_rows_and_registration(tmp_path):
+    import yaml
+
+    from partcal.data.formats import MeasurementFormat, RowSelection
+
+    cfg = load_config(write(tmp_path, TRACKER))
+    opts = cfg.data_options
+    assert opts.format == MeasurementFormat(delimiter=";", decimal=",", columns={"q1": "j1", "x_meas": "mx"},
+                                            joint_unit="rad", length_unit="m")
+    assert opts.frame == "tracker" and opts.own_frame == ("moved",)
+    assert opts.rows == {"identification": RowSelection(((1, 40),), 2)}
+    assert opts.tool_mm == (0.0, 0.5, 93.0) and opts.fit_tool is False and opts.converted
+    assert cfg.identification == DATA / "identification.csv" and cfg.tests["moved"] == DATA / "test_spiral_xy.csv"
+    resolved = yaml.safe_load(yaml.safe_dump(cfg.resolved()))
+    assert resolved["data_options"]["rows"] == {"identification": {"rows": "1-40", "every": 2}}
+    assert resolved["data_options"]["registration"] == {"tool_mm": [0.0, 0.5, 93.0], "fit_tool": False}
+    plain = load_config(write(tmp_path, BASE)).data_options
+    assert plain.format is None and plain.frame == "base" and not plain.converted
+
+
+@pytest.mark.parametrize("old, new, message", [
+    ("robot: universal_robots_ur10\n", "", r"data\.frame \(line {line}\): tracker needs a robot model"),
+    ("  frame: tracker\n", "  frame: laser\n", r"data\.frame \(line {line}\): must be one of 'base', 'tracker'; got 'laser'"),
+    ('    delimiter: ";"\n', '    delimiter: ","\n', r"data\.format\.decimal \(line 6\): must differ from the "
+                                                  r"delimiter ','"),
+    ("    columns: {{q1: j1, x_meas: mx}}\n", "    columns: {{q1: j1, xmeas: mx}}\n",
+     r"data\.format\.columns\.xmeas \(line {line}\): not a contract column .*did you mean 'x_meas'\?"),
+    ('rows: "1-40"', 'rows: "40-1"', r"data\.identification\.rows \(line {line}\): must be data rows such as '1-600'"),
+    ("every: 2}}", "every: 0}}", r"data\.identification\.every \(line {line}\): must be an int in \[1, inf\]; got 0"),
+    ("  identification: {{file:", "  identification: {{fil:", r"data\.identification \(line {line}\): missing "
+                                                            r"required key 'file'"),
+    ("registration: own}}", "registration: mine}}",
+     r"data\.tests\.moved\.registration \(line {line}\): must be one of 'shared', 'own'; got 'mine'"),
+    ("tool_mm: [0, 0.5, 93]", "tool_mm: [0, 93]", r"registration\.tool_mm \(line {line}\): must be a list of 3 numbers"),
+    ("fit_tool: false", "fit_tool: no_way", r"registration\.fit_tool \(line {line}\): must be true or false"),
+])
+def test_data_and_registration_errors_name_path_and_line(tmp_path, old, new, message):
+    text = TRACKER.replace(old.format(), new.format(), 1)
+    assert text != TRACKER
+    line = TRACKER[:TRACKER.index(old.format())].count("\n") + 1
+    if not new:
+        line = TRACKER[:TRACKER.index("  frame: tracker")].count("\n")       # one line was removed above it
+    with pytest.raises(ConfigError, match=message.format(line=line)):
+        load_config(write(tmp_path, text))
+
+
+def test_registration_keys_need_a_tracker_frame(tmp_path):
+    text = TRACKER.replace("  frame: tracker\n", "")
+    line = text[:text.index("    moved:")].count("\n") + 1
+    with pytest.raises(ConfigError, match=rf"data\.tests\.moved\.registration \(line {line}\): applies to data\.frame: "
+                                          "tracker only"):
+        load_config(write(tmp_path, text))
+    text = text.replace(", registration: own", "")
+    line = text[:text.index("registration:")].count("\n") + 1
+    with pytest.raises(ConfigError, match=rf"registration \(line {line}\): applies to data\.frame: tracker only"):
+        load_config(write(tmp_path, text))

@@ -13,10 +13,10 @@ import json
 
 import numpy as np
 import pytest
+from conftest import ROOT
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from conftest import ROOT
 from partcal import ErrorModel, load_predictor, load_robot, read_measurements
 from partcal.cli import main
 from partcal.study.persist import save_model

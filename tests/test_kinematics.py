@@ -41,6 +41,24 @@ def test_fk_matches_hand_derivation(sk120, q, expected):
     np.testing.assert_allclose(sk120.positions([q])[0], expected, atol=1e-9)
 
 
+# UR10 (standard DH, alpha = 90, 0, 0, 90, -90, 0), by hand. q = 0: row 1 lifts to (0, 0, d1) and
+# turns z1 = -y0, y1 = z0; rows 2-3 run a2 + a3 along x0; row 4 runs d4 along z3 = -y0 and turns
+# z4 = -z0; row 5 runs d5 down; row 6 runs d6 along z5 = -y0: (a2 + a3, -d4 - d6, d1 - d5).
+# q1 = 90 turns all of it about z0: (x, y) -> (-y, x).
+D1, A2, A3, D4, D5, D6 = 118.0, -612.7, -571.6, 163.9, 115.7, 92.2
+UR10_FK = [
+    ((0, 0, 0, 0, 0, 0), (A2 + A3, -D4 - D6, D1 - D5)),
+    ((90, 0, 0, 0, 0, 0), (D4 + D6, A2 + A3, D1 - D5)),
+]
+
+
+@pytest.mark.parametrize("q, expected", UR10_FK)
+def test_ur10_fk_matches_hand_derivation(q, expected):
+    robot = load_robot("universal_robots_ur10")
+    assert robot.n_joints == 6 and robot.tool_mm.tolist() == [0.0, 0.0, 0.0]
+    np.testing.assert_allclose(robot.positions([q])[0], expected, atol=1e-9)
+
+
 def test_fk_batch_equals_single_and_forward_pose(sk120):
     rng = np.random.default_rng(1)
     q = rng.uniform(sk120.limits_deg[:, 0], sk120.limits_deg[:, 1], size=(5000, 6))

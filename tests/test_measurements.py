@@ -37,6 +37,18 @@ def test_comments_blank_lines_and_extra_columns(tmp_path):
     assert m.errors_mm.tolist() == [[0.5, 0.0, -1.0]]
 
 
+def test_utf8_byte_order_mark_is_accepted(tmp_path):
+    path = tmp_path / "excel.csv"
+    path.write_bytes(b"\xef\xbb\xbf" + (HEADER + "\n1,2,3,4,5,6,7,8\n").encode())
+    m = read_measurements(path)
+    assert m.q_deg.tolist() == [[1.0, 2.0]] and m.errors_mm.tolist() == [[3.0, 3.0, 3.0]]
+
+
+def test_plain_decimal_notation_is_read_exactly(tmp_path):
+    m = read_measurements(write(tmp_path, HEADER + "\n+1.,-.5,1e3,2E-2,-0,3,4,5\n"))
+    assert m.q_deg.tolist() == [[1.0, -0.5]] and m.nominal_mm.tolist() == [[1000.0, 0.02, 0.0]]
+
+
 def test_nominal_from_forward_kinematics(tmp_path, sk120):
     path = write(tmp_path, "q1,q2,q3,q4,q5,q6,x_meas,y_meas,z_meas\n0,-90,-180,0,0,0,1858.65,0,1555.32\n")
     m = read_measurements(path, robot="motoman_sk120")
@@ -59,6 +71,12 @@ def test_nominal_from_forward_kinematics(tmp_path, sk120):
     ("# c\n" + HEADER + "\n1,2,3,4,5,,7,8\n", r"m.csv:3: column 'x_meas': expected a finite number, got an empty cell"),
     (HEADER + "\n1,2,3,4,5,6,7,8\n1,2,3,4,5,6,7\n", r"m.csv:3: expected 8 cells as in the header, got 7"),
     (HEADER + "\n1,2,3,4,5,6,7,inf\n", r"m.csv:2: column 'z_meas': expected a finite number, got 'inf'"),
+    (HEADER + "\n1,2,3,4,5,6,1_100,8\n", r"m.csv:2: column 'y_meas': expected a finite number, got '1_100'"),
+    (HEADER + "\n1,2,3,4,5,6,7,\u0661\n", r"m.csv:2: column 'z_meas': expected a finite number, got '\u0661'"),
+    (HEADER + "\n1,2,3,4,5,6,0x1f,8\n", r"m.csv:2: column 'y_meas': expected a finite number, got '0x1f'"),
+    (HEADER + '\n1,2,3,4,5,6,"7,5",8\n', r"m.csv:2: column 'y_meas': expected a number with a decimal point '\.', "
+                                          r"got '7,5' \(is the decimal mark ','\? set the format's decimal\)"),
+    (HEADER + "\n1,2,3,4,5,6,7,5,8\n", r"m.csv:2: expected 8 cells as in the header, got 9 \(a decimal comma"),
 ])
 def test_bad_files_get_one_clear_error(tmp_path, text, match):
     with pytest.raises(DataError, match=match):

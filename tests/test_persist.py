@@ -4,8 +4,8 @@ import json
 
 import numpy as np
 import pytest
-from sklearn.base import clone
 from conftest import ROOT
+from sklearn.base import clone
 
 from partcal import ModelFileError, load_robot, read_measurements
 from partcal.models.partition import KMeansPartition, Octree

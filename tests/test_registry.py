@@ -12,7 +12,7 @@ from conftest import ROOT
 from partcal import ConfigError, load_predictor, read_measurements
 from partcal.metrics import summary
 from partcal.study.config import load_config
-from partcal.study.outputs import write_run
+from partcal.study.outputs import metrics_document, write_run
 from partcal.study.registry import run
 
 DATA = ROOT / "data" / "sk120"
@@ -317,3 +317,173 @@ def test_rank_by_validation(tmp_path):
     assert cv_best != result.best       # on this data the two rules disagree: the rule matters
     with pytest.raises(ConfigError, match=r"rank_by \(line 4\): 'validation' needs data.validation"):
         ranking_config(tmp_path, "rank_by: validation")
+
+
+def tracker_files(tmp_path, rot, t, names=("identification", "test_rectangle")):
+    """The virtual SK120's data as a tracker would export them: measured points only, in a tracker frame
+    ``p_base = rot @ p + t``, semicolons, decimal commas, radians, metres, foreign column names."""
+    out = {}
+    for name in names:
+        m = read_measurements(DATA / f"{name}.csv")
+        seen = (m.measured_mm - t) @ rot
+        lines = ["stamp;" + ";".join(f"axis_{j}" for j in range(1, 7)) + ";smr_x;smr_y;smr_z;temp"]
+        for i, (q, p) in enumerate(zip(m.q_deg, seen)):
+            cells = [f"{i}"] + [repr(float(v)) for v in np.radians(q)] + [repr(float(v)) for v in p / 1000] + ["21.5"]
+            lines.append(";".join(c.replace(".", ",") for c in cells))
+        out[name] = tmp_path / f"{name}_tracker.csv"
+        out[name].write_text("\n".join(lines) + "\n")
+    return out
+
+
+TRACKER_FORMAT = """  format:
+    delimiter: ";"
+    decimal: ","
+    columns: {q1: axis_1, q2: axis_2, q3: axis_3, q4: axis_4, q5: axis_5, q6: axis_6,
+              x_meas: smr_x, y_meas: smr_y, z_meas: smr_z}
+    joint_unit: rad
+    length_unit: m
+"""
+
+
+def tracker_config(tmp_path, files, fmt=TRACKER_FORMAT, extra=""):
+    text = f"""name: tracked
+robot: motoman_sk120
+cv_folds: 3
+data:
+{fmt}  frame: tracker
+  identification: {files['identification']}
+  tests:
+    rectangle: {files['test_rectangle']}
+{extra}models:
+  - {{name: FDP(CI), degree: 1, solver: {{method: lstsq}}}}
+  - {{name: SDP(AI), inputs: joint, degree: 2, solver: {{method: lstsq}}}}
+"""
+    path = tmp_path / "configs" / "tracked.yaml"
+    path.parent.mkdir(exist_ok=True)
+    path.write_text(text)
+    return load_config(path)
+
+
+def test_a_tracker_run_recovers_the_known_frame_and_writes_reusable_base_frame_data(tmp_path):
+    from scipy.spatial.transform import Rotation
+
+    rot = Rotation.from_rotvec([0.4, -2.1, 1.3]).as_matrix()
+    t = np.array([3500.0, -1200.0, 800.0])
+    base = tmp_path / "base"
+    base.mkdir()
+    plain = tracker_files(base, np.eye(3), np.zeros(3))        # the same data, measured in the base frame
+    ref = run(tracker_config(base, plain))
+    moved = tracker_files(tmp_path, rot, t)
+    result = run(tracker_config(tmp_path, moved))
+    out = write_run(result)
+    doc = json.loads((out / "metrics.json").read_text())
+    reg, ref_reg = doc["registration"], ref.registrations["identification"]
+    # p_base = R_ref (rot p + t) + t_ref: the known frame composed with the base-frame data's own registration
+    expected_rot = ref_reg.rotation @ rot
+    np.testing.assert_allclose(Rotation.from_rotvec(reg["rotation_deg"], degrees=True).as_matrix(), expected_rot,
+                               atol=1e-9)
+    np.testing.assert_allclose(reg["translation_mm"], ref_reg.rotation @ t + ref_reg.translation_mm, atol=1e-6)
+    np.testing.assert_allclose(reg["tool_mm"], ref_reg.tool_mm, atol=1e-6)
+    assert reg["shared_by"] == ["identification", "rectangle"] and "own" not in reg and reg["n"] == 85
+    assert reg["rms_3d"] == pytest.approx(ref_reg.rms_3d, abs=1e-9) and reg["condition"] < 100
+    for name, m in result.datasets.items():      # same optimum, up to the solver's tolerance
+        np.testing.assert_allclose(m.errors_mm, ref.datasets[name].errors_mm, atol=1e-5)
+    assert np.all(np.abs(result.datasets["rectangle"].errors_mm).max(axis=0) < 50)     # mm, not metres
+    assert result.robot.tool_mm.tolist() == list(reg["tool_mm"])
+    assert json.loads((out / "models" / "sdp-ai.json").read_text())["robot"]["tool_mm"] == reg["tool_mm"]
+    # the registered data, in the contract, reproduce the run's errors when read back as they are
+    for name in ("identification", "rectangle"):
+        back = read_measurements(out / "data" / f"{name}.csv")
+        np.testing.assert_allclose(back.errors_mm, result.datasets[name].errors_mm, atol=2e-6)
+        np.testing.assert_allclose(back.q_deg, result.datasets[name].q_deg, atol=1e-6)
+    assert "registered on the identification set (85 poses" in (out / "data" / "rectangle.csv").read_text()
+
+
+def test_a_given_tool_is_used_as_it_is(tmp_path):
+    files = tracker_files(tmp_path, np.eye(3), np.array([0.0, 0, 1000]))
+    result = run(tracker_config(tmp_path, files, extra="registration: {tool_mm: [205, 0, 113], fit_tool: false}\n"))
+    doc = metrics_document(result)
+    assert doc["registration"]["tool_mm"] == [205.0, 0.0, 113.0] and doc["registration"]["fit_tool"] is False
+    assert result.robot.tool_mm.tolist() == [205.0, 0.0, 113.0]
+    from partcal import load_robot
+
+    given = load_robot("motoman_sk120").replace(tool_mm=np.array([205.0, 0.0, 113.0]))
+    nominal = given.positions(result.datasets["identification"].q_deg)              # FK with the given tool
+    np.testing.assert_allclose(result.datasets["identification"].nominal_mm, nominal, atol=1e-9)
+
+
+def test_a_test_set_from_another_tracker_position_gets_its_own_frame(tmp_path, caplog):
+    from scipy.spatial.transform import Rotation
+
+    files = tracker_files(tmp_path, Rotation.from_rotvec([0, 0, 1.0]).as_matrix(), np.array([2000.0, 0, 0]))
+    (tmp_path / "moved").mkdir()
+    files.update(tracker_files(tmp_path / "moved", Rotation.from_rotvec([0, 0, -2.0]).as_matrix(),
+                               np.array([0.0, 3000, 0]), names=("test_rectangle",)))
+    with caplog.at_level("WARNING"):
+        shared = run(tracker_config(tmp_path, files))
+    assert shared.uncompensated["rectangle"]["rms_3d"] > 1000               # the wrong frame: metres off
+    assert "test set 'rectangle'" in caplog.text and "was the tracker moved?" in caplog.text
+    cfg = tracker_config(tmp_path, files)
+    text = cfg.source.read_text().replace(f"rectangle: {files['test_rectangle']}",
+                                          f"rectangle: {{file: {files['test_rectangle']}, registration: own}}")
+    cfg.source.write_text(text)
+    result = run(load_config(cfg.source))
+    own = result.registrations["rectangle"]
+    ident = result.registrations["identification"]
+    assert own is not ident and not own.fit_tool and own.tool_mm.tolist() == ident.tool_mm.tolist()
+    assert result.uncompensated["rectangle"]["rms_3d"] == pytest.approx(own.rms_3d, rel=1e-9)
+    assert result.uncompensated["rectangle"]["rms_3d"] < 30
+    doc = json.loads(json.dumps(metrics_document(result)))
+    assert doc["registration"]["shared_by"] == ["identification"] and list(doc["registration"]["own"]) == ["rectangle"]
+
+
+def test_cli_predict_and_compensate_read_a_foreign_format(small_run, tmp_path):
+    _, out = small_run
+    m = read_measurements(DATA / "test_rectangle.csv")
+    pts = tmp_path / "points.csv"
+    pts.write_text("id;X [m];Y [m];Z [m]\n" + "\n".join(
+        f"{i};" + ";".join(repr(float(v)).replace(".", ",") for v in p / 1000) for i, p in enumerate(m.nominal_mm[:10])))
+    fmt = tmp_path / "fmt.yaml"
+    fmt.write_text('delimiter: ";"\ndecimal: ","\nlength_unit: m\ncolumns: {x: "X [m]", y: "Y [m]", z: "Z [m]"}\n')
+    res = cli("predict", str(out / "models" / "fdp-ci.json"), str(pts), "-o", str(tmp_path / "p.csv"), "--format", str(fmt))
+    assert res.returncode == 0, res.stderr
+    with open(tmp_path / "p.csv") as handle:
+        rows = list(csv.DictReader(handle))
+    assert list(rows[0]) == ["x", "y", "z", "dx", "dy", "dz"]                  # the contract's names and units
+    np.testing.assert_allclose([[float(r[k]) for k in "xyz"] for r in rows], m.nominal_mm[:10], atol=1e-6)
+    expected = load_predictor(out / "models" / "fdp-ci.json").predict(positions=m.nominal_mm[:10])
+    np.testing.assert_allclose([[float(r[k]) for k in ("dx", "dy", "dz")] for r in rows], expected, atol=1e-6)
+    res = cli("compensate", str(out / "models" / "fdp-ci.json"), str(pts), "-o", str(tmp_path / "c.csv"),
+              "--format", str(fmt))
+    assert res.returncode == 0, res.stderr
+    res = cli("predict", str(out / "models" / "fdp-ci.json"), str(pts), "-o", str(tmp_path / "p.csv"))
+    assert res.returncode == 2 and "points.csv:1: the header is one column containing ';'" in res.stderr
+    fmt.write_text('delimiter: ";"\ndecimal: ";"\n')
+    res = cli("predict", str(out / "models" / "fdp-ci.json"), str(pts), "-o", str(tmp_path / "p.csv"), "--format", str(fmt))
+    assert res.returncode == 2 and res.stderr.count("\n") == 1
+    assert "fmt.yaml: decimal (line 2): must be '.' or ','; got ';'" in res.stderr
+
+
+def test_cli_import_config_writes_the_runs_data_without_fitting(tmp_path):
+    from scipy.spatial.transform import Rotation
+
+    files = tracker_files(tmp_path, Rotation.from_rotvec([0.1, 0.2, 0.3]).as_matrix(), np.array([100.0, 200, 300]))
+    cfg = tracker_config(tmp_path, files)
+    res = cli("import", "--config", str(cfg.source), "-o", str(tmp_path / "converted"))
+    assert res.returncode == 0, res.stderr
+    assert "tracker registration (identification, rectangle): 85 poses" in res.stdout
+    assert "wrote 2 data sets (identification: 85, rectangle: 200)" in res.stdout
+    result = run(cfg)
+    out = write_run(result)
+    for name in ("identification", "rectangle"):
+        assert (tmp_path / "converted" / f"{name}.csv").read_bytes() == (out / "data" / f"{name}.csv").read_bytes()
+    res = cli("import", "--config", str(cfg.source))
+    assert res.returncode == 2 and "import --config: give the output folder with -o FOLDER" in res.stderr
+    few = cfg.source.read_text().replace(f"identification: {files['identification']}",
+                                         f"identification: {{file: {files['identification']}, rows: '1-3'}}")
+    cfg.source.write_text(few)
+    res = cli("run", str(cfg.source), "-q")
+    assert res.returncode == 2 and res.stderr.count("\n") == 1 and "Traceback" not in res.stderr
+    assert "identification_tracker.csv (identification): a tracker registration with the tool needs at least 4 poses " \
+           "(9 parameters); got 3" in res.stderr
+    assert (out / "metrics.json").exists()                      # the earlier results stay

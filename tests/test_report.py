@@ -1,6 +1,7 @@
 """The HTML report, opened in headless Chromium as an engineer would open it."""
 
 import json
+import re
 import shutil
 
 import html5lib
@@ -100,3 +101,34 @@ def test_report_survives_when_3d_rendering_is_impossible(report, tmp_path, monke
     assert note in text
     assert "The rest of the report is complete" in text and "id=\"compensation\"" in text
     html5lib.HTMLParser(strict=True).parse(text)
+
+
+def test_report_shows_the_tracker_registration(tmp_path):
+    import numpy as np
+
+    from partcal import read_measurements
+
+    for name in ("identification", "test_rectangle"):   # the virtual data, measured points only, turned 90 degrees
+        m = read_measurements(DATA / f"{name}.csv")
+        rows = [",".join(f"{v:.6f}" for v in (*q, -p[1], p[0], p[2])) for q, p in zip(m.q_deg, m.measured_mm)]
+        (tmp_path / f"{name}.csv").write_text("q1,q2,q3,q4,q5,q6,x_meas,y_meas,z_meas\n" + "\n".join(rows) + "\n")
+    (tmp_path / "configs").mkdir()
+    (tmp_path / "configs" / "run.yaml").write_text("""name: tracked
+robot: motoman_sk120
+cv_folds: 3
+data:
+  frame: tracker
+  identification: ../identification.csv
+  tests: {rectangle: ../test_rectangle.csv}
+models:
+  - {name: FDP(CI), degree: 1, solver: {method: lstsq}}
+""")
+    result = run(load_config(tmp_path / "configs" / "run.yaml"))
+    text = (write_run(result, render_report) / "index.html").read_text()
+    html5lib.HTMLParser(strict=True).parse(text)
+    errors = result.datasets["identification"].errors_mm
+    rms = float(np.sqrt(np.mean(np.sum(errors**2, axis=1))))
+    assert 'id="registration-table"' in text and "identification, rectangle" in text
+    assert f'data-value="{result.registrations["identification"].rms_3d}"' in text
+    assert f">{rms:.3f}<" in text and "(fitted)" in text
+    assert re.search(r"<td>-?[\d.]+ -?[\d.]+ -(89\.[5-9]|90\.[0-4])\d*</td>", text)   # tracker -> base: back by 90 deg

@@ -8,6 +8,11 @@ columns are accepted and ignored. Errors are ``measured - nominal``.
 
 Every problem is reported once, as ``FILE:LINE: column 'NAME': what was wrong``,
 where LINE is the line number an editor shows.
+
+Files from elsewhere (a tracker's export: semicolons, decimal commas, other
+column names, radians, metres) are read by the same functions with a
+:class:`~partcal.data.formats.MeasurementFormat`; values are converted once,
+here, to degrees and millimetres.
 """
 
 from __future__ import annotations
@@ -24,10 +29,13 @@ from .._io import atomic_write
 from .._validation import check_array
 from ..errors import DataError
 from ..robot.kinematics import MAX_JOINTS, Robot, joint_columns, load_robot
+from .formats import MeasurementFormat, RowSelection
 
 NOMINAL = ("x_nom", "y_nom", "z_nom")
 MEASURED = ("x_meas", "y_meas", "z_meas")
 _JOINT = re.compile(r"^q(\d+)$")
+_NUMBER = re.compile(r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
+_CONTRACT = MeasurementFormat()
 
 
 @dataclass(frozen=True, eq=False)
@@ -79,9 +87,10 @@ class Measurements:
         return self.measured_mm - self.nominal_mm
 
 
-def read_measurements(path: str | Path, robot: str | Robot | None = None, *, name: str | None = None
-                      ) -> Measurements:
-    """Read a measurement CSV.
+def read_measurements(path: str | Path, robot: str | Robot | None = None, *, name: str | None = None,
+                      fmt: MeasurementFormat | None = None, rows: RowSelection | None = None,
+                      frame: str = "base") -> Measurements:
+    """Read a measurement CSV, or a foreign file described by ``fmt``.
 
     Parameters
     ----------
@@ -91,18 +100,48 @@ def read_measurements(path: str | Path, robot: str | Robot | None = None, *, nam
         file has no ``x_nom, y_nom, z_nom`` columns.
     name : str, optional
         Data set name; default the file name without extension.
+    fmt : MeasurementFormat, optional
+        Delimiter, decimal mark, column names and units of the file; default
+        the contract (comma, decimal point, degrees, mm).
+    rows : RowSelection, optional
+        Data rows to keep (the whole file is validated either way).
+    frame : {"base", "tracker"}
+        ``"tracker"``: the measured positions are in a tracker's frame, to be
+        registered (:mod:`partcal.data.registration`); the nominal positions
+        then always come from ``robot`` (required), and nominal columns in the
+        file are refused rather than silently ignored.
+
+    Returns
+    -------
+    Measurements
+        Joint angles in degrees, positions in mm.
 
     Raises
     ------
     DataError
         For any malformed content, naming the file, line and column.
     """
+    if frame not in ("base", "tracker"):
+        raise DataError(f"The 'frame' parameter of read_measurements must be 'base' or 'tracker'. "
+                        f"Got {frame!r} instead.")
     path = Path(path)
-    line, header, seen, data = _table(path, "q1,...,x_meas,y_meas,z_meas")
-    columns = _check_header(path, line, header, seen, has_robot=robot is not None)
+    fmt = fmt or _CONTRACT
+    line, header, seen, data = _table(path, "q1,...,x_meas,y_meas,z_meas", fmt)
+    columns = _check_header(path, line, seen, fmt, has_robot=robot is not None)
+    if frame == "tracker":
+        if robot is None:
+            raise DataError(f"{path}: measurements in a tracker frame need a robot model to register them")
+        if columns["nom"]:
+            raise DataError(f"{path}:{line}: column {header[columns['nom'][0]]}: with frame: tracker the nominal "
+                            "positions come from the robot and the registration; drop the nominal columns "
+                            "(or their mapping), or use frame: base")
     q_cols, nom_cols = columns["q"], columns["nom"]
-    values = _numbers(path, line, header, data, q_cols + (nom_cols or []) + columns["meas"])
+    values = _numbers(path, line, header, data, q_cols + (nom_cols or []) + columns["meas"], fmt.decimal)
     n_q = len(q_cols)
+    names = joint_columns(n_q) + (list(NOMINAL) if nom_cols else []) + list(MEASURED)
+    values = fmt.to_contract(names, values)
+    keep = (rows or RowSelection()).indices(len(data), path)
+    values = values[keep]
     q = values[:, :n_q]
     meas = values[:, -3:]
     if nom_cols:
@@ -115,15 +154,18 @@ def read_measurements(path: str | Path, robot: str | Robot | None = None, *, nam
         nominal = model.positions(q)
     labels = None
     if columns["set"] is not None:
-        labels = tuple(cells[columns["set"]].strip() for _, cells in data)
+        labels = tuple(data[i][1][columns["set"]].strip() for i in keep)
     return Measurements(q_deg=q, nominal_mm=nominal, measured_mm=meas,
                         name=name if name is not None else path.stem, labels=labels)
 
 
-def _rows(path: Path):
-    """Yield ``(line_number, cells)`` for the header and data lines, skipping comments and blanks."""
+def _rows(path: Path, delimiter: str = ","):
+    """Yield ``(line_number, cells)`` for the header and data lines, skipping comments and blanks.
+
+    A UTF-8 byte-order mark (as Excel writes) is accepted and dropped.
+    """
     try:
-        handle = path.open(newline="", encoding="utf-8")
+        handle = path.open(newline="", encoding="utf-8-sig")
     except FileNotFoundError:
         raise DataError(f"{path}: no such file") from None
     except OSError as exc:
@@ -134,42 +176,73 @@ def _rows(path: Path):
                 stripped = text.strip()
                 if not stripped or stripped.startswith("#"):
                     continue
-                yield number, next(csv.reader([text]))
+                yield number, next(csv.reader([text], delimiter=delimiter))
         except UnicodeDecodeError as exc:
             raise DataError(f"{path}: not a UTF-8 text file ({exc.reason} at byte {exc.start})") from None
 
 
-def _table(path: Path, expected: str) -> tuple[int, list[str], dict[str, int], list]:
-    """Header line number, column names, their positions, and the data rows; refuses empty files
-    and duplicate columns."""
-    rows = list(_rows(path))
+def _table(path: Path, expected: str, fmt: MeasurementFormat = _CONTRACT
+           ) -> tuple[int, list[str], dict[str, int], list]:
+    """Header line number, column labels for messages, contract name -> position, and the data rows.
+
+    Refuses empty files, duplicate columns and mapped columns that are missing.
+    File columns that ``fmt`` maps are found under their contract names; an
+    unmapped file column named like a mapped contract column is ignored.
+    """
+    rows = list(_rows(path, fmt.delimiter))
     if not rows:
         raise DataError(f"{path}: empty file: expected a header line such as '{expected}'")
-    line, header = rows[0][0], [h.strip() for h in rows[0][1]]
-    seen: dict[str, int] = {}
-    for i, col in enumerate(header):
-        if col in seen:
-            raise DataError(f"{path}:{line}: column {col!r} appears twice (columns {seen[col] + 1} and {i + 1})")
-        seen[col] = i
-    return line, header, seen, rows[1:]
+    line, names = rows[0][0], [h.strip() for h in rows[0][1]]
+    hint = _delimiter_hint(names, fmt)
+    if hint:        # no measurement file has a single column: the delimiter is wrong
+        raise DataError(f"{path}:{line}: {hint}")
+    position: dict[str, int] = {}
+    for i, col in enumerate(names):
+        if col in position:
+            raise DataError(f"{path}:{line}: column {col!r} appears twice (columns {position[col] + 1} and {i + 1})")
+        position[col] = i
+    seen = {col: i for col, i in position.items() if col not in fmt.columns}
+    labels = [repr(col) for col in names]
+    for contract, column in fmt.columns.items():
+        if column not in position:
+            raise DataError(f"{path}:{line}: column {column!r} is missing (the format maps {contract} to it)")
+        seen[contract] = position[column]
+        labels[position[column]] = fmt.label(contract)
+    return line, labels, seen, rows[1:]
 
 
-def _numbers(path: Path, line: int, header: list[str], data: list, columns: list[int]) -> NDArray[np.float64]:
-    """The given columns of every data row as floats, shape (rows, len(columns)); at least one row."""
+def _delimiter_hint(names: list[str], fmt: MeasurementFormat) -> str:
+    """A hint when a single-column header looks split by another delimiter than the format's."""
+    if len(names) == 1:
+        for other in (";", ",", "\t", "|"):
+            if other != fmt.delimiter and other in names[0]:
+                return (f"the header is one column containing {other!r}, but the delimiter is {fmt.delimiter!r}: "
+                        f"is it {other!r}? (set the format's delimiter)")
+    return ""
+
+
+def _numbers(path: Path, line: int, header: list[str], data: list, columns: list[int], decimal: str = "."
+             ) -> NDArray[np.float64]:
+    """The given columns of every data row as floats, shape (rows, len(columns)); at least one row.
+
+    ``header`` holds the columns' labels for messages (see :func:`_table`).
+    """
     if not data:
         raise DataError(f"{path}:{line}: the header is not followed by any data row")
     values = np.empty((len(data), len(columns)))
     for r, (number, cells) in enumerate(data):
         if len(cells) != len(header):
-            raise DataError(f"{path}:{number}: expected {len(header)} cells as in the header, got {len(cells)}")
+            hint = (" (a decimal comma in a comma-separated file? set the format's delimiter)"
+                    if len(cells) > len(header) and decimal == "." else "")
+            raise DataError(f"{path}:{number}: expected {len(header)} cells as in the header, got {len(cells)}{hint}")
         for c, col in enumerate(columns):
-            values[r, c] = _number(path, number, header[col], cells[col])
+            values[r, c] = _number(path, number, header[col], cells[col], decimal)
     return values
 
 
-def _check_header(path: Path, line: int, header: list[str], seen: dict[str, int], *, has_robot: bool) -> dict:
+def _check_header(path: Path, line: int, seen: dict[str, int], fmt: MeasurementFormat, *, has_robot: bool) -> dict:
     where = f"{path}:{line}"
-    joints = sorted(int(m.group(1)) for col in header if (m := _JOINT.match(col)))
+    joints = sorted(int(m.group(1)) for col in seen if (m := _JOINT.match(col)))
     if not joints:
         raise DataError(f"{where}: no joint columns: expected q1..qN (degrees), N in 1..{MAX_JOINTS}")
     if joints != list(range(1, len(joints) + 1)) or len(joints) > MAX_JOINTS:
@@ -179,7 +252,8 @@ def _check_header(path: Path, line: int, header: list[str], seen: dict[str, int]
                         f"N <= {MAX_JOINTS}; expected {expected}")
     for col in MEASURED:
         if col not in seen:
-            raise DataError(f"{where}: column {col!r} is missing (required: {', '.join(MEASURED)})")
+            raise DataError(f"{where}: column {fmt.file_column(col)!r} is missing (required: "
+                            f"{', '.join(fmt.file_column(c) for c in MEASURED)})")
     present = [c for c in NOMINAL if c in seen]
     if 0 < len(present) < 3:
         missing = next(c for c in NOMINAL if c not in seen)
@@ -195,15 +269,18 @@ def _check_header(path: Path, line: int, header: list[str], seen: dict[str, int]
     }
 
 
-def _number(path: Path, line: int, column: str, cell: str) -> float:
+def _number(path: Path, line: int, label: str, cell: str, decimal: str = ".") -> float:
+    """One cell as a float: plain decimal notation only (no ``1_000``, ``nan``, ``inf`` or thousands marks)."""
     text = cell.strip()
-    try:
-        value = float(text)
-    except ValueError:
-        value = None
+    other = "," if decimal == "." else "."
+    if other in text and _NUMBER.fullmatch(text.replace(other, ".")):
+        mark = "comma" if decimal == "," else "point"
+        raise DataError(f"{path}:{line}: column {label}: expected a number with a decimal {mark} {decimal!r}, got "
+                        f"{text!r} (is the decimal mark {other!r}? set the format's decimal)")
+    value = float(text.replace(decimal, ".")) if _NUMBER.fullmatch(text.replace(decimal, ".")) else None
     if value is None or not np.isfinite(value):
         shown = "an empty cell" if not text else repr(text)
-        raise DataError(f"{path}:{line}: column {column!r}: expected a finite number, got {shown}")
+        raise DataError(f"{path}:{line}: column {label}: expected a finite number, got {shown}")
     return value
 
 
@@ -235,25 +312,31 @@ def _quote(text: str) -> str:
     return text
 
 
-def read_columns(path: str | Path, alternatives: list[list[str]], optional: list[str] = ()
+def read_columns(path: str | Path, alternatives: list[list[str]], optional: list[str] = (),
+                 fmt: MeasurementFormat | None = None
                  ) -> tuple[list[str], NDArray[np.float64], NDArray[np.float64] | None]:
     """Read numeric columns from a CSV: the first group of ``alternatives`` present, plus ``optional``.
 
-    Returns the chosen column names, their values ``(n, k)``, and the optional
-    columns' values (or None when absent). Errors name file, line and column.
+    Returns the chosen (contract) column names, their values ``(n, k)`` in
+    degrees and mm, and the optional columns' values (or None when absent).
+    ``fmt`` describes a foreign file as for :func:`read_measurements`. Errors
+    name file, line and column.
     """
     path = Path(path)
-    line, header, seen, data = _table(path, ",".join(alternatives[0]))
+    fmt = fmt or _CONTRACT
+    line, header, seen, data = _table(path, ",".join(alternatives[0]), fmt)
     chosen = next((group for group in alternatives if all(c in seen for c in group)), None)
     if chosen is None:
-        wanted = " or ".join(",".join(g) for g in alternatives)
+        wanted = " or ".join(",".join(fmt.file_column(c) for c in g) for g in alternatives)
         missing = next(c for c in alternatives[0] if c not in seen)
-        raise DataError(f"{path}:{line}: column {missing!r} is missing (expected columns {wanted})")
+        raise DataError(f"{path}:{line}: column {fmt.file_column(missing)!r} is missing (expected columns {wanted})")
     present = [c for c in optional if c in seen]
     if present and len(present) < len(optional):
         missing = next(c for c in optional if c not in seen)
-        raise DataError(f"{path}:{line}: column {missing!r} is missing (give all of {', '.join(optional)} or none)")
+        raise DataError(f"{path}:{line}: column {fmt.file_column(missing)!r} is missing (give all of "
+                        f"{', '.join(fmt.file_column(c) for c in optional)} or none)")
     extra = list(optional) if present else []
-    values = _numbers(path, line, header, data, [seen[c] for c in chosen + extra])
+    values = _numbers(path, line, header, data, [seen[c] for c in chosen + extra], fmt.decimal)
+    values = fmt.to_contract(chosen + extra, values)
     k = len(chosen)
     return chosen, values[:, :k], (values[:, k:] if extra else None)

@@ -82,7 +82,23 @@ def context(result: RunResult) -> dict:
         "equations": [{"name": r.spec.name, "lines": r.model.equations()}
                       for r in result.models if isinstance(r.model, ErrorModel)],
         **compensation_entries(result),
+        "registration": registration_rows(result),
     }
+
+
+def registration_rows(result: RunResult) -> list[dict]:
+    """One row per tracker registration of the run (none when the data were in the base frame)."""
+    regs = result.registrations
+    rows = []
+    for reg in {id(r): r for r in regs.values()}.values():
+        sets = [name for name, r in regs.items() if r is reg]
+        rows.append({"sets": ", ".join(sets), "fitted_on": "identification" if "identification" in sets else sets[0],
+                     "n": reg.n_poses, "rms": reg.rms_3d, "max": reg.max_3d, "condition": reg.condition,
+                     "rotation": " ".join(f"{v:.4f}" for v in reg.rotation_deg),
+                     "translation": " ".join(f"{v:.2f}" for v in reg.translation_mm),
+                     "tool": " ".join(f"{v:.3f}" for v in reg.tool_mm),
+                     "tool_how": "fitted" if reg.fit_tool else "given"})
+    return rows
 
 
 def granularity_rows(result: RunResult) -> list[dict]:
@@ -149,11 +165,24 @@ def family_sentences(result: RunResult) -> list[str]:
         best = min(members, key=lambda r: r.score(result.config.rank_by))
         before = np.mean([result.uncompensated[n]["rms_3d"] for n in tests])
         after = np.mean([best.metrics[n]["rms_3d"] for n in tests])
-        cuts = [100 * (1 - best.metrics[n]["rms_3d"] / result.uncompensated[n]["rms_3d"]) for n in tests]
+        changes = [100 * (best.metrics[n]["rms_3d"] / result.uncompensated[n]["rms_3d"] - 1) for n in tests]
         out.append(f"{family} ({len(members)}): the best by {'validation' if result.config.rank_by == 'validation' else 'CV'}, {best.spec.name}, brings the mean 3-D RMS on "
                    f"{'the test sets' if tests != ['identification'] else 'the identification set'} from "
-                   f"{before:.2f} to {after:.2f} mm ({min(cuts):.0f}–{max(cuts):.0f}% less).")
+                   f"{before:.2f} to {after:.2f} mm ({_change_text(changes)}).")
     return out
+
+
+def _change_text(changes: list[float]) -> str:
+    """``"12–40% less"``, ``"5% more"`` or ``"from 13% less to 95% more"`` for per-set changes in percent."""
+    lo, hi = min(changes), max(changes)
+
+    def one(v):
+        return f"{abs(v):.0f}% {'less' if v < 0 else 'more'}"
+    if hi < 0:
+        return f"{-hi:.0f}–{-lo:.0f}% less" if round(lo) != round(hi) else one(lo)
+    if lo >= 0:
+        return f"{lo:.0f}–{hi:.0f}% more" if round(lo) != round(hi) else one(hi)
+    return f"from {one(lo)} to {one(hi)}"
 
 
 def scene_entries(result: RunResult) -> list[dict]:

@@ -15,6 +15,7 @@ from pathlib import Path
 
 from .._validation import safe_name
 from .._yamlio import Section, load_yaml, range_check
+from ..data.formats import MeasurementFormat, RowSelection
 from ..errors import PartcalError
 from ..models.partition import KMeansPartition, Octree
 from ..models.partitioned import PartitionedErrorModel
@@ -81,6 +82,45 @@ class ModelSpec:
 
 
 @dataclass(frozen=True)
+class DataOptions:
+    """How a run reads its data: a foreign format, row subsets, and tracker registration.
+
+    Attributes
+    ----------
+    format : MeasurementFormat or None
+        Applies to every file of the run (``data.format``); None for the contract.
+    frame : {"base", "tracker"}
+        Frame of the measured positions (``data.frame``); ``tracker`` registers them.
+    rows : dict of str to RowSelection
+        Row subsets by data set name (``identification`` or a test set's name).
+    own_frame : tuple of str
+        Test sets measured from another tracker position, registered on themselves.
+    tool_mm : tuple of 3 floats or None
+        ``registration.tool_mm``: the target's offset in the flange frame, mm.
+    fit_tool : bool
+        ``registration.fit_tool``: fit the tool offset (``tool_mm`` is then the start).
+    """
+
+    format: MeasurementFormat | None = None
+    frame: str = "base"
+    rows: dict[str, RowSelection] = field(default_factory=dict)
+    own_frame: tuple[str, ...] = ()
+    tool_mm: tuple[float, float, float] | None = None
+    fit_tool: bool = True
+
+    @property
+    def converted(self) -> bool:
+        """True when the run's data are not the files verbatim (format, subset or registration)."""
+        return self.format is not None or self.frame != "base" or bool(self.rows)
+
+    def to_dict(self) -> dict:
+        return {"format": self.format.to_dict() if self.format else None, "frame": self.frame,
+                "rows": {k: v.to_dict() for k, v in self.rows.items()}, "own_frame": list(self.own_frame),
+                "registration": ({"tool_mm": list(self.tool_mm) if self.tool_mm else None, "fit_tool": self.fit_tool}
+                                 if self.frame == "tracker" else None)}
+
+
+@dataclass(frozen=True)
 class RunConfig:
     """A batch run: data, models, and where the results go."""
 
@@ -103,6 +143,7 @@ class RunConfig:
     def fail(self, where: str, message: str):
         """Raise a :class:`ConfigError` naming this file, the key path ``where`` and its line."""
         Section({}, where, self.lines, str(self.source)).fail(where, message)
+    data_options: DataOptions = field(default_factory=DataOptions)
 
     def resolved(self) -> dict:
         """The configuration with every default filled in (written beside the results)."""
@@ -114,6 +155,7 @@ class RunConfig:
         out["tests"] = {k: str(v) for k, v in self.tests.items()}
         out["output"] = str(self.output)
         out["virtual_robot"] = str(self.virtual_robot) if self.virtual_robot else None
+        out["data_options"] = self.data_options.to_dict()
         for m in out["models"]:
             if m["partition"]:
                 m["partition"]["sizes"] = list(m["partition"]["sizes"])
@@ -143,21 +185,9 @@ def load_config(path: str | Path) -> RunConfig:
     address = dask.get("address", "str", default=None) if dask.data else None
     dask.done()
     data_sec = top.section("data", required=True)
-    ident = _existing(data_sec, "identification", base)
-    validation = _existing(data_sec, "validation", base) if data_sec.has("validation") else None
+    ident, tests, validation, data_options = _data(data_sec, top, base, has_robot=robot is not None)
     if rank_by == "validation" and validation is None:
         top.fail("rank_by", "'validation' needs data.validation: FILE, a held-out set measured near the task")
-    tests_sec = data_sec.section("tests")
-    tests = {}
-    for key in tests_sec.data:
-        problem = safe_name(str(key))
-        if problem:
-            tests_sec.fail(tests_sec.path(str(key)), f"the test-set name {str(key)!r} must be {problem}")
-        tests[str(key)] = _existing(tests_sec, key, base)
-    for reserved in RESERVED_NAMES & set(tests):     # they share a JSON object with these keys in metrics.json
-        tests_sec.fail(tests_sec.path(reserved), f"a test set may not be called {reserved!r} (reserved: "
-                                                 f"{', '.join(sorted(RESERVED_NAMES))})")
-    data_sec.done()
     models_raw = top.get("models", "list", check=lambda v: None if v else "a non-empty list")
     models = tuple(_model(Section(m, f"models[{i}]", lines, str(path)))
                    for i, m in enumerate(models_raw))
@@ -178,7 +208,7 @@ def load_config(path: str | Path) -> RunConfig:
     return RunConfig(name=name, source=path, identification=ident, tests=tests, models=models,
                      output=Path(os.path.normpath(output)), robot=robot, seed=seed, n_jobs=n_jobs,
                      cv_folds=cv_folds, dask_address=address, virtual_robot=virtual, rank_by=rank_by,
-                     validation=validation, lines=lines)
+                     validation=validation, lines=lines, data_options=data_options)
 
 
 def _existing(sec: Section, key: str, base: Path) -> Path:
@@ -187,6 +217,62 @@ def _existing(sec: Section, key: str, base: Path) -> Path:
     if not target.is_file():
         sec.fail(sec.path(key), f"no such file: {target}")
     return target
+
+
+def _data(data_sec: Section, top: Section, base: Path, *, has_robot: bool
+          ) -> tuple[Path, dict[str, Path], Path | None, DataOptions]:
+    """The ``data`` section (files, ``validation``, ``format``, ``frame``, row subsets) and ``registration``."""
+    fmt_sec = data_sec.section("format")
+    fmt = MeasurementFormat.from_section(fmt_sec) if fmt_sec.data else None
+    frame = data_sec.get("frame", "str", default="base", check=_choice_check("base", "tracker"))
+    if frame == "tracker" and not has_robot:
+        data_sec.fail(data_sec.path("frame"), "tracker needs a robot model (top-level key 'robot') to register "
+                                              "the tracker frame")
+    rows: dict[str, RowSelection] = {}
+    ident, rows["identification"], _ = _data_file(data_sec, "identification", base, tracker=None)
+    validation = None
+    if data_sec.has("validation"):
+        validation, rows["validation"], _ = _data_file(data_sec, "validation", base, tracker=None)
+    tests_sec = data_sec.section("tests")
+    tests, own = {}, []
+    for key in tests_sec.data:
+        problem = safe_name(str(key))
+        if problem:
+            tests_sec.fail(tests_sec.path(str(key)), f"the test-set name {str(key)!r} must be {problem}")
+        tests[str(key)], rows[str(key)], own_frame = _data_file(tests_sec, key, base, tracker=frame == "tracker")
+        if own_frame:
+            own.append(str(key))
+    for reserved in RESERVED_NAMES & set(tests):     # they share a JSON object with these keys in metrics.json
+        tests_sec.fail(tests_sec.path(reserved), f"a test set may not be called {reserved!r} (reserved: "
+                                                 f"{', '.join(sorted(RESERVED_NAMES))})")
+    data_sec.done()
+    reg = top.section("registration")
+    if reg.data and frame != "tracker":
+        top.fail("registration", "applies to data.frame: tracker only")
+    tool = reg.get("tool_mm", "list", default=None, check=lambda v: None if len(v) == 3 and all(
+        isinstance(x, (int, float)) and not isinstance(x, bool) for x in v) else "a list of 3 numbers [x, y, z] (mm)")
+    fit_tool = reg.get("fit_tool", "bool", default=True)
+    reg.done()
+    return ident, tests, validation, DataOptions(format=fmt, frame=frame, rows={k: v for k, v in rows.items() if v is not None},
+                                     own_frame=tuple(own), tool_mm=tuple(float(x) for x in tool) if tool else None,
+                                     fit_tool=fit_tool)
+
+
+def _data_file(sec: Section, key: str, base: Path, *, tracker: bool | None
+               ) -> tuple[Path, RowSelection | None, bool]:
+    """A data file: a path, or ``{file, rows, every}`` (and ``registration: shared | own`` for a test set)."""
+    if not isinstance(sec.data.get(key), dict):
+        return _existing(sec, key, base), None, False
+    entry = sec.section(key)
+    path = _existing(entry, "file", base)
+    selection = RowSelection.from_section(entry)
+    own = False
+    if tracker is not None:
+        own = entry.get("registration", "str", default="shared", check=_choice_check("shared", "own")) == "own"
+        if own and not tracker:
+            entry.fail(entry.path("registration"), "applies to data.frame: tracker only")
+    entry.done()
+    return path, None if selection.is_all else selection, own
 
 
 def _model(sec: Section) -> ModelSpec:

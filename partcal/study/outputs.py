@@ -19,8 +19,10 @@ import numpy as np
 import yaml
 
 from .. import __version__
+from ..data.measurements import write_measurements
 from ..errors import PartcalError
 from ..robot.kinematics import joint_columns
+from .config import RunConfig
 from .persist import save_model
 from .registry import RunResult
 
@@ -57,7 +59,7 @@ def metrics_document(result: RunResult) -> dict:
         if r.compensation:
             entry["compensation"] = r.compensation
         models[r.spec.name] = entry
-    return {
+    doc = {
         "partcal_version": __version__, "name": cfg.name, "seed": cfg.seed,
         "datasets": {name: {"n": len(m)} for name, m in result.datasets.items()},
         "uncompensated": result.uncompensated,
@@ -66,6 +68,20 @@ def metrics_document(result: RunResult) -> dict:
         "best": result.best,
         "best_reason": result.best_reason,
     }
+    if result.registrations:
+        doc["registration"] = registration_document(result.registrations)
+    return doc
+
+
+def registration_document(registrations: dict) -> dict:
+    """metrics.json ``registration``: the identification set's fit, which data sets share it, and any own ones."""
+    shared = registrations["identification"]
+    doc = shared.to_dict()
+    doc["shared_by"] = [name for name, reg in registrations.items() if reg is shared]
+    own = {name: reg.to_dict() for name, reg in registrations.items() if reg is not shared}
+    if own:
+        doc["own"] = own
+    return doc
 
 
 def write_run(result: RunResult, render: Callable[[RunResult, Path], None] | None = None) -> Path:
@@ -104,9 +120,48 @@ def _write_all(result: RunResult, folder: Path) -> None:
         pred_dir.mkdir(parents=True)
         for name, m in result.datasets.items():
             _write_predictions(pred_dir / f"{name}.csv", m, r.predictions[name])
+    if cfg.data_options.converted:
+        write_datasets(cfg, result.datasets, result.registrations, folder / "data")
     (folder / "metrics.json").write_text(json.dumps(metrics_document(result), indent=1) + "\n")
     resolved = {"partcal_version": __version__, **cfg.resolved()}
     (folder / "config.resolved.yaml").write_text(yaml.safe_dump(resolved, sort_keys=False))
+
+
+def write_datasets(config: RunConfig, datasets: dict, registrations: dict, folder: Path) -> list[Path]:
+    """Data sets as contract CSVs (degrees, mm, base frame): ``folder/<data set>.csv``.
+
+    A run writes them when it converted its data (a format, a row subset or a
+    tracker registration), so the converted data can be reused as they are;
+    ``partcal import --config`` writes them without fitting anything. Each
+    file is written atomically; a header comment says where it came from.
+    """
+    opts = config.data_options
+    folder.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for name, m in datasets.items():
+        source = config.identification if name == "identification" else config.tests[name]
+        lines = [f"{name} of run {config.name!r} (partcal {__version__}), converted to degrees and mm from {source}"]
+        if name in opts.rows:
+            lines.append(f"data rows {opts.rows[name].text or 'all'}, every {opts.rows[name].every}")
+        if name in registrations:
+            reg = registrations[name]
+            lines.append(registration_comment(reg, shared=reg is registrations["identification"]))
+        path = folder / f"{name}.csv"
+        write_measurements(m, path, comment="\n".join(lines))
+        paths.append(path)
+    return paths
+
+
+def registration_comment(reg, shared: bool) -> str:
+    """One line on a registration for the header of a converted CSV."""
+    how = "registered on the identification set" if shared else "registered on this set"
+    return (f"base frame: tracker frame {how} ({reg.n_poses} poses, RMS {reg.rms_3d:.4f} mm); rotation vector "
+            f"{_triple(reg.rotation_deg)} deg, translation {_triple(reg.translation_mm)} mm, tool "
+            f"{_triple(reg.tool_mm)} mm in the flange frame")
+
+
+def _triple(values) -> str:
+    return "[" + ", ".join(f"{v:.6f}" for v in values) + "]"
 
 
 def _write_predictions(path: Path, m, predicted) -> None:

@@ -26,6 +26,7 @@ from joblib import Parallel, delayed, parallel_config
 from numpy.typing import NDArray
 
 from ..data.measurements import Measurements, read_measurements
+from ..data.registration import Registration, register_tracker, registered
 from ..errors import ConfigError, DataError
 from ..metrics import cross_validated_rms, kfold_splits, summary
 from ..models.bases import varying_inputs
@@ -77,6 +78,7 @@ class RunResult:
     models: list[ModelResult]
     best: str
     seconds: float
+    registrations: dict[str, Registration] = field(default_factory=dict)
 
     @property
     def best_reason(self) -> str:
@@ -92,19 +94,56 @@ def rank_reason(config: RunConfig) -> str:
             "for every model; nested for granularity lists)")
 
 
-def load_datasets(config: RunConfig) -> tuple[dict[str, Measurements], Robot | None]:
-    """Read the identification and test sets; all must have the same joints."""
+def load_datasets(config: RunConfig) -> tuple[dict[str, Measurements], Robot | None, dict[str, Registration]]:
+    """Read the identification and test sets (all with the same joints), in the base frame.
+
+    The run's format and row subsets apply to every file. With ``frame:
+    tracker`` the tracker frame (and the tool offset) is registered on the
+    identification set and carried to every test set, except those measured
+    from their own tracker position; the returned robot then carries the
+    registered tool, and the registrations are returned by data set name.
+    """
+    opts = config.data_options
     robot = load_robot(config.robot) if config.robot else None
-    data = {"identification": read_measurements(config.identification, robot, name="identification")}
+
+    def read(name: str, path) -> Measurements:
+        return read_measurements(path, robot, name=name, fmt=opts.format, rows=opts.rows.get(name), frame=opts.frame)
+
+    data = {"identification": read("identification", config.identification)}
     n = data["identification"].n_joints
     extra = {"validation": config.validation} if config.validation else {}
     for name, path in {**extra, **config.tests}.items():
-        m = read_measurements(path, robot, name=name)
+        m = read(name, path)
         if m.n_joints != n:
             raise DataError(f"{path}: test set {name!r} has {m.n_joints} joint columns (q1..q{m.n_joints}) "
                             f"but the identification set {config.identification} has {n}")
         data[name] = m
-    return data, robot
+    if opts.frame != "tracker":
+        return data, robot, {}
+    return _register(config, data, robot)
+
+
+def _register(config: RunConfig, data: dict[str, Measurements], robot: Robot):
+    """Registration on the identification set, shared by the test sets (or their own, when they have one)."""
+    opts = config.data_options
+    ident = data["identification"]
+    shared = register_tracker(robot, ident.q_deg, ident.measured_mm, tool_mm=opts.tool_mm, fit_tool=opts.fit_tool,
+                              source=f"{config.identification} (identification)")
+    regs = {}
+    for name, m in data.items():
+        if name in opts.own_frame:
+            regs[name] = register_tracker(robot, m.q_deg, m.measured_mm, tool_mm=shared.tool_mm, fit_tool=False,
+                                          source=f"{config.tests[name]} ({name}, own tracker frame)")
+        else:
+            regs[name] = shared
+    robot = robot.replace(tool_mm=shared.tool_mm.copy())
+    out = {name: registered(m, robot, regs[name]) for name, m in data.items()}
+    for name, m in out.items():
+        rms = float(np.sqrt(np.mean(np.sum(m.errors_mm**2, axis=1))))
+        if regs[name] is shared and name != "identification" and rms > 10 * max(shared.rms_3d, 0.01):
+            log.warning("test set %r: %.3g mm 3-D RMS after the identification set's registration (%.3g mm there): "
+                        "was the tracker moved? Then give it 'registration: own'", name, rms, shared.rms_3d)
+    return out, robot, regs
 
 
 def check_run(config: RunConfig, data: dict[str, Measurements]) -> None:
@@ -219,7 +258,7 @@ def _backend(config: RunConfig):
 def run(config: RunConfig, progress: Callable[[int, int, str], None] | None = None) -> RunResult:
     """Fit and evaluate every model of ``config``; verify compensation when a virtual robot is given."""
     start = time.perf_counter()
-    data, robot = load_datasets(config)
+    data, robot, registrations = load_datasets(config)
     check_run(config, data)
     virtual = _virtual_robot(config, robot)
     seeds = [int(s.generate_state(1)[0]) for s in np.random.SeedSequence(config.seed).spawn(len(config.models))]
@@ -238,7 +277,8 @@ def run(config: RunConfig, progress: Callable[[int, int, str], None] | None = No
             result.compensation = verify_compensation(result, data, robot, virtual, config.seed)
     uncompensated = {name: summary(m.errors_mm) for name, m in data.items()}
     best = min(results, key=lambda r: r.score(config.rank_by)).spec.name
-    return RunResult(config, data, robot, uncompensated, results, best, time.perf_counter() - start)
+    return RunResult(config, data, robot, uncompensated, results, best, time.perf_counter() - start,
+                     registrations=registrations)
 
 
 def _virtual_robot(config: RunConfig, robot: Robot | None):

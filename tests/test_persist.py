@@ -37,6 +37,27 @@ def test_round_trip_reproduces_predictions_bit_for_bit(tmp_path, inputs, model):
     assert doc["format"] == "partcal-model" and doc["version"] == 1 and doc["name"] == "demo"
     assert load_predictor(path).robot.name == "motoman_sk120"
     assert "pickle" not in path.read_text()
+    far = query + [0.0, 0.0, 400.0] if inputs == "cartesian" else query + 100.0
+    assert np.array_equal(loaded.distance_to_data(far), model.distance_to_data(far))   # the samples are kept
+    assert np.array_equal(loaded.train_inputs_, X)
+
+
+def test_files_without_training_inputs_fall_back_to_box_distances():
+    """Model files of partcal 0.1 keep no samples: the distance is then the one outside the data's boxes."""
+    from partcal.metrics import distance_outside_boxes
+
+    for name in ("v0.1_sdp-ci.json", "v0.1_fdp-ci-octree.json"):
+        model, doc = load_model(ROOT / "tests" / "fixtures" / name)
+        assert "train_inputs" not in doc and model.train_inputs_ is None
+        far = IDENT.nominal_mm[:5] + [0.0, 0.0, 500.0]
+        if doc["kind"] == "global":
+            low, high = model.data_bounds_[:1], model.data_bounds_[1:]
+        else:
+            low, high = model.region_bounds_[:, 0], model.region_bounds_[:, 1]
+        np.testing.assert_array_equal(model.distance_to_data(far), distance_outside_boxes(far, low, high))
+    kmeans, doc = load_model(ROOT / "tests" / "fixtures" / "v0.1_fdp-ai-kmeans.json")
+    assert "active" not in doc["partition"]
+    assert kmeans.partition_.active.tolist() == [True, True, True, False, False, True]   # q4, q5 held at 0
 
 
 def test_damaged_and_foreign_files_are_refused(tmp_path):

@@ -1,7 +1,11 @@
 """Model files: versioned plain JSON for global and partitioned models.
 
 No pickle and nothing executable: a model file from elsewhere can only hold
-numbers and names. Loading checks the format name, the version and every
+numbers and names. Files keep the training inputs (``train_inputs``, for
+``distance_to_data``) and the partition's varying axes (``partition.active``);
+files written before either was kept still load: without ``train_inputs``
+the distance to the data falls back to the distance outside the data's boxes,
+and without ``active`` the varying axes are read off ``region_bounds``. Loading checks the format name, the version and every
 field, and refuses a damaged or foreign file with one message naming the
 file and the field. Floats are written with ``repr`` precision, so a loaded
 model predicts bit for bit what the saved one did.
@@ -10,6 +14,7 @@ model predicts bit for bit what the saved one did.
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -18,7 +23,7 @@ import numpy as np
 from .. import __version__
 from .._io import atomic_write
 from ..errors import ModelFileError
-from ..models.bases import Basis, Scaling
+from ..models.bases import Basis, Scaling, varying_inputs
 from ..models.partition import Partition
 from ..models.partitioned import PartitionedErrorModel
 from ..models.series import ErrorModel
@@ -47,6 +52,8 @@ def model_to_dict(model, *, name: str = "", robot: Robot | None = None, extra: d
     else:
         raise ModelFileError(f"cannot save a {type(model).__name__}: expected an ErrorModel or a "
                              "PartitionedErrorModel")
+    if getattr(model, "train_inputs_", None) is not None:
+        out["train_inputs"] = model.train_inputs_.tolist()
     out["fit"] = extra or {}
     return out
 
@@ -100,12 +107,16 @@ def model_from_dict(doc: Any, source: str = "model") -> Any:
         except Exception as exc:  # noqa: BLE001 - any damage in the robot section is a file error
             raise ModelFileError(str(exc)) from None
     if kind == "global":
-        return _global_from(r.sub("model"), inputs, n_in, n_out)
+        model = _global_from(r.sub("model"), inputs, n_in, n_out)
+        model.train_inputs_ = _train_inputs(r, n_in)
+        return model
     if kind == "partitioned":
         try:
             partition = Partition.from_dict(r.get("partition", dict))
         except (KeyError, TypeError, ValueError) as exc:
             r.fail("partition", f"damaged ({type(exc).__name__}: {exc})")
+        if partition.active.shape != (n_in,):
+            r.fail("partition", f"expected {n_in} 'active' flags; got {partition.active.size}")
         regions = r.get("regions", list)
         if len(regions) != partition.n_regions:
             r.fail("regions", f"expected {partition.n_regions} region models; got {len(regions)}")
@@ -115,6 +126,9 @@ def model_from_dict(doc: Any, source: str = "model") -> Any:
                          for i, item in enumerate(regions)]
         model.partition_ = partition
         model.region_bounds_ = r.array("region_bounds", (partition.n_regions, 2, n_in))
+        if "active" not in r.get("partition", dict):      # written before constant inputs were left out
+            model.partition_ = replace(partition, active=varying_inputs(model.region_bounds_.reshape(-1, n_in)))
+        model.train_inputs_ = _train_inputs(r, n_in)
         model.region_counts_ = np.asarray(r.get("region_counts", list), dtype=np.intp)
         model.min_samples_ = r.get("min_samples", int)
         model.n_features_in_ = n_in
@@ -122,6 +136,13 @@ def model_from_dict(doc: Any, source: str = "model") -> Any:
         model.local = ErrorModel(inputs=inputs)
         return model
     r.fail("kind", f"expected 'global' or 'partitioned'; got {kind!r}")
+
+
+def _train_inputs(r: "_Reader", n_in: int) -> np.ndarray | None:
+    """The training inputs (for ``distance_to_data``), or None in files written before they were kept."""
+    if "train_inputs" not in r.doc:
+        return None
+    return r.array("train_inputs", (len(r.get("train_inputs", list)), n_in))
 
 
 def _global_from(r: "_Reader", inputs: str, n_in: int, n_out: int) -> ErrorModel:

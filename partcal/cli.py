@@ -132,13 +132,20 @@ def _cmd_predict(args) -> int:
         cols, X, _ = read_columns(args.input, [joint_columns(predictor.n_inputs)])
         errors = predictor.predict(joints=X)
     _write_table(args.output, cols + ["dx", "dy", "dz"], np.hstack([X, errors]), atomic_write)
-    far = predictor.distance_to_data(**({"positions": X} if predictor.inputs == "cartesian" else {"joints": X}))
-    if (far > 50).any():
-        print(f"partcal: warning: {int((far > 50).sum())} of {len(far)} points lie more than 50 "
-              f"{'mm' if predictor.inputs == 'cartesian' else 'deg'} outside the data the model was fitted on",
-              file=sys.stderr)
+    _warn_if_far(predictor, X)
     print(f"predicted errors for {len(X)} points: {args.output}")
     return 0
+
+
+def _warn_if_far(predictor, X) -> None:
+    """One stderr line if model inputs ``X`` lie far from the training data (predict and compensate)."""
+    from .study.predictor import EXTRAPOLATION_LIMIT
+
+    far = predictor.distance_to_data(**({"positions": X} if predictor.inputs == "cartesian" else {"joints": X}))
+    if (far > EXTRAPOLATION_LIMIT).any():
+        print(f"partcal: warning: {int((far > EXTRAPOLATION_LIMIT).sum())} of {len(far)} points lie more than "
+              f"{EXTRAPOLATION_LIMIT:g} {'mm' if predictor.inputs == 'cartesian' else 'deg'} outside the data "
+              "the model was fitted on", file=sys.stderr)
 
 
 def _cmd_compensate(args) -> int:
@@ -159,6 +166,7 @@ def _cmd_compensate(args) -> int:
         result = predictor.compensate_full(targets, seeds)
     for w in caught:
         print(f"partcal: warning: {w.message}", file=sys.stderr)
+    _warn_if_far(predictor, result.commanded_mm if predictor.inputs == "cartesian" else result.joints_deg)
     header, parts = list(cols), [targets]
     if seeds is not None:
         header += optional

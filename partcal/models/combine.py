@@ -168,26 +168,35 @@ class FrameCombiner:
                    np.stack([m.scaling_.scale for m in models]), reframe)
 
     def prepare(self, cells) -> None:
-        """Re-express the series of every cell in ``cells`` not seen yet (one batch for all)."""
-        p = self.partition
+        """Re-express the series of every cell in ``cells`` not seen yet (in batches of cells)."""
         todo = [c for c in cells if c not in self._cells]
-        if not todo:
-            return
-        kernels = [p.lookup.candidates(c) for c in todo]
+        lists = self.partition.lookup
+        per_pair = self.reframe.n_entries if self.reframe is not None else 1
+        batch, pairs = [], 0
+        for i, c in enumerate(todo):
+            batch.append(c)
+            pairs += lists.indptr[c + 1] - lists.indptr[c]
+            if pairs * per_pair > 1_000_000 or i == len(todo) - 1:      # bounded temporaries
+                self._prepare_batch(batch)
+                batch, pairs = [], 0
+
+    def _prepare_batch(self, cells) -> None:
+        p = self.partition
+        kernels = [p.lookup.candidates(c) for c in cells]
+        counts = [len(k) for k in kernels]
         regions = p.kernel_region[np.concatenate(kernels)]
         coefs = self.coefs[regions]                                  # (P, T, outputs)
         if self.reframe is not None:
             d = p.active.size
-            centre = np.zeros((len(regions), d))
-            centre[:, p.active] = np.repeat(np.array([p.lookup.centre(c) for c in todo]).reshape(len(todo), -1),
-                                            [len(k) for k in kernels], axis=0)
-            half = np.ones(d)
+            centre, half = np.zeros((len(regions), d)), np.ones(d)
+            centre[:, p.active] = np.repeat(np.array([p.lookup.centre(c) for c in cells]).reshape(len(cells), -1),
+                                            counts, axis=0)
             half[p.active] = p.lookup.size / 2
             scales = self.scales[regions]
             coefs = self.reframe.apply(coefs, half / scales, (centre - self.centres[regions]) / scales)
         flat = coefs.transpose(2, 1, 0).reshape(-1, len(regions))     # (outputs * T, P)
-        bounds = np.cumsum([0] + [len(k) for k in kernels])
-        for c, a, b in zip(todo, bounds[:-1], bounds[1:]):
+        bounds = np.cumsum([0] + counts)
+        for c, a, b in zip(cells, bounds[:-1], bounds[1:]):
             self._cells[c] = np.ascontiguousarray(flat[:, a:b])
 
     def _features(self, block: Block, Xb) -> NDArray[np.float64]:

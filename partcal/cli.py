@@ -148,13 +148,27 @@ def _cmd_predict(args) -> int:
         cols, X, _ = read_columns(args.input, [joint_columns(predictor.n_inputs)], fmt=fmt)
         errors = predictor.predict(joints=X)
     _write_table(args.output, cols + ["dx", "dy", "dz"], np.hstack([X, errors]), atomic_write)
-    far = predictor.distance_to_data(**({"positions": X} if predictor.inputs == "cartesian" else {"joints": X}))
-    if (far > 50).any():
-        print(f"partcal: warning: {int((far > 50).sum())} of {len(far)} points lie more than 50 "
-              f"{'mm' if predictor.inputs == 'cartesian' else 'deg'} outside the data the model was fitted on",
-              file=sys.stderr)
+    _warn_if_far(predictor, X)
     print(f"predicted errors for {len(X)} points: {args.output}")
     return 0
+
+
+def _far_from_data(predictor, X) -> str:
+    """A warning text if model inputs ``X`` lie far from the training data, else ``""``."""
+    from .study.predictor import EXTRAPOLATION_LIMIT
+
+    far = predictor.distance_to_data(**({"positions": X} if predictor.inputs == "cartesian" else {"joints": X}))
+    if not (far > EXTRAPOLATION_LIMIT).any():
+        return ""
+    return (f"{int((far > EXTRAPOLATION_LIMIT).sum())} of {len(far)} points lie more than {EXTRAPOLATION_LIMIT:g} "
+            f"{'mm' if predictor.inputs == 'cartesian' else 'deg'} from the data the model was fitted on")
+
+
+def _warn_if_far(predictor, X) -> None:
+    """One stderr line if model inputs ``X`` lie far from the training data (predict and compensate)."""
+    text = _far_from_data(predictor, X)
+    if text:
+        print(f"partcal: warning: {text}", file=sys.stderr)
 
 
 def _cmd_compensate(args) -> int:
@@ -162,6 +176,7 @@ def _cmd_compensate(args) -> int:
 
     from ._io import atomic_write
     from .data.measurements import read_columns
+    from .metrics import ExtrapolationWarning
     from .robot.compensation import CompensationWarning
     from .robot.kinematics import joint_columns
     from .study.predictor import load_predictor
@@ -170,9 +185,11 @@ def _cmd_compensate(args) -> int:
     n_q = predictor.robot.n_joints if predictor.robot is not None else 0
     optional = joint_columns(n_q) if predictor.inputs == "joint" else []
     cols, targets, seeds = read_columns(args.targets, [["x", "y", "z"]], optional, fmt=_format(args))
-    with warnings.catch_warnings():       # exit code 3 and one line below say it instead
+    with warnings.catch_warnings():       # exit code 3 and one stderr line below say it instead
         warnings.simplefilter("ignore", CompensationWarning)
+        warnings.simplefilter("ignore", ExtrapolationWarning)
         result = predictor.compensate_full(targets, seeds)
+    far = _far_from_data(predictor, result.commanded_mm if predictor.inputs == "cartesian" else result.joints_deg)
     header, parts = list(cols), [targets]
     if seeds is not None:
         header += optional
@@ -189,8 +206,11 @@ def _cmd_compensate(args) -> int:
         first = int(bad[0])
         print(f"partcal: {bad.size} of {len(targets)} targets did not converge or are unreachable (first: data "
               f"row {first + 1} of {args.targets}, target {targets[first].round(3).tolist()} mm, predicted miss "
-              f"{result.residual_mm[first]:.3g} mm); {args.output} marks them converged=false", file=sys.stderr)
+              f"{result.residual_mm[first]:.3g} mm); {args.output} marks them converged=false"
+              + (f"; also, {far}" if far else ""), file=sys.stderr)
         return 3
+    if far:
+        print(f"partcal: warning: {far}", file=sys.stderr)
     print(f"compensated {len(targets)} targets (all converged): {args.output}")
     return 0
 

@@ -94,7 +94,7 @@ def warn_far(distances: NDArray[np.float64], limit: float, stacklevel: int = 3) 
 
     far = distances > limit
     if far.any():
-        warnings.warn(f"{int(far.sum())} of {len(far)} points lie more than {limit:g} input units outside "
-                      f"the sampled workspace (up to {distances.max():.4g}); their predicted errors are "
-                      "extrapolations", ExtrapolationWarning, stacklevel=stacklevel)
+        warnings.warn(f"{int(far.sum())} of {len(far)} points lie more than {limit:g} input units from the "
+                      f"nearest training sample (up to {distances.max():.4g}); no data there support their "
+                      "predicted errors", ExtrapolationWarning, stacklevel=stacklevel)
     return far

@@ -15,3 +15,37 @@ def sk120():
     from partcal import load_robot
 
     return load_robot("motoman_sk120")
+
+
+def smoothstep(r):
+    """The blend cutoff written out: 1 below 2, 0 above 3, 10 t^3 - 15 t^4 + 6 t^5 between (t = 3 - r)."""
+    import numpy as np
+
+    t = np.clip(3.0 - r, 0.0, 1.0)
+    return 10 * t**3 - 15 * t**4 + 6 * t**5
+
+
+def brute_force_weights(partition, X):
+    """Blend weights over ALL kernels, (n, M), straight from the definition in ``blending``'s docstring."""
+    import numpy as np
+
+    axes = partition.active
+    z = (X[:, None, axes] - partition.centres[None][..., axes]) / partition.sigmas[None][..., axes]
+    r2 = np.sum(z * z, axis=2)
+    r = np.sqrt(r2)
+    r_min = r.min(axis=1, keepdims=True)
+    shift = np.maximum(0.0, r_min - 2.5)
+    raw = np.exp(-(r2 - r_min**2) / 2) * smoothstep(r - shift)
+    return raw / raw.sum(axis=1, keepdims=True)
+
+
+def brute_force_blend(model, X):
+    """A blended model's prediction as the weighted sum of every region model's own ``predict``."""
+    import numpy as np
+
+    W = brute_force_weights(model.partition_, X)
+    out = 0.0
+    for k, region in enumerate(model.partition_.kernel_region):
+        if W[:, k].any():
+            out = out + W[:, k, None] * np.asarray(model.models_[region].predict(X)).reshape(len(X), -1)
+    return out

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from partcal.models.bases import Basis, Scaling, raw_polynomial
+from partcal.models.bases import Basis, PolynomialReframe, Scaling, lift_coefficients, raw_polynomial
 
 
 def test_scaling_maps_training_range_to_unit_and_drops_constant_inputs():
@@ -37,3 +37,21 @@ def test_raw_polynomial_with_cross_terms():
     s = Scaling(np.array([1.0, -2.0]), np.array([2.0, 4.0]), np.array([True, True]))
     raw = raw_polynomial([(0, 0), (1, 1)], np.array([3.0, 2.0]), s)
     assert raw == pytest.approx({(0, 0): 2.5, (1, 0): 0.5, (0, 1): -0.25, (1, 1): 0.25})
+
+
+@pytest.mark.parametrize("degree, cross", [(1, False), (2, False), (3, True), (5, False)])
+def test_reframed_polynomials_are_the_same_functions(degree, cross):
+    """A series in one scaling, re-expressed in another frame, evaluates to the same values there."""
+    rng = np.random.default_rng(degree)
+    X = rng.uniform([-800, 0, 300], [600, 900, 1200], size=(400, 3))
+    basis = Basis("polynomial", "cartesian", degree, cross)
+    own = Scaling.fit(X[:, [0, 1, 2]] * [1, 0, 1] + [0, 5, 0])          # the y input constant in this region
+    terms = basis.terms(own)
+    coef = rng.normal(size=(len(terms), 3))
+    full = basis.terms(Scaling(np.zeros(3), np.ones(3), np.ones(3, bool)))
+    lifted = lift_coefficients(terms, coef, full)
+    frame = Scaling(np.array([-100.0, 450, 750]), np.array([40.0, 70, 55]), np.ones(3, bool))
+    reframed = PolynomialReframe(full).apply(lifted[None], (frame.scale / own.scale)[None],
+                                             ((frame.centre - own.centre) / own.scale)[None])[0]
+    expected = basis.transform(X, own, terms) @ coef
+    np.testing.assert_allclose(basis.transform(X, frame, full) @ reframed, expected, rtol=1e-11, atol=1e-9)

@@ -5,9 +5,11 @@ import warnings
 
 import numpy as np
 import pytest
-from conftest import ROOT
+from conftest import ROOT, brute_force_blend
+from scipy.spatial import cKDTree
+from sklearn.base import clone
 
-from partcal import PartcalError
+from partcal import PartcalError, read_measurements
 from partcal.data.simulate import load_study, simulate
 from partcal.metrics import ExtrapolationWarning
 from partcal.models.partition import KMeansPartition, Octree
@@ -77,16 +79,141 @@ def test_extrapolation_is_flagged():
     model = PartitionedErrorModel(partition=Octree(max_depth=1), local=ErrorModel(solver="lstsq")).fit(X, y)
     assert np.all(model.distance_to_data(X) == 0)
     far = np.array([[0.0, 0.0, 3500.0]])          # 2 m above the highest sample
-    labels = model.partition_.assign(X)
-    expected = min(np.linalg.norm(np.clip(far[0], X[labels == r].min(0), X[labels == r].max(0)) - far[0])
-                   for r in range(model.partition_.n_regions))       # nearest point of any region's box
+    expected = np.linalg.norm(X - far, axis=1).min()
     assert model.distance_to_data(far)[0] == pytest.approx(expected, rel=1e-12)
     assert expected > 1999
-    with pytest.warns(ExtrapolationWarning, match=r"1 of 2 points lie more than 50 input units outside the sampled workspace \(up to 2001\)"):
+    with pytest.warns(ExtrapolationWarning, match=r"1 of 2 points lie more than 50 input units from the nearest training "
+                                                  r"sample \(up to 20\d\d\)"):
         model.warn_if_extrapolating(np.vstack([X[:1], far]))
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         model.warn_if_extrapolating(X[:10])
+
+
+def holed_field(n=4000, seed=1):
+    """Samples of a smooth field around an empty ball of radius 400 mm centred at the origin."""
+    X, y = smooth_field(n, seed)
+    keep = np.linalg.norm(X - [0, 0, 500], axis=1) > 400
+    return X[keep], y[keep]
+
+
+@pytest.mark.parametrize("make", [
+    lambda: ErrorModel(degree=2, solver="lstsq"),
+    lambda: PartitionedErrorModel(partition=Octree(max_depth=2), local=ErrorModel(degree=2, solver="lstsq")),
+    lambda: PartitionedErrorModel(partition=KMeansPartition(12), local=ErrorModel(solver="lstsq"), random_state=0),
+])
+def test_distance_to_data_is_the_distance_to_the_nearest_sample(make):
+    X, y = holed_field()
+    model = make().fit(X, y)
+    rng = np.random.default_rng(2)
+    queries = np.vstack([rng.uniform(-3000, 3000, size=(2000, 3)), X[:50] + rng.normal(0, 5, (50, 3)),
+                         [[0.0, 0.0, 500.0], [0.0, 0.0, 2000.0]]])
+    nearest = cKDTree(X).query(queries)[0]
+    got = model.distance_to_data(queries)
+    assert np.all((got >= nearest / 2) & (got <= 2 * nearest))       # the promise
+    np.testing.assert_allclose(got, nearest, rtol=1e-12, atol=1e-9)    # in fact exact
+    assert got[-2] > 365 and got[-1] > 365                              # the middle of the hole, and above the data
+    with pytest.warns(ExtrapolationWarning, match="2 of 2 points"):
+        model.warn_if_extrapolating(queries[-2:])
+
+
+SHIFTS = [-90.0, 30.0, 1e4, -1e6]
+
+
+def shifted(X, column, value):
+    out = X.copy()
+    out[:, column] = value
+    return out
+
+
+@pytest.mark.parametrize("spec", [Octree(max_depth=2), KMeansPartition(n_regions=9)])
+def test_a_constant_cartesian_input_changes_no_prediction_wherever_it_is_held(spec):
+    X, y = smooth_field(2000)
+    queries = np.random.default_rng(3).uniform([-1500, -1500, 0], [1500, 1500, 0], size=(3000, 3))
+    local = ErrorModel(degree=2, solver="lstsq")
+    reference = PartitionedErrorModel(partition=spec, local=local, random_state=0).fit(shifted(X, 2, 0.0), y)
+    expected = reference.predict(shifted(queries, 2, 0.0))
+    for value in SHIFTS:
+        model = PartitionedErrorModel(partition=spec, local=local, random_state=0).fit(shifted(X, 2, value), y)
+        np.testing.assert_allclose(model.predict(shifted(queries, 2, value)), expected, rtol=0, atol=1e-9)
+
+
+def test_a_constant_joint_changes_no_prediction_wherever_it_is_held():
+    m = read_measurements(ROOT / "data" / "sk120" / "identification.csv")
+    assert np.all(m.q_deg[:, 4] == 0)                       # q5 is held at 0 in the paper's data
+    queries = m.q_deg + np.random.default_rng(4).normal(0, 10, m.q_deg.shape) * [1, 1, 1, 0, 0, 1]
+    for local in (ErrorModel(inputs="joint", solver="lstsq"),
+                  ErrorModel(inputs="joint", basis="fourier", harmonics=1, solver="lstsq")):
+        template = PartitionedErrorModel(partition=KMeansPartition(3), local=local, random_state=0)
+        expected = clone(template).fit(m.q_deg, m.errors_mm).predict(queries)
+        for value in SHIFTS:
+            model = clone(template).fit(shifted(m.q_deg, 4, value), m.errors_mm)
+            np.testing.assert_allclose(model.predict(shifted(queries, 4, value)), expected, rtol=0, atol=1e-9)
+
+
+SEGMENTS = [(np.array([-300.0, 100.0, 1865.0]), np.array([300.0, 100.0, 1865.0])),       # along the top, 365 mm up
+            (np.array([600.0, 0.0, 500.0]), np.array([1600.0, 200.0, 700.0])),           # out through a side
+            (np.array([-700.0, -700.0, 1300.0]), np.array([-1300.0, -1300.0, 1900.0]))]   # out through a corner
+
+
+@pytest.mark.parametrize("spec", [Octree(max_depth=2), KMeansPartition(n_regions=12)])
+def test_blend_is_continuous_along_segments_that_leave_the_data(spec):
+    """Steps of 1e-3 mm out of the data and along it 365 mm away (where hard switches were): no jump."""
+    X, y = smooth_field()
+    model = PartitionedErrorModel(partition=spec, local=ErrorModel(degree=2, solver="lstsq"), random_state=0).fit(X, y)
+    for a, b in SEGMENTS:
+        length = np.linalg.norm(b - a)
+        P = a + np.arange(0.0, length, 1e-3)[:, None] * (b - a) / length
+        pred = model.predict(P)
+        step = np.linalg.norm(np.diff(pred, axis=0), axis=1)
+        assert step.max() < 1e-3                   # slopes below 1 mm/mm everywhere on the segment
+        i = int(np.argmax(step))                   # refine the largest step: a jump would stay a jump
+        fine = model.predict(P[i] + np.linspace(0.0, 1.0, 11)[:, None] * (P[i + 1] - P[i]))
+        assert np.linalg.norm(np.diff(fine, axis=0), axis=1).max() <= 0.2 * step[i] + 1e-12
+        sample = P[:: 997]                         # the fast way is the blend over all kernels
+        np.testing.assert_allclose(pred[:: 997], brute_force_blend(model, sample), rtol=0, atol=1e-9)
+        assert model.distance_to_data(P[-1:])[0] > 300
+
+
+LOCALS = [
+    ("cartesian", Octree(max_depth=2), ErrorModel(degree=2, solver="lstsq")),
+    ("cartesian", KMeansPartition(n_regions=16), ErrorModel(degree=2, solver="lstsq")),
+    ("cartesian", Octree(max_depth=1), ErrorModel(degree=3, cross_terms=True, solver="lstsq")),
+    ("cartesian", KMeansPartition(n_regions=6), ErrorModel(basis="fourier", harmonics=2, solver="lstsq")),
+    ("joint", KMeansPartition(n_regions=3), ErrorModel(inputs="joint", basis="fourier", harmonics=2, solver="lstsq")),
+    ("joint", KMeansPartition(n_regions=3), ErrorModel(inputs="joint", degree=2, solver="lstsq")),
+]
+
+
+@pytest.mark.parametrize("inputs, spec, local", LOCALS)
+def test_prediction_equals_the_blend_over_all_kernels(inputs, spec, local):
+    """Every way of predicting (cell frames, region by region) against an independent brute force."""
+    if inputs == "cartesian":
+        X, y = smooth_field(2500)
+        rng = np.random.default_rng(5)
+        queries = np.vstack([rng.uniform([-1100, -1100, -600], [1100, 1100, 1600], size=(3000, 3)),
+                             rng.uniform(-6000, 6000, size=(300, 3))])
+    else:
+        m = read_measurements(ROOT / "data" / "sk120" / "identification.csv")
+        X, y = m.q_deg, m.errors_mm
+        rng = np.random.default_rng(5)
+        queries = np.vstack([X + rng.normal(0, 5, X.shape), X + rng.normal(0, 200, X.shape)])
+    model = PartitionedErrorModel(partition=spec, local=local, random_state=0).fit(X, y)
+    expected = brute_force_blend(model, queries)
+    np.testing.assert_allclose(model.predict(queries), expected, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(model._predict_blend(queries, fast=False), expected, rtol=0, atol=1e-9)
+
+
+def test_octree_works_on_the_varying_axes_and_refuses_joint_inputs():
+    X, y = smooth_field(2000)
+    planar = shifted(X, 2, 700.0)
+    model = PartitionedErrorModel(partition=Octree(max_depth=2), local=ErrorModel(degree=2, solver="lstsq"),
+                                  random_state=0).fit(planar, y)
+    assert model.partition_.n_regions == 16                       # a quadtree
+    np.testing.assert_allclose(model.predict(planar[:200]), brute_force_blend(model, planar[:200]), atol=1e-9)
+    with pytest.raises(PartcalError, match=r"The 'partition' parameter of PartitionedErrorModel must be a "
+                                           r"KMeansPartition for joint inputs"):
+        PartitionedErrorModel(partition=Octree(), local=ErrorModel(inputs="joint")).fit(np.c_[X, X], y)
 
 
 def test_select_granularity_reports_every_candidate():

@@ -38,6 +38,27 @@ def test_round_trip_reproduces_predictions_bit_for_bit(tmp_path, inputs, model):
     assert doc["format"] == "partcal-model" and doc["version"] == 1 and doc["name"] == "demo"
     assert load_predictor(path).robot.name == "motoman_sk120"
     assert "pickle" not in path.read_text()
+    far = query + [0.0, 0.0, 400.0] if inputs == "cartesian" else query + 100.0
+    assert np.array_equal(loaded.distance_to_data(far), model.distance_to_data(far))   # the samples are kept
+    assert np.array_equal(loaded.train_inputs_, X)
+
+
+def test_files_without_training_inputs_fall_back_to_box_distances():
+    """Model files of partcal 0.1 keep no samples: the distance is then the one outside the data's boxes."""
+    from partcal.metrics import distance_outside_boxes
+
+    for name in ("v0.1_sdp-ci.json", "v0.1_fdp-ci-octree.json"):
+        model, doc = load_model(ROOT / "tests" / "fixtures" / name)
+        assert "train_inputs" not in doc and model.train_inputs_ is None
+        far = IDENT.nominal_mm[:5] + [0.0, 0.0, 500.0]
+        if doc["kind"] == "global":
+            low, high = model.data_bounds_[:1], model.data_bounds_[1:]
+        else:
+            low, high = model.region_bounds_[:, 0], model.region_bounds_[:, 1]
+        np.testing.assert_array_equal(model.distance_to_data(far), distance_outside_boxes(far, low, high))
+    kmeans, doc = load_model(ROOT / "tests" / "fixtures" / "v0.1_fdp-ai-kmeans.json")
+    assert "active" not in doc["partition"]
+    assert kmeans.partition_.active.tolist() == [True, True, True, False, False, True]   # q4, q5 held at 0
 
 
 def test_damaged_and_foreign_files_are_refused(tmp_path):
@@ -113,8 +134,8 @@ SEMANTIC = [
     ("octree", ["partition", "kernel_region", 0], 99, r"'partition.kernel_region': must map the \d+ kernels onto all regions"),
     ("octree", ["partition", "tree", "child", 0], 10**6, r"'partition.tree.child': child indices must point forward"),
     ("octree", ["partition", "tree", "leaf"], lambda v: [len(v) + 5 if x >= 0 else x for x in v], r"'partition.tree.leaf': every node is either split"),
-    ("octree", ["partition", "cand", 0, 0], 10**6, r"'partition.cand': candidate kernels must be -1 \(padding\) or in"),
-    ("octree", ["partition", "own", 0], 10**6, r"'partition.own': each leaf's own kernel must be listed"),
+    ("octree", ["partition", "active"], lambda v: [False] * len(v), r"'partition.active': no input varies"),
+    ("octree", ["train_inputs", 0, 1], "1.5", r"'train_inputs': expected float values; found str '1.5'"),
     ("octree", ["regions", 0, "coef", 0, 0], -1e300, r"'regions\[0\].coef': predicts"),
     ("kmeans", ["partition", "kernel_region"], lambda v: list(reversed(v)), r"'partition.kernel_region': a k-means partition has one kernel per region"),
     ("kmeans", ["partition", "centres", 0, 0], "x", r"'partition.centres': expected float values; found str 'x'"),

@@ -4,6 +4,7 @@ import csv
 import json
 import subprocess
 import sys
+import warnings
 
 import numpy as np
 import pytest
@@ -175,6 +176,28 @@ def test_cli_run_prints_table_2_and_bad_input_keeps_earlier_outputs(tmp_path):
     assert res.returncode == 2 and res.stderr.count("\n") == 1, res.stderr
     assert f"{blocker / 'out'}: cannot write the output folder here" in res.stderr
     assert (cfg.output / "metrics.json").read_bytes() == metrics
+
+
+def test_compensation_far_from_the_data_warns_once(small_run, tmp_path):
+    from partcal.metrics import ExtrapolationWarning
+
+    _, out = small_run
+    m = read_measurements(DATA / "identification.csv")
+    far = m.nominal_mm[:6] + [0.0, 0.0, 1500.0] * (np.arange(6) % 2)[:, None]      # every other one 1.5 m up
+    p = load_predictor(out / "models" / "fdp-ci-k-means.json")
+    with pytest.warns(ExtrapolationWarning, match="3 of 6 points lie more than 50 input units from the nearest"):
+        p.compensate(far)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        p.compensate(m.nominal_mm[:6])          # at the samples: commanded points move by the errors only
+    targets = tmp_path / "far.csv"
+    targets.write_text("x,y,z\n" + "\n".join(",".join(f"{v:.6f}" for v in row) for row in far) + "\n")
+    for model in ("fdp-ci.json", "fdp-ci-k-means.json"):
+        res = cli("compensate", str(out / "models" / model), str(targets), "-o", str(tmp_path / "cmd.csv"))
+        assert res.returncode == 0, res.stderr
+        warned = [line for line in res.stderr.splitlines() if "from the data" in line]
+        assert warned == ["partcal: warning: 3 of 6 points lie more than 50 mm from the data the model "
+                          "was fitted on"], res.stderr
 
 
 def test_cli_predict_and_compensate(small_run, tmp_path):

@@ -1,4 +1,5 @@
-"""What partcal's estimators share: scikit-learn tags for x, y, z outputs, and one seed rule."""
+"""What partcal's estimators share: scikit-learn tags for x, y, z outputs, the distance to the
+training inputs, and one seed rule."""
 
 from __future__ import annotations
 
@@ -6,6 +7,7 @@ from numbers import Integral
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.spatial import cKDTree
 from sklearn.base import BaseEstimator, RegressorMixin
 from sklearn.utils import check_random_state
 
@@ -15,6 +17,13 @@ class ErrorModelBase(RegressorMixin, BaseEstimator):
 
     def _shape_output(self, out: NDArray[np.float64]) -> NDArray[np.float64]:
         return out[:, 0] if self._y_1d else out
+
+    def _distance_to_train_inputs(self, X: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Distance from each point to the nearest row of ``train_inputs_`` (KD-tree built on first use)."""
+        cached = getattr(self, "_train_tree", None)
+        if cached is None or cached[0] is not self.train_inputs_:
+            cached = self._train_tree = (self.train_inputs_, cKDTree(self.train_inputs_))
+        return cached[1].query(X)[0]
 
     def __sklearn_tags__(self):
         tags = super().__sklearn_tags__()

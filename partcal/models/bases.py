@@ -157,3 +157,71 @@ def raw_polynomial(terms: list[tuple], coefs: NDArray[np.float64], scaling: Scal
             key = tuple(j for j, _ in choice)
             out[key] = float(out.get(key, 0.0) + c * np.prod([f for _, f in choice]))
     return dict(sorted(out.items(), key=lambda kv: (sum(kv[0]), [-k for k in kv[0]])))
+
+
+# ---------------------------------------------------------------------- common frames
+def lift_coefficients(terms_from: list[tuple], coef: NDArray[np.float64], terms_to: list[tuple]
+                      ) -> NDArray[np.float64] | None:
+    """Coefficients ``(len(terms_to), n_outputs)`` of the same series on a larger term list.
+
+    Terms absent from ``terms_from`` get 0; ``None`` if some term of
+    ``terms_from`` is not in ``terms_to``.
+
+    >>> lift_coefficients([(0,), (2,)], np.array([[1.0], [3.0]]), [(0,), (1,), (2,)]).ravel().tolist()
+    [1.0, 0.0, 3.0]
+    """
+    index = {t: i for i, t in enumerate(terms_to)}
+    if any(t not in index for t in terms_from):
+        return None
+    out = np.zeros((len(terms_to), coef.shape[1]))
+    out[[index[t] for t in terms_from]] = coef
+    return out
+
+
+class PolynomialReframe:
+    """Re-express polynomials in ``u = a v + b`` (per input) as polynomials in ``v``.
+
+    A region's polynomial uses ``u = (x - m) / s`` (its own scaling); a lookup
+    cell's frame uses ``v = (x - o) / h``, so ``a = h / s`` and ``b = (o - m) / s``.
+    Every monomial ``u^e`` expands binomially into monomials ``v^f`` with
+    ``f <= e``; ``terms`` must therefore be closed under lowering exponents
+    (both term lists of :class:`Basis` are).
+
+    Parameters
+    ----------
+    terms : list of exponent tuples (length d)
+
+    >>> rf = PolynomialReframe([(0,), (1,), (2,)])           # 1 + u + u^2 with u = 2v + 1
+    >>> rf.apply(np.array([[[1.0], [1.0], [1.0]]]), np.array([[2.0]]), np.array([[1.0]])).ravel().tolist()
+    [3.0, 6.0, 4.0]
+    """
+
+    def __init__(self, terms: list[tuple]):
+        index = {t: i for i, t in enumerate(terms)}
+        to, frm, binom, low, rest = [], [], [], [], []
+        for j, e in enumerate(terms):
+            for f in itertools.product(*(range(k + 1) for k in e)):
+                to.append(index[f])
+                frm.append(j)
+                binom.append(float(np.prod([comb(k, i) for k, i in zip(e, f)])))
+                low.append(f)
+                rest.append(tuple(k - i for k, i in zip(e, f)))
+        self.n_terms, self.n_entries = len(terms), len(to)
+        self._from = np.array(frm, dtype=np.intp)
+        self._binom = np.array(binom)
+        d = len(terms[0]) if terms else 0
+        self._low = np.array(low, dtype=float).reshape(-1, d)
+        self._rest = np.array(rest, dtype=float).reshape(-1, d)
+        self._scatter = np.zeros((len(terms), len(to)))
+        self._scatter[to, np.arange(len(to))] = 1.0
+
+    def apply(self, coef: NDArray[np.float64], a: NDArray[np.float64], b: NDArray[np.float64]
+              ) -> NDArray[np.float64]:
+        """Coefficients in ``v``, shape ``(P, T, n_outputs)``, from those in ``u`` ``(P, T, n_outputs)``.
+
+        ``a`` and ``b`` have shape ``(P, d)``: one affine change of variable per problem.
+        """
+        values = np.broadcast_to(self._binom, (a.shape[0], self.n_entries)).copy()
+        for i in range(a.shape[1]):
+            values *= np.power(a[:, i, None], self._low[:, i]) * np.power(b[:, i, None], self._rest[:, i])
+        return self._scatter @ (values[:, :, None] * coef[:, self._from, :])

@@ -26,7 +26,7 @@ from ..errors import PartcalError
 from ..metrics import cross_validated_rms, distance_outside_boxes, kfold_splits, warn_far
 from .base import ErrorModelBase, seed_from
 from .bases import varying_inputs
-from .blending import block_weights
+from .combine import BlendWeights, FrameCombiner, combine_generic, one_blas_thread, region_weights
 from .partition import KMeansPartition, Octree, Partition, check_width
 from .series import ErrorModel
 
@@ -62,6 +62,8 @@ class PartitionedErrorModel(ErrorModelBase):
         Smallest number of samples a region was allowed to hold.
     region_counts_ : ndarray
         Samples per region (hard assignment).
+    train_inputs_ : ndarray, shape (n_samples, d)
+        The training inputs, for :meth:`distance_to_data`.
     """
 
     def __init__(self, *, partition=None, local=None, blend="gaussian", blend_width=0.7, n_jobs=None,
@@ -87,6 +89,9 @@ class PartitionedErrorModel(ErrorModelBase):
             partition = Octree() if local.inputs == "cartesian" else KMeansPartition()
         if not isinstance(partition, (Octree, KMeansPartition)):
             raise param_error(own, "partition", "an Octree or a KMeansPartition", partition)
+        if isinstance(partition, Octree) and local.inputs == "joint":
+            raise param_error(own, "partition", "a KMeansPartition for joint inputs (an octree splits "
+                              "Cartesian boxes)", partition)
         return local, partition
 
     # ------------------------------------------------------------------ fitting
@@ -103,7 +108,9 @@ class PartitionedErrorModel(ErrorModelBase):
                                f"({terms} terms per output); got {X.shape[0]} samples in all")
         seed = seed_from(self.random_state)
         partition = spec.build(X, min_samples, seed, self.blend_width)
-        groups = self._training_groups(partition, X)
+        self._weights, self._combiner = BlendWeights(partition), None
+        with one_blas_thread():
+            groups = self._training_groups(partition, X)
         seeds = np.random.SeedSequence(seed).spawn(partition.n_regions)
         jobs = (delayed(_fit_region)(clone(local).set_params(random_state=int(s.generate_state(1)[0])),
                                      X[idx], Y[idx], w) for (idx, w), s in zip(groups, seeds))
@@ -114,60 +121,92 @@ class PartitionedErrorModel(ErrorModelBase):
         self.region_counts_ = np.bincount(labels, minlength=partition.n_regions)
         self.region_bounds_ = np.array([[X[labels == r].min(axis=0), X[labels == r].max(axis=0)]
                                         for r in range(partition.n_regions)])
+        self.train_inputs_ = np.array(X, dtype=np.float64, copy=True)
         log.info("fitted %d regions (%s, min %d samples)", partition.n_regions, partition.kind, min_samples)
         return self
 
-    def _region_blocks(self, partition: Partition, X):
-        """Yield ``(rows, regions, weights)`` per block: weights ``(m, R_b)`` of the block's regions."""
-        for rows, kernels, own in partition.blocks(X):
-            w = block_weights(X[rows], partition.centres[kernels], partition.sigmas[kernels], own, self.blend)
-            regions, column = np.unique(partition.kernel_region[kernels], return_inverse=True)
-            onehot = np.zeros((kernels.size, regions.size))
-            onehot[np.arange(kernels.size), column] = 1.0
-            yield rows, regions, w @ onehot          # kernels of one region add up
-
     def _training_groups(self, partition: Partition, X) -> list[tuple[NDArray[np.intp], NDArray[np.float64]]]:
         """Samples and their blend weights for every region (rows with a positive weight)."""
+        if self.blend == "hard":
+            labels = partition.assign(X)
+            return [(np.flatnonzero(labels == r), np.ones(int(np.sum(labels == r))))
+                    for r in range(partition.n_regions)]
         parts = [[] for _ in range(partition.n_regions)]
-        for rows, regions, w in self._region_blocks(partition, X):
-            for j, region in enumerate(regions):
-                keep = w[:, j] > 0
-                parts[region].append((rows[keep], w[keep, j]))
+        plan, _, blocks = self._weights.blocks(X)
+        for block in blocks:
+            regions, W = region_weights(partition.kernel_region[block.kernels], block.weights)
+            rows = plan.order[block.positions]
+            for region, w in zip(regions.tolist(), W):
+                keep = w > 0
+                parts[region].append((rows[keep], w[keep]))
         return [(np.concatenate([r for r, _ in p]), np.concatenate([w for _, w in p])) for p in parts]
 
     # ------------------------------------------------------------------ prediction
     def predict(self, X) -> NDArray[np.float64]:
-        """Blended prediction, shape (n, n_outputs) mm (1-D if fitted on a 1-D ``y``)."""
-        check_is_fitted(self, "models_")
-        X = validate_data(self, X, reset=False, dtype=np.float64)
-        out = np.empty((X.shape[0], self.models_[0].coef_.shape[1]))
-        for rows, regions, w in self._region_blocks(self.partition_, X):
-            xb = X[rows]
-            block = np.zeros((rows.size, out.shape[1]))
-            for region, wr in zip(regions, np.ascontiguousarray(w.T)):
-                model = self.models_[region]
-                keep = np.flatnonzero(wr)
-                if 2 * keep.size > wr.size:     # most rows: evaluate all, cheaper than gathering
-                    block += wr[:, None] * model._predict_trusted(xb)
-                elif keep.size:
-                    block[keep] += wr[keep, None] * model._predict_trusted(xb[keep])
-            out[rows] = block
-        return self._shape_output(out)
+        """Blended prediction, shape (n, n_outputs) mm (1-D if fitted on a 1-D ``y``).
 
-    def distance_to_data(self, X) -> NDArray[np.float64]:
-        """How far each point lies outside the sampled workspace, shape (n,), input units.
-
-        Zero inside the bounding box of some region's own samples; otherwise the
-        distance to the nearest such box. Large values mean the prediction is an
-        extrapolation and should not be trusted.
+        Polynomial local models (and Fourier ones of joint angles) are evaluated
+        once per block in the lookup cell's frame; other local models, and
+        points outside the lookup grid, are evaluated region by region. Both
+        give the same blend (tested against a sum over all kernels).
         """
         check_is_fitted(self, "models_")
         X = validate_data(self, X, reset=False, dtype=np.float64)
-        return distance_outside_boxes(X, self.region_bounds_[:, 0], self.region_bounds_[:, 1])
+        with one_blas_thread():
+            return self._shape_output(self._predict_blend(X, fast=True))
+
+    def _predict_blend(self, X: NDArray[np.float64], fast: bool) -> NDArray[np.float64]:
+        """Prediction ``(n, n_outputs)`` on validated inputs; ``fast=False`` forces the region-by-region way."""
+        n_out = self.models_[0].coef_.shape[1]
+        out = np.empty((X.shape[0], n_out))
+        if self.blend == "hard":
+            labels = self.partition_.assign(X)
+            for region in np.unique(labels).tolist():
+                rows = np.flatnonzero(labels == region)
+                out[rows] = self.models_[region]._predict_trusted(X[rows])
+            return out
+        if getattr(self, "_weights", None) is None:
+            self._weights = BlendWeights(self.partition_)
+        combiner = None
+        if fast:
+            if getattr(self, "_combiner", None) is None:
+                self._combiner = FrameCombiner.build(self.partition_, self.models_) or False
+            combiner = self._combiner or None
+        plan, Xs, blocks = self._weights.blocks(X)
+        if combiner is not None:
+            combiner.prepare(plan.cells.tolist())
+        sorted_out = np.empty((n_out, X.shape[0]))            # outputs by points: blocks fill columns
+        region_of = self.partition_.kernel_region
+        for block in blocks:
+            xb = Xs[block.positions]
+            if combiner is not None and block.cell >= 0:
+                sorted_out[:, block.positions] = combiner.combine(block, xb)
+            else:
+                sorted_out[:, block.positions] = combine_generic(self.models_, region_of, xb, block.kernels,
+                                                                 block.weights, n_out).T
+        out[plan.order] = sorted_out.T
+        return out
+
+    def distance_to_data(self, X) -> NDArray[np.float64]:
+        """Distance from each point to the nearest training input, shape (n,), input units.
+
+        Exact (a KD-tree over the training inputs, kept in the fitted model and
+        its model file). Large values mean the prediction is an extrapolation
+        and should not be trusted. Models loaded from files written before
+        partcal kept the training inputs fall back to the distance outside the
+        nearest region's sample box, which reads far too small between and
+        beyond the regions.
+        """
+        check_is_fitted(self, "models_")
+        X = validate_data(self, X, reset=False, dtype=np.float64)
+        if getattr(self, "train_inputs_", None) is None:
+            return distance_outside_boxes(X, self.region_bounds_[:, 0], self.region_bounds_[:, 1])
+        return self._distance_to_train_inputs(X)
 
     def warn_if_extrapolating(self, X, limit: float = 50.0) -> NDArray[np.bool_]:
         """Warn (``ExtrapolationWarning``) about points farther than ``limit`` from the data; return the mask."""
         return warn_far(self.distance_to_data(X), limit)
+
 
 def _fit_region(model: ErrorModel, X, Y, weights) -> ErrorModel:
     return model._fit(X, Y, weights)

@@ -74,6 +74,8 @@ class ErrorModel(ErrorModelBase):
         3-D RMS of this fit over that of least squares (1.0 for lstsq).
     swarm_results_ : list of SwarmResult
         One per output for ``solver="pso"``, with the best-fitness history.
+    train_inputs_ : ndarray, shape (n_samples, d)
+        The training inputs, for :meth:`distance_to_data` (set by :meth:`fit`).
 
     Examples
     --------
@@ -119,7 +121,10 @@ class ErrorModel(ErrorModelBase):
     # ------------------------------------------------------------------ fitting
     def fit(self, X, y):
         """Fit the coefficients to errors ``y`` (n, 3) mm at inputs ``X`` (n, d). Returns self."""
-        return self._fit(X, y, None)
+        X = validate_data(self, X, dtype=np.float64)
+        self._fit(X, y, None)
+        self.train_inputs_ = np.array(X, copy=True)
+        return self
 
     def _fit(self, X, y, sample_weight):
         basis, swarm = self._check_params()
@@ -200,13 +205,20 @@ class ErrorModel(ErrorModelBase):
         return self.basis_.transform(X, self.scaling_, self.terms_) @ self.coef_
 
     def distance_to_data(self, X) -> NDArray[np.float64]:
-        """Distance of each point outside the bounding box of the training inputs, shape (n,).
+        """Distance from each point to the nearest training input, shape (n,), input units.
 
-        0 inside; a large value means the prediction is an extrapolation.
+        Exact (a KD-tree over ``train_inputs_``, which the model file keeps);
+        a large value means the prediction is an extrapolation. Models fitted
+        on weights only (regions of a ``PartitionedErrorModel``) and models
+        loaded from files written before partcal kept the training inputs fall
+        back to the distance outside the bounding box of the training inputs,
+        which reads 0 in holes of the data.
         """
         check_is_fitted(self, "coef_")
         X = validate_data(self, X, reset=False, dtype=np.float64)
-        return distance_outside_boxes(X, self.data_bounds_[:1], self.data_bounds_[1:])
+        if getattr(self, "train_inputs_", None) is None:
+            return distance_outside_boxes(X, self.data_bounds_[:1], self.data_bounds_[1:])
+        return self._distance_to_train_inputs(X)
 
     def warn_if_extrapolating(self, X, limit: float = 50.0) -> NDArray[np.bool_]:
         """Warn (``ExtrapolationWarning``) about points farther than ``limit``; return the mask."""

@@ -1,7 +1,11 @@
 """Model files: versioned plain JSON for global and partitioned models.
 
 No pickle and nothing executable: a model file from elsewhere can only hold
-numbers and names. Loading checks the format name, the version and every
+numbers and names. Files keep the training inputs (``train_inputs``, for
+``distance_to_data``) and the partition's varying axes (``partition.active``);
+files written before either was kept still load: without ``train_inputs``
+the distance to the data falls back to the distance outside the data's boxes,
+and without ``active`` the varying axes are read off ``region_bounds``. Loading checks the format name, the version and every
 field, and refuses a damaged or foreign file with one message naming the
 file and the field. Floats are written with ``repr`` precision, so a loaded
 model predicts bit for bit what the saved one did.
@@ -19,7 +23,7 @@ import numpy as np
 from .. import __version__
 from .._io import atomic_write
 from ..errors import ModelFileError, PartcalError
-from ..models.bases import Basis, Scaling
+from ..models.bases import Basis, Scaling, varying_inputs
 from ..models.partition import Partition
 from ..models.partitioned import PartitionedErrorModel
 from ..models.series import FITNESSES, SOLVERS, ErrorModel
@@ -48,6 +52,8 @@ def model_to_dict(model, *, name: str = "", robot: Robot | None = None, extra: d
     else:
         raise ModelFileError(f"cannot save a {type(model).__name__}: expected an ErrorModel or a "
                              "PartitionedErrorModel")
+    if getattr(model, "train_inputs_", None) is not None:
+        out["train_inputs"] = model.train_inputs_.tolist()
     out["fit"] = extra or {}
     return out
 
@@ -146,6 +152,7 @@ def model_from_dict(doc: Any, source: str = "model") -> Any:
         model = _global_from(r.sub("model"), inputs, n_in, n_out)
     else:
         model = _partitioned_from(r, inputs, n_in, n_out)
+    model.train_inputs_ = _train_inputs(r, n_in)
     _check_plausible(r, model, n_in)
     return model
 
@@ -154,16 +161,19 @@ def _partitioned_from(r: "_Reader", inputs: str, n_in: int, n_out: int) -> Parti
     blend = r.sub("blend")
     model = PartitionedErrorModel(blend=blend.choice("method", ("gaussian", "hard")),
                                   blend_width=blend.number("width", 0.6, 10.0))
-    partition = _partition_from(r.sub("partition"))
-    m = partition.n_regions
+    p = r.sub("partition")
+    m = p.integer("n_regions", 1)
+    model.region_bounds_ = r.array("region_bounds", (m, 2, n_in))
+    if np.any(model.region_bounds_[:, 0] > model.region_bounds_[:, 1]):
+        r.fail("region_bounds", "a low bound exceeds its high bound")
+    # files written before constant inputs were left out blend along the axes their regions span
+    active = p.array("active", (n_in,), bool) if "active" in p.doc else varying_inputs(model.region_bounds_.reshape(-1, n_in))
+    partition = _partition_from(p, m, n_in, active)
     regions = r.get("regions", list)
     if len(regions) != m:
         r.fail("regions", f"expected {m} region models (partition.n_regions); got {len(regions)}")
     model.models_ = [_global_from(r.sub(f"regions[{i}]", item), inputs, n_in, n_out) for i, item in enumerate(regions)]
     model.partition_ = partition
-    model.region_bounds_ = r.array("region_bounds", (m, 2, n_in))
-    if np.any(model.region_bounds_[:, 0] > model.region_bounds_[:, 1]):
-        r.fail("region_bounds", "a low bound exceeds its high bound")
     model.region_counts_ = r.array("region_counts", (m,), int)
     model.min_samples_ = r.integer("min_samples", 1)
     if np.any(model.region_counts_ < 0):
@@ -174,42 +184,48 @@ def _partitioned_from(r: "_Reader", inputs: str, n_in: int, n_out: int) -> Parti
     return model
 
 
-def _partition_from(p: "_Reader") -> Partition:
-    """A partition, with every index in range and every kernel width positive."""
+def _partition_from(p: "_Reader", m: int, n_in: int, active: np.ndarray) -> Partition:
+    """A partition, with every index in range and every kernel width positive on the varying axes.
+
+    Lists of candidate kernels (``cand``, ``own``) in files of partcal 0.1 are
+    ignored: the lookup is rebuilt from the kernels.
+    """
     kind = p.choice("kind", ("octree", "kmeans"))
-    m = p.integer("n_regions", 1)
-    centres = p.array("centres", (None, None))
-    k, d = centres.shape
-    sigmas = p.array("sigmas", (k, d))
-    if np.any(sigmas <= 0):
-        p.fail("sigmas", "kernel widths must be > 0")
+    centres = p.array("centres", (None, n_in))
+    k = centres.shape[0]
+    sigmas = p.array("sigmas", (k, n_in))
+    if not active.any():
+        p.fail("active", "no input varies: there is nothing to partition")
+    if np.any(sigmas[:, active] <= 0):
+        p.fail("sigmas", "kernel widths must be > 0 on the varying axes")
     kernel_region = p.array("kernel_region", (k,), int)
     if np.any((kernel_region < 0) | (kernel_region >= m)) or np.unique(kernel_region).size != m:
         p.fail("kernel_region", f"must map the {k} kernels onto all regions 0..{m - 1}")
     if kind == "kmeans":
         if k != m or np.any(kernel_region != np.arange(m)):
             p.fail("kernel_region", f"a k-means partition has one kernel per region: 0..{m - 1}")
-        return Partition("kmeans", m, centres, sigmas, kernel_region)
-    boxes = p.array("boxes", (k, 2, d))
+        return Partition("kmeans", m, centres, sigmas, kernel_region, active=active)
+    boxes = p.array("boxes", (k, 2, n_in))
     if np.any(boxes[:, 0] > boxes[:, 1]):
         p.fail("boxes", "a low corner exceeds its high corner")
     tree = p.sub("tree")
-    node_centre = tree.array("centre", (None, d))
-    nodes = node_centre.shape[0]
+    node_centre = tree.array("centre", (None, n_in))
+    nodes, split = node_centre.shape[0], 2 ** int(active.sum())
     child, leaf = tree.array("child", (nodes,), int), tree.array("leaf", (nodes,), int)
     inner = child >= 0
-    if np.any(child[inner] + 2**d > nodes) or np.any(child < -1) or np.any(child[inner] <= np.flatnonzero(inner)):
-        tree.fail("child", f"child indices must point forward to {2**d} nodes within the {nodes} nodes")
+    if np.any(child[inner] + split > nodes) or np.any(child < -1) or np.any(child[inner] <= np.flatnonzero(inner)):
+        tree.fail("child", f"child indices must point forward to {split} nodes within the {nodes} nodes")
     if np.any(inner == (leaf >= 0)) or np.any(leaf >= k) or np.any(leaf < -1):
         tree.fail("leaf", f"every node is either split (child >= 0) or a leaf with an index in 0..{k - 1}")
-    cand = p.array("cand", (k, None), int)
-    own = p.array("own", (k,), int)
-    if np.any((cand < -1) | (cand >= k)):
-        p.fail("cand", f"candidate kernels must be -1 (padding) or in 0..{k - 1}")
-    if np.any((own < 0) | (own >= cand.shape[1])) or np.any(cand[np.arange(k), own] != np.arange(k)):
-        p.fail("own", "each leaf's own kernel must be listed at its 'own' column of 'cand'")
-    return Partition("octree", m, centres, sigmas, kernel_region, boxes=boxes, cand=cand, own=own,
+    return Partition("octree", m, centres, sigmas, kernel_region, active=active, boxes=boxes,
                      tree={"centre": node_centre, "child": child, "leaf": leaf})
+
+
+def _train_inputs(r: "_Reader", n_in: int) -> np.ndarray | None:
+    """The training inputs (for ``distance_to_data``), or None in files written before they were kept."""
+    if "train_inputs" not in r.doc:
+        return None
+    return r.array("train_inputs", (None, n_in))
 
 
 def _global_from(r: "_Reader", inputs: str, n_in: int, n_out: int) -> ErrorModel:

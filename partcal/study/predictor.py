@@ -18,10 +18,13 @@ from numpy.typing import NDArray
 
 from .._validation import check_array
 from ..errors import DataError
+from ..metrics import warn_far
 from ..models.partitioned import PartitionedErrorModel
 from ..robot.compensation import CompensationResult, false_target, false_target_joints
 from ..robot.kinematics import Robot, robot_from_dict
 from .persist import load_model
+
+EXTRAPOLATION_LIMIT = 50.0    # mm (Cartesian models) or degrees (joint models) from the nearest training input
 
 
 class Predictor:
@@ -79,9 +82,14 @@ class Predictor:
         """Commanded ("false target") positions, shape (n, 3) mm, so that the robot reaches the targets.
 
         Targets that do not converge to ``tol_mm`` raise a ``CompensationWarning``
-        naming them; :meth:`compensate_full` returns the details.
+        naming them, and commanded inputs farther than ``EXTRAPOLATION_LIMIT``
+        (50 mm or degrees) from the training data an ``ExtrapolationWarning``;
+        :meth:`compensate_full` returns the details.
         """
-        return self.compensate_full(targets_mm, joints, tol_mm=tol_mm, max_iter=max_iter).commanded_mm
+        result = self.compensate_full(targets_mm, joints, tol_mm=tol_mm, max_iter=max_iter)
+        evaluated = result.commanded_mm if self.inputs == "cartesian" else result.joints_deg
+        warn_far(self.model.distance_to_data(evaluated), EXTRAPOLATION_LIMIT)     # names the caller's line
+        return result.commanded_mm
 
     def compensate_full(self, targets_mm, joints=None, *, tol_mm: float = 1e-4, max_iter: int = 50
                         ) -> CompensationResult:
@@ -89,7 +97,9 @@ class Predictor:
 
         ``joints`` (n, N) degrees are IK seeds for joint models (default: the
         robot's home pose, with the joints the model never saw move held at
-        their value in the training data).
+        their value in the training data). Unconverged targets warn as in
+        :meth:`compensate`; the distance to the data is left to the caller
+        (:meth:`distance_to_data` of the commanded inputs).
         """
         targets = check_array(targets_mm, "targets_mm", columns=3)
         if self.inputs == "cartesian":

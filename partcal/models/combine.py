@@ -1,0 +1,223 @@
+"""Blended prediction: weights per block of points, local models combined per block.
+
+:class:`BlendWeights` groups points by lookup cell (``lookup``) and yields,
+per block of at most ``MAX_ROWS`` points, the candidate kernels and their
+normalised weights (``blending``); points outside the lookup grid come last
+and are weighed against every kernel. Two ways then combine the regions'
+local models:
+
+* :func:`combine_generic` (the straightforward way, any local model):
+  every region with weight in the block predicts its points, and the
+  predictions are summed with the weights.
+* :class:`FrameCombiner` (polynomial local models, and Fourier ones of joint
+  angles): each region's series is re-expressed in the frame of the lookup
+  cell (``bases.PolynomialReframe``), so a block needs one feature matrix
+  ``Phi`` (m, T) and one product ``H = W^T C`` (m, outputs x T) of weights and
+  coefficients, instead of one evaluation per region. The frame is the
+  cell's own centre and half-size, so the re-expressed coefficients are
+  well conditioned. Points outside the grid take the generic way.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Iterator
+
+import numpy as np
+from numpy.typing import NDArray
+from threadpoolctl import ThreadpoolController
+
+from .bases import Basis, PolynomialReframe, Scaling, lift_coefficients
+from .blending import cell_distance_matrix, cell_features, normalised_weights, sq_distances
+from .lookup import BlockPlan
+from .partition import Partition
+from .series import ErrorModel
+
+MAX_ROWS = 4096               # points per block: the (kernels, points) arrays stay in cache
+MAX_REFRAME_ENTRIES = 4096    # larger term lists (high-degree cross terms) take the generic way
+_THREADPOOLS: list = []       # one threadpoolctl controller, made on first use
+
+
+def one_blas_thread():
+    """Context in which BLAS runs on one thread.
+
+    A blend makes many small matrix products (tens of rows by a few thousand
+    points). OpenBLAS splits each over all cores, which costs more than it
+    saves, and on a busy machine every product waits for the other threads:
+    300 times slower was measured with two busy cores.
+    """
+    if not _THREADPOOLS:
+        _THREADPOOLS.append(ThreadpoolController())
+    return _THREADPOOLS[0].limit(limits=1, user_api="blas")
+
+
+@dataclass(frozen=True)
+class Block:
+    """Points ``positions`` (a slice of the sorted order) with their kernels and weights ``(K, m)``.
+
+    ``cell`` is the lookup cell, or -1 for points outside the grid; ``frame``
+    holds the points' coordinates ``(x - o) / h`` in the cell's frame, shape
+    ``(a, m)`` on the varying axes (None outside the grid).
+    """
+
+    positions: slice
+    kernels: NDArray[np.intp]
+    weights: NDArray[np.float64]
+    cell: int
+    frame: NDArray[np.float64] | None
+
+
+class BlendWeights:
+    """Blocks of points with their blend weights, for one partition (caches per-cell matrices)."""
+
+    def __init__(self, partition: Partition):
+        self.partition = partition
+        self._cells: dict[int, tuple] = {}         # cell -> (kernels, centre, distance matrix)
+
+    def blocks(self, X: NDArray[np.float64]) -> tuple[BlockPlan, NDArray[np.float64], Iterator[Block]]:
+        """``(plan, X_sorted, blocks)``: the points sorted by cell (``plan.order``), and their blocks."""
+        p = self.partition
+        plan = p.plan(X)
+        Xs = np.take(X, plan.order, axis=0)
+        return plan, Xs, self._iterate(plan, np.ascontiguousarray(Xs[:, p.active]))
+
+    def _iterate(self, plan: BlockPlan, Xa) -> Iterator[Block]:
+        p, lookup = self.partition, self.partition.lookup
+        half = lookup.size / 2
+        a_axes = Xa.shape[1]
+        for cell, start, stop in zip(plan.cells.tolist(), plan.starts.tolist(), plan.stops.tolist()):
+            cached = self._cells.get(cell)
+            if cached is None:
+                kernels, centre = lookup.candidates(cell), lookup.centre(cell)
+                A = cell_distance_matrix(p.kernel_centres[kernels], p.kernel_inv_sigmas[kernels], centre, half)
+                cached = self._cells[cell] = (kernels, centre, A)
+            kernels, centre, A = cached
+            for a in range(start, stop, MAX_ROWS):
+                b = min(a + MAX_ROWS, stop)
+                F = cell_features(Xa[a:b], centre, half)
+                yield Block(slice(a, b), kernels, normalised_weights(A @ F), cell, F[a_axes:2 * a_axes])
+        n_kernels = p.kernel_centres.shape[0]
+        step = max(1, 1_000_000 // n_kernels)
+        for a in range(plan.far.start, plan.far.stop, step):       # outside the grid: every kernel
+            b = min(a + step, plan.far.stop)
+            w = normalised_weights(sq_distances(Xa[a:b], p.kernel_centres, p.kernel_inv_sigmas))
+            used = np.flatnonzero(w.any(axis=1))
+            yield Block(slice(a, b), used, w[used], -1, None)
+
+
+def region_weights(kernel_region: NDArray[np.intp], weights: NDArray[np.float64]
+                   ) -> tuple[NDArray[np.intp], NDArray[np.float64]]:
+    """Regions of a block's kernels and their weights ``(R_b, m)``: kernels of one region add up."""
+    regions, column = np.unique(kernel_region, return_inverse=True)
+    if regions.size == kernel_region.size:
+        return kernel_region, weights
+    onehot = np.zeros((regions.size, kernel_region.size))
+    onehot[column, np.arange(kernel_region.size)] = 1.0
+    return regions, onehot @ weights
+
+
+def combine_generic(models, kernel_region, Xb, kernels, weights, n_outputs: int) -> NDArray[np.float64]:
+    """Weighted sum of the predictions of every region with weight in the block, shape (m, outputs)."""
+    regions, W = region_weights(kernel_region[kernels], weights)
+    out = np.zeros((Xb.shape[0], n_outputs))
+    for region, w in zip(regions.tolist(), W):
+        keep = np.flatnonzero(w)
+        if 2 * keep.size > w.size:        # most rows: evaluate all, cheaper than gathering
+            out += w[:, None] * models[region]._predict_trusted(Xb)
+        elif keep.size:
+            out[keep] += w[keep, None] * models[region]._predict_trusted(Xb[keep])
+    return out
+
+
+class FrameCombiner:
+    """Local series re-expressed in each lookup cell's frame: one feature matrix per block.
+
+    Build with :meth:`build`, which returns ``None`` when the local models do
+    not allow it (not ``ErrorModel`` series, Fourier series of positions, or
+    term lists too large); callers then use :func:`combine_generic`.
+    """
+
+    def __init__(self, partition: Partition, basis: Basis, terms: list, coefs, centres, scales,
+                 reframe: PolynomialReframe | None):
+        self.partition, self.basis, self.terms = partition, basis, terms
+        self.coefs, self.centres, self.scales, self.reframe = coefs, centres, scales, reframe
+        axes = {int(i): j for j, i in enumerate(np.flatnonzero(partition.active))}
+        self._factors = [[(axes[i], k) for i, k in enumerate(t) if k] for t in terms] if reframe else None
+        self._cells: dict[int, NDArray[np.float64]] = {}   # cell -> (outputs * T, K) coefficients
+
+    @classmethod
+    def build(cls, partition: Partition, models) -> "FrameCombiner | None":
+        if not all(type(m) is ErrorModel and hasattr(m, "coef_") for m in models):
+            return None
+        basis = models[0].basis_
+        if any(m.basis_ != basis or m.coef_.shape[1] != models[0].coef_.shape[1] for m in models):
+            return None
+        if basis.kind == "fourier" and basis.inputs != "joint":
+            return None                   # phases scale with each region's range: no common frame
+        d = partition.active.size
+        terms = basis.terms(Scaling(np.zeros(d), np.ones(d), partition.active))
+        lifted = [lift_coefficients(m.terms_, m.coef_, terms) for m in models]
+        if any(c is None for c in lifted):
+            return None
+        reframe = None
+        if basis.kind == "polynomial":
+            reframe = PolynomialReframe(terms)
+            if reframe.n_entries > MAX_REFRAME_ENTRIES:
+                return None
+        return cls(partition, basis, terms, np.stack(lifted), np.stack([m.scaling_.centre for m in models]),
+                   np.stack([m.scaling_.scale for m in models]), reframe)
+
+    def prepare(self, cells) -> None:
+        """Re-express the series of every cell in ``cells`` not seen yet (in batches of cells)."""
+        todo = [c for c in cells if c not in self._cells]
+        lists = self.partition.lookup
+        per_pair = self.reframe.n_entries if self.reframe is not None else 1
+        batch, pairs = [], 0
+        for i, c in enumerate(todo):
+            batch.append(c)
+            pairs += lists.indptr[c + 1] - lists.indptr[c]
+            if pairs * per_pair > 1_000_000 or i == len(todo) - 1:      # bounded temporaries
+                self._prepare_batch(batch)
+                batch, pairs = [], 0
+
+    def _prepare_batch(self, cells) -> None:
+        p = self.partition
+        kernels = [p.lookup.candidates(c) for c in cells]
+        counts = [len(k) for k in kernels]
+        regions = p.kernel_region[np.concatenate(kernels)]
+        coefs = self.coefs[regions]                                  # (P, T, outputs)
+        if self.reframe is not None:
+            d = p.active.size
+            centre, half = np.zeros((len(regions), d)), np.ones(d)
+            centre[:, p.active] = np.repeat(np.array([p.lookup.centre(c) for c in cells]).reshape(len(cells), -1),
+                                            counts, axis=0)
+            half[p.active] = p.lookup.size / 2
+            scales = self.scales[regions]
+            coefs = self.reframe.apply(coefs, half / scales, (centre - self.centres[regions]) / scales)
+        flat = coefs.transpose(2, 1, 0).reshape(-1, len(regions))     # (outputs * T, P)
+        bounds = np.cumsum([0] + counts)
+        for c, a, b in zip(cells, bounds[:-1], bounds[1:]):
+            self._cells[c] = np.ascontiguousarray(flat[:, a:b])
+
+    def _features(self, block: Block, Xb) -> NDArray[np.float64]:
+        """Features of the block's points in the cell's frame, shape (T, m)."""
+        if self._factors is None:
+            return self.basis.transform(Xb, None, self.terms).T        # Fourier of joint angles: no frame
+        v = block.frame
+        powers = {}
+        out = np.empty((len(self.terms), v.shape[1]))
+        for t, factors in enumerate(self._factors):
+            row = out[t]
+            row[:] = 1.0
+            for i, k in factors:
+                if (i, k) not in powers:
+                    powers[i, k] = v[i] if k == 1 else v[i] * powers.get((i, k - 1), v[i] ** (k - 1))
+                row *= powers[i, k]
+        return out
+
+    def combine(self, block: Block, Xb) -> NDArray[np.float64]:
+        """Blended prediction of one block inside the grid, shape (outputs, m)."""
+        self.prepare([block.cell])
+        H = self._cells[block.cell] @ block.weights                     # (outputs * T, m)
+        T = len(self.terms)
+        return np.einsum("jtm,tm->jm", H.reshape(-1, T, H.shape[1]), self._features(block, Xb))

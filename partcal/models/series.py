@@ -28,7 +28,7 @@ from .._validation import check_choice, check_int, param_error
 from ..errors import PartcalError
 from ..metrics import distance_outside_boxes, warn_far
 from .base import ErrorModelBase, seed_from
-from .bases import Basis, Scaling, raw_polynomial
+from .bases import Basis, Scaling, SeriesPlan, raw_polynomial
 from .swarm import SwarmConfig, SwarmResult, minimize_batch
 
 log = logging.getLogger(__name__)
@@ -154,6 +154,8 @@ class ErrorModel(ErrorModelBase):
             coef = to_coef @ np.stack([res.x for res in self.swarm_results_], axis=1)
         self.coef_ = coef
         self.scaling_, self.terms_, self.basis_ = scaling, terms, basis
+        self._plan = SeriesPlan.build(basis, scaling, terms, coef)
+        self._plan_of = (coef, scaling, terms)
         self.data_bounds_ = np.stack([X.min(axis=0), X.max(axis=0)])
         resid = Y - phi @ coef
         self.train_rms_ = np.sqrt((weights[:, None] * resid**2).sum(axis=0) / total_w)
@@ -196,8 +198,22 @@ class ErrorModel(ErrorModelBase):
         return self._shape_output(self._predict_trusted(X))
 
     def _predict_trusted(self, X: NDArray[np.float64]) -> NDArray[np.float64]:
-        """Prediction ``(n, n_outputs)`` on validated arrays (no checks: the hot path of blends)."""
-        return self.basis_.transform(X, self.scaling_, self.terms_) @ self.coef_
+        """Prediction ``(n, n_outputs)`` on validated arrays (no checks: the hot path of blends).
+
+        Evaluated by the compiled :class:`SeriesPlan` in cache-sized chunks; it
+        equals ``basis_.transform(X) @ coef_`` to rounding (tested).
+        """
+        return self._series_plan().evaluate(X)
+
+    def _series_plan(self) -> SeriesPlan:
+        """The compiled series, built in ``fit``; rebuilt if ``coef_``, ``scaling_`` or ``terms_``
+        were replaced since (model files set them directly)."""
+        plan, source = self.__dict__.get("_plan"), self.__dict__.get("_plan_of", ())
+        now = (self.coef_, self.scaling_, self.terms_)
+        if plan is None or len(source) != 3 or any(a is not b for a, b in zip(source, now)):
+            plan = self._plan = SeriesPlan.build(self.basis_, self.scaling_, self.terms_, self.coef_)
+            self._plan_of = now
+        return plan
 
     def distance_to_data(self, X) -> NDArray[np.float64]:
         """Distance of each point outside the bounding box of the training inputs, shape (n,).

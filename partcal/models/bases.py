@@ -34,7 +34,20 @@ def varying_inputs(X: NDArray[np.float64]) -> NDArray[np.bool_]:
     >>> varying_inputs(np.array([[0.0, 30.0, 1.0], [5.0, 30.0, 1.0 + 1e-15]])).tolist()
     [True, False, False]
     """
-    lo, hi = X.min(axis=0), X.max(axis=0)
+    return _varying(*column_bounds(X))
+
+
+def column_bounds(X: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Smallest and largest value of every column of ``X`` (n, d), each shape (d,).
+
+    Reduced along contiguous rows of ``X.T``: reducing a C-ordered (n, 3) array
+    along axis 0 runs an inner loop of length 3 per row, about 10 times slower.
+    """
+    columns = np.ascontiguousarray(X.T)
+    return columns.min(axis=1), columns.max(axis=1)
+
+
+def _varying(lo: NDArray[np.float64], hi: NDArray[np.float64]) -> NDArray[np.bool_]:
     return (hi - lo) > 1e-12 * np.maximum(1.0, np.maximum(np.abs(lo), np.abs(hi)))
 
 
@@ -50,10 +63,11 @@ class Scaling:
     active: NDArray[np.bool_]
 
     @classmethod
-    def fit(cls, X: NDArray[np.float64]) -> "Scaling":
-        lo, hi = X.min(axis=0), X.max(axis=0)
+    def fit(cls, X: NDArray[np.float64], bounds=None) -> "Scaling":
+        """From training inputs ``X`` (n, d), or from their :func:`column_bounds` if given."""
+        lo, hi = column_bounds(X) if bounds is None else bounds
         half = (hi - lo) / 2.0
-        active = varying_inputs(X)
+        active = _varying(lo, hi)
         return cls(centre=(hi + lo) / 2.0, scale=np.where(active, half, 1.0), active=active)
 
     def to_dict(self) -> dict:

@@ -189,3 +189,11 @@ def test_path_ik_falls_back_to_sequential_steps_where_the_chain_does_not_settle(
     monkeypatch.setattr(ik, "_PASSES", 1)            # no time to settle: exact prefixes, then restarts
     monkeypatch.setattr(ik, "_SEGMENT", 25)          # and segments on a short path
     np.testing.assert_allclose(sk120.inverse_path(targets, fixed=(4, 5)), reference, rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("fixed", [(), (4, 5, 6)])
+def test_batched_path_ik_with_more_or_no_redundancy(sk120, fixed):
+    # six free joints (a three-dimensional self-motion) or three (none): the general corrections
+    targets = paper_path("rectangle")[::3]
+    q = sk120.inverse_path(targets, fixed=fixed)
+    np.testing.assert_allclose(q, sequential_path(sk120, targets, fixed=fixed), rtol=0, atol=1e-9)

@@ -140,3 +140,20 @@ def test_callback_sees_every_problem_and_objective_sees_a_read_only_swarm():
 
     res = minimize_batch(fun, -np.ones((2, 3)), np.ones((2, 3)), random_states=[0, 1], callback=callback)
     assert seen == [((2, 3), (2,))] * 3 and all(r.nit == 3 for r in res)
+
+
+def test_results_do_not_depend_on_how_many_random_numbers_are_drawn_ahead(monkeypatch):
+    # the block of pre-drawn random numbers shrinks as a batch grows: no result may depend on it
+    import partcal.models.swarm as swarm
+
+    centres = np.random.default_rng(8).uniform(-0.5, 0.5, size=(5, 3))
+
+    def batch_fun(X, which):
+        return 1.0 + np.sum((X - centres[which][:, None, :]) ** 2, axis=2)
+
+    cfg = SwarmConfig(particles=7, patience=20, iterations=200)     # 2 * 3 * 7 numbers per iteration: not whole words
+    default = minimize_batch(batch_fun, -np.ones((5, 3)), np.ones((5, 3)), cfg, random_states=list(range(5)))
+    monkeypatch.setattr(swarm, "_RANDOM_BLOCK_BYTES", 1)            # one iteration at a time
+    one_by_one = minimize_batch(batch_fun, -np.ones((5, 3)), np.ones((5, 3)), cfg, random_states=list(range(5)))
+    for a, b in zip(default, one_by_one):
+        assert np.array_equal(a.x, b.x) and np.array_equal(a.history, b.history)

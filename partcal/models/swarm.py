@@ -88,8 +88,8 @@ class SwarmConfig:
     vmax: float = 0.5
     bound_scale: float = 2.0
     stop_fitness: float | None = None
-    patience: int | None = 100
-    ftol: float = 1e-8
+    patience: int | None = 50
+    ftol: float = 1e-7
 
     def __post_init__(self):
         own = "SwarmConfig"
@@ -223,7 +223,7 @@ def minimize_batch(
         x[b] = g.uniform(lo[b], hi[b], size=(n, dims)).T
     if x0 is not None:
         x[:, :, 0] = np.clip(np.asarray(x0, dtype=float), lo, hi)
-    f = _evaluate(fun, x, np.arange(n_prob))
+    f = _evaluate(fun, _read_only_view(x), np.arange(n_prob))
     run = _Run(cfg, x, np.where(np.isnan(f), np.inf, f), lo, hi, rngs)   # later NaNs never win: f < pf, fmin
     for it in range(1, cfg.iterations + 1):
         if run.n_live == 0:
@@ -233,7 +233,7 @@ def minimize_batch(
         if callback is not None and callback(it, *run.best_all()):
             run.finish(run.live, it, "stopped by the callback", True)
             break
-        if np.count_nonzero(done):
+        if done is not None:
             run.finish(done, it)
     run.finish(run.live, cfg.iterations, "reached the iteration limit", False)
     return run.results
@@ -250,7 +250,7 @@ class _Run:
     the particles innermost (bounds and the guide then broadcast over long
     contiguous runs), and the personal-best fitness ``pf`` ``(b, n)``.
 
-    Random numbers are 32-bit uniforms, two from each raw 64-bit word of a
+    Random numbers are 16-bit uniforms, four from each raw 64-bit word of a
     problem's own bit generator, drawn in blocks of several iterations and
     used in order: a problem sees the same numbers alone or in any batch. A
     problem that stops has its result recorded at once; its rows stay in the
@@ -274,12 +274,18 @@ class _Run:
         self.tmp, self.mask = np.empty_like(x), np.empty(x.shape, dtype=bool)
         chi = cfg.chi if cfg.rule == "constriction" else 1.0
         self.scale = chi
-        self.pull = (chi * cfg.c1 * 2.0**-32, chi * cfg.c2 * 2.0**-32)
+        self.pull = (chi * cfg.c1 * 2.0**-16, chi * cfg.c2 * 2.0**-16)
         self.block = int(min(32, max(1, _RANDOM_BLOCK_BYTES // (max(b, 1) * 2 * n * dims * 8))))
-        self.rand, self.used = np.empty((b, 2, self.block, dims, n)), self.block
+        self.rand, self.used = np.empty((b, self.block, 2, dims, n)), self.block
         self.history = np.empty((min(cfg.iterations, 1024) + 1, b))
         self.history[0] = f.min(axis=1) if n else np.inf
         self.results: list = [None] * b
+        self.x_of_view = self.view = None
+
+    def _views(self) -> NDArray[np.float64]:
+        """The read-only view of the current position array (made again when the array changes)."""
+        self.x_of_view, self.view = self.x, _read_only_view(self.x)
+        return self.view
 
     def _compact(self) -> None:
         """Drop the rows of stopped problems (with their unused random numbers)."""
@@ -290,17 +296,25 @@ class _Run:
         self.rand = self.rand[keep] if self.used < self.block else np.empty((keep.sum(),) + self.rand.shape[1:])
 
     def _refill(self) -> None:
-        """Draw the next block of random numbers: per problem ``2 * block * dims * n`` uniforms.
+        """Draw the next block of random numbers: per problem and iteration, r1 then r2, ``dims * n`` each.
 
-        They come scaled by the pull coefficients (and ``2^-32``), so the
-        update multiplies once; r1 and r2 are each one contiguous half.
+        Four 16-bit uniforms from each raw 64-bit word: random numbers are a
+        fifth of an iteration's time, and their resolution does not limit the
+        search (each scales a continuous pull ``c r (p - x)``; steps of 2^-16
+        are far finer than the spread a swarm needs). Every iteration takes
+        the same whole number of words from the problem's stream, so which
+        number lands where does not depend on the block length (which depends
+        on the batch). They come scaled by the pull coefficients (and 2^-16),
+        so the update multiplies once.
         """
-        shape = self.rand.shape[1:]
-        words = int(np.prod(shape)) // 2
+        block, _, dims, n = self.rand.shape[1:]
+        count = 2 * dims * n
+        words = -(-count // 4)
         for k, b in enumerate(self.idx):
-            u = self.bits[b].random_raw(words).view(np.uint32).reshape(shape)
-            np.multiply(u[0], self.pull[0], out=self.rand[k, 0])
-            np.multiply(u[1], self.pull[1], out=self.rand[k, 1])
+            u = self.bits[b].random_raw(block * words).view(np.uint16).reshape(block, 4 * words)[:, :count]
+            u = u.reshape(block, 2, dims, n)
+            np.multiply(u[:, 0], self.pull[0], out=self.rand[k, :, 0])
+            np.multiply(u[:, 1], self.pull[1], out=self.rand[k, :, 1])
         self.used = 0
 
     def step(self, it: int, fun) -> None:
@@ -310,7 +324,7 @@ class _Run:
         if self.used == self.block:
             self._refill()
         cfg, x, v, t, p, mask = self.cfg, self.x, self.v, self.tmp, self.p, self.mask
-        r1, r2 = self.rand[:, 0, self.used], self.rand[:, 1, self.used]
+        r1, r2 = self.rand[:, self.used, 0], self.rand[:, self.used, 1]
         self.used += 1
         if cfg.rule == "inertia":
             v *= cfg.inertia[0] + (cfg.inertia[1] - cfg.inertia[0]) * (it - 1) / max(cfg.iterations - 1, 1)
@@ -335,14 +349,14 @@ class _Run:
         if np.count_nonzero(mask):                # absorbing walls: on the wall, that velocity zero
             v[mask] = 0.0
             self.x, self.tmp = x, t = t, x
-        f = _evaluate(fun, x, self.idx)
+        f = _evaluate(fun, self.view if x is self.x_of_view else self._views(), self.idx)
         np.less(f, self.pf, out=mask[:, 0])
         mask[:, 1:] = mask[:, :1]
         np.putmask(p, mask, x)                    # a full mask: about 3 times faster than copyto(where=)
         np.fmin(self.pf, f, out=self.pf)
 
     def stops(self, it: int) -> NDArray[np.bool_]:
-        """Record each problem's best; return which of the live ones stop now (threshold or patience)."""
+        """Record each problem's best; return which of the live ones stop now (threshold or patience), or None."""
         cfg, history = self.cfg, self.history
         if it >= history.shape[0]:
             history = np.empty((min(2 * history.shape[0], cfg.iterations + 1), history.shape[1]))
@@ -353,15 +367,18 @@ class _Run:
         history[it, cols] = best                     # stopped rows too: their history was copied already
         if cfg.patience is not None and it >= cfg.patience:
             floor = np.abs(best)
-            np.maximum(floor, 1e-300, out=floor)
             floor *= cfg.ftol
-            done = history[it - cfg.patience, cols] - best <= floor
+            floor += best
+            done = history[it - cfg.patience, cols] <= floor      # improved by ftol * |best| at most
+            if cfg.stop_fitness is not None:
+                done |= best <= cfg.stop_fitness
+        elif cfg.stop_fitness is not None:
+            done = best <= cfg.stop_fitness
         else:
-            done = np.zeros(best.size, dtype=bool)
-        if cfg.stop_fitness is not None:
-            done |= best <= cfg.stop_fitness
-        done &= self.live
-        return done
+            return None
+        if self.n_live < self.live.size:
+            done &= self.live
+        return done if np.count_nonzero(done) else None
 
     def best_all(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """The best position ``(B, dims)`` and fitness ``(B,)`` of every swarm, stopped ones included."""
@@ -390,10 +407,8 @@ class _Run:
         self.n_live = int(self.live.sum())
 
 
-def _evaluate(fun, x: NDArray[np.float64], which: NDArray[np.intp]) -> NDArray[np.float64]:
-    """``fun`` on the swarm ``x`` (b, dims, n), shown to it read-only as ``(b, n, dims)``, shape (b, n)."""
-    view = x.transpose(0, 2, 1)
-    view.flags.writeable = False
+def _evaluate(fun, view: NDArray[np.float64], which: NDArray[np.intp]) -> NDArray[np.float64]:
+    """``fun`` on the swarm, seen as ``(b, n, dims)`` (a read-only view of the swarm's memory), shape (b, n)."""
     f = fun(view, which)
     if type(f) is not np.ndarray or f.dtype != np.float64:
         f = np.asarray(f, dtype=float)
@@ -402,6 +417,13 @@ def _evaluate(fun, x: NDArray[np.float64], which: NDArray[np.intp]) -> NDArray[n
         raise param_error("minimize", "fun", f"a function returning shape {want}",
                           f.shape[1:] if view.shape[0] == 1 else f.shape)
     return f
+
+
+def _read_only_view(x: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The swarm ``x`` (b, dims, n) as ``fun`` sees it: ``(b, n, dims)``, read-only."""
+    view = x.transpose(0, 2, 1)
+    view.flags.writeable = False
+    return view
 
 
 def _neighbourhood_best(best_f: NDArray[np.float64], cfg: SwarmConfig) -> NDArray[np.intp]:

@@ -6,11 +6,13 @@ already built (the straightforward prediction also has to build it); 10^7
 points in bounded memory, without a 10^7 x terms matrix.
 Models are fitted by least squares on the virtual-SK120 identification data;
 the query points fill the training box (the timings do not depend on the values).
+Times are CPU time of this process (time.process_time), least disturbed of several runs.
 Run: .venv/bin/python benchmarks/bench_predict.py
 """
 
 import os
 import sys
+import time
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
@@ -40,9 +42,10 @@ def main() -> None:
         model = ErrorModel(**kw, solver="lstsq").fit(train, m.errors_mm)
         X = rng.uniform(train.min(axis=0), train.max(axis=0), size=(10**6, train.shape[1]))
         phi = model.basis_.transform(X, model.scaling_, model.terms_)
-        t_ref = best_time(lambda: phi @ model.coef_, repeat=7)
-        t_old = best_time(lambda: model.basis_.transform(X, model.scaling_, model.terms_) @ model.coef_, repeat=3)
-        t_new = best_time(lambda: model.predict(X), repeat=7)
+        t_ref = best_time(lambda: phi @ model.coef_, repeat=7, clock=time.process_time)
+        t_old = best_time(lambda: model.basis_.transform(X, model.scaling_, model.terms_) @ model.coef_, repeat=3,
+                          clock=time.process_time)
+        t_new = best_time(lambda: model.predict(X), repeat=7, clock=time.process_time)
         err = np.abs(model.predict(X) - phi @ model.coef_).max()
         rows.append([name, phi.shape[1], f"{t_ref * 1e3:.1f}", f"{t_old * 1e3:.1f}", f"{t_new * 1e3:.1f}",
                      f"{t_new / t_ref:.2f}x", "yes" if t_new <= 3 * t_ref else "NO", f"{err:.0e}"])
@@ -53,7 +56,7 @@ def main() -> None:
 
     model = ErrorModel(degree=2, solver="lstsq").fit(m.nominal_mm, m.errors_mm)
     X = rng.uniform(m.nominal_mm.min(axis=0), m.nominal_mm.max(axis=0), size=(10**7, 3))
-    t = best_time(lambda: model.predict(X), repeat=3)
+    t = best_time(lambda: model.predict(X), repeat=3, clock=time.process_time)
     tracemalloc.start()
     out = model.predict(X)
     peak = tracemalloc.get_traced_memory()[1]

@@ -231,8 +231,7 @@ class SeriesPlan:
 
     @classmethod
     def _polynomial(cls, scaling: Scaling, terms: list[tuple], coef) -> "SeriesPlan":
-        # every input gets a row, used or not: one subtraction of the whole chunk beats a gather
-        columns = np.arange(len(terms[0]) if terms else scaling.centre.size, dtype=np.intp)
+        columns = np.array(sorted({i for exps in terms for i, a in enumerate(exps) if a}), dtype=np.intp)
         k = columns.size
         wanted = {tuple(int(exps[i]) for i in columns) for exps in terms}
         higher = set()                     # every monomial of degree >= 2 needed, with its parents
@@ -283,12 +282,14 @@ class SeriesPlan:
         out = np.empty((n, self.coef.shape[1]))
         M = np.empty((self.coef.shape[0], min(self.chunk, max(n, 1))))
         M[0] = 1.0
-        every = k == X.shape[1]                       # all columns used, in order: no gather
+        runs = _runs(self.columns)                    # consecutive used columns: one strided subtraction each
         for start in range(0, n, M.shape[1]):
             m = min(M.shape[1], n - start)
             rows = M[:, :m]
             xs = X[start:start + m].T
-            np.subtract(xs if every else xs[self.columns], self.shift[:, None], out=rows[1:k + 1])
+            for first, count, row in runs:
+                np.subtract(xs[first:first + count], self.shift[row - 1:row - 1 + count, None],
+                            out=rows[row:row + count])
             if self.kind == "fourier":
                 self._harmonics(rows, k)
             else:
@@ -342,6 +343,21 @@ def _merge_runs(ops: list[tuple[int, int, int]]) -> tuple:
                 continue
         runs.append([dest, 1, left, right, 1])
     return tuple(tuple(run) for run in runs)
+
+
+def _runs(columns: NDArray[np.intp]) -> list[tuple[int, int, int]]:
+    """Runs of consecutive columns as ``(first column, count, first row)``, rows from 1.
+
+    >>> _runs(np.array([0, 1, 2, 5]))
+    [(0, 3, 1), (5, 1, 4)]
+    """
+    runs: list[tuple[int, int, int]] = []
+    for row, c in enumerate(columns, start=1):
+        if runs and runs[-1][0] + runs[-1][1] == c:
+            runs[-1] = (runs[-1][0], runs[-1][1] + 1, runs[-1][2])
+        else:
+            runs.append((int(c), 1, row))
+    return runs
 
 
 def _chunk_rows(n_rows: int) -> int:

@@ -167,7 +167,7 @@ class PartitionedErrorModel(ErrorModelBase):
         """Warn (``ExtrapolationWarning``) about points farther than ``limit`` from the data; return the mask."""
         return warn_far(self.distance_to_data(X), limit)
 
-def _fit_regions(models: list[ErrorModel], data: list[tuple], n_jobs) -> list[ErrorModel]:
+def _fit_regions(models: list, data: list[tuple], n_jobs) -> list:
     """Fit every region's model to its ``(X, Y, weights)``; swarms of all regions in one batch.
 
     PSO fits run their swarms together (:func:`fit_swarms`: one vectorised loop
@@ -175,7 +175,7 @@ def _fit_regions(models: list[ErrorModel], data: list[tuple], n_jobs) -> list[Er
     regions when asked. Every region keeps its own seed, so each model is
     exactly the one a solo fit gives, whatever ``n_jobs``.
     """
-    if models and models[0].solver == "lstsq":
+    if not all(isinstance(m, ErrorModel) and m.solver == "pso" for m in models):   # no swarms: region by region
         return Parallel(n_jobs=n_jobs)(delayed(_fit_one)(m, *d) for m, d in zip(models, data))
     workers = max(1, min(len(models), effective_n_jobs(n_jobs)))
     cuts = np.linspace(0, len(models), workers + 1).round().astype(int)
@@ -185,7 +185,7 @@ def _fit_regions(models: list[ErrorModel], data: list[tuple], n_jobs) -> list[Er
     return [m for part in Parallel(n_jobs=n_jobs)(delayed(_fit_batch)(*sl) for sl in slices) for m in part]
 
 
-def _fit_one(model: ErrorModel, X, Y, weights) -> ErrorModel:
+def _fit_one(model, X, Y, weights):
     return model._fit(X, Y, weights)
 
 

@@ -6,6 +6,8 @@ regions (issue 13); fitting 10^5 samples into 64 regions in under 10 s (issue 4)
 "reference" is the straightforward blend, measured in the same run: the
 same weights, then every region with weight in a block predicts its points.
 "1st call" includes building the per-cell caches (re-expressed coefficients).
+Issue 13 also: the swarms of a PSO model's 64 regions run as one vectorised batch, at least 5x
+faster than fitting the regions one by one (same seeds, identical results).
 Data: a smooth synthetic error field over a 2 x 2 x 2 m workspace (the
 timings do not depend on the values). Local models: SDP(CI) by least squares.
 Run: .venv/bin/python benchmarks/bench_partition.py
@@ -20,10 +22,11 @@ sys.path.insert(0, os.path.dirname(__file__))
 
 import numpy as np  # noqa: E402
 from _table import best_time, print_table  # noqa: E402
+from sklearn.base import clone  # noqa: E402
 
 from partcal.models.combine import one_blas_thread  # noqa: E402
 from partcal.models.partition import KMeansPartition, Octree  # noqa: E402
-from partcal.models.partitioned import PartitionedErrorModel  # noqa: E402
+from partcal.models.partitioned import PartitionedErrorModel, _fit_regions  # noqa: E402
 from partcal.models.series import ErrorModel  # noqa: E402
 
 LOW, HIGH = np.array([-1000.0, -1000, -500]), np.array([1000.0, 1000, 1500])
@@ -98,6 +101,36 @@ def main() -> None:
         rows.append([f"{n:,}", m.partition_.n_regions, f"{t_fit:.3f}", f"{t_pred:.3f}", f"{n / t_pred:,.0f}"])
     print_table("Samples: octree depth 2, blended (fit n samples, predict the same n)",
                 ["samples", "regions", "fit s", "predict s", "predictions/s"], rows)
+    regional_swarms()
+
+
+def regional_swarms() -> None:
+    """PSO local models: every region's swarms in one batch against the regions fitted one by one."""
+    rows = []
+    for n, depth in ((100_000, 2), (20_000, 2)):
+        X, y = field(n)
+        for label, degree in (("FDP(CI)", 1), ("SDP(CI)", 2)):
+            local = ErrorModel(degree=degree)
+            m = PartitionedErrorModel(partition=Octree(max_depth=depth), local=local, random_state=0)
+            t_model = best_time(lambda: m.fit(X, y), repeat=1)
+            groups = m._training_groups(m.partition_, X)
+            seeds = [int(s.generate_state(1)[0]) for s in np.random.SeedSequence(0).spawn(len(groups))]
+            data = [(X[idx], y[idx], w) for idx, w in groups]
+
+            def one_by_one():
+                return [clone(local).set_params(random_state=s)._fit(*d) for s, d in zip(seeds, data)]
+
+            def batched():
+                return _fit_regions([clone(local).set_params(random_state=s) for s in seeds], data, None)
+
+            t_solo = best_time(one_by_one, repeat=2)
+            t_batch = best_time(batched, repeat=2)
+            same = all(np.array_equal(a.coef_, b.coef_) for a, b in zip(one_by_one(), batched()))
+            rows.append([f"{n:,}", label, len(groups), f"{t_solo:.3f}", f"{t_batch:.3f}", f"{t_solo / t_batch:.1f}x",
+                         "yes" if same else "NO", f"{t_model:.2f}"])
+    print_table("PSO regions (octree depth 2, gaussian blend): swarms one by one vs one batch, one core",
+                ["samples", "local", "regions", "one by one s", "batched s", "speed-up", "identical coef",
+                 "whole fit s"], rows)
 
 
 if __name__ == "__main__":

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from partcal.models.bases import Basis, PolynomialReframe, Scaling, lift_coefficients, raw_polynomial
+from partcal.models.bases import Basis, PolynomialReframe, Scaling, SeriesPlan, lift_coefficients, raw_polynomial
 
 
 def test_scaling_maps_training_range_to_unit_and_drops_constant_inputs():
@@ -55,3 +55,55 @@ def test_reframed_polynomials_are_the_same_functions(degree, cross):
                                              ((frame.centre - own.centre) / own.scale)[None])[0]
     expected = basis.transform(X, own, terms) @ coef
     np.testing.assert_allclose(basis.transform(X, frame, full) @ reframed, expected, rtol=1e-11, atol=1e-9)
+
+
+SERIES = [("polynomial", "cartesian", 1, False), ("polynomial", "cartesian", 2, False),
+          ("polynomial", "cartesian", 8, False), ("polynomial", "cartesian", 3, True),
+          ("polynomial", "joint", 2, False), ("polynomial", "joint", 4, True),
+          ("fourier", "joint", 1, False), ("fourier", "joint", 5, False), ("fourier", "cartesian", 3, False)]
+
+
+@pytest.mark.parametrize("kind, inputs, order, cross", SERIES)
+def test_compiled_series_equals_the_feature_matrix_product(kind, inputs, order, cross):
+    rng = np.random.default_rng(order)
+    d = 3 if inputs == "cartesian" else 6
+    train = rng.uniform(-800, 1500, size=(50, d))
+    if inputs == "joint":
+        train[:, 3:5] = [0.0, 30.0]                    # constant joints, left out of the basis
+    scaling = Scaling.fit(train)
+    basis = Basis(kind, inputs, order, cross)
+    terms = basis.terms(scaling)
+    coef = rng.normal(size=(len(terms), 3))
+    plan = SeriesPlan.build(basis, scaling, terms, coef)
+    X = rng.uniform(-1200, 1900, size=(3 * plan.chunk + 17, d))     # beyond the data, several chunks
+    np.testing.assert_allclose(plan.evaluate(X), basis.transform(X, scaling, terms) @ coef, rtol=0, atol=1e-9)
+    assert plan.evaluate(X[:0]).shape == (0, 3)
+
+
+def test_compiled_polynomial_keeps_unusual_term_lists():
+    # a model file may list terms in any order, with gaps: x^3 without x^2, a repeated term
+    s = Scaling(np.array([100.0, -50.0]), np.array([20.0, 40.0]), np.array([True, True]))
+    terms = [(0, 0), (3, 0), (1, 2), (0, 1), (3, 0)]
+    coef = np.array([[1.0], [2.0], [-3.0], [0.5], [0.25]])
+    X = np.array([[110.0, -30.0], [60.0, 10.0]])
+    u = (X - s.centre) / s.scale
+    expected = 1 + 2.25 * u[:, 0] ** 3 - 3 * u[:, 0] * u[:, 1] ** 2 + 0.5 * u[:, 1]
+    plan = SeriesPlan.build(Basis("polynomial", "cartesian", 3, True), s, terms, coef)
+    np.testing.assert_allclose(plan.evaluate(X)[:, 0], expected, rtol=1e-13)
+
+
+def test_compiled_series_memory_is_bounded_by_its_output():
+    import tracemalloc
+
+    rng = np.random.default_rng(0)
+    scaling = Scaling.fit(rng.uniform(-1000, 1000, size=(40, 3)))
+    basis = Basis("polynomial", "cartesian", 4, True)            # 35 terms
+    terms = basis.terms(scaling)
+    plan = SeriesPlan.build(basis, scaling, terms, rng.normal(size=(len(terms), 3)))
+    X = rng.uniform(-1000, 1000, size=(200_000, 3))
+    tracemalloc.start()
+    out = plan.evaluate(X)
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    feature_matrix = X.shape[0] * len(terms) * 8
+    assert peak < out.nbytes + 2 * 2**20 < feature_matrix / 5

@@ -169,3 +169,84 @@ def test_robot_yaml_is_read_like_a_run_config(tmp_path):
     bad.write_text(text.replace("tool_mm: [205.32, 0.0, 112.65]", "tool_mm: [205.32, true, 112.65]"))
     with pytest.raises(ConfigError, match=r"r.yaml: tool_mm\[1\] \(line \d+\): must be a finite number; got True"):
         load_robot(bad)
+
+
+def dh_positions(robot, q_deg):
+    """The straightforward forward kinematics: a 4 x 4 matrix product per DH row, one pose at a time."""
+    out = []
+    for q in np.atleast_2d(q_deg):
+        T = np.eye(4)
+        theta = robot.theta_offset_deg + robot.coupling @ q
+        for th, d, a, al in zip(np.radians(theta), robot.d_mm, robot.a_mm, np.radians(robot.alpha_deg)):
+            ct, st, ca, sa = np.cos(th), np.sin(th), np.cos(al), np.sin(al)
+            T = T @ np.array([[ct, -st * ca, st * sa, a * ct], [st, ct * ca, -ct * sa, a * st],
+                              [0.0, sa, ca, d], [0.0, 0.0, 0.0, 1.0]])
+        out.append((T @ np.append(robot.tool_mm, 1.0))[:3])
+    return np.array(out)
+
+
+def test_fast_fk_equals_the_dh_matrix_product(sk120):
+    q = np.random.default_rng(3).uniform(sk120.limits_deg[:, 0], sk120.limits_deg[:, 1], size=(300, 6))
+    np.testing.assert_allclose(sk120.positions(q), dh_positions(sk120, q), rtol=0, atol=1e-9)
+    np.testing.assert_allclose(sk120.forward(q)[:, :3, 3], dh_positions(sk120, q), rtol=0, atol=1e-9)
+
+
+def test_ik_of_a_target_does_not_depend_on_the_batch(sk120):
+    rng = np.random.default_rng(4)
+    q = rng.uniform(sk120.limits_deg[:, 0], sk120.limits_deg[:, 1], size=(64, 6))
+    q[:, 1] = np.clip(q[:, 1], q[:, 2] + 20, q[:, 2] + 110)
+    targets = sk120.positions(q)
+    seeds = q + rng.normal(0, 5, q.shape)
+    batch = sk120.inverse(targets, seeds, fixed=(4, 5)).q_deg
+    for i in (0, 17, 63):
+        assert np.array_equal(sk120.inverse(targets[i:i + 1], seeds[i], fixed=(4, 5)).q_deg[0], batch[i])
+
+
+def sequential_path(robot, targets, fixed=(4, 5)):
+    """The straightforward path IK: one target after the other, each from the previous solution."""
+    q, seed = np.empty((len(targets), robot.n_joints)), robot.home_deg.copy()
+    for i, target in enumerate(targets):
+        seed = q[i] = robot.inverse(target[None], seed, fixed=fixed).q_deg[0]
+    return q
+
+
+@pytest.mark.parametrize("name", ["rectangle", "spiral_xy", "spiral_yz"])
+def test_batched_path_ik_is_the_sequential_solution(sk120, name):
+    targets = paper_path(name)
+    q = sk120.inverse_path(targets, fixed=(4, 5))
+    reference = sequential_path(sk120, targets)
+    np.testing.assert_allclose(q, reference, rtol=0, atol=1e-9)           # degrees: the same branch, point by point
+    np.testing.assert_allclose(sk120.positions(q), targets, rtol=0, atol=1e-8)
+
+
+def test_path_ik_falls_back_to_sequential_steps_where_the_chain_does_not_settle(sk120, monkeypatch):
+    from partcal.robot import ik
+
+    targets = paper_path("spiral_xy")[:60]
+    reference = sequential_path(sk120, targets)
+    monkeypatch.setattr(ik, "_PASSES", 1)            # no time to settle: exact prefixes, then restarts
+    monkeypatch.setattr(ik, "_SEGMENT", 25)          # and segments on a short path
+    np.testing.assert_allclose(sk120.inverse_path(targets, fixed=(4, 5)), reference, rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("fixed", [(), (4, 5, 6)])
+def test_batched_path_ik_with_more_or_no_redundancy(sk120, fixed):
+    # six free joints (a three-dimensional self-motion) or three (none): the general corrections
+    targets = paper_path("rectangle")[::3]
+    q = sk120.inverse_path(targets, fixed=fixed)
+    np.testing.assert_allclose(q, sequential_path(sk120, targets, fixed=fixed), rtol=0, atol=1e-9)
+
+
+def test_forward_of_a_planar_arm_whose_z_axis_never_turns():
+    # every alpha is 0: the walk keeps z as one column; forward() must still give (n, 4, 4) poses
+    planar = robot_from_dict({"name": "planar", "joints": 2, "limits_deg": [[-170, 170], [-170, 170]],
+                              "links": [{"theta": "q1", "d": 0, "a": 500, "alpha": 0},
+                                        {"theta": "q2", "d": 0, "a": 300, "alpha": 0}]})
+    q = np.array([[0.0, 90.0], [30.0, -60.0], [90.0, 0.0]])
+    poses = planar.forward(q)
+    t1, t12 = np.radians(q[:, 0]), np.radians(q.sum(axis=1))
+    np.testing.assert_allclose(poses[:, :3, 3], np.column_stack([500 * np.cos(t1) + 300 * np.cos(t12),
+                                                                 500 * np.sin(t1) + 300 * np.sin(t12), 0 * t1]),
+                               atol=1e-9)
+    np.testing.assert_allclose(poses[:, :3, 2], np.tile([0.0, 0.0, 1.0], (3, 1)), atol=1e-12)
+    np.testing.assert_allclose(poses[:, :3, 0], np.column_stack([np.cos(t12), np.sin(t12), 0 * t1]), atol=1e-12)

@@ -160,3 +160,25 @@ def test_global_model_flags_extrapolation(ident):
     assert nearest > 400.0 and model.distance_to_data(point)[0] == pytest.approx(nearest, rel=1e-12)
     with pytest.warns(ExtrapolationWarning, match="1 of 1 points"):
         model.warn_if_extrapolating(point, limit=100.0)
+
+
+@pytest.mark.parametrize("kw", [dict(inputs="cartesian", degree=2), dict(inputs="joint", degree=2),
+                                dict(inputs="cartesian", degree=3, cross_terms=True),
+                                dict(inputs="joint", basis="fourier", harmonics=2)])
+def test_prediction_equals_the_feature_matrix_product(ident, kw):
+    X, y = ident
+    train = X[kw["inputs"]]
+    model = ErrorModel(**kw, solver="lstsq").fit(train, y)
+    query = train[np.random.default_rng(0).integers(0, len(train), 5000)] + np.random.default_rng(1).normal(
+        0, 30, (5000, train.shape[1]))
+    straightforward = model.basis_.transform(query, model.scaling_, model.terms_) @ model.coef_
+    np.testing.assert_allclose(model.predict(query), straightforward, rtol=0, atol=1e-9)
+
+
+def test_prediction_follows_replaced_coefficients(ident):
+    # model files set coef_, scaling_ and terms_ directly: the compiled series must follow
+    X, y = ident
+    model = ErrorModel(degree=2, solver="lstsq").fit(X["cartesian"], y)
+    before = model.predict(X["cartesian"])
+    model.coef_ = 2.0 * model.coef_
+    np.testing.assert_allclose(model.predict(X["cartesian"]), 2.0 * before, rtol=1e-12, atol=1e-12)

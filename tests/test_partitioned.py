@@ -15,6 +15,7 @@ from partcal.metrics import ExtrapolationWarning
 from partcal.models.partition import KMeansPartition, Octree
 from partcal.models.partitioned import PartitionedErrorModel, select_granularity
 from partcal.models.series import ErrorModel
+from partcal.models.swarm import SwarmConfig
 
 
 def smooth_field(n=3000, seed=0):
@@ -249,3 +250,23 @@ def test_partitioning_beats_the_global_model_on_the_dense_virtual_sk120(dense_sk
         glob = ErrorModel(degree=degree, solver="lstsq").fit(X, y)
         for m in tests:
             assert rms_3d(best, m) < 0.5 * rms_3d(glob, m), (degree, m.name)
+
+
+@pytest.mark.parametrize("fitness", ["rms", "max"])
+def test_regional_swarms_in_one_batch_equal_solo_fits(fitness):
+    # half the samples on a plane z = 500: those regions have fewer coefficients (other batch group)
+    X, y = smooth_field(1200, seed=4)
+    X[X[:, 0] < 0, 2] = 500.0
+    local = ErrorModel(degree=1, fitness=fitness, pso=SwarmConfig(particles=20, iterations=300))
+    model = PartitionedErrorModel(partition=Octree(max_depth=1, min_samples=40), local=local, blend="hard",
+                                  random_state=3).fit(X, y)
+    sizes = {m.coef_.shape[0] for m in model.models_}
+    assert sizes == {3, 4}                                    # two dimensions, two batches
+    groups = model._training_groups(model.partition_, X)
+    seeds = np.random.SeedSequence(3).spawn(model.partition_.n_regions)   # the documented seed rule
+    for region, ((rows, w), s) in enumerate(zip(groups, seeds)):
+        solo = clone(local).set_params(random_state=int(s.generate_state(1)[0]))._fit(X[rows], y[rows], w)
+        batched = model.models_[region]
+        assert np.array_equal(solo.coef_, batched.coef_), region
+        assert [r.nit for r in solo.swarm_results_] == [r.nit for r in batched.swarm_results_]
+        assert all(np.array_equal(a.history, b.history) for a, b in zip(solo.swarm_results_, batched.swarm_results_))

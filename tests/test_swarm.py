@@ -114,3 +114,56 @@ def test_batch_gives_each_problem_its_solo_result():
         assert np.array_equal(solo.x, batch[k].x) and solo.nit == batch[k].nit
         np.testing.assert_allclose(batch[k].x, centres[k], atol=1e-6)
     assert len({r.nit for r in batch}) > 1      # each stopped on its own
+
+
+@pytest.mark.parametrize("topology", ["global", "ring"])
+def test_large_batch_gives_each_problem_its_solo_result(topology):
+    # problems that stop at many different iterations: rows are dropped mid-block and at block ends
+    rng = np.random.default_rng(3)
+    centres = rng.uniform(-0.8, 0.8, size=(24, 4))
+    scales = 10.0 ** rng.uniform(-3, 3, size=24)                # fitness from 1e-3 to 1e3: different stops
+
+    def batch_fun(X, which):
+        return 1.0 + scales[which][:, None] * np.sum((X - centres[which][:, None, :]) ** 2, axis=2)
+
+    cfg = SwarmConfig(particles=16, topology=topology, patience=30, iterations=400)
+    lower, upper = -np.ones((24, 4)), np.ones((24, 4))
+    batch = minimize_batch(batch_fun, lower, upper, cfg, random_states=list(range(100, 124)))
+    assert len({r.nit for r in batch}) > 5
+    for k in (0, 7, 23):
+        solo = minimize(lambda X: 1.0 + scales[k] * np.sum((X - centres[k]) ** 2, axis=1), lower[k], upper[k], cfg,
+                        random_state=100 + k)
+        assert np.array_equal(solo.x, batch[k].x) and solo.nit == batch[k].nit
+        assert np.array_equal(solo.history, batch[k].history)
+
+
+def test_callback_sees_every_problem_and_objective_sees_a_read_only_swarm():
+    seen = []
+
+    def fun(X, which):
+        assert not X.flags.writeable
+        return np.sum(X**2, axis=2)
+
+    def callback(it, best_x, best_f):
+        seen.append((best_x.shape, best_f.shape))
+        return it == 3
+
+    res = minimize_batch(fun, -np.ones((2, 3)), np.ones((2, 3)), random_states=[0, 1], callback=callback)
+    assert seen == [((2, 3), (2,))] * 3 and all(r.nit == 3 for r in res)
+
+
+def test_results_do_not_depend_on_how_many_random_numbers_are_drawn_ahead(monkeypatch):
+    # the block of pre-drawn random numbers shrinks as a batch grows: no result may depend on it
+    import partcal.models.swarm as swarm
+
+    centres = np.random.default_rng(8).uniform(-0.5, 0.5, size=(5, 3))
+
+    def batch_fun(X, which):
+        return 1.0 + np.sum((X - centres[which][:, None, :]) ** 2, axis=2)
+
+    cfg = SwarmConfig(particles=7, patience=20, iterations=200)     # 2 * 3 * 7 numbers per iteration: not whole words
+    default = minimize_batch(batch_fun, -np.ones((5, 3)), np.ones((5, 3)), cfg, random_states=list(range(5)))
+    monkeypatch.setattr(swarm, "_RANDOM_BLOCK_BYTES", 1)            # one iteration at a time
+    one_by_one = minimize_batch(batch_fun, -np.ones((5, 3)), np.ones((5, 3)), cfg, random_states=list(range(5)))
+    for a, b in zip(default, one_by_one):
+        assert np.array_equal(a.x, b.x) and np.array_equal(a.history, b.history)

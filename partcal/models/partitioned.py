@@ -16,7 +16,7 @@ import time
 from numbers import Integral
 
 import numpy as np
-from joblib import Parallel, delayed
+from joblib import Parallel, delayed, effective_n_jobs
 from numpy.typing import NDArray
 from sklearn.base import clone
 from sklearn.utils.validation import check_is_fitted, validate_data
@@ -28,7 +28,7 @@ from .base import ErrorModelBase, seed_from
 from .bases import varying_inputs
 from .combine import BlendWeights, FrameCombiner, combine_generic, one_blas_thread, region_weights
 from .partition import KMeansPartition, Octree, Partition, check_width
-from .series import ErrorModel
+from .series import ErrorModel, fit_swarms
 
 log = logging.getLogger(__name__)
 MIN_SAMPLES_PER_TERM = 3
@@ -112,9 +112,8 @@ class PartitionedErrorModel(ErrorModelBase):
         with one_blas_thread():
             groups = self._training_groups(partition, X)
         seeds = np.random.SeedSequence(seed).spawn(partition.n_regions)
-        jobs = (delayed(_fit_region)(clone(local).set_params(random_state=int(s.generate_state(1)[0])),
-                                     X[idx], Y[idx], w) for (idx, w), s in zip(groups, seeds))
-        self.models_ = Parallel(n_jobs=self.n_jobs)(jobs)
+        models = [clone(local).set_params(random_state=int(s.generate_state(1)[0])) for s in seeds]
+        self.models_ = _fit_regions(models, [(X[idx], Y[idx], w) for idx, w in groups], self.n_jobs)
         self.partition_ = partition
         self.min_samples_ = int(min_samples)
         labels = partition.assign(X)
@@ -207,9 +206,32 @@ class PartitionedErrorModel(ErrorModelBase):
         """Warn (``ExtrapolationWarning``) about points farther than ``limit`` from the data; return the mask."""
         return warn_far(self.distance_to_data(X), limit)
 
+def _fit_regions(models: list, data: list[tuple], n_jobs) -> list:
+    """Fit every region's model to its ``(X, Y, weights)``; swarms of all regions in one batch.
 
-def _fit_region(model: ErrorModel, X, Y, weights) -> ErrorModel:
+    PSO fits run their swarms together (:func:`fit_swarms`: one vectorised loop
+    for all regions and outputs, grouped by dimension), in ``n_jobs`` slices of
+    regions when asked. Every region keeps its own seed, so each model is
+    exactly the one a solo fit gives, whatever ``n_jobs``.
+    """
+    if not all(isinstance(m, ErrorModel) and m.solver == "pso" for m in models):   # no swarms: region by region
+        return Parallel(n_jobs=n_jobs)(delayed(_fit_one)(m, *d) for m, d in zip(models, data))
+    workers = max(1, min(len(models), effective_n_jobs(n_jobs)))
+    cuts = np.linspace(0, len(models), workers + 1).round().astype(int)
+    slices = [(models[a:b], data[a:b]) for a, b in zip(cuts[:-1], cuts[1:]) if b > a]
+    if len(slices) == 1:
+        return _fit_batch(*slices[0])
+    return [m for part in Parallel(n_jobs=n_jobs)(delayed(_fit_batch)(*sl) for sl in slices) for m in part]
+
+
+def _fit_one(model, X, Y, weights):
     return model._fit(X, Y, weights)
+
+
+def _fit_batch(models: list[ErrorModel], data: list[tuple]) -> list[ErrorModel]:
+    problems = [m._setup(*d, trusted=True) for m, d in zip(models, data)]
+    results = fit_swarms(list(zip(models, problems)))
+    return [m._complete(p, r) for m, p, r in zip(models, problems, results)]
 
 
 def select_granularity(model: PartitionedErrorModel, X, y, grid, *, folds=5, random_state=0

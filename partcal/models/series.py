@@ -19,6 +19,7 @@ least-squares RMS on the same data (1.0 is optimal).
 from __future__ import annotations
 
 import logging
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
@@ -28,7 +29,7 @@ from .._validation import check_choice, check_int, param_error
 from ..errors import PartcalError
 from ..metrics import distance_outside_boxes, warn_far
 from .base import ErrorModelBase, seed_from
-from .bases import Basis, Scaling, raw_polynomial
+from .bases import Basis, Scaling, SeriesPlan, column_bounds, raw_polynomial
 from .swarm import SwarmConfig, SwarmResult, minimize_batch
 
 log = logging.getLogger(__name__)
@@ -127,11 +128,25 @@ class ErrorModel(ErrorModelBase):
         return self
 
     def _fit(self, X, y, sample_weight):
-        basis, swarm = self._check_params()
-        X, y = validate_data(self, X, y, multi_output=True, y_numeric=True, dtype=np.float64)
+        problem = self._setup(X, y, sample_weight)
+        results = [] if self.solver == "lstsq" else fit_swarms([(self, problem)])[0]
+        return self._complete(problem, results)
+
+    def _setup(self, X, y, sample_weight, trusted: bool = False) -> "_Problem":
+        """Validate, scale and decompose: the least-squares problem of this fit (no swarm yet).
+
+        ``trusted``: ``X`` (n, d) and ``y`` (n, outputs) are float arrays validated by
+        the caller (a partitioned model's regions), so the checks are skipped.
+        """
+        basis, _ = self._check_params()
+        if trusted:
+            self.n_features_in_ = X.shape[1]
+        else:
+            X, y = validate_data(self, X, y, multi_output=True, y_numeric=True, dtype=np.float64)
         self._y_1d = y.ndim == 1
         Y = y.reshape(len(y), -1)
-        scaling = Scaling.fit(X)
+        bounds = column_bounds(X)
+        scaling = Scaling.fit(X, bounds)
         terms = basis.terms(scaling)
         n, m = X.shape[0], len(terms)
         if n < m:
@@ -144,54 +159,30 @@ class ErrorModel(ErrorModelBase):
         U, s, Vt = np.linalg.svd(phi * sqrt_w[:, None], full_matrices=False)
         keep = s > s[0] * max(n, m) * np.finfo(float).eps
         U, s, Vt = U[:, keep], s[keep], Vt[keep]
-        to_coef = Vt.T / s                                          # z -> coefficients
         Yw = Y * sqrt_w[:, None]
         z_ls = U.T @ Yw                                             # (r, outputs)
-        coef_ls = to_coef @ z_ls
-        total_w = weights.sum()
-        lstsq_sse = np.maximum((Yw * Yw).sum(axis=0) - (z_ls * z_ls).sum(axis=0), 0.0)
-        self.swarm_results_ = []
-        if self.solver == "lstsq":
-            coef = coef_ls
-        else:
-            seeds = np.random.SeedSequence(seed_from(self.random_state)).spawn(Y.shape[1])
-            self.swarm_results_ = self._swarm(phi @ to_coef, Y, Yw, z_ls, weights, swarm, seeds)
-            coef = to_coef @ np.stack([res.x for res in self.swarm_results_], axis=1)
+        yy = np.diagonal(Yw.T @ Yw).copy()                         # BLAS: faster than summing axis 0
+        return _Problem(X, Y, weights, basis, scaling, terms, phi, Vt.T / s, z_ls, yy,
+                        np.maximum(yy - (z_ls * z_ls).sum(axis=0), 0.0), np.stack(bounds))
+
+    def _complete(self, problem: "_Problem", results: list[SwarmResult]) -> "ErrorModel":
+        """Set the fitted attributes from the swarm results (least squares without them)."""
+        z = problem.z_ls if not results else problem.z_ls + np.stack([res.x for res in results], axis=1)
+        coef = problem.to_coef @ z
+        self.swarm_results_ = results
         self.coef_ = coef
-        self.scaling_, self.terms_, self.basis_ = scaling, terms, basis
-        self.data_bounds_ = np.stack([X.min(axis=0), X.max(axis=0)])
-        resid = Y - phi @ coef
-        self.train_rms_ = np.sqrt((weights[:, None] * resid**2).sum(axis=0) / total_w)
-        self.lstsq_rms_ = np.sqrt(lstsq_sse / total_w)
-        best = np.sqrt(lstsq_sse.sum() / total_w)
+        self.scaling_, self.terms_, self.basis_ = problem.scaling, problem.terms, problem.basis
+        self._plan = SeriesPlan.build(problem.basis, problem.scaling, problem.terms, coef)
+        self._plan_of = (coef, problem.scaling, problem.terms)
+        w = problem.weights
+        self.data_bounds_ = problem.bounds
+        resid = problem.Y - problem.phi @ coef
+        total_w = w.sum()
+        self.train_rms_ = np.sqrt(np.diagonal((w[:, None] * resid).T @ resid) / total_w)
+        self.lstsq_rms_ = np.sqrt(problem.lstsq_sse / total_w)
+        best = np.sqrt(problem.lstsq_sse.sum() / total_w)
         self.rms_ratio_ = float(np.sqrt((self.train_rms_**2).sum()) / best) if best > 0 else 1.0
         return self
-
-    def _swarm(self, A, Y, Yw, B, weights, cfg: SwarmConfig, seeds) -> list[SwarmResult]:
-        """Minimise the fitness of every output at once, over the orthonormal coordinates ``z``.
-
-        ``A`` maps ``z`` to predictions, ``B`` (r, outputs) is the least-squares
-        optimum ``U^T y`` of each output.
-        """
-        total_w = weights.sum()
-        yy = (Yw * Yw).sum(axis=0)
-        if self.fitness == "rms":
-            def fun(Z, which):
-                sse = np.einsum("bpk,bpk->bp", Z, Z) - 2.0 * np.einsum("bpk,kb->bp", Z, B[:, which])
-                return np.sqrt(np.maximum(sse + yy[which, None], 0.0) / total_w)
-            x0 = None
-        else:
-            w_max = weights.max()
-
-            def fun(Z, which):
-                r = np.abs(Y.T[which, None, :] - np.einsum("nk,bpk->bpn", A, Z))   # (b, particles, n)
-                if self.fitness == "max":
-                    return (r * weights).max(axis=2) / w_max
-                return (r @ weights) / total_w
-            x0 = B.T        # the least-squares fit as one particle: never worse than it
-        half = cfg.bound_scale * np.maximum(np.sqrt(yy), 1e-12)[:, None] * np.ones((1, B.shape[0]))
-        return minimize_batch(fun, -half, half, cfg, x0=x0,
-                              random_states=[np.random.default_rng(s) for s in seeds])
 
     # ------------------------------------------------------------------ prediction
     def predict(self, X) -> NDArray[np.float64]:
@@ -201,8 +192,22 @@ class ErrorModel(ErrorModelBase):
         return self._shape_output(self._predict_trusted(X))
 
     def _predict_trusted(self, X: NDArray[np.float64]) -> NDArray[np.float64]:
-        """Prediction ``(n, n_outputs)`` on validated arrays (no checks: the hot path of blends)."""
-        return self.basis_.transform(X, self.scaling_, self.terms_) @ self.coef_
+        """Prediction ``(n, n_outputs)`` on validated arrays (no checks: the hot path of blends).
+
+        Evaluated by the compiled :class:`SeriesPlan` in cache-sized chunks; it
+        equals ``basis_.transform(X) @ coef_`` to rounding (tested).
+        """
+        return self._series_plan().evaluate(X)
+
+    def _series_plan(self) -> SeriesPlan:
+        """The compiled series, built in ``fit``; rebuilt if ``coef_``, ``scaling_`` or ``terms_``
+        were replaced since (model files set them directly)."""
+        plan, source = self.__dict__.get("_plan"), self.__dict__.get("_plan_of", ())
+        now = (self.coef_, self.scaling_, self.terms_)
+        if plan is None or len(source) != 3 or any(a is not b for a, b in zip(source, now)):
+            plan = self._plan = SeriesPlan.build(self.basis_, self.scaling_, self.terms_, self.coef_)
+            self._plan_of = now
+        return plan
 
     def distance_to_data(self, X) -> NDArray[np.float64]:
         """Distance from each point to the nearest training input, shape (n,), input units.
@@ -291,3 +296,112 @@ class ErrorModel(ErrorModelBase):
             kind = {1: "first", 2: "second"}.get(self.degree, f"degree-{self.degree}")
             return f"{kind}-degree polynomial{' with cross terms' if self.cross_terms else ''} of {self.inputs} inputs"
         return f"Fourier series with {self.harmonics} harmonic(s) of {self.inputs} inputs"
+
+
+# ---------------------------------------------------------------------- swarms of many fits
+@dataclass(frozen=True, eq=False)
+class _Problem:
+    """The weighted least-squares problem of one fit, in the orthonormal coordinates ``z``.
+
+    ``Phi W^1/2 = U S V^T``; coefficients are ``to_coef @ z`` (``to_coef = V S^-1``,
+    (terms, r)); ``z_ls = U^T W^1/2 Y`` (r, outputs) is the least-squares optimum,
+    ``yy`` (outputs,) the weighted sum of squares of ``Y`` and ``lstsq_sse`` its
+    residual, so the weighted sum of squared errors at ``z`` is
+    ``|z - z_ls|^2 + lstsq_sse``.
+    """
+
+    X: NDArray[np.float64]
+    Y: NDArray[np.float64]
+    weights: NDArray[np.float64]
+    basis: Basis
+    scaling: Scaling
+    terms: list
+    phi: NDArray[np.float64]
+    to_coef: NDArray[np.float64]
+    z_ls: NDArray[np.float64]
+    yy: NDArray[np.float64]
+    lstsq_sse: NDArray[np.float64]
+    bounds: NDArray[np.float64]          # (2, d): smallest and largest input
+
+
+def fit_swarms(jobs: list[tuple[ErrorModel, _Problem]]) -> list[list[SwarmResult]]:
+    """Run the swarms of many PSO fits (every output of every model) in as few batches as possible.
+
+    Fits with the same fitness, swarm settings and number of coordinates share
+    one :func:`minimize_batch` loop. Each output of each model keeps its own
+    random stream (a child of the model's ``random_state``) and stopping test,
+    and its fitness depends on its own data only, so every result is exactly
+    what the model would get fitted alone.
+
+    A swarm searches the offset ``z - z_ls`` from the least-squares optimum,
+    in the box ``|z_k| <= bound_scale |y|`` (the same box as in ``z``, moved):
+    the RMS is then ``sqrt((|offset|^2 + lstsq_sse) / sum(w))``.
+
+    Returns
+    -------
+    list of list of SwarmResult
+        Per job, one result per output; ``x`` is the offset from ``z_ls``.
+    """
+    out: list[list[SwarmResult]] = [[] for _ in jobs]
+    groups: dict[tuple, list[int]] = {}
+    for k, (model, problem) in enumerate(jobs):
+        key = (model.fitness, model._check_params()[1], problem.z_ls.shape[0])
+        groups.setdefault(key, []).append(k)
+    for (fitness, cfg, _), members in groups.items():
+        owner = np.concatenate([np.full(jobs[k][1].Y.shape[1], j) for j, k in enumerate(members)])
+        problems = [jobs[k][1] for k in members]
+        B = np.concatenate([p.z_ls.T for p in problems])               # (outputs of all, r)
+        yy = np.concatenate([p.yy for p in problems])
+        seeds = [g for k in members
+                 for g in np.random.SeedSequence(seed_from(jobs[k][0].random_state)).spawn(jobs[k][1].Y.shape[1])]
+        half = cfg.bound_scale * np.maximum(np.sqrt(yy), 1e-12)[:, None] * np.ones((1, B.shape[1]))
+        fun = _rms_fitness(problems) if fitness == "rms" else _residual_fitness(problems, owner, fitness)
+        results = minimize_batch(fun, -half - B, half - B, cfg, x0=None if fitness == "rms" else 0.0 * B,
+                                 random_states=[np.random.default_rng(s) for s in seeds])
+        for j, res in zip(owner, results):
+            out[members[j]].append(res)
+    return out
+
+
+def _rms_fitness(problems: list[_Problem]):
+    """The weighted RMS of every output at offset ``d``: ``sqrt(|d|^2 / sum(w) + lstsq_sse / sum(w))``, O(r)."""
+    total = np.concatenate([np.full(p.Y.shape[1], p.weights.sum()) for p in problems])
+    floor = np.concatenate([p.lstsq_sse for p in problems]) / total
+    cache: list = [None, None, None]         # the rows of the last ``which`` (the same array until it changes)
+
+    def fun(D, which):               # D (b, particles, r), a view of swarm memory (b, r, particles)
+        if which is not cache[0]:
+            cache[:] = [which, 1.0 / total[which][:, None], floor[which][:, None]]
+        D = D.transpose(0, 2, 1)
+        f = np.einsum("bkp,bkp->bp", D, D)
+        f *= cache[1]
+        f += cache[2]
+        return np.sqrt(f, out=f)
+    return fun
+
+
+def _residual_fitness(problems: list[_Problem], owner: NDArray[np.intp], fitness: str):
+    """Largest or mean weighted absolute residual, from every sample: O(samples x r) per particle.
+
+    The outputs of one model are evaluated together, and each model alone, so
+    a model's fitness is the same in any batch. The least-squares fit is one
+    particle of each swarm, so the result is never worse than it.
+    """
+    A = [p.phi @ p.to_coef for p in problems]                         # z -> predictions, (n, r)
+    R0 = [(p.Y - a @ p.z_ls).T for p, a in zip(problems, A)]           # least-squares residuals (outputs, n)
+
+    def fun(Z, which):
+        out = np.empty(Z.shape[:2])
+        models = owner[which]
+        for j in np.unique(models):
+            rows = np.flatnonzero(models == j)
+            p = problems[j]
+            first = np.flatnonzero(owner == j)[0]
+            axes = which[rows] - first
+            r = np.abs(R0[j][axes, None, :] - np.einsum("nk,bpk->bpn", A[j], Z[rows]))   # (b, particles, n)
+            if fitness == "max":
+                out[rows] = (r * p.weights).max(axis=2) / p.weights.max()
+            else:
+                out[rows] = (r @ p.weights) / p.weights.sum()
+        return out
+    return fun

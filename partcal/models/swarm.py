@@ -66,7 +66,10 @@ class SwarmConfig:
     bound_scale : float
         For error models: half-width of the search box in the orthonormal
         coefficient coordinates, in units of the norm of the target data. With
-        1 or more the box provably contains the least-squares optimum.
+        1 or more the box provably contains the least-squares optimum; the
+        default 2 keeps it at least a quarter of the box width from every
+        wall (with 1 it can lie next to a wall, where absorbing walls
+        sometimes trap the swarm).
     stop_fitness : float or None
         Stop as soon as the best fitness is at or below this value.
     patience, ftol : int or None, float
@@ -83,10 +86,10 @@ class SwarmConfig:
     neighbours: int = 1
     inertia: tuple[float, float] = (0.9, 0.4)
     vmax: float = 0.5
-    bound_scale: float = 1.0
+    bound_scale: float = 2.0
     stop_fitness: float | None = None
-    patience: int | None = 100
-    ftol: float = 1e-8
+    patience: int | None = 50
+    ftol: float = 1e-7
 
     def __post_init__(self):
         own = "SwarmConfig"
@@ -186,14 +189,18 @@ def minimize_batch(
     running several problems (the x, y, z outputs of a model, or every region
     of a partitioned model) together shares that overhead. Each problem draws
     from its own random stream and stops on its own criteria, so its result
-    is the same alone or in a batch.
+    is the same alone or in a batch, provided ``fun`` computes each problem's
+    fitness from that problem's particles alone.
 
     Parameters
     ----------
     fun : callable
         ``fun(X, which)`` with ``X`` of shape ``(b, particles, dims)`` for the
-        problems ``which`` (indices into the batch, shape ``(b,)``) returns
-        shape ``(b, particles)``. Problems that have stopped are not evaluated.
+        problems ``which`` (increasing indices into the batch, shape ``(b,)``)
+        returns shape ``(b, particles)``. ``X`` is a read-only view of the
+        swarm's memory, laid out ``(b, dims, particles)``. A problem that has
+        stopped may still be evaluated for a few iterations; its result is
+        fixed when it stops.
     lower, upper : array-like, shape (B, dims)
     random_states : sequence of B seeds or Generators
     callback : callable, optional
@@ -211,111 +218,212 @@ def minimize_batch(
         raise param_error("minimize_batch", "random_states", f"{n_prob} seeds, one per problem",
                           len(random_states))
     rngs = [np.random.default_rng(r) for r in random_states]
-    x = np.stack([g.uniform(lo[b], hi[b], size=(n, dims)) for b, g in enumerate(rngs)])
+    x = np.empty((n_prob, dims, n))                        # particles vary fastest
+    for b, g in enumerate(rngs):
+        x[b] = g.uniform(lo[b], hi[b], size=(n, dims)).T
     if x0 is not None:
-        x[:, 0] = np.clip(np.asarray(x0, dtype=float), lo, hi)
-    s = _Swarm.start(x, _evaluate(fun, x, np.arange(n_prob)))
-    active = np.arange(n_prob)
+        x[:, :, 0] = np.clip(np.asarray(x0, dtype=float), lo, hi)
+    f = _evaluate(fun, _read_only_view(x), np.arange(n_prob))
+    run = _Run(cfg, x, np.where(np.isnan(f), np.inf, f), lo, hi, rngs)   # later NaNs never win: f < pf, fmin
     for it in range(1, cfg.iterations + 1):
-        # while every problem runs, work on views; afterwards on copies of the running ones
-        sel = slice(None) if active.size == n_prob else active
-        r = np.stack([rngs[b].random((2, n, dims)) for b in active], axis=1)
-        s.step(sel, r, cfg, it, lo[:, None, :], hi[:, None, :], lambda xa: _evaluate(fun, xa, active))
-        s.nit[active] = it
-        done = s.check_stops(active, it, cfg)
-        if callback is not None and callback(it, *s.best()):
-            for b in active[~done]:
-                s.messages[b], s.success[b] = "stopped by the callback", True
+        if run.n_live == 0:
             break
-        active = active[~done]
-        if active.size == 0:
+        run.step(it, fun)
+        done = run.stops(it)
+        if callback is not None and callback(it, *run.best_all()):
+            run.finish(run.live, it, "stopped by the callback", True)
             break
-    return s.results(n)
+        if done is not None:
+            run.finish(done, it)
+    run.finish(run.live, cfg.iterations, "reached the iteration limit", False)
+    return run.results
 
 
-@dataclass
-class _Swarm:
-    """The state of ``B`` swarms of ``n`` particles: positions, velocities, personal bests, history."""
+_RANDOM_BLOCK_BYTES = 16 << 20    # random numbers drawn ahead for all running swarms
 
-    x: NDArray[np.float64]            # (B, n, dims)
-    v: NDArray[np.float64]
-    best_x: NDArray[np.float64]
-    best_f: NDArray[np.float64]       # (B, n)
-    history: list                     # per problem: best fitness after each iteration
-    nit: NDArray[np.int_]
-    messages: list
-    success: NDArray[np.bool_]
 
-    @classmethod
-    def start(cls, x: NDArray[np.float64], f: NDArray[np.float64]) -> "_Swarm":
-        b = x.shape[0]
-        return cls(x, np.zeros_like(x), x.copy(), f.copy(), [[row.min()] for row in f], np.zeros(b, dtype=int),
-                   ["reached the iteration limit"] * b, np.zeros(b, dtype=bool))
+class _Run:
+    """The swarms of :func:`minimize_batch` while they run.
 
-    def step(self, sel, r, cfg: SwarmConfig, it: int, lo3, hi3, evaluate) -> None:
-        """One velocity and position update of the selected swarms, absorbing walls, new personal bests."""
-        xa, va, pa, fa = self.x[sel], self.v[sel], self.best_x[sel], self.best_f[sel]
-        lo3, hi3 = lo3[sel], hi3[sel]
-        pull = cfg.c1 * r[0] * (pa - xa) + cfg.c2 * r[1] * (_guides(pa, fa, cfg) - xa)
+    Arrays hold ``b`` problems (``idx`` maps them to the batch): positions
+    ``x``, velocities ``v`` and personal bests ``p``, all ``(b, dims, n)`` with
+    the particles innermost (bounds and the guide then broadcast over long
+    contiguous runs), and the personal-best fitness ``pf`` ``(b, n)``.
+
+    Random numbers are 16-bit uniforms, four from each raw 64-bit word of a
+    problem's own bit generator, drawn in blocks of several iterations and
+    used in order: a problem sees the same numbers alone or in any batch. A
+    problem that stops has its result recorded at once; its rows stay in the
+    arrays (still moved and evaluated, but ignored) until the block is used
+    up or half the rows have stopped, when the arrays are compacted:
+    compacting at every stop would copy the whole batch, block included, for
+    each problem.
+    """
+
+    def __init__(self, cfg: SwarmConfig, x, f, lo, hi, rngs):
+        b, dims, n = x.shape
+        self.cfg, self.bits = cfg, [g.bit_generator for g in rngs]
+        self.idx, self.live, self.n_live = np.arange(b), np.ones(b, dtype=bool), b
+        self.rows = np.arange(b)
+        self.x, self.v, self.p, self.pf = x, np.zeros_like(x), x.copy(), f.copy()
+        # bounds as full arrays: broadcasting over the particles costs more than reading them
+        self.lo = np.repeat(lo[:, :, None], n, axis=2)
+        self.hi = np.repeat(hi[:, :, None], n, axis=2)
+        self.vmax = cfg.vmax * (self.hi - self.lo)
+        self.vmin = -self.vmax
+        self.tmp, self.mask = np.empty_like(x), np.empty(x.shape, dtype=bool)
+        chi = cfg.chi if cfg.rule == "constriction" else 1.0
+        self.scale = chi
+        self.pull = (chi * cfg.c1 * 2.0**-16, chi * cfg.c2 * 2.0**-16)
+        self.block = int(min(32, max(1, _RANDOM_BLOCK_BYTES // (max(b, 1) * 2 * n * dims * 8))))
+        self.rand, self.used = np.empty((b, self.block, 2, dims, n)), self.block
+        self.history = np.empty((min(cfg.iterations, 1024) + 1, b))
+        self.history[0] = f.min(axis=1) if n else np.inf
+        self.results: list = [None] * b
+        self.x_of_view = self.view = None
+
+    def _views(self) -> NDArray[np.float64]:
+        """The read-only view of the current position array (made again when the array changes)."""
+        self.x_of_view, self.view = self.x, _read_only_view(self.x)
+        return self.view
+
+    def _compact(self) -> None:
+        """Drop the rows of stopped problems (with their unused random numbers)."""
+        keep = self.live
+        for name in ("idx", "live", "x", "v", "p", "pf", "lo", "hi", "vmax", "vmin", "tmp", "mask"):
+            setattr(self, name, getattr(self, name)[keep])
+        self.rows = np.arange(self.idx.size)
+        self.rand = self.rand[keep] if self.used < self.block else np.empty((keep.sum(),) + self.rand.shape[1:])
+
+    def _refill(self) -> None:
+        """Draw the next block of random numbers: per problem and iteration, r1 then r2, ``dims * n`` each.
+
+        Four 16-bit uniforms from each raw 64-bit word: random numbers are a
+        fifth of an iteration's time, and their resolution does not limit the
+        search (each scales a continuous pull ``c r (p - x)``; steps of 2^-16
+        are far finer than the spread a swarm needs). Every iteration takes
+        the same whole number of words from the problem's stream, so which
+        number lands where does not depend on the block length (which depends
+        on the batch). They come scaled by the pull coefficients (and 2^-16),
+        so the update multiplies once.
+        """
+        block, _, dims, n = self.rand.shape[1:]
+        count = 2 * dims * n
+        words = -(-count // 4)
+        for k, b in enumerate(self.idx):
+            u = self.bits[b].random_raw(block * words).view(np.uint16).reshape(block, 4 * words)[:, :count]
+            u = u.reshape(block, 2, dims, n)
+            np.multiply(u[:, 0], self.pull[0], out=self.rand[k, :, 0])
+            np.multiply(u[:, 1], self.pull[1], out=self.rand[k, :, 1])
+        self.used = 0
+
+    def step(self, it: int, fun) -> None:
+        """One velocity and position update, absorbing walls, new personal bests."""
+        if self.n_live < self.idx.size and (self.used == self.block or 2 * self.n_live < self.idx.size):
+            self._compact()                        # at a block's end, or once half the rows have stopped
+        if self.used == self.block:
+            self._refill()
+        cfg, x, v, t, p, mask = self.cfg, self.x, self.v, self.tmp, self.p, self.mask
+        r1, r2 = self.rand[:, self.used, 0], self.rand[:, self.used, 1]
+        self.used += 1
         if cfg.rule == "inertia":
-            w = cfg.inertia[0] + (cfg.inertia[1] - cfg.inertia[0]) * (it - 1) / max(cfg.iterations - 1, 1)
-            va = w * va + pull
+            v *= cfg.inertia[0] + (cfg.inertia[1] - cfg.inertia[0]) * (it - 1) / max(cfg.iterations - 1, 1)
+        elif self.scale != 1.0:
+            v *= self.scale
+        np.subtract(p, x, out=t)
+        t *= r1
+        v += t
+        if cfg.topology == "global":
+            guide = p[self.rows, :, self.pf.argmin(axis=1)][:, :, None]
         else:
-            va = (cfg.chi if cfg.rule == "constriction" else 1.0) * (va + pull)
-        vmax = cfg.vmax * (hi3 - lo3)
-        np.clip(va, -vmax, vmax, out=va)
-        xa = xa + va
-        outside = (xa < lo3) | (xa > hi3)
-        if outside.any():
-            np.clip(xa, lo3, hi3, out=xa)
-            va[outside] = 0.0
-        fa_new = evaluate(xa)
-        better = fa_new < fa
-        pa[better], fa[better] = xa[better], fa_new[better]
-        self.x[sel], self.v[sel], self.best_x[sel], self.best_f[sel] = xa, va, pa, fa
+            guide = p[self.rows[:, None], :, _neighbourhood_best(self.pf, cfg)].transpose(0, 2, 1)
+        np.subtract(guide, x, out=t)
+        t *= r2
+        v += t
+        np.minimum(v, self.vmax, out=v)
+        np.maximum(v, self.vmin, out=v)
+        x += v
+        np.maximum(x, self.lo, out=t)
+        np.minimum(t, self.hi, out=t)
+        np.not_equal(t, x, out=mask)
+        if np.count_nonzero(mask):                # absorbing walls: on the wall, that velocity zero
+            v[mask] = 0.0
+            self.x, self.tmp = x, t = t, x
+        f = _evaluate(fun, self.view if x is self.x_of_view else self._views(), self.idx)
+        np.less(f, self.pf, out=mask[:, 0])
+        mask[:, 1:] = mask[:, :1]
+        np.putmask(p, mask, x)                    # a full mask: about 3 times faster than copyto(where=)
+        np.fmin(self.pf, f, out=self.pf)
 
-    def check_stops(self, active: NDArray[np.intp], it: int, cfg: SwarmConfig) -> NDArray[np.bool_]:
-        """Record each running problem's best; return which of them stop now (threshold or patience)."""
-        done = np.zeros(active.size, dtype=bool)
-        for k, b in enumerate(active):
-            self.history[b].append(self.best_f[b].min())
-            if cfg.stop_fitness is not None and self.history[b][-1] <= cfg.stop_fitness:
-                self.messages[b], self.success[b], done[k] = "reached the stop threshold", True, True
-            elif cfg.patience is not None and it >= cfg.patience:
-                best_now, past = self.history[b][-1], self.history[b][-cfg.patience - 1]
-                if past - best_now <= cfg.ftol * max(abs(best_now), 1e-300):
-                    self.messages[b] = f"converged: improvement below ftol over {cfg.patience} iterations"
-                    self.success[b], done[k] = True, True
-        return done
+    def stops(self, it: int) -> NDArray[np.bool_]:
+        """Record each problem's best; return which of the live ones stop now (threshold or patience), or None."""
+        cfg, history = self.cfg, self.history
+        if it >= history.shape[0]:
+            history = np.empty((min(2 * history.shape[0], cfg.iterations + 1), history.shape[1]))
+            history[:it] = self.history[:it]
+            self.history = history
+        cols = slice(None) if self.idx.size == history.shape[1] else self.idx
+        best = self.pf.min(axis=1)
+        history[it, cols] = best                     # stopped rows too: their history was copied already
+        if cfg.patience is not None and it >= cfg.patience:
+            floor = np.abs(best)
+            floor *= cfg.ftol
+            floor += best
+            done = history[it - cfg.patience, cols] <= floor      # improved by ftol * |best| at most
+            if cfg.stop_fitness is not None:
+                done |= best <= cfg.stop_fitness
+        elif cfg.stop_fitness is not None:
+            done = best <= cfg.stop_fitness
+        else:
+            return None
+        if self.n_live < self.live.size:
+            done &= self.live
+        return done if np.count_nonzero(done) else None
 
-    def best(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """The best position ``(B, dims)`` and fitness ``(B,)`` of every swarm (copies)."""
-        g = np.argmin(self.best_f, axis=1)
-        rows = np.arange(self.best_f.shape[0])
-        return self.best_x[rows, g].copy(), self.best_f[rows, g].copy()
+    def best_all(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """The best position ``(B, dims)`` and fitness ``(B,)`` of every swarm, stopped ones included."""
+        g = np.argmin(self.pf, axis=1)
+        rows = np.arange(self.idx.size)
+        best_x, best_f = np.empty((len(self.results), self.x.shape[1])), np.empty(len(self.results))
+        best_x[self.idx], best_f[self.idx] = self.p[rows, :, g], self.pf[rows, g]
+        for b, res in enumerate(self.results):
+            if res is not None:
+                best_x[b], best_f[b] = res.x, res.fun
+        return best_x, best_f
 
-    def results(self, particles: int) -> list[SwarmResult]:
-        best_x, best_f = self.best()
-        return [SwarmResult(x=best_x[b], fun=float(best_f[b]), nit=int(self.nit[b]),
-                            nfev=particles * (int(self.nit[b]) + 1), success=bool(self.success[b]),
-                            message=self.messages[b], history=np.asarray(self.history[b]))
-                for b in range(len(best_f))]
+    def finish(self, done: NDArray[np.bool_], it: int, message: str | None = None, success: bool = True) -> None:
+        """Record the results of the ``done`` rows (live ones) and mark them stopped."""
+        n = self.x.shape[2]
+        g = np.argmin(self.pf, axis=1)
+        for k in np.flatnonzero(done):
+            b = self.idx[k]
+            reached = self.cfg.stop_fitness is not None and self.pf[k, g[k]] <= self.cfg.stop_fitness
+            msg = message or ("reached the stop threshold" if reached else
+                              f"converged: improvement below ftol over {self.cfg.patience} iterations")
+            self.results[b] = SwarmResult(x=self.p[k, :, g[k]].copy(), fun=float(self.pf[k, g[k]]), nit=it,
+                                          nfev=n * (it + 1), success=success, message=msg,
+                                          history=self.history[:it + 1, b].copy())
+        self.live = self.live & ~done
+        self.n_live = int(self.live.sum())
 
 
-def _evaluate(fun, x: NDArray[np.float64], which: NDArray[np.intp]) -> NDArray[np.float64]:
-    f = np.asarray(fun(x, which), dtype=float)
-    if f.shape != x.shape[:2]:
-        want = f"({x.shape[1]},)" if x.shape[0] == 1 else str(x.shape[:2])
+def _evaluate(fun, view: NDArray[np.float64], which: NDArray[np.intp]) -> NDArray[np.float64]:
+    """``fun`` on the swarm, seen as ``(b, n, dims)`` (a read-only view of the swarm's memory), shape (b, n)."""
+    f = fun(view, which)
+    if type(f) is not np.ndarray or f.dtype != np.float64:
+        f = np.asarray(f, dtype=float)
+    if f.shape != view.shape[:2]:
+        want = f"({view.shape[1]},)" if view.shape[0] == 1 else str(view.shape[:2])
         raise param_error("minimize", "fun", f"a function returning shape {want}",
-                          f.shape[1:] if x.shape[0] == 1 else f.shape)
-    return np.where(np.isnan(f), np.inf, f)
+                          f.shape[1:] if view.shape[0] == 1 else f.shape)
+    return f
 
 
-def _guides(best_x: NDArray[np.float64], best_f: NDArray[np.float64], cfg: SwarmConfig) -> NDArray[np.float64]:
-    """The neighbourhood best each particle is pulled towards, shape (B, n, dims)."""
-    if cfg.topology == "global":
-        return best_x[np.arange(best_f.shape[0]), np.argmin(best_f, axis=1)][:, None, :]
-    return np.take_along_axis(best_x, _neighbourhood_best(best_f, cfg)[:, :, None], axis=1)
+def _read_only_view(x: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The swarm ``x`` (b, dims, n) as ``fun`` sees it: ``(b, n, dims)``, read-only."""
+    view = x.transpose(0, 2, 1)
+    view.flags.writeable = False
+    return view
 
 
 def _neighbourhood_best(best_f: NDArray[np.float64], cfg: SwarmConfig) -> NDArray[np.intp]:

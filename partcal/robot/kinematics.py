@@ -13,6 +13,7 @@ positions go out as ``(n, 3)`` arrays in mm. Radians live only inside.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import re
 from dataclasses import dataclass
@@ -24,9 +25,11 @@ from numpy.typing import NDArray
 from .._validation import check_array
 from .._yamlio import load_yaml
 from ..errors import ConfigError, DataError, UnreachableError
+from . import ik
 
 MAX_JOINTS = 12
-_CHUNK = 4096
+_CHUNK = 8192
+_I1, _I2 = [1, 2, 0], [2, 0, 1]          # cross product: (a x b)_k = a_{k+1} b_{k+2} - a_{k+2} b_{k+1}
 _BUILTIN_DIR = Path(__file__).parent / "builtin"
 _TERM = re.compile(r"\s*([+-]?)\s*(?:(\d+(?:\.\d*)?|\.\d+)\s*\*?\s*)?(q(\d+))?\s*")
 
@@ -147,48 +150,92 @@ class Robot:
         return ok
 
     # ------------------------------------------------------------------ kinematics
-    def _chain(self, q_deg: NDArray[np.float64], keep_axes: bool = False):
-        """Walk the chain; return tool positions, orientations and optionally frame axes.
-
-        Internally vectors are ``(3, n)`` so every operation runs over
-        contiguous runs of ``n`` values (about twice as fast as ``(n, 3)``).
-        """
-        n = q_deg.shape[0]
-        theta = np.radians(self.theta_offset_deg[:, None] + self.coupling @ q_deg.T)  # (R, n)
-        cos_t, sin_t = np.cos(theta), np.sin(theta)
+    @functools.cached_property
+    def _rows(self) -> tuple["_Row", ...]:
+        """The DH rows compiled for the walk (built once per robot)."""
         ca, sa = _cos_sin_deg(self.alpha_deg)
-        r0, r1, r2 = (np.repeat(self.base_rotation[:, k, None], n, axis=1) for k in range(3))
-        p = np.repeat(self.base_mm[:, None], n, axis=1)
-        axes, origins = [], []
-        for row in range(theta.shape[0]):
-            if keep_axes:
-                axes.append(r2.T)
-                origins.append(p.T.copy())
-            c, s = cos_t[row], sin_t[row]
-            x_new = c * r0 + s * r1
-            y_rot = c * r1 - s * r0
-            p += self.a_mm[row] * x_new
-            if self.d_mm[row]:
-                p += self.d_mm[row] * r2
-            if sa[row] == 0.0:  # alpha = 0 or 180: exact, and saves half the work of this row
-                r0, r1, r2 = x_new, ca[row] * y_rot, ca[row] * r2
-            elif ca[row] == 0.0:  # alpha = +-90
-                r0, r1, r2 = x_new, sa[row] * r2, -sa[row] * y_rot
+        return tuple(_Row(float(off), tuple((int(j), float(c)) for j, c in enumerate(coef) if c),
+                          float(ca[r]), float(sa[r]), float(self.a_mm[r]), float(self.d_mm[r]))
+                     for r, (off, coef) in enumerate(zip(self.theta_offset_deg, self.coupling)))
+
+    def _trig(self, qT: NDArray[np.float64], rows=None) -> list:
+        """The rotor ``exp(-i theta)`` of each DH row (all, or those in ``rows``), for joints ``qT`` (N, n).
+
+        Constant rows give a Python complex, rows not asked for ``None``. Every
+        operation is elementwise in the poses, so a pose gets the same bits
+        alone or in any batch.
+        """
+        out: list = [None] * len(self._rows)
+        varying = []
+        for r, row in enumerate(self._rows):
+            if rows is not None and r not in rows:
+                continue
+            if row.terms:
+                varying.append(r)
             else:
-                r0, r1, r2 = x_new, ca[row] * y_rot + sa[row] * r2, ca[row] * r2 - sa[row] * y_rot
-        if keep_axes:
-            axes.append(r2.T)
-            origins.append(p.T.copy())
-        p += self.tool_mm[0] * r0 + self.tool_mm[1] * r1 + self.tool_mm[2] * r2
-        return p.T, np.stack([r0.T, r1.T, r2.T], axis=-1), axes, origins
+                rad = np.radians(row.offset)
+                out[r] = complex(np.cos(rad), -np.sin(rad))
+        if varying:
+            theta = np.empty((len(varying), qT.shape[1]))
+            for k, r in enumerate(varying):
+                _theta(self._rows[r], qT, out=theta[k])
+            rotors = _rotors(theta)                    # one call for all rows
+            for k, r in enumerate(varying):
+                out[r] = rotors[k]
+        return out
+
+    def _walk(self, trig: list, record=()) -> tuple:
+        """Walk the chain for the rows' rotors; return the tool position and frames.
+
+        A frame is kept as ``w = x + i y`` (3, n) complex and ``z`` (3, n): the
+        turn by ``theta`` about ``z`` is one complex product, ``w exp(-i theta)``.
+        Vectors are ``(3, n)``, so every operation runs over contiguous runs of
+        ``n`` values. Returns ``p`` (3, n), the last frame's axes ``(x, y, z)``
+        and, for each row in ``record``, the axis ``z`` and origin ``o`` (3, n)
+        it turns about.
+        """
+        n = next((e.shape[-1] for e in trig if isinstance(e, np.ndarray)), 1)
+        base = self.base_rotation
+        w = (base[:, 0] + 1j * base[:, 1])[:, None]                      # (3, 1): broadcast at first
+        z = base[:, 2][:, None]
+        p = np.repeat(self.base_mm[:, None], n, axis=1)
+        frames = {}
+        for r, (row, e) in enumerate(zip(self._rows, trig)):
+            if r in record:
+                frames[r] = (z if z.shape == p.shape else np.repeat(z, n, axis=1), p.copy())
+            w = w * e                                  # x' = c x + s y, y' = c y - s x
+            if row.a:
+                p += row.a * w.real
+            if row.d:
+                p += row.d * z
+            # then alpha about x': (y, z) -> (ca y + sa z, ca z - sa y); exact shortcuts for 0, 180, +-90
+            if row.sa == 0.0:
+                if row.ca != 1.0:
+                    w, z = np.conjugate(w), np.negative(z)
+            else:
+                y, turned = w.imag, np.empty(w.shape, dtype=complex)
+                turned.real = w.real
+                if row.ca == 0.0:
+                    turned.imag = z if row.sa == 1.0 else np.negative(z)
+                    z = np.negative(y) if row.sa == 1.0 else y.copy()
+                else:
+                    turned.imag = row.ca * y + row.sa * z
+                    z = row.ca * z - row.sa * y
+                w = turned
+        if len(self._rows) in record:
+            frames[len(self._rows)] = (z if z.shape == p.shape else np.repeat(z, n, axis=1), p.copy())
+        p += self.tool_mm[0] * w.real + self.tool_mm[1] * w.imag + self.tool_mm[2] * z
+        return p, (w.real, w.imag, z), frames
 
     def frames(self, q_deg) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Origins and z axes of the DH frames 0..R, each of shape ``(n, R + 1, 3)``.
 
         Frame 0 is the first DH frame (the base); frame ``k`` follows row ``k``.
         """
-        _, _, axes, origins = self._chain(self.check_joints(q_deg), keep_axes=True)
-        return np.stack(origins, axis=1), np.stack(axes, axis=1)
+        qT = self.check_joints(q_deg).T
+        _, _, frames = self._walk(self._trig(qT), record=range(len(self._rows) + 1))
+        keys = sorted(frames)
+        return (np.stack([frames[k][1].T for k in keys], axis=1), np.stack([frames[k][0].T for k in keys], axis=1))
 
     def positions(self, q_deg) -> NDArray[np.float64]:
         """Tool positions, shape ``(n, 3)`` mm, for joint angles ``(n, N)`` degrees.
@@ -199,18 +246,24 @@ class Robot:
         >>> robot.positions([[0, -90, -180, 0, 0, 0]]).round(2).tolist()
         [[1857.65, 0.0, 1555.32]]
         """
-        q = self.check_joints(q_deg)
+        return self._positions(self.check_joints(q_deg))
+
+    def _positions(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
+        """:meth:`positions` on validated joints (n, N), in cache-sized blocks."""
         out = np.empty((q.shape[0], 3))
         for start in range(0, q.shape[0], _CHUNK):  # cache-sized blocks: ~2x faster on big batches
-            out[start:start + _CHUNK] = self._chain(q[start:start + _CHUNK])[0]
+            qT = q[start:start + _CHUNK].T
+            out[start:start + _CHUNK] = self._walk(self._trig(qT))[0].T
         return out
 
     def forward(self, q_deg) -> NDArray[np.float64]:
         """Tool poses as homogeneous transforms, shape ``(n, 4, 4)`` (mm)."""
-        p, rot, _, _ = self._chain(self.check_joints(q_deg))
-        out = np.zeros((p.shape[0], 4, 4))
-        out[:, :3, :3] = rot
-        out[:, :3, 3] = p
+        q = self.check_joints(q_deg)
+        p, axes, _ = self._walk(self._trig(q.T))
+        out = np.zeros((q.shape[0], 4, 4))
+        n = q.shape[0]      # an axis that no joint turns (a planar arm's z) comes back as one column
+        out[:, :3, :3] = np.stack([np.broadcast_to(a, (3, n)).T for a in axes], axis=-1)
+        out[:, :3, 3] = p.T
         out[:, 3, 3] = 1.0
         return out
 
@@ -221,15 +274,58 @@ class Robot:
         origin ``o``; rows coupled to several joints add up through the
         coupling matrix.
         """
-        return self._position_and_jacobian(self.check_joints(q_deg))[1]
+        qT = self.check_joints(q_deg).T
+        _, jac = self._position_jacobian(self._trig(qT), np.arange(self.n_joints))
+        return jac.transpose(2, 1, 0)
 
-    def _position_and_jacobian(self, q_deg: NDArray[np.float64]):
-        p, _, axes, origins = self._chain(q_deg, keep_axes=True)
-        moving = np.flatnonzero(self.coupling.any(axis=1))
-        z = np.stack([axes[r] for r in moving], axis=-1)                # (n, 3, M)
-        lever = p[:, :, None] - np.stack([origins[r] for r in moving], axis=-1)
-        cross = z[:, [1, 2, 0]] * lever[:, [2, 0, 1]] - z[:, [2, 0, 1]] * lever[:, [1, 2, 0]]
-        return p, cross @ self.coupling[moving] * (np.pi / 180.0)
+    def _position_jacobian(self, trig: list, free: NDArray[np.intp]):
+        """Tool position (3, n) mm and Jacobian ``(F, 3, n)`` mm/deg for the joints ``free``."""
+        moving = self._moving(free)
+        p, _, frames = self._walk(trig, record=moving)
+        return p, self._jacobian(p, frames, free)
+
+    def _moving(self, free) -> list[int]:
+        """The DH rows that some joint in ``free`` turns."""
+        free = {int(j) for j in free}
+        return [r for r, row in enumerate(self._rows) if any(j in free for j, _ in row.terms)]
+
+    def _jacobian(self, p: NDArray[np.float64], frames: dict, free) -> NDArray[np.float64]:
+        """The Jacobian ``(F, 3, n)`` mm/deg from a walk that recorded the rows :meth:`_moving` gives.
+
+        Sums run in a fixed order, elementwise in the poses: a pose gets the
+        same bits alone or in any batch (batched path IK relies on it).
+        """
+        moving, plan = self._jacobian_plan(tuple(int(j) for j in free))
+        jac = np.zeros((len(free), 3, p.shape[1]))
+        if not moving:
+            return jac
+        z = np.stack([frames[r][0] for r in moving])               # (M, 3, n) axes
+        lever = p[None] - np.stack([frames[r][1] for r in moving])  # (M, 3, n) origin -> tool
+        cross = z[:, _I1] * lever[:, _I2]
+        cross -= z[:, _I2] * lever[:, _I1]
+        cross *= np.pi / 180.0
+        for k, f, c in plan:                                       # column f += c * (row k's contribution)
+            if c == 1.0:
+                jac[f] += cross[k]
+            elif c == -1.0:
+                jac[f] -= cross[k]
+            else:
+                jac[f] += c * cross[k]
+        return jac
+
+    def _jacobian_plan(self, free: tuple) -> tuple[list[int], list[tuple[int, int, float]]]:
+        """The moving rows for the joints ``free`` and ``(row, column, coefficient)`` of each sum (cached)."""
+        plan = self._plans.get(free)
+        if plan is None:
+            where = {j: f for f, j in enumerate(free)}
+            moving = self._moving(free)
+            plan = self._plans[free] = (moving, [(k, where[j], c) for k, r in enumerate(moving)
+                                                 for j, c in self._rows[r].terms if j in where])
+        return plan
+
+    @functools.cached_property
+    def _plans(self) -> dict:
+        return {}
 
     # ------------------------------------------------------------------ inverse
     def inverse(
@@ -254,7 +350,8 @@ class Robot:
         IKResult
             With ``q_deg`` (n, N), ``error_mm`` (n,) and ``success`` (n,).
             Redundant joints move by minimum-norm steps from the seed, so a
-            warm start keeps a path on one branch.
+            warm start keeps a path on one branch. Each target's result does
+            not depend on the others in the batch.
         """
         targets = check_array(targets_mm, "targets_mm", columns=3)
         n = targets.shape[0]
@@ -262,8 +359,8 @@ class Robot:
         q = np.array(np.broadcast_to(np.asarray(seeds, dtype=float), (n, self.n_joints)))
         q = self.check_joints(q, "seeds_deg")
         free = self._free_joints(fixed)
-        q = self._solve(targets, q, free, tol_mm, max_iter, max_step_deg, damping)
-        dist = np.linalg.norm(targets - self._chain(q)[0], axis=1)
+        q = ik.solve(self, targets, q, free, ik.Settings(tol_mm, max_iter, max_step_deg, damping))[0]
+        dist = np.linalg.norm(targets - self._positions(q), axis=1)
         return IKResult(q_deg=q, error_mm=dist, success=(dist <= tol_mm) & self.within_limits(q))
 
     def _free_joints(self, fixed) -> NDArray[np.intp]:
@@ -272,28 +369,14 @@ class Robot:
             raise DataError(f"fixed joints must be in 1..{self.n_joints}; got {bad[0]!r}")
         return np.array([j for j in range(self.n_joints) if j + 1 not in set(fixed)], dtype=np.intp)
 
-    def _solve(self, targets, q, free, tol_mm, max_iter, max_step_deg, damping):
-        """Damped least-squares iterations on validated arrays (the hot loop)."""
-        lo, hi = self.limits_deg[free, 0], self.limits_deg[free, 1]
-        active = np.arange(targets.shape[0])
-        for _ in range(max_iter):
-            p, jac = self._position_and_jacobian(q[active])
-            err = targets[active] - p
-            keep = np.einsum("ij,ij->i", err, err) > tol_mm**2
-            if not keep.any():
-                break
-            active, err, jac = active[keep], err[keep], jac[keep][:, :, free]
-            jjt = jac @ jac.transpose(0, 2, 1) + damping**2 * np.eye(3)
-            step = (jac.transpose(0, 2, 1) @ np.linalg.solve(jjt, err[:, :, None]))[:, :, 0]
-            biggest = np.abs(step).max(axis=1, keepdims=True)
-            step *= np.minimum(1.0, max_step_deg / np.maximum(biggest, 1e-300))
-            q_act = q[active]
-            q_act[:, free] = np.clip(q_act[:, free] + step, lo, hi)
-            q[active] = q_act
-        return q
-
     def inverse_path(self, targets_mm, seed_deg=None, *, fixed=(), tol_mm: float = 1e-8) -> NDArray[np.float64]:
         """Joint angles along a path, each point warm-started from the previous one.
+
+        The result is the sequential one (solve point ``i`` from the solution of
+        point ``i - 1``), computed for all points at once: batched damped least
+        squares, corrected along the redundant joints' self-motion until the
+        chain is consistent, then sequential steps only where it is not (see
+        :func:`partcal.robot.ik.solve_path`).
 
         Raises
         ------
@@ -301,12 +384,10 @@ class Robot:
             Naming every target that could not be reached, with its distance.
         """
         targets = check_array(targets_mm, "targets_mm", columns=3, min_rows=1)
-        q = np.empty((targets.shape[0], self.n_joints))
         seed = self.check_joints(self.home_deg if seed_deg is None else seed_deg, "seed_deg")[0]
         free = self._free_joints(fixed)
-        for i in range(targets.shape[0]):
-            seed = q[i] = self._solve(targets[i:i + 1], seed[None].copy(), free, tol_mm, 100, 10.0, 0.05)[0]
-        errors = np.linalg.norm(targets - self._chain(q)[0], axis=1)
+        q = ik.solve_path(self, targets, seed, free, ik.Settings(tol_mm))
+        errors = np.linalg.norm(targets - self._positions(q), axis=1)
         ok = (errors <= tol_mm) & self.within_limits(q)
         if not ok.all():
             bad = np.flatnonzero(~ok)
@@ -316,6 +397,54 @@ class Robot:
                 f"{self.name}: {bad.size} of {targets.shape[0]} targets unreachable within the joint "
                 f"limits: {listed}{more}", bad.tolist(), errors[bad].tolist())
         return q
+
+
+@dataclass(frozen=True)
+class _Row:
+    """One DH row compiled for the walk: ``theta = offset + sum(c * q[j])`` degrees."""
+
+    offset: float
+    terms: tuple
+    ca: float
+    sa: float
+    a: float
+    d: float
+
+
+def _theta(row: _Row, qT: NDArray[np.float64], out: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The row's joint angle in degrees for joints ``qT`` (N, n), into ``out`` (n,), summed in a fixed order."""
+    j, c = row.terms[0]
+    np.multiply(qT[j], c, out=out)
+    for j, c in row.terms[1:]:
+        if c == 1.0:
+            out += qT[j]
+        elif c == -1.0:
+            out -= qT[j]
+        else:
+            out += c * qT[j]
+    if row.offset:
+        out += row.offset
+    return out
+
+
+def _rotors(theta_deg: NDArray[np.float64]) -> NDArray[np.complex128]:
+    """``exp(-i theta)`` for angles in degrees, from ``t = tan(theta / 2)``.
+
+    ``cos = (1 - t^2) / (1 + t^2)``, ``sin = 2 t / (1 + t^2)``: numpy vectorises
+    ``tan`` for float64 but not ``sin`` and ``cos``, so this is about 4 times
+    faster, to a few units in the last place.
+    """
+    t = np.multiply(theta_deg, np.pi / 360.0)
+    np.tan(t, out=t)
+    inv = t * t
+    out = np.empty(t.shape, dtype=complex)
+    np.subtract(1.0, inv, out=out.real)
+    inv += 1.0
+    np.divide(1.0, inv, out=inv)
+    out.real *= inv
+    inv *= -2.0
+    np.multiply(t, inv, out=out.imag)
+    return out
 
 
 @dataclass(frozen=True)

@@ -298,7 +298,7 @@ def _check_plausible(r: "_Reader", model, n_in: int, limit_mm: float = 1e6) -> N
             if not np.all(np.isfinite(pred)) or np.abs(pred).max() > limit_mm:
                 where = "model.coef" if len(locals_) == 1 and not isinstance(model, PartitionedErrorModel) \
                     else f"regions[{k}].coef"
-                worst = np.abs(pred).max() if np.all(np.isfinite(pred)) else "a non-finite value"
+                worst = f"{np.abs(pred).max():.3g}" if np.all(np.isfinite(pred)) else "a non-finite value"
                 r.fail(where, f"predicts {worst} mm within the box of its data (limit {limit_mm:g} mm): "
                               "the coefficients are damaged")
 

@@ -1,0 +1,76 @@
+"""False targets: the batched joint-model solve against the straightforward nested fixed point."""
+
+import numpy as np
+import pytest
+from conftest import ROOT
+
+from partcal import read_measurements
+from partcal.models.series import ErrorModel
+from partcal.robot.compensation import false_target, false_target_joints
+
+
+@pytest.fixture(scope="module")
+def joint_model():
+    m = read_measurements(ROOT / "data" / "sk120" / "identification.csv")
+    return m, ErrorModel(inputs="joint", degree=2, solver="lstsq").fit(m.q_deg, m.errors_mm)
+
+
+def nested_fixed_point(predict, robot, targets, seeds, fixed, tol_mm, max_iter=50):
+    """The straightforward false targets: q <- IK(p - e(q)), a full IK per iteration, from IK(p)."""
+    q = robot.inverse(targets, seeds, fixed=fixed).q_deg
+    for _ in range(max_iter):
+        active = np.linalg.norm(robot.positions(q) + predict(q) - targets, axis=1) > tol_mm
+        if not active.any():
+            break
+        cmd = targets[active] - predict(q[active])
+        q[active] = robot.inverse(cmd, q[active], fixed=fixed, tol_mm=min(tol_mm, 1e-8)).q_deg
+    return q
+
+
+def valid_targets(sk120, m, n, seed):
+    rng = np.random.default_rng(seed)
+    q = m.q_deg[rng.integers(0, len(m.q_deg), 2 * n)] + rng.normal(0, 2, (2 * n, 6))
+    q[:, 3:5] = m.q_deg[0, 3:5]
+    q = q[sk120.within_limits(q)][:n]
+    return sk120.positions(q)
+
+
+def test_joint_false_targets_equal_the_nested_fixed_point(sk120, joint_model):
+    # with q4, q5 and q6 held the solution is unique: both must find it, to 1e-9 mm
+    m, model = joint_model
+    targets = valid_targets(sk120, m, 150, seed=5)
+    seeds = np.tile(sk120.home_deg, (len(targets), 1))
+    fast = false_target_joints(model._predict_trusted, sk120, targets, seeds, (4, 5, 6), tol_mm=1e-11)
+    q_ref = nested_fixed_point(model._predict_trusted, sk120, targets, seeds.copy(), (4, 5, 6), tol_mm=1e-11)
+    assert fast.converged.all()
+    np.testing.assert_allclose(fast.commanded_mm, sk120.positions(q_ref), rtol=0, atol=1e-9)
+    np.testing.assert_allclose(fast.commanded_mm + model.predict(fast.joints_deg), targets, rtol=0, atol=1e-9)
+
+
+def test_redundant_joints_stay_on_the_branch_of_the_nested_fixed_point(sk120, joint_model):
+    # q6 free: a one-dimensional self-motion; both land on it, within a hair of each other
+    m, model = joint_model
+    targets = valid_targets(sk120, m, 150, seed=6)
+    seeds = np.tile(sk120.home_deg, (len(targets), 1))
+    fast = false_target_joints(model._predict_trusted, sk120, targets, seeds, (4, 5), tol_mm=1e-10)
+    q_ref = nested_fixed_point(model._predict_trusted, sk120, targets, seeds.copy(), (4, 5), tol_mm=1e-10)
+    assert fast.converged.all() and np.all(fast.residual_mm <= 1e-10)
+    np.testing.assert_allclose(fast.joints_deg, q_ref, rtol=0, atol=1e-4)
+    assert np.all(fast.joints_deg[:, 3:5] == seeds[:, 3:5])
+
+
+def test_unreachable_joint_targets_are_reported_not_returned(sk120, joint_model):
+    _, model = joint_model
+    targets = np.array([[1100.0, 0.0, 800.0], [9000.0, 0.0, 0.0]])
+    res = false_target_joints(model._predict_trusted, sk120, targets, np.tile(sk120.home_deg, (2, 1)), (4, 5))
+    assert res.converged.tolist() == [True, False] and res.residual_mm[1] > 5000
+
+
+def test_cartesian_false_targets_solve_the_defining_equation():
+    def predict(p):                                       # a smooth error field, 1e-3 mm per mm
+        return np.c_[2 + 1e-3 * p[:, 1], -1 + 5e-4 * p[:, 0], 3e-3 * p[:, 2]]
+
+    targets = np.random.default_rng(0).uniform(-1000, 1000, size=(500, 3))
+    res = false_target(predict, targets, tol_mm=1e-10)
+    assert res.converged.all()
+    np.testing.assert_allclose(res.commanded_mm + predict(res.commanded_mm), targets, rtol=0, atol=1e-9)

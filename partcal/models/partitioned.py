@@ -23,9 +23,11 @@ from sklearn.utils.validation import check_is_fitted, validate_data
 from .._validation import check_choice, check_int, param_error
 from ..errors import PartcalError
 from ..metrics import cross_validated_rms, distance_outside_boxes, warn_far
+from .angles import InputMap
 from .base import ErrorModelBase, seed_from
 from .bases import varying_inputs
 from .blending import block_weights
+from .gp import GaussianProcessErrorModel
 from .partition import KMeansPartition, Octree, Partition, check_width
 from .series import ErrorModel
 
@@ -41,10 +43,14 @@ class PartitionedErrorModel(ErrorModelBase):
     partition : Octree or KMeansPartition, optional
         Default ``Octree()`` for Cartesian inputs, ``KMeansPartition()`` for
         joint angles.
-    local : ErrorModel, optional
-        The model fitted in every region (default ``ErrorModel()`` with the
-        same ``inputs``). Its ``random_state`` is replaced by a per-region
-        child of this model's ``random_state``.
+    local : ErrorModel or GaussianProcessErrorModel, optional
+        The model fitted in every region (default ``ErrorModel()``). Its
+        ``random_state`` is replaced by a per-region child of this model's
+        ``random_state``. With joint-angle inputs the regions and blend
+        kernels live in scaled joint space (each joint's training range is
+        [-1, 1], joints that never moved left out), and a joint whose data
+        straddle ±180 degrees is read in a window where they are contiguous
+        (``input_map_``); the local models see those wrapped angles.
     blend : {"gaussian", "hard"}
     blend_width : float
         Kernel width relative to the region's half-size (octree) or
@@ -56,7 +62,9 @@ class PartitionedErrorModel(ErrorModelBase):
     Attributes
     ----------
     partition_ : Partition
-    models_ : list of ErrorModel, one per region
+    models_ : list of ErrorModel or GaussianProcessErrorModel, one per region
+    input_map_ : InputMap or None
+        Joint-angle inputs: how they are wrapped and scaled for the partition.
     min_samples_ : int
         Smallest number of samples a region was allowed to hold.
     region_counts_ : ndarray
@@ -72,15 +80,15 @@ class PartitionedErrorModel(ErrorModelBase):
         self.n_jobs = n_jobs
         self.random_state = random_state
 
-    def _resolved(self) -> tuple[ErrorModel, Octree | KMeansPartition]:
+    def _resolved(self) -> tuple[ErrorModel | GaussianProcessErrorModel, Octree | KMeansPartition]:
         own = type(self).__name__
         check_choice(own, "blend", self.blend, ("gaussian", "hard"))
         check_width(self.blend_width)
         if self.n_jobs is not None and not isinstance(self.n_jobs, Integral):
             raise param_error(own, "n_jobs", "an int or None", self.n_jobs)
         local = ErrorModel() if self.local is None else self.local
-        if not isinstance(local, ErrorModel):
-            raise param_error(own, "local", "an ErrorModel", local)
+        if not isinstance(local, (ErrorModel, GaussianProcessErrorModel)):
+            raise param_error(own, "local", "an ErrorModel or a GaussianProcessErrorModel", local)
         partition = self.partition
         if partition is None:
             partition = Octree() if local.inputs == "cartesian" else KMeansPartition()
@@ -95,26 +103,42 @@ class PartitionedErrorModel(ErrorModelBase):
         X, y = validate_data(self, X, y, multi_output=True, y_numeric=True, dtype=np.float64)
         self._y_1d = y.ndim == 1
         Y = y.reshape(len(y), -1)
-        terms = local._check_params()[0].n_terms(int(varying_inputs(X).sum()))
-        min_samples = spec.min_samples or MIN_SAMPLES_PER_TERM * terms
+        self.input_map_ = InputMap.fit(X, angles=True) if local.inputs == "joint" else None
+        X, S = self._coordinates(X)
+        need, why = _region_minimum(local, int(varying_inputs(X).sum()))
+        min_samples = spec.min_samples or need
         if X.shape[0] < min_samples:
             raise PartcalError(f"{type(self).__name__}: a region needs at least {min_samples} samples "
-                               f"({terms} terms per output); got {X.shape[0]} samples in all")
+                               f"({why}); got {X.shape[0]} samples in all")
         seed = seed_from(self.random_state)
-        partition = spec.build(X, min_samples, seed, self.blend_width)
-        groups = self._training_groups(partition, X)
+        partition = spec.build(S, min_samples, seed, self.blend_width)
+        groups = self._training_groups(partition, S)
         seeds = np.random.SeedSequence(seed).spawn(partition.n_regions)
         jobs = (delayed(_fit_region)(clone(local).set_params(random_state=int(s.generate_state(1)[0])),
                                      X[idx], Y[idx], w) for (idx, w), s in zip(groups, seeds))
         self.models_ = Parallel(n_jobs=self.n_jobs)(jobs)
         self.partition_ = partition
         self.min_samples_ = int(min_samples)
-        labels = partition.assign(X)
+        self.n_outputs_ = Y.shape[1]
+        labels = partition.assign(S)
         self.region_counts_ = np.bincount(labels, minlength=partition.n_regions)
         self.region_bounds_ = np.array([[X[labels == r].min(axis=0), X[labels == r].max(axis=0)]
                                         for r in range(partition.n_regions)])
         log.info("fitted %d regions (%s, min %d samples)", partition.n_regions, partition.kind, min_samples)
         return self
+
+    def _coordinates(self, X: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """The local models' inputs (joints wrapped) and the partition's coordinates (joints also scaled)."""
+        if getattr(self, "input_map_", None) is None:
+            return X, X
+        wrapped = self.input_map_.wrap(X)
+        return wrapped, self.input_map_.scaled(wrapped)
+
+    def assign(self, X) -> NDArray[np.intp]:
+        """The region of every input ``X`` (n, d) in contract units, shape (n,)."""
+        check_is_fitted(self, "models_")
+        X = validate_data(self, X, reset=False, dtype=np.float64)
+        return self.partition_.assign(self._coordinates(X)[1])
 
     def _region_blocks(self, partition: Partition, X):
         """Yield ``(rows, regions, weights)`` per block: weights ``(m, R_b)`` of the block's regions."""
@@ -138,9 +162,9 @@ class PartitionedErrorModel(ErrorModelBase):
     def predict(self, X) -> NDArray[np.float64]:
         """Blended prediction, shape (n, n_outputs) mm (1-D if fitted on a 1-D ``y``)."""
         check_is_fitted(self, "models_")
-        X = validate_data(self, X, reset=False, dtype=np.float64)
-        out = np.empty((X.shape[0], self.models_[0].coef_.shape[1]))
-        for rows, regions, w in self._region_blocks(self.partition_, X):
+        X, S = self._coordinates(validate_data(self, X, reset=False, dtype=np.float64))
+        out = np.empty((X.shape[0], self.n_outputs_))
+        for rows, regions, w in self._region_blocks(self.partition_, S):
             xb = X[rows]
             block = np.zeros((rows.size, out.shape[1]))
             for region, wr in zip(regions, np.ascontiguousarray(w.T)):
@@ -161,15 +185,24 @@ class PartitionedErrorModel(ErrorModelBase):
         extrapolation and should not be trusted.
         """
         check_is_fitted(self, "models_")
-        X = validate_data(self, X, reset=False, dtype=np.float64)
+        X = self._coordinates(validate_data(self, X, reset=False, dtype=np.float64))[0]
         return distance_outside_boxes(X, self.region_bounds_[:, 0], self.region_bounds_[:, 1])
 
     def warn_if_extrapolating(self, X, limit: float = 50.0) -> NDArray[np.bool_]:
         """Warn (``ExtrapolationWarning``) about points farther than ``limit`` from the data; return the mask."""
         return warn_far(self.distance_to_data(X), limit)
 
-def _fit_region(model: ErrorModel, X, Y, weights) -> ErrorModel:
+def _fit_region(model, X, Y, weights):
     return model._fit(X, Y, weights)
+
+
+def _region_minimum(local, n_active: int) -> tuple[int, str]:
+    """Default smallest region for a local model, and the reason (for the message)."""
+    if isinstance(local, GaussianProcessErrorModel):
+        local._check_params()
+        return local.region_minimum(n_active)
+    terms = local._check_params()[0].n_terms(n_active)
+    return MIN_SAMPLES_PER_TERM * terms, f"{terms} terms per output"
 
 
 def select_granularity(model: PartitionedErrorModel, X, y, grid, *, folds: int = 5, random_state=0

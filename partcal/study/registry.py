@@ -25,8 +25,8 @@ from ..data.measurements import Measurements, read_measurements
 from ..errors import ConfigError, DataError
 from ..metrics import cross_validated_rms, summary
 from ..models.bases import varying_inputs
-from ..models.partitioned import PartitionedErrorModel, select_granularity
-from ..models.series import ErrorModel
+from ..models.kinematic import KinematicModel
+from ..models.partitioned import PartitionedErrorModel
 from ..robot.kinematics import Robot, load_robot
 from .config import ModelSpec, RunConfig
 from .predictor import Predictor
@@ -39,7 +39,7 @@ class ModelResult:
     """One fitted model of a run with everything measured about it."""
 
     spec: ModelSpec
-    model: ErrorModel | PartitionedErrorModel
+    model: object           # any partcal error model (series, partitioned, GP, kinematic)
     fit_seconds: float
     cv_rms_3d: float
     metrics: dict[str, dict]
@@ -50,7 +50,15 @@ class ModelResult:
 
     @property
     def n_regions(self) -> int:
-        return self.model.partition_.n_regions if isinstance(self.model, PartitionedErrorModel) else 1
+        part = partitioned_part(self.model)
+        return part.partition_.n_regions if part is not None else 1
+
+
+def partitioned_part(model) -> PartitionedErrorModel | None:
+    """The partitioned model in ``model``: itself, or the residual of a hybrid; None if there is none."""
+    if isinstance(model, KinematicModel):
+        model = model.residual_
+    return model if isinstance(model, PartitionedErrorModel) else None
 
 
 @dataclass
@@ -89,9 +97,8 @@ def fit_model(spec: ModelSpec, seed: int, data: dict[str, Measurements], folds: 
     X, y = model_inputs(spec.inputs, ident), ident.errors_mm
     granularity = None
     start = time.perf_counter()
-    if spec.partition is not None and len(spec.partition.sizes) > 1:
-        estimator, granularity = select_granularity(spec.build(seed), X, y, spec.partition.sizes, folds=folds,
-                                                    random_state=seed)       # returned fitted
+    if len(spec.sizes) > 1:
+        estimator, granularity = select_granularity(spec, seed, X, y, folds)       # returned fitted
         cv = min(row["cv_rms_3d"] for row in granularity)
     else:
         estimator = spec.build(seed).fit(X, y)
@@ -104,6 +111,23 @@ def fit_model(spec: ModelSpec, seed: int, data: dict[str, Measurements], folds: 
     locals_ = estimator.models_ if isinstance(estimator, PartitionedErrorModel) else [estimator]
     ratio = float(max(m.rms_ratio_ for m in locals_)) if spec.solver == "pso" else None
     return ModelResult(spec, estimator, fit_seconds, cv, metrics, predictions, ratio, granularity)
+
+
+def select_granularity(spec: ModelSpec, seed: int, X, y, folds: int) -> tuple[object, list[dict]]:
+    """Choose the partition granularity of an entry (or of its residual) by k-fold cross-validation.
+
+    The same choice as :func:`partcal.models.partitioned.select_granularity`, for any entry kind:
+    returns the best candidate fitted on all of ``X, y`` and a row per candidate.
+    """
+    table, fitted = [], []
+    for size in spec.sizes:
+        score = cross_validated_rms(spec.build(seed, size), X, y, folds=folds, random_state=seed)
+        fitted.append(spec.build(seed, size).fit(X, y))
+        regions = partitioned_part(fitted[-1]).partition_.n_regions
+        table.append({"granularity": int(size), "cv_rms_3d": score, "regions": int(regions)})
+        log.info("%s, granularity %s: CV RMS %.4f over %d regions", spec.name, size, score, regions)
+    best = min(range(len(table)), key=lambda i: table[i]["cv_rms_3d"])
+    return fitted[best], table
 
 
 @contextmanager

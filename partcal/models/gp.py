@@ -153,13 +153,16 @@ class GaussianProcessErrorModel(ErrorModelBase):
     def _prepare(self) -> "GaussianProcessErrorModel":
         """Precompute what every prediction needs (after fitting or loading); returns self.
 
-        The inputs are divided by the length scales and centred, so that
-        ``|a|^2 + |b|^2 - 2 a.b`` loses little to rounding.
+        The training inputs are divided by the length scales and centred (so
+        that the expansion below loses little to rounding), and augmented so
+        that one matrix product gives the exponent ``-|a - b|^2 / 2 = a.b -
+        |a|^2 / 2 - |b|^2 / 2`` for a whole block of queries.
         """
         B = self.X_train_ / self.length_scale_
         centre = B.mean(axis=0)
         B = B - centre
-        self._cache = (B, np.einsum("ij,ij->i", B, B), self.dual_coef_ * self.amplitude_, centre)
+        augmented = np.vstack([B.T, np.ones(len(B)), -0.5 * np.einsum("ij,ij->i", B, B)])
+        self._cache = (np.ascontiguousarray(augmented), self.dual_coef_ * self.amplitude_, centre)
         return self
 
     def _kernel(self, d: int):
@@ -183,22 +186,24 @@ class GaussianProcessErrorModel(ErrorModelBase):
 
     def _predict_trusted(self, X: NDArray[np.float64]) -> NDArray[np.float64]:
         """Prediction ``(n, n_outputs)`` on validated arrays (the hot path of blends)."""
-        B, b2, coef, centre = self._cache
+        augmented, coef, centre = self._cache
         A = self.input_map_.transform(X) / self.length_scale_ - centre
         out = np.empty((A.shape[0], coef.shape[1]))
+        a = np.empty((min(_BLOCK, A.shape[0]), A.shape[1] + 2))
         for start in range(0, A.shape[0], _BLOCK):
-            a = A[start:start + _BLOCK]
-            d2 = np.einsum("ij,ij->i", a, a)[:, None] + b2 - 2.0 * (a @ B.T)
-            np.maximum(d2, 0.0, out=d2)
-            out[start:start + _BLOCK] = self._shape(d2) @ coef
+            block = A[start:start + _BLOCK]
+            a = a[:len(block)]
+            a[:, :-2] = block
+            a[:, -2] = -0.5 * np.einsum("ij,ij->i", block, block)
+            a[:, -1] = 1.0
+            out[start:start + _BLOCK] = self._shape(a @ augmented) @ coef      # exponent -d^2/2, (m, n)
         return out * self.y_std_ + self.y_mean_
 
-    def _shape(self, d2: NDArray[np.float64]) -> NDArray[np.float64]:
-        """Kernel shape of squared scaled distances (in place where possible)."""
+    def _shape(self, exponent: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Kernel values from ``-d^2 / 2`` of scaled distances ``d`` (in place where possible)."""
         if self.kernel == "rbf":
-            d2 *= -0.5
-            return np.exp(d2, out=d2)
-        d = np.sqrt(d2)
+            return np.exp(exponent, out=exponent)      # rounding may give +1e-16: exp is 1 there, as it should
+        d = np.sqrt(np.maximum(-2.0 * exponent, 0.0))
         if self.nu == 0.5:
             return np.exp(-d)
         if self.nu == 1.5:

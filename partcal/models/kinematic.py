@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
+from pathlib import PurePath
 
 import numpy as np
 import scipy.linalg
@@ -36,7 +37,7 @@ from scipy.optimize import least_squares
 from sklearn.base import clone
 from sklearn.utils.validation import check_is_fitted, validate_data
 
-from .._validation import check_real, param_error
+from .._validation import check_array, check_real, param_error
 from ..errors import DataError
 from ..metrics import distance_outside_boxes, warn_far
 from ..robot.kinematics import Robot, load_robot
@@ -210,20 +211,16 @@ def identify(robot: Robot, q_deg: NDArray[np.float64], measured_mm: NDArray[np.f
     -------
     Identification
     """
-    names = parameter_names(robot)
+    q_deg = robot.check_joints(q_deg)
+    measured_mm = check_array(measured_mm, "measured_mm", columns=3)
+    if len(measured_mm) != len(q_deg):
+        raise DataError(f"measured_mm has {len(measured_mm)} rows but q_deg has {len(q_deg)}")
     v0 = nominal_values(robot)
     rows = robot.alpha_deg.size
     wanted = np.ones(v0.size, dtype=bool)
     wanted[4 * rows:4 * rows + 3] = tool
     wanted[4 * rows + 3:] = base
-    _, jac0 = identification_jacobian(robot, q_deg, v0)
-    norms = np.linalg.norm(jac0, axis=0)
-    candidates = np.flatnonzero(wanted & (norms > 1e-12 * max(norms.max(), 1e-300)))
-    scaled = jac0[:, candidates] / norms[candidates]
-    singular = np.linalg.svd(scaled, compute_uv=False)
-    rank = int(np.sum(singular > rcond * singular[0])) if singular.size else 0
-    pivots = scipy.linalg.qr(scaled, mode="r", pivoting=True)[1] if rank else np.array([], dtype=int)
-    free = np.sort(candidates[pivots[:rank]])
+    free, rank = _identifiable(robot, q_deg, wanted, rcond)
 
     def values_of(x):
         v = v0.copy()
@@ -236,33 +233,56 @@ def identify(robot: Robot, q_deg: NDArray[np.float64], measured_mm: NDArray[np.f
     def jacobian(x):
         return identification_jacobian(robot, q_deg, values_of(x))[1][:, free]
 
-    evaluations = 0
+    v, evaluations = v0.copy(), 0
     if free.size:
         sol = least_squares(residuals, v0[free], jac=jacobian, method="lm", x_scale="jac",
                             ftol=1e-15, xtol=1e-15, gtol=1e-15, max_nfev=200 * (free.size + 1))
         v, evaluations = values_of(sol.x), int(sol.nfev)
-    else:
-        v = v0.copy()
     p, jac = identification_jacobian(robot, q_deg, v)
     resid = p - measured_mm
-    std = np.full(v.size, np.nan)
-    condition = 1.0
-    if free.size:
-        jf = jac[:, free]
-        _, s, vt = np.linalg.svd(jf, full_matrices=False)
-        dof = resid.size - free.size
-        sigma2 = float(np.sum(resid**2)) / dof if dof > 0 else np.nan
-        std[free] = np.sqrt(sigma2 * np.sum((vt.T / s) ** 2, axis=1))
-        s_unit = np.linalg.svd(jf / np.linalg.norm(jf, axis=0), compute_uv=False)
-        condition = float(s_unit[0] / s_unit[-1]) if s_unit[-1] > 0 else np.inf
+    std, condition = _uncertainty(jac[:, free], resid)
+    std_full = np.full(v.size, np.nan)
+    std_full[free] = std
     status = np.where(wanted, "unidentifiable", "fixed").astype(object)
     status[free] = "identified"
-    result = Identification(tuple(n for n, _ in names), tuple(u for _, u in names), v0, v, std,
+    names = parameter_names(robot)
+    result = Identification(tuple(n for n, _ in names), tuple(u for _, u in names), v0, v, std_full,
                             tuple(str(s) for s in status), rank, condition,
                             float(np.sqrt(np.mean(np.sum(resid**2, axis=1)))), q_deg.shape[0], evaluations)
     log.info("identified %d of %d parameters (condition %.3g): RMS %.4f mm", free.size, v.size, condition,
              result.rms_mm)
     return result
+
+
+def _identifiable(robot: Robot, q_deg, wanted: NDArray[np.bool_], rcond: float) -> tuple[NDArray[np.intp], int]:
+    """Indices of the parameters to identify, and the rank, from the unit-column Jacobian at nominal.
+
+    The rank counts singular values above ``rcond`` times the largest; a QR
+    factorisation with column pivoting picks that many columns (the most
+    independent first). Columns that do not move the tool at all never count.
+    """
+    _, jac0 = identification_jacobian(robot, q_deg, nominal_values(robot))
+    norms = np.linalg.norm(jac0, axis=0)
+    candidates = np.flatnonzero(wanted & (norms > 1e-12 * max(norms.max(), 1e-300)))
+    if candidates.size == 0:
+        return candidates, 0
+    scaled = jac0[:, candidates] / norms[candidates]
+    singular = np.linalg.svd(scaled, compute_uv=False)
+    rank = int(np.sum(singular > rcond * singular[0]))
+    pivots = scipy.linalg.qr(scaled, mode="r", pivoting=True)[1]
+    return np.sort(candidates[pivots[:rank]]), rank
+
+
+def _uncertainty(jac: NDArray[np.float64], resid: NDArray[np.float64]) -> tuple[NDArray[np.float64], float]:
+    """Standard errors ``sqrt(diag(sigma^2 (J^T J)^-1))`` and the condition number of the unit-column ``J``."""
+    if jac.shape[1] == 0:
+        return np.zeros(0), 1.0
+    _, s, vt = np.linalg.svd(jac, full_matrices=False)
+    dof = resid.size - jac.shape[1]
+    sigma2 = float(np.sum(resid**2)) / dof if dof > 0 else np.nan
+    std = np.sqrt(sigma2 * np.sum((vt.T / s) ** 2, axis=1))
+    s_unit = np.linalg.svd(jac / np.linalg.norm(jac, axis=0), compute_uv=False)
+    return std, float(s_unit[0] / s_unit[-1]) if s_unit[-1] > 0 else np.inf
 
 
 # ---------------------------------------------------------------------- the estimator
@@ -328,10 +348,9 @@ class KinematicModel(ErrorModelBase):
 
     def _check_params(self) -> Robot:
         own = type(self).__name__
-        if self.robot is None:
-            raise param_error(own, "robot", "a Robot, a built-in robot name or a robot YAML path", None)
-        robot = load_robot(self.robot) if isinstance(self.robot, str) or not isinstance(self.robot, Robot) \
-            else self.robot
+        if not isinstance(self.robot, (Robot, str, PurePath)):
+            raise param_error(own, "robot", "a Robot, a built-in robot name or a robot YAML path", self.robot)
+        robot = load_robot(self.robot)
         for name in ("base", "tool"):
             if not isinstance(getattr(self, name), (bool, np.bool_)):
                 raise param_error(own, name, "a bool", getattr(self, name))

@@ -31,6 +31,7 @@ models:
   - {{name: DH, kind: kinematic}}
   - {{name: DH + SDP(CI), kind: kinematic, residual: {{degree: 2, solver: {{method: lstsq}}}}}}
   - {{name: GP(AI), kind: gaussian_process, inputs: joint, restarts: 0}}
+  - {{name: GP(CI), kind: gaussian_process, restarts: 0}}
   - {{name: GP(AI) k-means, kind: gaussian_process, inputs: joint, restarts: 0,
       partition: {{method: kmeans, n_regions: [1, 2]}}}}
   - name: DH + GP(AI) k-means
@@ -38,7 +39,7 @@ models:
     residual: {{kind: gaussian_process, inputs: joint, restarts: 0, partition: {{method: kmeans, n_regions: 2, min_samples: 20}}}}
 """
 KINDS = {"SDP(AI)": "series", "DH": "kinematic", "DH + SDP(CI)": "kinematic + series",
-         "GP(AI)": "gaussian_process", "GP(AI) k-means": "gaussian_process",
+         "GP(AI)": "gaussian_process", "GP(CI)": "gaussian_process", "GP(AI) k-means": "gaussian_process",
          "DH + GP(AI) k-means": "kinematic + gaussian_process"}
 
 
@@ -77,7 +78,8 @@ def test_compensation_works_for_every_kind_on_the_virtual_robot(kinds_run):
             continue                      # test_registry checks those
         c = r.compensation["rectangle"]
         assert c["converged"] == c["n"], r.spec.name
-        assert c["after"]["rms_3d"] < 0.1 * c["before"]["rms_3d"], r.spec.name
+        # GP(CI) cannot see q6, which turns the tool: it only halves the error; the others cut it tenfold
+        assert c["after"]["rms_3d"] < (0.5 if r.spec.name == "GP(CI)" else 0.1) * c["before"]["rms_3d"], r.spec.name
         assert c["after"]["rms_3d"] == pytest.approx(c["predicted_residual"]["rms_3d"], rel=0.15, abs=0.01), \
             r.spec.name
 

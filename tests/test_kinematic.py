@@ -137,3 +137,19 @@ def test_bad_parameters_and_inputs_are_refused(sk120, paper_data):
     with pytest.raises(PartcalError, match=r"Expected y \(position errors\) with shape \(n, 3\), got array with "
                                            r"shape \(85, 2\)"):
         KinematicModel(robot=sk120).fit(q, y[:, :2])
+
+
+def test_model_files_round_trip_bit_for_bit(tmp_path, sk120, paper_data):
+    from partcal import KMeansPartition, PartitionedErrorModel
+    from partcal.study.persist import load_model, model_to_dict, save_model
+
+    residual = PartitionedErrorModel(partition=KMeansPartition(2, min_samples=20),
+                                     local=GaussianProcessErrorModel(inputs="joint", restarts=0))
+    model = KinematicModel(robot=sk120, residual=residual, random_state=0).fit(paper_data.q_deg, paper_data.errors_mm)
+    save_model(model, tmp_path / "hybrid.json", name="DH + GP k-means", robot=sk120)
+    loaded, doc = load_model(tmp_path / "hybrid.json")
+    assert doc["kind"] == "kinematic" and doc["model"]["residual"]["kind"] == "partitioned"
+    test = read_measurements(ROOT / "data" / "sk120" / "test_spiral_yz.csv")
+    assert np.array_equal(loaded.predict(test.q_deg), model.predict(test.q_deg))
+    assert np.array_equal(loaded.predict_kinematic(test.q_deg), model.predict_kinematic(test.q_deg))
+    assert model_to_dict(loaded) | {"partcal_version": 0} == model_to_dict(model) | {"partcal_version": 0}

@@ -101,7 +101,8 @@ def test_report_shows_the_identified_dh_table(kinds_run):
     text = (out / "index.html").read_text()
     tree = html5lib.parse(text, namespaceHTMLElements=False)
     tables = [t for t in tree.iter("table") if t.get("class") == "dh"]
-    assert len(tables) == 2 * 3                                # DH rows and tool/base, for each kinematic model
+    assert len(tables) == 2                 # DH rows, and tool and base: the hybrids share DH's identification
+    assert "The same identified parameters as DH." in text
     model = json.loads((out / "models" / "dh.json").read_text())["model"]["identification"]
     cells = {td.get("data-name"): td for td in tables[0].iter("td") if td.get("data-name")} | \
             {td.get("data-name"): td for td in tables[1].iter("td") if td.get("data-name")}

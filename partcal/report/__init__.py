@@ -166,15 +166,24 @@ def _family(r: ModelResult) -> str:
 
 
 def kinematic_tables(result: RunResult) -> list[dict]:
-    """The identified parameter table of every kinematic (and hybrid) model, DH rows first."""
-    out = []
+    """The identified parameter table of every kinematic (and hybrid) model, DH rows first.
+
+    A model whose table equals an earlier one's (hybrids share their kinematic part) points to it.
+    """
+    out, seen = [], []
     for r in result.models:
         if not isinstance(r.model, KinematicModel):
             continue
         table = r.model.identification_
+        same = next((name for name, other in seen if np.array_equal(other.value, table.value)
+                     and other.status == table.status), None)
+        seen.append((r.spec.name, table))
+        if same is not None:
+            out.append({"name": r.spec.name, "same_as": same})
+            continue
         cells = {row["name"]: _parameter_cell(row) for row in table.rows()}
         n_rows = r.model.robot_.alpha_deg.size
-        out.append({"name": r.spec.name, "condition": table.condition, "n_poses": table.n_poses,
+        out.append({"name": r.spec.name, "same_as": None, "condition": table.condition, "n_poses": table.n_poses,
                     "identified": table.status.count("identified"), "parameters": len(table.names),
                     "rms": table.rms_mm, "unidentifiable": table.unidentifiable(),
                     "dh": [{"row": k + 1, "cells": [cells[f"{p}[{k + 1}]"] for p, _ in ROW_PARAMETERS]}

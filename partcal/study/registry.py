@@ -98,7 +98,7 @@ def fit_model(spec: ModelSpec, seed: int, data: dict[str, Measurements], folds: 
     granularity = None
     start = time.perf_counter()
     if len(spec.sizes) > 1:
-        estimator, granularity = select_granularity(spec, seed, X, y, folds)       # returned fitted
+        estimator, granularity = choose_granularity(spec, seed, X, y, folds)       # returned fitted
         cv = min(row["cv_rms_3d"] for row in granularity)
     else:
         estimator = spec.build(seed).fit(X, y)
@@ -113,7 +113,7 @@ def fit_model(spec: ModelSpec, seed: int, data: dict[str, Measurements], folds: 
     return ModelResult(spec, estimator, fit_seconds, cv, metrics, predictions, ratio, granularity)
 
 
-def select_granularity(spec: ModelSpec, seed: int, X, y, folds: int) -> tuple[object, list[dict]]:
+def choose_granularity(spec: ModelSpec, seed: int, X, y, folds: int) -> tuple[object, list[dict]]:
     """Choose the partition granularity of an entry (or of its residual) by k-fold cross-validation.
 
     The same choice as :func:`partcal.models.partitioned.select_granularity`, for any entry kind:

@@ -22,6 +22,8 @@ _EXPORTS = {
     "data.registration": ["Registration", "register_tracker"],
     "metrics": ["ExtrapolationWarning", "cross_validated_rms", "rms_per_axis", "summary"],
     "models.series": ["ErrorModel"],
+    "models.gp": ["GaussianProcessErrorModel"],
+    "models.kinematic": ["KinematicModel"],
     "models.swarm": ["SwarmConfig", "SwarmResult", "minimize", "minimize_batch"],
     "models.partition": ["KMeansPartition", "Octree"],
     "models.partitioned": ["PartitionedErrorModel", "select_granularity"],

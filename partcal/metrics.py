@@ -67,6 +67,29 @@ def cross_validated_rms(model, X, y, *, folds=5, random_state=0) -> float:
     return float(np.sqrt(np.mean(np.sum(resid.reshape(len(y), -1) ** 2, axis=1))))
 
 
+def nested_cross_validated_rms(candidates, X, y, *, folds, inner_folds: int = 5, random_state=0) -> float:
+    """Honest CV score of "choose among ``candidates`` by CV, then fit": the choice is made inside each fold.
+
+    For every outer ``(train, test)`` fold the candidate (an unfitted
+    estimator; granularities of a partitioned model, say) is chosen by
+    ``inner_folds``-fold CV on the outer training set alone (folds drawn with
+    ``random_state``; the first of equal scores), fitted there, and scored on
+    the held-out test set. Returns the pooled 3-D RMS of those held-out
+    predictions, mm. Scoring the chosen candidate on the folds that chose it
+    would flatter it.
+    """
+    from sklearn.base import clone
+
+    X, y = np.asarray(X, dtype=float), np.asarray(y, dtype=float)
+    resid = np.empty_like(y)
+    for train, test in folds:
+        inner = kfold_splits(len(train), inner_folds, random_state)
+        scores = [cross_validated_rms(c, X[train], y[train], folds=inner) for c in candidates]
+        chosen = candidates[min(range(len(scores)), key=scores.__getitem__)]
+        resid[test] = y[test] - clone(chosen).fit(X[train], y[train]).predict(X[test])
+    return float(np.sqrt(np.mean(np.sum(resid.reshape(len(y), -1) ** 2, axis=1))))
+
+
 class ExtrapolationWarning(UserWarning):
     """Predictions were requested far from the data a model was fitted on."""
 

@@ -43,9 +43,10 @@ def brute_force_blend(model, X):
     """A blended model's prediction as the weighted sum of every region model's own ``predict``."""
     import numpy as np
 
-    W = brute_force_weights(model.partition_, X)
+    local, coordinates = model._coordinates(X)      # joint inputs: wrapped for the models, scaled for the kernels
+    W = brute_force_weights(model.partition_, coordinates)
     out = 0.0
     for k, region in enumerate(model.partition_.kernel_region):
         if W[:, k].any():
-            out = out + W[:, k, None] * np.asarray(model.models_[region].predict(X)).reshape(len(X), -1)
+            out = out + W[:, k, None] * np.asarray(model.models_[region].predict(local)).reshape(len(X), -1)
     return out

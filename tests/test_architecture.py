@@ -110,23 +110,30 @@ def test_subpackages_import():
 
 
 def test_old_model_files_still_load():
-    """Files written by partcal 0.1.0 (before the layout change) load and predict as a fresh fit does."""
-    from partcal import ErrorModel, KMeansPartition, Octree, PartitionedErrorModel, load_predictor, read_measurements
+    """Files written by partcal 0.1.0 (before the layout change) load and predict what they predicted then.
+
+    The Cartesian ones predict as a fresh fit does. Joint-space partitions are scaled per joint since
+    (a fresh fit finds other regions), so the k-means file is held to the predictions partcal made from
+    it before that change (``v0.1_fdp-ai-kmeans.expected.json``).
+    """
+    import json
+
+    from partcal import ErrorModel, Octree, PartitionedErrorModel, load_predictor, read_measurements
 
     m = read_measurements(ROOT / "data" / "sk120" / "identification.csv")
     fresh = {
-        "v0.1_sdp-ci.json": (ErrorModel(degree=2, solver="lstsq").fit(m.nominal_mm, m.errors_mm), "positions"),
-        "v0.1_fdp-ci-octree.json": (PartitionedErrorModel(partition=Octree(max_depth=1, min_samples=12),
-                                                          local=ErrorModel(solver="lstsq"), random_state=0)
-                                    .fit(m.nominal_mm, m.errors_mm), "positions"),
-        "v0.1_fdp-ai-kmeans.json": (PartitionedErrorModel(partition=KMeansPartition(3),
-                                                          local=ErrorModel(inputs="joint", solver="lstsq"),
-                                                          random_state=0).fit(m.q_deg, m.errors_mm), "joints"),
+        "v0.1_sdp-ci.json": ErrorModel(degree=2, solver="lstsq").fit(m.nominal_mm, m.errors_mm),
+        "v0.1_fdp-ci-octree.json": PartitionedErrorModel(partition=Octree(max_depth=1, min_samples=12),
+                                                         local=ErrorModel(solver="lstsq"), random_state=0)
+                                   .fit(m.nominal_mm, m.errors_mm),
     }
-    for name, (model, kind) in fresh.items():
+    for name, model in fresh.items():
         p = load_predictor(ROOT / "tests" / "fixtures" / name)
-        X = m.nominal_mm if kind == "positions" else m.q_deg
-        np.testing.assert_allclose(p.predict(**{kind: X}), model.predict(X), atol=1e-9, err_msg=name)
+        np.testing.assert_allclose(p.predict(positions=m.nominal_mm), model.predict(m.nominal_mm), atol=1e-9,
+                                   err_msg=name)
+    then = json.loads((ROOT / "tests" / "fixtures" / "v0.1_fdp-ai-kmeans.expected.json").read_text())
+    now = load_predictor(ROOT / "tests" / "fixtures" / "v0.1_fdp-ai-kmeans.json").predict(joints=m.q_deg)
+    np.testing.assert_allclose(now, then["predictions"], rtol=0, atol=1e-12)
 
 
 def readme_python_example() -> str:

@@ -200,6 +200,52 @@ def test_data_and_registration_errors_name_path_and_line(tmp_path, old, new, mes
     line = TRACKER[:TRACKER.index(old.format())].count("\n") + 1
     if not new:
         line = TRACKER[:TRACKER.index("  frame: tracker")].count("\n")       # one line was removed above it
+
+
+KINDS = BASE.replace("models:\n", """models:
+  - {name: DH + GP, kind: kinematic, rcond: 1.0e-8, residual: {kind: gaussian_process, inputs: joint,
+                                                                partition: {method: kmeans, n_regions: [2, 4]}}}
+  - {name: GP(AI), kind: gaussian_process, inputs: joint, kernel: matern, nu: 1.5, restarts: 0}
+""")
+
+
+def test_model_kinds(tmp_path):
+    cfg = load_config(write(tmp_path, KINDS))
+    hybrid, gp, series = cfg.models[0], cfg.models[1], cfg.models[2]
+    assert (hybrid.kind, hybrid.inputs, hybrid.kinematic.rcond, hybrid.kinematic.robot) == (
+        "kinematic", "joint", 1e-8, "motoman_sk120")
+    assert hybrid.residual.kind == "gaussian_process" and hybrid.residual.name == "DH + GP residual"
+    assert hybrid.sizes == (2, 4) and series.kind == "series" and series.sizes == ()
+    assert (gp.gp.kernel, gp.gp.nu, gp.gp.restarts) == ("matern", 1.5, 0)
+    model = hybrid.build(0, 4)
+    assert model.residual.partition.n_regions == 4 and model.robot.name == "motoman_sk120"
+    import yaml
+    resolved = yaml.safe_load(yaml.safe_dump(cfg.resolved()))
+    assert resolved["models"][0]["residual"]["partition"]["sizes"] == [2, 4]
+
+
+@pytest.mark.parametrize("old, new, message", [
+    ("kind: gaussian_process, inputs: joint, kernel", "kind: gaussian_process, degree: 2, kernel",
+     r"models\[1\]\.degree \(line {line}\): applies to kind: series only; this entry is kind: gaussian_process"),
+    ("kind: kinematic, rcond", "kind: kinematic, inputs: joint, rcond",
+     r"models\[0\]\.inputs \(line {line}\): applies to kind: series or gaussian_process only; this entry is "
+     r"kind: kinematic"),
+    ("residual: {kind: gaussian_process", "residual: {name: x, kind: gaussian_process",
+     r"models\[0\]\.residual\.name \(line {line}\): a residual model takes its name from its entry"),
+    ("residual: {kind: gaussian_process", "residual: {kind: kinematic",
+     r"models\[0\]\.residual\.kind \(line {line}\): a residual must be 'series' or 'gaussian_process'"),
+    ("kind: gaussian_process, inputs: joint, kernel", "kind: gp, inputs: joint, kernel",
+     r"models\[1\]\.kind \(line {line}\): must be one of 'series', 'gaussian_process', 'kinematic'; got 'gp'"),
+    ("nu: 1.5", "nu: 2", r"models\[1\]\.nu \(line {line}\): must be 0\.5, 1\.5 or 2\.5; got 2\.0"),
+    ("kernel: matern, nu: 1.5", "kernel: rbf, nu: 1.5", r"models\[1\]\.nu \(line {line}\): applies to kernel: "
+                                                        r"matern only"),
+    ("rcond: 1.0e-8", "rcond: 0", r"models\[0\]\.rcond \(line {line}\): must be a number in \(0, 1\]; got 0"),
+    ("robot: motoman_sk120\n", "", r"models\[0\]\.kind \(line {line}\): kind: kinematic needs the run's robot"),
+])
+def test_model_kind_errors_name_path_and_line(tmp_path, old, new, message):
+    text = KINDS.replace(old, new, 1)
+    line = text[:text.index(new or "data:")].count("\n") + 1 if new else \
+        text[:text.index("kind: kinematic")].count("\n") + 1
     with pytest.raises(ConfigError, match=message.format(line=line)):
         load_config(write(tmp_path, text))
 
@@ -214,3 +260,9 @@ def test_registration_keys_need_a_tracker_frame(tmp_path):
     line = text[:text.index("registration:")].count("\n") + 1
     with pytest.raises(ConfigError, match=rf"registration \(line {line}\): applies to data\.frame: tracker only"):
         load_config(write(tmp_path, text))
+
+def test_calibration_config_loads():
+    cfg = load_config(ROOT / "configs" / "calibration_sk120.yaml")
+    assert {m.kind for m in cfg.models} == {"series", "kinematic", "gaussian_process"}
+    paper = load_config(ROOT / "configs" / "paper_sk120.yaml")
+    assert [m.name for m in paper.models] == ["FDP(CI)", "FDP(AI)", "SDP(CI)", "SDP(AI)"]      # the paper's four

@@ -35,7 +35,7 @@ def test_round_trip_reproduces_predictions_bit_for_bit(tmp_path, inputs, model):
     loaded, doc = load_model(path)
     query = X + np.random.default_rng(0).normal(0, 5, X.shape)
     assert np.array_equal(loaded.predict(query), model.predict(query))
-    assert doc["format"] == "partcal-model" and doc["version"] == 1 and doc["name"] == "demo"
+    assert doc["format"] == "partcal-model" and doc["version"] == 2 and doc["name"] == "demo"
     assert load_predictor(path).robot.name == "motoman_sk120"
     assert "pickle" not in path.read_text()
     far = query + [0.0, 0.0, 400.0] if inputs == "cartesian" else query + 100.0
@@ -77,7 +77,7 @@ def test_damaged_and_foreign_files_are_refused(tmp_path):
 
     refused("{not json", r"bad.json: not a partcal model file \(invalid JSON at line 1")
     refused({**good, "format": "sklearn"}, r"field 'format': expected 'partcal-model'")
-    refused({**good, "version": 2}, r"field 'version': this partcal reads version 1; the file has version 2")
+    refused({**good, "version": 3}, r"field 'version': this partcal reads versions 1, 2; the file has version 3")
     refused({k: v for k, v in good.items() if k != "kind"}, r"field 'kind': missing")
     coef = json.loads(json.dumps(good))
     coef["model"]["coef"] = coef["model"]["coef"][:-1]

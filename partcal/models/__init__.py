@@ -1,14 +1,17 @@
-"""Error models: feature bases, the particle swarm, series models, partitions and blending.
+"""Error models: series models, Gaussian processes, kinematic identification, partitions and blending.
 
 Every estimator here follows the scikit-learn contract: ``fit(X, y)`` with
 inputs in contract units (positions in mm or joint angles in degrees) and
 errors ``(n, 3)`` in mm, ``predict(X) -> (n, 3)`` mm.
 """
 
+from .gp import GaussianProcessErrorModel
+from .kinematic import Identification, KinematicModel, identify
 from .partition import KMeansPartition, Octree
 from .partitioned import PartitionedErrorModel, select_granularity
 from .series import ErrorModel
 from .swarm import SwarmConfig, SwarmResult, minimize, minimize_batch
 
-__all__ = ["ErrorModel", "KMeansPartition", "Octree", "PartitionedErrorModel", "SwarmConfig", "SwarmResult",
-           "minimize", "minimize_batch", "select_granularity"]
+__all__ = ["ErrorModel", "GaussianProcessErrorModel", "Identification", "KMeansPartition", "KinematicModel", "Octree",
+           "PartitionedErrorModel", "SwarmConfig", "SwarmResult", "identify", "minimize", "minimize_batch",
+           "select_granularity"]

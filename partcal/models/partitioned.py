@@ -24,9 +24,11 @@ from sklearn.utils.validation import check_is_fitted, validate_data
 from .._validation import check_choice, check_int, param_error
 from ..errors import PartcalError
 from ..metrics import cross_validated_rms, distance_outside_boxes, kfold_splits, warn_far
+from .angles import InputMap
 from .base import ErrorModelBase, seed_from
 from .bases import varying_inputs
 from .combine import BlendWeights, FrameCombiner, combine_generic, one_blas_thread, region_weights
+from .gp import GaussianProcessErrorModel
 from .partition import KMeansPartition, Octree, Partition, check_width
 from .series import ErrorModel, fit_swarms
 
@@ -42,10 +44,14 @@ class PartitionedErrorModel(ErrorModelBase):
     partition : Octree or KMeansPartition, optional
         Default ``Octree()`` for Cartesian inputs, ``KMeansPartition()`` for
         joint angles.
-    local : ErrorModel, optional
-        The model fitted in every region (default ``ErrorModel()`` with the
-        same ``inputs``). Its ``random_state`` is replaced by a per-region
-        child of this model's ``random_state``.
+    local : ErrorModel or GaussianProcessErrorModel, optional
+        The model fitted in every region (default ``ErrorModel()``). Its
+        ``random_state`` is replaced by a per-region child of this model's
+        ``random_state``. With joint-angle inputs the regions and blend
+        kernels live in scaled joint space (each joint's training range is
+        [-1, 1], joints that never moved left out), and a joint whose data
+        straddle ±180 degrees is read in a window where they are contiguous
+        (``input_map_``); the local models see those wrapped angles.
     blend : {"gaussian", "hard"}
     blend_width : float
         Kernel width relative to the region's half-size (octree) or
@@ -57,7 +63,9 @@ class PartitionedErrorModel(ErrorModelBase):
     Attributes
     ----------
     partition_ : Partition
-    models_ : list of ErrorModel, one per region
+    models_ : list of ErrorModel or GaussianProcessErrorModel, one per region
+    input_map_ : InputMap or None
+        Joint-angle inputs: how they are wrapped and scaled for the partition.
     min_samples_ : int
         Smallest number of samples a region was allowed to hold.
     region_counts_ : ndarray
@@ -75,15 +83,15 @@ class PartitionedErrorModel(ErrorModelBase):
         self.n_jobs = n_jobs
         self.random_state = random_state
 
-    def _resolved(self) -> tuple[ErrorModel, Octree | KMeansPartition]:
+    def _resolved(self) -> tuple[ErrorModel | GaussianProcessErrorModel, Octree | KMeansPartition]:
         own = type(self).__name__
         check_choice(own, "blend", self.blend, ("gaussian", "hard"))
         check_width(self.blend_width)
         if self.n_jobs is not None and not isinstance(self.n_jobs, Integral):
             raise param_error(own, "n_jobs", "an int or None", self.n_jobs)
         local = ErrorModel() if self.local is None else self.local
-        if not isinstance(local, ErrorModel):
-            raise param_error(own, "local", "an ErrorModel", local)
+        if not isinstance(local, (ErrorModel, GaussianProcessErrorModel)):
+            raise param_error(own, "local", "an ErrorModel or a GaussianProcessErrorModel", local)
         partition = self.partition
         if partition is None:
             partition = Octree() if local.inputs == "cartesian" else KMeansPartition()
@@ -101,28 +109,44 @@ class PartitionedErrorModel(ErrorModelBase):
         X, y = validate_data(self, X, y, multi_output=True, y_numeric=True, dtype=np.float64)
         self._y_1d = y.ndim == 1
         Y = y.reshape(len(y), -1)
-        terms = local._check_params()[0].n_terms(int(varying_inputs(X).sum()))
-        min_samples = spec.min_samples or MIN_SAMPLES_PER_TERM * terms
+        self.input_map_ = InputMap.fit(X, angles=True) if local.inputs == "joint" else None
+        X, S = self._coordinates(X)
+        need, why = _region_minimum(local, int(varying_inputs(X).sum()))
+        min_samples = spec.min_samples or need
         if X.shape[0] < min_samples:
             raise PartcalError(f"{type(self).__name__}: a region needs at least {min_samples} samples "
-                               f"({terms} terms per output); got {X.shape[0]} samples in all")
+                               f"({why}); got {X.shape[0]} samples in all")
         seed = seed_from(self.random_state)
-        partition = spec.build(X, min_samples, seed, self.blend_width)
+        partition = spec.build(S, min_samples, seed, self.blend_width)
         self._weights, self._combiner = BlendWeights(partition), None
         with one_blas_thread():
-            groups = self._training_groups(partition, X)
+            groups = self._training_groups(partition, S)
         seeds = np.random.SeedSequence(seed).spawn(partition.n_regions)
         models = [clone(local).set_params(random_state=int(s.generate_state(1)[0])) for s in seeds]
         self.models_ = _fit_regions(models, [(X[idx], Y[idx], w) for idx, w in groups], self.n_jobs)
         self.partition_ = partition
         self.min_samples_ = int(min_samples)
-        labels = partition.assign(X)
+        self.n_outputs_ = Y.shape[1]
+        labels = partition.assign(S)
         self.region_counts_ = np.bincount(labels, minlength=partition.n_regions)
         self.region_bounds_ = np.array([[X[labels == r].min(axis=0), X[labels == r].max(axis=0)]
                                         for r in range(partition.n_regions)])
         self.train_inputs_ = np.array(X, dtype=np.float64, copy=True)
         log.info("fitted %d regions (%s, min %d samples)", partition.n_regions, partition.kind, min_samples)
         return self
+
+    def _coordinates(self, X: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """The local models' inputs (joints wrapped) and the partition's coordinates (joints also scaled)."""
+        if getattr(self, "input_map_", None) is None:
+            return X, X
+        wrapped = self.input_map_.wrap(X)
+        return wrapped, self.input_map_.scaled(wrapped)
+
+    def assign(self, X) -> NDArray[np.intp]:
+        """The region of every input ``X`` (n, d) in contract units, shape (n,)."""
+        check_is_fitted(self, "models_")
+        X = validate_data(self, X, reset=False, dtype=np.float64)
+        return self.partition_.assign(self._coordinates(X)[1])
 
     def _training_groups(self, partition: Partition, X) -> list[tuple[NDArray[np.intp], NDArray[np.float64]]]:
         """Samples and their blend weights for every region (rows with a positive weight)."""
@@ -155,11 +179,19 @@ class PartitionedErrorModel(ErrorModelBase):
             return self._shape_output(self._predict_blend(X, fast=True))
 
     def _predict_blend(self, X: NDArray[np.float64], fast: bool) -> NDArray[np.float64]:
-        """Prediction ``(n, n_outputs)`` on validated inputs; ``fast=False`` forces the region-by-region way."""
-        n_out = self.models_[0].coef_.shape[1]
+        """Prediction ``(n, n_outputs)`` on validated inputs; ``fast=False`` forces the region-by-region way.
+
+        Weights come from the partition's coordinates; the local models see
+        their own inputs (the same, except for joint angles, which are scaled
+        for the partition). Re-expressing local series in a lookup cell's
+        frame needs the two to be one space, so joint-input models take the
+        region-by-region way.
+        """
+        X, S = self._coordinates(X)
+        n_out = self.n_outputs_
         out = np.empty((X.shape[0], n_out))
         if self.blend == "hard":
-            labels = self.partition_.assign(X)
+            labels = self.partition_.assign(S)
             for region in np.unique(labels).tolist():
                 rows = np.flatnonzero(labels == region)
                 out[rows] = self.models_[region]._predict_trusted(X[rows])
@@ -167,11 +199,12 @@ class PartitionedErrorModel(ErrorModelBase):
         if getattr(self, "_weights", None) is None:
             self._weights = BlendWeights(self.partition_)
         combiner = None
-        if fast:
+        if fast and S is X:
             if getattr(self, "_combiner", None) is None:
                 self._combiner = FrameCombiner.build(self.partition_, self.models_) or False
             combiner = self._combiner or None
-        plan, Xs, blocks = self._weights.blocks(X)
+        plan, Ss, blocks = self._weights.blocks(S)
+        Xs = Ss if S is X else np.take(X, plan.order, axis=0)
         if combiner is not None:
             combiner.prepare(plan.cells.tolist())
         sorted_out = np.empty((n_out, X.shape[0]))            # outputs by points: blocks fill columns
@@ -197,7 +230,7 @@ class PartitionedErrorModel(ErrorModelBase):
         beyond the regions.
         """
         check_is_fitted(self, "models_")
-        X = validate_data(self, X, reset=False, dtype=np.float64)
+        X = self._coordinates(validate_data(self, X, reset=False, dtype=np.float64))[0]
         if getattr(self, "train_inputs_", None) is None:
             return distance_outside_boxes(X, self.region_bounds_[:, 0], self.region_bounds_[:, 1])
         return self._distance_to_train_inputs(X)
@@ -226,6 +259,15 @@ def _fit_regions(models: list, data: list[tuple], n_jobs) -> list:
 
 def _fit_one(model, X, Y, weights):
     return model._fit(X, Y, weights)
+
+
+def _region_minimum(local, n_active: int) -> tuple[int, str]:
+    """Default smallest region for a local model, and the reason (for the message)."""
+    if isinstance(local, GaussianProcessErrorModel):
+        local._check_params()
+        return local.region_minimum(n_active)
+    terms = local._check_params()[0].n_terms(n_active)
+    return MIN_SAMPLES_PER_TERM * terms, f"{terms} terms per output"
 
 
 def _fit_batch(models: list[ErrorModel], data: list[tuple]) -> list[ErrorModel]:
@@ -258,7 +300,7 @@ def select_granularity(model: PartitionedErrorModel, X, y, grid, *, folds=5, ran
     Notes
     -----
     The CV score of the chosen candidate is optimistic: the same folds chose
-    it. :func:`nested_cross_validated_rms` gives an honest score.
+    it. :func:`partcal.metrics.nested_cross_validated_rms` gives an honest score.
     """
     X, y = np.asarray(X, dtype=float), np.asarray(y, dtype=float)
     if isinstance(folds, int):
@@ -275,25 +317,6 @@ def select_granularity(model: PartitionedErrorModel, X, y, grid, *, folds=5, ran
         log.info("granularity %s: CV RMS %.4f over %d regions", value, score, regions)
     best = min(range(len(table)), key=lambda i: table[i]["cv_rms_3d"])
     return fitted[best], table
-
-
-def nested_cross_validated_rms(model: PartitionedErrorModel, X, y, grid, *, folds, inner_folds: int = 5,
-                               random_state=0) -> float:
-    """Honest CV score of "choose the granularity by CV, then fit": the choice is made inside each fold.
-
-    For every outer ``(train, test)`` fold the granularity is chosen by
-    ``inner_folds``-fold CV on the outer training set alone (folds drawn with
-    ``random_state``), fitted there, and scored on the held-out test set.
-    Returns the pooled 3-D RMS of those held-out predictions, mm.
-    """
-    X, y = np.asarray(X, dtype=float), np.asarray(y, dtype=float)
-    resid = np.empty_like(y)
-    for train, test in folds:
-        inner = kfold_splits(len(train), inner_folds, random_state)
-        scores = [(cross_validated_rms(c, X[train], y[train], folds=inner), c) for c, _ in _candidates(model, grid)]
-        chosen = min(range(len(scores)), key=lambda i: scores[i][0])
-        resid[test] = y[test] - scores[chosen][1].fit(X[train], y[train]).predict(X[test])
-    return float(np.sqrt(np.mean(np.sum(resid.reshape(len(y), -1) ** 2, axis=1))))
 
 
 def _candidates(model: PartitionedErrorModel, grid):

@@ -21,9 +21,10 @@ import jinja2
 import numpy as np
 
 from .. import __version__
+from ..models.kinematic import BASE_PARAMETERS, ROW_PARAMETERS, TOOL_PARAMETERS, KinematicModel, inputs_of
 from ..models.partitioned import PartitionedErrorModel
 from ..models.series import ErrorModel
-from ..study.registry import ModelResult, RunResult
+from ..study.registry import ModelResult, RunResult, partitioned_part
 from . import figures
 from .scene import render_scenes
 
@@ -56,8 +57,8 @@ def context(result: RunResult) -> dict:
     by_name = {r.spec.name: r for r in result.models}
     best = by_name[result.best]
     ranked = sorted(result.models, key=lambda r: r.score(cfg.rank_by))
-    global_best = next((r for r in ranked if not isinstance(r.model, PartitionedErrorModel)), None)
-    part_best = next((r for r in ranked if isinstance(r.model, PartitionedErrorModel)), None)
+    global_best = next((r for r in ranked if partitioned_part(r.model) is None), None)
+    part_best = next((r for r in ranked if partitioned_part(r.model) is not None), None)
     shown = [r for r in (global_best, part_best) if r is not None]
     return {
         "name": cfg.name, "version": __version__, "seed": cfg.seed, "seconds": result.seconds,
@@ -81,6 +82,7 @@ def context(result: RunResult) -> dict:
                                                               if r.spec.solver == "pso"})),
         "equations": [{"name": r.spec.name, "lines": r.model.equations()}
                       for r in result.models if isinstance(r.model, ErrorModel)],
+        "kinematic": kinematic_tables(result),
         **compensation_entries(result),
         "registration": registration_rows(result),
     }
@@ -153,13 +155,11 @@ def comparison_rows(result: RunResult) -> list[dict]:
 
 
 def family_sentences(result: RunResult) -> list[str]:
-    """One sentence per model family (global/partitioned x Cartesian/joint inputs) on its gain."""
+    """One sentence per model family (kind, global/partitioned, Cartesian/joint inputs) on its gain."""
     tests = [n for n in result.datasets if n != "identification"] or ["identification"]
     families: dict[str, list[ModelResult]] = {}
     for r in result.models:
-        kind = "partitioned" if isinstance(r.model, PartitionedErrorModel) else "global"
-        inputs = "Cartesian-input" if r.spec.inputs == "cartesian" else "joint-input"
-        families.setdefault(f"{kind.capitalize()} {inputs} models", []).append(r)
+        families.setdefault(_family(r), []).append(r)
     out = []
     for family, members in families.items():
         best = min(members, key=lambda r: r.score(result.config.rank_by))
@@ -185,27 +185,73 @@ def _change_text(changes: list[float]) -> str:
     return f"from {one(lo)} to {one(hi)}"
 
 
+def _family(r: ModelResult) -> str:
+    if r.spec.kind == "kinematic":
+        return "Kinematic models" if r.spec.residual is None else "Hybrid models (kinematic + residual)"
+    kind = "partitioned" if isinstance(r.model, PartitionedErrorModel) else "global"
+    inputs = "Cartesian-input" if r.spec.inputs == "cartesian" else "joint-input"
+    what = "Gaussian processes" if r.spec.kind == "gaussian_process" else "models"
+    return f"{kind.capitalize()} {inputs} {what}"
+
+
+def kinematic_tables(result: RunResult) -> list[dict]:
+    """The identified parameter table of every kinematic (and hybrid) model, DH rows first.
+
+    A model whose table equals an earlier one's (hybrids share their kinematic part) points to it.
+    """
+    out, seen = [], []
+    for r in result.models:
+        if not isinstance(r.model, KinematicModel):
+            continue
+        table = r.model.identification_
+        same = next((name for name, other in seen if np.array_equal(other.value, table.value)
+                     and other.status == table.status), None)
+        seen.append((r.spec.name, table))
+        if same is not None:
+            out.append({"name": r.spec.name, "same_as": same})
+            continue
+        cells = {row["name"]: _parameter_cell(row) for row in table.rows()}
+        n_rows = r.model.robot_.alpha_deg.size
+        out.append({"name": r.spec.name, "same_as": None, "condition": table.condition, "n_poses": table.n_poses,
+                    "identified": table.status.count("identified"), "parameters": len(table.names),
+                    "rms": table.rms_mm, "unidentifiable": table.unidentifiable(),
+                    "dh": [{"row": k + 1, "cells": [cells[f"{p}[{k + 1}]"] for p, _ in ROW_PARAMETERS]}
+                           for k in range(n_rows)],
+                    "extra": [cells[n] for n, _ in TOOL_PARAMETERS + BASE_PARAMETERS]})
+    return out
+
+
+def _parameter_cell(row: dict) -> dict:
+    digits = 4 if row["unit"] == "deg" else 3
+    text = f"{row['value']:.{digits}f}"
+    if row["status"] == "identified":
+        text += f" ± {row['std_error']:.{digits}f}"
+    return {"name": row["name"], "unit": row["unit"], "status": row["status"], "text": text,
+            "nominal": f"{row['nominal']:.{digits}f}", "correction": f"{row['correction']:+.{digits}f}"}
+
+
 def scene_entries(result: RunResult) -> list[dict]:
-    """3-D pictures of every partitioned model (rendered in a child process)."""
+    """3-D pictures of every partitioned model, also the residual of a hybrid (rendered in a child process)."""
     ident = result.datasets["identification"]
     tests = {n: m for n, m in result.datasets.items() if n != "identification"}
     specs, captions = {}, {}
     for r in result.models:
-        if not isinstance(r.model, PartitionedErrorModel):
+        model = partitioned_part(r.model)
+        if model is None:
             continue
-        part = r.model.partition_
-        X = ident.q_deg if r.spec.inputs == "joint" else ident.nominal_mm
-        spec = {"points": ident.nominal_mm, "labels": part.assign(X),
-                "boxes": part.boxes[np.unique(part.kernel_region, return_index=True)[1]] if part.kind == "octree"
-                else np.zeros((0, 2, 3)), "n_paths": len(tests)}
+        part = model.partition_
+        cartesian = inputs_of(model) == "cartesian"
+        X = ident.nominal_mm if cartesian else ident.q_deg
+        spec = {"points": ident.nominal_mm, "labels": model.assign(X), "boxes": np.zeros((0, 2, 3)),
+                "n_paths": len(tests)}
         residuals = [np.linalg.norm(m.errors_mm - r.predictions[n], axis=1) for n, m in tests.items()]
         for k, (m, res) in enumerate(zip(tests.values(), residuals)):
             spec[f"path{k}"], spec[f"residual{k}"] = m.nominal_mm, res
         spec["residual_max"] = max([float(x.max()) for x in residuals] + [1e-9])
-        if part.kind == "octree" and r.spec.inputs == "cartesian":
+        if part.kind == "octree" and cartesian:
             spec["boxes"] = part.boxes[[int(np.flatnonzero(part.kernel_region == g)[0]) for g in range(part.n_regions)]]
         specs[r.spec.name] = spec
-        space = "joint space" if r.spec.inputs == "joint" else "the Cartesian workspace"
+        space = "the Cartesian workspace" if cartesian else "joint space"
         captions[r.spec.name] = (f"{part.n_regions} {'octree cells' if part.kind == 'octree' else 'k-means regions'} "
                                  f"in {space}; identification points coloured by region"
                                  f"{', octree cells as boxes' if part.kind == 'octree' else ''}; test paths coloured "

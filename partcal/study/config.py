@@ -17,6 +17,8 @@ from .._validation import safe_name
 from .._yamlio import Section, load_yaml, range_check
 from ..data.formats import MeasurementFormat, RowSelection
 from ..errors import PartcalError
+from ..models.gp import GaussianProcessErrorModel
+from ..models.kinematic import KinematicModel
 from ..models.partition import KMeansPartition, Octree
 from ..models.partitioned import PartitionedErrorModel
 from ..models.series import ErrorModel
@@ -24,7 +26,7 @@ from ..models.swarm import RULES, TOPOLOGIES, SwarmConfig
 from ..robot.kinematics import load_robot, robot_reference
 
 RESERVED_NAMES = {"identification", "validation", "file", "fit_seconds", "cv_seconds", "cv", "inputs", "solver",
-                  "regions", "pso_rms_ratio", "granularity", "compensation"}
+                  "regions", "pso_rms_ratio", "granularity", "compensation", "kind", "kinematic"}
 RANK_RULES = ("cv", "validation")
 _SWARM_KEYS = {"particles": "int", "iterations": "int", "c1": "float", "c2": "float", "rule": "str",
                "topology": "str", "neighbours": "int", "inertia": "list", "vmax": "float",
@@ -46,8 +48,32 @@ class PartitionSpec:
 
 
 @dataclass(frozen=True)
+class GaussianProcessSpec:
+    """``kind: gaussian_process`` settings (docs/models.md)."""
+
+    kernel: str = "rbf"
+    nu: float = 2.5
+    restarts: int = 1
+
+
+@dataclass(frozen=True)
+class KinematicSpec:
+    """``kind: kinematic`` settings: the run's robot and what to identify."""
+
+    robot: str
+    base: bool = True
+    tool: bool = True
+    rcond: float = 1e-6
+
+
+@dataclass(frozen=True)
 class ModelSpec:
-    """One entry of the registry: what to fit, how, and how to partition."""
+    """One entry of the registry: what to fit, how, and how to partition.
+
+    ``kind`` is ``series`` (the polynomial/Fourier ``ErrorModel``),
+    ``gaussian_process`` or ``kinematic``; a kinematic entry may carry a
+    ``residual`` entry (any other kind) fitted to what it leaves.
+    """
 
     name: str
     inputs: str = "cartesian"
@@ -59,20 +85,38 @@ class ModelSpec:
     fitness: str = "rms"
     swarm: dict = field(default_factory=dict)
     partition: PartitionSpec | None = None
+    kind: str = "series"
+    gp: GaussianProcessSpec | None = None
+    kinematic: KinematicSpec | None = None
+    residual: "ModelSpec | None" = None
 
     @property
     def slug(self) -> str:
         """A file-name-safe form of the name: ``SDP(CI) octree`` -> ``sdp-ci-octree``."""
         return re.sub(r"[^a-z0-9]+", "-", self.name.lower()).strip("-") or "model"
 
-    def local(self, random_state: int | None) -> ErrorModel:
+    @property
+    def sizes(self) -> tuple[int, ...]:
+        """Candidate granularities of this entry's partition (or its residual's); () if none."""
+        part = self.partition or (self.residual.partition if self.residual is not None else None)
+        return part.sizes if part is not None else ()
+
+    def local(self, random_state: int | None) -> ErrorModel | GaussianProcessErrorModel:
+        if self.kind == "gaussian_process":
+            return GaussianProcessErrorModel(inputs=self.inputs, kernel=self.gp.kernel, nu=self.gp.nu,
+                                             restarts=self.gp.restarts, random_state=random_state)
         pso = SwarmConfig(**self.swarm) if self.solver == "pso" else None
         return ErrorModel(inputs=self.inputs, basis=self.basis, degree=self.degree, harmonics=self.harmonics,
                           cross_terms=self.cross_terms, solver=self.solver, pso=pso, fitness=self.fitness,
                           random_state=random_state)
 
     def build(self, random_state: int | None, size: int | None = None):
-        """The estimator, unfitted (``size`` picks one granularity of the partition)."""
+        """The estimator, unfitted (``size`` picks one granularity of the partition, or of the residual's)."""
+        if self.kind == "kinematic":
+            k = self.kinematic
+            residual = self.residual.build(random_state, size) if self.residual is not None else None
+            return KinematicModel(robot=load_robot(k.robot), base=k.base, tool=k.tool, rcond=k.rcond,
+                                  residual=residual, random_state=random_state)
         local = self.local(random_state)
         if self.partition is None:
             return local
@@ -157,8 +201,9 @@ class RunConfig:
         out["virtual_robot"] = str(self.virtual_robot) if self.virtual_robot else None
         out["data_options"] = self.data_options.to_dict()
         for m in out["models"]:
-            if m["partition"]:
-                m["partition"]["sizes"] = list(m["partition"]["sizes"])
+            for entry in (m, m["residual"] or {}):
+                if entry.get("partition"):
+                    entry["partition"]["sizes"] = list(entry["partition"]["sizes"])
         return out
 
 
@@ -189,7 +234,7 @@ def load_config(path: str | Path) -> RunConfig:
     if rank_by == "validation" and validation is None:
         top.fail("rank_by", "'validation' needs data.validation: FILE, a held-out set measured near the task")
     models_raw = top.get("models", "list", check=lambda v: None if v else "a non-empty list")
-    models = tuple(_model(Section(m, f"models[{i}]", lines, str(path)))
+    models = tuple(_model(Section(m, f"models[{i}]", lines, str(path)), robot)
                    for i, m in enumerate(models_raw))
     names = [m.name for m in models]
     for i, m in enumerate(models):
@@ -275,9 +320,38 @@ def _data_file(sec: Section, key: str, base: Path, *, tracker: bool | None
     return path, None if selection.is_all else selection, own
 
 
-def _model(sec: Section) -> ModelSpec:
-    """One entry of ``models``: the basis keys, then ``solver``, ``partition`` and ``blend``."""
-    name = sec.get("name", "str", check=lambda v: None if v.strip() else "a non-empty text")
+KIND_KEYS = {
+    "series": {"inputs", "basis", "degree", "harmonics", "cross_terms", "solver", "partition", "blend"},
+    "gaussian_process": {"inputs", "kernel", "nu", "restarts", "partition", "blend"},
+    "kinematic": {"base", "tool", "rcond", "residual"},
+}
+KINDS = tuple(KIND_KEYS)
+
+
+def _model(sec: Section, robot: str | None, parent: str | None = None) -> ModelSpec:
+    """One entry of ``models`` (or the ``residual`` of a kinematic entry, named after its ``parent``)."""
+    if parent is None:
+        name = sec.get("name", "str", check=lambda v: None if v.strip() else "a non-empty text")
+    elif sec.has("name"):
+        sec.fail(sec.path("name"), "a residual model takes its name from its entry; remove it")
+    kind = sec.get("kind", "str", default="series", check=_choice_check(*KINDS))
+    if parent is not None and kind == "kinematic":
+        sec.fail(sec.path("kind"), "a residual must be 'series' or 'gaussian_process' (the kinematic model is "
+                                   "its entry)")
+    for key in sec.data:
+        if key not in KIND_KEYS[kind] and any(key in keys for keys in KIND_KEYS.values()):
+            owners = " or ".join(k for k, keys in KIND_KEYS.items() if key in keys)
+            sec.fail(sec.path(key), f"applies to kind: {owners} only; this entry is kind: {kind}")
+    name = f"{parent} residual" if parent is not None else name
+    if kind == "kinematic":
+        return _kinematic_entry(sec, name, robot)
+    if kind == "gaussian_process":
+        return _gp_entry(sec, name)
+    return _series_entry(sec, name)
+
+
+def _series_entry(sec: Section, name: str) -> ModelSpec:
+    """A series model: the basis keys, then ``solver``, ``partition`` and ``blend``."""
     choice = _choice_check
     kw = dict(
         name=name,
@@ -294,6 +368,39 @@ def _model(sec: Section) -> ModelSpec:
     partition = _partition(sec, kw["inputs"])
     sec.done()
     return ModelSpec(**kw, partition=partition)
+
+
+def _gp_entry(sec: Section, name: str) -> ModelSpec:
+    """``kind: gaussian_process``: inputs, kernel, nu, restarts, and optionally partition and blend."""
+    inputs = sec.get("inputs", "str", default="cartesian", check=_choice_check("cartesian", "joint"))
+    kernel = sec.get("kernel", "str", default="rbf", check=_choice_check("rbf", "matern"))
+    nu = sec.get("nu", "float", default=2.5, check=lambda v: None if v in (0.5, 1.5, 2.5) else "0.5, 1.5 or 2.5")
+    if sec.has("nu") and kernel != "matern":
+        sec.fail(sec.path("nu"), "applies to kernel: matern only")
+    restarts = sec.get("restarts", "int", default=1, check=range_check(0, 20, integer=True))
+    partition = _partition(sec, inputs)
+    sec.done()
+    return ModelSpec(name=name, inputs=inputs, solver="marginal-likelihood", kind="gaussian_process",
+                     gp=GaussianProcessSpec(kernel, nu, restarts), partition=partition)
+
+
+def _kinematic_entry(sec: Section, name: str, robot: str | None) -> ModelSpec:
+    """``kind: kinematic``: what to identify, and an optional ``residual`` model entry."""
+    if robot is None:
+        sec.fail(sec.path("kind"), "kind: kinematic needs the run's robot (top-level key 'robot')")
+    spec = KinematicSpec(robot=robot, base=sec.get("base", "bool", default=True),
+                         tool=sec.get("tool", "bool", default=True),
+                         rcond=sec.get("rcond", "float", default=1e-6,
+                                       check=lambda v: None if 0 < v <= 1 else "a number in (0, 1]"))
+    residual = None
+    if sec.has("residual"):
+        sub = sec.section("residual")
+        if not sub.data:
+            sec.fail(sec.path("residual"), "must be a model entry, e.g. {inputs: joint, degree: 2}")
+        residual = _model(sub, robot, parent=name)
+    sec.done()
+    return ModelSpec(name=name, inputs="joint", solver="levenberg-marquardt", kind="kinematic", kinematic=spec,
+                     residual=residual)
 
 
 def _solver(solver: Section) -> tuple[str, str, dict]:

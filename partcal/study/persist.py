@@ -1,14 +1,20 @@
-"""Model files: versioned plain JSON for global and partitioned models.
+"""Model files: versioned plain JSON for every model kind, checked for meaning on loading.
 
 No pickle and nothing executable: a model file from elsewhere can only hold
-numbers and names. Files keep the training inputs (``train_inputs``, for
-``distance_to_data``) and the partition's varying axes (``partition.active``);
-files written before either was kept still load: without ``train_inputs``
-the distance to the data falls back to the distance outside the data's boxes,
-and without ``active`` the varying axes are read off ``region_bounds``. Loading checks the format name, the version and every
+numbers and names. Loading checks the format name, the version and every
 field, and refuses a damaged or foreign file with one message naming the
 file and the field. Floats are written with ``repr`` precision, so a loaded
-model predicts bit for bit what the saved one did.
+model predicts bit for bit what the saved one did. A file carries a
+``checksum`` of its content, so a number changed after writing is refused.
+
+Kinds: ``global`` (a series ``ErrorModel``), ``partitioned`` (regions of
+series models or Gaussian processes), ``gaussian_process`` and
+``kinematic`` (identified parameters, with an optional ``residual`` model
+stored the same way). Version 2 added the last two kinds, GP regions and the
+joint-space ``input_map`` of partitioned models; version 1 files (partcal
+0.1) still load. Files keep the training inputs (``train_inputs``, for
+``distance_to_data``); without them the distance falls back to the distance
+outside the data's boxes.
 """
 
 from __future__ import annotations
@@ -23,39 +29,70 @@ import numpy as np
 from .. import __version__
 from .._io import atomic_write
 from ..errors import ModelFileError, PartcalError
+from ..models.angles import InputMap
 from ..models.bases import Basis, Scaling, varying_inputs
+from ..models.gp import KERNELS, NUS, GaussianProcessErrorModel
+from ..models.kinematic import STATUSES, Identification, KinematicModel, parameter_names, robot_with
 from ..models.partition import Partition
 from ..models.partitioned import PartitionedErrorModel
 from ..models.series import FITNESSES, SOLVERS, ErrorModel
 from ..robot.kinematics import MAX_JOINTS, Robot, robot_from_dict, robot_to_dict
 
 FORMAT = "partcal-model"
-VERSION = 1
+VERSION = 2
+READABLE = (1, 2)
+KINDS = ("global", "partitioned", "gaussian_process", "kinematic")
 
 
 def model_to_dict(model, *, name: str = "", robot: Robot | None = None, extra: dict | None = None) -> dict:
-    """The JSON-ready description of a fitted ``ErrorModel`` or ``PartitionedErrorModel``."""
+    """The JSON-ready description of any fitted partcal error model."""
     out = {"format": FORMAT, "version": VERSION, "partcal_version": __version__, "name": name,
            "robot": robot_to_dict(robot) if robot is not None else None}
-    if isinstance(model, PartitionedErrorModel):
-        local = model.models_[0]
-        out.update(kind="partitioned", inputs=local.inputs, n_inputs=int(model.n_features_in_),
-                   n_outputs=int(local.coef_.shape[1]),
-                   blend={"method": model.blend, "width": float(model.blend_width)},
-                   partition=model.partition_.to_dict(),
-                   region_bounds=model.region_bounds_.tolist(), region_counts=model.region_counts_.tolist(),
-                   min_samples=int(model.min_samples_),
-                   regions=[_global_dict(m) for m in model.models_])
-    elif isinstance(model, ErrorModel):
-        out.update(kind="global", inputs=model.inputs, n_inputs=int(model.n_features_in_),
-                   n_outputs=int(model.coef_.shape[1]), model=_global_dict(model))
-    else:
-        raise ModelFileError(f"cannot save a {type(model).__name__}: expected an ErrorModel or a "
-                             "PartitionedErrorModel")
+    out.update(_body(model))
     if getattr(model, "train_inputs_", None) is not None:
         out["train_inputs"] = model.train_inputs_.tolist()
     out["fit"] = extra or {}
     return out
+
+
+def _body(model) -> dict:
+    """Kind, inputs and the fitted numbers of a model (the part a residual model repeats)."""
+    if isinstance(model, PartitionedErrorModel):
+        local = model.models_[0]
+        gp = isinstance(local, GaussianProcessErrorModel)
+        imap = getattr(model, "input_map_", None)
+        return dict(kind="partitioned", inputs=local.inputs, n_inputs=int(model.n_features_in_),
+                    n_outputs=int(model.n_outputs_), local_kind="gaussian_process" if gp else "series",
+                    input_map=imap.to_dict() if imap is not None else None,
+                    blend={"method": model.blend, "width": float(model.blend_width)},
+                    partition=model.partition_.to_dict(),
+                    region_bounds=model.region_bounds_.tolist(), region_counts=model.region_counts_.tolist(),
+                    min_samples=int(model.min_samples_),
+                    regions=[_gp_dict(m) if gp else _global_dict(m) for m in model.models_])
+    if isinstance(model, ErrorModel):
+        return dict(kind="global", inputs=model.inputs, n_inputs=int(model.n_features_in_),
+                    n_outputs=int(model.coef_.shape[1]), model=_global_dict(model))
+    if isinstance(model, GaussianProcessErrorModel):
+        return dict(kind="gaussian_process", inputs=model.inputs, n_inputs=int(model.n_features_in_),
+                    n_outputs=int(model.dual_coef_.shape[1]), model=_gp_dict(model))
+    if isinstance(model, KinematicModel):
+        residual = _body(model.residual_) if model.residual_ is not None else None
+        return dict(kind="kinematic", inputs="joint", n_inputs=int(model.n_features_in_), n_outputs=3,
+                    model={"robot": robot_to_dict(model.robot_), "base": bool(model.base),
+                           "tool": bool(model.tool), "rcond": float(model.rcond),
+                           "identification": model.identification_.to_dict(),
+                           "data_bounds": model.data_bounds_.tolist(), "active": model.active_.tolist(),
+                           "residual": residual})
+    raise ModelFileError(f"cannot save a {type(model).__name__}: expected an ErrorModel, a "
+                         "PartitionedErrorModel, a GaussianProcessErrorModel or a KinematicModel")
+
+
+def _gp_dict(m: GaussianProcessErrorModel) -> dict:
+    return {"kernel": m.kernel, "nu": float(m.nu), "restarts": int(m.restarts),
+            "input_map": m.input_map_.to_dict(), "x_train": m.X_train_.tolist(),
+            "dual_coef": m.dual_coef_.tolist(), "y_mean": m.y_mean_.tolist(), "y_std": m.y_std_.tolist(),
+            "amplitude": m.amplitude_, "length_scale": m.length_scale_.tolist(), "noise": m.noise_,
+            "log_marginal_likelihood": m.log_marginal_likelihood_, "data_bounds": m.data_bounds_.tolist()}
 
 
 def _global_dict(m: ErrorModel) -> dict:
@@ -124,8 +161,8 @@ def model_from_dict(doc: Any, source: str = "model") -> Any:
     Beyond types and shapes: scales are positive and agree with the data
     bounds they came from, the terms are exactly those of the basis and
     degree, region and tree indices are in range, kernel widths are positive,
-    and the model predicts finite, plausible errors (under 1 km) across the
-    box of its data. A file that fails any of these is refused naming the
+    and a series model predicts finite, plausible errors (under 1 km) across
+    the box of its data. A file that fails any of these is refused naming the
     field, never used to predict ``-inf`` or ``1e300``.
     """
     r = _Reader(doc, source, "")
@@ -135,56 +172,75 @@ def model_from_dict(doc: Any, source: str = "model") -> Any:
         r.fail("checksum", "does not match the content: the file was changed after partcal wrote it (delete "
                            "this field to accept a deliberate edit)")
     version = r.get("version", int)
-    if version != VERSION:
-        r.fail("version", f"this partcal reads version {VERSION}; the file has version {version} "
-                          f"(written by partcal {doc.get('partcal_version', '?')})")
-    kind = r.choice("kind", ("global", "partitioned"))
-    n_in, n_out = r.integer("n_inputs", 1, MAX_JOINTS), r.integer("n_outputs", 1, 3)
-    inputs = r.choice("inputs", ("cartesian", "joint"))
+    if version not in READABLE:
+        r.fail("version", f"this partcal reads versions {', '.join(map(str, READABLE))}; the file has version "
+                          f"{version} (written by partcal {doc.get('partcal_version', '?')})")
     if r.get("robot", (dict, type(None))) is not None:
         try:
             robot = robot_from_dict(doc["robot"], source=f"{source}: robot")
         except PartcalError as exc:
             raise ModelFileError(str(exc)) from None
-        if inputs == "joint" and robot.n_joints != n_in:
-            r.fail("n_inputs", f"a joint model of robot {robot.name!r} takes {robot.n_joints} joints; got {n_in}")
-    if kind == "global":
-        model = _global_from(r.sub("model"), inputs, n_in, n_out)
-    else:
-        model = _partitioned_from(r, inputs, n_in, n_out)
-    model.train_inputs_ = _train_inputs(r, n_in)
-    _check_plausible(r, model, n_in)
+        if r.doc.get("inputs") == "joint" and robot.n_joints != r.doc.get("n_inputs"):
+            r.fail("n_inputs", f"a joint model of robot {robot.name!r} takes {robot.n_joints} joints; "
+                               f"got {r.doc.get('n_inputs')!r}")
+    model = _from_body(r)
+    model.train_inputs_ = _train_inputs(r, model.n_features_in_)
+    _check_plausible(r, model)
     return model
+
+
+def _from_body(r: "_Reader") -> Any:
+    kind = r.choice("kind", KINDS)
+    n_in, n_out = r.integer("n_inputs", 1, MAX_JOINTS), r.integer("n_outputs", 1, 3)
+    inputs = r.choice("inputs", ("cartesian", "joint"))
+    if kind == "global":
+        return _global_from(r.sub("model"), inputs, n_in, n_out)
+    if kind == "gaussian_process":
+        return _gp_from(r.sub("model"), inputs, n_in, n_out)
+    if kind == "kinematic":
+        return _kinematic_from(r.sub("model"), n_in, n_out)
+    return _partitioned_from(r, inputs, n_in, n_out)
 
 
 def _partitioned_from(r: "_Reader", inputs: str, n_in: int, n_out: int) -> PartitionedErrorModel:
     blend = r.sub("blend")
     model = PartitionedErrorModel(blend=blend.choice("method", ("gaussian", "hard")),
                                   blend_width=blend.number("width", 0.6, 10.0))
+    local_kind = r.choice("local_kind", ("series", "gaussian_process")) if "local_kind" in r.doc else "series"
+    model.input_map_ = _input_map(r, "input_map", n_in) if r.doc.get("input_map") is not None else None
     p = r.sub("partition")
     m = p.integer("n_regions", 1)
     model.region_bounds_ = r.array("region_bounds", (m, 2, n_in))
     if np.any(model.region_bounds_[:, 0] > model.region_bounds_[:, 1]):
         r.fail("region_bounds", "a low bound exceeds its high bound")
-    # files written before constant inputs were left out blend along the axes their regions span
-    active = p.array("active", (n_in,), bool) if "active" in p.doc else varying_inputs(model.region_bounds_.reshape(-1, n_in))
-    partition = _partition_from(p, m, n_in, active)
+    # the partition's coordinates: the scaled varying joints under an input map, else the inputs themselves
+    d = max(model.input_map_.n_active, 1) if model.input_map_ is not None else n_in
+    if "active" in p.doc:
+        active = p.array("active", (d,), bool)
+    else:        # partcal 0.1 blended along the axes its regions span
+        active = varying_inputs(model.region_bounds_.reshape(-1, n_in))
+    partition = _partition_from(p, m, d, active)
     regions = r.get("regions", list)
     if len(regions) != m:
         r.fail("regions", f"expected {m} region models (partition.n_regions); got {len(regions)}")
-    model.models_ = [_global_from(r.sub(f"regions[{i}]", item), inputs, n_in, n_out) for i, item in enumerate(regions)]
+    read = _gp_from if local_kind == "gaussian_process" else _global_from
+    model.models_ = [read(r.sub(f"regions[{i}]", item), inputs, n_in, n_out) for i, item in enumerate(regions)]
     model.partition_ = partition
     model.region_counts_ = r.array("region_counts", (m,), int)
     model.min_samples_ = r.integer("min_samples", 1)
     if np.any(model.region_counts_ < 0):
         r.fail("region_counts", "counts must be >= 0")
     model.n_features_in_ = n_in
+    model.n_outputs_ = n_out
     model._y_1d = False
-    model.local = ErrorModel(inputs=inputs)
+    first = model.models_[0]
+    model.local = GaussianProcessErrorModel(inputs=inputs, kernel=first.kernel, nu=first.nu) \
+        if local_kind == "gaussian_process" else ErrorModel(inputs=inputs)
     return model
 
 
 def _partition_from(p: "_Reader", m: int, n_in: int, active: np.ndarray) -> Partition:
+    # n_in: the dimension of the partition's coordinates
     """A partition, with every index in range and every kernel width positive on the varying axes.
 
     Lists of candidate kernels (``cand``, ``own``) in files of partcal 0.1 are
@@ -226,6 +282,75 @@ def _train_inputs(r: "_Reader", n_in: int) -> np.ndarray | None:
     if "train_inputs" not in r.doc:
         return None
     return r.array("train_inputs", (None, n_in))
+
+
+def _input_map(r: "_Reader", key: str, n_in: int) -> InputMap:
+    m = r.sub(key)
+    window = m.get("window", list)
+    if len(window) != n_in or not all(w is None or (isinstance(w, (int, float)) and not isinstance(w, bool)
+                                                    and np.isfinite(w)) for w in window):
+        m.fail("window", f"expected {n_in} numbers or nulls")
+    active = m.get("active", list)
+    if len(active) != n_in or not all(isinstance(a, bool) for a in active):
+        m.fail("active", f"expected {n_in} true/false values")
+    return InputMap(np.array([np.nan if w is None else w for w in window], dtype=float),
+                    m.array("centre", (n_in,)), m.array("scale", (n_in,)), np.array(active, dtype=bool))
+
+
+def _gp_from(r: "_Reader", inputs: str, n_in: int, n_out: int) -> GaussianProcessErrorModel:
+    kernel, nu = r.choice("kernel", KERNELS), r.get("nu", float)
+    if nu not in NUS:
+        r.fail("nu", f"expected one of {', '.join(map(str, NUS))}; got {nu!r}")
+    imap = _input_map(r, "input_map", n_in)
+    d = max(imap.n_active, 1)
+    n = len(r.get("x_train", list))
+    model = GaussianProcessErrorModel(inputs=inputs, kernel=kernel, nu=nu, restarts=r.integer("restarts", 0, 20))
+    model.input_map_ = imap
+    model.X_train_ = r.array("x_train", (n, d))
+    model.dual_coef_ = r.array("dual_coef", (n, n_out))
+    model.y_mean_, model.y_std_ = r.array("y_mean", (n_out,)), r.array("y_std", (n_out,))
+    model.amplitude_, model.noise_ = r.number("amplitude", 0.0), r.number("noise", 0.0)
+    model.length_scale_ = r.array("length_scale", (d,))
+    if model.amplitude_ <= 0 or np.any(model.length_scale_ <= 0):
+        r.fail("length_scale", "expected a positive amplitude and positive length scales")
+    model.log_marginal_likelihood_ = r.number("log_marginal_likelihood")
+    model.data_bounds_ = r.array("data_bounds", (2, n_in))
+    model.n_features_in_, model.n_train_, model._y_1d = n_in, n, False
+    return model._prepare()
+
+
+def _kinematic_from(r: "_Reader", n_in: int, n_out: int) -> KinematicModel:
+    try:
+        robot = robot_from_dict(r.get("robot", dict), source=f"{r.source}: field {r.path('robot')!r}")
+    except Exception as exc:  # noqa: BLE001 - any damage in the robot section is a file error
+        raise ModelFileError(str(exc)) from None
+    if robot.n_joints != n_in or n_out != 3:
+        r.fail("robot", f"a robot with {n_in} joints and 3 outputs; got {robot.n_joints} joints, {n_out} outputs")
+    ident = r.sub("identification")
+    names = [n for n, _ in parameter_names(robot)]
+    if ident.get("names", list) != names:
+        ident.fail("names", f"expected the {len(names)} parameters of {robot.name} ({names[0]} ... {names[-1]})")
+    status = ident.get("status", list)
+    if len(status) != len(names) or any(s not in STATUSES for s in status):
+        ident.fail("status", f"expected {len(names)} of {', '.join(STATUSES)}")
+    std = ident.get("std_error", list)
+    if len(std) != len(names) or not all(v is None or isinstance(v, (int, float)) for v in std):
+        ident.fail("std_error", f"expected {len(names)} numbers or nulls")
+    ident.array("nominal", (len(names),))
+    ident.array("value", (len(names),))
+    table = Identification.from_dict(ident.doc)
+    model = KinematicModel(robot=robot, base=r.get("base", bool), tool=r.get("tool", bool),
+                           rcond=r.get("rcond", float))
+    model.robot_, model.identification_ = robot, table
+    model.identified_robot_ = robot_with(robot, table.value)
+    model.data_bounds_ = r.array("data_bounds", (2, n_in))
+    model.active_ = r.array("active", (n_in,), bool)
+    model.n_features_in_, model._y_1d = n_in, False
+    model.residual_ = None
+    if r.doc.get("residual") is not None:
+        model.residual_ = _from_body(r.sub("residual"))
+        model.residual = model.residual_
+    return model
 
 
 def _global_from(r: "_Reader", inputs: str, n_in: int, n_out: int) -> ErrorModel:
@@ -286,21 +411,26 @@ def _is_int(value) -> bool:
     return isinstance(value, int) and not isinstance(value, bool)
 
 
-def _check_plausible(r: "_Reader", model, n_in: int, limit_mm: float = 1e6) -> None:
-    """The model must predict finite errors under ``limit_mm`` at the corners and centre of its data box."""
-    locals_ = model.models_ if isinstance(model, PartitionedErrorModel) else [model]
-    lo = np.min([m.data_bounds_[0] for m in locals_], axis=0)
-    hi = np.max([m.data_bounds_[1] for m in locals_], axis=0)
-    corners = lo + (hi - lo) * ((np.arange(2 ** min(n_in, 10))[:, None] >> np.arange(n_in)) & 1)
+def _check_plausible(r: "_Reader", model, limit_mm: float = 1e6) -> None:
+    """Series models (alone, as regions or as a kinematic model's residual) must predict finite errors
+    under ``limit_mm`` at the corners and centre of their data box."""
+    if isinstance(model, KinematicModel):
+        if model.residual_ is not None:
+            _check_plausible(r.sub("model").sub("residual"), model.residual_, limit_mm)
+        return
+    regions = isinstance(model, PartitionedErrorModel)
+    locals_ = [m for m in (model.models_ if regions else [model]) if isinstance(m, ErrorModel)]
     with np.errstate(all="ignore"):
         for k, local in enumerate(locals_):
+            lo, hi = local.data_bounds_
+            n_in = lo.size
+            corners = lo + (hi - lo) * ((np.arange(2 ** min(n_in, 10))[:, None] >> np.arange(n_in)) & 1)
             pred = local._predict_trusted(np.vstack([corners, (lo + hi) / 2]))
             if not np.all(np.isfinite(pred)) or np.abs(pred).max() > limit_mm:
-                where = "model.coef" if len(locals_) == 1 and not isinstance(model, PartitionedErrorModel) \
-                    else f"regions[{k}].coef"
                 worst = f"{np.abs(pred).max():.3g}" if np.all(np.isfinite(pred)) else "a non-finite value"
-                r.fail(where, f"predicts {worst} mm within the box of its data (limit {limit_mm:g} mm): "
-                              "the coefficients are damaged")
+                r.fail(f"regions[{k}].coef" if regions else "model.coef",
+                       f"predicts {worst} mm within the box of its data (limit {limit_mm:g} mm): "
+                       "the coefficients are damaged")
 
 
 class _Reader:

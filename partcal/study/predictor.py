@@ -19,6 +19,7 @@ from numpy.typing import NDArray
 from .._validation import check_array
 from ..errors import DataError
 from ..metrics import warn_far
+from ..models.bases import varying_inputs
 from ..models.partitioned import PartitionedErrorModel
 from ..robot.compensation import CompensationResult, false_target, false_target_joints
 from ..robot.kinematics import Robot, robot_from_dict
@@ -122,10 +123,14 @@ class Predictor:
 
     def _fixed_joints(self) -> tuple[tuple[int, ...], NDArray[np.float64]]:
         """Joints constant in the training data (the model cannot know what moving them does)."""
-        models = self.model.models_ if isinstance(self.model, PartitionedErrorModel) else [self.model]
-        active = np.any([m.scaling_.active for m in models], axis=0)
+        if isinstance(self.model, PartitionedErrorModel):
+            bounds = self.model.region_bounds_
+            low, high = bounds[:, 0].min(axis=0), bounds[:, 1].max(axis=0)
+        else:
+            low, high = self.model.data_bounds_
+        active = varying_inputs(np.stack([low, high]))
         fixed = tuple(int(j) + 1 for j in np.flatnonzero(~active))
-        return fixed, np.array([models[0].scaling_.centre[j - 1] for j in fixed])
+        return fixed, low[[j - 1 for j in fixed]]
 
     def distance_to_data(self, positions=None, joints=None) -> NDArray[np.float64]:
         """How far each input lies outside the training data (0 inside), input units."""

@@ -28,15 +28,11 @@ from numpy.typing import NDArray
 from ..data.measurements import Measurements, read_measurements
 from ..data.registration import Registration, register_tracker, registered
 from ..errors import ConfigError, DataError
-from ..metrics import cross_validated_rms, kfold_splits, summary
+from ..metrics import cross_validated_rms, kfold_splits, nested_cross_validated_rms, summary
 from ..models.bases import varying_inputs
-from ..models.partitioned import (
-    MIN_SAMPLES_PER_TERM,
-    PartitionedErrorModel,
-    nested_cross_validated_rms,
-    select_granularity,
-)
-from ..models.series import ErrorModel
+from ..models.gp import GaussianProcessErrorModel
+from ..models.kinematic import KinematicModel
+from ..models.partitioned import MIN_SAMPLES_PER_TERM, PartitionedErrorModel
 from ..robot.kinematics import Robot, load_robot
 from .config import ModelSpec, RunConfig
 from .predictor import Predictor
@@ -49,7 +45,7 @@ class ModelResult:
     """One fitted model of a run with everything measured about it."""
 
     spec: ModelSpec
-    model: ErrorModel | PartitionedErrorModel
+    model: object                       # any partcal error model (series, partitioned, GP, kinematic)
     fit_seconds: float                  # the final fit on the identification set, nothing else
     cv_rms_3d: float                    # on the run's shared folds; nested for granularity lists
     metrics: dict[str, dict]
@@ -66,7 +62,15 @@ class ModelResult:
 
     @property
     def n_regions(self) -> int:
-        return self.model.partition_.n_regions if isinstance(self.model, PartitionedErrorModel) else 1
+        part = partitioned_part(self.model)
+        return part.partition_.n_regions if part is not None else 1
+
+
+def partitioned_part(model) -> PartitionedErrorModel | None:
+    """The partitioned model in ``model``: itself, or the residual of a hybrid; None if there is none."""
+    if isinstance(model, KinematicModel):
+        model = model.residual_
+    return model if isinstance(model, PartitionedErrorModel) else None
 
 
 @dataclass
@@ -163,27 +167,41 @@ def check_run(config: RunConfig, data: dict[str, Measurements]) -> None:
         config.fail("cv_folds", f"{k} folds need at least {k} identification poses; "
                                 f"{config.identification} holds {n}")
     smallest = n - -(-n // k)                  # the smallest training fold: n - ceil(n / k)
-    for i, spec in enumerate(config.models):
-        X = model_inputs(spec.inputs, ident)
+    for i, entry in enumerate(config.models):
+        X = model_inputs(entry.inputs, ident)
         varying = int(varying_inputs(X).sum())
         if varying == 0:
-            what = "joint angle" if spec.inputs == "joint" else "nominal coordinate"
+            what = "joint angle" if entry.inputs == "joint" else "nominal coordinate"
             config.fail(_key(config, i, "inputs"), f"every {what} of the identification set "
                                                     f"{config.identification} is constant: nothing to fit")
-        terms = spec.local(None)._check_params()[0].n_terms(varying)
-        where, need, what = _key(config, i, "degree" if spec.basis == "polynomial" else "harmonics"), terms, \
-            f"{terms} terms per output ({varying} varying {spec.inputs} inputs)"
+        # a kinematic entry's own parameters are checked by its identification (rank, standard errors);
+        # what it leaves is fitted by its residual, which must fit in a fold like any entry
+        spec, prefix = (entry.residual, "residual.") if entry.kind == "kinematic" else (entry, "")
+        if spec is None:
+            continue
+        varying = int(varying_inputs(model_inputs(spec.inputs, ident)).sum())
+        if spec.kind == "gaussian_process":
+            if spec.partition is None:
+                continue
+            need, why = GaussianProcessErrorModel(inputs=spec.inputs).region_minimum(varying)
+            where, what = _key(config, i, prefix + "partition"), f"{why} of the Gaussian process"
+        else:
+            need = spec.local(None)._check_params()[0].n_terms(varying)
+            where = _key(config, i, prefix + ("degree" if spec.basis == "polynomial" else "harmonics"))
+            what = f"{need} terms per output ({varying} varying {spec.inputs} inputs)"
+            if spec.partition is not None:
+                if spec.partition.min_samples is not None and spec.partition.min_samples < need:
+                    config.fail(_key(config, i, prefix + "partition.min_samples"),
+                                f"must be at least the local model's {what}; got {spec.partition.min_samples}")
+                need *= MIN_SAMPLES_PER_TERM
         train = smallest
         if spec.partition is not None:
-            need = spec.partition.min_samples or MIN_SAMPLES_PER_TERM * terms
-            if spec.partition.min_samples is not None and spec.partition.min_samples < terms:
-                config.fail(_key(config, i, "partition.min_samples"),
-                            f"must be at least the local model's {what}; got {spec.partition.min_samples}")
+            need = spec.partition.min_samples or need
             what = f"one region of {need} samples ({what})"
             if len(spec.partition.sizes) > 1:         # nested CV: the inner folds are smaller still
                 train = smallest - -(-smallest // k)
         if train < need:
-            config.fail(where, f"{spec.name!r} needs {what}, but the smallest cross-validation training fold "
+            config.fail(where, f"{entry.name!r} needs {what}, but the smallest cross-validation training fold "
                                f"of the {n}-pose identification set holds {train} samples")
 
 
@@ -209,14 +227,10 @@ def fit_model(spec: ModelSpec, seed: int, data: dict[str, Measurements], folds: 
     X, y = model_inputs(spec.inputs, ident), ident.errors_mm
     granularity, nested = None, False
     start = time.perf_counter()
-    if spec.partition is not None and len(spec.partition.sizes) > 1:
-        sizes = spec.partition.sizes
-        cv = nested_cross_validated_rms(spec.build(seed), X, y, sizes, folds=folds, inner_folds=len(folds),
-                                        random_state=run_seed)
-        estimator, granularity = select_granularity(spec.build(seed), X, y, sizes, folds=folds)  # returned fitted
-        chosen = min(granularity, key=lambda row: row["cv_rms_3d"])
-        fit_seconds = chosen["fit_seconds"]
-        granularity = [{k: v for k, v in row.items() if k != "fit_seconds"} for row in granularity]
+    if len(spec.sizes) > 1:
+        candidates = [spec.build(seed, size) for size in spec.sizes]
+        cv = nested_cross_validated_rms(candidates, X, y, folds=folds, inner_folds=len(folds), random_state=run_seed)
+        estimator, granularity, fit_seconds = choose_granularity(spec, seed, X, y, folds)      # returned fitted
         cv_seconds, nested = time.perf_counter() - start - fit_seconds, True
     else:
         cv = cross_validated_rms(spec.build(seed), X, y, folds=folds)
@@ -230,6 +244,26 @@ def fit_model(spec: ModelSpec, seed: int, data: dict[str, Measurements], folds: 
     ratio = float(max(m.rms_ratio_ for m in locals_)) if spec.solver == "pso" else None
     return ModelResult(spec, estimator, fit_seconds, cv, metrics, predictions, ratio, granularity,
                        cv_seconds=cv_seconds, nested=nested)
+
+
+def choose_granularity(spec: ModelSpec, seed: int, X, y, folds: list) -> tuple[object, list[dict], float]:
+    """Choose the partition granularity of an entry (or of its residual) by cross-validation on ``folds``.
+
+    The same choice as :func:`partcal.models.partitioned.select_granularity`, for any entry kind:
+    returns the best candidate fitted on all of ``X, y``, a row per candidate
+    (``granularity``, ``cv_rms_3d``, ``regions``) and the seconds of that final fit.
+    """
+    table, fitted, seconds = [], [], []
+    for size in spec.sizes:
+        score = cross_validated_rms(spec.build(seed, size), X, y, folds=folds)
+        begin = time.perf_counter()
+        fitted.append(spec.build(seed, size).fit(X, y))
+        seconds.append(time.perf_counter() - begin)
+        regions = partitioned_part(fitted[-1]).partition_.n_regions
+        table.append({"granularity": int(size), "cv_rms_3d": score, "regions": int(regions)})
+        log.info("%s, granularity %s: CV RMS %.4f over %d regions", spec.name, size, score, regions)
+    best = min(range(len(table)), key=lambda i: table[i]["cv_rms_3d"])
+    return fitted[best], table, seconds[best]
 
 
 @contextmanager

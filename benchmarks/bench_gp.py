@@ -1,0 +1,120 @@
+"""Gaussian processes on dense virtual SK120 data: one global GP against one GP per k-means region.
+
+Training sets: 2,000 and 10,000 poses with all six joints moving (``sample_configurations`` with wide
+wrist ranges, q4 in [-150, 150] and q5 in [-100, 100], measured by the virtual robot's tracker).
+Test sets: 1,000 further poses drawn the same way, and the paper's three test paths (q4 = q5 = 0).
+Everything runs on one core (BLAS threads limited before numpy loads); global and partitioned GPs
+are timed in the same run, in CPU seconds of this process (wall time on a shared machine swings by
+2x and more). GPs use the defaults (anisotropic RBF, one seeded restart) unless a row says otherwise.
+
+Targets (issue 12): the partitioned GP within 1.5x of the global GP's test RMS and fitted at least
+10x faster; at 10,000 poses at least 5x faster again (the global GP there is estimated, not run);
+1e6 predictions of a 16-region GP model in under 5 s.
+Run: .venv/bin/python benchmarks/bench_gp.py
+"""
+
+import os
+
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ[_var] = "1"
+
+import dataclasses  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+
+sys.path.insert(0, os.path.dirname(__file__))
+
+import numpy as np  # noqa: E402
+from _table import print_table  # noqa: E402
+
+from partcal import GaussianProcessErrorModel, KinematicModel, KMeansPartition, PartitionedErrorModel  # noqa: E402
+from partcal.data.simulate import load_study, sample_configurations, simulate  # noqa: E402
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+WRIST = {4: (-150.0, 150.0), 5: (-100.0, 100.0)}
+PATHS = ["test_rectangle", "test_spiral_xy", "test_spiral_yz"]
+
+
+def dense(study, n, seed):
+    """``n`` poses with all six joints moving, and their measured errors (mm)."""
+    rng = np.random.default_rng(seed)
+    q = sample_configurations(study.robot.nominal, n, study.ranges_deg | WRIST, {}, rng)
+    return q, study.robot.measure(q, rng) - study.robot.nominal.positions(q)
+
+
+def rms_3d(errors):
+    return float(np.sqrt(np.mean(np.sum(errors**2, axis=1))))
+
+
+def gp_regions(n_regions, restarts=1):
+    return PartitionedErrorModel(partition=KMeansPartition(n_regions),
+                                 local=GaussianProcessErrorModel(inputs="joint", restarts=restarts), random_state=0)
+
+
+def evaluate(name, make, train, test, paths):
+    start = time.process_time()
+    model = make().fit(*train)
+    seconds = time.process_time() - start
+    part = model.residual_ if isinstance(model, KinematicModel) else model
+    regions = part.partition_.n_regions if isinstance(part, PartitionedErrorModel) else 1
+    scores = [rms_3d(test[1] - model.predict(test[0]))] + [rms_3d(m.errors_mm - model.predict(m.q_deg))
+                                                           for m in paths]
+    print(f"  {name}: {seconds:.1f} s, test RMS {scores[0]:.4f} mm", flush=True)
+    return {"name": name, "regions": regions, "seconds": seconds, "scores": scores, "model": model}
+
+
+def main() -> None:
+    study = load_study(os.path.join(ROOT, "configs", "sk120_virtual.yaml"))
+    paths = list(simulate(dataclasses.replace(study, datasets={k: study.datasets[k] for k in PATHS})).values())
+    seeds = np.random.SeedSequence(2006).spawn(3)
+    test = dense(study, 1000, seeds[0])
+    robot = study.robot.nominal
+    hybrid = lambda r: (lambda: KinematicModel(robot=robot, residual=gp_regions(r), random_state=0))  # noqa: E731
+
+    print("2,000 poses:", flush=True)
+    train = dense(study, 2000, seeds[1])
+    rows2k = [evaluate("GP(AI) global", lambda: GaussianProcessErrorModel(inputs="joint", random_state=0),
+                       train, test, paths)]
+    for r in (4, 8, 16):
+        rows2k.append(evaluate(f"GP(AI) k-means {r}", lambda r=r: gp_regions(r), train, test, paths))
+    rows2k.append(evaluate("GP(AI) k-means 16, no restart", lambda: gp_regions(16, restarts=0), train, test, paths))
+    rows2k.append(evaluate("DH", lambda: KinematicModel(robot=robot), train, test, paths))
+    rows2k.append(evaluate("DH + GP(AI) k-means 16", hybrid(16), train, test, paths))
+    glob = rows2k[0]
+
+    def row(res, base_seconds, note=""):
+        return [res["name"], res["regions"], f"{res['seconds']:.1f}"] + [f"{s:.4f}" for s in res["scores"]] + [
+            f"{res['scores'][0] / glob['scores'][0]:.2f}", f"{base_seconds / res['seconds']:.1f}" + note]
+
+    header = ["model", "regions", "fit CPU s", "test RMS", *PATHS, "RMS / global", "speed-up"]
+    print_table("2,000 poses, all six joints moving: 3-D RMS (mm) on 1,000 test poses and the paper's paths; "
+                "ratios against the global GP", header, [row(r, glob["seconds"]) for r in rows2k])
+
+    print("10,000 poses:", flush=True)
+    train = dense(study, 10_000, seeds[2])
+    estimate = glob["seconds"] * (10_000 / 2000) ** 3
+    rows10k = [evaluate(f"GP(AI) k-means {r}", lambda r=r: gp_regions(r), train, test, paths) for r in (64,)]
+    rows10k.append(evaluate("DH + GP(AI) k-means 64", hybrid(64), train, test, paths))
+    table = [["GP(AI) global", 1, f"{estimate:.0f} (estimated)", "not run: O(n^3) from 2,000 poses; "
+              "scikit-learn's gradient alone is an n x n x 8 array, 6.4 GB", "-", "-"]]
+    for r in rows10k:
+        table.append([r["name"], r["regions"], f"{r['seconds']:.1f}", f"{r['scores'][0]:.4f}",
+                      f"{glob['seconds'] / r['seconds']:.1f}", f"{estimate / r['seconds']:.0f}"])
+    print_table("10,000 poses: fit time against the global GP (measured at 2,000 poses, estimated at 10,000)",
+                ["model", "regions", "fit CPU s", "test RMS", "speed-up vs global @2,000", "vs global @10,000"], table)
+
+    model = rows2k[3]["model"]                  # the 16-region GP of the 2,000-pose run
+    lo, hi = test[0].min(axis=0), test[0].max(axis=0)
+    queries = np.random.default_rng(1).uniform(lo, hi, (1_000_000, 6))
+    model.predict(queries[:1000])
+    start = time.process_time()
+    model.predict(queries)
+    seconds = time.process_time() - start
+    sizes = [m.n_train_ for m in model.models_]
+    print_table("Prediction, one core", ["model", "regions", "training samples per region", "1e6 predictions"],
+                [["GP(AI) k-means 16", model.partition_.n_regions, f"{min(sizes)}-{max(sizes)}",
+                  f"{seconds:.2f} CPU s"]])
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,157 @@
+"""Gaussian-process error models: scikit-learn's numbers, angle wrapping, regions, model files."""
+
+import json
+
+import numpy as np
+import pytest
+from conftest import ROOT
+from sklearn.gaussian_process import GaussianProcessRegressor
+from sklearn.gaussian_process.kernels import RBF, ConstantKernel, Matern, WhiteKernel
+from sklearn.utils.estimator_checks import parametrize_with_checks
+
+from partcal import (
+    ErrorModel,
+    GaussianProcessErrorModel,
+    KMeansPartition,
+    PartcalError,
+    PartitionedErrorModel,
+    read_measurements,
+)
+from partcal.study.persist import load_model, model_to_dict, save_model
+
+IDENT = read_measurements(ROOT / "data" / "sk120" / "identification.csv")
+RECTANGLE = read_measurements(ROOT / "data" / "sk120" / "test_rectangle.csv")
+
+
+# These fit 10-input GPs several times over (about 230 likelihood evaluations each, 5 s of CPU per check);
+# what they check (shapes, mismatched lengths, a decent score) the tests below check on real data.
+SLOW_CHECKS = {"check_regressors_train", "check_regressor_data_not_an_array"}
+
+
+@parametrize_with_checks([GaussianProcessErrorModel(restarts=0)])
+def test_sklearn_compatible(estimator, check):
+    if getattr(check, "func", check).__name__ in SLOW_CHECKS:
+        pytest.skip("slow for a GP; covered by the tests on measured data")
+    check(estimator)
+
+
+def unit_scaled(X, train):
+    """Each varying column of X to [-1, 1] over the training range (written out, not partcal's map)."""
+    lo, hi = train.min(axis=0), train.max(axis=0)
+    moving = hi > lo
+    return (X[:, moving] - (hi + lo)[moving] / 2) / ((hi - lo)[moving] / 2)
+
+
+@pytest.mark.filterwarnings("ignore::sklearn.exceptions.ConvergenceWarning")   # scikit-learn's own fit, below
+@pytest.mark.parametrize("kernel, nu, shape", [("rbf", 2.5, RBF(np.ones(4), (1e-2, 1e3))),
+                                               ("matern", 2.5, Matern(np.ones(4), (1e-2, 1e3), nu=2.5))])
+def test_fit_and_prediction_are_scikit_learns(kernel, nu, shape):
+    """Same kernel, bounds, restarts and seed given to scikit-learn directly: same hyperparameters, same means."""
+    q, y = IDENT.q_deg, IDENT.errors_mm
+    model = GaussianProcessErrorModel(inputs="joint", kernel=kernel, nu=nu, restarts=1, random_state=3).fit(q, y)
+    reference = GaussianProcessRegressor(ConstantKernel(1.0, (1e-3, 1e3)) * shape + WhiteKernel(1e-4, (1e-12, 1.0)),
+                                         normalize_y=True, n_restarts_optimizer=1, random_state=3)
+    reference.fit(unit_scaled(q, q), y)                     # q4 = q5 = 0 never move: four inputs
+    np.testing.assert_allclose(model.log_marginal_likelihood_, reference.log_marginal_likelihood_value_, rtol=1e-12)
+    expected = reference.predict(unit_scaled(RECTANGLE.q_deg, q))
+    np.testing.assert_allclose(model.predict(RECTANGLE.q_deg), expected, rtol=0, atol=1e-10)
+    assert model.X_train_.shape == (85, 4) and model.length_scale_.shape == (4,)
+
+
+@pytest.mark.parametrize("kernel", ["rbf", "matern"])
+def test_model_files_round_trip_bit_for_bit(tmp_path, kernel):
+    model = GaussianProcessErrorModel(inputs="cartesian", kernel=kernel, random_state=0).fit(IDENT.nominal_mm,
+                                                                                          IDENT.errors_mm)
+    path = tmp_path / "gp.json"
+    save_model(model, path, name="GP(CI)")
+    loaded, doc = load_model(path)
+    assert doc["kind"] == "gaussian_process" and "pickle" not in path.read_text()
+    assert np.array_equal(loaded.predict(RECTANGLE.nominal_mm), model.predict(RECTANGLE.nominal_mm))
+    again = tmp_path / "again.json"
+    save_model(loaded, again, name="GP(CI)")
+    assert json.loads(again.read_text()) | {"partcal_version": 0} == doc | {"partcal_version": 0}
+    assert again.read_text() == path.read_text()
+
+
+def straddling(n=300, seed=0):
+    """Joint data whose q1 runs through 180 degrees: raw values 150..180 and -180..-150."""
+    rng = np.random.default_rng(seed)
+    unwrapped = np.c_[rng.uniform(150, 210, n), rng.uniform(-150, -110, n), rng.uniform(-40, 40, n)]
+    rad = np.radians(unwrapped)
+    y = np.c_[np.sin(rad[:, 0]) + rad[:, 1], np.cos(rad[:, 0] + rad[:, 2]), rad[:, 2] * np.sin(rad[:, 0])]
+    raw = unwrapped.copy()
+    raw[:, 0] = np.where(raw[:, 0] > 180, raw[:, 0] - 360, raw[:, 0])
+    return raw, unwrapped, y
+
+
+MAKERS = {
+    "GP": lambda inputs: GaussianProcessErrorModel(inputs=inputs, restarts=0),
+    "SDP k-means": lambda inputs: PartitionedErrorModel(partition=KMeansPartition(3), local=ErrorModel(
+        inputs=inputs, degree=2, solver="lstsq"), random_state=0),
+    "GP k-means": lambda inputs: PartitionedErrorModel(partition=KMeansPartition(3), local=GaussianProcessErrorModel(
+        inputs=inputs, restarts=0), random_state=0),
+}
+
+
+@pytest.mark.parametrize("name", MAKERS)
+def test_a_joint_through_180_degrees_is_read_where_its_data_are_contiguous(name):
+    """Fitted on raw angles that jump from 180 to -180, a model equals one fitted on the unwrapped angles.
+
+    (Up to rounding: wrapping moves an angle by an ulp, and a GP's optimiser then stops a little elsewhere.)
+    The same arrays read as plain numbers (no wrapping) give another model.
+    """
+    make = MAKERS[name]
+    raw, unwrapped, y = straddling(150)
+    wrapped, plain = make("joint").fit(raw, y), make("joint").fit(unwrapped, y)
+    query_raw, query, _ = straddling(50, seed=1)
+    np.testing.assert_allclose(wrapped.predict(query_raw), plain.predict(query), rtol=0, atol=1e-5)
+    seam = np.array([[180.0, -130.0, 0.0], [-180.0, -130.0, 0.0]])          # one pose, written two ways
+    np.testing.assert_array_equal(*wrapped.predict(seam))
+    if name == "SDP k-means":      # dense GPs interpolate either way; polynomials over a torn range do not
+        naive = make("cartesian").fit(raw, y)
+        assert np.abs(naive.predict(query_raw) - plain.predict(query)).max() > 1e-3
+
+
+def test_joint_space_regions_are_scaled_per_joint():
+    """k-means regions do not change when one joint's angles are stretched: every joint spans [-1, 1]."""
+    _, q, y = straddling()
+    model = PartitionedErrorModel(partition=KMeansPartition(4), local=ErrorModel(inputs="joint", solver="lstsq"),
+                                  random_state=0)
+    stretched = q * [1, 4, 1] + [0, 300, 0]                     # q2: 40 degrees of range become 160
+    labels = model.fit(q, y).assign(q)
+    np.testing.assert_array_equal(model.fit(stretched, y).assign(stretched), labels)
+
+
+@pytest.fixture(scope="module")
+def regional_gp():
+    return PartitionedErrorModel(partition=KMeansPartition(2), local=GaussianProcessErrorModel(inputs="joint"),
+                                 random_state=0).fit(IDENT.q_deg, IDENT.errors_mm)
+
+
+def test_one_gp_per_region_is_blended_and_round_trips(tmp_path, regional_gp):
+    model = regional_gp
+    assert model.partition_.n_regions == 2 and all(isinstance(m, GaussianProcessErrorModel) for m in model.models_)
+    assert model.min_samples_ == 40                          # ten per varying joint (q1, q2, q3, q6)
+    path = tmp_path / "gp-kmeans.json"
+    save_model(model, path)
+    loaded, doc = load_model(path)
+    assert doc["local_kind"] == "gaussian_process" and doc["input_map"]["active"] == [True] * 3 + [False] * 2 + [True]
+    assert np.array_equal(loaded.predict(RECTANGLE.q_deg), model.predict(RECTANGLE.q_deg))
+    assert model_to_dict(loaded) | {"partcal_version": 0} == model_to_dict(model) | {"partcal_version": 0}
+    rms = np.sqrt(np.mean(np.sum((RECTANGLE.errors_mm - model.predict(RECTANGLE.q_deg)) ** 2, axis=1)))
+    assert rms < 0.5 * np.sqrt(np.mean(np.sum(RECTANGLE.errors_mm**2, axis=1)))
+
+
+def test_bad_parameters_are_refused():
+    X, y = IDENT.nominal_mm, IDENT.errors_mm
+    with pytest.raises(PartcalError, match=r"The 'kernel' parameter of GaussianProcessErrorModel must be one of "
+                                           r"'rbf', 'matern'\. Got 'linear' instead\."):
+        GaussianProcessErrorModel(kernel="linear").fit(X, y)
+    with pytest.raises(PartcalError, match=r"The 'nu' parameter of GaussianProcessErrorModel must be one of 0\.5, "
+                                           r"1\.5, 2\.5\. Got 2 instead\."):
+        GaussianProcessErrorModel(kernel="matern", nu=2).fit(X, y)
+    with pytest.raises(PartcalError, match=r"a region needs at least 40 samples \(10 per varying input\); got 30"):
+        PartitionedErrorModel(local=GaussianProcessErrorModel(inputs="joint")).fit(IDENT.q_deg[:30], y[:30])
+    with pytest.raises(PartcalError, match=r"The 'local' parameter of PartitionedErrorModel must be an ErrorModel "
+                                           r"or a GaussianProcessErrorModel"):
+        PartitionedErrorModel(local="gp").fit(X, y)

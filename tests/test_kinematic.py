@@ -1,0 +1,155 @@
+"""Kinematic identification and hybrid models: exact recovery, identifiability, standard errors."""
+
+import numpy as np
+import pytest
+from conftest import ROOT
+from sklearn.base import clone
+
+from partcal import ErrorModel, GaussianProcessErrorModel, KinematicModel, PartcalError, read_measurements
+from partcal.models.kinematic import identify, nominal_values, parameter_names, robot_with
+from partcal.robot.kinematics import robot_from_dict
+
+# A planar arm: two parallel joint axes (alpha = 0) and a tool on the last x axis. Worked out by hand,
+# positions alone cannot tell apart: d[1], d[2], tool.z and base.z (all slide along z), a[2] and tool.x
+# (both along the last x axis), theta[2] and tool.y (to first order both move the tool across that axis),
+# theta[1] and base.rz (both turn the whole arm about z0); alpha[2] turns about the axis the tool lies on,
+# so it moves nothing. Everything else (a[1], alpha[1], base.x, base.y, base.rx, base.ry) stands alone:
+# ten identifiable directions of seventeen.
+PLANAR = {"name": "planar2", "joints": 2, "tool_mm": [100, 0, 0], "limits_deg": [[-170, 170], [-150, 150]],
+          "links": [{"theta": "q1", "d": 0, "a": 500, "alpha": 0}, {"theta": "q2", "d": 0, "a": 400, "alpha": 0}]}
+GROUPS = [{"d[1]", "d[2]", "tool.z", "base.z"}, {"a[2]", "tool.x"}, {"theta[2]", "tool.y"}, {"theta[1]", "base.rz"}]
+ALONE = {"a[1]", "alpha[1]", "base.x", "base.y", "base.rx", "base.ry"}
+
+
+def test_planar_arm_identifiability_matches_the_hand_derivation():
+    robot = robot_from_dict(PLANAR)
+    q = np.random.default_rng(0).uniform([-170, -150], [170, 150], (40, 2))
+    table = identify(robot, q, robot.positions(q))
+    status = dict(zip(table.names, table.status))
+    assert table.rank == 10
+    for group in GROUPS:
+        assert sorted(status[n] for n in group) == ["identified"] + ["unidentifiable"] * (len(group) - 1), group
+    assert {n for n in ALONE if status[n] == "identified"} == ALONE
+    assert status["alpha[2]"] == "unidentifiable"
+
+
+def sk120_poses(sk120, n, seed, wrist=True):
+    rng = np.random.default_rng(seed)
+    ranges = np.array([[-60, 60], [-160, -100], [-205, -145], [-150, 150], [-100, 100], [-90, 90]], dtype=float)
+    q = rng.uniform(ranges[:, 0], ranges[:, 1], (2 * n, 6))
+    if not wrist:
+        q[:, 3:5] = 0.0
+    return q[sk120.within_limits(q)][:n]
+
+
+def deviations(robot, seed):
+    """A random error of every parameter: 1 mm for lengths, 0.1 degree for angles."""
+    units = np.array([u for _, u in parameter_names(robot)])
+    return np.random.default_rng(seed).normal(size=units.size) * np.where(units == "mm", 1.0, 0.1)
+
+
+@pytest.mark.parametrize("wrist", [True, False])
+def test_noise_free_identification_recovers_the_identifiable_parameters_exactly(sk120, wrist):
+    q = sk120_poses(sk120, 200, 1, wrist)
+    probe = identify(sk120, q, sk120.positions(q))        # which parameters positions identify here
+    free = np.array([s == "identified" for s in probe.status])
+    true = nominal_values(sk120) + deviations(sk120, 2) * free
+    measured = robot_with(sk120, true).positions(q)
+    model = KinematicModel(robot=sk120).fit(q, measured - sk120.positions(q))
+    table = model.identification_
+    np.testing.assert_allclose(table.value[free], true[free], rtol=0, atol=1e-8)
+    np.testing.assert_array_equal(table.value[~free], nominal_values(sk120)[~free])     # never moved
+    assert table.unidentifiable() == [n for n, f in zip(table.names, free) if not f]
+    assert table.rms_mm < 1e-9
+    assert np.all(np.isnan(table.std_error[~free])) and np.all(table.std_error[free] >= 0)
+    other = sk120_poses(sk120, 50, 3, wrist)
+    np.testing.assert_allclose(model.predict(other), robot_with(sk120, true).positions(other)
+                               - sk120.positions(other), atol=1e-8)
+    if not wrist:     # q4 = q5 = 0 hide more: the wrist rows' offsets and twists cannot all be told apart
+        assert len(table.unidentifiable()) > len(probe.unidentifiable()) - 1 and table.rank < 27
+
+
+def test_errors_in_unidentifiable_parameters_are_absorbed_by_the_others(sk120):
+    """Every parameter off: the identified set still reproduces the positions (up to second-order terms)."""
+    q = sk120_poses(sk120, 200, 4)
+    true = robot_with(sk120, nominal_values(sk120) + deviations(sk120, 5))
+    model = KinematicModel(robot=sk120).fit(q, true.positions(q) - sk120.positions(q))
+    assert model.identification_.rms_mm < 1e-3           # against errors of several mm before
+    assert np.sqrt(np.mean(np.sum((true.positions(q) - sk120.positions(q)) ** 2, axis=1))) > 3
+
+
+def test_standard_errors_match_the_scatter_over_noise_draws(sk120):
+    q = sk120_poses(sk120, 120, 6)
+    true = robot_with(sk120, nominal_values(sk120) + deviations(sk120, 7))
+    exact = true.positions(q)
+    rng = np.random.default_rng(8)
+    values, errors = [], []
+    for _ in range(40):
+        table = identify(sk120, q, exact + rng.normal(0, 0.05, exact.shape))
+        values.append(table.value)
+        errors.append(table.std_error)
+    free = np.array([s == "identified" for s in table.status])
+    scatter = np.std(values, axis=0)[free]
+    reported = np.mean(errors, axis=0)[free]
+    ratio = scatter / reported
+    assert 0.7 < np.median(ratio) < 1.3 and ratio.min() > 0.5 and ratio.max() < 1.6, ratio
+    assert table.condition > 1 and np.isfinite(table.condition)
+
+
+@pytest.fixture(scope="module")
+def paper_data():
+    return read_measurements(ROOT / "data" / "sk120" / "identification.csv")
+
+
+@pytest.mark.parametrize("residual", [
+    ErrorModel(inputs="joint", degree=2, solver="lstsq"),
+    ErrorModel(inputs="cartesian", degree=1, solver="lstsq"),
+    GaussianProcessErrorModel(inputs="joint", restarts=0),
+])
+def test_hybrid_is_the_kinematic_model_plus_the_residual_fitted_on_what_it_leaves(sk120, paper_data, residual):
+    q, y = paper_data.q_deg, paper_data.errors_mm
+    hybrid = KinematicModel(robot=sk120, residual=residual, random_state=0).fit(q, y)
+    kinematic = KinematicModel(robot=sk120).fit(q, y)
+    leftover = y - kinematic.predict(q)
+    X = q if residual.inputs == "joint" else sk120.positions(q)
+    part = clone(residual).set_params(random_state=hybrid.residual_.random_state).fit(X, leftover)
+    test = read_measurements(ROOT / "data" / "sk120" / "test_rectangle.csv")
+    Xt = test.q_deg if residual.inputs == "joint" else sk120.positions(test.q_deg)     # FK, not the CSV columns
+    np.testing.assert_allclose(hybrid.predict(test.q_deg), kinematic.predict(test.q_deg) + part.predict(Xt),
+                               rtol=0, atol=1e-12)
+    np.testing.assert_allclose(hybrid.predict_kinematic(test.q_deg), kinematic.predict(test.q_deg), rtol=0, atol=0)
+
+
+def test_bad_parameters_and_inputs_are_refused(sk120, paper_data):
+    q, y = paper_data.q_deg, paper_data.errors_mm
+    with pytest.raises(PartcalError, match=r"The 'robot' parameter of KinematicModel must be a Robot, a built-in "
+                                           r"robot name or a robot YAML path\. Got None instead\."):
+        KinematicModel().fit(q, y)
+    with pytest.raises(PartcalError, match=r"The 'rcond' parameter of KinematicModel must be a real number in "
+                                           r"\(0\.0, 1\.0\]\. Got 0 instead\."):
+        KinematicModel(robot=sk120, rcond=0).fit(q, y)
+    with pytest.raises(PartcalError, match=r"The 'residual' parameter of KinematicModel must be None, an "
+                                           r"ErrorModel, .*Got KinematicModel"):
+        KinematicModel(robot=sk120, residual=KinematicModel(robot=sk120)).fit(q, y)
+    with pytest.raises(PartcalError, match=r"KinematicModel for motoman_sk120 takes 6 joint angles \(degrees\) "
+                                           r"per sample; got X with 5 columns"):
+        KinematicModel(robot="motoman_sk120").fit(q[:, :5], y)
+    with pytest.raises(PartcalError, match=r"Expected y \(position errors\) with shape \(n, 3\), got array with "
+                                           r"shape \(85, 2\)"):
+        KinematicModel(robot=sk120).fit(q, y[:, :2])
+
+
+def test_model_files_round_trip_bit_for_bit(tmp_path, sk120, paper_data):
+    from partcal import KMeansPartition, PartitionedErrorModel
+    from partcal.study.persist import load_model, model_to_dict, save_model
+
+    residual = PartitionedErrorModel(partition=KMeansPartition(2, min_samples=20),
+                                     local=GaussianProcessErrorModel(inputs="joint", restarts=0))
+    model = KinematicModel(robot=sk120, residual=residual, random_state=0).fit(paper_data.q_deg, paper_data.errors_mm)
+    save_model(model, tmp_path / "hybrid.json", name="DH + GP k-means", robot=sk120)
+    loaded, doc = load_model(tmp_path / "hybrid.json")
+    assert doc["kind"] == "kinematic" and doc["model"]["residual"]["kind"] == "partitioned"
+    test = read_measurements(ROOT / "data" / "sk120" / "test_spiral_yz.csv")
+    assert np.array_equal(loaded.predict(test.q_deg), model.predict(test.q_deg))
+    assert np.array_equal(loaded.predict_kinematic(test.q_deg), model.predict_kinematic(test.q_deg))
+    assert model_to_dict(loaded) | {"partcal_version": 0} == model_to_dict(model) | {"partcal_version": 0}

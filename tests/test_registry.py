@@ -510,3 +510,28 @@ def test_cli_import_config_writes_the_runs_data_without_fitting(tmp_path):
     assert "identification_tracker.csv (identification): a tracker registration with the tool needs at least 4 poses " \
            "(9 parameters); got 3" in res.stderr
     assert (out / "metrics.json").exists()                      # the earlier results stay
+
+
+def test_a_set_in_its_own_tracker_frame_is_scored_up_to_a_rigid_transform():
+    """Its registration already took out the rigid part: a perfect model must score ~0, not the rigid part."""
+    from scipy.spatial.transform import Rotation
+
+    from partcal import Measurements
+    from partcal.study.registry import errors_left
+
+    rng = np.random.default_rng(5)
+    nominal = rng.uniform(-1000, 1000, (60, 3))
+    true_error = 2.0 * np.sin(nominal / 300.0)                         # what the robot really does, mm
+    rot, shift = Rotation.from_rotvec([0.002, -0.001, 0.003]).as_matrix(), np.array([1.5, -0.7, 2.0])
+    measured = (nominal + true_error) @ rot.T + shift                  # seen through a slightly wrong frame
+    m = Measurements(np.zeros((60, 1)), nominal, measured)
+    perfect = errors_left(m, true_error, own_frame=True)
+    assert np.abs(perfect).max() < 1e-9
+    assert np.sqrt(np.mean(np.sum((m.errors_mm - true_error) ** 2, axis=1))) > 1.0   # plain subtraction: wrong
+    # uncompensated, the same rule: what is left of the error field after the best rigid fit of the nominal
+    left = errors_left(m, np.zeros_like(true_error), own_frame=True)
+    moved = measured - left
+    d_nom = np.linalg.norm(nominal[:, None] - nominal[None], axis=2)
+    np.testing.assert_allclose(np.linalg.norm(moved[:, None] - moved[None], axis=2), d_nom, atol=1e-9)  # rigid
+    assert np.sqrt(np.mean(np.sum(left**2, axis=1))) < np.sqrt(np.mean(np.sum(m.errors_mm**2, axis=1)))
+    np.testing.assert_array_equal(errors_left(m, true_error), m.errors_mm - true_error)   # a shared frame: plain

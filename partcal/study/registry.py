@@ -26,7 +26,7 @@ from joblib import Parallel, delayed, parallel_config
 from numpy.typing import NDArray
 
 from ..data.measurements import Measurements, read_measurements
-from ..data.registration import Registration, register_tracker, registered
+from ..data.registration import Registration, kabsch, register_tracker, registered
 from ..errors import ConfigError, DataError
 from ..metrics import cross_validated_rms, kfold_splits, nested_cross_validated_rms, summary
 from ..models.bases import varying_inputs
@@ -216,12 +216,13 @@ def model_inputs(inputs: str, m: Measurements) -> NDArray[np.float64]:
     return m.nominal_mm if inputs == "cartesian" else m.q_deg
 
 
-def fit_model(spec: ModelSpec, seed: int, data: dict[str, Measurements], folds: list, run_seed: int = 0
-              ) -> ModelResult:
+def fit_model(spec: ModelSpec, seed: int, data: dict[str, Measurements], folds: list, run_seed: int = 0,
+              own_frame: tuple[str, ...] = ()) -> ModelResult:
     """Fit one registry entry and evaluate it (runs in a joblib worker).
 
     ``folds`` are the run's shared ``(train, test)`` index pairs on the
     identification set; ``run_seed`` draws the inner folds of nested CV.
+    Data sets in ``own_frame`` are scored by :func:`own_frame_errors`.
     """
     ident = data["identification"]
     X, y = model_inputs(spec.inputs, ident), ident.errors_mm
@@ -239,11 +240,29 @@ def fit_model(spec: ModelSpec, seed: int, data: dict[str, Measurements], folds: 
         estimator = spec.build(seed).fit(X, y)
         fit_seconds = time.perf_counter() - start
     predictions = {name: estimator.predict(model_inputs(spec.inputs, m)) for name, m in data.items()}
-    metrics = {name: summary(m.errors_mm - predictions[name]) for name, m in data.items()}
+    metrics = {name: summary(errors_left(m, predictions[name], name in own_frame)) for name, m in data.items()}
     locals_ = estimator.models_ if isinstance(estimator, PartitionedErrorModel) else [estimator]
     ratio = float(max(m.rms_ratio_ for m in locals_)) if spec.solver == "pso" else None
     return ModelResult(spec, estimator, fit_seconds, cv, metrics, predictions, ratio, granularity,
                        cv_seconds=cv_seconds, nested=nested)
+
+
+def errors_left(m: Measurements, predicted: NDArray[np.float64], own_frame: bool = False) -> NDArray[np.float64]:
+    """The errors a model leaves on a data set, (n, 3) mm: measured - nominal - predicted.
+
+    A set registered in its own tracker frame (``registration: own``) is known
+    only up to a rigid transform: its registration on the nominal model has
+    already absorbed the rigid part of the robot's errors, and a model's
+    prediction would count it again. There the errors left are the measured
+    positions minus the model's positions (nominal + predicted) moved by their
+    best rigid fit to them; with ``predicted = 0`` the same gives the
+    uncompensated figure, so both sides are scored alike.
+    """
+    if not own_frame:
+        return m.errors_mm - predicted
+    model_mm = m.nominal_mm + predicted
+    rot, shift = kabsch(model_mm, m.measured_mm)
+    return m.measured_mm - (model_mm @ rot.T + shift)
 
 
 def choose_granularity(spec: ModelSpec, seed: int, X, y, folds: list) -> tuple[object, list[dict], float]:
@@ -297,7 +316,8 @@ def run(config: RunConfig, progress: Callable[[int, int, str], None] | None = No
     virtual = _virtual_robot(config, robot)
     seeds = [int(s.generate_state(1)[0]) for s in np.random.SeedSequence(config.seed).spawn(len(config.models))]
     folds = kfold_splits(len(data["identification"]), config.cv_folds, config.seed)    # one split for every model
-    jobs = [delayed(fit_model)(spec, seed, data, folds, config.seed) for spec, seed in zip(config.models, seeds)]
+    own = config.data_options.own_frame
+    jobs = [delayed(fit_model)(spec, seed, data, folds, config.seed, own) for spec, seed in zip(config.models, seeds)]
     results: list[ModelResult] = []
     with _backend(config):
         stream = Parallel(n_jobs=config.n_jobs, return_as="generator")(jobs)
@@ -309,7 +329,7 @@ def run(config: RunConfig, progress: Callable[[int, int, str], None] | None = No
     if virtual is not None:
         for result in results:
             result.compensation = verify_compensation(result, data, robot, virtual, config.seed)
-    uncompensated = {name: summary(m.errors_mm) for name, m in data.items()}
+    uncompensated = {name: summary(errors_left(m, np.zeros_like(m.errors_mm), name in own)) for name, m in data.items()}
     best = min(results, key=lambda r: r.score(config.rank_by)).spec.name
     return RunResult(config, data, robot, uncompensated, results, best, time.perf_counter() - start,
                      registrations=registrations)

@@ -17,9 +17,9 @@ def atomic_write(path: str | Path, mode: str = "w", **kwargs):
     If the block raises, the temporary file is removed and ``path`` keeps its
     previous content.
     """
-    path = Path(path)
-    if path.is_dir():
+    if str(path).endswith(("/", os.sep)) or Path(path).is_dir():
         raise PartcalError(f"{path}: is a folder; give the name of a file to write")
+    path = Path(path)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)

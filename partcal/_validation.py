@@ -110,7 +110,7 @@ def safe_name(value: str) -> str | None:
     >>> safe_name("paper_sk120"), safe_name("../etc") is not None, safe_name("a/b") is not None
     (None, True, True)
     """
-    if _SAFE_NAME.match(value) and ".." not in value and not value.startswith("."):
+    if _SAFE_NAME.match(value) and ".." not in value and not value.startswith(".") and len(value) <= 100:
         return None
-    return ("a name of letters, digits, '_', '.' and '-' (it names files and folders: no '/', no '..', "
-            "no leading '.')")
+    return ("a name of at most 100 letters, digits, '_', '.' and '-' (it names files and folders: no '/', "
+            "no '..', no leading '.')")

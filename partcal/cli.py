@@ -262,16 +262,19 @@ def _import_run(args) -> int:
     from pathlib import Path
 
     from .study.config import load_config
-    from .study.outputs import write_datasets
+    from .study.outputs import check_writable, replace_folder, write_datasets
     from .study.registry import load_datasets
 
     if args.output is None:
         raise PartcalError("import --config: give the output folder with -o FOLDER")
     config = load_config(args.config)
+    output = Path(args.output)
+    check_writable(output)
     datasets, _, registrations = load_datasets(config)
     for reg in {id(r): r for r in registrations.values()}.values():
         print(_registration_line(reg, [n for n, r in registrations.items() if r is reg]))
-    paths = write_datasets(config, datasets, registrations, Path(args.output))
+    paths = replace_folder(output, lambda tmp: write_datasets(config, datasets, registrations, tmp))
+    paths = [output / p.name for p in paths]
     print(f"wrote {len(paths)} data sets ({', '.join(f'{n}: {len(m)}' for n, m in datasets.items())}) to {args.output}")
     return 0
 
@@ -305,11 +308,28 @@ def _cmd_equations(args) -> int:
     return 0
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with the project's rule for bad input: one line on stderr, exit 2 (no usage block)."""
+
+    def error(self, message: str):
+        self.exit(2, f"partcal: error: {self.prog}: {message} (see '{self.prog} --help')\n")
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 1; got {text!r}")
+    return value
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="partcal", description=__doc__.splitlines()[0])
+    parser = _Parser(prog="partcal", description=__doc__.splitlines()[0])
     parser.add_argument("--version", action="version", version=f"partcal {__version__}")
     parser.add_argument("-v", "--verbose", action="store_true", help="show debug messages")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     sim = sub.add_parser("simulate", help="generate measurement data from a virtual robot config")
     sim.add_argument("config", help="virtual-experiment YAML, e.g. configs/sk120_virtual.yaml")
     sim.set_defaults(func=_cmd_simulate)
@@ -339,7 +359,7 @@ def build_parser() -> argparse.ArgumentParser:
     comp.set_defaults(func=_cmd_compensate)
     eqs = sub.add_parser("equations", help="print a series model's fitted equations in mm and degrees")
     eqs.add_argument("model", help="model file (models/<name>.json of a run)")
-    eqs.add_argument("--digits", type=int, default=None,
+    eqs.add_argument("--digits", type=_positive_int, default=None,
                      help="round to this many significant digits (default: full precision, which reproduces "
                           "the model's predictions)")
     eqs.set_defaults(func=_cmd_equations)
@@ -353,7 +373,7 @@ def build_parser() -> argparse.ArgumentParser:
     imp.add_argument("--tool-mm", nargs=3, type=float, metavar=("X", "Y", "Z"),
                      help="with --frame tracker: the known target offset in the flange frame (not fitted then)")
     imp.add_argument("--rows", help="data rows to keep, e.g. '1-600' or '1-100, 201-300'")
-    imp.add_argument("--every", type=int, default=1, help="keep every k-th of the rows")
+    imp.add_argument("--every", type=_positive_int, default=1, help="keep every k-th of the rows")
     imp.add_argument("--config", metavar="RUN.yaml",
                      help="convert the data of a run config (format, subsets, registration) without fitting")
     imp.set_defaults(func=_cmd_import)

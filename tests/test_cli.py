@@ -198,3 +198,64 @@ def test_import_registers_a_tracker_file(tmp_path):
     assert res.returncode == 2 and "give either an input file or --config RUN.yaml" in res.stderr
     res = run("import", str(src), "-o", str(tmp_path / "x.csv"))             # forgot the format
     assert res.returncode == 2 and res.stderr.count("\n") == 1 and "tracker.csv:1: the header is one column containing ';'" in res.stderr
+
+
+@pytest.fixture(scope="module")
+def cartesian_model(tmp_path_factory):
+    from partcal import ErrorModel, load_robot
+    from partcal.study.persist import save_model
+
+    m = read_measurements(DATA / "identification.csv")
+    path = tmp_path_factory.mktemp("model") / "sdp-ci.json"
+    save_model(ErrorModel(degree=2, solver="lstsq").fit(m.nominal_mm, m.errors_mm), path,
+               robot=load_robot("motoman_sk120"))
+    return path
+
+
+def test_a_cartesian_target_beyond_the_arms_reach_is_not_converged(cartesian_model, tmp_path):
+    # the fixed-point iteration converges on any target; the robot in the file says 10 m is out of reach
+    m = read_measurements(DATA / "test_rectangle.csv")
+    targets = tmp_path / "t.csv"
+    targets.write_text("x,y,z\n" + ",".join(f"{v:.6f}" for v in m.nominal_mm[0]) + "\n10000,0,0\n")
+    res = run("compensate", str(cartesian_model), str(targets), "-o", str(tmp_path / "c.csv"))
+    assert res.returncode == 3 and "1 of 2 targets did not converge or are unreachable (first: data row 2" in res.stderr
+    with open(tmp_path / "c.csv") as handle:
+        assert [r["converged"] for r in csv.DictReader(handle)] == ["true", "false"]
+
+
+@pytest.mark.parametrize("args, message", [
+    (["equations", "MODEL", "--digits", "-1"], "partcal equations: argument --digits: expected a whole number >= 1; got '-1'"),
+    (["import", "a.csv", "--tool-mm", "0", "0", "abc"], "partcal import: argument --tool-mm: invalid float value: 'abc'"),
+    (["import", "a.csv", "--every", "0"], "partcal import: argument --every: expected a whole number >= 1; got '0'"),
+    (["predict", "MODEL", "IN.csv", "-o", "newdir/"], "newdir/: is a folder; give the name of a file to write"),
+])
+def test_command_line_mistakes_get_one_line(cartesian_model, tmp_path, args, message):
+    points = tmp_path / "IN.csv"
+    points.write_text("x,y,z\n1000,0,500\n")
+    args = [str(cartesian_model) if a == "MODEL" else str(points) if a == "IN.csv" else a for a in args]
+    res = run(*args, cwd=tmp_path)
+    assert res.returncode == 2 and res.stderr.count("\n") == 1 and message in res.stderr, res.stderr
+    assert not (tmp_path / "newdir").exists()
+
+
+def test_validation_set_with_converted_data_runs_and_imports(tmp_path):
+    """A held-out validation set in a run whose data are converted (a row subset) used to crash after fitting."""
+    cfg = tmp_path / "configs" / "v.yaml"
+    cfg.parent.mkdir()
+    cfg.write_text(f"""name: v
+data:
+  identification: {{file: {DATA / 'identification.csv'}, rows: "1-80"}}
+  validation: {DATA / 'test_rectangle.csv'}
+  tests: {{spiral: {DATA / 'test_spiral_xy.csv'}}}
+rank_by: validation
+models:
+  - {{name: FDP(CI), solver: {{method: lstsq}}}}
+""")
+    res = run("import", "--config", str(cfg), "-o", str(tmp_path / "conv"))
+    assert res.returncode == 0, res.stderr
+    assert sorted(p.name for p in (tmp_path / "conv").iterdir()) == ["identification.csv", "spiral.csv", "validation.csv"]
+    assert len(read_measurements(tmp_path / "conv" / "identification.csv")) == 80
+    res = run("run", str(cfg), "-q")
+    assert res.returncode == 0, res.stderr
+    out = tmp_path / "reports" / "v"
+    assert (out / "data" / "validation.csv").is_file() and (out / "metrics.json").is_file()

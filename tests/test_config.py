@@ -61,10 +61,10 @@ def test_defaults_and_paths(tmp_path):
     ("name: demo\n", "name: demo\nseed: -3\n", r"seed \(line {line}\): must be an int in \[0, 4294967295\]; got -3"),
     ("    rectangle:", "    cv:", r"data\.tests\.cv \(line {line}\): a test set may not be called 'cv' \(reserved: "),
     ("    rectangle:", "    validation:", r"data\.tests\.validation \(line {line}\): a test set may not be called 'validation'"),
-    ("    rectangle:", "    ../up:", r"data\.tests\.\.\./up \(line {line}\): the test-set name '\.\./up' must be a name of letters"),
-    ("    rectangle:", "    'a b':", r"the test-set name 'a b' must be a name of letters, digits"),
-    ("name: demo\n", "name: ../demo\n", r"name \(line {line}\): must be a name of letters, digits, '_', '\.' and '-' .*; got '\.\./demo'"),
-    ("name: demo\n", "name: a/b\n", r"name \(line {line}\): must be a name of letters.*got 'a/b'"),
+    ("    rectangle:", "    ../up:", r"data\.tests\.\.\./up \(line {line}\): the test-set name '\.\./up' must be a name of at most 100 letters"),
+    ("    rectangle:", "    'a b':", r"the test-set name 'a b' must be a name of at most 100 letters, digits"),
+    ("name: demo\n", "name: ../demo\n", r"name \(line {line}\): must be a name of at most 100 letters, digits, '_', '\.' and '-' .*; got '\.\./demo'"),
+    ("name: demo\n", "name: a/b\n", r"name \(line {line}\): must be a name of at most 100 letters.*got 'a/b'"),
     ("max_depth: [1, 2]", "max_depth: []", r"models\[1\]\.partition\.max_depth \(line {line}\): must be an int or a non-empty list of ints; got an empty list"),
     ("{method: hard}", "{method: gaussian, width: .nan}", r"models\[1\]\.blend\.width \(line {line}\): must be a finite number; got nan"),
     ("    degree: 2\n    solver: {method: lstsq}\n", "    degree: 2\n    inputs: joint\n    solver: {method: lstsq}\n", r"models\[1\]\.partition\.method \(line {line}\): octree splits the Cartesian workspace; for joint inputs use method: kmeans"),
@@ -266,3 +266,8 @@ def test_calibration_config_loads():
     assert {m.kind for m in cfg.models} == {"series", "kinematic", "gaussian_process"}
     paper = load_config(ROOT / "configs" / "paper_sk120.yaml")
     assert [m.name for m in paper.models] == ["FDP(CI)", "FDP(AI)", "SDP(CI)", "SDP(AI)"]      # the paper's four
+
+
+def test_a_name_too_long_for_a_file_is_refused_before_fitting(tmp_path):
+    with pytest.raises(ConfigError, match=r"data\.tests\.b{300} \(line \d+\): the test-set name 'b{300}' must be a name of at most 100"):
+        load_config(write(tmp_path, BASE.replace("    rectangle:", "    " + "b" * 300 + ":")))

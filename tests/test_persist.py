@@ -170,3 +170,36 @@ def test_a_number_changed_after_writing_is_refused_by_the_checksum(saved, tmp_pa
     bad.write_text(json.dumps(doc))
     model, _ = load_model(bad)
     assert model.coef_[0, 0] == saved["global"]["model"]["coef"][0][0] + 5.0
+
+
+@pytest.fixture(scope="module")
+def gp_files(tmp_path_factory):
+    from partcal import GaussianProcessErrorModel
+
+    tmp = tmp_path_factory.mktemp("gp")
+    out = {}
+    gp = GaussianProcessErrorModel(inputs="joint", restarts=0, random_state=0).fit(IDENT.q_deg, IDENT.errors_mm)
+    regional = PartitionedErrorModel(partition=KMeansPartition(2, min_samples=30),
+                                     local=GaussianProcessErrorModel(inputs="joint", restarts=0),
+                                     random_state=0).fit(IDENT.q_deg, IDENT.errors_mm)
+    for name, model in (("gp", gp), ("regional", regional)):
+        save_model(model, tmp / f"{name}.json", robot=load_robot("motoman_sk120"))
+        out[name] = json.loads((tmp / f"{name}.json").read_text())
+    return out
+
+
+@pytest.mark.parametrize("kind, path, value, message", [
+    ("gp", ["model", "input_map", "scale", 0], 0.0, r"'model.input_map.scale': the scales of the varying inputs must be > 0"),
+    ("gp", ["model", "y_std", 0], 0.0, r"'model.y_std': the output scales must be > 0"),
+    ("gp", ["model", "dual_coef", 0, 0], 1e6, r"'model.dual_coef': predicts [\d.e+]+ mm within the box of its data"),
+    ("regional", ["regions", 0, "input_map", "scale", 0], 0.0, r"'regions\[0\].input_map.scale': the scales of the varying"),
+    ("regional", ["regions", 1, "dual_coef", 0, 0], 1e6, r"'regions\[1\].dual_coef': predicts"),
+])
+def test_gaussian_process_files_are_checked_for_meaning(gp_files, tmp_path, kind, path, value, message):
+    """These edits used to load, then predict NaN (a zero scale) or 43 km (a huge dual coefficient)."""
+    doc = edited(gp_files[kind], path, value)
+    del doc["checksum"]
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps(doc))
+    with pytest.raises(ModelFileError, match="bad.json: field " + message):
+        load_model(bad)

@@ -142,6 +142,15 @@ class Robot:
             arr = arr[None, :]
         return check_array(arr, name, columns=self.n_joints)
 
+    @property
+    def reach_mm(self) -> float:
+        """An upper bound on the distance from the base origin to the tool, mm (every link stretched out).
+
+        >>> round(load_robot("motoman_sk120").reach_mm, 2)
+        4413.19
+        """
+        return float(np.hypot(self.a_mm, self.d_mm).sum() + np.linalg.norm(self.tool_mm))
+
     def within_limits(self, q_deg: NDArray[np.float64]) -> NDArray[np.bool_]:
         """Which poses respect the joint limits and the coupled constraints, shape (n,)."""
         ok = np.all((q_deg >= self.limits_deg[:, 0]) & (q_deg <= self.limits_deg[:, 1]), axis=1)

@@ -13,7 +13,7 @@ import os
 import shutil
 import tempfile
 from pathlib import Path
-from typing import Callable
+from typing import Any, Callable
 
 import numpy as np
 import yaml
@@ -92,13 +92,25 @@ def registration_document(registrations: dict) -> dict:
 
 def write_run(result: RunResult, render: Callable[[RunResult, Path], None] | None = None) -> Path:
     """Write all outputs of a run atomically; return the output folder."""
-    output = result.config.output
-    check_writable(output)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{output.name}.partial-", dir=output.parent))
-    try:
+    def fill(tmp: Path) -> None:
         _write_all(result, tmp)
         if render is not None:
             render(result, tmp)
+
+    replace_folder(result.config.output, fill)
+    return result.config.output
+
+
+def replace_folder(output: Path, fill: Callable[[Path], Any]) -> Any:
+    """Build a folder's new content in a temporary sibling (``fill(tmp)``) and swap it in whole.
+
+    A failure while filling leaves the previous folder (or its absence) as it
+    was; returns what ``fill`` returned.
+    """
+    check_writable(output)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{output.name}.partial-", dir=output.parent))
+    try:
+        value = fill(tmp)
         os.chmod(tmp, 0o755)
         if output.exists():
             old = Path(tempfile.mkdtemp(prefix=f".{output.name}.old-", dir=output.parent))
@@ -111,7 +123,7 @@ def write_run(result: RunResult, render: Callable[[RunResult, Path], None] | Non
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
-    return output
+    return value
 
 
 def _write_all(result: RunResult, folder: Path) -> None:
@@ -143,9 +155,10 @@ def write_datasets(config: RunConfig, datasets: dict, registrations: dict, folde
     """
     opts = config.data_options
     folder.mkdir(parents=True, exist_ok=True)
+    sources = {"identification": config.identification, "validation": config.validation, **config.tests}
     paths = []
     for name, m in datasets.items():
-        source = config.identification if name == "identification" else config.tests[name]
+        source = sources[name]
         lines = [f"{name} of run {config.name!r} (partcal {__version__}), converted to degrees and mm from {source}"]
         if name in opts.rows:
             lines.append(f"data rows {opts.rows[name].text or 'all'}, every {opts.rows[name].every}")

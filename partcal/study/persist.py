@@ -293,8 +293,11 @@ def _input_map(r: "_Reader", key: str, n_in: int) -> InputMap:
     active = m.get("active", list)
     if len(active) != n_in or not all(isinstance(a, bool) for a in active):
         m.fail("active", f"expected {n_in} true/false values")
+    scale = m.array("scale", (n_in,))
+    if np.any(scale[np.array(active, dtype=bool)] <= 0):
+        m.fail("scale", "the scales of the varying inputs must be > 0")
     return InputMap(np.array([np.nan if w is None else w for w in window], dtype=float),
-                    m.array("centre", (n_in,)), m.array("scale", (n_in,)), np.array(active, dtype=bool))
+                    m.array("centre", (n_in,)), scale, np.array(active, dtype=bool))
 
 
 def _gp_from(r: "_Reader", inputs: str, n_in: int, n_out: int) -> GaussianProcessErrorModel:
@@ -309,6 +312,8 @@ def _gp_from(r: "_Reader", inputs: str, n_in: int, n_out: int) -> GaussianProces
     model.X_train_ = r.array("x_train", (n, d))
     model.dual_coef_ = r.array("dual_coef", (n, n_out))
     model.y_mean_, model.y_std_ = r.array("y_mean", (n_out,)), r.array("y_std", (n_out,))
+    if np.any(model.y_std_ <= 0):
+        r.fail("y_std", "the output scales must be > 0")
     model.amplitude_, model.noise_ = r.number("amplitude", 0.0), r.number("noise", 0.0)
     model.length_scale_ = r.array("length_scale", (d,))
     if model.amplitude_ <= 0 or np.any(model.length_scale_ <= 0):
@@ -412,25 +417,26 @@ def _is_int(value) -> bool:
 
 
 def _check_plausible(r: "_Reader", model, limit_mm: float = 1e6) -> None:
-    """Series models (alone, as regions or as a kinematic model's residual) must predict finite errors
-    under ``limit_mm`` at the corners and centre of their data box."""
+    """Series models and Gaussian processes (alone, as regions or as a kinematic model's residual) must
+    predict finite errors under ``limit_mm`` at the corners and centre of their data box."""
     if isinstance(model, KinematicModel):
         if model.residual_ is not None:
             _check_plausible(r.sub("model").sub("residual"), model.residual_, limit_mm)
         return
     regions = isinstance(model, PartitionedErrorModel)
-    locals_ = [m for m in (model.models_ if regions else [model]) if isinstance(m, ErrorModel)]
+    field = "coef" if all(isinstance(m, ErrorModel) for m in (model.models_ if regions else [model])) else "dual_coef"
     with np.errstate(all="ignore"):
-        for k, local in enumerate(locals_):
+        for k, local in enumerate(model.models_ if regions else [model]):
             lo, hi = local.data_bounds_
             n_in = lo.size
             corners = lo + (hi - lo) * ((np.arange(2 ** min(n_in, 10))[:, None] >> np.arange(n_in)) & 1)
-            pred = local._predict_trusted(np.vstack([corners, (lo + hi) / 2]))
+            points = np.vstack([corners, (lo + hi) / 2])
+            pred = local._predict_trusted(points) if isinstance(local, ErrorModel) else local.predict(points)
             if not np.all(np.isfinite(pred)) or np.abs(pred).max() > limit_mm:
                 worst = f"{np.abs(pred).max():.3g}" if np.all(np.isfinite(pred)) else "a non-finite value"
-                r.fail(f"regions[{k}].coef" if regions else "model.coef",
+                r.fail(f"regions[{k}].{field}" if regions else f"model.{field}",
                        f"predicts {worst} mm within the box of its data (limit {limit_mm:g} mm): "
-                       "the coefficients are damaged")
+                       "the fitted numbers are damaged")
 
 
 class _Reader:

@@ -11,6 +11,7 @@ Usage, with a model file from ``partcal run``::
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -105,6 +106,10 @@ class Predictor:
         targets = check_array(targets_mm, "targets_mm", columns=3)
         if self.inputs == "cartesian":
             result = false_target(self._errors, targets, tol_mm=tol_mm, max_iter=max_iter)
+            if self.robot is not None:      # a commanded point beyond the arm's reach is not a solution
+                far = np.linalg.norm(result.commanded_mm - self.robot.base_mm, axis=1) > self.robot.reach_mm
+                if far.any():
+                    result = dataclasses.replace(result, converged=result.converged & ~far)
         else:
             if self.robot is None:
                 raise DataError("compensating a joint model needs its robot, and this model file names none")
@@ -133,7 +138,10 @@ class Predictor:
         return fixed, low[[j - 1 for j in fixed]]
 
     def distance_to_data(self, positions=None, joints=None) -> NDArray[np.float64]:
-        """How far each input lies outside the training data (0 inside), input units."""
+        """Distance of each input to the nearest training sample, input units (mm or degrees).
+
+        Files written before partcal kept the training inputs give the distance outside the data's boxes.
+        """
         return self.model.distance_to_data(self._inputs(positions, joints))
 
 

@@ -12,7 +12,6 @@ fitting and prediction agree.
 from __future__ import annotations
 
 import logging
-import time
 from numbers import Integral
 
 import numpy as np
@@ -23,7 +22,7 @@ from sklearn.utils.validation import check_is_fitted, validate_data
 
 from .._validation import check_choice, check_int, param_error
 from ..errors import PartcalError
-from ..metrics import cross_validated_rms, distance_outside_boxes, kfold_splits, warn_far
+from ..metrics import distance_outside_boxes, kfold_splits, select_by_cv, warn_far
 from .angles import InputMap
 from .base import ErrorModelBase, seed_from
 from .bases import varying_inputs
@@ -111,7 +110,7 @@ class PartitionedErrorModel(ErrorModelBase):
         Y = y.reshape(len(y), -1)
         self.input_map_ = InputMap.fit(X, angles=True) if local.inputs == "joint" else None
         X, S = self._coordinates(X)
-        need, why = _region_minimum(local, int(varying_inputs(X).sum()))
+        need, why = region_minimum(local, int(varying_inputs(X).sum()))
         min_samples = spec.min_samples or need
         if X.shape[0] < min_samples:
             raise PartcalError(f"{type(self).__name__}: a region needs at least {min_samples} samples "
@@ -261,7 +260,7 @@ def _fit_one(model, X, Y, weights):
     return model._fit(X, Y, weights)
 
 
-def _region_minimum(local, n_active: int) -> tuple[int, str]:
+def region_minimum(local, n_active: int) -> tuple[int, str]:
     """Default smallest region for a local model, and the reason (for the message)."""
     if isinstance(local, GaussianProcessErrorModel):
         local._check_params()
@@ -306,22 +305,17 @@ def select_granularity(model: PartitionedErrorModel, X, y, grid, *, folds=5, ran
     if isinstance(folds, int):
         check_int("select_granularity", "folds", folds, 2)
         folds = kfold_splits(len(X), folds, random_state)
-    table, fitted = [], []
-    for candidate, value in _candidates(model, grid):
-        score = cross_validated_rms(candidate, X, y, folds=folds)
-        start = time.perf_counter()
-        fitted.append(candidate.fit(X, y))
-        seconds = time.perf_counter() - start
-        regions = candidate.partition_.n_regions
-        table.append({"granularity": int(value), "cv_rms_3d": score, "regions": int(regions), "fit_seconds": seconds})
-        log.info("granularity %s: CV RMS %.4f over %d regions", value, score, regions)
-    best = min(range(len(table)), key=lambda i: table[i]["cv_rms_3d"])
+    values = [int(v) for v in grid]
+    best, scores, fitted, seconds = select_by_cv([_candidate(model, v) for v in values], X, y, folds=folds)
+    table = [{"granularity": v, "cv_rms_3d": s, "regions": int(f.partition_.n_regions), "fit_seconds": t}
+             for v, s, f, t in zip(values, scores, fitted, seconds)]
+    for row in table:
+        log.info("granularity %s: CV RMS %.4f over %d regions", row["granularity"], row["cv_rms_3d"], row["regions"])
     return fitted[best], table
 
 
-def _candidates(model: PartitionedErrorModel, grid):
-    """Unfitted copies of ``model`` with each granularity of ``grid``: ``(candidate, value)``."""
+def _candidate(model: PartitionedErrorModel, value: int) -> PartitionedErrorModel:
+    """An unfitted copy of ``model`` with octree depth or k-means region count ``value``."""
     _, spec = model._resolved()
     key = "max_depth" if isinstance(spec, Octree) else "n_regions"
-    for value in grid:
-        yield clone(model).set_params(partition=type(spec)(**{**spec.__dict__, key: value})), value
+    return clone(model).set_params(partition=type(spec)(**{**spec.__dict__, key: value}))

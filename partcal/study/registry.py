@@ -28,11 +28,10 @@ from numpy.typing import NDArray
 from ..data.measurements import Measurements, read_measurements
 from ..data.registration import Registration, kabsch, register_tracker, registered
 from ..errors import ConfigError, DataError
-from ..metrics import cross_validated_rms, kfold_splits, nested_cross_validated_rms, summary
+from ..metrics import cross_validated_rms, kfold_splits, nested_cross_validated_rms, select_by_cv, summary
 from ..models.bases import varying_inputs
-from ..models.gp import GaussianProcessErrorModel
 from ..models.kinematic import KinematicModel
-from ..models.partitioned import MIN_SAMPLES_PER_TERM, PartitionedErrorModel
+from ..models.partitioned import MIN_SAMPLES_PER_TERM, PartitionedErrorModel, region_minimum
 from ..robot.kinematics import Robot, load_robot
 from .config import ModelSpec, RunConfig
 from .predictor import Predictor
@@ -180,26 +179,29 @@ def check_run(config: RunConfig, data: dict[str, Measurements]) -> None:
         if spec is None:
             continue
         varying = int(varying_inputs(model_inputs(spec.inputs, ident)).sum())
-        if spec.kind == "gaussian_process":
-            if spec.partition is None:
-                continue
-            need, why = GaussianProcessErrorModel(inputs=spec.inputs).region_minimum(varying)
-            where, what = _key(config, i, prefix + "partition"), f"{why} of the Gaussian process"
-        else:
-            need = spec.local(None)._check_params()[0].n_terms(varying)
-            where = _key(config, i, prefix + ("degree" if spec.basis == "polynomial" else "harmonics"))
-            what = f"{need} terms per output ({varying} varying {spec.inputs} inputs)"
-            if spec.partition is not None:
-                if spec.partition.min_samples is not None and spec.partition.min_samples < need:
-                    config.fail(_key(config, i, prefix + "partition.min_samples"),
-                                f"must be at least the local model's {what}; got {spec.partition.min_samples}")
-                need *= MIN_SAMPLES_PER_TERM
-        train = smallest
+        local, train = spec.local(None), smallest
         if spec.partition is not None:
+            need, why = region_minimum(local, varying)
+            if spec.kind == "series" and spec.partition.min_samples is not None \
+                    and spec.partition.min_samples < need // MIN_SAMPLES_PER_TERM:
+                config.fail(_key(config, i, prefix + "partition.min_samples"),
+                            f"must be at least the local model's {need // MIN_SAMPLES_PER_TERM} terms per output; "
+                            f"got {spec.partition.min_samples}")
             need = spec.partition.min_samples or need
-            what = f"one region of {need} samples ({what})"
+            if spec.kind == "series":
+                why = f"{why} ({varying} varying {spec.inputs} inputs)"
+                where = _key(config, i, prefix + ("degree" if spec.basis == "polynomial" else "harmonics"))
+            else:
+                why, where = f"{why} of the Gaussian process", _key(config, i, prefix + "partition")
+            what = f"one region of {need} samples ({why})"
             if len(spec.partition.sizes) > 1:         # nested CV: the inner folds are smaller still
                 train = smallest - -(-smallest // k)
+        elif spec.kind == "gaussian_process":
+            continue                                  # a global GP fits any number of poses
+        else:
+            need = local._check_params()[0].n_terms(varying)
+            where = _key(config, i, prefix + ("degree" if spec.basis == "polynomial" else "harmonics"))
+            what = f"{need} terms per output ({varying} varying {spec.inputs} inputs)"
         if train < need:
             config.fail(where, f"{entry.name!r} needs {what}, but the smallest cross-validation training fold "
                                f"of the {n}-pose identification set holds {train} samples")
@@ -222,7 +224,7 @@ def fit_model(spec: ModelSpec, seed: int, data: dict[str, Measurements], folds: 
 
     ``folds`` are the run's shared ``(train, test)`` index pairs on the
     identification set; ``run_seed`` draws the inner folds of nested CV.
-    Data sets in ``own_frame`` are scored by :func:`own_frame_errors`.
+    Data sets in ``own_frame`` are scored by :func:`errors_left`.
     """
     ident = data["identification"]
     X, y = model_inputs(spec.inputs, ident), ident.errors_mm
@@ -272,16 +274,12 @@ def choose_granularity(spec: ModelSpec, seed: int, X, y, folds: list) -> tuple[o
     returns the best candidate fitted on all of ``X, y``, a row per candidate
     (``granularity``, ``cv_rms_3d``, ``regions``) and the seconds of that final fit.
     """
-    table, fitted, seconds = [], [], []
-    for size in spec.sizes:
-        score = cross_validated_rms(spec.build(seed, size), X, y, folds=folds)
-        begin = time.perf_counter()
-        fitted.append(spec.build(seed, size).fit(X, y))
-        seconds.append(time.perf_counter() - begin)
-        regions = partitioned_part(fitted[-1]).partition_.n_regions
-        table.append({"granularity": int(size), "cv_rms_3d": score, "regions": int(regions)})
-        log.info("%s, granularity %s: CV RMS %.4f over %d regions", spec.name, size, score, regions)
-    best = min(range(len(table)), key=lambda i: table[i]["cv_rms_3d"])
+    best, scores, fitted, seconds = select_by_cv([spec.build(seed, size) for size in spec.sizes], X, y, folds=folds)
+    table = [{"granularity": int(size), "cv_rms_3d": score, "regions": int(partitioned_part(f).partition_.n_regions)}
+             for size, score, f in zip(spec.sizes, scores, fitted)]
+    for row in table:
+        log.info("%s, granularity %s: CV RMS %.4f over %d regions", spec.name, row["granularity"], row["cv_rms_3d"],
+                 row["regions"])
     return fitted[best], table, seconds[best]
 
 

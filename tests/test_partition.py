@@ -133,16 +133,6 @@ def test_lookup_cells_agree_with_their_boxes():
         assert np.all(outside_grid)
 
 
-def test_partition_round_trips_as_plain_data():
-    X = cloud(3)
-    for spec in SPECS:
-        P = spec.build(X, 20, random_state=0)
-        Q = Partition.from_dict(P.to_dict())
-        q = np.random.default_rng(1).uniform(-2000, 2000, size=(500, 3))
-        np.testing.assert_array_equal(P.assign(q), Q.assign(q))
-        np.testing.assert_array_equal(block_weights_dense(P, q), block_weights_dense(Q, q))
-
-
 def test_constant_axes_are_left_out():
     X = cloud(4)
     planar = np.c_[X[:, :2], np.full(len(X), -90.0), X[:, 2]]        # 4 columns, one constant

@@ -96,11 +96,6 @@ class InputMap:
         return {"window": [None if np.isnan(w) else float(w) for w in self.window],
                 "centre": self.centre.tolist(), "scale": self.scale.tolist(), "active": self.active.tolist()}
 
-    @classmethod
-    def from_dict(cls, d: dict) -> "InputMap":
-        return cls(np.array([np.nan if w is None else w for w in d["window"]], dtype=float),
-                   np.asarray(d["centre"], dtype=float), np.asarray(d["scale"], dtype=float),
-                   np.asarray(d["active"], dtype=bool))
 
 
 def _wrap(X: NDArray[np.float64], window: NDArray[np.float64]) -> NDArray[np.float64]:

@@ -11,9 +11,16 @@ from scipy.spatial import cKDTree
 from sklearn.base import BaseEstimator, RegressorMixin
 from sklearn.utils import check_random_state
 
+from ..metrics import warn_far
+
 
 class ErrorModelBase(RegressorMixin, BaseEstimator):
     """Base of every error model: multi-output tags, and 1-D targets kept 1-D on the way out."""
+
+    def warn_if_extrapolating(self, X, limit: float = 50.0) -> NDArray[np.bool_]:
+        """Warn (one ``ExtrapolationWarning``) about inputs farther than ``limit`` (mm or degrees) from the
+        training data (see ``distance_to_data``); return their mask."""
+        return warn_far(self.distance_to_data(X), limit)
 
     def _shape_output(self, out: NDArray[np.float64]) -> NDArray[np.float64]:
         return out[:, 0] if self._y_1d else out

@@ -31,7 +31,7 @@ from sklearn.gaussian_process.kernels import RBF, ConstantKernel, Matern, WhiteK
 from sklearn.utils.validation import check_is_fitted, validate_data
 
 from .._validation import check_choice, check_int, param_error
-from ..metrics import distance_outside_boxes, warn_far
+from ..metrics import distance_outside_boxes
 from .angles import InputMap
 from .base import ErrorModelBase, seed_from
 
@@ -218,6 +218,3 @@ class GaussianProcessErrorModel(ErrorModelBase):
         X = validate_data(self, X, reset=False, dtype=np.float64)
         return distance_outside_boxes(self.input_map_.wrap(X), self.data_bounds_[:1], self.data_bounds_[1:])
 
-    def warn_if_extrapolating(self, X, limit: float = 50.0) -> NDArray[np.bool_]:
-        """Warn (``ExtrapolationWarning``) about points farther than ``limit``; return the mask."""
-        return warn_far(self.distance_to_data(X), limit)

@@ -39,7 +39,7 @@ from sklearn.utils.validation import check_is_fitted, validate_data
 
 from .._validation import check_array, check_real, param_error
 from ..errors import DataError
-from ..metrics import distance_outside_boxes, warn_far
+from ..metrics import distance_outside_boxes
 from ..robot.kinematics import Robot, load_robot
 from .base import ErrorModelBase, seed_from
 from .bases import varying_inputs
@@ -382,11 +382,12 @@ class KinematicModel(ErrorModelBase):
             seed = int(np.random.SeedSequence(seed_from(self.random_state)).spawn(1)[0].generate_state(1)[0])
             leftover = y - (self.identified_robot_.positions(X) - nominal)
             self.residual_ = clone(self.residual).set_params(random_state=seed)
-            self.residual_.fit(self._residual_inputs(X), leftover)
+            self.residual_.fit(self._residual_inputs(X, nominal), leftover)
         return self
 
-    def _residual_inputs(self, X: NDArray[np.float64]) -> NDArray[np.float64]:
-        return self.robot_.positions(X) if inputs_of(self.residual_) == "cartesian" else X
+    def _residual_inputs(self, X: NDArray[np.float64], nominal: NDArray[np.float64]) -> NDArray[np.float64]:
+        """What the residual model reads: the nominal positions ``nominal`` (mm) or the joints ``X`` (deg)."""
+        return nominal if inputs_of(self.residual_) == "cartesian" else X
 
     # ------------------------------------------------------------------ prediction
     def predict(self, X) -> NDArray[np.float64]:
@@ -402,9 +403,10 @@ class KinematicModel(ErrorModelBase):
         return self.identified_robot_.positions(X) - self.robot_.positions(X)
 
     def _predict_trusted(self, X: NDArray[np.float64]) -> NDArray[np.float64]:
-        out = self.identified_robot_.positions(X) - self.robot_.positions(X)
+        nominal = self.robot_.positions(X)
+        out = self.identified_robot_.positions(X) - nominal
         if self.residual_ is not None:
-            out += self.residual_.predict(self._residual_inputs(X))
+            out += self.residual_.predict(self._residual_inputs(X, nominal))
         return out
 
     def distance_to_data(self, X) -> NDArray[np.float64]:
@@ -413,6 +415,3 @@ class KinematicModel(ErrorModelBase):
         X = validate_data(self, X, reset=False, dtype=np.float64)
         return distance_outside_boxes(X, self.data_bounds_[:1], self.data_bounds_[1:])
 
-    def warn_if_extrapolating(self, X, limit: float = 50.0) -> NDArray[np.bool_]:
-        """Warn (``ExtrapolationWarning``) about poses farther than ``limit`` degrees; return the mask."""
-        return warn_far(self.distance_to_data(X), limit)

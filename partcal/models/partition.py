@@ -4,8 +4,8 @@
 ``build(X, min_samples, random_state)`` returns a fitted :class:`Partition`,
 plain arrays that tell which region any point belongs to (also outside the
 data's bounding box), and which kernels may weigh on it (its ``lookup``, see
-``lookup`` and ``blending``). ``Partition.to_dict`` / ``from_dict`` turn it
-into JSON-ready data for model files and pictures.
+``lookup`` and ``blending``). ``Partition.to_dict`` turns it into JSON-ready
+data for model files (read back, with every field checked, by ``partcal.study.persist``).
 
 Inputs that never vary in the training data (``bases.varying_inputs``) are
 left out: an octree splits, and kernels blend, along the varying axes only,
@@ -97,13 +97,9 @@ class Partition:
     centres: NDArray[np.float64]
     sigmas: NDArray[np.float64]
     kernel_region: NDArray[np.intp]
-    active: NDArray[np.bool_] | None = None
+    active: NDArray[np.bool_]
     boxes: NDArray[np.float64] | None = None
     tree: dict | None = None
-
-    def __post_init__(self):
-        if self.active is None:           # files written before constant inputs were left out
-            object.__setattr__(self, "active", np.ones(self.centres.shape[1], dtype=bool))
 
     # -------------------------------------------------------------- kernels on the varying axes
     @cached_property
@@ -166,21 +162,6 @@ class Partition:
             out["tree"] = {k: v.tolist() for k, v in self.tree.items()}
         return out
 
-    @classmethod
-    def from_dict(cls, data: dict) -> "Partition":
-        """Rebuild from :meth:`to_dict` output. Files without ``active`` blend along every axis;
-        lists of candidate kernels in older files are ignored (they are rebuilt)."""
-        arr = np.asarray
-        kw = dict(kind=data["kind"], n_regions=int(data["n_regions"]), centres=arr(data["centres"], float),
-                  sigmas=arr(data["sigmas"], float), kernel_region=arr(data["kernel_region"], np.intp))
-        if "active" in data:
-            kw["active"] = arr(data["active"], bool)
-        if data["kind"] == "octree":
-            kw.update(boxes=arr(data["boxes"], float),
-                      tree={"centre": arr(data["tree"]["centre"], float),
-                            "child": arr(data["tree"]["child"], np.intp),
-                            "leaf": arr(data["tree"]["leaf"], np.intp)})
-        return cls(**kw)
 
 
 # ---------------------------------------------------------------------- octree

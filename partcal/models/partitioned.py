@@ -22,7 +22,7 @@ from sklearn.utils.validation import check_is_fitted, validate_data
 
 from .._validation import check_choice, check_int, param_error
 from ..errors import PartcalError
-from ..metrics import distance_outside_boxes, kfold_splits, select_by_cv, warn_far
+from ..metrics import distance_outside_boxes, kfold_splits, select_by_cv
 from .angles import InputMap
 from .base import ErrorModelBase, seed_from
 from .bases import varying_inputs
@@ -234,9 +234,6 @@ class PartitionedErrorModel(ErrorModelBase):
             return distance_outside_boxes(X, self.region_bounds_[:, 0], self.region_bounds_[:, 1])
         return self._distance_to_train_inputs(X)
 
-    def warn_if_extrapolating(self, X, limit: float = 50.0) -> NDArray[np.bool_]:
-        """Warn (``ExtrapolationWarning``) about points farther than ``limit`` from the data; return the mask."""
-        return warn_far(self.distance_to_data(X), limit)
 
 def _fit_regions(models: list, data: list[tuple], n_jobs) -> list:
     """Fit every region's model to its ``(X, Y, weights)``; swarms of all regions in one batch.

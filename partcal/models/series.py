@@ -27,7 +27,7 @@ from sklearn.utils.validation import check_is_fitted, validate_data
 
 from .._validation import check_choice, check_int, param_error
 from ..errors import PartcalError
-from ..metrics import distance_outside_boxes, warn_far
+from ..metrics import distance_outside_boxes
 from .base import ErrorModelBase, seed_from
 from .bases import Basis, Scaling, SeriesPlan, column_bounds, raw_polynomial
 from .swarm import SwarmConfig, SwarmResult, minimize_batch
@@ -172,6 +172,7 @@ class ErrorModel(ErrorModelBase):
         self.swarm_results_ = results
         self.coef_ = coef
         self.scaling_, self.terms_, self.basis_ = problem.scaling, problem.terms, problem.basis
+        # compiled here, not on first use: scikit-learn's contract is that predict() leaves __dict__ alone
         self._plan = SeriesPlan.build(problem.basis, problem.scaling, problem.terms, coef)
         self._plan_of = (coef, problem.scaling, problem.terms)
         w = problem.weights
@@ -225,9 +226,6 @@ class ErrorModel(ErrorModelBase):
             return distance_outside_boxes(X, self.data_bounds_[:1], self.data_bounds_[1:])
         return self._distance_to_train_inputs(X)
 
-    def warn_if_extrapolating(self, X, limit: float = 50.0) -> NDArray[np.bool_]:
-        """Warn (``ExtrapolationWarning``) about points farther than ``limit``; return the mask."""
-        return warn_far(self.distance_to_data(X), limit)
 
     def equations(self, input_names=None, output_names=("dx", "dy", "dz"), precision: int | None = None
                   ) -> list[str]:

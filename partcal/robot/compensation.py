@@ -60,7 +60,9 @@ def false_target(predict: Callable[[NDArray[np.float64]], NDArray[np.float64]], 
             break
         cmd[active] -= miss[active]               # = target - e(cmd)
         iterations[active] += 1
-    residual = np.linalg.norm(cmd + predict(cmd) - targets_mm, axis=1)
+    else:                                         # out of iterations: the miss of the last step
+        miss = cmd + predict(cmd) - targets_mm
+    residual = np.linalg.norm(miss, axis=1)
     return CompensationResult(cmd, None, iterations, residual, residual <= tol_mm)
 
 

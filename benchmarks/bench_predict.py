@@ -49,7 +49,6 @@ def main() -> None:
         err = np.abs(model.predict(X) - phi @ model.coef_).max()
         rows.append([name, phi.shape[1], f"{t_ref * 1e3:.1f}", f"{t_old * 1e3:.1f}", f"{t_new * 1e3:.1f}",
                      f"{t_new / t_ref:.2f}x", "yes" if t_new <= 3 * t_ref else "NO", f"{err:.0e}"])
-        del phi
     print_table("10^6 predictions, one core: predict() against Phi @ coef with Phi already built",
                 ["model", "terms", "Phi @ coef ms", "build Phi + product ms", "predict ms", "predict / matmul",
                  "within 3x", "max |diff| mm"], rows)

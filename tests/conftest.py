@@ -50,3 +50,18 @@ def brute_force_blend(model, X):
         if W[:, k].any():
             out = out + W[:, k, None] * np.asarray(model.models_[region].predict(local)).reshape(len(X), -1)
     return out
+
+
+def partcal_cli(*args, cwd=None):
+    """``python -m partcal ARGS`` in a child process: its exit code, stdout and stderr."""
+    import subprocess
+    import sys
+
+    return subprocess.run([sys.executable, "-m", "partcal", *args], capture_output=True, text=True, cwd=cwd)
+
+
+def write_text(tmp_path, text, name):
+    """Write ``text`` to ``tmp_path / name``; return the path."""
+    path = tmp_path / name
+    path.write_text(text)
+    return path

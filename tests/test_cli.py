@@ -2,12 +2,10 @@
 
 import csv
 import shutil
-import subprocess
-import sys
 
 import numpy as np
 import pytest
-from conftest import ROOT
+from conftest import ROOT, partcal_cli
 
 import partcal
 from partcal import read_measurements
@@ -16,8 +14,7 @@ from partcal.metrics import rms_per_axis
 DATA = ROOT / "data" / "sk120"
 
 
-def run(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "partcal", *args], capture_output=True, text=True, cwd=cwd)
+run = partcal_cli
 
 
 def test_version():

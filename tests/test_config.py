@@ -200,6 +200,8 @@ def test_data_and_registration_errors_name_path_and_line(tmp_path, old, new, mes
     line = TRACKER[:TRACKER.index(old.format())].count("\n") + 1
     if not new:
         line = TRACKER[:TRACKER.index("  frame: tracker")].count("\n")       # one line was removed above it
+    with pytest.raises(ConfigError, match=message.format(line=line)):
+        load_config(write(tmp_path, text))
 
 
 KINDS = BASE.replace("models:\n", """models:

@@ -4,6 +4,7 @@ import math
 
 import numpy as np
 import pytest
+from conftest import write_text
 
 from partcal import ConfigError, DataError, read_measurements
 from partcal._yamlio import Section, load_yaml
@@ -14,9 +15,7 @@ CONTRACT = "q1,q2,x_nom,y_nom,z_nom,x_meas,y_meas,z_meas\n"
 
 
 def write(tmp_path, text, name="f.csv"):
-    path = tmp_path / name
-    path.write_text(text)
-    return path
+    return write_text(tmp_path, text, name)
 
 
 def test_a_tracker_export_reads_as_the_contract(tmp_path):

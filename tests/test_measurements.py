@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from conftest import write_text
 
 from partcal import DataError, Measurements, read_measurements, write_measurements
 from partcal.data.measurements import read_columns
@@ -10,9 +11,7 @@ HEADER = "q1,q2,x_nom,y_nom,z_nom,x_meas,y_meas,z_meas"
 
 
 def write(tmp_path, text, name="m.csv"):
-    path = tmp_path / name
-    path.write_text(text)
-    return path
+    return write_text(tmp_path, text, name)
 
 
 def test_round_trip_and_errors(tmp_path):

@@ -154,10 +154,12 @@ def test_files_are_checked_for_meaning(saved, tmp_path, kind, path, value, messa
 
 
 def test_the_saved_files_themselves_load(saved, tmp_path):
+    """The control of the edits above: the checks refuse none of the files partcal itself wrote."""
     for name, doc in saved.items():
         path = tmp_path / f"{name}.json"
         path.write_text(json.dumps(doc))
-        load_model(path)
+        model, loaded = load_model(path)
+        assert loaded == doc and type(model).__name__ == {"global": "ErrorModel"}.get(name, "PartitionedErrorModel")
 
 
 def test_a_number_changed_after_writing_is_refused_by_the_checksum(saved, tmp_path):

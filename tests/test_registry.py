@@ -2,13 +2,11 @@
 
 import csv
 import json
-import subprocess
-import sys
 import warnings
 
 import numpy as np
 import pytest
-from conftest import ROOT
+from conftest import ROOT, partcal_cli
 
 from partcal import ConfigError, load_predictor, read_measurements
 from partcal.metrics import summary
@@ -130,8 +128,7 @@ def test_compensation_on_the_virtual_robot_matches_the_prediction(small_run):
             assert c["after"]["rms_3d"] == pytest.approx(c["predicted_residual"]["rms_3d"], rel=0.15), (r.spec.name, ds)
 
 
-def cli(*args):
-    return subprocess.run([sys.executable, "-m", "partcal", *args], capture_output=True, text=True)
+cli = partcal_cli
 
 
 def test_cli_run_prints_table_2_and_bad_input_keeps_earlier_outputs(tmp_path):

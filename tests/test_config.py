@@ -206,6 +206,7 @@ def test_data_and_registration_errors_name_path_and_line(tmp_path, old, new, mes
 
 KINDS = BASE.replace("models:\n", """models:
   - {name: DH + GP, kind: kinematic, rcond: 1.0e-8, residual: {kind: gaussian_process, inputs: joint,
+                                                                region_overlap: 1.25, hyper_samples: 300,
                                                                 partition: {method: kmeans, n_regions: [2, 4]}}}
   - {name: GP(AI), kind: gaussian_process, inputs: joint, kernel: matern, nu: 1.5, restarts: 0}
 """)
@@ -221,6 +222,8 @@ def test_model_kinds(tmp_path):
     assert (gp.gp.kernel, gp.gp.nu, gp.gp.restarts) == ("matern", 1.5, 0)
     model = hybrid.build(0, 4)
     assert model.residual.partition.n_regions == 4 and model.robot.name == "motoman_sk120"
+    local = model.residual.local
+    assert (local.region_overlap, local.hyper_samples, local.hyperparameters) == (1.25, 300, "shared")
     import yaml
     resolved = yaml.safe_load(yaml.safe_dump(cfg.resolved()))
     assert resolved["models"][0]["residual"]["partition"]["sizes"] == [2, 4]
@@ -242,6 +245,12 @@ def test_model_kinds(tmp_path):
     ("kernel: matern, nu: 1.5", "kernel: rbf, nu: 1.5", r"models\[1\]\.nu \(line {line}\): applies to kernel: "
                                                         r"matern only"),
     ("rcond: 1.0e-8", "rcond: 0", r"models\[0\]\.rcond \(line {line}\): must be a number in \(0, 1\]; got 0"),
+    ("region_overlap: 1.25", "region_overlap: 4", r"models\[0\]\.residual\.region_overlap \(line {line}\): must be "
+                                                  r"a number in \[1\.0, 3\.0\]; got 4\.0"),
+    ("hyper_samples: 300", "hyper_samples: 10", r"models\[0\]\.residual\.hyper_samples \(line {line}\): must be an "
+                                                r"int in \[20, inf\]; got 10"),
+    ("restarts: 0", "restarts: 0, hyperparameters: per_region", r"models\[1\]\.hyperparameters \(line {line}\): "
+                                                                r"applies to a partitioned GP only"),
     ("robot: motoman_sk120\n", "", r"models\[0\]\.kind \(line {line}\): kind: kinematic needs the run's robot"),
 ])
 def test_model_kind_errors_name_path_and_line(tmp_path, old, new, message):

@@ -71,6 +71,16 @@ def test_model_files_round_trip_bit_for_bit(tmp_path, kernel):
     save_model(loaded, again, name="GP(CI)")
     assert json.loads(again.read_text()) | {"partcal_version": 0} == doc | {"partcal_version": 0}
     assert again.read_text() == path.read_text()
+    assert (doc["model"]["hyperparameters"], doc["model"]["hyper_samples"], doc["model"]["region_overlap"]) == (
+        "shared", None, 1.0)
+    for key in ("hyperparameters", "hyper_samples", "region_overlap"):     # a file from before these settings
+        del doc["model"][key]
+    del doc["checksum"]
+    older = tmp_path / "older.json"
+    older.write_text(json.dumps(doc))
+    old_model = load_model(older)[0]
+    assert (old_model.hyperparameters, old_model.hyper_samples, old_model.region_overlap) == ("per_region", None, 1.0)
+    assert np.array_equal(old_model.predict(RECTANGLE.nominal_mm), model.predict(RECTANGLE.nominal_mm))
 
 
 def straddling(n=300, seed=0):
@@ -155,3 +165,89 @@ def test_bad_parameters_are_refused():
     with pytest.raises(PartcalError, match=r"The 'local' parameter of PartitionedErrorModel must be an ErrorModel "
                                            r"or a GaussianProcessErrorModel"):
         PartitionedErrorModel(local="gp").fit(X, y)
+
+
+def dual_coefficients(Z, Y, amplitude, length_scale, noise):
+    """``(K + noise I)^-1 Y`` of an RBF kernel, by Cholesky, written out (scikit-learn adds 1e-10 to the diagonal)."""
+    from scipy.linalg import cho_factor, cho_solve
+
+    d = (Z[:, None, :] - Z[None, :, :]) / length_scale
+    K = amplitude * np.exp(-0.5 * np.sum(d * d, axis=2)) + (noise + 1e-10) * np.eye(len(Z))
+    return cho_solve(cho_factor(K, lower=True), Y)
+
+
+@pytest.mark.filterwarnings("ignore::sklearn.exceptions.ConvergenceWarning")
+def test_regions_share_one_search_and_solve_on_their_own_samples():
+    """Default: the hyperparameters of one search on all samples; each region solves only for its dual coefficients."""
+    from conftest import brute_force_weights
+
+    q, y = IDENT.q_deg, IDENT.errors_mm
+    model = PartitionedErrorModel(partition=KMeansPartition(2), local=GaussianProcessErrorModel(inputs="joint"),
+                                  random_state=0).fit(q, y)
+    whole = GaussianProcessErrorModel(inputs="joint", random_state=0).fit(q, y)     # 85 < 500: the search sees all
+    W = brute_force_weights(model.partition_, model._coordinates(q)[1])
+    for region, gp in enumerate(model.models_):
+        assert (gp.amplitude_, gp.noise_) == (whole.amplitude_, whole.noise_)
+        np.testing.assert_array_equal(gp.length_scale_, whole.length_scale_)
+        np.testing.assert_array_equal(gp.y_std_, whole.y_std_)
+        rows = W[:, region] > 0
+        assert 40 <= rows.sum() < len(q) and gp.n_train_ == rows.sum()
+        Z = unit_scaled(q, q)                                    # the map of all samples, not the region's
+        match = np.argmin(np.sum((gp.X_train_[:, None, :] - Z[None]) ** 2, axis=2), axis=1)   # the region's order
+        assert sorted(match.tolist()) == np.flatnonzero(rows).tolist()
+        np.testing.assert_allclose(gp.X_train_, Z[match], rtol=0, atol=1e-14)
+        alpha = dual_coefficients(Z[match], (y[match] - whole.y_mean_) / whole.y_std_, whole.amplitude_,
+                                  whole.length_scale_, whole.noise_)
+        np.testing.assert_allclose(gp.dual_coef_, alpha, rtol=1e-8, atol=1e-8 * np.abs(alpha).max())
+    own = PartitionedErrorModel(partition=KMeansPartition(2), local=GaussianProcessErrorModel(
+        inputs="joint", hyperparameters="per_region"), random_state=0).fit(q, y)
+    assert not np.array_equal(own.models_[0].length_scale_, own.models_[1].length_scale_)
+
+
+@pytest.mark.filterwarnings("ignore::sklearn.exceptions.ConvergenceWarning")
+def test_a_region_overlap_widens_what_every_region_trains_on():
+    """region_overlap f: a region's GP takes every sample within f times its kernel's reach (3 widths)."""
+    import dataclasses
+
+    from conftest import brute_force_weights
+
+    q, y = IDENT.q_deg, IDENT.errors_mm
+    sizes = []
+    for f in (1.0, 1.3):
+        model = PartitionedErrorModel(partition=KMeansPartition(3), local=GaussianProcessErrorModel(
+            inputs="joint", region_overlap=f, restarts=0), random_state=0).fit(q, y)
+        S = model._coordinates(q)[1]
+        wide = dataclasses.replace(model.partition_, sigmas=model.partition_.sigmas * f)
+        W = brute_force_weights(wide, S)
+        r = np.sqrt(np.sum(((S[:, None, :] - model.partition_.centres[None]) / model.partition_.sigmas[None]) ** 2, 2))
+        inside = r.min(axis=1) <= 2.5 * f            # where the cutoff is not moved outward: reach is 3 f widths
+        np.testing.assert_array_equal((W > 0)[inside], (r < 3 * f)[inside])
+        sizes.append([gp.n_train_ for gp in model.models_])
+        assert sizes[-1] == (W > 0).sum(axis=0).tolist()
+    assert all(b > a for a, b in zip(*sizes)) and max(sizes[1]) <= len(q)
+    hard = PartitionedErrorModel(partition=KMeansPartition(3), blend="hard", local=GaussianProcessErrorModel(
+        inputs="joint", region_overlap=1.3, restarts=0), random_state=0).fit(q, y)
+    assert [gp.n_train_ for gp in hard.models_] == sizes[1]       # hard switching, but the same wide training sets
+
+
+@pytest.mark.filterwarnings("ignore::sklearn.exceptions.ConvergenceWarning")
+def test_hyper_samples_search_a_subset_and_solve_on_all():
+    q, y = IDENT.q_deg, IDENT.errors_mm
+    full = GaussianProcessErrorModel(inputs="joint", random_state=3).fit(q, y)
+    same = GaussianProcessErrorModel(inputs="joint", hyper_samples=85, random_state=3).fit(q, y)
+    assert np.array_equal(same.dual_coef_, full.dual_coef_) and same.length_scale_.tolist() == full.length_scale_.tolist()
+    part = GaussianProcessErrorModel(inputs="joint", hyper_samples=40, random_state=3).fit(q, y)
+    assert part.n_train_ == 85 and not np.allclose(part.length_scale_, full.length_scale_, rtol=1e-3)
+    reference = GaussianProcessRegressor(part.sklearn_kernel(), normalize_y=True, optimizer=None).fit(unit_scaled(q, q), y)
+    np.testing.assert_allclose(part.log_marginal_likelihood_, reference.log_marginal_likelihood_value_, rtol=1e-12)
+    np.testing.assert_allclose(part.predict(RECTANGLE.q_deg), reference.predict(unit_scaled(RECTANGLE.q_deg, q)),
+                               rtol=0, atol=1e-10)
+    # a partition's shared search on 30 samples keeps every input's extremes: the map is that of all samples
+    model = PartitionedErrorModel(partition=KMeansPartition(2), local=GaussianProcessErrorModel(
+        inputs="joint", hyper_samples=30, restarts=0), random_state=0).fit(q, y)
+    lo, hi = q.min(axis=0), q.max(axis=0)
+    moving = hi > lo
+    for gp in model.models_:
+        assert gp.input_map_.active.tolist() == moving.tolist()
+        np.testing.assert_array_equal(gp.input_map_.centre[moving], ((hi + lo) / 2)[moving])
+        np.testing.assert_array_equal(gp.input_map_.scale[moving], ((hi - lo) / 2)[moving])

@@ -25,12 +25,13 @@ import warnings
 
 import numpy as np
 from numpy.typing import NDArray
+from sklearn.base import clone
 from sklearn.exceptions import ConvergenceWarning
 from sklearn.gaussian_process import GaussianProcessRegressor
 from sklearn.gaussian_process.kernels import RBF, ConstantKernel, Matern, WhiteKernel
 from sklearn.utils.validation import check_is_fitted, validate_data
 
-from .._validation import check_choice, check_int, param_error
+from .._validation import check_choice, check_int, check_real, param_error
 from ..metrics import distance_outside_boxes
 from .angles import InputMap
 from .base import ErrorModelBase, seed_from
@@ -42,7 +43,8 @@ NUS = (0.5, 1.5, 2.5)
 LENGTH_BOUNDS = (1e-2, 1e3)        # on inputs scaled to [-1, 1]
 AMPLITUDE_BOUNDS = (1e-3, 1e3)     # on normalised outputs
 NOISE_BOUNDS = (1e-12, 1.0)
-REGION_MIN_WEIGHT = 1e-3           # a region's GP skips samples it weighs less than this (of its largest)
+SHARED_HYPER_SAMPLES = 500         # default subset for a partition's shared hyperparameters
+HYPERPARAMETERS = ("shared", "per_region")
 SAMPLES_PER_INPUT = 10             # default smallest region: 10 samples per varying input
 _BLOCK = 2048
 
@@ -61,6 +63,27 @@ class GaussianProcessErrorModel(ErrorModelBase):
     restarts : int in [0, 20]
         Extra starts of the marginal-likelihood optimiser, drawn from the
         hyperparameter bounds with ``random_state``.
+    hyper_samples : int >= 20 or None
+        Most samples the marginal-likelihood search sees: a seeded random
+        subset when there are more; the GP is then solved on all samples with
+        the hyperparameters found. The search costs O(n^3) per step and takes
+        dozens of steps, the solve one step, so this is where a large fit's
+        time goes. None: all samples for a global GP (scikit-learn's way),
+        ``SHARED_HYPER_SAMPLES`` for the shared hyperparameters of a partition.
+    hyperparameters : {"shared", "per_region"}
+        As the local model of a ``PartitionedErrorModel``: one set of
+        hyperparameters learnt from the whole training set (a subset of
+        ``hyper_samples``) and used by every region, which then only solves
+        for its dual coefficients; or each region's own search on its own
+        samples. A global GP ignores it.
+    region_overlap : float in [1, 3]
+        As the local model of a ``PartitionedErrorModel``: each region's GP
+        trains on the samples within ``region_overlap`` times the reach of its
+        region's blend kernels (1: exactly the samples the blend gives the
+        region any weight). More overlap gives every GP more data (more
+        accurate where regions meet, and where data are sparse for the
+        input dimension) at the cost of larger solves and slower predictions.
+        A global GP ignores it.
     random_state : None, int, RandomState or Generator
 
     Attributes
@@ -89,11 +112,15 @@ class GaussianProcessErrorModel(ErrorModelBase):
     True
     """
 
-    def __init__(self, *, inputs="cartesian", kernel="rbf", nu=2.5, restarts=1, random_state=None):
+    def __init__(self, *, inputs="cartesian", kernel="rbf", nu=2.5, restarts=1, hyper_samples=None,
+                 hyperparameters="shared", region_overlap=1.0, random_state=None):
         self.inputs = inputs
         self.kernel = kernel
         self.nu = nu
         self.restarts = restarts
+        self.hyper_samples = hyper_samples
+        self.hyperparameters = hyperparameters
+        self.region_overlap = region_overlap
         self.random_state = random_state
 
     def _check_params(self) -> None:
@@ -103,6 +130,10 @@ class GaussianProcessErrorModel(ErrorModelBase):
         if self.kernel == "matern" and self.nu not in NUS:
             raise param_error(own, "nu", "one of 0.5, 1.5, 2.5", self.nu)
         check_int(own, "restarts", self.restarts, 0, 20)
+        if self.hyper_samples is not None:
+            check_int(own, "hyper_samples", self.hyper_samples, 20)
+        check_choice(own, "hyperparameters", self.hyperparameters, HYPERPARAMETERS)
+        check_real(own, "region_overlap", self.region_overlap, 1.0, 3.0)
 
     def region_minimum(self, n_active: int) -> tuple[int, str]:
         """Smallest region a partition may give this model, and why (for messages)."""
@@ -113,34 +144,34 @@ class GaussianProcessErrorModel(ErrorModelBase):
         """Fit the GP to errors ``y`` (n, 3) mm at inputs ``X`` (n, d). Returns self."""
         return self._fit(X, y, None)
 
-    def _fit(self, X, y, sample_weight):
-        """Fit; in a partition, samples weighing less than ``REGION_MIN_WEIGHT`` of the largest are skipped."""
+    def _fit(self, X, y, sample_weight, shared: "GaussianProcessErrorModel | None" = None):
+        """Fit; in a partition, the samples of weight 0 (outside the region's reach) are left out.
+
+        ``shared``: a fitted GP whose input map, output normalisation and
+        kernel this one takes as they are (a partition's shared
+        hyperparameters); only the dual coefficients are solved for.
+        """
         self._check_params()
         X, y = validate_data(self, X, y, multi_output=True, y_numeric=True, dtype=np.float64)
         self._y_1d = y.ndim == 1
         Y = y.reshape(len(y), -1)
         if sample_weight is not None:
-            w = np.asarray(sample_weight, dtype=float)
-            keep = w >= REGION_MIN_WEIGHT * w.max()
+            keep = np.asarray(sample_weight, dtype=float) > 0
             X, Y = X[keep], Y[keep]
-        self.input_map_ = InputMap.fit(X, angles=self.inputs == "joint")
-        Z = self.input_map_.transform(X)
-        gpr = GaussianProcessRegressor(self._kernel(Z.shape[1]), normalize_y=True,
-                                       n_restarts_optimizer=int(self.restarts),
-                                       random_state=seed_from(self.random_state) % 2**32)
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always", ConvergenceWarning)
-            gpr.fit(Z, Y)
-        for w in caught:          # bounds reached are normal (noise-free data): a log line, not a warning
-            if issubclass(w.category, ConvergenceWarning):
-                log.info("GP hyperparameters: %s", w.message)
-            else:
-                warnings.warn(w.message, w.category, stacklevel=2)
+        if shared is None:
+            self.input_map_ = InputMap.fit(X, angles=self.inputs == "joint")
+            Z = self.input_map_.transform(X)
+            gpr = self._search(Z, Y)
+            self.y_mean_ = np.broadcast_to(gpr._y_train_mean, (Y.shape[1],)).astype(float)
+            self.y_std_ = np.broadcast_to(gpr._y_train_std, (Y.shape[1],)).astype(float)
+        else:
+            self.input_map_ = shared.input_map_
+            self.y_mean_, self.y_std_ = shared.y_mean_.copy(), shared.y_std_.copy()
+            Z = self.input_map_.transform(X)
+            gpr = GaussianProcessRegressor(shared.sklearn_kernel(), optimizer=None).fit(Z, (Y - self.y_mean_) / self.y_std_)
         params = gpr.kernel_.get_params()
         self.X_train_ = np.ascontiguousarray(gpr.X_train_)          # the layout a loaded file has:
         self.dual_coef_ = np.ascontiguousarray(gpr.alpha_.reshape(len(Z), -1))   # same sums, same bits
-        self.y_mean_ = np.broadcast_to(gpr._y_train_mean, (Y.shape[1],)).astype(float)
-        self.y_std_ = np.broadcast_to(gpr._y_train_std, (Y.shape[1],)).astype(float)
         self.amplitude_ = float(params["k1__k1__constant_value"])
         self.length_scale_ = np.broadcast_to(params["k1__k2__length_scale"], (Z.shape[1],)).astype(float)
         self.noise_ = float(params["k2__noise_level"])
@@ -149,6 +180,47 @@ class GaussianProcessErrorModel(ErrorModelBase):
         self.data_bounds_ = np.stack([wrapped.min(axis=0), wrapped.max(axis=0)])
         self.n_train_ = int(len(Z))
         return self._prepare()
+
+    def fit_shared(self, X, Y) -> "GaussianProcessErrorModel":
+        """Fit as the hyperparameters a partition's regions share; returns self.
+
+        The search runs on at most ``hyper_samples`` (default
+        ``SHARED_HYPER_SAMPLES``) samples of ``X, Y``: a seeded random subset
+        that keeps every input's smallest and largest value, so that the input
+        map, and with it the meaning of the length scales, is that of all of ``X``.
+        """
+        X, Y = np.asarray(X, dtype=float), np.asarray(Y, dtype=float)
+        n_search = int(self.hyper_samples or SHARED_HYPER_SAMPLES)
+        if len(X) > n_search:
+            rng = np.random.default_rng(seed_from(self.random_state))
+            ends = np.unique(np.r_[X.argmin(axis=0), X.argmax(axis=0)])
+            rest = np.setdiff1d(np.arange(len(X)), ends)
+            pick = rng.choice(rest, max(n_search - len(ends), 0), replace=False)
+            subset = np.sort(np.r_[ends, pick])
+            X, Y = X[subset], Y[subset]
+        search = clone(self).set_params(hyper_samples=None)
+        return search._fit(X, Y, None)
+
+    def _search(self, Z: NDArray[np.float64], Y: NDArray[np.float64]) -> GaussianProcessRegressor:
+        """Hyperparameters by marginal likelihood (on at most ``hyper_samples`` of the samples), then the solve on all."""
+        seed = seed_from(self.random_state) % 2**32
+        n_search = len(Z) if self.hyper_samples is None else min(len(Z), int(self.hyper_samples))
+        subset = np.sort(np.random.default_rng(seed).choice(len(Z), n_search, replace=False)) \
+            if n_search < len(Z) else slice(None)
+        gpr = GaussianProcessRegressor(self._kernel(Z.shape[1]), normalize_y=True,
+                                       n_restarts_optimizer=int(self.restarts), random_state=seed)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", ConvergenceWarning)
+            gpr.fit(Z[subset], Y[subset])
+        for w in caught:          # bounds reached are normal (noise-free data): a log line, not a warning
+            if issubclass(w.category, ConvergenceWarning):
+                log.info("GP hyperparameters: %s", w.message)
+            else:
+                warnings.warn(w.message, w.category, stacklevel=3)
+        if n_search < len(Z):
+            log.info("GP hyperparameters from %d of %d samples: %s", n_search, len(Z), gpr.kernel_)
+            gpr = GaussianProcessRegressor(gpr.kernel_, normalize_y=True, optimizer=None).fit(Z, Y)
+        return gpr
 
     def _prepare(self) -> "GaussianProcessErrorModel":
         """Precompute what every prediction needs (after fitting or loading); returns self.

@@ -11,6 +11,7 @@ fitting and prediction agree.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 from numbers import Integral
 
@@ -118,11 +119,16 @@ class PartitionedErrorModel(ErrorModelBase):
         seed = seed_from(self.random_state)
         partition = spec.build(S, min_samples, seed, self.blend_width)
         self._weights, self._combiner = BlendWeights(partition), None
+        reach = local.region_overlap if isinstance(local, GaussianProcessErrorModel) else 1.0
         with one_blas_thread():
-            groups = self._training_groups(partition, S)
+            groups = self._training_groups(partition, S, reach)
         seeds = np.random.SeedSequence(seed).spawn(partition.n_regions)
         models = [clone(local).set_params(random_state=int(s.generate_state(1)[0])) for s in seeds]
-        self.models_ = _fit_regions(models, [(X[idx], Y[idx], w) for idx, w in groups], self.n_jobs)
+        shared = None
+        if isinstance(local, GaussianProcessErrorModel) and local.hyperparameters == "shared":
+            shared = clone(local).set_params(random_state=seed).fit_shared(X, Y)
+            log.info("shared GP hyperparameters: %s", shared.sklearn_kernel())
+        self.models_ = _fit_regions(models, [(X[idx], Y[idx], w) for idx, w in groups], self.n_jobs, shared)
         self.partition_ = partition
         self.min_samples_ = int(min_samples)
         self.n_outputs_ = Y.shape[1]
@@ -147,14 +153,24 @@ class PartitionedErrorModel(ErrorModelBase):
         X = validate_data(self, X, reset=False, dtype=np.float64)
         return self.partition_.assign(self._coordinates(X)[1])
 
-    def _training_groups(self, partition: Partition, X) -> list[tuple[NDArray[np.intp], NDArray[np.float64]]]:
-        """Samples and their blend weights for every region (rows with a positive weight)."""
-        if self.blend == "hard":
+    def _training_groups(self, partition: Partition, X, reach: float = 1.0
+                         ) -> list[tuple[NDArray[np.intp], NDArray[np.float64]]]:
+        """Samples and their blend weights for every region (rows with a positive weight).
+
+        ``reach > 1`` (Gaussian-process regions only, which use the weights
+        only to pick their samples): the weights of kernels ``reach`` times
+        wider, so every region gets the samples that far out.
+        """
+        weights = self._weights
+        if reach != 1.0:
+            partition = dataclasses.replace(partition, sigmas=partition.sigmas * reach)
+            weights = BlendWeights(partition)
+        if self.blend == "hard" and reach == 1.0:
             labels = partition.assign(X)
             return [(np.flatnonzero(labels == r), np.ones(int(np.sum(labels == r))))
                     for r in range(partition.n_regions)]
         parts = [[] for _ in range(partition.n_regions)]
-        plan, _, blocks = self._weights.blocks(X)
+        plan, _, blocks = weights.blocks(X)
         for block in blocks:
             regions, W = region_weights(partition.kernel_region[block.kernels], block.weights)
             rows = plan.order[block.positions]
@@ -235,16 +251,18 @@ class PartitionedErrorModel(ErrorModelBase):
         return self._distance_to_train_inputs(X)
 
 
-def _fit_regions(models: list, data: list[tuple], n_jobs) -> list:
+def _fit_regions(models: list, data: list[tuple], n_jobs, shared=None) -> list:
     """Fit every region's model to its ``(X, Y, weights)``; swarms of all regions in one batch.
 
     PSO fits run their swarms together (:func:`fit_swarms`: one vectorised loop
     for all regions and outputs, grouped by dimension), in ``n_jobs`` slices of
     regions when asked. Every region keeps its own seed, so each model is
-    exactly the one a solo fit gives, whatever ``n_jobs``.
+    exactly the one a solo fit gives, whatever ``n_jobs``. ``shared``: the
+    hyperparameters Gaussian-process regions share (see ``GaussianProcessErrorModel``).
     """
     if not all(isinstance(m, ErrorModel) and m.solver == "pso" for m in models):   # no swarms: region by region
-        return Parallel(n_jobs=n_jobs)(delayed(_fit_one)(m, *d) for m, d in zip(models, data))
+        extra = {} if shared is None else {"shared": shared}
+        return Parallel(n_jobs=n_jobs)(delayed(_fit_one)(m, *d, **extra) for m, d in zip(models, data))
     workers = max(1, min(len(models), effective_n_jobs(n_jobs)))
     cuts = np.linspace(0, len(models), workers + 1).round().astype(int)
     slices = [(models[a:b], data[a:b]) for a, b in zip(cuts[:-1], cuts[1:]) if b > a]
@@ -253,8 +271,8 @@ def _fit_regions(models: list, data: list[tuple], n_jobs) -> list:
     return [m for part in Parallel(n_jobs=n_jobs)(delayed(_fit_batch)(*sl) for sl in slices) for m in part]
 
 
-def _fit_one(model, X, Y, weights):
-    return model._fit(X, Y, weights)
+def _fit_one(model, X, Y, weights, **extra):
+    return model._fit(X, Y, weights, **extra)
 
 
 def region_minimum(local, n_active: int) -> tuple[int, str]:

@@ -54,6 +54,9 @@ class GaussianProcessSpec:
     kernel: str = "rbf"
     nu: float = 2.5
     restarts: int = 1
+    hyper_samples: int | None = None
+    hyperparameters: str = "shared"
+    region_overlap: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -103,8 +106,10 @@ class ModelSpec:
 
     def local(self, random_state: int | None) -> ErrorModel | GaussianProcessErrorModel:
         if self.kind == "gaussian_process":
-            return GaussianProcessErrorModel(inputs=self.inputs, kernel=self.gp.kernel, nu=self.gp.nu,
-                                             restarts=self.gp.restarts, random_state=random_state)
+            gp = self.gp
+            return GaussianProcessErrorModel(inputs=self.inputs, kernel=gp.kernel, nu=gp.nu, restarts=gp.restarts,
+                                             hyper_samples=gp.hyper_samples, hyperparameters=gp.hyperparameters,
+                                             region_overlap=gp.region_overlap, random_state=random_state)
         pso = SwarmConfig(**self.swarm) if self.solver == "pso" else None
         return ErrorModel(inputs=self.inputs, basis=self.basis, degree=self.degree, harmonics=self.harmonics,
                           cross_terms=self.cross_terms, solver=self.solver, pso=pso, fitness=self.fitness,
@@ -322,7 +327,8 @@ def _data_file(sec: Section, key: str, base: Path, *, tracker: bool | None
 
 KIND_KEYS = {
     "series": {"inputs", "basis", "degree", "harmonics", "cross_terms", "solver", "partition", "blend"},
-    "gaussian_process": {"inputs", "kernel", "nu", "restarts", "partition", "blend"},
+    "gaussian_process": {"inputs", "kernel", "nu", "restarts", "hyper_samples", "hyperparameters", "region_overlap",
+                         "partition", "blend"},
     "kinematic": {"base", "tool", "rcond", "residual"},
 }
 KINDS = tuple(KIND_KEYS)
@@ -371,17 +377,24 @@ def _series_entry(sec: Section, name: str) -> ModelSpec:
 
 
 def _gp_entry(sec: Section, name: str) -> ModelSpec:
-    """``kind: gaussian_process``: inputs, kernel, nu, restarts, and optionally partition and blend."""
+    """``kind: gaussian_process``: inputs, kernel, nu, the search's settings, and optionally partition and blend."""
     inputs = sec.get("inputs", "str", default="cartesian", check=_choice_check("cartesian", "joint"))
     kernel = sec.get("kernel", "str", default="rbf", check=_choice_check("rbf", "matern"))
     nu = sec.get("nu", "float", default=2.5, check=lambda v: None if v in (0.5, 1.5, 2.5) else "0.5, 1.5 or 2.5")
     if sec.has("nu") and kernel != "matern":
         sec.fail(sec.path("nu"), "applies to kernel: matern only")
     restarts = sec.get("restarts", "int", default=1, check=range_check(0, 20, integer=True))
+    hyper_samples = sec.get("hyper_samples", "int", default=None, check=range_check(20, None, integer=True))
+    hyperparameters = sec.get("hyperparameters", "str", default="shared", check=_choice_check("shared", "per_region"))
+    overlap = sec.get("region_overlap", "float", default=1.0, check=range_check(1.0, 3.0))
     partition = _partition(sec, inputs)
+    for key in ("hyperparameters", "region_overlap"):
+        if sec.has(key) and partition is None:
+            sec.fail(sec.path(key), "applies to a partitioned GP only (add 'partition')")
     sec.done()
     return ModelSpec(name=name, inputs=inputs, solver="marginal-likelihood", kind="gaussian_process",
-                     gp=GaussianProcessSpec(kernel, nu, restarts), partition=partition)
+                     gp=GaussianProcessSpec(kernel, nu, restarts, hyper_samples, hyperparameters, overlap),
+                     partition=partition)
 
 
 def _kinematic_entry(sec: Section, name: str, robot: str | None) -> ModelSpec:

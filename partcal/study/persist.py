@@ -25,13 +25,14 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from sklearn.base import clone
 
 from .. import __version__
 from .._io import atomic_write
 from ..errors import ModelFileError, PartcalError
 from ..models.angles import InputMap
 from ..models.bases import Basis, Scaling, varying_inputs
-from ..models.gp import KERNELS, NUS, GaussianProcessErrorModel
+from ..models.gp import HYPERPARAMETERS, KERNELS, NUS, GaussianProcessErrorModel
 from ..models.kinematic import STATUSES, Identification, KinematicModel, parameter_names, robot_with
 from ..models.partition import Partition
 from ..models.partitioned import PartitionedErrorModel
@@ -89,6 +90,8 @@ def _body(model) -> dict:
 
 def _gp_dict(m: GaussianProcessErrorModel) -> dict:
     return {"kernel": m.kernel, "nu": float(m.nu), "restarts": int(m.restarts),
+            "hyper_samples": None if m.hyper_samples is None else int(m.hyper_samples),
+            "hyperparameters": m.hyperparameters, "region_overlap": float(m.region_overlap),
             "input_map": m.input_map_.to_dict(), "x_train": m.X_train_.tolist(),
             "dual_coef": m.dual_coef_.tolist(), "y_mean": m.y_mean_.tolist(), "y_std": m.y_std_.tolist(),
             "amplitude": m.amplitude_, "length_scale": m.length_scale_.tolist(), "noise": m.noise_,
@@ -234,8 +237,7 @@ def _partitioned_from(r: "_Reader", inputs: str, n_in: int, n_out: int) -> Parti
     model.n_outputs_ = n_out
     model._y_1d = False
     first = model.models_[0]
-    model.local = GaussianProcessErrorModel(inputs=inputs, kernel=first.kernel, nu=first.nu) \
-        if local_kind == "gaussian_process" else ErrorModel(inputs=inputs)
+    model.local = clone(first) if local_kind == "gaussian_process" else ErrorModel(inputs=inputs)
     return model
 
 
@@ -307,7 +309,12 @@ def _gp_from(r: "_Reader", inputs: str, n_in: int, n_out: int) -> GaussianProces
     imap = _input_map(r, "input_map", n_in)
     d = max(imap.n_active, 1)
     n = len(r.get("x_train", list))
-    model = GaussianProcessErrorModel(inputs=inputs, kernel=kernel, nu=nu, restarts=r.integer("restarts", 0, 20))
+    # the search settings (files written before they existed: how such GPs were fitted then)
+    hyper_samples = r.integer("hyper_samples", 20) if r.doc.get("hyper_samples") is not None else None
+    shared = r.choice("hyperparameters", HYPERPARAMETERS) if "hyperparameters" in r.doc else "per_region"
+    overlap = r.number("region_overlap", 1.0, 3.0) if "region_overlap" in r.doc else 1.0
+    model = GaussianProcessErrorModel(inputs=inputs, kernel=kernel, nu=nu, restarts=r.integer("restarts", 0, 20),
+                                      hyper_samples=hyper_samples, hyperparameters=shared, region_overlap=overlap)
     model.input_map_ = imap
     model.X_train_ = r.array("x_train", (n, d))
     model.dual_coef_ = r.array("dual_coef", (n, n_out))

@@ -6,7 +6,7 @@ Test sets: 1,000 further poses drawn the same way, and the paper's three test pa
 Everything runs on one core (BLAS threads limited before numpy loads); global and partitioned GPs
 are timed in the same run, in CPU seconds of this process (wall time on a shared machine swings by
 2x and more). GPs use the defaults (anisotropic RBF, one seeded restart; regions share one
-hyperparameter search on 500 samples) unless a row says otherwise.
+hyperparameter search on a tenth of the samples, at least 500) unless a row says otherwise.
 
 Rows: the global GP the way scikit-learn fits it (the search on all samples); the global GP with
 its search on 500 samples (``hyper_samples``), which shows where a GP's time goes; k-means

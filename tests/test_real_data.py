@@ -6,7 +6,6 @@ series, least-squares models) so that it runs in seconds.
 """
 
 import json
-import time
 
 import pytest
 from conftest import ROOT, SHARED
@@ -61,10 +60,8 @@ def fast_config(tmp_path):
 @pytest.fixture(scope="module")
 def ur10_run(tmp_path_factory):
     path = fast_config(tmp_path_factory.mktemp("ur10"))
-    start = time.perf_counter()
     result = run(load_config(path))
-    out = write_run(result)
-    return result, out, time.perf_counter() - start
+    return result, write_run(result)
 
 
 def test_the_shipped_config_reads_the_shared_files_by_their_relative_path(tmp_path):
@@ -77,7 +74,7 @@ def test_the_shipped_config_reads_the_shared_files_by_their_relative_path(tmp_pa
 
 
 def test_registration_of_the_real_tracker_data(ur10_run):
-    result, out, seconds = ur10_run
+    result, out = ur10_run
     doc = json.loads((out / "metrics.json").read_text())
     reg = doc["registration"]
     assert doc["datasets"] == {"identification": {"n": 334}, "joint_configurations": {"n": 248},
@@ -94,12 +91,11 @@ def test_registration_of_the_real_tracker_data(ur10_run):
     assert 0.3 < doc["uncompensated"]["joint_configurations"]["rms_3d"] < 1.0
     assert sorted(p.name for p in (out / "data").iterdir()) == [
         "identification.csv", "iso_cubes.csv", "joint_configurations.csv", "random_poses.csv"]
-    assert seconds < 60
 
 
 def test_the_best_model_improves_every_test_series(ur10_run):
     """Held-out B, C (random poses) and D (ISO cubes, scored up to a rigid transform in its own frame)."""
-    result, out, _ = ur10_run
+    result, out = ur10_run
     doc = json.loads((out / "metrics.json").read_text())
     assert doc["best"].startswith("DH")            # the geometric identification carries the real robot
     best = doc["models"][doc["best"]]

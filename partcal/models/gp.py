@@ -43,7 +43,7 @@ NUS = (0.5, 1.5, 2.5)
 LENGTH_BOUNDS = (1e-2, 1e3)        # on inputs scaled to [-1, 1]
 AMPLITUDE_BOUNDS = (1e-3, 1e3)     # on normalised outputs
 NOISE_BOUNDS = (1e-12, 1.0)
-SHARED_HYPER_SAMPLES = 500         # default subset for a partition's shared hyperparameters
+SHARED_HYPER_SAMPLES = (500, 2000)  # a partition's shared search: a tenth of the samples, within these bounds
 HYPERPARAMETERS = ("shared", "per_region")
 SAMPLES_PER_INPUT = 10             # default smallest region: 10 samples per varying input
 _BLOCK = 2048
@@ -68,8 +68,10 @@ class GaussianProcessErrorModel(ErrorModelBase):
         subset when there are more; the GP is then solved on all samples with
         the hyperparameters found. The search costs O(n^3) per step and takes
         dozens of steps, the solve one step, so this is where a large fit's
-        time goes. None: all samples for a global GP (scikit-learn's way),
-        ``SHARED_HYPER_SAMPLES`` for the shared hyperparameters of a partition.
+        time goes. None: all samples for a global GP (scikit-learn's way); for
+        the shared hyperparameters of a partition, a tenth of the samples, but
+        at least 500 and at most 2,000 (``SHARED_HYPER_SAMPLES``; fewer search
+        samples than that miss fine structure and read it as noise).
     hyperparameters : {"shared", "per_region"}
         As the local model of a ``PartitionedErrorModel``: one set of
         hyperparameters learnt from the whole training set (a subset of
@@ -184,13 +186,15 @@ class GaussianProcessErrorModel(ErrorModelBase):
     def fit_shared(self, X, Y) -> "GaussianProcessErrorModel":
         """Fit as the hyperparameters a partition's regions share; returns self.
 
-        The search runs on at most ``hyper_samples`` (default
-        ``SHARED_HYPER_SAMPLES``) samples of ``X, Y``: a seeded random subset
-        that keeps every input's smallest and largest value, so that the input
-        map, and with it the meaning of the length scales, is that of all of ``X``.
+        The search runs on at most ``hyper_samples`` samples of ``X, Y`` (by
+        default a tenth of them, within ``SHARED_HYPER_SAMPLES``): a seeded
+        random subset that keeps every input's smallest and largest value, so
+        that the input map, and with it the meaning of the length scales, is
+        that of all of ``X``.
         """
         X, Y = np.asarray(X, dtype=float), np.asarray(Y, dtype=float)
-        n_search = int(self.hyper_samples or SHARED_HYPER_SAMPLES)
+        low, high = SHARED_HYPER_SAMPLES
+        n_search = int(self.hyper_samples or min(max(len(X) // 10, low), high))
         if len(X) > n_search:
             rng = np.random.default_rng(seed_from(self.random_state))
             ends = np.unique(np.r_[X.argmin(axis=0), X.argmax(axis=0)])

@@ -239,7 +239,7 @@ def minimize_batch(
     return run.results
 
 
-_RANDOM_BLOCK_BYTES = 16 << 20    # random numbers drawn ahead for all running swarms
+_RANDOM_BLOCK_BYTES = 4 << 20     # raw random words drawn ahead for all running swarms
 
 
 class _Run:
@@ -275,8 +275,10 @@ class _Run:
         chi = cfg.chi if cfg.rule == "constriction" else 1.0
         self.scale = chi
         self.pull = (chi * cfg.c1 * 2.0**-16, chi * cfg.c2 * 2.0**-16)
-        self.block = int(min(32, max(1, _RANDOM_BLOCK_BYTES // (max(b, 1) * 2 * n * dims * 8))))
-        self.rand, self.used = np.empty((b, self.block, 2, dims, n)), self.block
+        self.count, self.words = 2 * dims * n, -(-2 * dims * n // 4)
+        self.block = int(min(32, max(1, _RANDOM_BLOCK_BYTES // (max(b, 1) * self.words * 8))))
+        self.raw, self.used = np.empty((b, self.block * self.words), dtype=np.uint64), self.block
+        self.r1, self.r2 = np.empty_like(x), np.empty_like(x)
         self.history = np.empty((min(cfg.iterations, 1024) + 1, b))
         self.history[0] = f.min(axis=1) if n else np.inf
         self.results: list = [None] * b
@@ -290,10 +292,11 @@ class _Run:
     def _compact(self) -> None:
         """Drop the rows of stopped problems (with their unused random numbers)."""
         keep = self.live
-        for name in ("idx", "live", "x", "v", "p", "pf", "lo", "hi", "vmax", "vmin", "tmp", "mask"):
+        for name in ("idx", "live", "x", "v", "p", "pf", "lo", "hi", "vmax", "vmin", "tmp", "mask", "r1", "r2"):
             setattr(self, name, getattr(self, name)[keep])
         self.rows = np.arange(self.idx.size)
-        self.rand = self.rand[keep] if self.used < self.block else np.empty((keep.sum(),) + self.rand.shape[1:])
+        self.raw = self.raw[keep] if self.used < self.block else np.empty((keep.sum(),) + self.raw.shape[1:], np.uint64)
+        self._unpack()
 
     def _refill(self) -> None:
         """Draw the next block of random numbers: per problem and iteration, r1 then r2, ``dims * n`` each.
@@ -304,18 +307,22 @@ class _Run:
         are far finer than the spread a swarm needs). Every iteration takes
         the same whole number of words from the problem's stream, so which
         number lands where does not depend on the block length (which depends
-        on the batch). They come scaled by the pull coefficients (and 2^-16),
-        so the update multiplies once.
+        on the batch). The block holds the raw words (a quarter of the bytes
+        of floats, so it stays in cache); each iteration turns its own into
+        floats for all problems at once, scaled by the pull coefficients (and
+        2^-16), so the update multiplies once.
         """
-        block, _, dims, n = self.rand.shape[1:]
-        count = 2 * dims * n
-        words = -(-count // 4)
+        size = self.raw.shape[1]
         for k, b in enumerate(self.idx):
-            u = self.bits[b].random_raw(block * words).view(np.uint16).reshape(block, 4 * words)[:, :count]
-            u = u.reshape(block, 2, dims, n)
-            np.multiply(u[:, 0], self.pull[0], out=self.rand[k, :, 0])
-            np.multiply(u[:, 1], self.pull[1], out=self.rand[k, :, 1])
+            self.raw[k] = self.bits[b].random_raw(size)
         self.used = 0
+        self._unpack()
+
+    def _unpack(self) -> None:
+        """The 16-bit uniforms of the block as ``(b, block, 2, dims, n)`` (a view of the raw words)."""
+        b, dims, n = self.x.shape
+        self.u16 = self.raw.view(np.uint16).reshape(b, self.block, 4 * self.words)[:, :, :self.count].reshape(
+            b, self.block, 2, dims, n)
 
     def step(self, it: int, fun) -> None:
         """One velocity and position update, absorbing walls, new personal bests."""
@@ -324,7 +331,9 @@ class _Run:
         if self.used == self.block:
             self._refill()
         cfg, x, v, t, p, mask = self.cfg, self.x, self.v, self.tmp, self.p, self.mask
-        r1, r2 = self.rand[:, self.used, 0], self.rand[:, self.used, 1]
+        r1, r2 = self.r1, self.r2
+        np.multiply(self.u16[:, self.used, 0], self.pull[0], out=r1)
+        np.multiply(self.u16[:, self.used, 1], self.pull[1], out=r2)
         self.used += 1
         if cfg.rule == "inertia":
             v *= cfg.inertia[0] + (cfg.inertia[1] - cfg.inertia[0]) * (it - 1) / max(cfg.iterations - 1, 1)

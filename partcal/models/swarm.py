@@ -281,6 +281,11 @@ class _Run:
         self.r1, self.r2 = np.empty_like(x), np.empty_like(x)
         self.history = np.empty((min(cfg.iterations, 1024) + 1, b))
         self.history[0] = f.min(axis=1) if n else np.inf
+        self.gbest = self.pf.argmin(axis=1)             # each swarm's best particle
+        # the first iteration at which each swarm's patience test can pass (see ``stops``)
+        self.next_check = np.full(b, cfg.patience or 0)
+        self.check_at = cfg.patience
+        self.inertia_rule, self.global_best = cfg.rule == "inertia", cfg.topology == "global"
         self.results: list = [None] * b
         self.x_of_view = self.view = None
 
@@ -292,7 +297,8 @@ class _Run:
     def _compact(self) -> None:
         """Drop the rows of stopped problems (with their unused random numbers)."""
         keep = self.live
-        for name in ("idx", "live", "x", "v", "p", "pf", "lo", "hi", "vmax", "vmin", "tmp", "mask", "r1", "r2"):
+        for name in ("idx", "live", "x", "v", "p", "pf", "lo", "hi", "vmax", "vmin", "tmp", "mask", "r1", "r2", "gbest",
+                     "next_check"):
             setattr(self, name, getattr(self, name)[keep])
         self.rows = np.arange(self.idx.size)
         self.raw = self.raw[keep] if self.used < self.block else np.empty((keep.sum(),) + self.raw.shape[1:], np.uint64)
@@ -335,15 +341,15 @@ class _Run:
         np.multiply(self.u16[:, self.used, 0], self.pull[0], out=r1)
         np.multiply(self.u16[:, self.used, 1], self.pull[1], out=r2)
         self.used += 1
-        if cfg.rule == "inertia":
+        if self.inertia_rule:
             v *= cfg.inertia[0] + (cfg.inertia[1] - cfg.inertia[0]) * (it - 1) / max(cfg.iterations - 1, 1)
         elif self.scale != 1.0:
             v *= self.scale
         np.subtract(p, x, out=t)
         t *= r1
         v += t
-        if cfg.topology == "global":
-            guide = p[self.rows, :, self.pf.argmin(axis=1)][:, :, None]
+        if self.global_best:
+            guide = p[self.rows, :, self.gbest][:, :, None]
         else:
             guide = p[self.rows[:, None], :, _neighbourhood_best(self.pf, cfg)].transpose(0, 2, 1)
         np.subtract(guide, x, out=t)
@@ -363,27 +369,50 @@ class _Run:
         mask[:, 1:] = mask[:, :1]
         np.putmask(p, mask, x)                    # a full mask: about 3 times faster than copyto(where=)
         np.fmin(self.pf, f, out=self.pf)
+        self.gbest = self.pf.argmin(axis=1)       # argmin and a gather: faster than min(axis=1)
 
     def stops(self, it: int) -> NDArray[np.bool_]:
-        """Record each problem's best; return which of the live ones stop now (threshold or patience), or None."""
+        """Record each problem's best; return which of the live ones stop now (threshold or patience), or None.
+
+        The patience test ``history[it - patience] <= best + ftol |best|`` runs
+        only from the iteration where it can first pass: after a test at
+        iteration ``i``, with ``j`` the first iteration in ``(i - patience, i]``
+        whose best was already at most ``floor = best_i + ftol |best_i|``, no
+        iteration before ``j + patience`` can pass it (earlier bests are all
+        above ``floor``, and the floor only falls as the best does). While a
+        swarm still improves fast that skips ``patience`` iterations at a time;
+        the iteration it stops at is the same as with a test every iteration.
+        Rows whose best is negative (where rounding might not keep the floor
+        monotonic) are tested every iteration.
+        """
         cfg, history = self.cfg, self.history
         if it >= history.shape[0]:
             history = np.empty((min(2 * history.shape[0], cfg.iterations + 1), history.shape[1]))
             history[:it] = self.history[:it]
             self.history = history
-        cols = slice(None) if self.idx.size == history.shape[1] else self.idx
-        best = self.pf.min(axis=1)
-        history[it, cols] = best                     # stopped rows too: their history was copied already
-        if cfg.patience is not None and it >= cfg.patience:
+        full = self.idx.size == history.shape[1]
+        best = self.pf[self.rows, self.gbest]
+        if full:
+            history[it] = best
+        else:
+            history[it, self.idx] = best             # stopped rows too: their history was copied already
+        done = None
+        if cfg.patience is not None and it >= self.check_at:
+            patience = cfg.patience
             floor = np.abs(best)
             floor *= cfg.ftol
             floor += best
-            done = history[it - cfg.patience, cols] <= floor      # improved by ftol * |best| at most
-            if cfg.stop_fitness is not None:
-                done |= best <= cfg.stop_fitness
-        elif cfg.stop_fitness is not None:
-            done = best <= cfg.stop_fitness
-        else:
+            window = history[it - patience:it + 1] if full else history[it - patience:it + 1, self.idx]
+            below = window <= floor                          # (patience + 1, b); the last row is all True
+            done = below[0] & (self.next_check <= it)         # improved by ftol * |best| at most
+            first = np.argmax(below[1:], axis=0)             # j - (it - patience + 1)
+            self.next_check = np.maximum(self.next_check, np.where(best >= 0, it + 1 + first, it + 1))
+            live = self.next_check if self.n_live == self.live.size else self.next_check[self.live]
+            self.check_at = live.min() if live.size else it + 1
+        if cfg.stop_fitness is not None:
+            reached = best <= cfg.stop_fitness
+            done = reached if done is None else done | reached
+        if done is None:
             return None
         if self.n_live < self.live.size:
             done &= self.live

@@ -126,21 +126,21 @@ class ErrorModel(ErrorModelBase):
     # ------------------------------------------------------------------ fitting
     def fit(self, X, y):
         """Fit the coefficients to errors ``y`` (n, 3) mm at inputs ``X`` (n, d). Returns self."""
-        X = validate_data(self, X, dtype=np.float64)
-        self._fit(X, y, None)
+        X, y = validate_data(self, X, y, multi_output=True, y_numeric=True, dtype=np.float64)   # once, with y
+        self._fit(X, y, None, trusted=True)
         self.train_inputs_ = np.array(X, copy=True)
         return self
 
-    def _fit(self, X, y, sample_weight):
-        problem = self._setup(X, y, sample_weight)
+    def _fit(self, X, y, sample_weight, trusted: bool = False):
+        problem = self._setup(X, y, sample_weight, trusted)
         results = [] if self.solver == "lstsq" else fit_swarms([(self, problem)])[0]
         return self._complete(problem, results)
 
     def _setup(self, X, y, sample_weight, trusted: bool = False) -> "_Problem":
         """Validate, scale and decompose: the least-squares problem of this fit (no swarm yet).
 
-        ``trusted``: ``X`` (n, d) and ``y`` (n, outputs) are float arrays validated by
-        the caller (a partitioned model's regions), so the checks are skipped.
+        ``trusted``: ``X`` (n, d) and ``y`` (n, outputs) were validated by the caller
+        (:meth:`fit`, a partitioned model's regions), so the checks are skipped.
         """
         basis, _ = self._check_params()
         if trusted:

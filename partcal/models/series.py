@@ -41,6 +41,7 @@ INPUTS = ("cartesian", "joint")
 BASES = ("polynomial", "fourier")
 SOLVERS = ("pso", "lstsq")
 FITNESSES = ("rms", "max", "mae")
+_DEFAULT_SWARM = SwarmConfig()      # frozen: one validated instance instead of a new one per call
 
 
 class ErrorModel(ErrorModelBase):
@@ -121,7 +122,7 @@ class ErrorModel(ErrorModelBase):
         if self.pso is not None and not isinstance(self.pso, SwarmConfig):
             raise param_error(own, "pso", "a SwarmConfig or None", self.pso)
         order = self.degree if self.basis == "polynomial" else self.harmonics
-        return Basis(self.basis, self.inputs, order, bool(self.cross_terms)), self.pso or SwarmConfig()
+        return Basis(self.basis, self.inputs, order, bool(self.cross_terms)), self.pso or _DEFAULT_SWARM
 
     # ------------------------------------------------------------------ fitting
     def fit(self, X, y):
@@ -160,11 +161,14 @@ class ErrorModel(ErrorModelBase):
         weights = np.ones(n) if sample_weight is None else np.asarray(sample_weight, dtype=float)
         phi = basis.transform(X, scaling, terms)
         sqrt_w = np.sqrt(weights)
-        U, s, Vt = np.linalg.svd(phi * sqrt_w[:, None], full_matrices=False)
-        keep = s > s[0] * max(n, m) * np.finfo(float).eps
-        U, s, Vt = U[:, keep], s[keep], Vt[keep]
         Yw = Y * sqrt_w[:, None]
-        z_ls = U.T @ Yw                                             # (r, outputs)
+        # [Phi W^1/2, W^1/2 Y] = Q R (R only: Q is never formed); Phi W^1/2 = Q1 R11 and R11 = Ur S V^T, so
+        # U = Q1 Ur and U^T W^1/2 Y = Ur^T R12: the SVD of an (m, m) matrix instead of the (n, m) one
+        R = np.linalg.qr(np.hstack([phi * sqrt_w[:, None], Yw]), mode="r")
+        Ur, s, Vt = np.linalg.svd(R[:m, :m])
+        keep = s > s[0] * max(n, m) * np.finfo(float).eps
+        Ur, s, Vt = Ur[:, keep], s[keep], Vt[keep]
+        z_ls = Ur.T @ R[:m, m:]                                     # (r, outputs)
         yy = np.diagonal(Yw.T @ Yw).copy()                         # BLAS: faster than summing axis 0
         return _Problem(X, Y, weights, basis, scaling, terms, phi, Vt.T / s, z_ls, yy,
                         np.maximum(yy - (z_ls * z_ls).sum(axis=0), 0.0), np.stack(bounds))

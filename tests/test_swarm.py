@@ -167,3 +167,20 @@ def test_results_do_not_depend_on_how_many_random_numbers_are_drawn_ahead(monkey
     one_by_one = minimize_batch(batch_fun, -np.ones((5, 3)), np.ones((5, 3)), cfg, random_states=list(range(5)))
     for a, b in zip(default, one_by_one):
         assert np.array_equal(a.x, b.x) and np.array_equal(a.history, b.history)
+
+
+@pytest.mark.parametrize("patience, ftol", [(50, 1e-7), (10, 1e-3), (30, 0.0)])
+def test_patience_stop_is_the_first_iteration_the_plain_test_passes(patience, ftol):
+    # the test is skipped where it provably cannot pass; the stop must be where testing every iteration stops
+    rng = np.random.default_rng(4)
+    centres = rng.uniform(-0.8, 0.8, size=(12, 6))
+    scales = 10.0 ** rng.uniform(-2, 2, size=12)
+
+    def batch_fun(X, which):
+        return 0.5 + scales[which][:, None] * np.sum((X - centres[which][:, None, :]) ** 2, axis=2)
+
+    cfg = SwarmConfig(particles=20, patience=patience, ftol=ftol, iterations=3000)
+    for res in minimize_batch(batch_fun, -np.ones((12, 6)), np.ones((12, 6)), cfg, random_states=list(range(12))):
+        h = res.history
+        passes = [it for it in range(patience, h.size) if h[it - patience] <= h[it] + ftol * abs(h[it])]
+        assert res.success and res.nit == passes[0]

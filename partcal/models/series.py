@@ -33,10 +33,15 @@ from .bases import Basis, Scaling, SeriesPlan, column_bounds, raw_polynomial
 from .swarm import SwarmConfig, SwarmResult, minimize_batch
 
 log = logging.getLogger(__name__)
+try:        # numpy's einsum without its Python wrapper: a quarter of the cost of a small swarm's RMS
+    from numpy._core.multiarray import c_einsum as _einsum
+except ImportError:  # pragma: no cover - other numpy layouts
+    _einsum = np.einsum
 INPUTS = ("cartesian", "joint")
 BASES = ("polynomial", "fourier")
 SOLVERS = ("pso", "lstsq")
 FITNESSES = ("rms", "max", "mae")
+_DEFAULT_SWARM = SwarmConfig()      # frozen: one validated instance instead of a new one per call
 
 
 class ErrorModel(ErrorModelBase):
@@ -117,26 +122,26 @@ class ErrorModel(ErrorModelBase):
         if self.pso is not None and not isinstance(self.pso, SwarmConfig):
             raise param_error(own, "pso", "a SwarmConfig or None", self.pso)
         order = self.degree if self.basis == "polynomial" else self.harmonics
-        return Basis(self.basis, self.inputs, order, bool(self.cross_terms)), self.pso or SwarmConfig()
+        return Basis(self.basis, self.inputs, order, bool(self.cross_terms)), self.pso or _DEFAULT_SWARM
 
     # ------------------------------------------------------------------ fitting
     def fit(self, X, y):
         """Fit the coefficients to errors ``y`` (n, 3) mm at inputs ``X`` (n, d). Returns self."""
-        X = validate_data(self, X, dtype=np.float64)
-        self._fit(X, y, None)
+        X, y = validate_data(self, X, y, multi_output=True, y_numeric=True, dtype=np.float64)   # once, with y
+        self._fit(X, y, None, trusted=True)
         self.train_inputs_ = np.array(X, copy=True)
         return self
 
-    def _fit(self, X, y, sample_weight):
-        problem = self._setup(X, y, sample_weight)
+    def _fit(self, X, y, sample_weight, trusted: bool = False):
+        problem = self._setup(X, y, sample_weight, trusted)
         results = [] if self.solver == "lstsq" else fit_swarms([(self, problem)])[0]
         return self._complete(problem, results)
 
     def _setup(self, X, y, sample_weight, trusted: bool = False) -> "_Problem":
         """Validate, scale and decompose: the least-squares problem of this fit (no swarm yet).
 
-        ``trusted``: ``X`` (n, d) and ``y`` (n, outputs) are float arrays validated by
-        the caller (a partitioned model's regions), so the checks are skipped.
+        ``trusted``: ``X`` (n, d) and ``y`` (n, outputs) were validated by the caller
+        (:meth:`fit`, a partitioned model's regions), so the checks are skipped.
         """
         basis, _ = self._check_params()
         if trusted:
@@ -156,11 +161,14 @@ class ErrorModel(ErrorModelBase):
         weights = np.ones(n) if sample_weight is None else np.asarray(sample_weight, dtype=float)
         phi = basis.transform(X, scaling, terms)
         sqrt_w = np.sqrt(weights)
-        U, s, Vt = np.linalg.svd(phi * sqrt_w[:, None], full_matrices=False)
-        keep = s > s[0] * max(n, m) * np.finfo(float).eps
-        U, s, Vt = U[:, keep], s[keep], Vt[keep]
         Yw = Y * sqrt_w[:, None]
-        z_ls = U.T @ Yw                                             # (r, outputs)
+        # [Phi W^1/2, W^1/2 Y] = Q R (R only: Q is never formed); Phi W^1/2 = Q1 R11 and R11 = Ur S V^T, so
+        # U = Q1 Ur and U^T W^1/2 Y = Ur^T R12: the SVD of an (m, m) matrix instead of the (n, m) one
+        R = np.linalg.qr(np.hstack([phi * sqrt_w[:, None], Yw]), mode="r")
+        Ur, s, Vt = np.linalg.svd(R[:m, :m])
+        keep = s > s[0] * max(n, m) * np.finfo(float).eps
+        Ur, s, Vt = Ur[:, keep], s[keep], Vt[keep]
+        z_ls = Ur.T @ R[:m, m:]                                     # (r, outputs)
         yy = np.diagonal(Yw.T @ Yw).copy()                         # BLAS: faster than summing axis 0
         return _Problem(X, Y, weights, basis, scaling, terms, phi, Vt.T / s, z_ls, yy,
                         np.maximum(yy - (z_ls * z_ls).sum(axis=0), 0.0), np.stack(bounds))
@@ -371,7 +379,7 @@ def _rms_fitness(problems: list[_Problem]):
         if which is not cache[0]:
             cache[:] = [which, 1.0 / total[which][:, None], floor[which][:, None]]
         D = D.transpose(0, 2, 1)
-        f = np.einsum("bkp,bkp->bp", D, D)
+        f = _einsum("bkp,bkp->bp", D, D)
         f *= cache[1]
         f += cache[2]
         return np.sqrt(f, out=f)

@@ -239,7 +239,7 @@ def minimize_batch(
     return run.results
 
 
-_RANDOM_BLOCK_BYTES = 16 << 20    # random numbers drawn ahead for all running swarms
+_RANDOM_BLOCK_BYTES = 4 << 20     # raw random words drawn ahead for all running swarms
 
 
 class _Run:
@@ -271,14 +271,21 @@ class _Run:
         self.hi = np.repeat(hi[:, :, None], n, axis=2)
         self.vmax = cfg.vmax * (self.hi - self.lo)
         self.vmin = -self.vmax
-        self.tmp, self.mask = np.empty_like(x), np.empty(x.shape, dtype=bool)
+        self.tmp, self.mask, self.better = np.empty_like(x), np.empty(x.shape, dtype=bool), np.empty((b, n), bool)
         chi = cfg.chi if cfg.rule == "constriction" else 1.0
         self.scale = chi
         self.pull = (chi * cfg.c1 * 2.0**-16, chi * cfg.c2 * 2.0**-16)
-        self.block = int(min(32, max(1, _RANDOM_BLOCK_BYTES // (max(b, 1) * 2 * n * dims * 8))))
-        self.rand, self.used = np.empty((b, self.block, 2, dims, n)), self.block
+        self.count, self.words = 2 * dims * n, -(-2 * dims * n // 4)
+        self.block = int(min(32, max(1, _RANDOM_BLOCK_BYTES // (max(b, 1) * self.words * 8))))
+        self.raw, self.used = np.empty((b, self.block * self.words), dtype=np.uint64), self.block
+        self.r1, self.r2 = np.empty_like(x), np.empty_like(x)
         self.history = np.empty((min(cfg.iterations, 1024) + 1, b))
         self.history[0] = f.min(axis=1) if n else np.inf
+        self.gbest = self.pf.argmin(axis=1)             # each swarm's best particle
+        # the first iteration at which each swarm's patience test can pass (see ``stops``)
+        self.next_check = np.full(b, cfg.patience or 0)
+        self.check_at = cfg.patience
+        self.inertia_rule, self.global_best = cfg.rule == "inertia", cfg.topology == "global"
         self.results: list = [None] * b
         self.x_of_view = self.view = None
 
@@ -290,10 +297,12 @@ class _Run:
     def _compact(self) -> None:
         """Drop the rows of stopped problems (with their unused random numbers)."""
         keep = self.live
-        for name in ("idx", "live", "x", "v", "p", "pf", "lo", "hi", "vmax", "vmin", "tmp", "mask"):
+        for name in ("idx", "live", "x", "v", "p", "pf", "lo", "hi", "vmax", "vmin", "tmp", "mask", "better", "r1", "r2",
+                     "gbest", "next_check"):
             setattr(self, name, getattr(self, name)[keep])
         self.rows = np.arange(self.idx.size)
-        self.rand = self.rand[keep] if self.used < self.block else np.empty((keep.sum(),) + self.rand.shape[1:])
+        self.raw = self.raw[keep] if self.used < self.block else np.empty((keep.sum(),) + self.raw.shape[1:], np.uint64)
+        self._unpack()
 
     def _refill(self) -> None:
         """Draw the next block of random numbers: per problem and iteration, r1 then r2, ``dims * n`` each.
@@ -304,18 +313,22 @@ class _Run:
         are far finer than the spread a swarm needs). Every iteration takes
         the same whole number of words from the problem's stream, so which
         number lands where does not depend on the block length (which depends
-        on the batch). They come scaled by the pull coefficients (and 2^-16),
-        so the update multiplies once.
+        on the batch). The block holds the raw words (a quarter of the bytes
+        of floats, so it stays in cache); each iteration turns its own into
+        floats for all problems at once, scaled by the pull coefficients (and
+        2^-16), so the update multiplies once.
         """
-        block, _, dims, n = self.rand.shape[1:]
-        count = 2 * dims * n
-        words = -(-count // 4)
+        size = self.raw.shape[1]
         for k, b in enumerate(self.idx):
-            u = self.bits[b].random_raw(block * words).view(np.uint16).reshape(block, 4 * words)[:, :count]
-            u = u.reshape(block, 2, dims, n)
-            np.multiply(u[:, 0], self.pull[0], out=self.rand[k, :, 0])
-            np.multiply(u[:, 1], self.pull[1], out=self.rand[k, :, 1])
+            self.raw[k] = self.bits[b].random_raw(size)
         self.used = 0
+        self._unpack()
+
+    def _unpack(self) -> None:
+        """The 16-bit uniforms of the block as ``(b, block, 2, dims, n)`` (a view of the raw words)."""
+        b, dims, n = self.x.shape
+        self.u16 = self.raw.view(np.uint16).reshape(b, self.block, 4 * self.words)[:, :, :self.count].reshape(
+            b, self.block, 2, dims, n)
 
     def step(self, it: int, fun) -> None:
         """One velocity and position update, absorbing walls, new personal bests."""
@@ -324,17 +337,19 @@ class _Run:
         if self.used == self.block:
             self._refill()
         cfg, x, v, t, p, mask = self.cfg, self.x, self.v, self.tmp, self.p, self.mask
-        r1, r2 = self.rand[:, self.used, 0], self.rand[:, self.used, 1]
+        r1, r2 = self.r1, self.r2
+        np.multiply(self.u16[:, self.used, 0], self.pull[0], out=r1)
+        np.multiply(self.u16[:, self.used, 1], self.pull[1], out=r2)
         self.used += 1
-        if cfg.rule == "inertia":
+        if self.inertia_rule:
             v *= cfg.inertia[0] + (cfg.inertia[1] - cfg.inertia[0]) * (it - 1) / max(cfg.iterations - 1, 1)
         elif self.scale != 1.0:
             v *= self.scale
         np.subtract(p, x, out=t)
         t *= r1
         v += t
-        if cfg.topology == "global":
-            guide = p[self.rows, :, self.pf.argmin(axis=1)][:, :, None]
+        if self.global_best:
+            guide = p[self.rows, :, self.gbest][:, :, None]
         else:
             guide = p[self.rows[:, None], :, _neighbourhood_best(self.pf, cfg)].transpose(0, 2, 1)
         np.subtract(guide, x, out=t)
@@ -350,31 +365,54 @@ class _Run:
             v[mask] = 0.0
             self.x, self.tmp = x, t = t, x
         f = _evaluate(fun, self.view if x is self.x_of_view else self._views(), self.idx)
-        np.less(f, self.pf, out=mask[:, 0])
-        mask[:, 1:] = mask[:, :1]
+        np.less(f, self.pf, out=self.better)
+        np.copyto(mask, self.better[:, None, :])
         np.putmask(p, mask, x)                    # a full mask: about 3 times faster than copyto(where=)
         np.fmin(self.pf, f, out=self.pf)
+        self.gbest = self.pf.argmin(axis=1)       # argmin and a gather: faster than min(axis=1)
 
     def stops(self, it: int) -> NDArray[np.bool_]:
-        """Record each problem's best; return which of the live ones stop now (threshold or patience), or None."""
+        """Record each problem's best; return which of the live ones stop now (threshold or patience), or None.
+
+        The patience test ``history[it - patience] <= best + ftol |best|`` runs
+        only from the iteration where it can first pass: after a test at
+        iteration ``i``, with ``j`` the first iteration in ``(i - patience, i]``
+        whose best was already at most ``floor = best_i + ftol |best_i|``, no
+        iteration before ``j + patience`` can pass it (earlier bests are all
+        above ``floor``, and the floor only falls as the best does). While a
+        swarm still improves fast that skips ``patience`` iterations at a time;
+        the iteration it stops at is the same as with a test every iteration.
+        Rows whose best is negative (where rounding might not keep the floor
+        monotonic) are tested every iteration.
+        """
         cfg, history = self.cfg, self.history
         if it >= history.shape[0]:
             history = np.empty((min(2 * history.shape[0], cfg.iterations + 1), history.shape[1]))
             history[:it] = self.history[:it]
             self.history = history
-        cols = slice(None) if self.idx.size == history.shape[1] else self.idx
-        best = self.pf.min(axis=1)
-        history[it, cols] = best                     # stopped rows too: their history was copied already
-        if cfg.patience is not None and it >= cfg.patience:
+        full = self.idx.size == history.shape[1]
+        best = self.pf[self.rows, self.gbest]
+        if full:
+            history[it] = best
+        else:
+            history[it, self.idx] = best             # stopped rows too: their history was copied already
+        done = None
+        if cfg.patience is not None and it >= self.check_at:
+            patience = cfg.patience
             floor = np.abs(best)
             floor *= cfg.ftol
             floor += best
-            done = history[it - cfg.patience, cols] <= floor      # improved by ftol * |best| at most
-            if cfg.stop_fitness is not None:
-                done |= best <= cfg.stop_fitness
-        elif cfg.stop_fitness is not None:
-            done = best <= cfg.stop_fitness
-        else:
+            window = history[it - patience:it + 1] if full else history[it - patience:it + 1, self.idx]
+            below = window <= floor                          # (patience + 1, b); the last row is all True
+            done = below[0] & (self.next_check <= it)         # improved by ftol * |best| at most
+            first = np.argmax(below[1:], axis=0)             # j - (it - patience + 1)
+            self.next_check = np.maximum(self.next_check, np.where(best >= 0, it + 1 + first, it + 1))
+            live = self.next_check if self.n_live == self.live.size else self.next_check[self.live]
+            self.check_at = live.min() if live.size else it + 1
+        if cfg.stop_fitness is not None:
+            reached = best <= cfg.stop_fitness
+            done = reached if done is None else done | reached
+        if done is None:
             return None
         if self.n_live < self.live.size:
             done &= self.live

@@ -170,7 +170,8 @@ class GaussianProcessErrorModel(ErrorModelBase):
             self.input_map_ = shared.input_map_
             self.y_mean_, self.y_std_ = shared.y_mean_.copy(), shared.y_std_.copy()
             Z = self.input_map_.transform(X)
-            gpr = GaussianProcessRegressor(shared.sklearn_kernel(), optimizer=None).fit(Z, (Y - self.y_mean_) / self.y_std_)
+            gpr = GaussianProcessRegressor(shared.sklearn_kernel(), optimizer=None)
+            gpr.fit(Z, (Y - self.y_mean_) / self.y_std_)
         params = gpr.kernel_.get_params()
         self.X_train_ = np.ascontiguousarray(gpr.X_train_)          # the layout a loaded file has:
         self.dual_coef_ = np.ascontiguousarray(gpr.alpha_.reshape(len(Z), -1))   # same sums, same bits

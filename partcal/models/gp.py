@@ -65,7 +65,8 @@ class GaussianProcessErrorModel(ErrorModelBase):
         hyperparameter bounds with ``random_state``.
     hyper_samples : int >= 20 or None
         Most samples the marginal-likelihood search sees: a seeded random
-        subset when there are more; the GP is then solved on all samples with
+        subset when there are more, which keeps every input's smallest and
+        largest value; the GP is then solved on all samples with
         the hyperparameters found. The search costs O(n^3) per step and takes
         dozens of steps, the solve one step, so this is where a large fit's
         time goes. None: all samples for a global GP (scikit-learn's way); for
@@ -188,30 +189,20 @@ class GaussianProcessErrorModel(ErrorModelBase):
         """Fit as the hyperparameters a partition's regions share; returns self.
 
         The search runs on at most ``hyper_samples`` samples of ``X, Y`` (by
-        default a tenth of them, within ``SHARED_HYPER_SAMPLES``): a seeded
-        random subset that keeps every input's smallest and largest value, so
-        that the input map, and with it the meaning of the length scales, is
-        that of all of ``X``.
+        default a tenth of them, within ``SHARED_HYPER_SAMPLES``); the subset
+        keeps every input's smallest and largest value, so the input map, and
+        with it the meaning of the length scales, is that of all of ``X``.
         """
         X, Y = np.asarray(X, dtype=float), np.asarray(Y, dtype=float)
         low, high = SHARED_HYPER_SAMPLES
-        n_search = int(self.hyper_samples or min(max(len(X) // 10, low), high))
-        if len(X) > n_search:
-            rng = np.random.default_rng(seed_from(self.random_state))
-            ends = np.unique(np.r_[X.argmin(axis=0), X.argmax(axis=0)])
-            rest = np.setdiff1d(np.arange(len(X)), ends)
-            pick = rng.choice(rest, max(n_search - len(ends), 0), replace=False)
-            subset = np.sort(np.r_[ends, pick])
-            X, Y = X[subset], Y[subset]
-        search = clone(self).set_params(hyper_samples=None)
-        return search._fit(X, Y, None)
+        subset = _search_subset(X, int(self.hyper_samples or min(max(len(X) // 10, low), high)),
+                                seed_from(self.random_state))
+        return clone(self).set_params(hyper_samples=None)._fit(X[subset], Y[subset], None)
 
     def _search(self, Z: NDArray[np.float64], Y: NDArray[np.float64]) -> GaussianProcessRegressor:
         """Hyperparameters by marginal likelihood (on at most ``hyper_samples`` of the samples), then the solve on all."""
         seed = seed_from(self.random_state) % 2**32
-        n_search = len(Z) if self.hyper_samples is None else min(len(Z), int(self.hyper_samples))
-        subset = np.sort(np.random.default_rng(seed).choice(len(Z), n_search, replace=False)) \
-            if n_search < len(Z) else slice(None)
+        subset = _search_subset(Z, len(Z) if self.hyper_samples is None else int(self.hyper_samples), seed)
         gpr = GaussianProcessRegressor(self._kernel(Z.shape[1]), normalize_y=True,
                                        n_restarts_optimizer=int(self.restarts), random_state=seed)
         with warnings.catch_warnings(record=True) as caught:
@@ -222,8 +213,8 @@ class GaussianProcessErrorModel(ErrorModelBase):
                 log.info("GP hyperparameters: %s", w.message)
             else:
                 warnings.warn(w.message, w.category, stacklevel=3)
-        if n_search < len(Z):
-            log.info("GP hyperparameters from %d of %d samples: %s", n_search, len(Z), gpr.kernel_)
+        if isinstance(subset, np.ndarray):
+            log.info("GP hyperparameters from %d of %d samples: %s", len(subset), len(Z), gpr.kernel_)
             gpr = GaussianProcessRegressor(gpr.kernel_, normalize_y=True, optimizer=None).fit(Z, Y)
         return gpr
 
@@ -295,3 +286,13 @@ class GaussianProcessErrorModel(ErrorModelBase):
         X = validate_data(self, X, reset=False, dtype=np.float64)
         return distance_outside_boxes(self.input_map_.wrap(X), self.data_bounds_[:1], self.data_bounds_[1:])
 
+
+def _search_subset(X: NDArray[np.float64], n: int, seed: int) -> NDArray[np.intp] | slice:
+    """Rows for a hyperparameter search on at most ``n`` of ``X``: all (a slice), or a seeded random subset
+    that keeps every column's smallest and largest value (so the subset spans what all of ``X`` spans)."""
+    if len(X) <= n:
+        return slice(None)
+    ends = np.unique(np.r_[X.argmin(axis=0), X.argmax(axis=0)])
+    rest = np.setdiff1d(np.arange(len(X)), ends)
+    pick = np.random.default_rng(seed).choice(rest, max(n - len(ends), 0), replace=False)
+    return np.sort(np.r_[ends, pick])

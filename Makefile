@@ -32,8 +32,10 @@ run: $(STAMP)
 test: $(STAMP) $(SYSTEM)
 	$(BIN)/python -m pytest -n 2
 
+# pyswarms: the peer to beat (bench_swarm.py); numba: a compiled swarm loop, the bound that
+# bench_swarm_batch.py measures. Neither is a dependency of partcal.
 bench: $(STAMP)
-	$(BIN)/python -m pip install --quiet pyswarms   # the peer to beat, for bench_swarm.py only
+	$(BIN)/python -m pip install --quiet pyswarms numba
 	for b in benchmarks/bench_*.py; do $(BIN)/python $$b || exit 1; done
 
 clean:

@@ -7,7 +7,9 @@ regions (issue 13); fitting 10^5 samples into 64 regions in under 10 s (issue 4)
 same weights, then every region with weight in a block predicts its points.
 "1st call" includes building the per-cell caches (re-expressed coefficients).
 Issue 13 also: the swarms of a PSO model's 64 regions run as one vectorised batch, at least 5x
-faster than fitting the regions one by one (same seeds, identical results).
+faster than fitting the regions one by one (same seeds, identical results); measured as whole
+region fits and as the swarms alone. Not met: 3-4x, at the bound that bench_swarm_batch.py
+measures for any batch of numpy operations.
 Data: a smooth synthetic error field over a 2 x 2 x 2 m workspace (the
 timings do not depend on the values). Local models: SDP(CI) by least squares.
 Run: .venv/bin/python benchmarks/bench_partition.py
@@ -15,6 +17,7 @@ Run: .venv/bin/python benchmarks/bench_partition.py
 
 import os
 import sys
+import time
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
@@ -27,7 +30,7 @@ from sklearn.base import clone  # noqa: E402
 from partcal.models.combine import one_blas_thread  # noqa: E402
 from partcal.models.partition import KMeansPartition, Octree  # noqa: E402
 from partcal.models.partitioned import PartitionedErrorModel, _fit_regions  # noqa: E402
-from partcal.models.series import ErrorModel  # noqa: E402
+from partcal.models.series import ErrorModel, fit_swarms  # noqa: E402
 
 LOW, HIGH = np.array([-1000.0, -1000, -500]), np.array([1000.0, 1000, 1500])
 TARGET_S = 0.5
@@ -105,7 +108,14 @@ def main() -> None:
 
 
 def regional_swarms() -> None:
-    """PSO local models: every region's swarms in one batch against the regions fitted one by one."""
+    """PSO local models: every region's swarms in one batch against the regions fitted one by one.
+
+    Two readings of the target: whole region fits (each region's setup, swarms
+    and completion; the setup and completion are the same work either way)
+    and the swarms alone (the same set-up problems, run one region at a time
+    or all in one ``fit_swarms`` batch). bench_swarm_batch.py measures how
+    far any batch can go.
+    """
     rows = []
     for n, depth in ((100_000, 2), (20_000, 2)):
         X, y = field(n)
@@ -116,6 +126,8 @@ def regional_swarms() -> None:
             groups = m._training_groups(m.partition_, X)
             seeds = [int(s.generate_state(1)[0]) for s in np.random.SeedSequence(0).spawn(len(groups))]
             data = [(X[idx], y[idx], w) for idx, w in groups]
+            models = [clone(local).set_params(random_state=s) for s in seeds]
+            problems = [mm._setup(*d, trusted=True) for mm, d in zip(models, data)]
 
             def one_by_one():
                 return [clone(local).set_params(random_state=s)._fit(*d) for s, d in zip(seeds, data)]
@@ -123,14 +135,18 @@ def regional_swarms() -> None:
             def batched():
                 return _fit_regions([clone(local).set_params(random_state=s) for s in seeds], data, None)
 
-            t_solo = best_time(one_by_one, repeat=2)
-            t_batch = best_time(batched, repeat=2)
+            t_solo = best_time(one_by_one, repeat=2, clock=time.process_time)
+            t_batch = best_time(batched, repeat=2, clock=time.process_time)
+            s_solo = best_time(lambda: [fit_swarms([job]) for job in zip(models, problems)], repeat=2,
+                               clock=time.process_time)
+            s_batch = best_time(lambda: fit_swarms(list(zip(models, problems))), repeat=2, clock=time.process_time)
             same = all(np.array_equal(a.coef_, b.coef_) for a, b in zip(one_by_one(), batched()))
             rows.append([f"{n:,}", label, len(groups), f"{t_solo:.3f}", f"{t_batch:.3f}", f"{t_solo / t_batch:.1f}x",
-                         "yes" if same else "NO", f"{t_model:.2f}"])
-    print_table("PSO regions (octree depth 2, gaussian blend): swarms one by one vs one batch, one core",
-                ["samples", "local", "regions", "one by one s", "batched s", "speed-up", "identical coef",
-                 "whole fit s"], rows)
+                         f"{s_solo:.3f}", f"{s_batch:.3f}", f"{s_solo / s_batch:.1f}x", "yes" if same else "NO",
+                         f"{t_model:.2f}"])
+    print_table("PSO regions (octree depth 2, gaussian blend): one by one vs one batch, one core (CPU time)",
+                ["samples", "local", "regions", "fits one by one s", "batched s", "speed-up",
+                 "swarms one by one s", "batched s", "speed-up", "identical coef", "whole fit s"], rows)
 
 
 if __name__ == "__main__":

@@ -16,7 +16,8 @@ except PackageNotFoundError:  # running from a source tree without installing
 
 _EXPORTS = {
     "errors": ["ConfigError", "DataError", "ModelFileError", "PartcalError", "UnreachableError"],
-    "robot.kinematics": ["Robot", "available_robots", "load_robot"],
+    "robot.kinematics": ["Robot"],
+    "robot.description": ["available_robots", "load_robot"],
     "data.measurements": ["Measurements", "read_measurements", "write_measurements"],
     "data.formats": ["MeasurementFormat", "RowSelection", "load_format"],
     "data.registration": ["Registration", "register_tracker"],

@@ -136,7 +136,7 @@ def results_table(result) -> str:
 def _cmd_predict(args) -> int:
     from ._io import atomic_write
     from .data.measurements import read_columns
-    from .robot.kinematics import joint_columns
+    from .robot.description import joint_columns
     from .study.predictor import load_predictor
 
     predictor = load_predictor(args.model)
@@ -178,7 +178,7 @@ def _cmd_compensate(args) -> int:
     from .data.measurements import read_columns
     from .metrics import ExtrapolationWarning
     from .robot.compensation import CompensationWarning
-    from .robot.kinematics import joint_columns
+    from .robot.description import joint_columns
     from .study.predictor import load_predictor
 
     predictor = load_predictor(args.model)
@@ -234,7 +234,7 @@ def _cmd_import(args) -> int:
     from .data.formats import RowSelection
     from .data.measurements import read_measurements, write_measurements
     from .data.registration import register_tracker, registered
-    from .robot.kinematics import load_robot
+    from .robot.description import load_robot
 
     if args.output is None:
         raise PartcalError("import: give the CSV to write with -o OUT.csv")

@@ -7,7 +7,7 @@ from sklearn.base import clone
 
 from partcal import ErrorModel, GaussianProcessErrorModel, KinematicModel, PartcalError, read_measurements
 from partcal.models.kinematic import identify, nominal_values, parameter_names, robot_with
-from partcal.robot.kinematics import robot_from_dict
+from partcal.robot.description import robot_from_dict
 
 # A planar arm: two parallel joint axes (alpha = 0) and a tool on the last x axis. Worked out by hand,
 # positions alone cannot tell apart: d[1], d[2], tool.z and base.z (all slide along z), a[2] and tool.x

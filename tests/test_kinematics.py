@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 
 import partcal
 from partcal import ConfigError, UnreachableError, load_robot
-from partcal.robot.kinematics import parse_theta, robot_from_dict
+from partcal.robot.description import parse_theta, robot_from_dict
 from partcal.robot.trajectories import paper_path
 
 ROBOTS = Path(partcal.__file__).parent / "robot" / "builtin"

@@ -6,7 +6,7 @@ from scipy.spatial.transform import Rotation
 
 from partcal import DataError, Measurements, load_robot
 from partcal.data.registration import kabsch, register_tracker, registered
-from partcal.robot.kinematics import robot_from_dict
+from partcal.robot.description import robot_from_dict
 
 
 def synthetic(robot, seed, n=40, angle_deg=None):

@@ -33,7 +33,7 @@ from numpy.typing import NDArray
 
 from .._yamlio import Section, load_yaml, range_check
 from ..errors import ConfigError, DataError
-from ..robot.kinematics import MAX_JOINTS
+from ..robot.description import MAX_JOINTS
 
 JOINTS = tuple(f"q{j}" for j in range(1, MAX_JOINTS + 1))
 LENGTHS = ("x_nom", "y_nom", "z_nom", "x_meas", "y_meas", "z_meas", "x", "y", "z")

@@ -28,7 +28,8 @@ from numpy.typing import NDArray
 from .._io import atomic_write
 from .._validation import check_array
 from ..errors import DataError
-from ..robot.kinematics import MAX_JOINTS, Robot, joint_columns, load_robot
+from ..robot.description import MAX_JOINTS, joint_columns, load_robot
+from ..robot.kinematics import Robot
 from .formats import MeasurementFormat, RowSelection
 
 NOMINAL = ("x_nom", "y_nom", "z_nom")

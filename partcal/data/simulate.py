@@ -23,7 +23,8 @@ from .._io import check_folder_writable, replace_all
 from .._validation import safe_name
 from .._yamlio import Section, load_yaml, range_check
 from ..errors import ConfigError
-from ..robot.kinematics import Robot, joint_columns, load_robot, robot_reference
+from ..robot.description import joint_columns, load_robot, robot_reference
+from ..robot.kinematics import Robot
 from ..robot.trajectories import PATHS, paper_path
 from .measurements import Measurements, write_measurements
 

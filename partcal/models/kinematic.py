@@ -40,7 +40,8 @@ from sklearn.utils.validation import check_is_fitted, validate_data
 from .._validation import check_array, check_real, param_error
 from ..errors import DataError
 from ..metrics import distance_outside_boxes
-from ..robot.kinematics import Robot, load_robot
+from ..robot.description import load_robot
+from ..robot.kinematics import Robot
 from .base import ErrorModelBase, seed_from
 from .bases import varying_inputs
 from .gp import GaussianProcessErrorModel

@@ -4,6 +4,7 @@ The lowest layer above the foundation: it knows joint angles and positions,
 nothing about measurement files or error models.
 """
 
-from .kinematics import IKResult, Robot, available_robots, joint_columns, load_robot
+from .description import available_robots, joint_columns, load_robot
+from .kinematics import IKResult, Robot
 
 __all__ = ["IKResult", "Robot", "available_robots", "joint_columns", "load_robot"]

@@ -14,71 +14,17 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import math
-import re
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 
 from .._validation import check_array
-from .._yamlio import load_yaml
-from ..errors import ConfigError, DataError, UnreachableError
+from ..errors import DataError, UnreachableError
 from . import ik
 
-MAX_JOINTS = 12
 _CHUNK = 8192
 _I1, _I2 = [1, 2, 0], [2, 0, 1]          # cross product: (a x b)_k = a_{k+1} b_{k+2} - a_{k+2} b_{k+1}
-_BUILTIN_DIR = Path(__file__).parent / "builtin"
-_TERM = re.compile(r"\s*([+-]?)\s*(?:(\d+(?:\.\d*)?|\.\d+)\s*\*?\s*)?(q(\d+))?\s*")
-
-
-def parse_theta(expr: str | float, n_joints: int) -> tuple[float, NDArray[np.float64]]:
-    """Parse a joint-angle expression into ``(offset_deg, coefficients)``.
-
-    Parameters
-    ----------
-    expr : str or float
-        A sum of terms, each a number, ``qK`` or ``c*qK`` (degrees).
-    n_joints : int
-        Number of joints ``N``; ``K`` must be in ``1..N``.
-
-    Returns
-    -------
-    offset_deg : float
-    coefficients : ndarray, shape (N,)
-
-    Examples
-    --------
-    >>> off, c = parse_theta("180 - q2 + q3", 6)
-    >>> off, c.tolist()
-    (180.0, [0.0, -1.0, 1.0, 0.0, 0.0, 0.0])
-    """
-    coeffs = np.zeros(n_joints)
-    if isinstance(expr, (int, float)) and not isinstance(expr, bool):
-        return float(expr), coeffs
-    if not isinstance(expr, str) or not expr.strip():
-        raise ConfigError(f"expected a number or an expression like '180 - q2 + q3', got {expr!r}")
-    offset, pos = 0.0, 0
-    text = expr.strip()
-    while pos < len(text):
-        m = _TERM.match(text, pos)
-        if not m or m.end() == pos or (m.group(2) is None and m.group(3) is None):
-            raise ConfigError(f"cannot read {expr!r} at character {pos + 1}: expected a number or qK")
-        if pos > 0 and not m.group(1):
-            raise ConfigError(f"cannot read {expr!r} at character {pos + 1}: expected '+' or '-'")
-        sign = -1.0 if m.group(1) == "-" else 1.0
-        value = float(m.group(2)) if m.group(2) is not None else 1.0
-        if m.group(3):
-            k = int(m.group(4))
-            if not 1 <= k <= n_joints:
-                raise ConfigError(f"{expr!r} names q{k}, but the robot has joints q1..q{n_joints}")
-            coeffs[k - 1] += sign * value
-        else:
-            offset += sign * value
-        pos = m.end()
-    return offset, coeffs
 
 
 def _cos_sin_deg(angle_deg: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -146,6 +92,7 @@ class Robot:
     def reach_mm(self) -> float:
         """An upper bound on the distance from the base origin to the tool, mm (every link stretched out).
 
+        >>> from partcal.robot import load_robot
         >>> round(load_robot("motoman_sk120").reach_mm, 2)
         4413.19
         """
@@ -294,6 +241,7 @@ class Robot:
 
         Examples
         --------
+        >>> from partcal.robot import load_robot
         >>> robot = load_robot("motoman_sk120")
         >>> robot.positions([[0, -90, -180, 0, 0, 0]]).round(2).tolist()
         [[1857.65, 0.0, 1555.32]]
@@ -533,146 +481,3 @@ class IKResult:
     q_deg: NDArray[np.float64]
     error_mm: NDArray[np.float64]
     success: NDArray[np.bool_]
-
-
-# ---------------------------------------------------------------------- YAML
-def available_robots() -> list[str]:
-    """Names of the built-in robots."""
-    return sorted(p.stem for p in _BUILTIN_DIR.glob("*.yaml"))
-
-
-def load_robot(name_or_path: str | Path | Robot) -> Robot:
-    """Load a built-in robot by name, or a robot YAML file by path.
-
-    >>> load_robot("motoman_sk120").n_joints
-    6
-    """
-    if isinstance(name_or_path, Robot):
-        return name_or_path
-    text = str(name_or_path)
-    path = Path(text)
-    if not path.suffix and (_BUILTIN_DIR / f"{text}.yaml").exists():
-        path = _BUILTIN_DIR / f"{text}.yaml"
-    if not path.is_file():
-        raise ConfigError(f"robot {text!r}: no such file, and not a built-in robot "
-                          f"(built-ins: {', '.join(available_robots())})")
-    spec, lines = load_yaml(path)
-    return robot_from_dict(spec, source=str(path), lines=lines)
-
-
-def robot_reference(name: str, base: Path) -> str:
-    """A robot named in a config: a ``.yaml`` path relative to the config's folder, or a built-in name."""
-    candidate = base / name
-    return str(candidate) if candidate.suffix in (".yaml", ".yml") else name
-
-
-_ROBOT_KEYS = {"name", "description", "joints", "links", "tool_mm", "limits_deg", "home_deg",
-               "constraints_deg"}
-
-
-def robot_from_dict(spec: dict, source: str = "robot", lines: dict[str, int] | None = None) -> Robot:
-    """Build a :class:`Robot` from its YAML mapping (see ``docs/robots.md``).
-
-    ``lines`` (key path -> line, from :func:`partcal._yamlio.load_yaml`) puts
-    the line of the bad key into every message.
-    """
-    lines = lines or {}
-
-    def fail(where: str, msg: str):
-        line = lines.get(where)
-        raise ConfigError(f"{source}: {where}{f' (line {line})' if line else ''}: {msg}")
-
-    def number(where: str, value) -> float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
-                or abs(value) > 1e300:
-            fail(where, f"must be a finite number; got {value!r}")
-        return float(value)
-
-    def numbers(where: str, value, shape: tuple[int, ...], what: str) -> NDArray[np.float64]:
-        arr = np.asarray(value if isinstance(value, list) else [value], dtype=object)
-        if arr.shape != shape:
-            fail(where, f"expected {what}; got {value!r}")
-        for index in np.ndindex(arr.shape):
-            at = where + "".join(f"[{k}]" for k in index)
-            number(at if at in lines else where, arr[index])
-        return arr.astype(float)
-
-    if not isinstance(spec, dict):
-        fail("top level", f"expected a mapping, got {type(spec).__name__}")
-    unknown = set(spec) - _ROBOT_KEYS
-    if unknown:
-        fail(sorted(unknown)[0], f"unknown key (allowed: {', '.join(sorted(_ROBOT_KEYS))})")
-    for key in ("name", "joints", "links", "limits_deg"):
-        if key not in spec:
-            fail(key, "missing")
-    n = spec["joints"]
-    if not isinstance(n, int) or not 1 <= n <= MAX_JOINTS:
-        fail("joints", f"must be an int in [1, {MAX_JOINTS}]; got {n!r}")
-    for key, kind in (("links", list), ("constraints_deg", (list, type(None)))):
-        if not isinstance(spec.get(key), kind):
-            fail(key, f"expected a list; got {spec.get(key)!r}"[:200])
-    rows = []
-    for i, link in enumerate(spec["links"]):
-        if not isinstance(link, dict) or set(link) != {"theta", "d", "a", "alpha"}:
-            fail(f"links[{i}]", f"expected a mapping with theta, d, a, alpha; got {link!r}")
-        try:
-            off, coeffs = parse_theta(link["theta"], n)
-        except ConfigError as exc:
-            fail(f"links[{i}].theta", str(exc))
-        rows.append((*(number(f"links[{i}].{key}", link[key]) for key in ("alpha", "d", "a")), off, coeffs))
-    if not rows:
-        fail("links", "needs at least one DH row")
-    coupling = np.array([r[4] for r in rows])
-    unused = [f"q{j + 1}" for j in range(n) if not coupling[:, j].any()]
-    if unused:
-        fail("links", f"joint(s) {', '.join(unused)} appear in no theta expression")
-    limits = numbers("limits_deg", spec["limits_deg"], (n, 2), f"{n} pairs [low, high] with low < high")
-    if np.any(limits[:, 0] >= limits[:, 1]):
-        fail("limits_deg", f"expected {n} pairs [low, high] with low < high; got {spec['limits_deg']!r}")
-    home = numbers("home_deg", spec["home_deg"], (n,), f"{n} angles") if "home_deg" in spec else limits.mean(axis=1)
-    tool = numbers("tool_mm", spec.get("tool_mm", [0, 0, 0]), (3,), "[x, y, z]")
-    constraints = []
-    for i, c in enumerate(spec.get("constraints_deg") or []):
-        if not isinstance(c, dict) or not isinstance(c.get("range"), list) or len(c["range"]) != 2:
-            fail(f"constraints_deg[{i}]", f"expected {{expr: 'q2 - q3', range: [low, high]}}; got {c!r}"[:200])
-        try:
-            _, coeffs = parse_theta(c["expr"], n)
-            low, high = (number(f"constraints_deg[{i}].range", v) for v in c["range"])
-        except (KeyError, TypeError, ValueError, ConfigError) as exc:
-            fail(f"constraints_deg[{i}]", f"expected {{expr: 'q2 - q3', range: [low, high]}}: {exc}")
-        constraints.append((coeffs, low, high))
-    alpha, d, a, off = (np.array([r[k] for r in rows]) for k in range(4))
-    return Robot(name=str(spec["name"]), n_joints=n, alpha_deg=alpha, d_mm=d, a_mm=a,
-                 theta_offset_deg=off, coupling=coupling, tool_mm=tool, limits_deg=limits,
-                 home_deg=home, constraints=tuple(constraints))
-
-
-def joint_columns(n_joints: int) -> list[str]:
-    """Column names ``q1..qN``."""
-    if not 1 <= n_joints <= MAX_JOINTS:
-        raise DataError(f"a robot has 1..{MAX_JOINTS} joints, got {n_joints}")
-    return [f"q{j}" for j in range(1, n_joints + 1)]
-
-
-def _expression(offset: float, coeffs: NDArray[np.float64]) -> str | float:
-    """Inverse of :func:`parse_theta`: ``(180, [0, -1, 1])`` -> ``'180.0 - q2 + q3'``."""
-    parts = [repr(float(offset))] if offset else []
-    for j, c in enumerate(coeffs, start=1):
-        if c:
-            mag = "" if abs(c) == 1 else f"{abs(float(c))!r}*"
-            sign = "-" if c < 0 else "+"
-            parts.append(f"{sign} {mag}q{j}" if parts else f"{'-' if c < 0 else ''}{mag}q{j}")
-    return " ".join(parts) if parts else 0.0
-
-
-def robot_to_dict(robot: Robot) -> dict:
-    """The robot as the mapping :func:`robot_from_dict` reads (exact round trip)."""
-    return {
-        "name": robot.name, "joints": robot.n_joints,
-        "links": [{"theta": _expression(off, c), "d": float(d), "a": float(a), "alpha": float(al)}
-                  for off, c, d, a, al in zip(robot.theta_offset_deg, robot.coupling, robot.d_mm, robot.a_mm,
-                                              robot.alpha_deg)],
-        "tool_mm": robot.tool_mm.tolist(), "limits_deg": robot.limits_deg.tolist(),
-        "home_deg": robot.home_deg.tolist(),
-        "constraints_deg": [{"expr": _expression(0.0, c), "range": [lo, hi]} for c, lo, hi in robot.constraints],
-    }

@@ -23,7 +23,7 @@ from ..models.partition import KMeansPartition, Octree
 from ..models.partitioned import PartitionedErrorModel
 from ..models.series import ErrorModel
 from ..models.swarm import RULES, TOPOLOGIES, SwarmConfig
-from ..robot.kinematics import load_robot, robot_reference
+from ..robot.description import load_robot, robot_reference
 
 RESERVED_NAMES = {"identification", "validation", "file", "fit_seconds", "cv_seconds", "cv", "inputs", "solver",
                   "regions", "pso_rms_ratio", "granularity", "compensation", "kind", "kinematic"}

@@ -21,7 +21,7 @@ import yaml
 from .. import __version__
 from ..data.measurements import write_measurements
 from ..errors import PartcalError
-from ..robot.kinematics import joint_columns
+from ..robot.description import joint_columns
 from .config import RunConfig
 from .persist import save_model
 from .registry import RunResult

@@ -37,7 +37,8 @@ from ..models.kinematic import STATUSES, Identification, KinematicModel, paramet
 from ..models.partition import Partition
 from ..models.partitioned import PartitionedErrorModel
 from ..models.series import FITNESSES, SOLVERS, ErrorModel
-from ..robot.kinematics import MAX_JOINTS, Robot, robot_from_dict, robot_to_dict
+from ..robot.description import MAX_JOINTS, robot_from_dict, robot_to_dict
+from ..robot.kinematics import Robot
 
 FORMAT = "partcal-model"
 VERSION = 2

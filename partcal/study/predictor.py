@@ -23,7 +23,8 @@ from ..metrics import warn_far
 from ..models.bases import varying_inputs
 from ..models.partitioned import PartitionedErrorModel
 from ..robot.compensation import CompensationResult, false_target, false_target_joints
-from ..robot.kinematics import Robot, robot_from_dict
+from ..robot.description import robot_from_dict
+from ..robot.kinematics import Robot
 from .persist import load_model
 
 EXTRAPOLATION_LIMIT = 50.0    # mm (Cartesian models) or degrees (joint models) from the nearest training input

@@ -32,7 +32,8 @@ from ..metrics import cross_validated_rms, kfold_splits, nested_cross_validated_
 from ..models.bases import varying_inputs
 from ..models.kinematic import KinematicModel
 from ..models.partitioned import MIN_SAMPLES_PER_TERM, PartitionedErrorModel, region_minimum
-from ..robot.kinematics import Robot, load_robot
+from ..robot.description import load_robot
+from ..robot.kinematics import Robot
 from .config import ModelSpec, RunConfig
 from .predictor import Predictor
 

@@ -1,6 +1,7 @@
 """Model files: bit-for-bit round trips, refusal of damaged and foreign files."""
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -205,3 +206,64 @@ def test_gaussian_process_files_are_checked_for_meaning(gp_files, tmp_path, kind
     bad.write_text(json.dumps(doc))
     with pytest.raises(ModelFileError, match="bad.json: field " + message):
         load_model(bad)
+
+
+@pytest.fixture(scope="module")
+def kinematic_file(tmp_path_factory):
+    from partcal import KinematicModel
+
+    path = tmp_path_factory.mktemp("kinematic") / "dh.json"
+    save_model(KinematicModel(robot="motoman_sk120").fit(IDENT.q_deg, IDENT.errors_mm), path,
+               robot=load_robot("motoman_sk120"))
+    return json.loads(path.read_text())
+
+
+def kinematic_edits(doc) -> list:
+    """Edits of a kinematic file that used to load and predict as written, with the message each gets now."""
+    ident = doc["model"]["identification"]
+    names, status = ident["names"], ident["status"]
+    kept = status.index("unidentifiable")
+    found = status.index("identified")
+    d1, a2 = names.index("d[1]"), names.index("a[2]")
+    return [
+        (["model", "identification", "nominal", d1], lambda v: v + 5.0,
+         rf"'model.identification.nominal': entry {d1} \(d\[1\]\) is [\d.]+, but the file's robot gives"),
+        (["model", "identification", "value", kept], lambda v: v + 0.5,
+         rf"'model.identification.value': entry {kept} \({re.escape(names[kept])}\) is 'unidentifiable', so it "
+         r"keeps its nominal value"),
+        (["model", "identification", "value", a2], lambda v: v + 1e5,
+         r"'model.identification.value': the identified robot moves the tool by [\d.e+]+ mm within the joint box "
+         r"of its data, more than the robot's reach \(4413 mm\)"),
+        (["model", "identification", "std_error", found], -0.1,
+         r"'model.identification.std_error': standard errors must be finite and >= 0"),
+        (["model", "data_bounds", 0, 0], lambda v: v + 1e3, r"'model.data_bounds': a low bound exceeds"),
+    ]
+
+
+def test_kinematic_files_are_checked_for_meaning(kinematic_file, tmp_path):
+    bad = tmp_path / "bad.json"
+    for path, value, message in kinematic_edits(kinematic_file):
+        doc = edited(kinematic_file, path, value)
+        del doc["checksum"]
+        bad.write_text(json.dumps(doc))
+        with pytest.raises(ModelFileError, match="bad.json: field " + message):
+            load_model(bad)
+
+
+def test_a_deliberate_edit_of_an_identified_value_is_used_as_written(kinematic_file, tmp_path):
+    """The control of the checks above: a plausible edit (the base 1 mm higher) loads, and every
+    predicted error moves by exactly 1 mm along z."""
+    z = kinematic_file["model"]["identification"]["names"].index("base.z")
+    doc = edited(kinematic_file, ["model", "identification", "value", z], lambda v: v + 1.0)
+    del doc["checksum"]
+    path = tmp_path / "edited.json"
+    path.write_text(json.dumps(doc))
+    original, _ = load_model_from(kinematic_file, tmp_path / "original.json")
+    model, _ = load_model(path)
+    shift = model.predict(IDENT.q_deg) - original.predict(IDENT.q_deg)
+    np.testing.assert_allclose(shift, np.tile([0.0, 0.0, 1.0], (len(shift), 1)), atol=1e-9)
+
+
+def load_model_from(doc, path):
+    path.write_text(json.dumps(doc))
+    return load_model(path)

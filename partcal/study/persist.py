@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 from pathlib import Path
 from typing import Any
 
@@ -33,7 +34,14 @@ from ..errors import ModelFileError, PartcalError
 from ..models.angles import InputMap
 from ..models.bases import Basis, Scaling, varying_inputs
 from ..models.gp import HYPERPARAMETERS, KERNELS, NUS, GaussianProcessErrorModel
-from ..models.kinematic import STATUSES, Identification, KinematicModel, parameter_names, robot_with
+from ..models.kinematic import (
+    STATUSES,
+    Identification,
+    KinematicModel,
+    nominal_values,
+    parameter_names,
+    robot_with,
+)
 from ..models.partition import Partition
 from ..models.partitioned import PartitionedErrorModel
 from ..models.series import FITNESSES, SOLVERS, ErrorModel
@@ -165,8 +173,10 @@ def model_from_dict(doc: Any, source: str = "model") -> Any:
     Beyond types and shapes: scales are positive and agree with the data
     bounds they came from, the terms are exactly those of the basis and
     degree, region and tree indices are in range, kernel widths are positive,
-    and a series model predicts finite, plausible errors (under 1 km) across
-    the box of its data. A file that fails any of these is refused naming the
+    a series model predicts finite, plausible errors (under 1 km) across the
+    box of its data, and a kinematic model agrees with its robot (nominal
+    values, unidentified parameters kept nominal, a tool shift under the
+    robot's reach). A file that fails any of these is refused naming the
     field, never used to predict ``-inf`` or ``1e300``.
     """
     r = _Reader(doc, source, "")
@@ -349,14 +359,29 @@ def _kinematic_from(r: "_Reader", n_in: int, n_out: int) -> KinematicModel:
     std = ident.get("std_error", list)
     if len(std) != len(names) or not all(v is None or isinstance(v, (int, float)) for v in std):
         ident.fail("std_error", f"expected {len(names)} numbers or nulls")
-    ident.array("nominal", (len(names),))
-    ident.array("value", (len(names),))
+    nominal, value = ident.array("nominal", (len(names),)), ident.array("value", (len(names),))
+    expected = nominal_values(robot)
+    off = np.flatnonzero(~np.isclose(nominal, expected, rtol=1e-12, atol=1e-9))
+    if off.size:
+        k = off[0]
+        ident.fail("nominal", f"entry {k} ({names[k]}) is {float(nominal[k])!r}, but the file's robot gives "
+                              f"{float(expected[k])!r}: "
+                              "the nominal values must be those of field 'model.robot'")
+    kept = np.flatnonzero((np.array(status) != "identified") & (value != nominal))
+    if kept.size:
+        k = kept[0]
+        ident.fail("value", f"entry {k} ({names[k]}) is {status[k]!r}, so it keeps its nominal value "
+                            f"{float(nominal[k])!r}; got {float(value[k])!r}")
+    if any(v is not None and not (math.isfinite(v) and v >= 0) for v in std):
+        ident.fail("std_error", "standard errors must be finite and >= 0 (or null)")
     table = Identification.from_dict(ident.doc)
     model = KinematicModel(robot=robot, base=r.get("base", bool), tool=r.get("tool", bool),
                            rcond=r.get("rcond", float))
     model.robot_, model.identification_ = robot, table
     model.identified_robot_ = robot_with(robot, table.value)
     model.data_bounds_ = r.array("data_bounds", (2, n_in))
+    if np.any(model.data_bounds_[0] > model.data_bounds_[1]):
+        r.fail("data_bounds", "a low bound exceeds its high bound")
     model.active_ = r.array("active", (n_in,), bool)
     model.n_features_in_, model._y_1d = n_in, False
     model.residual_ = None
@@ -428,6 +453,7 @@ def _check_plausible(r: "_Reader", model, limit_mm: float = 1e6) -> None:
     """Series models and Gaussian processes (alone, as regions or as a kinematic model's residual) must
     predict finite errors under ``limit_mm`` at the corners and centre of their data box."""
     if isinstance(model, KinematicModel):
+        _check_kinematic_plausible(r, model)
         if model.residual_ is not None:
             _check_plausible(r.sub("model").sub("residual"), model.residual_, limit_mm)
         return
@@ -445,6 +471,23 @@ def _check_plausible(r: "_Reader", model, limit_mm: float = 1e6) -> None:
                 r.fail(f"regions[{k}].{field}" if regions else f"model.{field}",
                        f"predicts {worst} mm within the box of its data (limit {limit_mm:g} mm): "
                        "the fitted numbers are damaged")
+
+
+def _check_kinematic_plausible(r: "_Reader", model: KinematicModel) -> None:
+    """The identified robot must move the tool by less than the robot's reach from where the nominal
+    robot puts it, at the corners and centre of the joint box of the data (else the values are damaged)."""
+    lo, hi = model.data_bounds_
+    n_in = lo.size
+    corners = lo + (hi - lo) * ((np.arange(2 ** min(n_in, 10))[:, None] >> np.arange(n_in)) & 1)
+    poses = np.vstack([corners, (lo + hi) / 2])
+    with np.errstate(all="ignore"):
+        shift = np.linalg.norm(model.identified_robot_.positions(poses) - model.robot_.positions(poses), axis=1)
+    reach = model.robot_.reach_mm
+    if not np.all(np.isfinite(shift)) or shift.max() > reach:
+        worst = f"{shift.max():.4g} mm" if np.all(np.isfinite(shift)) else "a non-finite distance"
+        r.sub("model").sub("identification").fail(
+            "value", f"the identified robot moves the tool by {worst} within the joint box of its data, more "
+                     f"than the robot's reach ({reach:.0f} mm): the identified values are damaged")
 
 
 class _Reader:

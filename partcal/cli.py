@@ -82,10 +82,11 @@ def _cmd_run(args) -> int:
 
         data, _, _ = load_datasets(config)
         check_run(config, data)
+        check_writable(config.output, config.inputs(), create=False)
         sizes = ", ".join(f"{name} {len(m)}" for name, m in data.items())
         print(f"{args.config}: OK: {len(config.models)} models; data sets (poses): {sizes}; nothing fitted")
         return 0
-    check_writable(config.output)
+    check_writable(config.output, config.inputs())
     progress = Progress(args.quiet, f"partcal {__version__}: run {config.name!r}, {len(config.models)} models, "
                                     f"{1 + len(config.tests)} data sets, seed {config.seed}")
     result = run(config, progress)
@@ -269,7 +270,7 @@ def _import_run(args) -> int:
         raise PartcalError("import --config: give the output folder with -o FOLDER")
     config = load_config(args.config)
     output = Path(args.output)
-    check_writable(output)
+    check_writable(output, config.inputs())
     datasets, _, registrations = load_datasets(config)
     for reg in {id(r): r for r in registrations.values()}.values():
         print(_registration_line(reg, [n for n, r in registrations.items() if r is reg]))

@@ -250,9 +250,50 @@ models:
 """)
     res = run("import", "--config", str(cfg), "-o", str(tmp_path / "conv"))
     assert res.returncode == 0, res.stderr
-    assert sorted(p.name for p in (tmp_path / "conv").iterdir()) == ["identification.csv", "spiral.csv", "validation.csv"]
+    assert sorted(p.name for p in (tmp_path / "conv").iterdir()) == [".partcal-output", "identification.csv", "spiral.csv",
+                                                                     "validation.csv"]
     assert len(read_measurements(tmp_path / "conv" / "identification.csv")) == 80
     res = run("run", str(cfg), "-q")
     assert res.returncode == 0, res.stderr
     out = tmp_path / "reports" / "v"
     assert (out / "data" / "validation.csv").is_file() and (out / "metrics.json").is_file()
+
+
+def test_a_run_never_replaces_a_folder_holding_its_inputs_or_files_partcal_did_not_write(tmp_path):
+    """``output: .`` beside the config used to delete the config and the data (the folder is replaced whole)."""
+    home = tmp_path / "study"
+    home.mkdir()
+    shutil.copy(DATA / "identification.csv", home)
+    config = home / "cfg.yaml"
+    body = "name: s\ndata:\n  identification: identification.csv\nmodels:\n  - {name: A, solver: {method: lstsq}}\n"
+    config.write_text(body + "output: .\n")
+    for check in ([], ["--check"]):
+        res = run("run", *check, str(config))
+        assert res.returncode == 2 and res.stderr.count("\n") == 1, res.stderr
+        assert f"{home}: holds {config}, an input of this run" in res.stderr
+    assert sorted(p.name for p in home.iterdir()) == ["cfg.yaml", "identification.csv"]
+
+    mine = tmp_path / "mine"
+    (mine / "notes").mkdir(parents=True)
+    (mine / "thesis.tex").write_text("chapter 1\n")
+    config.write_text(body + f"output: {mine}\n")
+    res = run("run", str(config))
+    assert res.returncode == 2 and res.stderr.count("\n") == 1, res.stderr
+    assert f"{mine}: exists and holds files partcal did not write (notes, thesis.tex)" in res.stderr
+    assert (mine / "thesis.tex").read_text() == "chapter 1\n"
+
+    (tmp_path / "file.txt").write_text("x\n")
+    for where, message in ((tmp_path / "file.txt", "exists and is not a folder"),
+                           (tmp_path / "file.txt" / "sub", "cannot write the output folder here (Not a directory)")):
+        config.write_text(body + f"output: {where}\n")
+        res = run("run", "--check", str(config))               # --check looks at the output folder too
+        assert res.returncode == 2 and f"{where}: {message}" in res.stderr, res.stderr
+
+    out = tmp_path / "out"
+    config.write_text(body + f"output: {out}\n")
+    for _ in range(2):                      # partcal's own output (marked) is replaced by the next run
+        res = run("run", "-q", str(config))
+        assert res.returncode == 0, res.stderr
+    assert (out / ".partcal-output").is_file() and (out / "metrics.json").is_file()
+    (out / ".partcal-output").unlink()      # a run of a version before the marker: still partcal's own
+    assert run("run", "-q", str(config)).returncode == 0

@@ -194,6 +194,13 @@ class RunConfig:
         Section({}, where, self.lines, str(self.source)).fail(where, message)
     data_options: DataOptions = field(default_factory=DataOptions)
 
+    def inputs(self) -> list[Path]:
+        """The files this run reads: the config, the data sets, a robot or simulation YAML file."""
+        files = [self.source, self.identification, *self.tests.values(), self.validation, self.virtual_robot]
+        if self.robot is not None and Path(self.robot).suffix in (".yaml", ".yml"):
+            files.append(Path(self.robot))
+        return [Path(f) for f in files if f is not None]
+
     def resolved(self) -> dict:
         """The configuration with every default filled in (written beside the results)."""
         out = asdict(self)

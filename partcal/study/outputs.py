@@ -13,7 +13,7 @@ import os
 import shutil
 import tempfile
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Iterable
 
 import numpy as np
 import yaml
@@ -29,17 +29,60 @@ from .registry import RunResult
 log = logging.getLogger(__name__)
 
 
-def check_writable(output: Path) -> None:
-    """Fail early, before any fitting, if the output folder cannot be created or replaced."""
+MARKER = ".partcal-output"      # in every folder partcal replaces whole: it may replace it again
+
+
+def check_writable(output: Path, inputs: Iterable[Path] = (), create: bool = True) -> None:
+    """Fail early, before any fitting, if the output folder cannot be created or replaced.
+
+    A run replaces its output folder whole, so an existing folder is replaced
+    only when it is empty or partcal wrote it (an earlier run or import), and
+    never when it holds one of ``inputs`` (the config and data files).
+    ``create=False`` (``run --check``) creates no missing parent folder: the
+    nearest existing one must be a folder where a folder can be made.
+    """
     parent = output.parent
     try:
-        parent.mkdir(parents=True, exist_ok=True)
-        probe = tempfile.mkdtemp(prefix=f".{output.name}.probe-", dir=parent)
-        os.rmdir(probe)
+        if create:
+            parent.mkdir(parents=True, exist_ok=True)
+            os.rmdir(tempfile.mkdtemp(prefix=f".{output.name}.probe-", dir=parent))
+        else:
+            while not parent.exists() and parent != parent.parent:
+                parent = parent.parent
+            if not parent.is_dir():
+                raise NotADirectoryError(20, "Not a directory")
+            os.rmdir(tempfile.mkdtemp(prefix=".partcal.probe-", dir=parent))      # leaves nothing behind
     except OSError as exc:
         raise PartcalError(f"{output}: cannot write the output folder here ({exc.strerror or exc})") from None
     if output.exists() and not output.is_dir():
         raise PartcalError(f"{output}: exists and is not a folder; refusing to replace it")
+    if not output.is_dir():
+        return
+    where = output.resolve()
+    for path in inputs:
+        if where in Path(path).resolve().parents:
+            raise PartcalError(f"{output}: holds {path}, an input of this run; the output folder is replaced whole, "
+                               "so name a folder of its own (output: in the config, or -o)")
+    entries = sorted(p.name for p in output.iterdir())
+    if entries and not _written_by_partcal(output, entries):
+        shown = ", ".join(entries[:3]) + (f" and {len(entries) - 3} more" if len(entries) > 3 else "")
+        raise PartcalError(f"{output}: exists and holds files partcal did not write ({shown}); the output folder "
+                           "is replaced whole, so name a new or empty folder, or an earlier partcal output")
+
+
+def _written_by_partcal(folder: Path, entries: list[str]) -> bool:
+    """The folder carries partcal's marker, or is an output of a version before the marker: a run's
+    (metrics.json and config.resolved.yaml) or an import's (CSVs whose first line names partcal)."""
+    if MARKER in entries or {"metrics.json", "config.resolved.yaml"} <= set(entries):
+        return True
+
+    def converted(name: str) -> bool:
+        try:
+            with open(folder / name, encoding="utf-8") as handle:
+                return "(partcal " in handle.readline()
+        except (OSError, UnicodeDecodeError):
+            return False
+    return all(name.endswith(".csv") and converted(name) for name in entries)
 
 
 def metrics_document(result: RunResult) -> dict:
@@ -111,6 +154,7 @@ def replace_folder(output: Path, fill: Callable[[Path], Any]) -> Any:
     tmp = Path(tempfile.mkdtemp(prefix=f".{output.name}.partial-", dir=output.parent))
     try:
         value = fill(tmp)
+        (tmp / MARKER).write_text("written by partcal: a later run or import may replace this folder whole\n")
         os.chmod(tmp, 0o755)
         if output.exists():
             old = Path(tempfile.mkdtemp(prefix=f".{output.name}.old-", dir=output.parent))

@@ -74,3 +74,23 @@ def test_cartesian_false_targets_solve_the_defining_equation():
     res = false_target(predict, targets, tol_mm=1e-10)
     assert res.converged.all()
     np.testing.assert_allclose(res.commanded_mm + predict(res.commanded_mm), targets, rtol=0, atol=1e-9)
+
+
+def test_a_diverging_false_target_is_reported_not_returned_and_warns_nothing():
+    """Far outside the data a quadratic error grows faster than the position: the iteration diverges.
+    It used to overflow to inf (numpy warnings, then an error for the whole file); now that target alone
+    is not converged and keeps itself as the command, while the others converge as before."""
+    import warnings
+
+    def grows(p):                                  # 1 mm per m^2: tiny at 1 m, 1e8 mm at 10 km
+        return 1e-6 * p**2
+
+    targets = np.array([[1e7, 0.0, 0.0], [1000.0, 500.0, 800.0]])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")            # no RuntimeWarning from numpy
+        res = false_target(grows, targets)
+    assert res.converged.tolist() == [False, True]
+    assert res.residual_mm[0] == np.inf and res.residual_mm[1] <= 1e-4
+    np.testing.assert_array_equal(res.commanded_mm[0], targets[0])
+    cmd = res.commanded_mm[1]
+    np.testing.assert_allclose(cmd + grows(cmd), targets[1], atol=1e-4)

@@ -86,8 +86,13 @@ def test_missing_file_and_joint_mismatch_with_robot(tmp_path):
     with pytest.raises(DataError, match=r"nope.csv: no such file"):
         read_measurements(tmp_path / "nope.csv")
     path = write(tmp_path, "q1,q2,x_meas,y_meas,z_meas\n1,2,3,4,5\n")
-    with pytest.raises(DataError, match=r"2 joint columns but robot 'motoman_sk120' has 6 joints"):
+    with pytest.raises(DataError, match=r"2 joint columns \(q1..q2\) but robot 'motoman_sk120' has 6 joints"):
         read_measurements(path, robot="motoman_sk120")
+    # with nominal columns too (a joint model fitted on 5 of 6 joints used to be written and then refused)
+    path = write(tmp_path, "q1,q2,q3,q4,q5,x_nom,y_nom,z_nom,x_meas,y_meas,z_meas\n" + "1," * 10 + "1\n")
+    with pytest.raises(DataError, match=r"5 joint columns \(q1..q5\) but robot 'motoman_sk120' has 6 joints"):
+        read_measurements(path, robot="motoman_sk120")
+    assert read_measurements(path).n_joints == 5          # without a robot, any number of joints
 
 
 def test_measurements_record_checks_shapes():

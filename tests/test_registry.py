@@ -155,10 +155,14 @@ def test_cli_run_prints_table_2_and_bad_input_keeps_earlier_outputs(tmp_path):
     five += [",".join(r.split(",")[:5] + r.split(",")[6:12]) for r in original[3:10]]
     few.write_text("\n".join(five) + "\n")
     cases["fewer joints in a test set"] = text.replace(str(DATA / "test_rectangle.csv"), str(few))
+    cases["fewer joints, no robot"] = cases["fewer joints in a test set"].replace("robot: motoman_sk120\n", "")
     expected = {"broken YAML": "not valid YAML", "unknown key": "did you mean 'seed'",
                 "missing file": "no such file", "wrong type": "cv_folds (line 5): must be an integer",
                 "NaN in a CSV": "nan.csv:6: column 'q1': expected a finite number, got 'nan'",
-                "fewer joints in a test set": "has 5 joint columns (q1..q5) but the identification set"}
+                "fewer joints in a test set": "five_joints.csv: the file has 5 joint columns (q1..q5) but robot "
+                                              "'motoman_sk120'",
+                "fewer joints, no robot": "five_joints.csv: test set 'rectangle' has 5 joint columns (q1..q5) but the "
+                                          "identification set"}
     for label, bad in cases.items():
         cfg.source.write_text(bad)
         res = cli("run", str(cfg.source), "-q")

@@ -145,14 +145,11 @@ def read_measurements(path: str | Path, robot: str | Robot | None = None, *, nam
     values = values[keep]
     q = values[:, :n_q]
     meas = values[:, -3:]
-    if nom_cols:
-        nominal = values[:, n_q:n_q + 3]
-    else:
-        model = load_robot(robot)
-        if model.n_joints != n_q:
-            raise DataError(f"{path}: the file has {n_q} joint columns but robot {model.name!r} has "
-                            f"{model.n_joints} joints")
-        nominal = model.positions(q)
+    model = load_robot(robot) if robot is not None else None
+    if model is not None and model.n_joints != n_q:     # even with nominal columns: joint models read q1..qN
+        raise DataError(f"{path}: the file has {n_q} joint columns (q1..q{n_q}) but robot {model.name!r} has "
+                        f"{model.n_joints} joints")
+    nominal = values[:, n_q:n_q + 3] if nom_cols else model.positions(q)
     labels = None
     if columns["set"] is not None:
         labels = tuple(data[i][1][columns["set"]].strip() for i in keep)

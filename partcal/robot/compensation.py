@@ -50,19 +50,42 @@ class CompensationResult:
 
 def false_target(predict: Callable[[NDArray[np.float64]], NDArray[np.float64]], targets_mm: NDArray[np.float64],
                  *, tol_mm: float = 1e-4, max_iter: int = 50) -> CompensationResult:
-    """Fixed-point false targets for a Cartesian error model ``predict(positions) -> errors``."""
-    cmd = targets_mm - predict(targets_mm)
-    iterations = np.ones(len(targets_mm), dtype=np.int64)
-    for _ in range(max_iter - 1):
-        miss = cmd + predict(cmd) - targets_mm
-        active = np.linalg.norm(miss, axis=1) > tol_mm
-        if not active.any():
-            break
-        cmd[active] -= miss[active]               # = target - e(cmd)
-        iterations[active] += 1
-    else:                                         # out of iterations: the miss of the last step
-        miss = cmd + predict(cmd) - targets_mm
-    residual = np.linalg.norm(miss, axis=1)
+    """Fixed-point false targets for a Cartesian error model ``predict(positions) -> errors``.
+
+    Each step predicts only the targets still moving. A target whose next
+    command would not be finite (the iteration diverges, as it can far outside
+    the data, where a polynomial grows fast) stops and is reported not
+    converged, with an infinite residual and the target itself as its command
+    (never a command of 1e200 mm).
+    """
+    with np.errstate(over="ignore", invalid="ignore"):
+        cmd = targets_mm - predict(targets_mm)
+        start = np.all(np.isfinite(cmd), axis=1)
+        cmd[~start] = targets_mm[~start]              # nothing finite to command: the target itself
+        iterations = np.ones(len(targets_mm), dtype=np.int64)
+        miss = np.full(targets_mm.shape, np.inf)
+        live = start.copy()
+        for step in range(max_iter):
+            idx = np.flatnonzero(live)
+            if idx.size == 0:
+                break
+            miss[idx] = cmd[idx] + predict(cmd[idx]) - targets_mm[idx]
+            norm = np.linalg.norm(miss[idx], axis=1)
+            move = norm > tol_mm                      # NaN: not a step, and not converged
+            live[idx[~move]] = False
+            if step == max_iter - 1:
+                break
+            move = idx[move]
+            new = cmd[move] - miss[move]              # = target - e(cmd)
+            finite = np.all(np.isfinite(new), axis=1)
+            cmd[move[finite]] = new[finite]
+            iterations[move[finite]] += 1
+            live[move[~finite]] = False
+            miss[move[~finite]] = np.inf
+        residual = np.linalg.norm(miss, axis=1)
+    diverged = ~np.isfinite(residual)
+    residual[diverged] = np.inf
+    cmd[diverged] = targets_mm[diverged]
     return CompensationResult(cmd, None, iterations, residual, residual <= tol_mm)
 
 

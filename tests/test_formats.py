@@ -88,7 +88,9 @@ def test_bad_foreign_files_name_file_line_and_column(tmp_path, kwargs, text, mat
     ({"joint_unit": "grad"}, r"The 'joint_unit' parameter of MeasurementFormat must be 'deg' or 'rad'"),
     ({"length_unit": "cm"}, r"The 'length_unit' parameter of MeasurementFormat must be 'mm' or 'm'"),
     ({"columns": {"q13": "a"}}, r"The 'columns' parameter .* keys are contract columns\. Got 'q13' instead"),
-    ({"columns": {"q1": "a", "q2": "a"}}, r"The 'columns' parameter .* distinct file columns"),
+    ({"columns": {"q1": "a", "q2": "a"}}, r"The 'columns' parameter .* each file column holds one contract column "
+                                          r"\(column 'a' is already mapped to q1"),
+    ({"columns": {"x_meas": "q1"}}, r"column 'q1' is also read as q1 \(a contract column not mapped"),
 ])
 def test_bad_format_parameters(kwargs, match):
     with pytest.raises(ConfigError, match=match):
@@ -115,6 +117,8 @@ def test_format_yaml_round_trip(tmp_path):
     ('decimal: ","', 'decimal: "/"', r"fmt.yaml: decimal \(line 2\): must be '\.' or ','; got '/'"),
     ("q1: axis_1", "q_1: axis_1", r"fmt.yaml: columns.q_1 \(line 3\): not a contract column .*; did you mean 'q1'\?"),
     ("x_meas: smr_x", "x_meas: axis_1", r"columns.x_meas \(line 3\): column 'axis_1' is already mapped to q1"),
+    ("x_meas: smr_x", "x_meas: q2", r"columns.x_meas \(line 3\): column 'q2' is also read as q2 \(a contract column "
+                                    r"not mapped is read under its own name\); each file column can hold one"),
     ("joint_unit: rad", "joint_unit: radians", r"joint_unit \(line 4\): must be one of 'deg', 'rad'; got 'radians'"),
     ("length_unit: m", "length_units: m", r"length_units \(line 5\): unknown key; did you mean 'length_unit'\?"),
     ('delimiter: ";"', 'delimiter: ";,"', r"delimiter \(line 1\): must be one character other than a quote"),

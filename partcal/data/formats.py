@@ -137,13 +137,32 @@ def _columns(sec: Section) -> dict[str, str]:
             sec.fail(sec.path(name), f"not a contract column (q1..q{MAX_JOINTS}, x_nom, y_nom, z_nom, x_meas, "
                                      f"y_meas, z_meas, x, y, z, set){hint}")
         value = sec.get(key, "str", check=lambda v: None if v.strip() else "a non-empty column name")
-        if value.strip() in out.values():
-            other = next(k for k, v in out.items() if v == value.strip())
-            sec.fail(sec.path(name), f"column {value!r} is already mapped to {other}; each file column can "
-                                     "hold one contract column")
         out[name] = value.strip()
+    problem = _mapping_problem(out)
+    if problem:
+        sec.fail(sec.path(problem[0]), problem[1])
     sec.done()
     return out
+
+
+def _mapping_problem(columns: Mapping[str, str]) -> tuple[str, str] | None:
+    """The first contract column whose file column also holds another contract column, and why.
+
+    Two contract columns mapped to one file column, or mapped to the name of
+    a contract column that is not mapped (and so is read under its own name:
+    ``{x_meas: q1}`` would read q1 twice).
+    """
+    owner: dict[str, str] = {}
+    for key, value in columns.items():
+        if value in owner:
+            return key, (f"column {value!r} is already mapped to {owner[value]}; each file column can hold one "
+                         "contract column")
+        owner[value] = key
+    for key, value in columns.items():
+        if value in CONTRACT_COLUMNS and value != key and value not in columns:
+            return key, (f"column {value!r} is also read as {value} (a contract column not mapped is read under "
+                         f"its own name); each file column can hold one contract column: map {value} too")
+    return None
 
 
 def _delimiter_check(value: str) -> str | None:
@@ -177,9 +196,9 @@ def _format_problem(fmt: MeasurementFormat) -> tuple[str, str, object] | None:
             return "columns", "a mapping whose keys are contract columns", key
         if not isinstance(value, str) or not value.strip():
             return "columns", "a mapping to non-empty file column names", value
-    values = list(fmt.columns.values())
-    if len(set(values)) != len(values):
-        return "columns", "a mapping to distinct file columns", fmt.columns
+    problem = _mapping_problem(fmt.columns)
+    if problem:
+        return "columns", f"a mapping where each file column holds one contract column ({problem[1]})", fmt.columns
     return None
 
 

@@ -162,7 +162,7 @@ def test_readme_python_example_runs(tmp_path):
     write_run(run(load_config(work / "configs" / "paper_sk120.yaml")))
     assert (work / "reports" / "paper_sk120" / "models" / "sdp-ci.json").is_file()
     targets = paper_path("rectangle")[:20]
-    namespace = {"targets_mm": targets, "positions_mm": targets}
+    namespace = {}
     code = readme_python_example()
     import os
     here = os.getcwd()
@@ -175,5 +175,7 @@ def test_readme_python_example_runs(tmp_path):
     assert namespace["m"].errors_mm.shape == (85, 3)
     np.testing.assert_allclose(namespace["p"].compensate(targets) + namespace["p"].predict(
         positions=namespace["p"].compensate(targets)), targets, atol=1e-3)
-    assert namespace["regional"].partition_.n_regions >= 1
+    assert namespace["regional"].region_counts_.tolist() == [44, 20, 21]      # as the README says
+    np.testing.assert_array_equal(namespace["targets_mm"], read_measurements(
+        ROOT / "data" / "sk120" / "test_rectangle.csv").nominal_mm)
     np.testing.assert_array_equal(namespace["m"].q_deg, m.q_deg)

@@ -73,7 +73,6 @@ def parse_theta(expr: str | float, n_joints: int) -> tuple[float, NDArray[np.flo
     return offset, coeffs
 
 
-
 def available_robots() -> list[str]:
     """Names of the built-in robots."""
     return sorted(p.stem for p in _BUILTIN_DIR.glob("*.yaml"))

@@ -45,7 +45,7 @@ def kfold_splits(n: int, folds: int, random_state: int = 0) -> list[tuple[NDArra
     return list(KFold(n_splits=folds, shuffle=True, random_state=random_state).split(np.zeros((n, 1))))
 
 
-def cross_validated_rms(model, X, y, *, folds=5, random_state=0) -> float:
+def cross_validated_rms(model, X, y, *, folds=5, random_state=0, fitted: list | None = None) -> float:
     """Pooled 3-D RMS of k-fold held-out predictions, mm.
 
     Every sample is predicted once by a model fitted without it; the result is
@@ -56,6 +56,9 @@ def cross_validated_rms(model, X, y, *, folds=5, random_state=0) -> float:
     folds : int or list of (train, test) index arrays
         The number of shuffled folds (drawn with ``random_state``), or the
         folds themselves (see :func:`kfold_splits`).
+    fitted : list, optional
+        Receives the model fitted on each fold (to see, say, how many regions
+        a partition kept with fewer samples).
     """
     from sklearn.base import clone
 
@@ -63,22 +66,30 @@ def cross_validated_rms(model, X, y, *, folds=5, random_state=0) -> float:
     splits = kfold_splits(len(X), folds, random_state) if isinstance(folds, int) else folds
     resid = np.empty_like(y)
     for train, test in splits:
-        resid[test] = y[test] - clone(model).fit(X[train], y[train]).predict(X[test])
+        fold = clone(model).fit(X[train], y[train])
+        resid[test] = y[test] - fold.predict(X[test])
+        if fitted is not None:
+            fitted.append(fold)
     return float(np.sqrt(np.mean(np.sum(resid.reshape(len(y), -1) ** 2, axis=1))))
 
 
-def select_by_cv(candidates, X, y, *, folds) -> tuple[int, list[float], list, list[float]]:
+def select_by_cv(candidates, X, y, *, folds, fold_models: list | None = None
+                 ) -> tuple[int, list[float], list, list[float]]:
     """Score unfitted ``candidates`` by CV on ``folds``, then fit each on all of ``X, y``.
 
     Returns ``(best, scores, fitted, seconds)``: the index of the lowest score
     (the first of equals), the pooled 3-D RMS of each candidate, the fitted
-    candidates and the seconds of each final fit.
+    candidates and the seconds of each final fit. ``fold_models`` receives,
+    per candidate, the list of its models fitted on the folds.
     """
     import time
 
     scores, fitted, seconds = [], [], []
     for candidate in candidates:
-        scores.append(cross_validated_rms(candidate, X, y, folds=folds))
+        folds_fitted: list = []
+        scores.append(cross_validated_rms(candidate, X, y, folds=folds, fitted=folds_fitted))
+        if fold_models is not None:
+            fold_models.append(folds_fitted)
         begin = time.perf_counter()
         fitted.append(candidate.fit(X, y))
         seconds.append(time.perf_counter() - begin)

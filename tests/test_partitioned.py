@@ -228,6 +228,22 @@ def test_select_granularity_reports_every_candidate():
     assert table[-1]["cv_rms_3d"] < table[0]["cv_rms_3d"]      # finer is better on this smooth field
 
 
+def test_select_granularity_tells_how_many_regions_the_fold_fits_kept():
+    """On the 85 shipped poses an octree of FDP cells keeps 3 regions, but on each 68-pose CV fold only 1:
+    its CV score is the global model's. The table says so (and a run warns, and its report notes it)."""
+    from partcal.metrics import kfold_splits
+
+    m = read_measurements(ROOT / "data" / "sk120" / "identification.csv")
+    template = PartitionedErrorModel(partition=Octree(), local=ErrorModel(solver="lstsq"), random_state=0)
+    best, table = select_granularity(template, m.nominal_mm, m.errors_mm, [1, 2], folds=5)
+    by_hand = []
+    for train, _ in kfold_splits(85, 5, 0):
+        fold = clone(template).set_params(partition=Octree(max_depth=1)).fit(m.nominal_mm[train], m.errors_mm[train])
+        by_hand.append(fold.partition_.n_regions)
+    assert [row["regions"] for row in table] == [3, 3] and best.region_counts_.tolist() == [44, 20, 21]
+    assert table[0]["cv_regions"] == [min(by_hand), max(by_hand)] == [1, 1]
+
+
 @pytest.fixture(scope="module")
 def dense_sk120():
     study = load_study(ROOT / "configs" / "sk120_virtual.yaml")

@@ -312,7 +312,13 @@ def test_granularity_lists_are_scored_by_nested_cv(ranking_run):
     assert r.nested and r.cv_rms_3d == pytest.approx(nested, rel=1e-9)
     table_min = min(row["cv_rms_3d"] for row in r.granularity)
     assert r.cv_rms_3d > 1.02 * table_min     # today's score was that flattering minimum over the same folds
-    assert set(r.granularity[0]) == {"granularity", "cv_rms_3d", "regions"}
+    assert set(r.granularity[0]) == {"granularity", "cv_rms_3d", "regions", "cv_regions"}
+    for row, k in zip(r.granularity, (1, 2, 3)):      # the regions each candidate kept on the shared folds
+        kept = [candidate(k).fit(X[tr], y[tr]).partition_.n_regions
+                for tr, _ in KFold(5, shuffle=True, random_state=11).split(X)]
+        assert row["cv_regions"] == [min(kept), max(kept)]
+    chosen = min(r.granularity, key=lambda row: row["cv_rms_3d"])
+    assert r.cv_regions == chosen["cv_regions"]
 
 
 def test_fit_seconds_is_the_final_fit_and_cv_time_is_separate(ranking_run):

@@ -308,8 +308,10 @@ def select_granularity(model: PartitionedErrorModel, X, y, grid, *, folds=5, ran
     best : PartitionedErrorModel
         The candidate of lowest CV 3-D RMS (the first of equals), fitted on all of ``X, y``.
     table : list of dict
-        ``{"granularity", "cv_rms_3d", "regions", "fit_seconds"}`` per candidate
-        (regions and the fit time from the fit on all data).
+        ``{"granularity", "cv_rms_3d", "regions", "cv_regions", "fit_seconds"}``
+        per candidate (regions and the fit time from the fit on all data;
+        ``cv_regions``: the fewest and most regions of the fold fits, which
+        can be fewer: a partition merges regions that lack samples).
 
     Notes
     -----
@@ -321,12 +323,21 @@ def select_granularity(model: PartitionedErrorModel, X, y, grid, *, folds=5, ran
         check_int("select_granularity", "folds", folds, 2)
         folds = kfold_splits(len(X), folds, random_state)
     values = [int(v) for v in grid]
-    best, scores, fitted, seconds = select_by_cv([_candidate(model, v) for v in values], X, y, folds=folds)
-    table = [{"granularity": v, "cv_rms_3d": s, "regions": int(f.partition_.n_regions), "fit_seconds": t}
-             for v, s, f, t in zip(values, scores, fitted, seconds)]
+    fold_models: list = []
+    best, scores, fitted, seconds = select_by_cv([_candidate(model, v) for v in values], X, y, folds=folds,
+                                                 fold_models=fold_models)
+    table = [{"granularity": v, "cv_rms_3d": s, "regions": int(f.partition_.n_regions),
+              "cv_regions": fold_regions(folded), "fit_seconds": t}
+             for v, s, f, folded, t in zip(values, scores, fitted, fold_models, seconds)]
     for row in table:
         log.info("granularity %s: CV RMS %.4f over %d regions", row["granularity"], row["cv_rms_3d"], row["regions"])
     return fitted[best], table
+
+
+def fold_regions(models: list[PartitionedErrorModel]) -> list[int]:
+    """``[fewest, most]`` regions among fitted partitioned ``models`` (the fits on the CV folds)."""
+    counts = [int(m.partition_.n_regions) for m in models]
+    return [min(counts), max(counts)]
 
 
 def _candidate(model: PartitionedErrorModel, value: int) -> PartitionedErrorModel:

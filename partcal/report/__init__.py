@@ -72,6 +72,7 @@ def context(result: RunResult) -> dict:
         "families": family_sentences(result),
         "table": comparison_rows(result),
         "granularity": granularity_rows(result),
+        "coarser_in_cv": coarser_in_cv(result),
         "shown_models": [r.spec.name for r in shown],
         "error_figures": [{"name": n,
                            "path_svg": _b64(figures.errors_along_path(n, m.errors_mm, {r.spec.name: r.predictions[n] for r in shown})),
@@ -111,8 +112,19 @@ def granularity_rows(result: RunResult) -> list[dict]:
             continue
         chosen = min(range(len(r.granularity)), key=lambda i: r.granularity[i]["cv_rms_3d"])
         rows += [{"model": r.spec.name, "granularity": g["granularity"], "regions": g["regions"],
-                  "cv": g["cv_rms_3d"], "chosen": i == chosen} for i, g in enumerate(r.granularity)]
+                  "cv_regions": _span(g["cv_regions"]), "cv": g["cv_rms_3d"], "chosen": i == chosen}
+                 for i, g in enumerate(r.granularity)]
     return rows
+
+
+def coarser_in_cv(result: RunResult) -> list[dict]:
+    """Partitioned models whose CV fold fits kept fewer regions than the fit on all the data."""
+    return [{"model": r.spec.name, "regions": r.n_regions, "cv_regions": _span(r.cv_regions)}
+            for r in result.models if r.cv_regions is not None and r.cv_regions[0] < r.n_regions]
+
+
+def _span(counts: list[int]) -> str:
+    return str(counts[0]) if counts[0] == counts[1] else f"{counts[0]}-{counts[1]}"
 
 
 def _optional_b64(svg: str | None) -> str | None:

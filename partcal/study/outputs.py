@@ -105,6 +105,8 @@ def metrics_document(result: RunResult) -> dict:
             entry["pso_rms_ratio"] = r.rms_ratio
         if r.granularity is not None:
             entry["granularity"] = r.granularity
+        if r.cv_regions is not None:
+            entry["cv"]["regions"] = r.cv_regions
         if r.compensation:
             entry["compensation"] = r.compensation
         models[r.spec.name] = entry

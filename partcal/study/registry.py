@@ -31,7 +31,7 @@ from ..errors import ConfigError, DataError
 from ..metrics import cross_validated_rms, kfold_splits, nested_cross_validated_rms, select_by_cv, summary
 from ..models.bases import varying_inputs
 from ..models.kinematic import KinematicModel
-from ..models.partitioned import MIN_SAMPLES_PER_TERM, PartitionedErrorModel, region_minimum
+from ..models.partitioned import MIN_SAMPLES_PER_TERM, PartitionedErrorModel, fold_regions, region_minimum
 from ..robot.description import load_robot
 from ..robot.kinematics import Robot
 from .config import ModelSpec, RunConfig
@@ -55,6 +55,7 @@ class ModelResult:
     compensation: dict[str, dict] = field(default_factory=dict)
     cv_seconds: float = 0.0             # cross-validation (and the granularity choice)
     nested: bool = False
+    cv_regions: list[int] | None = None  # partitioned: [fewest, most] regions of the CV fold fits
 
     def score(self, rank_by: str) -> float:
         """The number the run ranks by: CV 3-D RMS, or 3-D RMS on the validation set (mm)."""
@@ -231,23 +232,39 @@ def fit_model(spec: ModelSpec, seed: int, data: dict[str, Measurements], folds: 
     X, y = model_inputs(spec.inputs, ident), ident.errors_mm
     granularity, nested = None, False
     start = time.perf_counter()
+    cv_regions = None
     if len(spec.sizes) > 1:
         candidates = [spec.build(seed, size) for size in spec.sizes]
         cv = nested_cross_validated_rms(candidates, X, y, folds=folds, inner_folds=len(folds), random_state=run_seed)
         estimator, granularity, fit_seconds = choose_granularity(spec, seed, X, y, folds)      # returned fitted
         cv_seconds, nested = time.perf_counter() - start - fit_seconds, True
+        chosen = min(range(len(granularity)), key=lambda i: granularity[i]["cv_rms_3d"])
+        cv_regions = granularity[chosen]["cv_regions"]
     else:
-        cv = cross_validated_rms(spec.build(seed), X, y, folds=folds)
+        fold_fits: list = []
+        cv = cross_validated_rms(spec.build(seed), X, y, folds=folds, fitted=fold_fits)
         cv_seconds = time.perf_counter() - start
         start = time.perf_counter()
         estimator = spec.build(seed).fit(X, y)
         fit_seconds = time.perf_counter() - start
+        if partitioned_part(estimator) is not None:
+            cv_regions = fold_regions([partitioned_part(m) for m in fold_fits])
+    if cv_regions is not None and cv_regions[0] < partitioned_part(estimator).partition_.n_regions:
+        log.warning("%s: fitted on all the identification data it has %d regions, but on the cross-validation "
+                    "folds %s, so its CV score is that of a coarser model", spec.name,
+                    partitioned_part(estimator).partition_.n_regions, _regions_text(cv_regions))
     predictions = {name: estimator.predict(model_inputs(spec.inputs, m)) for name, m in data.items()}
     metrics = {name: summary(errors_left(m, predictions[name], name in own_frame)) for name, m in data.items()}
     locals_ = estimator.models_ if isinstance(estimator, PartitionedErrorModel) else [estimator]
     ratio = float(max(m.rms_ratio_ for m in locals_)) if spec.solver == "pso" else None
     return ModelResult(spec, estimator, fit_seconds, cv, metrics, predictions, ratio, granularity,
-                       cv_seconds=cv_seconds, nested=nested)
+                       cv_seconds=cv_seconds, nested=nested, cv_regions=cv_regions)
+
+
+def _regions_text(counts: list[int]) -> str:
+    """``[1, 1]`` -> ``'1 region'``, ``[1, 3]`` -> ``'1 to 3 regions'``."""
+    low, high = counts
+    return (f"{low} to {high} regions" if low != high else f"{low} region{'s' if low != 1 else ''}")
 
 
 def errors_left(m: Measurements, predicted: NDArray[np.float64], own_frame: bool = False) -> NDArray[np.float64]:
@@ -273,11 +290,15 @@ def choose_granularity(spec: ModelSpec, seed: int, X, y, folds: list) -> tuple[o
 
     The same choice as :func:`partcal.models.partitioned.select_granularity`, for any entry kind:
     returns the best candidate fitted on all of ``X, y``, a row per candidate
-    (``granularity``, ``cv_rms_3d``, ``regions``) and the seconds of that final fit.
+    (``granularity``, ``cv_rms_3d``, ``regions``, and ``cv_regions``: the fewest and most regions of
+    the fits on the folds) and the seconds of that final fit.
     """
-    best, scores, fitted, seconds = select_by_cv([spec.build(seed, size) for size in spec.sizes], X, y, folds=folds)
-    table = [{"granularity": int(size), "cv_rms_3d": score, "regions": int(partitioned_part(f).partition_.n_regions)}
-             for size, score, f in zip(spec.sizes, scores, fitted)]
+    fold_models: list = []
+    best, scores, fitted, seconds = select_by_cv([spec.build(seed, size) for size in spec.sizes], X, y, folds=folds,
+                                                 fold_models=fold_models)
+    table = [{"granularity": int(size), "cv_rms_3d": score, "regions": int(partitioned_part(f).partition_.n_regions),
+              "cv_regions": fold_regions([partitioned_part(m) for m in folded])}
+             for size, score, f, folded in zip(spec.sizes, scores, fitted, fold_models)]
     for row in table:
         log.info("%s, granularity %s: CV RMS %.4f over %d regions", spec.name, row["granularity"], row["cv_rms_3d"],
                  row["regions"])

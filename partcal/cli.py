@@ -241,6 +241,9 @@ def _cmd_import(args) -> int:
         raise PartcalError("import: give the CSV to write with -o OUT.csv")
     if args.frame == "tracker" and not args.robot:
         raise PartcalError("import: --frame tracker needs --robot (a built-in name or a robot YAML)")
+    if args.tool_mm is not None and args.frame != "tracker":
+        raise PartcalError("import: --tool-mm is the target offset of a tracker registration; it needs --frame "
+                           "tracker (in the base frame the measured positions already include the tool)")
     rows = RowSelection.parse(args.rows, args.every) if (args.rows or args.every != 1) else None
     robot = load_robot(args.robot) if args.robot else None
     m = read_measurements(args.input, robot, fmt=_format(args), rows=rows, frame=args.frame)
@@ -397,6 +400,10 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("partcal: interrupted", file=sys.stderr)
         return 130
+    except OSError as exc:          # the machine, not partcal: a full disk, a folder gone; earlier outputs stay
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"partcal: error: {where}{exc.strerror or exc}; nothing was replaced", file=sys.stderr)
+        return 1
     except Exception as exc:  # an internal failure: keep the traceback for a bug report
         log.exception("internal error")
         print(f"partcal: internal error: {type(exc).__name__}: {exc} (please report it)", file=sys.stderr)

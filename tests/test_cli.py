@@ -225,6 +225,8 @@ def test_a_cartesian_target_beyond_the_arms_reach_is_not_converged(cartesian_mod
     (["import", "a.csv", "--tool-mm", "0", "0", "abc"], "partcal import: argument --tool-mm: invalid float value: 'abc'"),
     (["import", "a.csv", "--every", "0"], "partcal import: argument --every: expected a whole number >= 1; got '0'"),
     (["predict", "MODEL", "IN.csv", "-o", "newdir/"], "newdir/: is a folder; give the name of a file to write"),
+    (["import", "a.csv", "-o", "b.csv", "--tool-mm", "1", "2", "3"], "import: --tool-mm is the target offset of a "
+                                                                     "tracker registration; it needs --frame tracker"),
 ])
 def test_command_line_mistakes_get_one_line(cartesian_model, tmp_path, args, message):
     points = tmp_path / "IN.csv"
@@ -297,3 +299,19 @@ def test_a_run_never_replaces_a_folder_holding_its_inputs_or_files_partcal_did_n
     assert (out / ".partcal-output").is_file() and (out / "metrics.json").is_file()
     (out / ".partcal-output").unlink()      # a run of a version before the marker: still partcal's own
     assert run("run", "-q", str(config)).returncode == 0
+
+
+def test_a_full_disk_gets_one_line_not_a_traceback(monkeypatch, capsys):
+    """An OSError from the machine (here ENOSPC while writing) used to print a 23-line traceback."""
+    import errno
+
+    from partcal import cli
+
+    def full(args):
+        raise OSError(errno.ENOSPC, "No space left on device", "reports/x/.x.partial-1/metrics.json")
+
+    monkeypatch.setattr(cli, "_cmd_run", full)
+    assert cli.main(["run", "any.yaml"]) == 1
+    err = capsys.readouterr().err
+    assert err == ("partcal: error: reports/x/.x.partial-1/metrics.json: No space left on device; "
+                   "nothing was replaced\n")

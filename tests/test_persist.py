@@ -77,6 +77,8 @@ def test_damaged_and_foreign_files_are_refused(tmp_path):
             load_model(bad)
 
     refused("{not json", r"bad.json: not a partcal model file \(invalid JSON at line 1")
+    refused('{"version": ' + "9" * 5001 + "}", r"bad.json: not a partcal model file \(Exceeds the limit")
+    refused("[" * 100_000, r"bad.json: not a partcal model file \(maximum recursion depth exceeded")
     refused({**good, "format": "sklearn"}, r"field 'format': expected 'partcal-model'")
     refused({**good, "version": 3}, r"field 'version': this partcal reads versions 1, 2; the file has version 3")
     refused({k: v for k, v in good.items() if k != "kind"}, r"field 'kind': missing")
@@ -267,3 +269,16 @@ def test_a_deliberate_edit_of_an_identified_value_is_used_as_written(kinematic_f
 def load_model_from(doc, path):
     path.write_text(json.dumps(doc))
     return load_model(path)
+
+
+def test_empty_inputs_give_empty_answers_for_every_model_file(saved, kinematic_file, tmp_path):
+    """Partitioned and kinematic files used to raise scikit-learn's 'Found array with 0 sample(s)'."""
+    for name, doc in {**saved, "kinematic": kinematic_file}.items():
+        path = tmp_path / f"{name}.json"
+        path.write_text(json.dumps(doc))
+        p = load_predictor(path)
+        empty = np.zeros((0, p.n_inputs)) if p.inputs == "joint" else np.zeros((0, 3))
+        given = {"joints": empty} if p.inputs == "joint" else {"positions": empty}
+        assert p.predict(**given).shape == (0, 3) and p.distance_to_data(**given).shape == (0,)
+        result = p.compensate_full(np.zeros((0, 3)))
+        assert p.compensate(np.zeros((0, 3))).shape == (0, 3) and result.converged.shape == (0,)

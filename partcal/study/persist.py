@@ -150,6 +150,9 @@ def load_model(path: str | Path) -> tuple[Any, dict]:
         raise ModelFileError(f"{path}: cannot read: {exc}") from None
     except json.JSONDecodeError as exc:
         raise ModelFileError(f"{path}: not a partcal model file (invalid JSON at line {exc.lineno}: {exc.msg})") from None
+    except (ValueError, RecursionError) as exc:      # a 5,000-digit number; lists nested 100,000 deep
+        raise ModelFileError(f"{path}: not a partcal model file ({str(exc).split(';')[0] or 'nested too deep'})"
+                             ) from None
     return model_from_dict(doc, source=str(path)), doc
 
 

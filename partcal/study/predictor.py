@@ -54,6 +54,8 @@ class Predictor:
         return f"Predictor({self.name!r}, inputs={self.inputs!r}, kind={self.document['kind']!r})"
 
     def _errors(self, X: NDArray[np.float64]) -> NDArray[np.float64]:
+        if len(X) == 0:                 # no points, no errors (scikit-learn refuses empty inputs)
+            return np.zeros((0, 3))
         if isinstance(self.model, PartitionedErrorModel):
             return self.model.predict(X)
         return self.model._predict_trusted(X)
@@ -91,7 +93,8 @@ class Predictor:
         """
         result = self.compensate_full(targets_mm, joints, tol_mm=tol_mm, max_iter=max_iter)
         evaluated = result.commanded_mm if self.inputs == "cartesian" else result.joints_deg
-        warn_far(self.model.distance_to_data(evaluated), EXTRAPOLATION_LIMIT)     # names the caller's line
+        if len(evaluated):
+            warn_far(self.model.distance_to_data(evaluated), EXTRAPOLATION_LIMIT)     # names the caller's line
         return result.commanded_mm
 
     def compensate_full(self, targets_mm, joints=None, *, tol_mm: float = 1e-4, max_iter: int = 50
@@ -105,6 +108,10 @@ class Predictor:
         (:meth:`distance_to_data` of the commanded inputs).
         """
         targets = check_array(targets_mm, "targets_mm", columns=3)
+        if len(targets) == 0:
+            joints_out = None if self.inputs == "cartesian" else np.zeros((0, self.n_inputs))
+            return CompensationResult(np.zeros((0, 3)), joints_out, np.zeros(0, np.int64), np.zeros(0),
+                                      np.zeros(0, bool))
         if self.inputs == "cartesian":
             result = false_target(self._errors, targets, tol_mm=tol_mm, max_iter=max_iter)
             if self.robot is not None:      # a commanded point beyond the arm's reach is not a solution
@@ -143,7 +150,8 @@ class Predictor:
 
         Files written before partcal kept the training inputs give the distance outside the data's boxes.
         """
-        return self.model.distance_to_data(self._inputs(positions, joints))
+        X = self._inputs(positions, joints)
+        return self.model.distance_to_data(X) if len(X) else np.zeros(0)
 
 
 def load_predictor(path: str | Path) -> Predictor:

@@ -189,12 +189,24 @@ def _change_text(changes: list[float]) -> str:
     lo, hi = min(changes), max(changes)
 
     def one(v):
-        return f"{abs(v):.0f}% {'less' if v < 0 else 'more'}"
+        return f"{_percent(v)}% {'less' if v < 0 else 'more'}"
     if hi < 0:
-        return f"{-hi:.0f}–{-lo:.0f}% less" if round(lo) != round(hi) else one(lo)
+        return f"{_percent(hi)}–{_percent(lo)}% less" if round(lo) != round(hi) else one(lo)
     if lo >= 0:
-        return f"{lo:.0f}–{hi:.0f}% more" if round(lo) != round(hi) else one(hi)
+        return f"{_percent(lo)}–{_percent(hi)}% more" if round(lo) != round(hi) else one(hi)
     return f"from {one(lo)} to {one(hi)}"
+
+
+def _percent(v: float) -> str:
+    """``|v|`` rounded to whole percent, with the decimals that keep 99.7 from reading as 100.
+
+    >>> _percent(-99.66), _percent(-12.4), _percent(100.0)
+    ('99.7', '12', '100')
+    """
+    digits = 0
+    while digits < 3 and abs(v) < 100 and round(abs(v), digits) >= 100:
+        digits += 1
+    return f"{abs(v):.{digits}f}"
 
 
 def _family(r: ModelResult) -> str:
@@ -264,7 +276,8 @@ def scene_entries(result: RunResult) -> list[dict]:
             spec["boxes"] = part.boxes[[int(np.flatnonzero(part.kernel_region == g)[0]) for g in range(part.n_regions)]]
         specs[r.spec.name] = spec
         space = "the Cartesian workspace" if cartesian else "joint space"
-        captions[r.spec.name] = (f"{part.n_regions} {'octree cells' if part.kind == 'octree' else 'k-means regions'} "
+        unit = ("octree cell" if part.kind == "octree" else "k-means region") + ("s" if part.n_regions != 1 else "")
+        captions[r.spec.name] = (f"{part.n_regions} {unit} "
                                  f"in {space}; identification points coloured by region"
                                  f"{', octree cells as boxes' if part.kind == 'octree' else ''}; test paths coloured "
                                  "by the residual error after the model's prediction.")

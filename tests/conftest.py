@@ -65,3 +65,29 @@ def write_text(tmp_path, text, name):
     path = tmp_path / name
     path.write_text(text)
     return path
+
+
+DH_FIELDS = ("theta_offset_deg", "d_mm", "a_mm", "alpha_deg")
+
+
+def moved_positions(robot, q_deg, k, step):
+    """Forward kinematics with geometric parameter ``k`` moved by ``step``, written out from the robot's
+    fields (for central differences): four DH fields per row, then the tool's x, y, z (mm), then the
+    base's x, y, z (mm) and small base turns about x, y, z (degrees)."""
+    import numpy as np
+    from scipy.spatial.transform import Rotation
+
+    rows = robot.alpha_deg.size
+    if k < 4 * rows:
+        row, field = divmod(k, 4)
+        values = getattr(robot, DH_FIELDS[field]).copy()
+        values[row] += step
+        return robot.replace(**{DH_FIELDS[field]: values}).positions(q_deg)
+    if k < 4 * rows + 3:
+        tool = robot.tool_mm.copy()
+        tool[k - 4 * rows] += step
+        return robot.replace(tool_mm=tool).positions(q_deg)
+    shift = np.zeros(3)
+    shift[(k - 4 * rows - 3) % 3] = step
+    p = robot.positions(q_deg)
+    return p + shift if k < 4 * rows + 6 else p @ Rotation.from_rotvec(np.radians(shift)).as_matrix().T

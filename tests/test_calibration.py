@@ -5,7 +5,7 @@ import json
 import html5lib
 import numpy as np
 import pytest
-from conftest import ROOT
+from conftest import ROOT, moved_positions
 
 from partcal import load_predictor, load_robot, read_measurements
 from partcal.metrics import summary
@@ -57,29 +57,12 @@ def independent_rank(q_deg) -> int:
     identification: central differences of forward kinematics for each DH field of each row, the tool and the
     base pose (translation, small rotations), unit-norm columns, and the singular values above 1e-6 of the
     largest (measured: 19 values above 7e-3, the rest below 3e-10, the differencing noise)."""
-    from scipy.spatial.transform import Rotation
-
     from partcal import load_robot
 
     robot = load_robot("motoman_sk120")
-    fields, rows = ("theta_offset_deg", "d_mm", "a_mm", "alpha_deg"), robot.alpha_deg.size
-
-    def moved(k, h):
-        if k < 4 * rows:
-            row, field = divmod(k, 4)
-            values = getattr(robot, fields[field]).copy()
-            values[row] += h
-            return robot.replace(**{fields[field]: values}).positions(q_deg)
-        if k < 4 * rows + 3:
-            tool = robot.tool_mm.copy()
-            tool[k - 4 * rows] += h
-            return robot.replace(tool_mm=tool).positions(q_deg)
-        step = np.zeros(3)
-        step[(k - 4 * rows - 3) % 3] = h
-        p = robot.positions(q_deg)
-        return p + step if k < 4 * rows + 6 else p @ Rotation.from_rotvec(np.radians(step)).as_matrix().T
-
-    jac = np.array([((moved(k, 1e-4) - moved(k, -1e-4)) / 2e-4).ravel() for k in range(4 * rows + 9)]).T
+    rows = robot.alpha_deg.size
+    jac = np.array([((moved_positions(robot, q_deg, k, 1e-4) - moved_positions(robot, q_deg, k, -1e-4)) / 2e-4).ravel()
+                    for k in range(4 * rows + 9)]).T
     s = np.linalg.svd(jac / np.linalg.norm(jac, axis=0), compute_uv=False)
     return int(np.sum(s > 1e-6 * s[0]))
 

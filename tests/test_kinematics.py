@@ -4,6 +4,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import moved_positions
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -251,9 +252,6 @@ def test_forward_of_a_planar_arm_whose_z_axis_never_turns():
     np.testing.assert_allclose(poses[:, :3, 2], np.tile([0.0, 0.0, 1.0], (3, 1)), atol=1e-12)
     np.testing.assert_allclose(poses[:, :3, 0], np.column_stack([np.cos(t12), np.sin(t12), 0 * t1]), atol=1e-12)
 
-FIELDS = ("theta_offset_deg", "d_mm", "a_mm", "alpha_deg")
-
-
 def test_parameter_jacobian_matches_finite_differences(sk120):
     """Every DH parameter (four per row) and the tool offset, against central differences of FK."""
     q = np.random.default_rng(4).uniform(sk120.limits_deg[:, 0], sk120.limits_deg[:, 1], (7, 6))
@@ -262,19 +260,8 @@ def test_parameter_jacobian_matches_finite_differences(sk120):
     assert jac.shape == (7, 3, 4 * rows + 3)
     np.testing.assert_allclose(p, sk120.positions(q), rtol=0, atol=1e-9)   # the plain walk and the fast one
     h = 1e-5
-
-    def moved(k, step):
-        if k < 4 * rows:
-            row, field = divmod(k, 4)
-            values = getattr(sk120, FIELDS[field]).copy()
-            values[row] += step
-            return sk120.replace(**{FIELDS[field]: values}).positions(q)
-        tool = sk120.tool_mm.copy()
-        tool[k - 4 * rows] += step
-        return sk120.replace(tool_mm=tool).positions(q)
-
     for k in range(4 * rows + 3):
-        numeric = (moved(k, h) - moved(k, -h)) / (2 * h)
+        numeric = (moved_positions(sk120, q, k, h) - moved_positions(sk120, q, k, -h)) / (2 * h)
         np.testing.assert_allclose(jac[:, :, k], numeric, atol=1e-6, err_msg=f"column {k}")
 
 

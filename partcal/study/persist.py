@@ -464,10 +464,7 @@ def _check_plausible(r: "_Reader", model, limit_mm: float = 1e6) -> None:
     field = "coef" if all(isinstance(m, ErrorModel) for m in (model.models_ if regions else [model])) else "dual_coef"
     with np.errstate(all="ignore"):
         for k, local in enumerate(model.models_ if regions else [model]):
-            lo, hi = local.data_bounds_
-            n_in = lo.size
-            corners = lo + (hi - lo) * ((np.arange(2 ** min(n_in, 10))[:, None] >> np.arange(n_in)) & 1)
-            points = np.vstack([corners, (lo + hi) / 2])
+            points = _box_points(*local.data_bounds_)
             pred = local._predict_trusted(points) if isinstance(local, ErrorModel) else local.predict(points)
             if not np.all(np.isfinite(pred)) or np.abs(pred).max() > limit_mm:
                 worst = f"{np.abs(pred).max():.3g}" if np.all(np.isfinite(pred)) else "a non-finite value"
@@ -476,13 +473,17 @@ def _check_plausible(r: "_Reader", model, limit_mm: float = 1e6) -> None:
                        "the fitted numbers are damaged")
 
 
+def _box_points(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """The corners of the box ``[lo, hi]`` (of its first 10 inputs, the others at ``lo``) and its centre."""
+    n_in = lo.size
+    corners = lo + (hi - lo) * ((np.arange(2 ** min(n_in, 10))[:, None] >> np.arange(n_in)) & 1)
+    return np.vstack([corners, (lo + hi) / 2])
+
+
 def _check_kinematic_plausible(r: "_Reader", model: KinematicModel) -> None:
     """The identified robot must move the tool by less than the robot's reach from where the nominal
     robot puts it, at the corners and centre of the joint box of the data (else the values are damaged)."""
-    lo, hi = model.data_bounds_
-    n_in = lo.size
-    corners = lo + (hi - lo) * ((np.arange(2 ** min(n_in, 10))[:, None] >> np.arange(n_in)) & 1)
-    poses = np.vstack([corners, (lo + hi) / 2])
+    poses = _box_points(*model.data_bounds_)
     with np.errstate(all="ignore"):
         shift = np.linalg.norm(model.identified_robot_.positions(poses) - model.robot_.positions(poses), axis=1)
     reach = model.robot_.reach_mm

@@ -282,3 +282,18 @@ def test_empty_inputs_give_empty_answers_for_every_model_file(saved, kinematic_f
         assert p.predict(**given).shape == (0, 3) and p.distance_to_data(**given).shape == (0,)
         result = p.compensate_full(np.zeros((0, 3)))
         assert p.compensate(np.zeros((0, 3))).shape == (0, 3) and result.converged.shape == (0,)
+
+
+@pytest.mark.parametrize("name", ["format2_sdp-ai", "format2_fdp-ci-octree", "format2_gp-ci",
+                                  "format2_dh-gp-ai-k-means"])
+def test_files_of_format_2_load_and_predict_what_they_predicted_when_written(name):
+    """Model files written by partcal 0.1.0 in format 2 (a series, an octree, a GP and a hybrid with a
+    partitioned GP residual) predict what that version predicted from them (stored beside each file)."""
+    from partcal.data.measurements import read_measurements as read
+
+    model, doc = load_model(ROOT / "tests" / "fixtures" / f"{name}.json")
+    expected = json.loads((ROOT / "tests" / "fixtures" / f"{name}.expected.json").read_text())["predictions"]
+    for data_set, file in (("identification", "identification.csv"), ("rectangle", "test_rectangle.csv")):
+        m = read(ROOT / "data" / "sk120" / file)
+        X = m.nominal_mm if doc["inputs"] == "cartesian" else m.q_deg
+        np.testing.assert_allclose(model.predict(X), expected[data_set], rtol=0, atol=1e-9)

@@ -8,8 +8,9 @@ and what was got.
 from __future__ import annotations
 
 import re
+from dataclasses import dataclass
 from numbers import Integral, Real
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 from numpy.typing import NDArray
@@ -70,11 +71,7 @@ def param_error(owner: str, name: str, expected: str, got: Any) -> PartcalError:
 
 def check_int(owner: str, name: str, value: Any, low: int, high: int | None = None) -> int:
     """Return ``value`` if it is an int in ``[low, high]``, else raise :func:`param_error`."""
-    ok = isinstance(value, Integral) and not isinstance(value, bool)
-    if not ok or value < low or (high is not None and value > high):
-        rng = f"[{low}, {high}]" if high is not None else f">= {low}"
-        raise param_error(owner, name, f"an int in {rng}" if high is not None else f"an int {rng}", value)
-    return int(value)
+    return int(integer(low, high).check(owner, name, value))
 
 
 def check_real(
@@ -82,23 +79,132 @@ def check_real(
     *, low_open: bool = False,
 ) -> float:
     """Return ``value`` as float if it is a finite real within the bounds, else raise."""
-    ok = isinstance(value, Real) and not isinstance(value, bool) and np.isfinite(value)
-    if ok and low is not None:
-        ok = value > low if low_open else value >= low
-    if ok and high is not None:
-        ok = value <= high
-    if not ok:
-        lo = "(" if low_open else "["
-        rng = f"{lo}{low if low is not None else '-inf'}, {high if high is not None else 'inf'}]"
-        raise param_error(owner, name, f"a real number in {rng}", value)
-    return float(value)
+    return float(real(low, high, default=None, low_open=low_open).check(owner, name, value))
 
 
-def check_choice(owner: str, name: str, value: Any, choices: tuple[str, ...]) -> str:
+def check_choice(owner: str, name: str, value: Any, choices: tuple) -> Any:
     """Return ``value`` if it is one of ``choices``, else raise :func:`param_error`."""
-    if not isinstance(value, str) or value not in choices:
-        raise param_error(owner, name, "one of " + ", ".join(repr(c) for c in choices), value)
-    return value
+    return one_of(*choices).check(owner, name, value)
+
+
+# ---------------------------------------------------------------------- declared parameter rules
+@dataclass(frozen=True)
+class Rule:
+    """What one parameter accepts, declared once and applied wherever the parameter is read.
+
+    An estimator declares a ``Rule`` per parameter (``_parameter_rules``); the
+    estimator's own check, the run-config reader and the model-file reader all
+    ask the same rule, so a rule and its wording (:attr:`expected`) exist once.
+    Build rules with :func:`one_of`, :func:`integer`, :func:`real` and :func:`boolean`.
+
+    Examples
+    --------
+    >>> integer(1, 8).expected, integer(1, 8).problem(9), integer(1, 8).problem(3)
+    ('an int in [1, 8]', 'an int in [1, 8]', None)
+    >>> one_of("rbf", "matern").expected
+    "one of 'rbf', 'matern'"
+    """
+
+    type: str                           # "int", "float", "str", "bool": the value's type in YAML and JSON
+    default: Any = None
+    low: float | None = None
+    high: float | None = None
+    choices: tuple = ()
+    none: bool = False                  # None is accepted too
+    low_open: bool = False
+
+    @property
+    def expected(self) -> str:
+        """What the rule accepts, in words (the one wording of every message about it)."""
+        if self.choices:
+            text = "one of " + ", ".join(repr(c) for c in self.choices)
+        elif self.type == "bool":
+            text = "a bool"
+        elif self.type == "str":
+            text = "a text"
+        else:
+            what = "an int" if self.type == "int" else "a real number"
+            if self.low is not None and self.high is None and self.type == "int":
+                text = f"{what} >= {self.low}"
+            else:
+                lo = "-inf" if self.low is None else self.low
+                hi = "inf" if self.high is None else self.high
+                text = f"{what} in {'(' if self.low_open else '['}{lo}, {hi}]"
+        return text + (" or None" if self.none else "")
+
+    def problem(self, value: Any) -> str | None:
+        """None if ``value`` is accepted, else :attr:`expected`."""
+        if value is None:
+            return None if self.none else self.expected
+        if self.choices:
+            same_type = isinstance(value, str) == (self.type == "str") and not isinstance(value, (bool, np.bool_))
+            return None if same_type and value in self.choices else self.expected
+        if self.type == "bool":
+            return None if isinstance(value, (bool, np.bool_)) else self.expected
+        if self.type == "str":
+            return None if isinstance(value, str) else self.expected
+        kinds = Integral if self.type == "int" else Real
+        if not isinstance(value, kinds) or isinstance(value, (bool, np.bool_)) or not np.isfinite(value):
+            return self.expected
+        if self.low is not None and (value <= self.low if self.low_open else value < self.low):
+            return self.expected
+        if self.high is not None and value > self.high:
+            return self.expected
+        return None
+
+    def check(self, owner: str, name: str, value: Any) -> Any:
+        """Return ``value`` if accepted, else raise :func:`param_error` naming ``owner`` and ``name``."""
+        if self.problem(value) is not None:
+            raise param_error(owner, name, self.expected, value)
+        return value
+
+
+def one_of(*choices, default: Any = None, none: bool = False) -> Rule:
+    """A rule for one of ``choices`` (texts or numbers); the first is the default unless given."""
+    kind = "str" if isinstance(choices[0], str) else "float"
+    return Rule(kind, choices[0] if default is None else default, choices=tuple(choices), none=none)
+
+
+def integer(low: int, high: int | None = None, *, default: Any = None, none: bool = False) -> Rule:
+    """A rule for an int in ``[low, high]`` (``high`` None: no upper bound)."""
+    return Rule("int", low if default is None and not none else default, low, high, none=none)
+
+
+def real(low: float | None = None, high: float | None = None, *, default: float, low_open: bool = False) -> Rule:
+    """A rule for a finite real number in ``[low, high]`` (``(low, high]`` with ``low_open``)."""
+    return Rule("float", default, low, high, low_open=low_open)
+
+
+def boolean(default: bool) -> Rule:
+    """A rule for true or false."""
+    return Rule("bool", default)
+
+
+@dataclass(frozen=True)
+class Requirement:
+    """A rule that ties parameters together: ``param`` must be ``expected`` whenever ``holds(params)`` is false.
+
+    >>> fourier = Requirement("cross_terms", "false for the fourier basis",
+    ...                       lambda p: not p["cross_terms"] or p["basis"] == "polynomial")
+    >>> fourier.problem({"cross_terms": True, "basis": "fourier"})
+    'false for the fourier basis'
+    """
+
+    param: str
+    expected: str
+    holds: Callable[[dict], bool]
+
+    def problem(self, params: dict) -> str | None:
+        return None if self.holds(params) else self.expected
+
+
+def check_params(owner: str, rules: dict[str, Rule], requirements: tuple[Requirement, ...], params: dict) -> None:
+    """Check ``params`` against declared rules and requirements; raise :func:`param_error` on the first problem."""
+    for name, rule in rules.items():
+        rule.check(owner, name, params[name])
+    for req in requirements:
+        if req.problem(params):
+            raise param_error(owner, req.param, req.expected, params[req.param])
 
 
 _SAFE_NAME = re.compile(r"^[A-Za-z0-9_.-]+$")

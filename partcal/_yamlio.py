@@ -121,6 +121,21 @@ class Section:
             self.fail(where, f"must be {problem}; got {_show(value)}")
         return value
 
+    def rule(self, key: str, rule) -> Any:
+        """Read ``key`` by a declared parameter rule (``partcal._validation.Rule``: type, check, default)."""
+        if rule.none and key in self.data and self.data[key] is None:
+            self._read.add(key)
+            return None
+        return self.get(key, rule.type, default=rule.default, check=rule.problem)
+
+    def requirements(self, requirements, params: dict) -> None:
+        """Fail at the first declared requirement (``partcal._validation.Requirement``) ``params`` break,
+        naming the key if this section wrote it."""
+        for req in requirements:
+            if req.problem(params):
+                where = self.path(req.param) if self.has(req.param) else (self.where or "top level")
+                self.fail(where, f"must be {req.expected}; got {_show(params[req.param])}")
+
     def section(self, key: str, required: bool = False) -> "Section":
         self._read.add(key)
         if required and key not in self.data:

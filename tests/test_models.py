@@ -124,8 +124,8 @@ def test_printed_equations_with_cross_terms_and_fourier_series(ident, kwargs):
     (dict(basis="spline"), r"The 'basis' parameter of ErrorModel must be one of 'polynomial', 'fourier'. Got 'spline' instead."),
     (dict(solver="adam"), r"The 'solver' parameter of ErrorModel must be one of 'pso', 'lstsq'. Got 'adam' instead."),
     (dict(fitness="r2"), r"The 'fitness' parameter of ErrorModel must be one of 'rms', 'max', 'mae'. Got 'r2' instead."),
-    (dict(solver="lstsq", fitness="max"), r"The 'fitness' parameter of ErrorModel must be 'rms' with solver='lstsq'"),
-    (dict(basis="fourier", cross_terms=True), r"The 'cross_terms' parameter of ErrorModel must be False for the fourier basis"),
+    (dict(solver="lstsq", fitness="max"), r"The 'fitness' parameter of ErrorModel must be 'rms' with solver 'lstsq'"),
+    (dict(basis="fourier", cross_terms=True), r"The 'cross_terms' parameter of ErrorModel must be false for the fourier basis"),
     (dict(pso={"particles": 10}), r"The 'pso' parameter of ErrorModel must be a SwarmConfig or None"),
 ])
 def test_bad_parameters_are_named(kwargs, message):

@@ -131,7 +131,7 @@ SEMANTIC = [
     ("global", ["model", "data_bounds", 0, 0], lambda v: v + 1e4, r"'model.data_bounds': a low bound exceeds its high bound"),
     ("global", ["model", "solver"], "magic", r"'model.solver': expected one of 'pso', 'lstsq'; got 'magic'"),
     ("octree", ["blend", "method"], "cubic", r"'blend.method': expected one of 'gaussian', 'hard'; got 'cubic'"),
-    ("octree", ["blend", "width"], -1.0, r"'blend.width': expected a finite number in \[0.6, 10.0\]"),
+    ("octree", ["blend", "width"], -1.0, r"'blend.width': expected a real number in \[0.6, 10.0\]"),
     ("octree", ["partition", "kind"], "voronoi", r"'partition.kind': expected one of 'octree', 'kmeans'; got 'voronoi'"),
     ("octree", ["partition", "sigmas", 0, 0], 0.0, r"'partition.sigmas': kernel widths must be > 0"),
     ("octree", ["partition", "kernel_region", 0], 99, r"'partition.kernel_region': must map the \d+ kernels onto all regions"),

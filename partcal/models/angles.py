@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from .._fields import FieldReader
 from .bases import varying_inputs
 
 
@@ -95,6 +96,22 @@ class InputMap:
     def to_dict(self) -> dict:
         return {"window": [None if np.isnan(w) else float(w) for w in self.window],
                 "centre": self.centre.tolist(), "scale": self.scale.tolist(), "active": self.active.tolist()}
+
+    @classmethod
+    def from_file(cls, m: FieldReader, n_in: int) -> "InputMap":
+        """The map a model file keeps (``m`` reads its section), every field checked."""
+        window = m.get("window", list)
+        if len(window) != n_in or not all(w is None or (isinstance(w, (int, float)) and not isinstance(w, bool)
+                                                        and np.isfinite(w)) for w in window):
+            m.fail("window", f"expected {n_in} numbers or nulls")
+        active = m.get("active", list)
+        if len(active) != n_in or not all(isinstance(a, bool) for a in active):
+            m.fail("active", f"expected {n_in} true/false values")
+        scale = m.array("scale", (n_in,))
+        if np.any(scale[np.array(active, dtype=bool)] <= 0):
+            m.fail("scale", "the scales of the varying inputs must be > 0")
+        return cls(np.array([np.nan if w is None else w for w in window], dtype=float),
+                   m.array("centre", (n_in,)), scale, np.array(active, dtype=bool))
 
 
 

@@ -1,9 +1,20 @@
 """What partcal's estimators share: scikit-learn tags for x, y, z outputs, the distance to the
-training inputs, and one seed rule."""
+training inputs, one seed rule, and what every model kind offers the rest of partcal.
+
+A *model kind* is one estimator class. Besides ``fit`` and ``predict`` it
+declares its parameters once (``_parameter_rules``, ``_requirements``: the
+estimator's own check, the run-config reader and the model-file reader apply
+the same rules), reads and writes its own section of a model file
+(:meth:`ErrorModelBase.file_section`, :meth:`ErrorModelBase.from_file_section`)
+and answers what a batch run and its report ask (:meth:`ErrorModelBase.min_samples`,
+:meth:`ErrorModelBase.describe`, ...). The defaults here serve a simple kind;
+``partcal.models.kinds`` is the table that names them all.
+"""
 
 from __future__ import annotations
 
 from numbers import Integral
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -11,11 +22,147 @@ from scipy.spatial import cKDTree
 from sklearn.base import BaseEstimator, RegressorMixin
 from sklearn.utils import check_random_state
 
+from .._validation import Requirement, Rule, check_params
 from ..metrics import warn_far
+
+if TYPE_CHECKING:
+    from .._fields import FieldReader
+    from .._yamlio import Section
 
 
 class ErrorModelBase(RegressorMixin, BaseEstimator):
-    """Base of every error model: multi-output tags, and 1-D targets kept 1-D on the way out."""
+    """Base of every error model: multi-output tags, 1-D targets kept 1-D on the way out, and the
+    defaults of what a model kind offers (see the module docstring)."""
+
+    kind: ClassVar[str] = ""                       # its name in run configs (``kind:``) and the table of kinds
+    file_kind: ClassVar[str] = ""                  # its name in model files (default: ``kind``)
+    family_noun: ClassVar[str] = "models"          # the report groups models as "Global joint-input <noun>"
+    _parameter_rules: ClassVar[dict[str, Rule]] = {}       # parameter -> what it accepts (and its default)
+    _requirements: ClassVar[tuple[Requirement, ...]] = ()  # rules that tie parameters together
+
+    # ------------------------------------------------------------------ parameters
+    def _check_rules(self) -> dict[str, Any]:
+        """Check the declared parameters (one message format); return them by name."""
+        params = {name: getattr(self, name) for name in self._parameter_rules}
+        check_params(type(self).__name__, self._parameter_rules, self._requirements, params)
+        return params
+
+    @classmethod
+    def params_from_config(cls, sec: "Section", context: dict) -> dict[str, Any]:
+        """This kind's parameters from its entry of a run config: every declared rule, read as a key of
+        ``sec`` (defaults filled in), then the requirements. ``context`` holds the run's ``robot``."""
+        params = {name: sec.rule(name, rule) for name, rule in cls._parameter_rules.items()}
+        sec.requirements(cls._requirements, params)
+        return params
+
+    @classmethod
+    def from_params(cls, params: dict[str, Any], random_state=None) -> "ErrorModelBase":
+        """The unfitted estimator of a config entry's ``params`` (what :meth:`params_from_config` returned)."""
+        return cls(**params, random_state=random_state)
+
+    @classmethod
+    def config_keys(cls) -> set[str]:
+        """The keys of this kind's entry in a run config (besides ``name``, ``kind`` and the table's)."""
+        return set(cls._parameter_rules) | ({"residual"} if cls.takes_residual else set())
+
+    takes_residual: ClassVar[bool] = False       # a config entry may give a ``residual`` model (kinematic)
+
+    @classmethod
+    def input_space(cls, params: dict[str, Any]) -> str:
+        """What a config entry's estimator reads: ``cartesian`` (positions, mm) or ``joint`` (degrees)."""
+        return params.get("inputs", "cartesian")
+
+    # ------------------------------------------------------------------ model files
+    def to_file(self) -> dict[str, Any]:
+        """The fields of a model file beside ``kind``, ``inputs``, ``n_inputs`` and ``n_outputs``."""
+        return {"model": self.file_section()}
+
+    @classmethod
+    def from_file(cls, r: "FieldReader", inputs: str, n_in: int, n_out: int) -> "ErrorModelBase":
+        """The fitted model from the fields :meth:`to_file` wrote (``r`` reads the file's top level)."""
+        return cls.from_file_section(r.sub("model"), inputs, n_in, n_out)
+
+    def file_section(self) -> dict[str, Any]:
+        """This model's fitted numbers as plain JSON values (its ``model`` section)."""
+        raise NotImplementedError(f"{type(self).__name__} does not write model files")
+
+    @classmethod
+    def from_file_section(cls, r: "FieldReader", inputs: str, n_in: int, n_out: int) -> "ErrorModelBase":
+        """The fitted model from its section, every field checked (failing through ``r``)."""
+        raise NotImplementedError(f"{cls.__name__} does not read model files")
+
+    def check_file(self, r: "FieldReader") -> None:
+        """Checks of a loaded model as a whole (``r`` reads the fields :meth:`to_file` wrote)."""
+        self.check_section(r.sub("model"))
+
+    def check_section(self, r: "FieldReader", limit_mm: float = 1e6) -> None:
+        """Refuse a loaded model that predicts non-finite errors, or errors over ``limit_mm``, at the
+        corners and centre of the box of its data (its numbers are then damaged)."""
+        with np.errstate(all="ignore"):
+            pred = self.predict_validated(box_points(*self.input_bounds()))
+        if not np.all(np.isfinite(pred)) or np.abs(pred).max() > limit_mm:
+            worst = f"{np.abs(pred).max():.3g}" if np.all(np.isfinite(pred)) else "a non-finite value"
+            r.fail(self._damage_field, f"predicts {worst} mm within the box of its data (limit {limit_mm:g} mm): "
+                                       "the fitted numbers are damaged")
+
+    _damage_field: ClassVar[str] = ""           # the field a damaged model's message names ("": the section)
+
+    # ------------------------------------------------------------------ what a run and its report ask
+    def min_samples(self, n_inputs: int) -> tuple[int, str, str | None]:
+        """Fewest samples a fit on ``n_inputs`` varying inputs needs: ``(count, why, parameter)``, the
+        parameter (a key of the config entry) that sets it, or None."""
+        return 1, "one sample", None
+
+    def describe(self) -> str:
+        """This model in words, for messages and the report."""
+        return f"a {self.kind or type(self).__name__} model"
+
+    @property
+    def solver_name(self) -> str:
+        """How the model is fitted (metrics.json ``solver``)."""
+        return getattr(self, "solver", "-")
+
+    def family(self) -> str:
+        """The report's family of this model (models of one family are compared in one sentence)."""
+        inputs = "Cartesian-input" if self.input_space(self.get_params(deep=False)) == "cartesian" else "joint-input"
+        return f"Global {inputs} {self.family_noun}"
+
+    def pso_rms_ratio(self) -> float | None:
+        """RMS of a particle-swarm fit over the least-squares RMS (1.0 optimal); None if no swarm ran."""
+        return None
+
+    def swarm_runs(self) -> list[tuple[np.ndarray, float]]:
+        """``(best fitness per iteration, least-squares RMS)`` of every swarm of the fit (none by default)."""
+        return []
+
+    def equations(self, input_names=None, output_names=("dx", "dy", "dz"), precision: int | None = None
+                  ) -> list[str] | None:
+        """The fitted functions, one line per output; None for kinds without one equation per axis."""
+        return None
+
+    def regions_model(self) -> "ErrorModelBase | None":
+        """The partitioned model in this model (itself, or a hybrid's residual); None if there is none."""
+        return None
+
+    def identification(self):
+        """The identified parameter table of a kinematic model; None for other kinds."""
+        return None
+
+    def run_summary(self) -> dict[str, Any]:
+        """Extra fields of this model's entry in metrics.json (none by default)."""
+        return {}
+
+    def n_outputs(self) -> int:
+        """Outputs per prediction (3: x, y, z)."""
+        return int(getattr(self, "n_outputs_", 3))
+
+    def input_bounds(self) -> np.ndarray:
+        """``(2, d)``: the smallest and largest training input per column."""
+        return self.data_bounds_
+
+    def predict_validated(self, X: NDArray[np.float64]) -> NDArray[np.float64]:
+        """:meth:`predict` of inputs already checked as a finite ``(n, d)`` float array, ``(n, outputs)``."""
+        return np.asarray(self.predict(X)).reshape(len(X), -1)
 
     def warn_if_extrapolating(self, X, limit: float = 50.0) -> NDArray[np.bool_]:
         """Warn (one ``ExtrapolationWarning``) about inputs farther than ``limit`` (mm or degrees) from the
@@ -37,6 +184,13 @@ class ErrorModelBase(RegressorMixin, BaseEstimator):
         tags.target_tags.multi_output = True
         tags.target_tags.single_output = True
         return tags
+
+
+def box_points(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """The corners of the box ``[lo, hi]`` (of its first 10 inputs, the others at ``lo``) and its centre."""
+    n_in = lo.size
+    corners = lo + (hi - lo) * ((np.arange(2 ** min(n_in, 10))[:, None] >> np.arange(n_in)) & 1)
+    return np.vstack([corners, (lo + hi) / 2])
 
 
 def seed_from(random_state) -> int:

@@ -31,7 +31,8 @@ from sklearn.gaussian_process import GaussianProcessRegressor
 from sklearn.gaussian_process.kernels import RBF, ConstantKernel, Matern, WhiteKernel
 from sklearn.utils.validation import check_is_fitted, validate_data
 
-from .._validation import check_choice, check_int, check_real, param_error
+from .._fields import FieldReader
+from .._validation import integer, one_of, real
 from ..metrics import distance_outside_boxes
 from .angles import InputMap
 from .base import ErrorModelBase, seed_from
@@ -126,17 +127,22 @@ class GaussianProcessErrorModel(ErrorModelBase):
         self.region_overlap = region_overlap
         self.random_state = random_state
 
+    kind = "gaussian_process"
+    file_kind = "gaussian_process"
+    family_noun = "Gaussian processes"
+    _parameter_rules = {
+        "inputs": one_of(*INPUTS),
+        "kernel": one_of(*KERNELS),
+        "nu": one_of(*NUS, default=2.5),
+        "restarts": integer(0, 20, default=1),
+        "hyper_samples": integer(20, none=True),
+        "hyperparameters": one_of(*HYPERPARAMETERS),
+        "region_overlap": real(1.0, 3.0, default=1.0),
+    }
+    _damage_field = "dual_coef"
+
     def _check_params(self) -> None:
-        own = type(self).__name__
-        check_choice(own, "inputs", self.inputs, INPUTS)
-        check_choice(own, "kernel", self.kernel, KERNELS)
-        if self.kernel == "matern" and self.nu not in NUS:
-            raise param_error(own, "nu", "one of 0.5, 1.5, 2.5", self.nu)
-        check_int(own, "restarts", self.restarts, 0, 20)
-        if self.hyper_samples is not None:
-            check_int(own, "hyper_samples", self.hyper_samples, 20)
-        check_choice(own, "hyperparameters", self.hyperparameters, HYPERPARAMETERS)
-        check_real(own, "region_overlap", self.region_overlap, 1.0, 3.0)
+        self._check_rules()
 
     def region_minimum(self, n_active: int) -> tuple[int, str]:
         """Smallest region a partition may give this model, and why (for messages)."""
@@ -285,6 +291,62 @@ class GaussianProcessErrorModel(ErrorModelBase):
         check_is_fitted(self, "dual_coef_")
         X = validate_data(self, X, reset=False, dtype=np.float64)
         return distance_outside_boxes(self.input_map_.wrap(X), self.data_bounds_[:1], self.data_bounds_[1:])
+
+
+    # ------------------------------------------------------------------ the kind: config, files, run
+    @classmethod
+    def params_from_config(cls, sec, context: dict) -> dict:
+        """The declared keys; ``nu`` only with the Matern kernel, the region keys only under a partition."""
+        params = super().params_from_config(sec, context)
+        if sec.has("nu") and params["kernel"] != "matern":
+            sec.fail(sec.path("nu"), "applies to kernel: matern only")
+        for key in ("hyperparameters", "region_overlap"):
+            if sec.has(key) and not context.get("partitioned"):
+                sec.fail(sec.path(key), "applies to a partitioned GP only (add 'partition')")
+        return params
+
+    @property
+    def solver_name(self) -> str:
+        return "marginal-likelihood"
+
+    def n_outputs(self) -> int:
+        return int(self.dual_coef_.shape[1])
+
+    def file_section(self) -> dict:
+        return {"kernel": self.kernel, "nu": float(self.nu), "restarts": int(self.restarts),
+                "hyper_samples": None if self.hyper_samples is None else int(self.hyper_samples),
+                "hyperparameters": self.hyperparameters, "region_overlap": float(self.region_overlap),
+                "input_map": self.input_map_.to_dict(), "x_train": self.X_train_.tolist(),
+                "dual_coef": self.dual_coef_.tolist(), "y_mean": self.y_mean_.tolist(),
+                "y_std": self.y_std_.tolist(), "amplitude": self.amplitude_,
+                "length_scale": self.length_scale_.tolist(), "noise": self.noise_,
+                "log_marginal_likelihood": self.log_marginal_likelihood_, "data_bounds": self.data_bounds_.tolist()}
+
+    @classmethod
+    def from_file_section(cls, r: FieldReader, inputs: str, n_in: int, n_out: int) -> "GaussianProcessErrorModel":
+        """A GP from its section (files written before the search settings existed: how GPs were fitted then)."""
+        rules = cls._parameter_rules
+        imap = InputMap.from_file(r.sub("input_map"), n_in)
+        d = max(imap.n_active, 1)
+        n = len(r.get("x_train", list))
+        older = {"hyper_samples": None, "hyperparameters": "per_region", "region_overlap": 1.0}
+        params = {key: r.rule(key, rules[key]) if key in r.doc or key not in older else older[key]
+                  for key in ("kernel", "nu", "restarts", *older)}
+        model = cls(inputs=inputs, **params)
+        model.input_map_ = imap
+        model.X_train_ = r.array("x_train", (n, d))
+        model.dual_coef_ = r.array("dual_coef", (n, n_out))
+        model.y_mean_, model.y_std_ = r.array("y_mean", (n_out,)), r.array("y_std", (n_out,))
+        if np.any(model.y_std_ <= 0):
+            r.fail("y_std", "the output scales must be > 0")
+        model.amplitude_, model.noise_ = r.number("amplitude", 0.0), r.number("noise", 0.0)
+        model.length_scale_ = r.array("length_scale", (d,))
+        if model.amplitude_ <= 0 or np.any(model.length_scale_ <= 0):
+            r.fail("length_scale", "expected a positive amplitude and positive length scales")
+        model.log_marginal_likelihood_ = r.number("log_marginal_likelihood")
+        model.data_bounds_ = r.array("data_bounds", (2, n_in))
+        model.n_features_in_, model.n_train_, model._y_1d = n_in, n, False
+        return model._prepare()
 
 
 def _search_subset(X: NDArray[np.float64], n: int, seed: int) -> NDArray[np.intp] | slice:

@@ -27,6 +27,7 @@ predictions add up (a hybrid model).
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import dataclass
 from pathlib import PurePath
 
@@ -37,12 +38,13 @@ from scipy.optimize import least_squares
 from sklearn.base import clone
 from sklearn.utils.validation import check_is_fitted, validate_data
 
-from .._validation import check_array, check_real, param_error
-from ..errors import DataError
+from .._fields import FieldReader
+from .._validation import boolean, check_array, param_error, real
+from ..errors import DataError, ModelFileError
 from ..metrics import distance_outside_boxes
-from ..robot.description import load_robot
+from ..robot.description import load_robot, robot_from_dict, robot_to_dict
 from ..robot.kinematics import Robot
-from .base import ErrorModelBase, seed_from
+from .base import ErrorModelBase, box_points, seed_from
 from .bases import varying_inputs
 from .gp import GaussianProcessErrorModel
 from .partitioned import PartitionedErrorModel
@@ -347,15 +349,18 @@ class KinematicModel(ErrorModelBase):
         self.residual = residual
         self.random_state = random_state
 
+    kind = "kinematic"
+    file_kind = "kinematic"
+    takes_residual = True
+    _parameter_rules = {"base": boolean(True), "tool": boolean(True),
+                        "rcond": real(0.0, 1.0, default=1e-6, low_open=True)}
+
     def _check_params(self) -> Robot:
         own = type(self).__name__
         if not isinstance(self.robot, (Robot, str, PurePath)):
             raise param_error(own, "robot", "a Robot, a built-in robot name or a robot YAML path", self.robot)
         robot = load_robot(self.robot)
-        for name in ("base", "tool"):
-            if not isinstance(getattr(self, name), (bool, np.bool_)):
-                raise param_error(own, name, "a bool", getattr(self, name))
-        check_real(own, "rcond", self.rcond, 0.0, 1.0, low_open=True)
+        self._check_rules()
         if self.residual is not None and not isinstance(self.residual, RESIDUAL_MODELS):
             raise param_error(own, "residual", "None, an ErrorModel, a PartitionedErrorModel or a "
                               "GaussianProcessErrorModel", self.residual)
@@ -416,3 +421,127 @@ class KinematicModel(ErrorModelBase):
         X = validate_data(self, X, reset=False, dtype=np.float64)
         return distance_outside_boxes(X, self.data_bounds_[:1], self.data_bounds_[1:])
 
+    # ------------------------------------------------------------------ the kind: config, files, run, report
+    @classmethod
+    def params_from_config(cls, sec, context: dict) -> dict:
+        """``base``, ``tool`` and ``rcond``; the robot is the run's (top-level key ``robot``)."""
+        if context.get("robot") is None:
+            sec.fail(sec.path("kind"), "kind: kinematic needs the run's robot (top-level key 'robot')")
+        return {"robot": context["robot"], **super().params_from_config(sec, context)}
+
+    @classmethod
+    def from_params(cls, params: dict, random_state=None) -> "KinematicModel":
+        return cls(**{**params, "robot": load_robot(params["robot"])}, random_state=random_state)
+
+    @classmethod
+    def input_space(cls, params: dict) -> str:
+        return "joint"
+
+    def file_section(self) -> dict:
+        from .kinds import body_of      # the table of kinds knows this module
+
+        return {"robot": robot_to_dict(self.robot_), "base": bool(self.base), "tool": bool(self.tool),
+                "rcond": float(self.rcond), "identification": self.identification_.to_dict(),
+                "data_bounds": self.data_bounds_.tolist(), "active": self.active_.tolist(),
+                "residual": body_of(self.residual_) if self.residual_ is not None else None}
+
+    @classmethod
+    def from_file_section(cls, r: FieldReader, inputs: str, n_in: int, n_out: int) -> "KinematicModel":
+        """A kinematic model from its section: the identified table must agree with the file's robot
+        (nominal values, unidentified parameters kept nominal, standard errors >= 0)."""
+        try:
+            robot = robot_from_dict(r.get("robot", dict), source=f"{r.source}: field {r.path('robot')!r}")
+        except Exception as exc:  # noqa: BLE001 - any damage in the robot section is a file error
+            raise ModelFileError(str(exc)) from None
+        if robot.n_joints != n_in or n_out != 3:
+            r.fail("robot", f"a robot with {n_in} joints and 3 outputs; got {robot.n_joints} joints, {n_out} outputs")
+        table = _identification_from(r.sub("identification"), robot)
+        model = cls(robot=robot, **{key: r.rule(key, rule) for key, rule in cls._parameter_rules.items()})
+        model.robot_, model.identification_ = robot, table
+        model.identified_robot_ = robot_with(robot, table.value)
+        model.data_bounds_ = r.array("data_bounds", (2, n_in))
+        if np.any(model.data_bounds_[0] > model.data_bounds_[1]):
+            r.fail("data_bounds", "a low bound exceeds its high bound")
+        model.active_ = r.array("active", (n_in,), bool)
+        model.n_features_in_, model._y_1d = n_in, False
+        model.residual_ = None
+        if r.doc.get("residual") is not None:
+            from .kinds import model_from_body      # the table of kinds knows this module
+
+            model.residual_ = model_from_body(r.sub("residual"))
+            model.residual = model.residual_
+        return model
+
+    def check_file(self, r: FieldReader) -> None:
+        """The identified robot moves the tool by less than the robot's reach from where the nominal robot
+        puts it, at the corners and centre of the joint box of the data; a residual model is checked too."""
+        poses = box_points(*self.data_bounds_)
+        with np.errstate(all="ignore"):
+            shift = np.linalg.norm(self.identified_robot_.positions(poses) - self.robot_.positions(poses), axis=1)
+        reach = self.robot_.reach_mm
+        if not np.all(np.isfinite(shift)) or shift.max() > reach:
+            worst = f"{shift.max():.4g} mm" if np.all(np.isfinite(shift)) else "a non-finite distance"
+            r.sub("model").sub("identification").fail(
+                "value", f"the identified robot moves the tool by {worst} within the joint box of its data, more "
+                         f"than the robot's reach ({reach:.0f} mm): the identified values are damaged")
+        if self.residual_ is not None:
+            self.residual_.check_file(r.sub("model").sub("residual"))
+
+    def n_outputs(self) -> int:
+        return 3
+
+    def describe(self) -> str:
+        text = f"the kinematic parameters of {self.robot_.name}"
+        return text + (f", plus a residual {self.residual_.describe()}" if self.residual_ is not None else "")
+
+    @property
+    def solver_name(self) -> str:
+        return "levenberg-marquardt"
+
+    def family(self) -> str:
+        return "Kinematic models" if self.residual is None else "Hybrid models (kinematic + residual)"
+
+    def regions_model(self):
+        return self.residual_.regions_model() if getattr(self, "residual_", None) is not None else None
+
+    def identification(self) -> Identification:
+        return self.identification_
+
+    def run_summary(self) -> dict:
+        table = self.identification_
+        return {"kinematic": {"identified": table.status.count("identified"), "parameters": len(table.names),
+                              "unidentifiable": table.unidentifiable(), "condition": table.condition,
+                              "rms_3d": table.rms_mm}}
+
+    def predict_validated(self, X: NDArray[np.float64]) -> NDArray[np.float64]:
+        return self._predict_trusted(X)
+
+
+def _identification_from(ident: FieldReader, robot: Robot) -> Identification:
+    """A model file's identified table, which must agree with its robot: the robot's parameter names and
+    nominal values, unidentified parameters kept nominal, standard errors finite and >= 0 (or null)."""
+    names = [n for n, _ in parameter_names(robot)]
+    if ident.get("names", list) != names:
+        ident.fail("names", f"expected the {len(names)} parameters of {robot.name} ({names[0]} ... {names[-1]})")
+    status = ident.get("status", list)
+    if len(status) != len(names) or any(s not in STATUSES for s in status):
+        ident.fail("status", f"expected {len(names)} of {', '.join(STATUSES)}")
+    std = ident.get("std_error", list)
+    if len(std) != len(names) or not all(v is None or isinstance(v, (int, float)) for v in std):
+        ident.fail("std_error", f"expected {len(names)} numbers or nulls")
+    nominal, value = ident.array("nominal", (len(names),)), ident.array("value", (len(names),))
+    expected = nominal_values(robot)
+    off = np.flatnonzero(~np.isclose(nominal, expected, rtol=1e-12, atol=1e-9))
+    if off.size:
+        k = off[0]
+        ident.fail("nominal", f"entry {k} ({names[k]}) is {float(nominal[k])!r}, but the file's robot gives "
+                              f"{float(expected[k])!r}: "
+                              "the nominal values must be those of field 'model.robot'")
+    kept = np.flatnonzero((np.array(status) != "identified") & (value != nominal))
+    if kept.size:
+        k = kept[0]
+        ident.fail("value", f"entry {k} ({names[k]}) is {status[k]!r}, so it keeps its nominal value "
+                            f"{float(nominal[k])!r}; got {float(value[k])!r}")
+    if any(v is not None and not (math.isfinite(v) and v >= 0) for v in std):
+        ident.fail("std_error", "standard errors must be finite and >= 0 (or null)")
+    return Identification.from_dict(ident.doc)

@@ -29,7 +29,8 @@ from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 from sklearn.cluster import KMeans
 
-from .._validation import check_int, check_real, param_error
+from .._fields import FieldReader
+from .._validation import check_int, integer, param_error, real
 from ..errors import PartcalError
 from .bases import varying_inputs
 from .lookup import BlockPlan, Lookup, grid_lookup, octree_lookup
@@ -46,8 +47,12 @@ class Octree:
     max_depth: int = 3
     min_samples: int | None = None
 
+    size_key = "max_depth"                       # what sets the granularity (a run config's key too)
+    size_rule = integer(0, 8, default=3)
+    joint_inputs = False                         # an octree splits Cartesian boxes
+
     def __post_init__(self):
-        check_int("Octree", "max_depth", self.max_depth, 0, 8)
+        self.size_rule.check("Octree", "max_depth", self.max_depth)
         if self.min_samples is not None:
             check_int("Octree", "min_samples", self.min_samples, 1)
 
@@ -67,8 +72,12 @@ class KMeansPartition:
     n_regions: int = 8
     min_samples: int | None = None
 
+    size_key = "n_regions"
+    size_rule = integer(1, 4096, default=8)
+    joint_inputs = True
+
     def __post_init__(self):
-        check_int("KMeansPartition", "n_regions", self.n_regions, 1, 4096)
+        self.size_rule.check("KMeansPartition", "n_regions", self.n_regions)
         if self.min_samples is not None:
             check_int("KMeansPartition", "min_samples", self.min_samples, 1)
 
@@ -161,6 +170,17 @@ class Partition:
             out["boxes"] = self.boxes.tolist()
             out["tree"] = {k: v.tolist() for k, v in self.tree.items()}
         return out
+
+    @property
+    def region_noun(self) -> str:
+        """What a region is called: ``octree cell`` or ``k-means region``."""
+        return "octree cell" if self.kind == "octree" else "k-means region"
+
+    def region_boxes(self) -> NDArray[np.float64] | None:
+        """``(n_regions, 2, d)``: each region's box (an octree's first cell of the region), or None (k-means)."""
+        if self.kind != "octree":
+            return None
+        return self.boxes[[int(np.flatnonzero(self.kernel_region == g)[0]) for g in range(self.n_regions)]]
 
 
 
@@ -255,6 +275,49 @@ def _build_kmeans(X, n_regions: int, min_samples: int, random_state, width: floa
     return Partition("kmeans", m, full_centres, sigmas, np.arange(m), active=active)
 
 
+BLEND_WIDTH = real(0.6, 10.0, default=0.7)       # kernel widths relative to the regions: below 0.6 they barely overlap
+PARTITIONS = {"octree": Octree, "kmeans": KMeansPartition}     # a run config's partition.method -> settings
+
+
 def check_width(value) -> float:
     """Kernel widths relative to the regions: below 0.6 neighbouring kernels barely overlap."""
-    return check_real("PartitionedErrorModel", "blend_width", value, 0.6, 10.0)
+    return float(BLEND_WIDTH.check("PartitionedErrorModel", "blend_width", value))
+
+
+def partition_from_file(p: FieldReader, m: int, n_in: int, active: np.ndarray) -> Partition:
+    """A model file's partition of ``m`` regions in ``n_in`` coordinates, with every index in range and every
+    kernel width positive on the varying axes.
+
+    Lists of candidate kernels (``cand``, ``own``) in files of partcal 0.1 are
+    ignored: the lookup is rebuilt from the kernels.
+    """
+    kind = p.choice("kind", tuple(PARTITIONS))
+    centres = p.array("centres", (None, n_in))
+    k = centres.shape[0]
+    sigmas = p.array("sigmas", (k, n_in))
+    if not active.any():
+        p.fail("active", "no input varies: there is nothing to partition")
+    if np.any(sigmas[:, active] <= 0):
+        p.fail("sigmas", "kernel widths must be > 0 on the varying axes")
+    kernel_region = p.array("kernel_region", (k,), int)
+    if np.any((kernel_region < 0) | (kernel_region >= m)) or np.unique(kernel_region).size != m:
+        p.fail("kernel_region", f"must map the {k} kernels onto all regions 0..{m - 1}")
+    if kind == "kmeans":
+        if k != m or np.any(kernel_region != np.arange(m)):
+            p.fail("kernel_region", f"a k-means partition has one kernel per region: 0..{m - 1}")
+        return Partition("kmeans", m, centres, sigmas, kernel_region, active=active)
+    boxes = p.array("boxes", (k, 2, n_in))
+    if np.any(boxes[:, 0] > boxes[:, 1]):
+        p.fail("boxes", "a low corner exceeds its high corner")
+    tree = p.sub("tree")
+    node_centre = tree.array("centre", (None, n_in))
+    nodes, split = node_centre.shape[0], 2 ** int(active.sum())
+    child, leaf = tree.array("child", (nodes,), int), tree.array("leaf", (nodes,), int)
+    inner = child >= 0
+    if np.any(child[inner] + split > nodes) or np.any(child < -1) or np.any(child[inner] <= np.flatnonzero(inner)):
+        tree.fail("child", f"child indices must point forward to {split} nodes within the {nodes} nodes")
+    if np.any(inner == (leaf >= 0)) or np.any(leaf >= k) or np.any(leaf < -1):
+        tree.fail("leaf", f"every node is either split (child >= 0) or a leaf with an index in 0..{k - 1}")
+    return Partition("octree", m, centres, sigmas, kernel_region, active=active, boxes=boxes,
+                     tree={"centre": node_centre, "child": child, "leaf": leaf})
+

@@ -21,7 +21,8 @@ from numpy.typing import NDArray
 from sklearn.base import clone
 from sklearn.utils.validation import check_is_fitted, validate_data
 
-from .._validation import check_choice, check_int, param_error
+from .._fields import FieldReader
+from .._validation import check_int, one_of, param_error
 from ..errors import PartcalError
 from ..metrics import distance_outside_boxes, kfold_splits, select_by_cv
 from .angles import InputMap
@@ -29,11 +30,12 @@ from .base import ErrorModelBase, seed_from
 from .bases import varying_inputs
 from .combine import BlendWeights, FrameCombiner, combine_generic, one_blas_thread, region_weights
 from .gp import GaussianProcessErrorModel
-from .partition import KMeansPartition, Octree, Partition, check_width
+from .partition import BLEND_WIDTH, KMeansPartition, Octree, Partition, partition_from_file
 from .series import ErrorModel, fit_swarms
 
 log = logging.getLogger(__name__)
 MIN_SAMPLES_PER_TERM = 3
+LOCAL_KINDS = {cls.kind: cls for cls in (ErrorModel, GaussianProcessErrorModel)}    # what a region may hold
 
 
 class PartitionedErrorModel(ErrorModelBase):
@@ -83,10 +85,18 @@ class PartitionedErrorModel(ErrorModelBase):
         self.n_jobs = n_jobs
         self.random_state = random_state
 
+    kind = "partitioned"
+    file_kind = "partitioned"
+    _parameter_rules = {"blend": one_of("gaussian", "hard"), "blend_width": BLEND_WIDTH}
+
+    @property
+    def inputs(self) -> str:
+        """What the local models read: ``cartesian`` or ``joint``."""
+        return (self.local if self.local is not None else ErrorModel()).inputs
+
     def _resolved(self) -> tuple[ErrorModel | GaussianProcessErrorModel, Octree | KMeansPartition]:
         own = type(self).__name__
-        check_choice(own, "blend", self.blend, ("gaussian", "hard"))
-        check_width(self.blend_width)
+        self._check_rules()
         if self.n_jobs is not None and not isinstance(self.n_jobs, Integral):
             raise param_error(own, "n_jobs", "an int or None", self.n_jobs)
         local = ErrorModel() if self.local is None else self.local
@@ -249,6 +259,108 @@ class PartitionedErrorModel(ErrorModelBase):
         if getattr(self, "train_inputs_", None) is None:
             return distance_outside_boxes(X, self.region_bounds_[:, 0], self.region_bounds_[:, 1])
         return self._distance_to_train_inputs(X)
+
+
+    # ------------------------------------------------------------------ the kind: files, run, report
+    def to_file(self) -> dict:
+        """A partitioned model's fields stand at the file's top level (as partcal 0.1 wrote them)."""
+        imap = getattr(self, "input_map_", None)
+        local = self.models_[0]
+        return dict(local_kind=local.kind, input_map=imap.to_dict() if imap is not None else None,
+                    blend={"method": self.blend, "width": float(self.blend_width)},
+                    partition=self.partition_.to_dict(), region_bounds=self.region_bounds_.tolist(),
+                    region_counts=self.region_counts_.tolist(), min_samples=int(self.min_samples_),
+                    regions=[m.file_section() for m in self.models_])
+
+    @classmethod
+    def from_file(cls, r: FieldReader, inputs: str, n_in: int, n_out: int) -> "PartitionedErrorModel":
+        blend = r.sub("blend")
+        model = cls(blend=blend.rule("method", cls._parameter_rules["blend"]),
+                    blend_width=blend.rule("width", cls._parameter_rules["blend_width"]))
+        local_cls = LOCAL_KINDS[r.choice("local_kind", tuple(LOCAL_KINDS))] if "local_kind" in r.doc else ErrorModel
+        model.input_map_ = InputMap.from_file(r.sub("input_map"), n_in) if r.doc.get("input_map") is not None else None
+        p = r.sub("partition")
+        m = p.integer("n_regions", 1)
+        model.region_bounds_ = r.array("region_bounds", (m, 2, n_in))
+        if np.any(model.region_bounds_[:, 0] > model.region_bounds_[:, 1]):
+            r.fail("region_bounds", "a low bound exceeds its high bound")
+        # the partition's coordinates: the scaled varying joints under an input map, else the inputs themselves
+        d = max(model.input_map_.n_active, 1) if model.input_map_ is not None else n_in
+        if "active" in p.doc:
+            active = p.array("active", (d,), bool)
+        else:        # partcal 0.1 blended along the axes its regions span
+            active = varying_inputs(model.region_bounds_.reshape(-1, n_in))
+        partition = partition_from_file(p, m, d, active)
+        regions = r.get("regions", list)
+        if len(regions) != m:
+            r.fail("regions", f"expected {m} region models (partition.n_regions); got {len(regions)}")
+        model.models_ = [local_cls.from_file_section(r.sub(f"regions[{i}]", item), inputs, n_in, n_out)
+                         for i, item in enumerate(regions)]
+        model.partition_ = partition
+        model.region_counts_ = r.array("region_counts", (m,), int)
+        model.min_samples_ = r.integer("min_samples", 1)
+        if np.any(model.region_counts_ < 0):
+            r.fail("region_counts", "counts must be >= 0")
+        model.n_features_in_, model.n_outputs_, model._y_1d = n_in, n_out, False
+        model.local = clone(model.models_[0]) if local_cls is GaussianProcessErrorModel else ErrorModel(inputs=inputs)
+        return model
+
+    def check_file(self, r: FieldReader) -> None:
+        """Every region's model is checked on the box of its own data."""
+        for k, (local, item) in enumerate(zip(self.models_, r.doc["regions"])):
+            local.check_section(r.sub(f"regions[{k}]", item))
+
+    def min_samples(self, n_inputs: int) -> tuple[int, str, str]:
+        local, spec = self._resolved()
+        need, why = region_minimum(local, n_inputs)
+        if isinstance(local, ErrorModel):
+            why, key = f"{why} ({n_inputs} varying {local.inputs} inputs)", local.min_samples(n_inputs)[2]
+        else:
+            why, key = f"{why} of the Gaussian process", "partition"
+        need = spec.min_samples or need
+        return need, f"one region of {need} samples ({why})", key
+
+    def setting_problem(self, n_inputs: int) -> tuple[str, str] | None:
+        """A region of series models may not be set smaller than the local model's terms per output."""
+        local, spec = self._resolved()
+        if isinstance(local, ErrorModel) and spec.min_samples is not None:
+            terms = local.min_samples(n_inputs)[0]
+            if spec.min_samples < terms:
+                return "partition.min_samples", (f"must be at least the local model's {terms} terms per output; "
+                                                 f"got {spec.min_samples}")
+        return None
+
+    def describe(self) -> str:
+        local, spec = self._resolved()
+        return f"{local.describe()}, one per {type(spec).__name__} region"
+
+    @property
+    def solver_name(self) -> str:
+        return self._resolved()[0].solver_name
+
+    def family(self) -> str:
+        local = self._resolved()[0]
+        return "Partitioned" + local.family()[len("Global"):]
+
+    def pso_rms_ratio(self) -> float | None:
+        ratios = [m.pso_rms_ratio() for m in self.models_]
+        return None if any(v is None for v in ratios) else float(max(ratios))
+
+    def swarm_runs(self) -> list[tuple[np.ndarray, float]]:
+        return [run for m in self.models_ for run in m.swarm_runs()]
+
+    def regions_model(self) -> "PartitionedErrorModel":
+        return self
+
+    def n_outputs(self) -> int:
+        return int(self.n_outputs_)
+
+    def input_bounds(self) -> NDArray[np.float64]:
+        """The box of all regions' samples (in the local models' inputs: joints wrapped)."""
+        return np.stack([self.region_bounds_[:, 0].min(axis=0), self.region_bounds_[:, 1].max(axis=0)])
+
+    def predict_validated(self, X: NDArray[np.float64]) -> NDArray[np.float64]:
+        return self.predict(X).reshape(len(X), -1)
 
 
 def _fit_regions(models: list, data: list[tuple], n_jobs, shared=None) -> list:

@@ -25,12 +25,13 @@ import numpy as np
 from numpy.typing import NDArray
 from sklearn.utils.validation import check_is_fitted, validate_data
 
-from .._validation import check_choice, check_int, param_error
+from .._fields import FieldReader, is_int
+from .._validation import Requirement, boolean, integer, one_of, param_error
 from ..errors import PartcalError
 from ..metrics import distance_outside_boxes
 from .base import ErrorModelBase, seed_from
 from .bases import Basis, Scaling, SeriesPlan, column_bounds, raw_polynomial
-from .swarm import SwarmConfig, SwarmResult, minimize_batch
+from .swarm import RULES, TOPOLOGIES, SwarmConfig, SwarmResult, minimize_batch
 
 log = logging.getLogger(__name__)
 try:        # numpy's einsum without its Python wrapper: a quarter of the cost of a small swarm's RMS
@@ -41,6 +42,10 @@ INPUTS = ("cartesian", "joint")
 BASES = ("polynomial", "fourier")
 SOLVERS = ("pso", "lstsq")
 FITNESSES = ("rms", "max", "mae")
+# a run config's solver section: these keys are SwarmConfig's (checked by it), as YAML types
+SWARM_KEYS = {"particles": "int", "iterations": "int", "c1": "float", "c2": "float", "rule": "str",
+              "topology": "str", "neighbours": "int", "inertia": "list", "vmax": "float",
+              "bound_scale": "float", "stop_fitness": "float", "patience": "int", "ftol": "float"}
 _DEFAULT_SWARM = SwarmConfig()      # frozen: one validated instance instead of a new one per call
 
 
@@ -104,23 +109,29 @@ class ErrorModel(ErrorModelBase):
         self.fitness = fitness
         self.random_state = random_state
 
+    kind = "series"
+    file_kind = "global"
+    _parameter_rules = {
+        "inputs": one_of(*INPUTS),
+        "basis": one_of(*BASES),
+        "degree": integer(1, 8, default=1),
+        "harmonics": integer(1, 8, default=1),
+        "cross_terms": boolean(False),
+        "solver": one_of(*SOLVERS),
+        "fitness": one_of(*FITNESSES),
+    }
+    _requirements = (
+        Requirement("cross_terms", "false for the fourier basis",
+                    lambda p: not p["cross_terms"] or p["basis"] == "polynomial"),
+        Requirement("fitness", "'rms' with solver 'lstsq' (least squares minimises the RMS; use solver 'pso')",
+                    lambda p: p["solver"] != "lstsq" or p["fitness"] == "rms"),
+    )
+
     # ------------------------------------------------------------------ parameters
     def _check_params(self) -> tuple[Basis, SwarmConfig]:
-        own = type(self).__name__
-        check_choice(own, "inputs", self.inputs, INPUTS)
-        check_choice(own, "basis", self.basis, BASES)
-        check_int(own, "degree", self.degree, 1, 8)
-        check_int(own, "harmonics", self.harmonics, 1, 8)
-        check_choice(own, "solver", self.solver, SOLVERS)
-        check_choice(own, "fitness", self.fitness, FITNESSES)
-        if not isinstance(self.cross_terms, (bool, np.bool_)):
-            raise param_error(own, "cross_terms", "a bool", self.cross_terms)
-        if self.cross_terms and self.basis != "polynomial":
-            raise param_error(own, "cross_terms", "False for the fourier basis", self.cross_terms)
-        if self.solver == "lstsq" and self.fitness != "rms":
-            raise param_error(own, "fitness", "'rms' with solver='lstsq' (use solver='pso')", self.fitness)
+        self._check_rules()
         if self.pso is not None and not isinstance(self.pso, SwarmConfig):
-            raise param_error(own, "pso", "a SwarmConfig or None", self.pso)
+            raise param_error(type(self).__name__, "pso", "a SwarmConfig or None", self.pso)
         order = self.degree if self.basis == "polynomial" else self.harmonics
         return Basis(self.basis, self.inputs, order, bool(self.cross_terms)), self.pso or _DEFAULT_SWARM
 
@@ -156,7 +167,7 @@ class ErrorModel(ErrorModelBase):
         n, m = X.shape[0], len(terms)
         if n < m:
             raise PartcalError(
-                f"{type(self).__name__} with {m} terms per output ({self._describe()}) needs at least "
+                f"{type(self).__name__} with {m} terms per output ({self.describe()}) needs at least "
                 f"{m} samples; got {n} sample{'s' if n != 1 else ''}")
         weights = np.ones(n) if sample_weight is None else np.asarray(sample_weight, dtype=float)
         phi = basis.transform(X, scaling, terms)
@@ -297,11 +308,146 @@ class ErrorModel(ErrorModelBase):
         text = " ".join(f"{p[0]} {p[1:]}" for p in parts)        # "+0.5*x" -> "+ 0.5*x"
         return text[2:] if text.startswith("+ ") else "-" + text[2:]
 
-    def _describe(self) -> str:
+    def describe(self) -> str:
         if self.basis == "polynomial":
             kind = {1: "first", 2: "second"}.get(self.degree, f"degree-{self.degree}")
             return f"{kind}-degree polynomial{' with cross terms' if self.cross_terms else ''} of {self.inputs} inputs"
         return f"Fourier series with {self.harmonics} harmonic(s) of {self.inputs} inputs"
+
+    # ------------------------------------------------------------------ the kind: config, files, run
+    @classmethod
+    def params_from_config(cls, sec, context: dict) -> dict:
+        """The basis keys of a config entry, and its ``solver`` section: ``method``, ``fitness`` and the
+        swarm settings (``swarm``, checked by :class:`SwarmConfig`)."""
+        rules = cls._parameter_rules
+        params = {key: sec.rule(key, rules[key]) for key in ("inputs", "basis", "degree", "harmonics", "cross_terms")}
+        solver = sec.section("solver")
+        params["solver"] = solver.rule("method", rules["solver"])
+        params["fitness"] = solver.rule("fitness", rules["fitness"])
+        for req in cls._requirements:
+            (solver if req.param == "fitness" else sec).requirements((req,), params)
+        params["swarm"] = _swarm_settings(solver, params["solver"])
+        solver.done()
+        return params
+
+    @classmethod
+    def from_params(cls, params: dict, random_state=None) -> "ErrorModel":
+        params = dict(params)
+        swarm = params.pop("swarm", {})
+        pso = SwarmConfig(**swarm) if params["solver"] == "pso" and swarm else None
+        return cls(**params, pso=pso, random_state=random_state)
+
+    def file_section(self) -> dict:
+        return {"basis": self.basis, "order": self.basis_.order, "cross_terms": bool(self.cross_terms),
+                "solver": self.solver, "fitness": self.fitness, "scaling": self.scaling_.to_dict(),
+                "terms": [list(t) for t in self.terms_], "coef": self.coef_.tolist(),
+                "data_bounds": self.data_bounds_.tolist(), "train_rms": self.train_rms_.tolist(),
+                "lstsq_rms": self.lstsq_rms_.tolist(), "rms_ratio": self.rms_ratio_}
+
+    @classmethod
+    def from_file_section(cls, r: FieldReader, inputs: str, n_in: int, n_out: int) -> "ErrorModel":
+        """A series model from its section: the scaling must be the one its data bounds give, and the
+        terms exactly those of its basis and order."""
+        rules = cls._parameter_rules
+        params = {"basis": r.rule("basis", rules["basis"]), "cross_terms": r.rule("cross_terms", rules["cross_terms"]),
+                  "solver": r.rule("solver", rules["solver"]), "fitness": r.rule("fitness", rules["fitness"])}
+        order = r.rule("order", rules["degree" if params["basis"] == "polynomial" else "harmonics"])
+        r.requirements(cls._requirements, params)
+        bounds = r.array("data_bounds", (2, n_in))
+        if np.any(bounds[0] > bounds[1]):
+            r.fail("data_bounds", "a low bound exceeds its high bound")
+        scaling = _scaling_from(r.sub("scaling"), bounds, n_in)
+        basis = Basis(params["basis"], inputs, order, params["cross_terms"])
+        want = basis.terms(scaling)
+        terms = _terms_from(r, params["basis"])
+        if terms != want:
+            r.fail("terms", f"are not the {len(want)} terms of a {basis.kind} basis of order {order} over the varying "
+                            f"inputs (exponents beyond the degree, or a basis that does not match)")
+        model = cls(inputs=inputs, degree=order if basis.kind == "polynomial" else 1,
+                    harmonics=order if basis.kind == "fourier" else 1, **params)
+        model.coef_, model.scaling_, model.terms_, model.basis_ = r.array("coef", (len(terms), n_out)), scaling, terms, basis
+        model.n_features_in_, model._y_1d, model.data_bounds_ = n_in, False, bounds
+        model.train_rms_ = r.array("train_rms", (n_out,))
+        model.lstsq_rms_ = r.array("lstsq_rms", (n_out,))
+        model.rms_ratio_ = r.number("rms_ratio", 0.0)
+        if np.any(model.train_rms_ < 0) or np.any(model.lstsq_rms_ < 0):
+            r.fail("train_rms", "RMS values must be >= 0")
+        model.swarm_results_ = []
+        return model
+
+    _damage_field = "coef"
+
+    def min_samples(self, n_inputs: int) -> tuple[int, str, str]:
+        terms = self._check_params()[0].n_terms(n_inputs)
+        return terms, f"{terms} terms per output ({n_inputs} varying {self.inputs} inputs)", (
+            "degree" if self.basis == "polynomial" else "harmonics")
+
+    @classmethod
+    def config_keys(cls) -> set[str]:
+        return {"inputs", "basis", "degree", "harmonics", "cross_terms", "solver"}
+
+    def n_outputs(self) -> int:
+        return int(self.coef_.shape[1])
+
+    def pso_rms_ratio(self) -> float | None:
+        return float(self.rms_ratio_) if self.solver == "pso" else None
+
+    def swarm_runs(self) -> list[tuple[np.ndarray, float]]:
+        return [(res.history, float(self.lstsq_rms_[a])) for a, res in enumerate(self.swarm_results_)]
+
+    def predict_validated(self, X: NDArray[np.float64]) -> NDArray[np.float64]:
+        return self._predict_trusted(X)
+
+
+def _swarm_settings(solver, method: str) -> dict:
+    """The swarm keys of a config entry's ``solver`` section (checked by :class:`SwarmConfig`)."""
+    swarm = {}
+    for key, kind in SWARM_KEYS.items():
+        if not solver.has(key):
+            continue
+        if method != "pso":
+            solver.fail(solver.path(key), "applies to method: pso only")
+        if solver.data[key] is None and key in ("patience", "stop_fitness"):
+            solver.get(key, "any")
+            swarm[key] = None
+        elif key in ("rule", "topology"):
+            swarm[key] = solver.rule(key, one_of(*(RULES if key == "rule" else TOPOLOGIES)))
+        elif key == "inertia":
+            swarm[key] = tuple(solver.get(key, "list"))
+        else:
+            swarm[key] = solver.get(key, kind)
+    if swarm:
+        try:
+            SwarmConfig(**swarm)
+        except PartcalError as exc:
+            solver.fail(solver.where, str(exc))
+    return swarm
+
+
+def _scaling_from(s: FieldReader, bounds: NDArray[np.float64], n_in: int) -> Scaling:
+    """A file's ``scaling``, which must be what the fit derived from the same data bounds."""
+    scaling = Scaling(s.array("centre", (n_in,)), s.array("scale", (n_in,)), s.array("active", (n_in,), bool))
+    expected = Scaling.fit(bounds)
+    if not np.array_equal(scaling.active, expected.active):
+        s.fail("active", f"must mark the inputs that vary within data_bounds: {expected.active.tolist()}")
+    for key in ("centre", "scale"):
+        if not np.allclose(getattr(scaling, key), getattr(expected, key), rtol=1e-12, atol=0):
+            s.fail(key, f"disagrees with data_bounds (expected {getattr(expected, key).tolist()})")
+    return scaling
+
+
+def _terms_from(r: FieldReader, basis: str) -> list[tuple]:
+    """A file's terms as tuples, with the element types checked (no strings for numbers, no booleans)."""
+    out = []
+    for i, t in enumerate(r.get("terms", list)):
+        ok = isinstance(t, list) and (
+            all(is_int(k) for k in t) if basis == "polynomial"
+            else len(t) == 3 and t[0] in ("1", "cos", "sin") and is_int(t[1]) and is_int(t[2]))
+        if not ok:
+            r.fail(f"terms[{i}]", "expected a list of integer exponents" if basis == "polynomial"
+                   else "expected [\"1\"|\"cos\"|\"sin\", input, harmonic]")
+        out.append(tuple(t) if basis == "polynomial" else (t[0], int(t[1]), int(t[2])))
+    return out
 
 
 # ---------------------------------------------------------------------- swarms of many fits

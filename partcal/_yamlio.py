@@ -182,14 +182,7 @@ def _show(value: Any) -> str:
 
 
 def range_check(low: float | None = None, high: float | None = None, *, integer: bool = False):
-    """A ``check`` for :meth:`Section.get`: a number in ``[low, high]``."""
-    def check(value):
-        if value != value or value in (float("inf"), float("-inf")):     # NaN and infinities
-            return f"a finite {'int' if integer else 'number'}"
-        if (low is not None and value < low) or (high is not None and value > high):
-            what = "an int" if integer else "a number"
-            lo = "-inf" if low is None else low
-            hi = "inf" if high is None else high
-            return f"{what} in [{lo}, {hi}]"
-        return None
-    return check
+    """A ``check`` for :meth:`Section.get`: a number in ``[low, high]`` (the wording of a declared rule)."""
+    from ._validation import Rule
+
+    return Rule("int" if integer else "float", None, low, high).problem

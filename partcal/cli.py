@@ -301,14 +301,14 @@ def _write_table(path, header, values, atomic_write, flags=None) -> None:
 
 def _cmd_equations(args) -> int:
     from .errors import ModelFileError
-    from .models.series import ErrorModel
     from .study.predictor import load_predictor
 
     predictor = load_predictor(args.model)
-    if not isinstance(predictor.model, ErrorModel):
+    lines = predictor.model.equations(precision=args.digits)
+    if lines is None:
         raise ModelFileError(f"{args.model}: a {predictor.document['kind']} model has no single equation per "
                              "axis; equations are printed for global series models")
-    print("\n".join(predictor.model.equations(precision=args.digits)))
+    print("\n".join(lines))
     return 0
 
 

@@ -101,7 +101,7 @@ def test_config_errors_name_key_and_line(tmp_path):
     with pytest.raises(ConfigError, match=rf"bad.yaml: tracker.readngs \(line {line}\): unknown key; did you mean 'readings'\?"):
         load_study(bad)
     bad.write_text(CONFIG.read_text().replace("seed: 2006", "seed: -1"))
-    with pytest.raises(ConfigError, match=r"seed \(line \d+\): must be an int in \[0, inf\]; got -1"):
+    with pytest.raises(ConfigError, match=r"seed \(line \d+\): must be an int >= 0; got -1"):
         load_study(bad)
     bad.write_text(CONFIG.read_text().replace("seed: 2006", "seed: 1\nseed: 2"))
     with pytest.raises(ConfigError, match=r"seed \(line \d+\): duplicate key"):

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from .._fields import FieldReader
+from .._validation import FieldReader
 from .bases import varying_inputs
 
 

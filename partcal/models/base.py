@@ -26,7 +26,7 @@ from .._validation import Requirement, Rule, check_params
 from ..metrics import warn_far
 
 if TYPE_CHECKING:
-    from .._fields import FieldReader
+    from .._validation import FieldReader
     from .._yamlio import Section
 
 
@@ -112,6 +112,11 @@ class ErrorModelBase(RegressorMixin, BaseEstimator):
         """Fewest samples a fit on ``n_inputs`` varying inputs needs: ``(count, why, parameter)``, the
         parameter (a key of the config entry) that sets it, or None."""
         return 1, "one sample", None
+
+    def setting_problem(self, n_inputs: int) -> tuple[str, str] | None:
+        """A setting this model cannot be fitted with on ``n_inputs`` varying inputs: ``(config key, what it
+        must be)``; None if there is none."""
+        return None
 
     def describe(self) -> str:
         """This model in words, for messages and the report."""

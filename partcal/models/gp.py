@@ -31,8 +31,7 @@ from sklearn.gaussian_process import GaussianProcessRegressor
 from sklearn.gaussian_process.kernels import RBF, ConstantKernel, Matern, WhiteKernel
 from sklearn.utils.validation import check_is_fitted, validate_data
 
-from .._fields import FieldReader
-from .._validation import integer, one_of, real
+from .._validation import FieldReader, integer, one_of, real
 from ..metrics import distance_outside_boxes
 from .angles import InputMap
 from .base import ErrorModelBase, seed_from
@@ -304,6 +303,10 @@ class GaussianProcessErrorModel(ErrorModelBase):
             if sec.has(key) and not context.get("partitioned"):
                 sec.fail(sec.path(key), "applies to a partitioned GP only (add 'partition')")
         return params
+
+    def describe(self) -> str:
+        kernel = "RBF" if self.kernel == "rbf" else f"Matern {self.nu}"
+        return f"Gaussian process ({kernel} kernel) of {self.inputs} inputs"
 
     @property
     def solver_name(self) -> str:

@@ -17,7 +17,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from .._fields import FieldReader
+from .._validation import FieldReader
 from ..errors import ModelFileError, PartcalError
 from ..robot.description import MAX_JOINTS
 from .base import ErrorModelBase

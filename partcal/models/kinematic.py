@@ -38,8 +38,7 @@ from scipy.optimize import least_squares
 from sklearn.base import clone
 from sklearn.utils.validation import check_is_fitted, validate_data
 
-from .._fields import FieldReader
-from .._validation import boolean, check_array, param_error, real
+from .._validation import FieldReader, boolean, check_array, param_error, real
 from ..errors import DataError, ModelFileError
 from ..metrics import distance_outside_boxes
 from ..robot.description import load_robot, robot_from_dict, robot_to_dict

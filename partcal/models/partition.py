@@ -29,8 +29,7 @@ from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 from sklearn.cluster import KMeans
 
-from .._fields import FieldReader
-from .._validation import check_int, integer, param_error, real
+from .._validation import FieldReader, check_int, integer, param_error, real
 from ..errors import PartcalError
 from .bases import varying_inputs
 from .lookup import BlockPlan, Lookup, grid_lookup, octree_lookup

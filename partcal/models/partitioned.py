@@ -21,8 +21,7 @@ from numpy.typing import NDArray
 from sklearn.base import clone
 from sklearn.utils.validation import check_is_fitted, validate_data
 
-from .._fields import FieldReader
-from .._validation import check_int, one_of, param_error
+from .._validation import FieldReader, check_int, one_of, param_error
 from ..errors import PartcalError
 from ..metrics import distance_outside_boxes, kfold_splits, select_by_cv
 from .angles import InputMap
@@ -332,7 +331,10 @@ class PartitionedErrorModel(ErrorModelBase):
 
     def describe(self) -> str:
         local, spec = self._resolved()
-        return f"{local.describe()}, one per {type(spec).__name__} region"
+        if not hasattr(self, "partition_"):
+            return f"{local.describe()} in each region of a {type(spec).__name__}"
+        n = self.partition_.n_regions
+        return f"{local.describe()} in each of {n} {self.partition_.region_noun}{'s' if n != 1 else ''}, blended"
 
     @property
     def solver_name(self) -> str:

@@ -25,8 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 from sklearn.utils.validation import check_is_fitted, validate_data
 
-from .._fields import FieldReader, is_int
-from .._validation import Requirement, boolean, integer, one_of, param_error
+from .._validation import FieldReader, Requirement, boolean, integer, is_int, one_of, param_error
 from ..errors import PartcalError
 from ..metrics import distance_outside_boxes
 from .base import ErrorModelBase, seed_from

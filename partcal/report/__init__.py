@@ -21,9 +21,7 @@ import jinja2
 import numpy as np
 
 from .. import __version__
-from ..models.kinematic import BASE_PARAMETERS, ROW_PARAMETERS, TOOL_PARAMETERS, KinematicModel, inputs_of
-from ..models.partitioned import PartitionedErrorModel
-from ..models.series import ErrorModel
+from ..models.kinematic import BASE_PARAMETERS, ROW_PARAMETERS, TOOL_PARAMETERS
 from ..study.registry import ModelResult, RunResult, partitioned_part
 from . import figures
 from .scene import render_scenes
@@ -71,6 +69,7 @@ def context(result: RunResult) -> dict:
                      for n, m in result.datasets.items()],
         "families": family_sentences(result),
         "table": comparison_rows(result),
+        "descriptions": [{"name": r.spec.name, "text": r.model.describe()} for r in result.models],
         "granularity": granularity_rows(result),
         "coarser_in_cv": coarser_in_cv(result),
         "shown_models": [r.spec.name for r in shown],
@@ -79,10 +78,9 @@ def context(result: RunResult) -> dict:
                            "hist_svg": _b64(figures.residual_histogram(n, m.errors_mm, {r.spec.name: r.predictions[n] for r in shown}))}
                           for n, m in result.datasets.items()],
         "scenes": scene_entries(result),
-        "convergence_svg": _optional_b64(figures.convergence({r.spec.name: r.model for r in result.models
-                                                              if r.spec.solver == "pso"})),
-        "equations": [{"name": r.spec.name, "lines": r.model.equations()}
-                      for r in result.models if isinstance(r.model, ErrorModel)],
+        "convergence_svg": _optional_b64(figures.convergence({r.spec.name: r.model for r in result.models})),
+        "equations": [{"name": r.spec.name, "lines": lines} for r in result.models
+                      if (lines := r.model.equations()) is not None],
         "kinematic": kinematic_tables(result),
         **compensation_entries(result),
         "registration": registration_rows(result),
@@ -210,12 +208,7 @@ def _percent(v: float) -> str:
 
 
 def _family(r: ModelResult) -> str:
-    if r.spec.kind == "kinematic":
-        return "Kinematic models" if r.spec.residual is None else "Hybrid models (kinematic + residual)"
-    kind = "partitioned" if isinstance(r.model, PartitionedErrorModel) else "global"
-    inputs = "Cartesian-input" if r.spec.inputs == "cartesian" else "joint-input"
-    what = "Gaussian processes" if r.spec.kind == "gaussian_process" else "models"
-    return f"{kind.capitalize()} {inputs} {what}"
+    return r.model.family()
 
 
 def kinematic_tables(result: RunResult) -> list[dict]:
@@ -225,9 +218,9 @@ def kinematic_tables(result: RunResult) -> list[dict]:
     """
     out, seen = [], []
     for r in result.models:
-        if not isinstance(r.model, KinematicModel):
+        table = r.model.identification()
+        if table is None:
             continue
-        table = r.model.identification_
         same = next((name for name, other in seen if np.array_equal(other.value, table.value)
                      and other.status == table.status), None)
         seen.append((r.spec.name, table))
@@ -264,7 +257,7 @@ def scene_entries(result: RunResult) -> list[dict]:
         if model is None:
             continue
         part = model.partition_
-        cartesian = inputs_of(model) == "cartesian"
+        cartesian = model.inputs == "cartesian"
         X = ident.nominal_mm if cartesian else ident.q_deg
         spec = {"points": ident.nominal_mm, "labels": model.assign(X), "boxes": np.zeros((0, 2, 3)),
                 "n_paths": len(tests)}
@@ -272,15 +265,16 @@ def scene_entries(result: RunResult) -> list[dict]:
         for k, (m, res) in enumerate(zip(tests.values(), residuals)):
             spec[f"path{k}"], spec[f"residual{k}"] = m.nominal_mm, res
         spec["residual_max"] = max([float(x.max()) for x in residuals] + [1e-9])
-        if part.kind == "octree" and cartesian:
-            spec["boxes"] = part.boxes[[int(np.flatnonzero(part.kernel_region == g)[0]) for g in range(part.n_regions)]]
+        boxes = part.region_boxes() if cartesian else None
+        if boxes is not None:
+            spec["boxes"] = boxes
         specs[r.spec.name] = spec
         space = "the Cartesian workspace" if cartesian else "joint space"
-        unit = ("octree cell" if part.kind == "octree" else "k-means region") + ("s" if part.n_regions != 1 else "")
+        unit = part.region_noun + ("s" if part.n_regions != 1 else "")
         captions[r.spec.name] = (f"{part.n_regions} {unit} "
                                  f"in {space}; identification points coloured by region"
-                                 f"{', octree cells as boxes' if part.kind == 'octree' else ''}; test paths coloured "
-                                 "by the residual error after the model's prediction.")
+                                 f"{f', {part.region_noun}s as boxes' if boxes is not None else ''}; test paths "
+                                 "coloured by the residual error after the model's prediction.")
     pngs, problem = render_scenes(specs)
     if problem:
         log.warning("report: %s", problem)

@@ -14,7 +14,6 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from ..models.partitioned import PartitionedErrorModel  # noqa: E402
 
 plt.rcParams.update({"svg.fonttype": "none", "font.size": 9, "axes.grid": True, "grid.alpha": 0.3,
                      "axes.spines.top": False, "axes.spines.right": False, "svg.hashsalt": "partcal"})
@@ -69,10 +68,9 @@ def convergence(models: dict[str, object]) -> str | None:
     """
     curves = {}
     for label, model in models.items():
-        locals_ = model.models_ if isinstance(model, PartitionedErrorModel) else [model]
-        runs = [r.history / max(m.lstsq_rms_[a], 1e-12) for m in locals_ for a, r in enumerate(m.swarm_results_)]
+        runs = [history / max(lstsq_rms, 1e-12) for history, lstsq_rms in model.swarm_runs()]
         if runs:
-            curves[label] = (runs, isinstance(model, PartitionedErrorModel))
+            curves[label] = (runs, model.regions_model() is not None)
     if not curves:
         return None
     fig, ax = plt.subplots(figsize=(8, 3.4))

@@ -13,85 +13,57 @@ import re
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-from .._validation import safe_name
-from .._yamlio import Section, load_yaml, range_check
+from .._validation import integer, one_of, safe_name
+from .._yamlio import Section, load_yaml
 from ..data.formats import MeasurementFormat, RowSelection
 from ..errors import PartcalError
-from ..models.gp import GaussianProcessErrorModel
-from ..models.kinematic import KinematicModel
-from ..models.partition import KMeansPartition, Octree
+from ..models.kinds import KINDS, config_kinds
+from ..models.partition import PARTITIONS
 from ..models.partitioned import PartitionedErrorModel
-from ..models.series import ErrorModel
-from ..models.swarm import RULES, TOPOLOGIES, SwarmConfig
 from ..robot.description import load_robot, robot_reference
 
 RESERVED_NAMES = {"identification", "validation", "file", "fit_seconds", "cv_seconds", "cv", "inputs", "solver",
                   "regions", "pso_rms_ratio", "granularity", "compensation", "kind", "kinematic"}
 RANK_RULES = ("cv", "validation")
-_SWARM_KEYS = {"particles": "int", "iterations": "int", "c1": "float", "c2": "float", "rule": "str",
-               "topology": "str", "neighbours": "int", "inertia": "list", "vmax": "float",
-               "bound_scale": "float", "stop_fitness": "float", "patience": "int", "ftol": "float"}
 
 
 @dataclass(frozen=True)
 class PartitionSpec:
-    method: str                      # "octree" | "kmeans"
+    method: str                      # a key of partcal.models.partition.PARTITIONS: "octree" | "kmeans"
     sizes: tuple[int, ...]           # max_depth or n_regions; several = choose by cross-validation
     min_samples: int | None = None
     blend: str = "gaussian"
     blend_width: float = 0.7
 
     def build(self, size: int):
-        cls = Octree if self.method == "octree" else KMeansPartition
-        key = "max_depth" if self.method == "octree" else "n_regions"
-        return cls(**{key: size, "min_samples": self.min_samples})
-
-
-@dataclass(frozen=True)
-class GaussianProcessSpec:
-    """``kind: gaussian_process`` settings (docs/models.md)."""
-
-    kernel: str = "rbf"
-    nu: float = 2.5
-    restarts: int = 1
-    hyper_samples: int | None = None
-    hyperparameters: str = "shared"
-    region_overlap: float = 1.0
-
-
-@dataclass(frozen=True)
-class KinematicSpec:
-    """``kind: kinematic`` settings: the run's robot and what to identify."""
-
-    robot: str
-    base: bool = True
-    tool: bool = True
-    rcond: float = 1e-6
+        cls = PARTITIONS[self.method]
+        return cls(**{cls.size_key: size, "min_samples": self.min_samples})
 
 
 @dataclass(frozen=True)
 class ModelSpec:
-    """One entry of the registry: what to fit, how, and how to partition.
+    """One entry of the registry: its kind, the kind's parameters, and how to partition.
 
-    ``kind`` is ``series`` (the polynomial/Fourier ``ErrorModel``),
-    ``gaussian_process`` or ``kinematic``; a kinematic entry may carry a
-    ``residual`` entry (any other kind) fitted to what it leaves.
+    ``kind`` names a row of the table of kinds (``partcal.models.kinds``);
+    ``params`` are that kind's estimator parameters as the config gave them
+    (defaults filled in). A kind that takes one (kinematic) may carry a
+    ``residual`` entry of another kind, fitted to what it leaves.
     """
 
     name: str
-    inputs: str = "cartesian"
-    basis: str = "polynomial"
-    degree: int = 1
-    harmonics: int = 1
-    cross_terms: bool = False
-    solver: str = "pso"
-    fitness: str = "rms"
-    swarm: dict = field(default_factory=dict)
-    partition: PartitionSpec | None = None
     kind: str = "series"
-    gp: GaussianProcessSpec | None = None
-    kinematic: KinematicSpec | None = None
+    params: dict = field(default_factory=dict)
+    partition: PartitionSpec | None = None
     residual: "ModelSpec | None" = None
+
+    @property
+    def estimator_class(self) -> type:
+        return KINDS[self.kind].estimator
+
+    @property
+    def inputs(self) -> str:
+        """What the entry's model reads: ``cartesian`` (positions, mm) or ``joint`` (angles, degrees)."""
+        return self.estimator_class.input_space(self.params)
 
     @property
     def slug(self) -> str:
@@ -104,29 +76,15 @@ class ModelSpec:
         part = self.partition or (self.residual.partition if self.residual is not None else None)
         return part.sizes if part is not None else ()
 
-    def local(self, random_state: int | None) -> ErrorModel | GaussianProcessErrorModel:
-        if self.kind == "gaussian_process":
-            gp = self.gp
-            return GaussianProcessErrorModel(inputs=self.inputs, kernel=gp.kernel, nu=gp.nu, restarts=gp.restarts,
-                                             hyper_samples=gp.hyper_samples, hyperparameters=gp.hyperparameters,
-                                             region_overlap=gp.region_overlap, random_state=random_state)
-        pso = SwarmConfig(**self.swarm) if self.solver == "pso" else None
-        return ErrorModel(inputs=self.inputs, basis=self.basis, degree=self.degree, harmonics=self.harmonics,
-                          cross_terms=self.cross_terms, solver=self.solver, pso=pso, fitness=self.fitness,
-                          random_state=random_state)
-
     def build(self, random_state: int | None, size: int | None = None):
         """The estimator, unfitted (``size`` picks one granularity of the partition, or of the residual's)."""
-        if self.kind == "kinematic":
-            k = self.kinematic
-            residual = self.residual.build(random_state, size) if self.residual is not None else None
-            return KinematicModel(robot=load_robot(k.robot), base=k.base, tool=k.tool, rcond=k.rcond,
-                                  residual=residual, random_state=random_state)
-        local = self.local(random_state)
+        model = self.estimator_class.from_params(self.params, random_state)
+        if self.residual is not None:
+            model.set_params(residual=self.residual.build(random_state, size))
         if self.partition is None:
-            return local
+            return model
         p = self.partition
-        return PartitionedErrorModel(partition=p.build(size if size is not None else p.sizes[0]), local=local,
+        return PartitionedErrorModel(partition=p.build(size if size is not None else p.sizes[0]), local=model,
                                      blend=p.blend, blend_width=p.blend_width, random_state=random_state)
 
 
@@ -234,10 +192,10 @@ def load_config(path: str | Path) -> RunConfig:
         except PartcalError as exc:
             top.fail("robot", str(exc))
         robot = robot_ref
-    seed = top.get("seed", "int", default=0, check=range_check(0, 2**32 - 1, integer=True))
+    seed = top.get("seed", "int", default=0, check=integer(0, 2**32 - 1).problem)
     n_jobs = top.get("n_jobs", "int", default=1, check=lambda v: None if v == -1 or v >= 1 else "-1 or >= 1")
-    cv_folds = top.get("cv_folds", "int", default=5, check=range_check(2, 100, integer=True))
-    rank_by = top.get("rank_by", "str", default="cv", check=_choice_check(*RANK_RULES))
+    cv_folds = top.get("cv_folds", "int", default=5, check=integer(2, 100).problem)
+    rank_by = top.get("rank_by", "str", default="cv", check=one_of(*RANK_RULES).problem)
     dask = top.section("dask")
     address = dask.get("address", "str", default=None) if dask.data else None
     dask.done()
@@ -281,7 +239,7 @@ def _data(data_sec: Section, top: Section, base: Path, *, has_robot: bool
     """The ``data`` section (files, ``validation``, ``format``, ``frame``, row subsets) and ``registration``."""
     fmt_sec = data_sec.section("format")
     fmt = MeasurementFormat.from_section(fmt_sec) if fmt_sec.data else None
-    frame = data_sec.get("frame", "str", default="base", check=_choice_check("base", "tracker"))
+    frame = data_sec.get("frame", "str", default="base", check=one_of("base", "tracker").problem)
     if frame == "tracker" and not has_robot:
         data_sec.fail(data_sec.path("frame"), "tracker needs a robot model (top-level key 'robot') to register "
                                               "the tracker frame")
@@ -325,169 +283,81 @@ def _data_file(sec: Section, key: str, base: Path, *, tracker: bool | None
     selection = RowSelection.from_section(entry)
     own = False
     if tracker is not None:
-        own = entry.get("registration", "str", default="shared", check=_choice_check("shared", "own")) == "own"
+        own = entry.get("registration", "str", default="shared", check=one_of("shared", "own").problem) == "own"
         if own and not tracker:
             entry.fail(entry.path("registration"), "applies to data.frame: tracker only")
     entry.done()
     return path, None if selection.is_all else selection, own
 
 
-KIND_KEYS = {
-    "series": {"inputs", "basis", "degree", "harmonics", "cross_terms", "solver", "partition", "blend"},
-    "gaussian_process": {"inputs", "kernel", "nu", "restarts", "hyper_samples", "hyperparameters", "region_overlap",
-                         "partition", "blend"},
-    "kinematic": {"base", "tool", "rcond", "residual"},
-}
-KINDS = tuple(KIND_KEYS)
-
-
 def _model(sec: Section, robot: str | None, parent: str | None = None) -> ModelSpec:
-    """One entry of ``models`` (or the ``residual`` of a kinematic entry, named after its ``parent``)."""
+    """One entry of ``models`` (or the ``residual`` of a kinematic entry, named after its ``parent``).
+
+    The kind's estimator reads its own keys (``params_from_config``, by its declared rules); this
+    reads ``name``, ``kind``, the table's ``partition`` and ``blend``, and a ``residual`` entry.
+    """
     if parent is None:
         name = sec.get("name", "str", check=lambda v: None if v.strip() else "a non-empty text")
     elif sec.has("name"):
         sec.fail(sec.path("name"), "a residual model takes its name from its entry; remove it")
-    kind = sec.get("kind", "str", default="series", check=_choice_check(*KINDS))
-    if parent is not None and kind == "kinematic":
-        sec.fail(sec.path("kind"), "a residual must be 'series' or 'gaussian_process' (the kinematic model is "
-                                   "its entry)")
+    allowed = config_kinds() if parent is None else tuple(k for k in config_kinds() if KINDS[k].residual)
+    kind = KINDS[sec.get("kind", "str", default="series", check=_kind_check(allowed, parent))]
+    keys = kind.config_keys()
     for key in sec.data:
-        if key not in KIND_KEYS[kind] and any(key in keys for keys in KIND_KEYS.values()):
-            owners = " or ".join(k for k, keys in KIND_KEYS.items() if key in keys)
-            sec.fail(sec.path(key), f"applies to kind: {owners} only; this entry is kind: {kind}")
+        owners = [k for k in config_kinds() if key in KINDS[k].config_keys()]
+        if key not in keys and owners:
+            sec.fail(sec.path(key), f"applies to kind: {' or '.join(owners)} only; this entry is kind: {kind.name}")
     name = f"{parent} residual" if parent is not None else name
-    if kind == "kinematic":
-        return _kinematic_entry(sec, name, robot)
-    if kind == "gaussian_process":
-        return _gp_entry(sec, name)
-    return _series_entry(sec, name)
-
-
-def _series_entry(sec: Section, name: str) -> ModelSpec:
-    """A series model: the basis keys, then ``solver``, ``partition`` and ``blend``."""
-    choice = _choice_check
-    kw = dict(
-        name=name,
-        inputs=sec.get("inputs", "str", default="cartesian", check=choice("cartesian", "joint")),
-        basis=sec.get("basis", "str", default="polynomial", check=choice("polynomial", "fourier")),
-        degree=sec.get("degree", "int", default=1, check=range_check(1, 8, integer=True)),
-        harmonics=sec.get("harmonics", "int", default=1, check=range_check(1, 8, integer=True)),
-        cross_terms=sec.get("cross_terms", "bool", default=False),
-    )
-    if kw["cross_terms"] and kw["basis"] != "polynomial":
-        sec.fail(sec.path("cross_terms"), "must be false for the fourier basis")
-    method, fitness, swarm = _solver(sec.section("solver"))
-    kw.update(solver=method, fitness=fitness, swarm=swarm)
-    partition = _partition(sec, kw["inputs"])
-    sec.done()
-    return ModelSpec(**kw, partition=partition)
-
-
-def _gp_entry(sec: Section, name: str) -> ModelSpec:
-    """``kind: gaussian_process``: inputs, kernel, nu, the search's settings, and optionally partition and blend."""
-    inputs = sec.get("inputs", "str", default="cartesian", check=_choice_check("cartesian", "joint"))
-    kernel = sec.get("kernel", "str", default="rbf", check=_choice_check("rbf", "matern"))
-    nu = sec.get("nu", "float", default=2.5, check=lambda v: None if v in (0.5, 1.5, 2.5) else "0.5, 1.5 or 2.5")
-    if sec.has("nu") and kernel != "matern":
-        sec.fail(sec.path("nu"), "applies to kernel: matern only")
-    restarts = sec.get("restarts", "int", default=1, check=range_check(0, 20, integer=True))
-    hyper_samples = sec.get("hyper_samples", "int", default=None, check=range_check(20, None, integer=True))
-    hyperparameters = sec.get("hyperparameters", "str", default="shared", check=_choice_check("shared", "per_region"))
-    overlap = sec.get("region_overlap", "float", default=1.0, check=range_check(1.0, 3.0))
-    partition = _partition(sec, inputs)
-    for key in ("hyperparameters", "region_overlap"):
-        if sec.has(key) and partition is None:
-            sec.fail(sec.path(key), "applies to a partitioned GP only (add 'partition')")
-    sec.done()
-    return ModelSpec(name=name, inputs=inputs, solver="marginal-likelihood", kind="gaussian_process",
-                     gp=GaussianProcessSpec(kernel, nu, restarts, hyper_samples, hyperparameters, overlap),
-                     partition=partition)
-
-
-def _kinematic_entry(sec: Section, name: str, robot: str | None) -> ModelSpec:
-    """``kind: kinematic``: what to identify, and an optional ``residual`` model entry."""
-    if robot is None:
-        sec.fail(sec.path("kind"), "kind: kinematic needs the run's robot (top-level key 'robot')")
-    spec = KinematicSpec(robot=robot, base=sec.get("base", "bool", default=True),
-                         tool=sec.get("tool", "bool", default=True),
-                         rcond=sec.get("rcond", "float", default=1e-6,
-                                       check=lambda v: None if 0 < v <= 1 else "a number in (0, 1]"))
+    partition = _partition(sec, kind.estimator.input_space(sec.data)) if kind.regions else None
+    params = kind.estimator.params_from_config(sec, {"robot": robot, "partitioned": partition is not None})
     residual = None
-    if sec.has("residual"):
+    if kind.estimator.takes_residual and sec.has("residual"):
         sub = sec.section("residual")
         if not sub.data:
             sec.fail(sec.path("residual"), "must be a model entry, e.g. {inputs: joint, degree: 2}")
         residual = _model(sub, robot, parent=name)
     sec.done()
-    return ModelSpec(name=name, inputs="joint", solver="levenberg-marquardt", kind="kinematic", kinematic=spec,
-                     residual=residual)
+    return ModelSpec(name=name, kind=kind.name, params=params, partition=partition, residual=residual)
 
 
-def _solver(solver: Section) -> tuple[str, str, dict]:
-    """``solver``: the method, the fitness and the swarm settings (checked by ``SwarmConfig``)."""
-    choice = _choice_check
-    method = solver.get("method", "str", default="pso", check=choice("pso", "lstsq"))
-    fitness = solver.get("fitness", "str", default="rms", check=choice("rms", "max", "mae"))
-    if method == "lstsq" and fitness != "rms":
-        solver.fail(solver.path("fitness"), "must be 'rms' with method: lstsq (least squares minimises the RMS)")
-    swarm = {}
-    for key, kind in _SWARM_KEYS.items():
-        if not solver.has(key):
-            continue
-        if method != "pso":
-            solver.fail(solver.path(key), "applies to method: pso only")
-        if solver.data[key] is None and key in ("patience", "stop_fitness"):
-            solver.get(key, "any")
-            swarm[key] = None
-        elif key == "rule":
-            swarm[key] = solver.get(key, "str", check=choice(*RULES))
-        elif key == "topology":
-            swarm[key] = solver.get(key, "str", check=choice(*TOPOLOGIES))
-        elif key == "inertia":
-            swarm[key] = tuple(solver.get(key, "list"))
-        else:
-            swarm[key] = solver.get(key, kind)
-    if swarm:
-        try:
-            SwarmConfig(**swarm)
-        except PartcalError as exc:
-            solver.fail(solver.where, str(exc))
-    solver.done()
-    return method, fitness, swarm
+def _kind_check(allowed: tuple[str, ...], parent: str | None):
+    rule = one_of(*allowed)
+
+    def check(value):
+        if rule.problem(value) is None:
+            return None
+        if parent is not None and value in config_kinds():
+            return f"{rule.expected} (a residual is fitted to what its entry leaves; the entry is the {value} model)"
+        return rule.expected
+    return check
 
 
 def _partition(sec: Section, inputs: str) -> PartitionSpec | None:
     """``partition`` and ``blend`` of a model entry (``blend`` needs a partition)."""
-    choice = _choice_check
     part = sec.section("partition")
     if not part.data:
         part.done()
         if sec.has("blend"):
             sec.fail(sec.path("blend"), "needs a partition")
         return None
-    kind = part.get("method", "str", check=choice("octree", "kmeans"))
-    if kind == "octree" and inputs == "joint":
-        part.fail(part.path("method"), "octree splits the Cartesian workspace; for joint inputs use method: kmeans")
-    size_key = "max_depth" if kind == "octree" else "n_regions"
-    low, high = (0, 8) if kind == "octree" else (1, 4096)
-    raw = part.get(size_key, "any", default=3 if kind == "octree" else 8)
+    method = part.get("method", "str", check=one_of(*PARTITIONS).problem)
+    cls = PARTITIONS[method]
+    if inputs == "joint" and not cls.joint_inputs:
+        part.fail(part.path("method"), f"{method} splits the Cartesian workspace; for joint inputs use method: "
+                                       f"{next(k for k, c in PARTITIONS.items() if c.joint_inputs)}")
+    key, rule = cls.size_key, cls.size_rule
+    raw = part.get(key, "any", default=rule.default)
     sizes = raw if isinstance(raw, list) else [raw]
     if not sizes:
-        part.fail(part.path(size_key), "must be an int or a non-empty list of ints; got an empty list")
+        part.fail(part.path(key), "must be an int or a non-empty list of ints; got an empty list")
     for v in sizes:
-        if not isinstance(v, int) or isinstance(v, bool) or not low <= v <= high:
-            part.fail(part.path(size_key), f"must be an int in [{low}, {high}] (or a list of them, chosen "
-                                          f"by cross-validation); got {v!r}")
-    min_samples = part.get("min_samples", "int", default=None, check=range_check(1, integer=True))
+        if rule.problem(v):
+            part.fail(part.path(key), f"must be {rule.expected} (or a list of them, chosen by cross-validation); "
+                                      f"got {v!r}")
+    min_samples = part.rule("min_samples", integer(1, none=True))
     part.done()
     blend = sec.section("blend")
-    bmethod = blend.get("method", "str", default="gaussian", check=choice("gaussian", "hard"))
-    width = blend.get("width", "float", default=0.7, check=range_check(0.6, 10.0))
+    rules = PartitionedErrorModel._parameter_rules
+    method_b, width = blend.rule("method", rules["blend"]), blend.rule("width", rules["blend_width"])
     blend.done()
-    return PartitionSpec(kind, tuple(sizes), min_samples, bmethod, width)
-
-
-def _choice_check(*allowed: str):
-    def check(value):
-        return None if value in allowed else "one of " + ", ".join(repr(a) for a in allowed)
-    return check
+    return PartitionSpec(method, tuple(sizes), min_samples, method_b, width)

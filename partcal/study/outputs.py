@@ -94,13 +94,9 @@ def metrics_document(result: RunResult) -> dict:
                  "cv_seconds": round(r.cv_seconds, 4)}
         entry.update(r.metrics)
         entry["cv"] = {"folds": cfg.cv_folds, "rms_3d": r.cv_rms_3d, "nested": r.nested}
-        entry["inputs"], entry["solver"], entry["regions"] = r.spec.inputs, r.spec.solver, r.n_regions
+        entry["inputs"], entry["solver"], entry["regions"] = r.spec.inputs, r.model.solver_name, r.n_regions
         entry["kind"] = r.spec.kind if r.spec.residual is None else f"{r.spec.kind} + {r.spec.residual.kind}"
-        if r.spec.kind == "kinematic":
-            table = r.model.identification_
-            entry["kinematic"] = {"identified": table.status.count("identified"), "parameters": len(table.names),
-                                  "unidentifiable": table.unidentifiable(), "condition": table.condition,
-                                  "rms_3d": table.rms_mm}
+        entry.update(r.model.run_summary())
         if r.rms_ratio is not None:
             entry["pso_rms_ratio"] = r.rms_ratio
         if r.granularity is not None:

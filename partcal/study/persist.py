@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from .. import __version__
-from .._fields import FieldReader
+from .._validation import FieldReader
 from .._io import atomic_write
 from ..errors import ModelFileError, PartcalError
 from ..models.kinds import body_of, model_from_body

@@ -21,7 +21,6 @@ from .._validation import check_array
 from ..errors import DataError
 from ..metrics import warn_far
 from ..models.bases import varying_inputs
-from ..models.partitioned import PartitionedErrorModel
 from ..robot.compensation import CompensationResult, false_target, false_target_joints
 from ..robot.description import robot_from_dict
 from ..robot.kinematics import Robot
@@ -56,9 +55,7 @@ class Predictor:
     def _errors(self, X: NDArray[np.float64]) -> NDArray[np.float64]:
         if len(X) == 0:                 # no points, no errors (scikit-learn refuses empty inputs)
             return np.zeros((0, 3))
-        if isinstance(self.model, PartitionedErrorModel):
-            return self.model.predict(X)
-        return self.model._predict_trusted(X)
+        return self.model.predict_validated(X)
 
     def predict(self, positions=None, joints=None) -> NDArray[np.float64]:
         """Predicted errors (measured - nominal), shape (n, 3) mm.
@@ -136,11 +133,7 @@ class Predictor:
 
     def _fixed_joints(self) -> tuple[tuple[int, ...], NDArray[np.float64]]:
         """Joints constant in the training data (the model cannot know what moving them does)."""
-        if isinstance(self.model, PartitionedErrorModel):
-            bounds = self.model.region_bounds_
-            low, high = bounds[:, 0].min(axis=0), bounds[:, 1].max(axis=0)
-        else:
-            low, high = self.model.data_bounds_
+        low, high = self.model.input_bounds()
         active = varying_inputs(np.stack([low, high]))
         fixed = tuple(int(j) + 1 for j in np.flatnonzero(~active))
         return fixed, low[[j - 1 for j in fixed]]

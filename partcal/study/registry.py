@@ -15,6 +15,7 @@ end: the compensated targets are commanded on the simulated true robot.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import time
 from contextlib import contextmanager
@@ -30,8 +31,7 @@ from ..data.registration import Registration, kabsch, register_tracker, register
 from ..errors import ConfigError, DataError
 from ..metrics import cross_validated_rms, kfold_splits, nested_cross_validated_rms, select_by_cv, summary
 from ..models.bases import varying_inputs
-from ..models.kinematic import KinematicModel
-from ..models.partitioned import MIN_SAMPLES_PER_TERM, PartitionedErrorModel, fold_regions, region_minimum
+from ..models.partitioned import fold_regions
 from ..robot.description import load_robot
 from ..robot.kinematics import Robot
 from .config import ModelSpec, RunConfig
@@ -67,11 +67,9 @@ class ModelResult:
         return part.partition_.n_regions if part is not None else 1
 
 
-def partitioned_part(model) -> PartitionedErrorModel | None:
+def partitioned_part(model):
     """The partitioned model in ``model``: itself, or the residual of a hybrid; None if there is none."""
-    if isinstance(model, KinematicModel):
-        model = model.residual_
-    return model if isinstance(model, PartitionedErrorModel) else None
+    return model.regions_model()
 
 
 @dataclass
@@ -170,43 +168,27 @@ def check_run(config: RunConfig, data: dict[str, Measurements]) -> None:
     smallest = n - -(-n // k)                  # the smallest training fold: n - ceil(n / k)
     for i, entry in enumerate(config.models):
         X = model_inputs(entry.inputs, ident)
-        varying = int(varying_inputs(X).sum())
-        if varying == 0:
+        if int(varying_inputs(X).sum()) == 0:
             what = "joint angle" if entry.inputs == "joint" else "nominal coordinate"
             config.fail(_key(config, i, "inputs"), f"every {what} of the identification set "
                                                     f"{config.identification} is constant: nothing to fit")
-        # a kinematic entry's own parameters are checked by its identification (rank, standard errors);
-        # what it leaves is fitted by its residual, which must fit in a fold like any entry
-        spec, prefix = (entry.residual, "residual.") if entry.kind == "kinematic" else (entry, "")
-        if spec is None:
-            continue
-        varying = int(varying_inputs(model_inputs(spec.inputs, ident)).sum())
-        local, train = spec.local(None), smallest
-        if spec.partition is not None:
-            need, why = region_minimum(local, varying)
-            if spec.kind == "series" and spec.partition.min_samples is not None \
-                    and spec.partition.min_samples < need // MIN_SAMPLES_PER_TERM:
-                config.fail(_key(config, i, prefix + "partition.min_samples"),
-                            f"must be at least the local model's {need // MIN_SAMPLES_PER_TERM} terms per output; "
-                            f"got {spec.partition.min_samples}")
-            need = spec.partition.min_samples or need
-            if spec.kind == "series":
-                why = f"{why} ({varying} varying {spec.inputs} inputs)"
-                where = _key(config, i, prefix + ("degree" if spec.basis == "polynomial" else "harmonics"))
-            else:
-                why, where = f"{why} of the Gaussian process", _key(config, i, prefix + "partition")
-            what = f"one region of {need} samples ({why})"
-            if len(spec.partition.sizes) > 1:         # nested CV: the inner folds are smaller still
+        # an entry and its residual (fitted to what the entry leaves) must each fit in a fold
+        for spec, prefix in ((entry, ""), (entry.residual, "residual.")):
+            if spec is None:
+                continue
+            varying = int(varying_inputs(model_inputs(spec.inputs, ident)).sum())
+            model = (spec if spec.residual is None else dataclasses.replace(spec, residual=None)).build(None)
+            problem = model.setting_problem(varying)
+            if problem is not None:
+                config.fail(_key(config, i, prefix + problem[0]), problem[1])
+            need, why, key = model.min_samples(varying)
+            train = smallest
+            if spec.partition is not None and len(spec.partition.sizes) > 1:    # nested CV: inner folds smaller
                 train = smallest - -(-smallest // k)
-        elif spec.kind == "gaussian_process":
-            continue                                  # a global GP fits any number of poses
-        else:
-            need = local._check_params()[0].n_terms(varying)
-            where = _key(config, i, prefix + ("degree" if spec.basis == "polynomial" else "harmonics"))
-            what = f"{need} terms per output ({varying} varying {spec.inputs} inputs)"
-        if train < need:
-            config.fail(where, f"{entry.name!r} needs {what}, but the smallest cross-validation training fold "
-                               f"of the {n}-pose identification set holds {train} samples")
+            if train < need:
+                config.fail(_key(config, i, prefix + (key or "kind")),
+                            f"{entry.name!r} needs {why}, but the smallest cross-validation training fold "
+                            f"of the {n}-pose identification set holds {train} samples")
 
 
 def _key(config: RunConfig, i: int, key: str) -> str:
@@ -255,8 +237,7 @@ def fit_model(spec: ModelSpec, seed: int, data: dict[str, Measurements], folds: 
                     partitioned_part(estimator).partition_.n_regions, _regions_text(cv_regions))
     predictions = {name: estimator.predict(model_inputs(spec.inputs, m)) for name, m in data.items()}
     metrics = {name: summary(errors_left(m, predictions[name], name in own_frame)) for name, m in data.items()}
-    locals_ = estimator.models_ if isinstance(estimator, PartitionedErrorModel) else [estimator]
-    ratio = float(max(m.rms_ratio_ for m in locals_)) if spec.solver == "pso" else None
+    ratio = estimator.pso_rms_ratio()
     return ModelResult(spec, estimator, fit_seconds, cv, metrics, predictions, ratio, granularity,
                        cv_seconds=cv_seconds, nested=nested, cv_regions=cv_regions)
 

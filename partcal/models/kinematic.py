@@ -41,7 +41,7 @@ from .._validation import check_array, check_real, param_error
 from ..errors import DataError
 from ..metrics import distance_outside_boxes
 from ..robot.description import load_robot
-from ..robot.kinematics import Robot
+from ..robot.kinematics import Robot, matrix_from_euler_deg as _rotation_deg
 from .base import ErrorModelBase, seed_from
 from .bases import varying_inputs
 from .gp import GaussianProcessErrorModel
@@ -71,16 +71,6 @@ def nominal_values(robot: Robot) -> NDArray[np.float64]:
     """The robot's own parameter values, shape ``(4 R + 9,)``: rows, tool, then a zero base correction."""
     rows = np.column_stack([robot.theta_offset_deg, robot.d_mm, robot.a_mm, robot.alpha_deg]).ravel()
     return np.concatenate([rows, robot.tool_mm, np.zeros(6)])
-
-
-def _rotation_deg(angles_deg: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``Rz(rz) Ry(ry) Rx(rx)`` for ``(rx, ry, rz)`` in degrees (the virtual robot's base convention)."""
-    cx, cy, cz = np.cos(np.radians(angles_deg))
-    sx, sy, sz = np.sin(np.radians(angles_deg))
-    rot_x = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
-    rot_y = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
-    rot_z = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
-    return rot_z @ rot_y @ rot_x
 
 
 def robot_with(nominal: Robot, values: NDArray[np.float64]) -> Robot:

@@ -128,8 +128,8 @@ def test_format_yaml_round_trip(tmp_path):
     ('delimiter: ";"', 'delimiter: ","', r"fmt.yaml: decimal \(line 2\): must be different from the delimiter ','; "
                                          r"got ','"),
     ('decimal: ","', 'decimal: "/"', r"fmt.yaml: decimal \(line 2\): must be '\.' or ','; got '/'"),
-    ("q1: axis_1", "q_1: axis_1", r"fmt.yaml: columns.q_1 \(line 3\): must be a contract column \(q1\.\.q12, .*, set\); "
-                                  r"got 'q_1' \(did you mean 'q1'\?\)"),
+    ("q1: axis_1", "q_1: axis_1", r"fmt.yaml: columns.q_1 \(line 3\): must be a contract column "
+                                  r"\(q1\.\.q12, .*, set\); got 'q_1' \(did you mean 'q1'\?\)"),
     ("q1: axis_1", "q1: ' '", r"fmt.yaml: columns.q1 \(line 3\): must be a non-empty file column name; got ' '"),
     ("x_meas: smr_x", "x_meas: axis_1", r"columns.x_meas \(line 3\): must be a file column that holds no other "
                                         r"contract column; got 'axis_1' \(already mapped to q1\)"),

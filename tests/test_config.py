@@ -181,10 +181,10 @@ def test_format_frame_rows_and_registration(tmp_path):
 @pytest.mark.parametrize("old, new, message", [
     ("robot: universal_robots_ur10\n", "", r"data\.frame \(line {line}\): tracker needs a robot model"),
     ("  frame: tracker\n", "  frame: laser\n", r"data\.frame \(line {line}\): must be one of 'base', 'tracker'; got 'laser'"),
-    ('    delimiter: ";"\n', '    delimiter: ","\n', r"data\.format\.decimal \(line 6\): must differ from the "
+    ('    delimiter: ";"\n', '    delimiter: ","\n', r"data\.format\.decimal \(line 6\): must be different from the "
                                                   r"delimiter ','"),
     ("    columns: {{q1: j1, x_meas: mx}}\n", "    columns: {{q1: j1, xmeas: mx}}\n",
-     r"data\.format\.columns\.xmeas \(line {line}\): not a contract column .*did you mean 'x_meas'\?"),
+     r"data\.format\.columns\.xmeas \(line {line}\): must be a contract column .*did you mean 'x_meas'\?"),
     ('rows: "1-40"', 'rows: "40-1"', r"data\.identification\.rows \(line {line}\): must be data rows such as '1-600'"),
     ("every: 2}}", "every: 0}}", r"data\.identification\.every \(line {line}\): must be an int >= 1; got 0"),
     ("  identification: {{file:", "  identification: {{fil:", r"data\.identification \(line {line}\): missing "

@@ -1,9 +1,11 @@
 """Foreign measurement files: every format key, row subsets, and one clear error per problem."""
 
 import math
+import re
 
 import numpy as np
 import pytest
+import yaml
 from conftest import write_text
 
 from partcal import ConfigError, DataError, read_measurements
@@ -84,13 +86,23 @@ def test_bad_foreign_files_name_file_line_and_column(tmp_path, kwargs, text, mat
     ({"delimiter": ";;"}, r"The 'delimiter' parameter of MeasurementFormat must be one character .* Got ';;' instead"),
     ({"delimiter": '"'}, r"The 'delimiter' parameter"),
     ({"decimal": ";"}, r"The 'decimal' parameter of MeasurementFormat must be '\.' or ','\. Got ';' instead"),
-    ({"decimal": ","}, r"The 'decimal' parameter of MeasurementFormat must be different from the delimiter ','"),
-    ({"joint_unit": "grad"}, r"The 'joint_unit' parameter of MeasurementFormat must be 'deg' or 'rad'"),
-    ({"length_unit": "cm"}, r"The 'length_unit' parameter of MeasurementFormat must be 'mm' or 'm'"),
-    ({"columns": {"q13": "a"}}, r"The 'columns' parameter .* keys are contract columns\. Got 'q13' instead"),
-    ({"columns": {"q1": "a", "q2": "a"}}, r"The 'columns' parameter .* each file column holds one contract column "
-                                          r"\(column 'a' is already mapped to q1"),
-    ({"columns": {"x_meas": "q1"}}, r"column 'q1' is also read as q1 \(a contract column not mapped"),
+    ({"decimal": ","}, r"The 'decimal' parameter of MeasurementFormat must be different from the delimiter ','\. "
+                       r"Got ',' instead"),
+    ({"joint_unit": "grad"}, r"The 'joint_unit' parameter of MeasurementFormat must be one of 'deg', 'rad'\. "
+                             r"Got 'grad' instead"),
+    ({"length_unit": "cm"}, r"The 'length_unit' parameter of MeasurementFormat must be one of 'mm', 'm'"),
+    ({"columns": [("q1", "a")]}, r"The 'columns' parameter of MeasurementFormat must be a mapping of contract "
+                                 r"column to file column"),
+    ({"columns": {"q13": "a"}}, r"The 'columns' entry 'q13' of MeasurementFormat must be a contract column "
+                                r"\(q1\.\.q12, .*, set\)\. Got 'q13'"),
+    ({"columns": {"temperature": "a"}}, r"Got 'temperature' instead"),
+    ({"columns": {"xmeas": "a"}}, r"Got 'xmeas' \(did you mean 'x_meas'\?\) instead"),
+    ({"columns": {"q1": " "}}, r"The 'columns' entry 'q1' of MeasurementFormat must be a non-empty file column "
+                               r"name\. Got ' ' instead"),
+    ({"columns": {"q1": "a", "q2": "a"}}, r"The 'columns' entry 'q2' of MeasurementFormat must be a file column "
+                                          r"that holds no other contract column\. Got 'a' \(already mapped to q1\)"),
+    ({"columns": {"x_meas": "q1"}}, r"Got 'q1' \(the contract column q1 is not mapped, so it is read under its own "
+                                    r"name: map q1 too\) instead"),
 ])
 def test_bad_format_parameters(kwargs, match):
     with pytest.raises(ConfigError, match=match):
@@ -113,19 +125,60 @@ def test_format_yaml_round_trip(tmp_path):
 
 
 @pytest.mark.parametrize("old, new, match", [
-    ('delimiter: ";"', 'delimiter: ","', r"fmt.yaml: decimal \(line 2\): must differ from the delimiter ','; got ','"),
+    ('delimiter: ";"', 'delimiter: ","', r"fmt.yaml: decimal \(line 2\): must be different from the delimiter ','; "
+                                         r"got ','"),
     ('decimal: ","', 'decimal: "/"', r"fmt.yaml: decimal \(line 2\): must be '\.' or ','; got '/'"),
-    ("q1: axis_1", "q_1: axis_1", r"fmt.yaml: columns.q_1 \(line 3\): not a contract column .*; did you mean 'q1'\?"),
-    ("x_meas: smr_x", "x_meas: axis_1", r"columns.x_meas \(line 3\): column 'axis_1' is already mapped to q1"),
-    ("x_meas: smr_x", "x_meas: q2", r"columns.x_meas \(line 3\): column 'q2' is also read as q2 \(a contract column "
-                                    r"not mapped is read under its own name\); each file column can hold one"),
+    ("q1: axis_1", "q_1: axis_1", r"fmt.yaml: columns.q_1 \(line 3\): must be a contract column "
+                                  r"\(q1\.\.q12, .*, set\); got 'q_1' \(did you mean 'q1'\?\)"),
+    ("q1: axis_1", "q1: ' '", r"fmt.yaml: columns.q1 \(line 3\): must be a non-empty file column name; got ' '"),
+    ("x_meas: smr_x", "x_meas: axis_1", r"columns.x_meas \(line 3\): must be a file column that holds no other "
+                                        r"contract column; got 'axis_1' \(already mapped to q1\)"),
+    ("x_meas: smr_x", "x_meas: ' axis_1 '", r"columns.x_meas \(line 3\): .*; got 'axis_1' \(already mapped to q1\)"),
+    ("x_meas: smr_x", "x_meas: q2", r"columns.x_meas \(line 3\): .*; got 'q2' \(the contract column q2 is not mapped, "
+                                    r"so it is read under its own name: map q2 too\)"),
     ("joint_unit: rad", "joint_unit: radians", r"joint_unit \(line 4\): must be one of 'deg', 'rad'; got 'radians'"),
     ("length_unit: m", "length_units: m", r"length_units \(line 5\): unknown key; did you mean 'length_unit'\?"),
     ('delimiter: ";"', 'delimiter: ";,"', r"delimiter \(line 1\): must be one character other than a quote"),
+    ('delimiter: ";"', 'delimiter: 1', r"delimiter \(line 1\): must be a text; got 1"),
 ])
 def test_format_yaml_errors_name_key_and_line(tmp_path, old, new, match):
     with pytest.raises(ConfigError, match=match):
         load_format(write(tmp_path, YAML.replace(old, new), "fmt.yaml"))
+
+
+@pytest.mark.parametrize("kwargs", [
+    {"delimiter": ";;"}, {"delimiter": '"'}, {"decimal": ";"}, {"decimal": ","}, {"joint_unit": "grad"},
+    {"length_unit": "cm"}, {"columns": {"q13": "a"}}, {"columns": {"xmeas": "a"}}, {"columns": {"q1": " "}},
+    {"columns": {"q1": "a", "q2": "a"}}, {"columns": {"x_meas": "q1"}},
+])
+def test_each_format_rule_has_one_wording_from_python_and_from_yaml(tmp_path, kwargs):
+    with pytest.raises(ConfigError) as built:
+        MeasurementFormat(**kwargs)
+    with pytest.raises(ConfigError) as read:
+        load_format(write(tmp_path, yaml.safe_dump(kwargs), "fmt.yaml"))
+    python = re.fullmatch(r"The '(\w+)' (?:parameter|entry '(\w+)') of MeasurementFormat must be (.+)\. "
+                          r"Got (.+) instead\.", str(built.value))
+    from_yaml = re.fullmatch(r".*fmt\.yaml: ([\w.]+) \(line \d+\): must be (.+); got (.+)", str(read.value))
+    assert python and from_yaml, (str(built.value), str(read.value))
+    key, entry, expected, got = python.groups()
+    assert from_yaml.groups() == (key if entry is None else f"{key}.{entry}", expected, got)
+
+
+@pytest.mark.parametrize("python, text", [
+    (lambda: RowSelection(every=0), "every: 0"), (lambda: RowSelection.parse("4-2"), "rows: 4-2"),
+    (lambda: RowSelection.parse("1-3, 3-4"), "rows: 1-3, 3-4"), (lambda: RowSelection.parse("1-"), "rows: 1-"),
+    (lambda: RowSelection(((5, 6), (1, 2))), "rows: 5-6, 1-2"),
+])
+def test_each_row_rule_has_one_wording_from_python_and_from_yaml(tmp_path, python, text):
+    with pytest.raises(ConfigError) as built:
+        python()
+    path = write(tmp_path, text + "\n", "sel.yaml")
+    data, lines = load_yaml(path)
+    with pytest.raises(ConfigError) as read:
+        RowSelection.from_section(Section(data, "", lines, str(path)))
+    key, expected, got = re.fullmatch(r"The '(\w+)' parameter of RowSelection must be (.+)\. Got (.+) instead\.",
+                                      str(built.value)).groups()
+    assert str(read.value) == f"{path}: {key} (line 1): must be {expected}; got {got}"
 
 
 def test_row_selection(tmp_path):

@@ -26,12 +26,12 @@ import difflib
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Mapping
+from typing import Any, Mapping, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
-from .._yamlio import Section, load_yaml, range_check
+from .._yamlio import Section, load_yaml
 from ..errors import ConfigError, DataError
 from ..robot.description import MAX_JOINTS
 
@@ -41,6 +41,7 @@ CONTRACT_COLUMNS = JOINTS + LENGTHS + ("set",)
 JOINT_UNITS = ("deg", "rad")
 LENGTH_UNITS = ("mm", "m")
 _RANGE = re.compile(r"^\s*(\d+)\s*(?:-\s*(\d+)\s*)?$")
+_ROWS = "data rows such as '1-600' or '1-100, 201-300' (1-based, increasing, not overlapping)"
 
 
 @dataclass(frozen=True)
@@ -70,10 +71,11 @@ class MeasurementFormat:
     length_unit: str = "mm"
 
     def __post_init__(self):
-        problem = _format_problem(self)
+        problem = _format_problem(self.delimiter, self.decimal, self.columns, self.joint_unit, self.length_unit)
         if problem:
-            key, expected, got = problem
-            raise ConfigError(f"The {key!r} parameter of MeasurementFormat must be {expected}. Got {got!r} instead.")
+            name = f"{problem.key!r} parameter" if problem.entry is None else f"{problem.key!r} entry {problem.entry!r}"
+            raise ConfigError(f"The {name} of MeasurementFormat must be {problem.expected}. "
+                              f"Got {problem.got!r}{problem.note} instead.")
         object.__setattr__(self, "columns", dict(self.columns))
 
     def file_column(self, contract: str) -> str:
@@ -107,18 +109,21 @@ class MeasurementFormat:
 
     @classmethod
     def from_section(cls, sec: Section) -> "MeasurementFormat":
-        """Read the format keys of a YAML mapping; errors name the key path and line."""
-        delimiter = sec.get("delimiter", "str", default=",", check=_delimiter_check)
-        decimal = sec.get("decimal", "str", default=".",
-                          check=lambda v: None if v in (".", ",") else "'.' or ','")
-        if decimal == delimiter:
-            sec.fail(sec.path("decimal"), f"must differ from the delimiter {delimiter!r}; got {decimal!r}")
-        joint_unit = sec.get("joint_unit", "str", default="deg", check=_one_of(JOINT_UNITS))
-        length_unit = sec.get("length_unit", "str", default="mm", check=_one_of(LENGTH_UNITS))
-        columns = _columns(sec.section("columns"))
+        """Read the format keys of a YAML mapping; errors name the key path and line.
+
+        The rules are those of the constructor (:func:`_format_problem`), framed
+        as ``key (line N): must be ...; got ...``.
+        """
+        values = {key: sec.get(key, "str", default=default) for key, default in
+                  (("delimiter", ","), ("decimal", "."), ("joint_unit", "deg"), ("length_unit", "mm"))}
+        cols = sec.section("columns")
+        values["columns"] = {str(key): _stripped(cols.get(key, "str")) for key in list(cols.data)}
+        problem = _format_problem(**values)
+        if problem:
+            where = problem.key if problem.entry is None else f"{problem.key}.{problem.entry}"
+            sec.fail(sec.path(where), f"must be {problem.expected}; got {problem.got!r}{problem.note}")
         sec.done()
-        return cls(delimiter=delimiter, decimal=decimal, columns=columns, joint_unit=joint_unit,
-                   length_unit=length_unit)
+        return cls(**values)
 
 
 def load_format(path: str | Path) -> MeasurementFormat:
@@ -127,78 +132,69 @@ def load_format(path: str | Path) -> MeasurementFormat:
     return MeasurementFormat.from_section(Section(data, "", lines, str(path)))
 
 
-def _columns(sec: Section) -> dict[str, str]:
-    out: dict[str, str] = {}
-    for key in list(sec.data):
-        name = str(key)
-        if name not in CONTRACT_COLUMNS:
-            close = difflib.get_close_matches(name, CONTRACT_COLUMNS, n=1, cutoff=0.6)
-            hint = f"; did you mean {close[0]!r}?" if close else ""
-            sec.fail(sec.path(name), f"not a contract column (q1..q{MAX_JOINTS}, x_nom, y_nom, z_nom, x_meas, "
-                                     f"y_meas, z_meas, x, y, z, set){hint}")
-        value = sec.get(key, "str", check=lambda v: None if v.strip() else "a non-empty column name")
-        out[name] = value.strip()
-    problem = _mapping_problem(out)
-    if problem:
-        sec.fail(sec.path(problem[0]), problem[1])
-    sec.done()
-    return out
+def _stripped(name: str) -> str:
+    """A file column name from YAML without surrounding blanks (a blank name stays as written, to be refused)."""
+    return name.strip() or name
 
 
-def _mapping_problem(columns: Mapping[str, str]) -> tuple[str, str] | None:
-    """The first contract column whose file column also holds another contract column, and why.
+class _Problem(NamedTuple):
+    """A broken format rule: ``key`` (and ``entry`` of ``columns``) must be ``expected``; got ``got`` (``note``)."""
+
+    key: str
+    entry: Any
+    expected: str
+    got: Any
+    note: str = ""
+
+
+def _format_problem(delimiter: Any, decimal: Any, columns: Any, joint_unit: Any, length_unit: Any
+                    ) -> _Problem | None:
+    """The first format rule the values break, or None: each rule is checked here and only here.
+
+    Both ways of making a format use it: the constructor frames the problem
+    scikit-learn style, :meth:`MeasurementFormat.from_section` with the YAML key
+    path and line.
+    """
+    if not isinstance(delimiter, str) or len(delimiter) != 1 or delimiter in "\"\r\n":
+        return _Problem("delimiter", None, "one character other than a quote or a line break (e.g. ',', ';' or "
+                                           "\"\\t\")", delimiter)
+    if not isinstance(decimal, str) or decimal not in (".", ","):
+        return _Problem("decimal", None, "'.' or ','", decimal)
+    if decimal == delimiter:
+        return _Problem("decimal", None, f"different from the delimiter {delimiter!r}", decimal)
+    for key, value, allowed in (("joint_unit", joint_unit, JOINT_UNITS), ("length_unit", length_unit, LENGTH_UNITS)):
+        if not isinstance(value, str) or value not in allowed:
+            return _Problem(key, None, "one of " + ", ".join(repr(a) for a in allowed), value)
+    if not isinstance(columns, Mapping):
+        return _Problem("columns", None, "a mapping of contract column to file column", columns)
+    for key, value in columns.items():
+        if key not in CONTRACT_COLUMNS:
+            close = difflib.get_close_matches(str(key), CONTRACT_COLUMNS, n=1, cutoff=0.6)
+            return _Problem("columns", key, f"a contract column (q1..q{MAX_JOINTS}, x_nom, y_nom, z_nom, x_meas, "
+                                            "y_meas, z_meas, x, y, z, set)", key,
+                            f" (did you mean {close[0]!r}?)" if close else "")
+        if not isinstance(value, str) or not value.strip():
+            return _Problem("columns", key, "a non-empty file column name", value)
+    return _mapping_problem(columns)
+
+
+def _mapping_problem(columns: Mapping[str, str]) -> _Problem | None:
+    """The first contract column whose file column also holds another contract column.
 
     Two contract columns mapped to one file column, or mapped to the name of
     a contract column that is not mapped (and so is read under its own name:
     ``{x_meas: q1}`` would read q1 twice).
     """
+    one = "a file column that holds no other contract column"
     owner: dict[str, str] = {}
     for key, value in columns.items():
         if value in owner:
-            return key, (f"column {value!r} is already mapped to {owner[value]}; each file column can hold one "
-                         "contract column")
+            return _Problem("columns", key, one, value, f" (already mapped to {owner[value]})")
         owner[value] = key
     for key, value in columns.items():
         if value in CONTRACT_COLUMNS and value != key and value not in columns:
-            return key, (f"column {value!r} is also read as {value} (a contract column not mapped is read under "
-                         f"its own name); each file column can hold one contract column: map {value} too")
-    return None
-
-
-def _delimiter_check(value: str) -> str | None:
-    if len(value) != 1 or value in "\"\r\n":
-        return "one character other than a quote or a line break (e.g. ',', ';' or \"\\t\")"
-    return None
-
-
-def _one_of(allowed: tuple[str, ...]):
-    def check(value):
-        return None if value in allowed else "one of " + ", ".join(repr(a) for a in allowed)
-    return check
-
-
-def _format_problem(fmt: MeasurementFormat) -> tuple[str, str, object] | None:
-    """The first bad parameter of a format built in Python, as ``(key, expected, got)``."""
-    if not isinstance(fmt.delimiter, str) or _delimiter_check(fmt.delimiter):
-        return "delimiter", "one character other than a quote or a line break", fmt.delimiter
-    if fmt.decimal not in (".", ","):
-        return "decimal", "'.' or ','", fmt.decimal
-    if fmt.decimal == fmt.delimiter:
-        return "decimal", f"different from the delimiter {fmt.delimiter!r}", fmt.decimal
-    if fmt.joint_unit not in JOINT_UNITS:
-        return "joint_unit", "'deg' or 'rad'", fmt.joint_unit
-    if fmt.length_unit not in LENGTH_UNITS:
-        return "length_unit", "'mm' or 'm'", fmt.length_unit
-    if not isinstance(fmt.columns, Mapping):
-        return "columns", "a mapping of contract column to file column", fmt.columns
-    for key, value in fmt.columns.items():
-        if key not in CONTRACT_COLUMNS:
-            return "columns", "a mapping whose keys are contract columns", key
-        if not isinstance(value, str) or not value.strip():
-            return "columns", "a mapping to non-empty file column names", value
-    problem = _mapping_problem(fmt.columns)
-    if problem:
-        return "columns", f"a mapping where each file column holds one contract column ({problem[1]})", fmt.columns
+            return _Problem("columns", key, one, value, f" (the contract column {value} is not mapped, so it is "
+                                                        f"read under its own name: map {value} too)")
     return None
 
 
@@ -214,28 +210,21 @@ class RowSelection:
     every: int = 1
 
     def __post_init__(self):
-        if not isinstance(self.every, int) or isinstance(self.every, bool) or self.every < 1:
-            raise ConfigError(f"The 'every' parameter of RowSelection must be an int >= 1. Got {self.every!r} instead.")
-        last = 0
-        for low, high in self.ranges:
-            if not 1 <= low <= high or low <= last:
-                raise ConfigError(f"The 'ranges' parameter of RowSelection must hold increasing, non-overlapping "
-                                  f"1-based ranges. Got {self.text!r} instead.")
-            last = high
+        problem = _every_problem(self.every)
+        if problem:
+            raise ConfigError(f"The 'every' parameter of RowSelection must be {problem}. Got {self.every!r} instead.")
+        if not _increasing(self.ranges):
+            raise _bad_rows(self.text)
 
     @classmethod
     def parse(cls, text: str | None, every: int = 1) -> "RowSelection":
         """From text such as ``"1-600"`` or ``"1-100, 201-300, 400"``."""
         if text is None:
             return cls((), every)
-        ranges = []
-        for part in text.split(","):
-            m = _RANGE.match(part)
-            if not m:
-                raise ConfigError(f"cannot read {part.strip()!r}: expected N or N-M (1-based data rows)")
-            low = int(m.group(1))
-            ranges.append((low, int(m.group(2)) if m.group(2) else low))
-        return cls(tuple(ranges), every)
+        ranges = _ranges(text)
+        if ranges is None:
+            raise _bad_rows(text)
+        return cls(ranges, every)
 
     @property
     def text(self) -> str | None:
@@ -266,10 +255,38 @@ class RowSelection:
     @classmethod
     def from_section(cls, sec: Section) -> "RowSelection":
         """Read ``rows`` and ``every`` of a YAML mapping (other keys are the caller's)."""
-        text = sec.get("rows", "str", default=None)
-        every = sec.get("every", "int", default=1, check=range_check(1, integer=True))
-        try:
-            return cls.parse(text, every)
-        except ConfigError:
-            sec.fail(sec.path("rows"), f"must be data rows such as '1-600' or '1-100, 201-300' (1-based, "
-                                       f"increasing, not overlapping); got {text!r}")
+        text = sec.get("rows", "str", default=None, check=lambda t: None if _ranges(t) is not None else _ROWS)
+        every = sec.get("every", "int", default=1, check=_every_problem)
+        return cls.parse(text, every)
+
+
+def _every_problem(every: Any) -> str | None:
+    """What ``every`` must be, or None when it is: an int >= 1 (bools are not ints here)."""
+    ok = isinstance(every, int) and not isinstance(every, bool) and every >= 1
+    return None if ok else "an int >= 1"
+
+
+def _increasing(ranges: tuple[tuple[int, int], ...]) -> bool:
+    """The rows rule: 1-based ``(first, last)`` ranges, each ``first <= last``, increasing, not overlapping."""
+    last = 0
+    for low, high in ranges:
+        if not 1 <= low <= high or low <= last:
+            return False
+        last = high
+    return True
+
+
+def _ranges(text: str) -> tuple[tuple[int, int], ...] | None:
+    """The ranges of ``"1-100, 201-300, 400"``, or None when the text does not follow the rows rule."""
+    ranges = []
+    for part in text.split(","):
+        m = _RANGE.match(part)
+        if not m:
+            return None
+        low = int(m.group(1))
+        ranges.append((low, int(m.group(2)) if m.group(2) else low))
+    return tuple(ranges) if _increasing(tuple(ranges)) else None
+
+
+def _bad_rows(text: str | None) -> ConfigError:
+    return ConfigError(f"The 'rows' parameter of RowSelection must be {_ROWS}. Got {text!r} instead.")

@@ -24,7 +24,7 @@ from .._validation import safe_name
 from .._yamlio import Section, load_yaml, range_check
 from ..errors import ConfigError
 from ..robot.description import joint_columns, load_robot, robot_reference
-from ..robot.kinematics import Robot
+from ..robot.kinematics import Robot, matrix_from_euler_deg
 from ..robot.trajectories import PATHS, paper_path
 from .measurements import Measurements, write_measurements
 
@@ -107,14 +107,6 @@ class VirtualRobot:
         return scaled + sigma[:, None] * noise
 
 
-def _rotation_deg(rx: float, ry: float, rz: float) -> NDArray[np.float64]:
-    cx, sx, cy, sy, cz, sz = (f(np.radians(a)) for a in (rx, ry, rz) for f in (np.cos, np.sin))
-    rot_x = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
-    rot_y = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
-    rot_z = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
-    return rot_z @ rot_y @ rot_x
-
-
 @dataclass(frozen=True)
 class Study:
     """A parsed virtual-experiment config: the robot and the data sets to produce."""
@@ -176,7 +168,7 @@ def _true_robot(nominal: Robot, errors: Section, rng: np.random.Generator):
     deviations = rng.standard_normal((4, rows)) * np.array([[length], [length], [twist], [zero]])
     tool = np.asarray(errors.get("tool_mm", "list", check=_vector3), dtype=float)
     base = errors.section("base", required=True)
-    rot = _rotation_deg(*base.get("rotation_deg", "list", check=_vector3))
+    rot = matrix_from_euler_deg(base.get("rotation_deg", "list", check=_vector3))
     shift = np.asarray(base.get("translation_mm", "list", check=_vector3), dtype=float)
     base.done()
     true = nominal.replace(a_mm=nominal.a_mm + deviations[0], d_mm=nominal.d_mm + deviations[1],

@@ -42,7 +42,7 @@ from .._validation import FieldReader, boolean, check_array, param_error, real
 from ..errors import DataError, ModelFileError
 from ..metrics import distance_outside_boxes
 from ..robot.description import load_robot, robot_from_dict, robot_to_dict
-from ..robot.kinematics import Robot
+from ..robot.kinematics import Robot, matrix_from_euler_deg
 from .base import ErrorModelBase, box_points, seed_from
 from .bases import varying_inputs
 from .gp import GaussianProcessErrorModel
@@ -74,16 +74,6 @@ def nominal_values(robot: Robot) -> NDArray[np.float64]:
     return np.concatenate([rows, robot.tool_mm, np.zeros(6)])
 
 
-def _rotation_deg(angles_deg: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``Rz(rz) Ry(ry) Rx(rx)`` for ``(rx, ry, rz)`` in degrees (the virtual robot's base convention)."""
-    cx, cy, cz = np.cos(np.radians(angles_deg))
-    sx, sy, sz = np.sin(np.radians(angles_deg))
-    rot_x = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
-    rot_y = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
-    rot_z = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
-    return rot_z @ rot_y @ rot_x
-
-
 def robot_with(nominal: Robot, values: NDArray[np.float64]) -> Robot:
     """The robot with parameter ``values`` (``(4 R + 9,)``, as :func:`nominal_values`).
 
@@ -92,7 +82,7 @@ def robot_with(nominal: Robot, values: NDArray[np.float64]) -> Robot:
     """
     rows = nominal.alpha_deg.size
     dh = values[:4 * rows].reshape(rows, 4)
-    turn = _rotation_deg(values[4 * rows + 6:])
+    turn = matrix_from_euler_deg(values[4 * rows + 6:])
     return nominal.replace(theta_offset_deg=dh[:, 0].copy(), d_mm=dh[:, 1].copy(), a_mm=dh[:, 2].copy(),
                            alpha_deg=dh[:, 3].copy(), tool_mm=values[4 * rows:4 * rows + 3].copy(),
                            base_rotation=turn @ nominal.base_rotation,
@@ -110,8 +100,8 @@ def identification_jacobian(nominal: Robot, q_deg: NDArray[np.float64], values: 
     rows = nominal.alpha_deg.size
     _, ry, rz = values[4 * rows + 6:]
     lever = p - values[4 * rows + 3:4 * rows + 6]                # about the shifted base origin
-    turn_z = _rotation_deg(np.array([0.0, 0.0, rz]))
-    axes = [turn_z @ _rotation_deg(np.array([0.0, ry, 0.0])) @ [1.0, 0, 0], turn_z @ [0, 1.0, 0],
+    turn_z = matrix_from_euler_deg(np.array([0.0, 0.0, rz]))
+    axes = [turn_z @ matrix_from_euler_deg(np.array([0.0, ry, 0.0])) @ [1.0, 0, 0], turn_z @ [0, 1.0, 0],
             np.array([0, 0, 1.0])]                               # d/drx, d/dry, d/drz of Rz Ry Rx
     base = np.empty((p.shape[0], 3, 6))
     base[:, :, :3] = np.eye(3)

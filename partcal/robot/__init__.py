@@ -5,6 +5,7 @@ nothing about measurement files or error models.
 """
 
 from .description import available_robots, joint_columns, load_robot
-from .kinematics import IKResult, Robot
+from .kinematics import IKResult, Robot, matrix_from_euler_deg
 
-__all__ = ["IKResult", "Robot", "available_robots", "joint_columns", "load_robot"]
+__all__ = ["IKResult", "Robot", "available_robots", "joint_columns", "load_robot",
+           "matrix_from_euler_deg"]

@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 import re
 from pathlib import Path
+from typing import NoReturn
 
 import numpy as np
 from numpy.typing import NDArray
@@ -113,75 +114,99 @@ def robot_from_dict(spec: dict, source: str = "robot", lines: dict[str, int] | N
     ``lines`` (key path -> line, from :func:`partcal._yamlio.load_yaml`) puts
     the line of the bad key into every message.
     """
-    lines = lines or {}
+    r = _Reader(source, lines or {})
+    n = _joint_count(spec, r)
+    alpha, d, a, off, coupling = _links(spec["links"], n, r)
+    limits = r.numbers("limits_deg", spec["limits_deg"], (n, 2), f"{n} pairs [low, high] with low < high")
+    if np.any(limits[:, 0] >= limits[:, 1]):
+        r.fail("limits_deg", f"expected {n} pairs [low, high] with low < high; got {spec['limits_deg']!r}")
+    home = r.numbers("home_deg", spec["home_deg"], (n,), f"{n} angles") if "home_deg" in spec else limits.mean(axis=1)
+    tool = r.numbers("tool_mm", spec.get("tool_mm", [0, 0, 0]), (3,), "[x, y, z]")
+    constraints = _constraints(spec.get("constraints_deg") or [], n, r)
+    return Robot(name=str(spec["name"]), n_joints=n, alpha_deg=alpha, d_mm=d, a_mm=a,
+                 theta_offset_deg=off, coupling=coupling, tool_mm=tool, limits_deg=limits,
+                 home_deg=home, constraints=constraints)
 
-    def fail(where: str, msg: str):
-        line = lines.get(where)
-        raise ConfigError(f"{source}: {where}{f' (line {line})' if line else ''}: {msg}")
 
-    def number(where: str, value) -> float:
+class _Reader:
+    """The messages of one robot mapping: ``source: where (line N): message``, and its number checks."""
+
+    def __init__(self, source: str, lines: dict[str, int]):
+        self.source, self.lines = source, lines
+
+    def fail(self, where: str, msg: str) -> NoReturn:
+        line = self.lines.get(where)
+        raise ConfigError(f"{self.source}: {where}{f' (line {line})' if line else ''}: {msg}")
+
+    def number(self, where: str, value) -> float:
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
                 or abs(value) > 1e300:
-            fail(where, f"must be a finite number; got {value!r}")
+            self.fail(where, f"must be a finite number; got {value!r}")
         return float(value)
 
-    def numbers(where: str, value, shape: tuple[int, ...], what: str) -> NDArray[np.float64]:
+    def numbers(self, where: str, value, shape: tuple[int, ...], what: str) -> NDArray[np.float64]:
         arr = np.asarray(value if isinstance(value, list) else [value], dtype=object)
         if arr.shape != shape:
-            fail(where, f"expected {what}; got {value!r}")
+            self.fail(where, f"expected {what}; got {value!r}")
         for index in np.ndindex(arr.shape):
             at = where + "".join(f"[{k}]" for k in index)
-            number(at if at in lines else where, arr[index])
+            self.number(at if at in self.lines else where, arr[index])
         return arr.astype(float)
 
+
+def _joint_count(spec, r: _Reader) -> int:
+    """The number of joints, once the top-level keys are known, present and of the right kind."""
     if not isinstance(spec, dict):
-        fail("top level", f"expected a mapping, got {type(spec).__name__}")
+        r.fail("top level", f"expected a mapping, got {type(spec).__name__}")
     unknown = set(spec) - _ROBOT_KEYS
     if unknown:
-        fail(sorted(unknown)[0], f"unknown key (allowed: {', '.join(sorted(_ROBOT_KEYS))})")
+        r.fail(sorted(unknown)[0], f"unknown key (allowed: {', '.join(sorted(_ROBOT_KEYS))})")
     for key in ("name", "joints", "links", "limits_deg"):
         if key not in spec:
-            fail(key, "missing")
+            r.fail(key, "missing")
     n = spec["joints"]
     if not isinstance(n, int) or not 1 <= n <= MAX_JOINTS:
-        fail("joints", f"must be an int in [1, {MAX_JOINTS}]; got {n!r}")
+        r.fail("joints", f"must be an int in [1, {MAX_JOINTS}]; got {n!r}")
     for key, kind in (("links", list), ("constraints_deg", (list, type(None)))):
         if not isinstance(spec.get(key), kind):
-            fail(key, f"expected a list; got {spec.get(key)!r}"[:200])
+            r.fail(key, f"expected a list; got {spec.get(key)!r}"[:200])
+    return n
+
+
+def _links(links: list, n: int, r: _Reader) -> tuple[NDArray[np.float64], ...]:
+    """``alpha, d, a, theta offset`` (each ``(R,)``) and the coupling ``(R, N)`` of the DH rows."""
     rows = []
-    for i, link in enumerate(spec["links"]):
+    for i, link in enumerate(links):
         if not isinstance(link, dict) or set(link) != {"theta", "d", "a", "alpha"}:
-            fail(f"links[{i}]", f"expected a mapping with theta, d, a, alpha; got {link!r}")
+            r.fail(f"links[{i}]", f"expected a mapping with theta, d, a, alpha; got {link!r}")
         try:
             off, coeffs = parse_theta(link["theta"], n)
         except ConfigError as exc:
-            fail(f"links[{i}].theta", str(exc))
-        rows.append((*(number(f"links[{i}].{key}", link[key]) for key in ("alpha", "d", "a")), off, coeffs))
+            r.fail(f"links[{i}].theta", str(exc))
+        rows.append((*(r.number(f"links[{i}].{key}", link[key]) for key in ("alpha", "d", "a")), off, coeffs))
     if not rows:
-        fail("links", "needs at least one DH row")
-    coupling = np.array([r[4] for r in rows])
+        r.fail("links", "needs at least one DH row")
+    coupling = np.array([row[4] for row in rows])
     unused = [f"q{j + 1}" for j in range(n) if not coupling[:, j].any()]
     if unused:
-        fail("links", f"joint(s) {', '.join(unused)} appear in no theta expression")
-    limits = numbers("limits_deg", spec["limits_deg"], (n, 2), f"{n} pairs [low, high] with low < high")
-    if np.any(limits[:, 0] >= limits[:, 1]):
-        fail("limits_deg", f"expected {n} pairs [low, high] with low < high; got {spec['limits_deg']!r}")
-    home = numbers("home_deg", spec["home_deg"], (n,), f"{n} angles") if "home_deg" in spec else limits.mean(axis=1)
-    tool = numbers("tool_mm", spec.get("tool_mm", [0, 0, 0]), (3,), "[x, y, z]")
+        r.fail("links", f"joint(s) {', '.join(unused)} appear in no theta expression")
+    alpha, d, a, off = (np.array([row[k] for row in rows]) for k in range(4))
+    return alpha, d, a, off, coupling
+
+
+def _constraints(items: list, n: int, r: _Reader) -> tuple:
+    """``(coefficients (N,), low, high)`` of each entry of ``constraints_deg``."""
     constraints = []
-    for i, c in enumerate(spec.get("constraints_deg") or []):
+    for i, c in enumerate(items):
         if not isinstance(c, dict) or not isinstance(c.get("range"), list) or len(c["range"]) != 2:
-            fail(f"constraints_deg[{i}]", f"expected {{expr: 'q2 - q3', range: [low, high]}}; got {c!r}"[:200])
+            r.fail(f"constraints_deg[{i}]", f"expected {{expr: 'q2 - q3', range: [low, high]}}; got {c!r}"[:200])
         try:
             _, coeffs = parse_theta(c["expr"], n)
-            low, high = (number(f"constraints_deg[{i}].range", v) for v in c["range"])
+            low, high = (r.number(f"constraints_deg[{i}].range", v) for v in c["range"])
         except (KeyError, TypeError, ValueError, ConfigError) as exc:
-            fail(f"constraints_deg[{i}]", f"expected {{expr: 'q2 - q3', range: [low, high]}}: {exc}")
+            r.fail(f"constraints_deg[{i}]", f"expected {{expr: 'q2 - q3', range: [low, high]}}: {exc}")
         constraints.append((coeffs, low, high))
-    alpha, d, a, off = (np.array([r[k] for r in rows]) for k in range(4))
-    return Robot(name=str(spec["name"]), n_joints=n, alpha_deg=alpha, d_mm=d, a_mm=a,
-                 theta_offset_deg=off, coupling=coupling, tool_mm=tool, limits_deg=limits,
-                 home_deg=home, constraints=tuple(constraints))
+    return tuple(constraints)
 
 
 def joint_columns(n_joints: int) -> list[str]:

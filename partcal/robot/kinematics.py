@@ -37,6 +37,25 @@ def _cos_sin_deg(angle_deg: NDArray[np.float64]) -> tuple[NDArray[np.float64], N
     return c, s
 
 
+def matrix_from_euler_deg(angles_deg) -> NDArray[np.float64]:
+    """The rotation ``Rz(rz) Ry(ry) Rx(rx)`` from angles ``(rx, ry, rz)`` in degrees, shape ``(3, 3)``.
+
+    Turns about the fixed x, then y, then z axes: the convention of the virtual
+    robot's base (``errors.base.rotation_deg``) and of the kinematic model's base
+    correction.
+
+    >>> (matrix_from_euler_deg([0.0, 0.0, 90.0]) @ [1.0, 0.0, 0.0]).round(12) + 0.0
+    array([0., 1., 0.])
+    """
+    rad = np.radians(np.asarray(angles_deg, dtype=float))
+    cx, cy, cz = np.cos(rad)
+    sx, sy, sz = np.sin(rad)
+    rot_x = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
+    rot_y = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
+    rot_z = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
+    return rot_z @ rot_y @ rot_x
+
+
 @dataclass(frozen=True, eq=False)
 class Robot:
     """A serial chain of standard DH rows, possibly with coupled joints.

@@ -203,7 +203,7 @@ def model_from_dict(doc: Any, source: str = "model") -> Any:
     model = _from_body(r)
     model.train_inputs_ = _train_inputs(r, model.n_features_in_)
     _check_plausible(r, model)
-    return model
+    return model._prepare()
 
 
 def _from_body(r: "_Reader") -> Any:

@@ -1,5 +1,6 @@
 """What partcal's estimators share: scikit-learn tags for x, y, z outputs, the distance to the
-training inputs, and one seed rule."""
+training inputs, ``_prepare`` (what reads need, built once, so that reads store nothing), and one
+seed rule."""
 
 from __future__ import annotations
 

@@ -7,7 +7,6 @@ import pytest
 from conftest import ROOT
 from sklearn.gaussian_process import GaussianProcessRegressor
 from sklearn.gaussian_process.kernels import RBF, ConstantKernel, Matern, WhiteKernel
-from sklearn.utils.estimator_checks import parametrize_with_checks
 
 from partcal import (
     ErrorModel,
@@ -21,18 +20,6 @@ from partcal.study.persist import load_model, model_to_dict, save_model
 
 IDENT = read_measurements(ROOT / "data" / "sk120" / "identification.csv")
 RECTANGLE = read_measurements(ROOT / "data" / "sk120" / "test_rectangle.csv")
-
-
-# These fit 10-input GPs several times over (about 230 likelihood evaluations each, 5 s of CPU per check);
-# what they check (shapes, mismatched lengths, a decent score) the tests below check on real data.
-SLOW_CHECKS = {"check_regressors_train", "check_regressor_data_not_an_array"}
-
-
-@parametrize_with_checks([GaussianProcessErrorModel(restarts=0)])
-def test_sklearn_compatible(estimator, check):
-    if getattr(check, "func", check).__name__ in SLOW_CHECKS:
-        pytest.skip("slow for a GP; covered by the tests on measured data")
-    check(estimator)
 
 
 def unit_scaled(X, train):

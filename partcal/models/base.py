@@ -1,5 +1,6 @@
 """What partcal's estimators share: scikit-learn tags for x, y, z outputs, the distance to the
-training inputs, one seed rule, and what every model kind offers the rest of partcal.
+training inputs, ``_prepare`` (what reads need, built once, so that reads store nothing), one seed
+rule, and what every model kind offers the rest of partcal.
 
 A *model kind* is one estimator class. Besides ``fit`` and ``predict`` it
 declares its parameters once (``_parameter_rules``, ``_requirements``: the
@@ -177,12 +178,25 @@ class ErrorModelBase(RegressorMixin, BaseEstimator):
     def _shape_output(self, out: NDArray[np.float64]) -> NDArray[np.float64]:
         return out[:, 0] if self._y_1d else out
 
+    def _prepare(self):
+        """Build what reads need from the fitted attributes; returns self.
+
+        Called at the end of ``fit``, and after a model file has set the
+        fitted attributes directly. Reads (``predict``, ``distance_to_data``,
+        ...) only use what is built here and never store anything: the
+        estimator is the same object before and after any read. Here: the
+        KD-tree over ``train_inputs_`` (when the model keeps them).
+        """
+        inputs = getattr(self, "train_inputs_", None)
+        self._train_tree = None if inputs is None else (inputs, cKDTree(inputs))
+        return self
+
     def _distance_to_train_inputs(self, X: NDArray[np.float64]) -> NDArray[np.float64]:
-        """Distance from each point to the nearest row of ``train_inputs_`` (KD-tree built on first use)."""
-        cached = getattr(self, "_train_tree", None)
-        if cached is None or cached[0] is not self.train_inputs_:
-            cached = self._train_tree = (self.train_inputs_, cKDTree(self.train_inputs_))
-        return cached[1].query(X)[0]
+        """Distance from each point to the nearest row of ``train_inputs_`` (the KD-tree of :meth:`_prepare`,
+        or one built for this call if ``train_inputs_`` was replaced since)."""
+        kept = getattr(self, "_train_tree", None)
+        tree = kept[1] if kept is not None and kept[0] is self.train_inputs_ else cKDTree(self.train_inputs_)
+        return tree.query(X)[0]
 
     def __sklearn_tags__(self):
         tags = super().__sklearn_tags__()

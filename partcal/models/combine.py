@@ -81,17 +81,27 @@ class BlendWeights:
         Xs = np.take(X, plan.order, axis=0)
         return plan, Xs, self._iterate(plan, np.ascontiguousarray(Xs[:, p.active]))
 
+    def prepare(self, cells) -> None:
+        """Compute the matrices of every cell in ``cells`` not seen yet (a fitted model: all cells)."""
+        for cell in cells:
+            self._cell(cell)
+
+    def _cell(self, cell: int) -> tuple:
+        """``(kernels, centre, distance matrix)`` of one lookup cell, kept for the next blocks in it."""
+        cached = self._cells.get(cell)
+        if cached is None:
+            p, lookup = self.partition, self.partition.lookup
+            kernels, centre = lookup.candidates(cell), lookup.centre(cell)
+            A = cell_distance_matrix(p.kernel_centres[kernels], p.kernel_inv_sigmas[kernels], centre, lookup.size / 2)
+            cached = self._cells[cell] = (kernels, centre, A)
+        return cached
+
     def _iterate(self, plan: BlockPlan, Xa) -> Iterator[Block]:
         p, lookup = self.partition, self.partition.lookup
         half = lookup.size / 2
         a_axes = Xa.shape[1]
         for cell, start, stop in zip(plan.cells.tolist(), plan.starts.tolist(), plan.stops.tolist()):
-            cached = self._cells.get(cell)
-            if cached is None:
-                kernels, centre = lookup.candidates(cell), lookup.centre(cell)
-                A = cell_distance_matrix(p.kernel_centres[kernels], p.kernel_inv_sigmas[kernels], centre, half)
-                cached = self._cells[cell] = (kernels, centre, A)
-            kernels, centre, A = cached
+            kernels, centre, A = self._cell(cell)
             for a in range(start, stop, MAX_ROWS):
                 b = min(a + MAX_ROWS, stop)
                 F = cell_features(Xa[a:b], centre, half)

@@ -224,7 +224,8 @@ class GaussianProcessErrorModel(ErrorModelBase):
         return gpr
 
     def _prepare(self) -> "GaussianProcessErrorModel":
-        """Precompute what every prediction needs (after fitting or loading); returns self.
+        """Precompute what every prediction needs (after fitting or loading); returns self
+        (see :meth:`ErrorModelBase._prepare`).
 
         The training inputs are divided by the length scales and centred (so
         that the expansion below loses little to rounding), and augmented so
@@ -236,7 +237,7 @@ class GaussianProcessErrorModel(ErrorModelBase):
         B = B - centre
         augmented = np.vstack([B.T, np.ones(len(B)), -0.5 * np.einsum("ij,ij->i", B, B)])
         self._cache = (np.ascontiguousarray(augmented), self.dual_coef_ * self.amplitude_, centre)
-        return self
+        return super()._prepare()
 
     def _kernel(self, d: int):
         shape = RBF(np.ones(d), LENGTH_BOUNDS) if self.kernel == "rbf" else \

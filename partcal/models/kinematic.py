@@ -378,7 +378,20 @@ class KinematicModel(ErrorModelBase):
             leftover = y - (self.identified_robot_.positions(X) - nominal)
             self.residual_ = clone(self.residual).set_params(random_state=seed)
             self.residual_.fit(self._residual_inputs(X, nominal), leftover)
-        return self
+        return self._prepare()
+
+    def _prepare(self) -> "KinematicModel":
+        """Build what a prediction reads (after fitting or loading); returns self.
+
+        A :class:`Robot` compiles its DH rows on its first forward kinematics:
+        one pose through both robots does it here, not in ``predict``. The
+        residual model prepares its own (see :meth:`ErrorModelBase._prepare`).
+        """
+        for robot in (self.robot_, self.identified_robot_):
+            robot.positions(self.data_bounds_[:1])
+        if self.residual_ is not None:
+            self.residual_._prepare()
+        return super()._prepare()
 
     def _residual_inputs(self, X: NDArray[np.float64], nominal: NDArray[np.float64]) -> NDArray[np.float64]:
         """What the residual model reads: the nominal positions ``nominal`` (mm) or the joints ``X`` (deg)."""

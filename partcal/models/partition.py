@@ -21,8 +21,7 @@ neighbour until every cluster is large enough.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from functools import cached_property
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -98,6 +97,12 @@ class Partition:
         are never split nor blended along (their ``sigmas`` are meaningless)
     boxes : (M, 2, d) octree leaf boxes (low, high) or None
     tree : dict of octree node arrays (``centre``, ``child``, ``leaf``) or None
+
+    Derived at construction (a partition never changes after it, and reading it
+    builds nothing): ``kernel_centres`` and ``kernel_inv_sigmas`` (M, a), the
+    kernels on the varying axes; ``lookup``, the grid of candidate kernels
+    (see ``lookup``); k-means: a KD-tree over the kernel centres for
+    :meth:`assign`.
     """
 
     kind: str
@@ -108,21 +113,20 @@ class Partition:
     active: NDArray[np.bool_]
     boxes: NDArray[np.float64] | None = None
     tree: dict | None = None
+    kernel_centres: NDArray[np.float64] = field(init=False, repr=False)
+    kernel_inv_sigmas: NDArray[np.float64] = field(init=False, repr=False)
+    lookup: Lookup = field(init=False, repr=False)
+    _centre_tree: cKDTree | None = field(init=False, repr=False)
 
-    # -------------------------------------------------------------- kernels on the varying axes
-    @cached_property
-    def kernel_centres(self) -> NDArray[np.float64]:
-        """Kernel centres on the varying axes, shape (M, a)."""
-        return np.ascontiguousarray(self.centres[:, self.active])
+    def __post_init__(self):
+        derived = object.__setattr__       # a frozen dataclass: its derived fields are set once, here
+        derived(self, "kernel_centres", np.ascontiguousarray(self.centres[:, self.active]))
+        derived(self, "kernel_inv_sigmas", 1.0 / self.sigmas[:, self.active])
+        derived(self, "lookup", self._build_lookup())
+        derived(self, "_centre_tree", cKDTree(self.kernel_centres) if self.kind == "kmeans" else None)
 
-    @cached_property
-    def kernel_inv_sigmas(self) -> NDArray[np.float64]:
-        """Reciprocal kernel widths on the varying axes, shape (M, a)."""
-        return 1.0 / self.sigmas[:, self.active]
-
-    @cached_property
-    def lookup(self) -> Lookup:
-        """The grid of candidate kernels (built on first use; see ``lookup``)."""
+    def _build_lookup(self) -> Lookup:
+        """The grid of candidate kernels (see ``lookup``)."""
         if self.kind == "octree":
             low = self.boxes[:, 0][:, self.active].min(axis=0)
             high = self.boxes[:, 1][:, self.active].max(axis=0)
@@ -130,10 +134,6 @@ class Partition:
             depth = int(np.rint(np.log2((high - low) / extent)).max(initial=0)) if self.active.any() else 0
             return octree_lookup(low, high, depth, self.kernel_centres, self.kernel_inv_sigmas)
         return grid_lookup(self.kernel_centres, self.kernel_inv_sigmas)
-
-    @cached_property
-    def _centre_tree(self) -> cKDTree:
-        return cKDTree(self.kernel_centres)
 
     # -------------------------------------------------------------- lookups
     def leaf_of(self, X: NDArray[np.float64]) -> NDArray[np.intp]:

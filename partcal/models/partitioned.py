@@ -147,7 +147,31 @@ class PartitionedErrorModel(ErrorModelBase):
                                         for r in range(partition.n_regions)])
         self.train_inputs_ = np.array(X, dtype=np.float64, copy=True)
         log.info("fitted %d regions (%s, min %d samples)", partition.n_regions, partition.kind, min_samples)
-        return self
+        return self._prepare()
+
+    def _prepare(self) -> "PartitionedErrorModel":
+        """Build everything a prediction reads (after fitting or loading); returns self.
+
+        Every region model's own (see :meth:`ErrorModelBase._prepare`); for a
+        Gaussian blend, the distance matrices of every lookup cell and, where
+        the local models allow it, their series re-expressed in every cell's
+        frame (:class:`FrameCombiner`); the KD-tree over the training inputs.
+        """
+        for model in self.models_:
+            model._prepare()
+        weights = combiner = None
+        if self.blend == "gaussian":
+            weights = self.__dict__.get("_weights")
+            if weights is None or weights.partition is not self.partition_:
+                weights = BlendWeights(self.partition_)
+            every_cell = range(self.partition_.lookup.n_cells)
+            weights.prepare(every_cell)
+            if getattr(self, "input_map_", None) is None:
+                combiner = FrameCombiner.build(self.partition_, self.models_)
+            if combiner is not None:
+                combiner.prepare(every_cell)
+        self._weights, self._combiner = weights, combiner
+        return super()._prepare()
 
     def _coordinates(self, X: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """The local models' inputs (joints wrapped) and the partition's coordinates (joints also scaled)."""
@@ -220,14 +244,8 @@ class PartitionedErrorModel(ErrorModelBase):
                 rows = np.flatnonzero(labels == region)
                 out[rows] = self.models_[region]._predict_trusted(X[rows])
             return out
-        if getattr(self, "_weights", None) is None:
-            self._weights = BlendWeights(self.partition_)
-        combiner = None
-        if fast and S is X:
-            if getattr(self, "_combiner", None) is None:
-                self._combiner = FrameCombiner.build(self.partition_, self.models_) or False
-            combiner = self._combiner or None
-        plan, Ss, blocks = self._weights.blocks(S)
+        weights, combiner = self._blend_caches(fast and S is X)
+        plan, Ss, blocks = weights.blocks(S)
         Xs = Ss if S is X else np.take(X, plan.order, axis=0)
         if combiner is not None:
             combiner.prepare(plan.cells.tolist())
@@ -242,6 +260,15 @@ class PartitionedErrorModel(ErrorModelBase):
                                                                  block.weights, n_out).T
         out[plan.order] = sorted_out.T
         return out
+
+    def _blend_caches(self, frames: bool) -> tuple[BlendWeights, FrameCombiner | None]:
+        """The blend weights and frame combiner of :meth:`_prepare` (the combiner only if ``frames``);
+        made for this call, and not kept, if the partition was replaced since (or never prepared)."""
+        weights, combiner = self.__dict__.get("_weights"), self.__dict__.get("_combiner")
+        if weights is None or weights.partition is not self.partition_:
+            weights = BlendWeights(self.partition_)
+            combiner = FrameCombiner.build(self.partition_, self.models_) if frames else None
+        return weights, combiner if frames else None
 
     def distance_to_data(self, X) -> NDArray[np.float64]:
         """Distance from each point to the nearest training input, shape (n,), input units.

@@ -140,7 +140,7 @@ class ErrorModel(ErrorModelBase):
         X, y = validate_data(self, X, y, multi_output=True, y_numeric=True, dtype=np.float64)   # once, with y
         self._fit(X, y, None, trusted=True)
         self.train_inputs_ = np.array(X, copy=True)
-        return self
+        return self._prepare()
 
     def _fit(self, X, y, sample_weight, trusted: bool = False):
         problem = self._setup(X, y, sample_weight, trusted)
@@ -218,14 +218,19 @@ class ErrorModel(ErrorModelBase):
         """
         return self._series_plan().evaluate(X)
 
+    def _prepare(self) -> "ErrorModel":
+        """The compiled series (kept if it is that of the current coefficients) and the base's KD-tree;
+        returns self (see :meth:`ErrorModelBase._prepare`)."""
+        self._plan, self._plan_of = self._series_plan(), (self.coef_, self.scaling_, self.terms_)
+        return super()._prepare()
+
     def _series_plan(self) -> SeriesPlan:
-        """The compiled series, built in ``fit``; rebuilt if ``coef_``, ``scaling_`` or ``terms_``
-        were replaced since (model files set them directly)."""
+        """The compiled series of :meth:`_prepare` (or of ``fit``); built for this call, not kept, if
+        ``coef_``, ``scaling_`` or ``terms_`` were replaced since."""
         plan, source = self.__dict__.get("_plan"), self.__dict__.get("_plan_of", ())
         now = (self.coef_, self.scaling_, self.terms_)
         if plan is None or len(source) != 3 or any(a is not b for a, b in zip(source, now)):
-            plan = self._plan = SeriesPlan.build(self.basis_, self.scaling_, self.terms_, self.coef_)
-            self._plan_of = now
+            plan = SeriesPlan.build(self.basis_, self.scaling_, self.terms_, self.coef_)
         return plan
 
     def distance_to_data(self, X) -> NDArray[np.float64]:

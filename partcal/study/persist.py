@@ -136,4 +136,4 @@ def model_from_dict(doc: Any, source: str = "model") -> Any:
     model = model_from_body(r)
     model.train_inputs_ = r.array("train_inputs", (None, model.n_features_in_)) if "train_inputs" in r.doc else None
     model.check_file(r)
-    return model
+    return model._prepare()

@@ -14,6 +14,7 @@ Terms follow the paper: ``1, u1, u1², ..., u2, ...`` (eq. 7) and
 
 from __future__ import annotations
 
+import functools
 import itertools
 from dataclasses import dataclass
 from math import comb
@@ -128,49 +129,19 @@ class Basis:
                   ) -> NDArray[np.float64]:
         """Feature matrix, shape ``(n, n_terms)``, for inputs ``(n, d)`` in contract units."""
         terms = self.terms(scaling) if terms is None else terms
-        out = np.empty((X.shape[0], len(terms)))
         if self.kind == "fourier":
+            out = np.empty((X.shape[0], len(terms)))
             phi = self.angles(X, scaling)
             for t, (trig, i, q) in enumerate(terms):
                 out[:, t] = 1.0 if trig == "1" else (np.cos if trig == "cos" else np.sin)(q * phi[:, i])
             return out
         u = (X - scaling.centre) / scaling.scale
-        powers = [None, u]
-        for _ in range(2, self.order + 1):
-            powers.append(powers[-1] * u)
-        for t, exps in enumerate(terms):
-            factors = [(i, k) for i, k in enumerate(exps) if k]
-            if not factors:
-                out[:, t] = 1.0
-                continue
-            i, k = factors[0]
-            out[:, t] = powers[k][:, i]
-            for i, k in factors[1:]:
-                out[:, t] *= powers[k][:, i]
-        return out
-
-
-# ---------------------------------------------------------------------- raw-unit equations
-def raw_polynomial(terms: list[tuple], coefs: NDArray[np.float64], scaling: Scaling) -> dict[tuple, float]:
-    """Re-express a polynomial in scaled inputs as one in raw inputs.
-
-    ``sum_t c_t prod_i ((x_i - m_i) / s_i)^a_ti`` is expanded binomially into
-    ``{exponents: coefficient}`` over the raw inputs ``x_i``.
-
-    >>> s = Scaling(np.array([10.0]), np.array([2.0]), np.array([True]))
-    >>> raw_polynomial([(0,), (1,), (2,)], np.array([1.0, 2.0, 4.0]), s)   # 1 + 2u + 4u², u = (x-10)/2
-    {(0,): 91.0, (1,): -19.0, (2,): 1.0}
-    """
-    out: dict[tuple, float] = {}
-    for exps, c in zip(terms, coefs):
-        parts = []   # per input: list of (power, factor) from ((x - m) / s)^a
-        for i, a in enumerate(exps):
-            m, s = scaling.centre[i], scaling.scale[i]
-            parts.append([(j, comb(a, j) * (-m) ** (a - j) / s**a) for j in range(a + 1)])
-        for choice in itertools.product(*parts):
-            key = tuple(j for j, _ in choice)
-            out[key] = float(out.get(key, 0.0) + c * np.prod([f for _, f in choice]))
-    return dict(sorted(out.items(), key=lambda kv: (sum(kv[0]), [-k for k in kv[0]])))
+        mono = monomials(terms)
+        M = np.empty((mono.n_rows, X.shape[0]))
+        M[0] = 1.0
+        M[1:1 + mono.columns.size] = u[:, mono.columns].T
+        mono.fill(M)
+        return np.ascontiguousarray(M[mono.rows(terms)].T)
 
 
 # ---------------------------------------------------------------------- common frames
@@ -192,53 +163,236 @@ def lift_coefficients(terms_from: list[tuple], coef: NDArray[np.float64], terms_
     return out
 
 
-class PolynomialReframe:
-    """Re-express polynomials in ``u = a v + b`` (per input) as polynomials in ``v``.
 
-    A region's polynomial uses ``u = (x - m) / s`` (its own scaling); a lookup
-    cell's frame uses ``v = (x - o) / h``, so ``a = h / s`` and ``b = (o - m) / s``.
-    Every monomial ``u^e`` expands binomially into monomials ``v^f`` with
-    ``f <= e``; ``terms`` must therefore be closed under lowering exponents
-    (both term lists of :class:`Basis` are).
+# ---------------------------------------------------------------------- change of variables
+def lowered_terms(terms: list[tuple]) -> list[tuple]:
+    """The distinct ``terms`` in their order, then the lower monomials they expand into.
+
+    A monomial ``u^e`` in ``u = (v - shift) / scale`` expands into every
+    ``v^f`` with ``f <= e`` (per input); a term list closed under lowering
+    exponents (both lists of :class:`Basis`) comes back unchanged.
+
+    >>> lowered_terms([(0, 0), (1, 1)])
+    [(0, 0), (1, 1), (0, 1), (1, 0)]
+    """
+    out = list(dict.fromkeys(tuple(int(k) for k in e) for e in terms))
+    seen = set(out)
+    for e in list(out):
+        for f in itertools.product(*(range(k + 1) for k in e)):
+            if f not in seen:
+                seen.add(f)
+                out.append(f)
+    return out
+
+
+@functools.lru_cache(maxsize=64)
+def _expansion(terms: tuple) -> tuple:
+    """Every pair (term ``e``, lower monomial ``f``) of the binomial expansion, as arrays.
+
+    ``(source term, C(e, f), e - f, e, scatter)``, one entry per pair;
+    ``scatter`` (len(lowered_terms), entries) adds the entries into their ``f``.
+    """
+    index = {f: i for i, f in enumerate(lowered_terms(list(terms)))}
+    d = len(terms[0]) if terms else 0
+    to, source, binom, rest, exps = [], [], [], [], []
+    for j, e in enumerate(terms):
+        for f in itertools.product(*(range(k + 1) for k in e)):
+            to.append(index[f])
+            source.append(j)
+            binom.append(float(np.prod([comb(k, i) for k, i in zip(e, f)])))
+            rest.append([k - i for k, i in zip(e, f)])
+            exps.append(e)
+    scatter = np.zeros((len(index), len(to)))
+    scatter[to, np.arange(len(to))] = 1.0
+    return (np.array(source, dtype=np.intp), np.array(binom), np.array(rest, dtype=float).reshape(-1, d),
+            np.array(exps, dtype=float).reshape(-1, d), scatter)
+
+
+def expansion_size(terms: list[tuple]) -> int:
+    """Number of (term, lower monomial) pairs that :func:`coef_from_scaled` computes for ``terms``."""
+    return int(_expansion(tuple(map(tuple, terms)))[0].size)
+
+
+def coef_from_scaled(terms: list[tuple], coef: NDArray[np.float64], scale: NDArray[np.float64],
+                     shift: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Coefficients in ``v`` of a polynomial in the scaled inputs ``u = (v - shift) / scale``.
+
+    The one change of variables for polynomials: ``sum_t coef_t prod_i
+    u_i^e_ti`` is expanded binomially, ``u^e = sum_{f <= e} C(e, f) v^f
+    (-shift)^(e - f) / scale^e``, into coefficients of :func:`lowered_terms`
+    of ``terms``. With ``(scale, shift)`` the model's :class:`Scaling`,
+    ``v`` is the raw input (mm, degrees); with ``shift = 0``, the centred
+    input ``x - centre``; with a lookup cell's frame ``v = (x - o) / h``,
+    ``scale = s / h`` and ``shift = (m - o) / h``.
 
     Parameters
     ----------
     terms : list of exponent tuples (length d)
+    coef : ndarray, shape (n_terms, n_outputs), or (P, n_terms, n_outputs) for P problems
+    scale, shift : ndarray, shape (d,), or (P, d)
 
-    >>> rf = PolynomialReframe([(0,), (1,), (2,)])           # 1 + u + u^2 with u = 2v + 1
-    >>> rf.apply(np.array([[[1.0], [1.0], [1.0]]]), np.array([[2.0]]), np.array([[1.0]])).ravel().tolist()
-    [3.0, 6.0, 4.0]
+    Returns
+    -------
+    ndarray, shape (len(lowered_terms(terms)), n_outputs), or (P, ..., n_outputs)
+
+    >>> coef_from_scaled([(0,), (1,), (2,)], np.array([[1.0], [2.0], [4.0]]), np.array([2.0]), np.array([10.0])
+    ...                  ).ravel().tolist()         # 1 + 2u + 4u², u = (x - 10)/2
+    [91.0, -19.0, 1.0]
+    """
+    source, binom, rest, exps, scatter = _expansion(tuple(map(tuple, terms)))
+    coef = np.asarray(coef, dtype=float)
+    single = coef.ndim == 2
+    if single:
+        coef, scale, shift = coef[None], np.asarray(scale)[None], np.asarray(shift)[None]
+    num = np.broadcast_to(binom, (coef.shape[0], binom.size)).copy()
+    den = np.ones_like(num)
+    for i in range(exps.shape[1]):
+        num *= np.power(-shift[:, i, None], rest[:, i])
+        den *= np.power(scale[:, i, None], exps[:, i])
+    out = scatter @ (coef[:, source, :] * num[:, :, None] / den[:, :, None])
+    return out[0] if single else out
+
+
+def coef_centred(terms: list[tuple], coef: NDArray[np.float64], scale: NDArray[np.float64]
+                 ) -> tuple[list[tuple], NDArray[np.float64]]:
+    """The distinct ``terms`` and their coefficients ``(n_distinct, n_outputs)`` in ``x - centre``.
+
+    :func:`coef_from_scaled` without shift: each monomial maps onto itself
+    alone (``c / scale^e``), so the lower monomials get nothing.
+    """
+    distinct = list(dict.fromkeys(tuple(int(k) for k in e) for e in terms))
+    return distinct, coef_from_scaled(terms, coef, scale, np.zeros_like(scale))[:len(distinct)]
+
+
+# ---------------------------------------------------------------------- monomials
+@dataclass(frozen=True, eq=False)
+class Monomials:
+    """The one monomial evaluator: monomials of some inputs as the rows of a table ``M`` (n_rows, m).
+
+    Row 0 is 1 and rows ``1..k`` hold the inputs ``columns`` (the caller
+    writes them: scaled, centred or in a cell's frame); :meth:`fill` computes
+    every further row as the product of two earlier ones. A power of one
+    input is ``u^k = u^(k-1) * u``; a monomial of several inputs is the
+    monomial of all but its last input times the power of that input,
+    ``u1^2 u3 = (u1^2) * u3``. That is the order in which the fitted feature
+    matrices have always been computed, so they keep their last bit. Rows of
+    one degree whose operands advance together are one numpy call.
+
+    Build with :func:`monomials`, which caches one per term list.
+
+    Attributes
+    ----------
+    columns : ndarray of int, shape (k,)
+        The inputs used (indices into the exponent tuples).
+    row_of : dict
+        Exponent tuple (length d) -> row; holds every term and every intermediate.
+    n_rows : int
+    runs : tuple of (out, left, right)
+        Row indices (int or slice): ``M[out] = M[left] * M[right]``, in order.
     """
 
-    def __init__(self, terms: list[tuple]):
-        index = {t: i for i, t in enumerate(terms)}
-        to, frm, binom, low, rest = [], [], [], [], []
-        for j, e in enumerate(terms):
-            for f in itertools.product(*(range(k + 1) for k in e)):
-                to.append(index[f])
-                frm.append(j)
-                binom.append(float(np.prod([comb(k, i) for k, i in zip(e, f)])))
-                low.append(f)
-                rest.append(tuple(k - i for k, i in zip(e, f)))
-        self.n_terms, self.n_entries = len(terms), len(to)
-        self._from = np.array(frm, dtype=np.intp)
-        self._binom = np.array(binom)
-        d = len(terms[0]) if terms else 0
-        self._low = np.array(low, dtype=float).reshape(-1, d)
-        self._rest = np.array(rest, dtype=float).reshape(-1, d)
-        self._scatter = np.zeros((len(terms), len(to)))
-        self._scatter[to, np.arange(len(to))] = 1.0
+    columns: NDArray[np.intp]
+    row_of: dict
+    n_rows: int
+    runs: tuple
 
-    def apply(self, coef: NDArray[np.float64], a: NDArray[np.float64], b: NDArray[np.float64]
-              ) -> NDArray[np.float64]:
-        """Coefficients in ``v``, shape ``(P, T, n_outputs)``, from those in ``u`` ``(P, T, n_outputs)``.
+    def rows(self, terms: list[tuple]) -> list[int]:
+        """The rows of ``terms``."""
+        return [self.row_of[tuple(e)] for e in terms]
 
-        ``a`` and ``b`` have shape ``(P, d)``: one affine change of variable per problem.
-        """
-        values = np.broadcast_to(self._binom, (a.shape[0], self.n_entries)).copy()
-        for i in range(a.shape[1]):
-            values *= np.power(a[:, i, None], self._low[:, i]) * np.power(b[:, i, None], self._rest[:, i])
-        return self._scatter @ (values[:, :, None] * coef[:, self._from, :])
+    def fill(self, M: NDArray[np.float64]) -> None:
+        """Compute rows ``1 + k ..`` of ``M`` (n_rows, m) in place from rows 0 (ones) and ``1..k`` (inputs)."""
+        for out, left, right in self.runs:
+            np.multiply(M[left], M[right], out=M[out])
+
+
+@functools.lru_cache(maxsize=64)
+def _monomials(terms: tuple) -> Monomials:
+    d = len(terms[0]) if terms else 0
+    columns = sorted({i for e in terms for i, a in enumerate(e) if a})
+    unit = [tuple(int(j == i) for j in range(d)) for i in columns]
+    row_of = {(0,) * d: 0} | {e: 1 + j for j, e in enumerate(unit)}
+    needed: dict[tuple, tuple] = {}          # monomial -> its two factors
+    todo = [e for e in terms if sum(e) >= 2]
+    while todo:
+        e = todo.pop()
+        if e not in needed and e not in row_of:
+            needed[e] = _factors(e)
+            todo.extend(f for f in needed[e] if sum(f) >= 2)
+    runs = []
+    for degree in range(2, max((sum(e) for e in needed), default=1) + 1):
+        level = {(row_of[a], row_of[b]): e for e, (a, b) in needed.items() if sum(e) == degree}
+        for left, ls, right, rs, n in _longest_runs(set(level)):
+            runs.append((len(row_of), n, left, ls, right, rs))
+            for i in range(n):
+                pair = (left + ls * i, right + rs * i)
+                row_of[level[pair] if pair in level else level[pair[::-1]]] = len(row_of)
+    return Monomials(np.array(columns, dtype=np.intp), row_of, len(row_of), tuple(_indices(r) for r in runs))
+
+
+def monomials(terms: list[tuple]) -> Monomials:
+    """The compiled :class:`Monomials` of polynomial ``terms`` (exponent tuples), cached.
+
+    >>> mono = monomials([(0, 0), (1, 0), (2, 0), (1, 1)])          # 1, u1, u1², u1 u2
+    >>> M = np.array([[1.0], [3.0], [5.0], [0.0], [0.0]])           # rows 1, 2: u1 = 3, u2 = 5
+    >>> mono.fill(M)
+    >>> M[mono.rows([(2, 0), (1, 1)]), 0].tolist()
+    [9.0, 15.0]
+    """
+    return _monomials(tuple(tuple(int(k) for k in e) for e in terms))
+
+
+def _factors(e: tuple) -> tuple[tuple, tuple]:
+    """The two lower monomials whose product is ``e`` (degree >= 2): see :class:`Monomials`."""
+    used = [i for i, k in enumerate(e) if k]
+    last = used[-1]
+    if len(used) == 1:
+        return tuple(k - (i == last) for i, k in enumerate(e)), tuple(int(i == last) for i in range(len(e)))
+    return tuple(0 if i == last else k for i, k in enumerate(e)), tuple(k if i == last else 0 for i, k in enumerate(e))
+
+
+def _longest_runs(products: set[tuple[int, int]]) -> list[tuple[int, int, int, int, int]]:
+    """Cover products ``(a, b)`` (rows ``M[a] * M[b]``) with few runs, the longest first.
+
+    A run ``(left, left_step, right, right_step, n)`` is the ``n`` products
+    ``M[left + left_step * i] * M[right + right_step * i]`` (steps >= 0, the
+    operands of a product in either order): one numpy call.
+
+    >>> _longest_runs({(1, 1), (2, 2), (3, 3), (1, 4), (1, 5)})
+    [(1, 1, 1, 1, 3), (1, 0, 4, 1, 2)]
+    """
+    left = set(products)
+    out = []
+    while left:
+        have = left | {(b, a) for a, b in left}
+        rights: dict[int, list[int]] = {}
+        for a, b in sorted(have):
+            rights.setdefault(a, []).append(b)
+        best = (1, min(left), (0, 0))
+        for a, bs in rights.items():       # steps tried: the same left with the next right, and (1, 1)
+            for j, b in enumerate(bs):
+                for steps in ([(0, bs[j + 1] - b)] if j + 1 < len(bs) else []) + [(1, 1)]:
+                    n = 1
+                    while (a + steps[0] * n, b + steps[1] * n) in have:
+                        n += 1
+                    if n > best[0]:
+                        best = (n, (a, b), steps)
+        n, (a, b), (ls, rs) = best
+        out.append((a, ls, b, rs, n))
+        for i in range(n):
+            pair = (a + ls * i, b + rs * i)
+            left.discard(pair)
+            left.discard(pair[::-1])
+    return out
+
+
+def _indices(run: tuple) -> tuple:
+    """``(out, left, right)`` row indices of a run: ints for one row or a fixed operand, else slices."""
+    out, n, left, ls, right, rs = run
+    if n == 1:
+        return out, left, right
+    side = [x if s == 0 else slice(x, x + s * (n - 1) + 1, s) for x, s in ((left, ls), (right, rs))]
+    return (slice(out, out + n), *side)
 
 
 # ---------------------------------------------------------------------- fast evaluation
@@ -256,11 +410,11 @@ class SeriesPlan:
     the result is one small product ``M.T @ coef_rows``.
 
     - Polynomials are evaluated in raw units (mm or degrees) about the centre of
-      the training data, ``v = x - centre``, with coefficients ``c / scale^a``:
-      the same polynomial as the scaled basis without the division, and without
-      the lost digits of monomials about the origin (``x^8`` with ``x`` near
-      2000 mm). Each monomial is one product of a lower one and an input row
-      (precomputed powers), and runs of them are one numpy call.
+      the training data, ``v = x - centre``, with coefficients ``c / scale^a``
+      (:func:`coef_centred`): the same polynomial as the
+      scaled basis without the division, and without the lost digits of
+      monomials about the origin (``x^8`` with ``x`` near 2000 mm). The
+      monomials are filled by :class:`Monomials`, runs of rows in one numpy call.
     - Fourier series evaluate ``cos`` and ``sin`` once per input and the higher
       harmonics by the angle-addition recurrence.
 
@@ -271,8 +425,8 @@ class SeriesPlan:
         The input columns the series uses.
     shift, gain : ndarray, shape (k,)
         Row ``1 + j`` is ``(x[:, columns[j]] - shift[j]) * gain[j]`` (gain 1 for polynomials).
-    products : tuple of (dest, length, left, right, right_step)
-        Polynomial rows ``M[dest:dest+length] = M[left:left+length] * M[right + right_step * i]``.
+    monomials : Monomials or None
+        Polynomials: how the higher rows are computed from the inputs.
     harmonics : int
         Fourier: the highest harmonic.
     coef : ndarray, shape (n_rows, n_outputs)
@@ -284,7 +438,7 @@ class SeriesPlan:
     columns: NDArray[np.intp]
     shift: NDArray[np.float64]
     gain: NDArray[np.float64]
-    products: tuple
+    monomials: Monomials | None
     harmonics: int
     coef: NDArray[np.float64]
     chunk: int
@@ -299,35 +453,13 @@ class SeriesPlan:
 
     @classmethod
     def _polynomial(cls, scaling: Scaling, terms: list[tuple], coef) -> "SeriesPlan":
-        columns = np.array(sorted({i for exps in terms for i, a in enumerate(exps) if a}), dtype=np.intp)
-        k = columns.size
-        wanted = {tuple(int(exps[i]) for i in columns) for exps in terms}
-        higher = set()                     # every monomial of degree >= 2 needed, with its parents
-        for exps in wanted:
-            while sum(exps) >= 2 and exps not in higher:
-                higher.add(exps)
-                j = next(i for i, a in enumerate(exps) if a)
-                exps = tuple(a - (i == j) for i, a in enumerate(exps))
-        rows = {(0,) * k: 0} | {tuple(int(j == i) for j in range(k)): 1 + i for i in range(k)}
-        ops = []
-        for degree in range(2, max((sum(e) for e in higher), default=1) + 1):
-            # a monomial is its lowest input times a parent; sorted by (input, parent row), the
-            # parents and inputs of consecutive rows advance in steps of one (or the input stays)
-            level = []
-            for exps in higher:
-                if sum(exps) == degree:
-                    j = next(i for i, a in enumerate(exps) if a)
-                    parent = tuple(a - (i == j) for i, a in enumerate(exps))
-                    level.append((j, rows[parent], exps))
-            for j, parent_row, exps in sorted(level):
-                rows[exps] = len(rows)
-                ops.append((rows[exps], parent_row, 1 + j))
-        table = np.zeros((len(rows), coef.shape[1]))
-        for exps, c in zip(terms, coef):
-            a = tuple(int(exps[i]) for i in columns)
-            table[rows[a]] += c / np.prod(scaling.scale[columns] ** np.array(a, dtype=float))
-        return cls("polynomial", columns, scaling.centre[columns].astype(float), np.ones(k),
-                   _merge_runs(ops), 0, table, _chunk_rows(len(rows)))
+        mono = monomials(terms)
+        distinct, centred = coef_centred(terms, coef, scaling.scale)
+        table = np.zeros((mono.n_rows, coef.shape[1]))
+        table[mono.rows(distinct)] = centred
+        k = mono.columns.size
+        return cls("polynomial", mono.columns, scaling.centre[mono.columns].astype(float), np.ones(k),
+                   mono, 0, table, _chunk_rows(mono.n_rows))
 
     @classmethod
     def _fourier(cls, basis: Basis, scaling: Scaling, terms: list[tuple], coef) -> "SeriesPlan":
@@ -342,7 +474,7 @@ class SeriesPlan:
             shift, gain = np.zeros(k), np.full(k, np.pi / 180.0)
         else:
             shift, gain = scaling.centre[columns].astype(float), (np.pi / 2.0) / scaling.scale[columns]
-        return cls("fourier", columns, shift, gain, (), top, table, _chunk_rows(table.shape[0]))
+        return cls("fourier", columns, shift, gain, None, top, table, _chunk_rows(table.shape[0]))
 
     def evaluate(self, X: NDArray[np.float64]) -> NDArray[np.float64]:
         """The series at inputs ``X`` (n, d) in contract units: shape (n, n_outputs)."""
@@ -361,9 +493,7 @@ class SeriesPlan:
             if self.kind == "fourier":
                 self._harmonics(rows, k)
             else:
-                for dest, length, left, right, step in self.products:
-                    np.multiply(rows[left:left + length], rows[right:right + length] if step else rows[right],
-                                out=rows[dest:dest + length])
+                self.monomials.fill(rows)
             np.matmul(rows.T, self.coef, out=out[start:start + m])
         return out
 
@@ -391,26 +521,6 @@ class SeriesPlan:
             np.multiply(s_prev, cos1, out=s_new)
             np.multiply(c_prev, sin1, out=tmp)
             s_new += tmp
-
-
-def _merge_runs(ops: list[tuple[int, int, int]]) -> tuple:
-    """Join products ``(dest, left, right)`` whose rows advance together into ``(dest, n, left, right, step)``.
-
-    >>> _merge_runs([(4, 1, 1), (5, 2, 2), (6, 3, 3), (7, 4, 1), (8, 5, 1)])
-    ((4, 3, 1, 1, 1), (7, 2, 4, 1, 0))
-    """
-    runs: list[list[int]] = []
-    for dest, left, right in ops:
-        if runs:
-            d0, n, l0, r0, step = runs[-1]
-            if n == 1 and (dest, left) == (d0 + 1, l0 + 1) and right - r0 in (0, 1):
-                runs[-1] = [d0, 2, l0, r0, right - r0]
-                continue
-            if n > 1 and (dest, left, right) == (d0 + n, l0 + n, r0 + step * n):
-                runs[-1][1] += 1
-                continue
-        runs.append([dest, 1, left, right, 1])
-    return tuple(tuple(run) for run in runs)
 
 
 def _runs(columns: NDArray[np.intp]) -> list[tuple[int, int, int]]:

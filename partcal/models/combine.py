@@ -11,7 +11,7 @@ local models:
   predictions are summed with the weights.
 * :class:`FrameCombiner` (polynomial local models, and Fourier ones of joint
   angles): each region's series is re-expressed in the frame of the lookup
-  cell (``bases.coef_from_scaled``), so a block needs one feature matrix
+  cell (``polynomials.coef_from_scaled``), so a block needs one feature matrix
   ``Phi`` (m, T) and one product ``H = W^T C`` (m, outputs x T) of weights and
   coefficients, instead of one evaluation per region. The frame is the
   cell's own centre and half-size, so the re-expressed coefficients are
@@ -27,10 +27,11 @@ import numpy as np
 from numpy.typing import NDArray
 from threadpoolctl import ThreadpoolController
 
-from .bases import Basis, Monomials, Scaling, coef_from_scaled, expansion_size, lift_coefficients, monomials
+from .bases import Basis, Scaling, lift_coefficients
 from .blending import cell_distance_matrix, cell_features, normalised_weights, sq_distances
 from .lookup import BlockPlan
 from .partition import Partition
+from .polynomials import Monomials, coef_from_scaled, expansion_size, monomials
 from .series import ErrorModel
 
 MAX_ROWS = 4096               # points per block: the (kernels, points) arrays stay in cache

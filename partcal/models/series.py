@@ -29,7 +29,8 @@ from .._validation import check_choice, check_int, param_error
 from ..errors import PartcalError
 from ..metrics import distance_outside_boxes
 from .base import ErrorModelBase, seed_from
-from .bases import Basis, Scaling, SeriesPlan, coef_centred, coef_from_scaled, column_bounds, lowered_terms
+from .bases import Basis, Scaling, SeriesPlan, column_bounds
+from .polynomials import coef_centred, coef_from_scaled, lowered_terms
 from .swarm import SwarmConfig, SwarmResult, minimize_batch
 
 log = logging.getLogger(__name__)

@@ -138,11 +138,12 @@ class Basis:
             for t, (trig, i, q) in enumerate(terms):
                 out[:, t] = 1.0 if trig == "1" else (np.cos if trig == "cos" else np.sin)(q * phi[:, i])
             return out
-        u = (X - scaling.centre) / scaling.scale
         mono = monomials(terms)
         M = np.empty((mono.n_rows, X.shape[0]))
         M[0] = 1.0
-        M[1:1 + mono.columns.size] = u[:, mono.columns].T
+        used, u = mono.columns, M[1:1 + mono.columns.size]
+        np.subtract(X.T[used], scaling.centre[used, None], out=u)           # u = (x - centre) / scale
+        u /= scaling.scale[used, None]
         mono.fill(M)
         return np.ascontiguousarray(M[mono.rows(terms)].T)
 
@@ -255,17 +256,18 @@ class SeriesPlan:
         M = np.empty((self.coef.shape[0], min(self.chunk, max(n, 1))))
         M[0] = 1.0
         runs = _runs(self.columns)                    # consecutive used columns: one strided subtraction each
+        shifts = [self.shift[row - 1:row - 1 + count, None] for _, count, row in runs]
+        products = self.monomials.views(M) if self.monomials is not None else None    # views of whole chunks
         for start in range(0, n, M.shape[1]):
             m = min(M.shape[1], n - start)
             rows = M[:, :m]
             xs = X[start:start + m].T
-            for first, count, row in runs:
-                np.subtract(xs[first:first + count], self.shift[row - 1:row - 1 + count, None],
-                            out=rows[row:row + count])
+            for (first, count, row), shift in zip(runs, shifts):
+                np.subtract(xs[first:first + count], shift, out=rows[row:row + count])
             if self.kind == "fourier":
                 self._harmonics(rows, k)
             else:
-                self.monomials.fill(rows)
+                self.monomials.fill(rows, products if m == M.shape[1] else None)
             np.matmul(rows.T, self.coef, out=out[start:start + m])
         return out
 

@@ -159,10 +159,17 @@ class Monomials:
         """The rows of ``terms``."""
         return [self.row_of[tuple(e)] for e in terms]
 
-    def fill(self, M: NDArray[np.float64]) -> None:
-        """Compute rows ``1 + k ..`` of ``M`` (n_rows, m) in place from rows 0 (ones) and ``1..k`` (inputs)."""
-        for out, left, right in self.runs:
-            np.multiply(M[left], M[right], out=M[out])
+    def fill(self, M: NDArray[np.float64], views: list | None = None) -> None:
+        """Compute rows ``1 + k ..`` of ``M`` (n_rows, m) in place from rows 0 (ones) and ``1..k`` (inputs).
+
+        ``views``: ``self.views(M)``, when ``M`` is filled again and again (saves making them each time).
+        """
+        for out, left, right in self.views(M) if views is None else views:
+            np.multiply(left, right, out=out)
+
+    def views(self, M: NDArray[np.float64]) -> list[tuple]:
+        """The operands of every run as views of ``M``: ``(out, left, right)``."""
+        return [(M[out], M[left], M[right]) for out, left, right in self.runs]
 
 
 @functools.lru_cache(maxsize=64)
@@ -198,7 +205,7 @@ def monomials(terms: list[tuple]) -> Monomials:
     >>> M[mono.rows([(2, 0), (1, 1)]), 0].tolist()
     [9.0, 15.0]
     """
-    return _monomials(tuple(tuple(int(k) for k in e) for e in terms))
+    return _monomials(tuple(map(tuple, terms)))
 
 
 def _factors(e: tuple) -> tuple[tuple, tuple]:

@@ -5,7 +5,7 @@ import pytest
 from numpy.polynomial import polynomial as P
 
 from partcal.models.bases import Basis, Scaling, lift_coefficients
-from partcal.models.polynomials import coef_centred, coef_from_scaled, lowered_terms, monomials
+from partcal.models.polynomials import coef_centred, coef_from_scaled, expansion_size, lowered_terms, monomials
 
 
 def test_coefficients_from_scaled_inputs_with_cross_terms():
@@ -47,6 +47,10 @@ def test_coefficients_from_scaled_keep_the_function_for_any_terms_and_frames(see
         expected = direct((v - shift[p]) / scale[p], terms, coef[p])
         np.testing.assert_allclose(direct(v, lowered_terms(terms), batch[p]), expected, rtol=1e-10, atol=1e-10)
         np.testing.assert_array_equal(coef_from_scaled(terms, coef[p], scale[p], shift[p]), batch[p])
+
+
+def test_expansion_size_counts_every_lower_monomial_of_every_term():
+    assert expansion_size([(0, 0), (1, 1), (2, 0), (1, 1)]) == 1 + 4 + 3 + 4      # prod(e_i + 1) per term
 
 
 def test_centred_coefficients_divide_by_the_scale_powers():

@@ -1,9 +1,9 @@
-"""Feature maps and raw-unit equations."""
+"""Feature maps, input scaling and compiled series."""
 
 import numpy as np
 import pytest
 
-from partcal.models.bases import Basis, PolynomialReframe, Scaling, SeriesPlan, lift_coefficients, raw_polynomial
+from partcal.models.bases import Basis, Scaling, SeriesPlan
 
 
 def test_scaling_maps_training_range_to_unit_and_drops_constant_inputs():
@@ -32,29 +32,32 @@ def test_fourier_terms_use_joint_angles_in_radians():
     assert basis.n_terms(6) == 25                # 25 per axis: 75 for x, y, z
 
 
-def test_raw_polynomial_with_cross_terms():
-    # c = 3 + 2 u v with u = (x - 1)/2, v = (y + 2)/4  ->  3 + (x - 1)(y + 2)/4 = 2.5 + x/2 - y/4 + xy/4
-    s = Scaling(np.array([1.0, -2.0]), np.array([2.0, 4.0]), np.array([True, True]))
-    raw = raw_polynomial([(0, 0), (1, 1)], np.array([3.0, 2.0]), s)
-    assert raw == pytest.approx({(0, 0): 2.5, (1, 0): 0.5, (0, 1): -0.25, (1, 1): 0.25})
+def sequential_features(u, terms):
+    """Features in the documented order: u^k = u^(k-1) * u, then the inputs' powers multiplied left to right."""
+    out = np.empty((u.shape[0], len(terms)))
+    for t, e in enumerate(terms):
+        value = np.ones(u.shape[0])
+        for n, (i, k) in enumerate((i, k) for i, k in enumerate(e) if k):
+            power = u[:, i]
+            for _ in range(k - 1):
+                power = power * u[:, i]
+            value = power if n == 0 else value * power
+        out[:, t] = value
+    return out
 
 
-@pytest.mark.parametrize("degree, cross", [(1, False), (2, False), (3, True), (5, False)])
-def test_reframed_polynomials_are_the_same_functions(degree, cross):
-    """A series in one scaling, re-expressed in another frame, evaluates to the same values there."""
+@pytest.mark.parametrize("d, degree, cross", [(3, 2, False), (3, 8, False), (3, 3, True), (3, 6, True),
+                                              (6, 4, True), (6, 8, False)])
+def test_fitted_features_are_the_sequential_products_to_the_last_bit(d, degree, cross):
+    """The swarm compares fitnesses to the last bit: the feature matrix is pinned exactly, not to rounding."""
     rng = np.random.default_rng(degree)
-    X = rng.uniform([-800, 0, 300], [600, 900, 1200], size=(400, 3))
-    basis = Basis("polynomial", "cartesian", degree, cross)
-    own = Scaling.fit(X[:, [0, 1, 2]] * [1, 0, 1] + [0, 5, 0])          # the y input constant in this region
-    terms = basis.terms(own)
-    coef = rng.normal(size=(len(terms), 3))
-    full = basis.terms(Scaling(np.zeros(3), np.ones(3), np.ones(3, bool)))
-    lifted = lift_coefficients(terms, coef, full)
-    frame = Scaling(np.array([-100.0, 450, 750]), np.array([40.0, 70, 55]), np.ones(3, bool))
-    reframed = PolynomialReframe(full).apply(lifted[None], (frame.scale / own.scale)[None],
-                                             ((frame.centre - own.centre) / own.scale)[None])[0]
-    expected = basis.transform(X, own, terms) @ coef
-    np.testing.assert_allclose(basis.transform(X, frame, full) @ reframed, expected, rtol=1e-11, atol=1e-9)
+    X = rng.uniform(-1700, 1500, size=(200, d))
+    s = Scaling.fit(X)
+    basis = Basis("polynomial", "joint", degree, cross)
+    terms = basis.terms(s)
+    phi = basis.transform(X, s, terms)
+    np.testing.assert_array_equal(phi, sequential_features((X - s.centre) / s.scale, terms))
+    assert phi.flags.c_contiguous
 
 
 SERIES = [("polynomial", "cartesian", 1, False), ("polynomial", "cartesian", 2, False),

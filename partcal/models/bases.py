@@ -10,6 +10,8 @@ and are left out (the paper's q4 = q5 = 0).
 
 Terms follow the paper: ``1, u1, u1², ..., u2, ...`` (eq. 7) and
 ``1, cos(phi_i), sin(phi_i), ..., cos(r phi_i), sin(r phi_i)`` (eq. 5).
+Polynomial features are filled by ``polynomials.Monomials``; a fitted series
+is compiled into a :class:`SeriesPlan` for fast prediction.
 """
 
 from __future__ import annotations
@@ -20,6 +22,8 @@ from math import comb
 
 import numpy as np
 from numpy.typing import NDArray
+
+from .polynomials import Monomials, coef_centred, monomials
 
 
 def varying_inputs(X: NDArray[np.float64]) -> NDArray[np.bool_]:
@@ -128,49 +132,20 @@ class Basis:
                   ) -> NDArray[np.float64]:
         """Feature matrix, shape ``(n, n_terms)``, for inputs ``(n, d)`` in contract units."""
         terms = self.terms(scaling) if terms is None else terms
-        out = np.empty((X.shape[0], len(terms)))
         if self.kind == "fourier":
+            out = np.empty((X.shape[0], len(terms)))
             phi = self.angles(X, scaling)
             for t, (trig, i, q) in enumerate(terms):
                 out[:, t] = 1.0 if trig == "1" else (np.cos if trig == "cos" else np.sin)(q * phi[:, i])
             return out
-        u = (X - scaling.centre) / scaling.scale
-        powers = [None, u]
-        for _ in range(2, self.order + 1):
-            powers.append(powers[-1] * u)
-        for t, exps in enumerate(terms):
-            factors = [(i, k) for i, k in enumerate(exps) if k]
-            if not factors:
-                out[:, t] = 1.0
-                continue
-            i, k = factors[0]
-            out[:, t] = powers[k][:, i]
-            for i, k in factors[1:]:
-                out[:, t] *= powers[k][:, i]
-        return out
-
-
-# ---------------------------------------------------------------------- raw-unit equations
-def raw_polynomial(terms: list[tuple], coefs: NDArray[np.float64], scaling: Scaling) -> dict[tuple, float]:
-    """Re-express a polynomial in scaled inputs as one in raw inputs.
-
-    ``sum_t c_t prod_i ((x_i - m_i) / s_i)^a_ti`` is expanded binomially into
-    ``{exponents: coefficient}`` over the raw inputs ``x_i``.
-
-    >>> s = Scaling(np.array([10.0]), np.array([2.0]), np.array([True]))
-    >>> raw_polynomial([(0,), (1,), (2,)], np.array([1.0, 2.0, 4.0]), s)   # 1 + 2u + 4u², u = (x-10)/2
-    {(0,): 91.0, (1,): -19.0, (2,): 1.0}
-    """
-    out: dict[tuple, float] = {}
-    for exps, c in zip(terms, coefs):
-        parts = []   # per input: list of (power, factor) from ((x - m) / s)^a
-        for i, a in enumerate(exps):
-            m, s = scaling.centre[i], scaling.scale[i]
-            parts.append([(j, comb(a, j) * (-m) ** (a - j) / s**a) for j in range(a + 1)])
-        for choice in itertools.product(*parts):
-            key = tuple(j for j, _ in choice)
-            out[key] = float(out.get(key, 0.0) + c * np.prod([f for _, f in choice]))
-    return dict(sorted(out.items(), key=lambda kv: (sum(kv[0]), [-k for k in kv[0]])))
+        mono = monomials(terms)
+        M = np.empty((mono.n_rows, X.shape[0]))
+        M[0] = 1.0
+        used, u = mono.columns, M[1:1 + mono.columns.size]
+        np.subtract(X.T[used], scaling.centre[used, None], out=u)           # u = (x - centre) / scale
+        u /= scaling.scale[used, None]
+        mono.fill(M)
+        return np.ascontiguousarray(M[mono.rows(terms)].T)
 
 
 # ---------------------------------------------------------------------- common frames
@@ -192,54 +167,6 @@ def lift_coefficients(terms_from: list[tuple], coef: NDArray[np.float64], terms_
     return out
 
 
-class PolynomialReframe:
-    """Re-express polynomials in ``u = a v + b`` (per input) as polynomials in ``v``.
-
-    A region's polynomial uses ``u = (x - m) / s`` (its own scaling); a lookup
-    cell's frame uses ``v = (x - o) / h``, so ``a = h / s`` and ``b = (o - m) / s``.
-    Every monomial ``u^e`` expands binomially into monomials ``v^f`` with
-    ``f <= e``; ``terms`` must therefore be closed under lowering exponents
-    (both term lists of :class:`Basis` are).
-
-    Parameters
-    ----------
-    terms : list of exponent tuples (length d)
-
-    >>> rf = PolynomialReframe([(0,), (1,), (2,)])           # 1 + u + u^2 with u = 2v + 1
-    >>> rf.apply(np.array([[[1.0], [1.0], [1.0]]]), np.array([[2.0]]), np.array([[1.0]])).ravel().tolist()
-    [3.0, 6.0, 4.0]
-    """
-
-    def __init__(self, terms: list[tuple]):
-        index = {t: i for i, t in enumerate(terms)}
-        to, frm, binom, low, rest = [], [], [], [], []
-        for j, e in enumerate(terms):
-            for f in itertools.product(*(range(k + 1) for k in e)):
-                to.append(index[f])
-                frm.append(j)
-                binom.append(float(np.prod([comb(k, i) for k, i in zip(e, f)])))
-                low.append(f)
-                rest.append(tuple(k - i for k, i in zip(e, f)))
-        self.n_terms, self.n_entries = len(terms), len(to)
-        self._from = np.array(frm, dtype=np.intp)
-        self._binom = np.array(binom)
-        d = len(terms[0]) if terms else 0
-        self._low = np.array(low, dtype=float).reshape(-1, d)
-        self._rest = np.array(rest, dtype=float).reshape(-1, d)
-        self._scatter = np.zeros((len(terms), len(to)))
-        self._scatter[to, np.arange(len(to))] = 1.0
-
-    def apply(self, coef: NDArray[np.float64], a: NDArray[np.float64], b: NDArray[np.float64]
-              ) -> NDArray[np.float64]:
-        """Coefficients in ``v``, shape ``(P, T, n_outputs)``, from those in ``u`` ``(P, T, n_outputs)``.
-
-        ``a`` and ``b`` have shape ``(P, d)``: one affine change of variable per problem.
-        """
-        values = np.broadcast_to(self._binom, (a.shape[0], self.n_entries)).copy()
-        for i in range(a.shape[1]):
-            values *= np.power(a[:, i, None], self._low[:, i]) * np.power(b[:, i, None], self._rest[:, i])
-        return self._scatter @ (values[:, :, None] * coef[:, self._from, :])
-
 
 # ---------------------------------------------------------------------- fast evaluation
 _CHUNK_BYTES = 1 << 19      # the feature rows of one chunk: 512 KiB, stays in a core's L2 cache
@@ -256,11 +183,11 @@ class SeriesPlan:
     the result is one small product ``M.T @ coef_rows``.
 
     - Polynomials are evaluated in raw units (mm or degrees) about the centre of
-      the training data, ``v = x - centre``, with coefficients ``c / scale^a``:
-      the same polynomial as the scaled basis without the division, and without
-      the lost digits of monomials about the origin (``x^8`` with ``x`` near
-      2000 mm). Each monomial is one product of a lower one and an input row
-      (precomputed powers), and runs of them are one numpy call.
+      the training data, ``v = x - centre``, with coefficients ``c / scale^a``
+      (:func:`coef_centred`): the same polynomial as the
+      scaled basis without the division, and without the lost digits of
+      monomials about the origin (``x^8`` with ``x`` near 2000 mm). The
+      monomials are filled by :class:`Monomials`, runs of rows in one numpy call.
     - Fourier series evaluate ``cos`` and ``sin`` once per input and the higher
       harmonics by the angle-addition recurrence.
 
@@ -271,8 +198,8 @@ class SeriesPlan:
         The input columns the series uses.
     shift, gain : ndarray, shape (k,)
         Row ``1 + j`` is ``(x[:, columns[j]] - shift[j]) * gain[j]`` (gain 1 for polynomials).
-    products : tuple of (dest, length, left, right, right_step)
-        Polynomial rows ``M[dest:dest+length] = M[left:left+length] * M[right + right_step * i]``.
+    monomials : Monomials or None
+        Polynomials: how the higher rows are computed from the inputs.
     harmonics : int
         Fourier: the highest harmonic.
     coef : ndarray, shape (n_rows, n_outputs)
@@ -284,7 +211,7 @@ class SeriesPlan:
     columns: NDArray[np.intp]
     shift: NDArray[np.float64]
     gain: NDArray[np.float64]
-    products: tuple
+    monomials: Monomials | None
     harmonics: int
     coef: NDArray[np.float64]
     chunk: int
@@ -299,35 +226,13 @@ class SeriesPlan:
 
     @classmethod
     def _polynomial(cls, scaling: Scaling, terms: list[tuple], coef) -> "SeriesPlan":
-        columns = np.array(sorted({i for exps in terms for i, a in enumerate(exps) if a}), dtype=np.intp)
-        k = columns.size
-        wanted = {tuple(int(exps[i]) for i in columns) for exps in terms}
-        higher = set()                     # every monomial of degree >= 2 needed, with its parents
-        for exps in wanted:
-            while sum(exps) >= 2 and exps not in higher:
-                higher.add(exps)
-                j = next(i for i, a in enumerate(exps) if a)
-                exps = tuple(a - (i == j) for i, a in enumerate(exps))
-        rows = {(0,) * k: 0} | {tuple(int(j == i) for j in range(k)): 1 + i for i in range(k)}
-        ops = []
-        for degree in range(2, max((sum(e) for e in higher), default=1) + 1):
-            # a monomial is its lowest input times a parent; sorted by (input, parent row), the
-            # parents and inputs of consecutive rows advance in steps of one (or the input stays)
-            level = []
-            for exps in higher:
-                if sum(exps) == degree:
-                    j = next(i for i, a in enumerate(exps) if a)
-                    parent = tuple(a - (i == j) for i, a in enumerate(exps))
-                    level.append((j, rows[parent], exps))
-            for j, parent_row, exps in sorted(level):
-                rows[exps] = len(rows)
-                ops.append((rows[exps], parent_row, 1 + j))
-        table = np.zeros((len(rows), coef.shape[1]))
-        for exps, c in zip(terms, coef):
-            a = tuple(int(exps[i]) for i in columns)
-            table[rows[a]] += c / np.prod(scaling.scale[columns] ** np.array(a, dtype=float))
-        return cls("polynomial", columns, scaling.centre[columns].astype(float), np.ones(k),
-                   _merge_runs(ops), 0, table, _chunk_rows(len(rows)))
+        mono = monomials(terms)
+        distinct, centred = coef_centred(terms, coef, scaling.scale)
+        table = np.zeros((mono.n_rows, coef.shape[1]))
+        table[mono.rows(distinct)] = centred
+        k = mono.columns.size
+        return cls("polynomial", mono.columns, scaling.centre[mono.columns].astype(float), np.ones(k),
+                   mono, 0, table, _chunk_rows(mono.n_rows))
 
     @classmethod
     def _fourier(cls, basis: Basis, scaling: Scaling, terms: list[tuple], coef) -> "SeriesPlan":
@@ -342,7 +247,7 @@ class SeriesPlan:
             shift, gain = np.zeros(k), np.full(k, np.pi / 180.0)
         else:
             shift, gain = scaling.centre[columns].astype(float), (np.pi / 2.0) / scaling.scale[columns]
-        return cls("fourier", columns, shift, gain, (), top, table, _chunk_rows(table.shape[0]))
+        return cls("fourier", columns, shift, gain, None, top, table, _chunk_rows(table.shape[0]))
 
     def evaluate(self, X: NDArray[np.float64]) -> NDArray[np.float64]:
         """The series at inputs ``X`` (n, d) in contract units: shape (n, n_outputs)."""
@@ -351,19 +256,18 @@ class SeriesPlan:
         M = np.empty((self.coef.shape[0], min(self.chunk, max(n, 1))))
         M[0] = 1.0
         runs = _runs(self.columns)                    # consecutive used columns: one strided subtraction each
+        shifts = [self.shift[row - 1:row - 1 + count, None] for _, count, row in runs]
+        products = self.monomials.views(M) if self.monomials is not None else None    # views of whole chunks
         for start in range(0, n, M.shape[1]):
             m = min(M.shape[1], n - start)
             rows = M[:, :m]
             xs = X[start:start + m].T
-            for first, count, row in runs:
-                np.subtract(xs[first:first + count], self.shift[row - 1:row - 1 + count, None],
-                            out=rows[row:row + count])
+            for (first, count, row), shift in zip(runs, shifts):
+                np.subtract(xs[first:first + count], shift, out=rows[row:row + count])
             if self.kind == "fourier":
                 self._harmonics(rows, k)
             else:
-                for dest, length, left, right, step in self.products:
-                    np.multiply(rows[left:left + length], rows[right:right + length] if step else rows[right],
-                                out=rows[dest:dest + length])
+                self.monomials.fill(rows, products if m == M.shape[1] else None)
             np.matmul(rows.T, self.coef, out=out[start:start + m])
         return out
 
@@ -391,26 +295,6 @@ class SeriesPlan:
             np.multiply(s_prev, cos1, out=s_new)
             np.multiply(c_prev, sin1, out=tmp)
             s_new += tmp
-
-
-def _merge_runs(ops: list[tuple[int, int, int]]) -> tuple:
-    """Join products ``(dest, left, right)`` whose rows advance together into ``(dest, n, left, right, step)``.
-
-    >>> _merge_runs([(4, 1, 1), (5, 2, 2), (6, 3, 3), (7, 4, 1), (8, 5, 1)])
-    ((4, 3, 1, 1, 1), (7, 2, 4, 1, 0))
-    """
-    runs: list[list[int]] = []
-    for dest, left, right in ops:
-        if runs:
-            d0, n, l0, r0, step = runs[-1]
-            if n == 1 and (dest, left) == (d0 + 1, l0 + 1) and right - r0 in (0, 1):
-                runs[-1] = [d0, 2, l0, r0, right - r0]
-                continue
-            if n > 1 and (dest, left, right) == (d0 + n, l0 + n, r0 + step * n):
-                runs[-1][1] += 1
-                continue
-        runs.append([dest, 1, left, right, 1])
-    return tuple(tuple(run) for run in runs)
 
 
 def _runs(columns: NDArray[np.intp]) -> list[tuple[int, int, int]]:

@@ -11,7 +11,7 @@ local models:
   predictions are summed with the weights.
 * :class:`FrameCombiner` (polynomial local models, and Fourier ones of joint
   angles): each region's series is re-expressed in the frame of the lookup
-  cell (``bases.PolynomialReframe``), so a block needs one feature matrix
+  cell (``polynomials.coef_from_scaled``), so a block needs one feature matrix
   ``Phi`` (m, T) and one product ``H = W^T C`` (m, outputs x T) of weights and
   coefficients, instead of one evaluation per region. The frame is the
   cell's own centre and half-size, so the re-expressed coefficients are
@@ -27,10 +27,11 @@ import numpy as np
 from numpy.typing import NDArray
 from threadpoolctl import ThreadpoolController
 
-from .bases import Basis, PolynomialReframe, Scaling, lift_coefficients
+from .bases import Basis, Scaling, lift_coefficients
 from .blending import cell_distance_matrix, cell_features, normalised_weights, sq_distances
 from .lookup import BlockPlan
 from .partition import Partition
+from .polynomials import Monomials, coef_from_scaled, expansion_size, monomials
 from .series import ErrorModel
 
 MAX_ROWS = 4096               # points per block: the (kernels, points) arrays stay in cache
@@ -148,12 +149,14 @@ class FrameCombiner:
     """
 
     def __init__(self, partition: Partition, basis: Basis, terms: list, coefs, centres, scales,
-                 reframe: PolynomialReframe | None):
+                 mono: Monomials | None):
         self.partition, self.basis, self.terms = partition, basis, terms
-        self.coefs, self.centres, self.scales, self.reframe = coefs, centres, scales, reframe
-        axes = {int(i): j for j, i in enumerate(np.flatnonzero(partition.active))}
-        self._factors = [[(axes[i], k) for i, k in enumerate(t) if k] for t in terms] if reframe else None
+        self.coefs, self.centres, self.scales, self.monomials = coefs, centres, scales, mono
         self._cells: dict[int, NDArray[np.float64]] = {}   # cell -> (outputs * T, K) coefficients
+        self._per_pair = expansion_size(terms) if mono is not None else 1   # coefficients per (cell, kernel)
+        if mono is not None:       # features are the monomials' rows: coefficients in row order
+            self._term_of_row = np.argsort(mono.rows(terms))
+            self._frame_rows = np.searchsorted(np.flatnonzero(partition.active), mono.columns)
 
     @classmethod
     def build(cls, partition: Partition, models) -> "FrameCombiner | None":
@@ -169,24 +172,23 @@ class FrameCombiner:
         lifted = [lift_coefficients(m.terms_, m.coef_, terms) for m in models]
         if any(c is None for c in lifted):
             return None
-        reframe = None
+        mono = None
         if basis.kind == "polynomial":
-            reframe = PolynomialReframe(terms)
-            if reframe.n_entries > MAX_REFRAME_ENTRIES:
+            mono = monomials(terms)
+            if expansion_size(terms) > MAX_REFRAME_ENTRIES or mono.n_rows != len(terms):
                 return None
         return cls(partition, basis, terms, np.stack(lifted), np.stack([m.scaling_.centre for m in models]),
-                   np.stack([m.scaling_.scale for m in models]), reframe)
+                   np.stack([m.scaling_.scale for m in models]), mono)
 
     def prepare(self, cells) -> None:
         """Re-express the series of every cell in ``cells`` not seen yet (in batches of cells)."""
         todo = [c for c in cells if c not in self._cells]
         lists = self.partition.lookup
-        per_pair = self.reframe.n_entries if self.reframe is not None else 1
         batch, pairs = [], 0
         for i, c in enumerate(todo):
             batch.append(c)
             pairs += lists.indptr[c + 1] - lists.indptr[c]
-            if pairs * per_pair > 1_000_000 or i == len(todo) - 1:      # bounded temporaries
+            if pairs * self._per_pair > 1_000_000 or i == len(todo) - 1:      # bounded temporaries
                 self._prepare_batch(batch)
                 batch, pairs = [], 0
 
@@ -196,34 +198,28 @@ class FrameCombiner:
         counts = [len(k) for k in kernels]
         regions = p.kernel_region[np.concatenate(kernels)]
         coefs = self.coefs[regions]                                  # (P, T, outputs)
-        if self.reframe is not None:
+        if self.monomials is not None:     # u = (x - m) / s, v = (x - o) / h: u = (v - (m - o) / h) / (s / h)
             d = p.active.size
             centre, half = np.zeros((len(regions), d)), np.ones(d)
             centre[:, p.active] = np.repeat(np.array([p.lookup.centre(c) for c in cells]).reshape(len(cells), -1),
                                             counts, axis=0)
             half[p.active] = p.lookup.size / 2
-            scales = self.scales[regions]
-            coefs = self.reframe.apply(coefs, half / scales, (centre - self.centres[regions]) / scales)
+            coefs = coef_from_scaled(self.terms, coefs, self.scales[regions] / half,
+                                     (self.centres[regions] - centre) / half)[:, self._term_of_row]
         flat = coefs.transpose(2, 1, 0).reshape(-1, len(regions))     # (outputs * T, P)
         bounds = np.cumsum([0] + counts)
         for c, a, b in zip(cells, bounds[:-1], bounds[1:]):
             self._cells[c] = np.ascontiguousarray(flat[:, a:b])
 
     def _features(self, block: Block, Xb) -> NDArray[np.float64]:
-        """Features of the block's points in the cell's frame, shape (T, m)."""
-        if self._factors is None:
+        """Features of the block's points in the cell's frame, shape (T, m) (monomials in row order)."""
+        if self.monomials is None:
             return self.basis.transform(Xb, None, self.terms).T        # Fourier of joint angles: no frame
-        v = block.frame
-        powers = {}
-        out = np.empty((len(self.terms), v.shape[1]))
-        for t, factors in enumerate(self._factors):
-            row = out[t]
-            row[:] = 1.0
-            for i, k in factors:
-                if (i, k) not in powers:
-                    powers[i, k] = v[i] if k == 1 else v[i] * powers.get((i, k - 1), v[i] ** (k - 1))
-                row *= powers[i, k]
-        return out
+        M = np.empty((self.monomials.n_rows, block.frame.shape[1]))
+        M[0] = 1.0
+        M[1:1 + self._frame_rows.size] = block.frame[self._frame_rows]
+        self.monomials.fill(M)
+        return M
 
     def combine(self, block: Block, Xb) -> NDArray[np.float64]:
         """Blended prediction of one block inside the grid, shape (outputs, m)."""

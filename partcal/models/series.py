@@ -29,7 +29,8 @@ from .._validation import FieldReader, Requirement, boolean, integer, is_int, on
 from ..errors import PartcalError
 from ..metrics import distance_outside_boxes
 from .base import ErrorModelBase, seed_from
-from .bases import Basis, Scaling, SeriesPlan, column_bounds, raw_polynomial
+from .bases import Basis, Scaling, SeriesPlan, column_bounds
+from .polynomials import coef_centred, coef_from_scaled, lowered_terms
 from .swarm import RULES, TOPOLOGIES, SwarmConfig, SwarmResult, minimize_batch
 
 log = logging.getLogger(__name__)
@@ -274,43 +275,58 @@ class ErrorModel(ErrorModelBase):
         return [f"{name} = {self._equation(a, input_names, precision)}" for a, name in enumerate(outs)]
 
     def _equation(self, a: int, names, precision: int | None) -> str:
-        def num(value: float, sign: bool = True) -> str:
-            text = repr(float(value)) if precision is None else f"{float(value):.{precision}g}"
-            return ("+" + text if sign and not text.startswith("-") else text)
-
-        parts = []
-        if self.basis == "polynomial":
-            raw = raw_polynomial(self.terms_, self.coef_[:, a], self.scaling_)
-            reach = np.abs(self.data_bounds_).max(axis=0)          # largest |input| in the data
-            rounding = 1e3 * np.finfo(float).eps * sum(abs(c) * np.prod(reach ** np.array(e)) for e, c in raw.items())
-            if rounding <= 1e-9:        # the paper's form: powers of the raw inputs, exact to 1e-9 mm here
-                for exps, c in raw.items():
-                    mono = "*".join(f"{names[i]}^{k}" if k > 1 else names[i] for i, k in enumerate(exps) if k)
-                    parts.append(num(c) + (f"*{mono}" if mono else ""))
-            else:                       # expanding would cancel digits: powers of the centred inputs instead
-                s = self.scaling_
-                for exps, c in zip(self.terms_, self.coef_[:, a]):
-                    factors = []
-                    for i, k in enumerate(exps):
-                        if k:
-                            c = c / s.scale[i] ** k
-                            shifted = f"({names[i]} {num(-s.centre[i])[0]} {num(-s.centre[i])[1:]})"
-                            factors.append(f"{shifted}^{k}" if k > 1 else shifted)
-                    parts.append(num(c) + ("*" + "*".join(factors) if factors else ""))
+        """The right-hand side for output ``a``: signed terms joined, ``"0.5*x - 0.25*y"``."""
+        if self.basis == "fourier":
+            parts = self._fourier_terms(a, names, precision)
         else:
-            s = self.scaling_
-            for (trig, i, q), c in zip(self.terms_, self.coef_[:, a]):
-                if trig == "1":
-                    parts.append(num(c))
-                    continue
-                if self.inputs == "joint":
-                    arg = f"{num(q * np.pi / 180, sign=False)}*{names[i]}"
-                else:
-                    k = q * np.pi / 2 / s.scale[i]
-                    arg = f"{num(k, sign=False)}*{names[i]} {num(-k * s.centre[i])}"
-                parts.append(f"{num(c)}*{trig}({arg})")
+            parts = self._raw_terms(a, names, precision) or self._centred_terms(a, names, precision)
         text = " ".join(f"{p[0]} {p[1:]}" for p in parts)        # "+0.5*x" -> "+ 0.5*x"
         return text[2:] if text.startswith("+ ") else "-" + text[2:]
+
+    def _raw_terms(self, a: int, names, precision: int | None) -> list[str] | None:
+        """The paper's form, powers of the raw inputs, if exact to 1e-9 mm over the data; else None."""
+        s = self.scaling_
+        terms = lowered_terms(self.terms_)
+        coef = coef_from_scaled(self.terms_, self.coef_[:, a:a + 1], s.scale, s.centre)[:, 0]
+        reach = np.abs(self.data_bounds_).max(axis=0)          # largest |input| in the data
+        rounding = 1e3 * np.finfo(float).eps * sum(abs(c) * np.prod(reach ** np.array(e)) for e, c in zip(terms, coef))
+        if rounding > 1e-9:             # expanding would cancel digits
+            return None
+        parts = []
+        for exps, c in sorted(zip(terms, coef), key=lambda tc: (sum(tc[0]), [-k for k in tc[0]])):
+            mono = "*".join(f"{names[i]}^{k}" if k > 1 else names[i] for i, k in enumerate(exps) if k)
+            parts.append(_number(c, precision) + (f"*{mono}" if mono else ""))
+        return parts
+
+    def _centred_terms(self, a: int, names, precision: int | None) -> list[str]:
+        """Powers of the centred inputs, ``(q3 + 170.5)^4``, which lose no digits."""
+        s = self.scaling_
+        terms, coef = coef_centred(self.terms_, self.coef_[:, a:a + 1], s.scale)
+        parts = []
+        for exps, c in zip(terms, coef[:, 0]):
+            factors = []
+            for i, k in enumerate(exps):
+                if k:
+                    shift = _number(-s.centre[i], precision)
+                    shifted = f"({names[i]} {shift[0]} {shift[1:]})"
+                    factors.append(f"{shifted}^{k}" if k > 1 else shifted)
+            parts.append(_number(c, precision) + ("*" + "*".join(factors) if factors else ""))
+        return parts
+
+    def _fourier_terms(self, a: int, names, precision: int | None) -> list[str]:
+        """Fourier terms with their phase: ``0.1*cos(0.0349*q1)`` or ``0.1*sin(0.00157*x -1.2)``."""
+        s, parts = self.scaling_, []
+        for (trig, i, q), c in zip(self.terms_, self.coef_[:, a]):
+            if trig == "1":
+                parts.append(_number(c, precision))
+                continue
+            if self.inputs == "joint":
+                arg = f"{_number(q * np.pi / 180, precision, sign=False)}*{names[i]}"
+            else:
+                k = q * np.pi / 2 / s.scale[i]
+                arg = f"{_number(k, precision, sign=False)}*{names[i]} {_number(-k * s.centre[i], precision)}"
+            parts.append(f"{_number(c, precision)}*{trig}({arg})")
+        return parts
 
     def describe(self) -> str:
         if self.basis == "polynomial":
@@ -452,6 +468,12 @@ def _terms_from(r: FieldReader, basis: str) -> list[tuple]:
                    else "expected [\"1\"|\"cos\"|\"sin\", input, harmonic]")
         out.append(tuple(t) if basis == "polynomial" else (t[0], int(t[1]), int(t[2])))
     return out
+
+
+def _number(value: float, precision: int | None, sign: bool = True) -> str:
+    """``value`` in full (``repr``) or to ``precision`` significant digits; with its sign if ``sign``."""
+    text = repr(float(value)) if precision is None else f"{float(value):.{precision}g}"
+    return "+" + text if sign and not text.startswith("-") else text
 
 
 # ---------------------------------------------------------------------- swarms of many fits

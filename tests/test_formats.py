@@ -85,7 +85,7 @@ def test_bad_foreign_files_name_file_line_and_column(tmp_path, kwargs, text, mat
 @pytest.mark.parametrize("kwargs, match", [
     ({"delimiter": ";;"}, r"The 'delimiter' parameter of MeasurementFormat must be one character .* Got ';;' instead"),
     ({"delimiter": '"'}, r"The 'delimiter' parameter"),
-    ({"decimal": ";"}, r"The 'decimal' parameter of MeasurementFormat must be '\.' or ','\. Got ';' instead"),
+    ({"decimal": ";"}, r"The 'decimal' parameter of MeasurementFormat must be one of '\.', ','\. Got ';' instead"),
     ({"decimal": ","}, r"The 'decimal' parameter of MeasurementFormat must be different from the delimiter ','\. "
                        r"Got ',' instead"),
     ({"joint_unit": "grad"}, r"The 'joint_unit' parameter of MeasurementFormat must be one of 'deg', 'rad'\. "
@@ -127,7 +127,7 @@ def test_format_yaml_round_trip(tmp_path):
 @pytest.mark.parametrize("old, new, match", [
     ('delimiter: ";"', 'delimiter: ","', r"fmt.yaml: decimal \(line 2\): must be different from the delimiter ','; "
                                          r"got ','"),
-    ('decimal: ","', 'decimal: "/"', r"fmt.yaml: decimal \(line 2\): must be '\.' or ','; got '/'"),
+    ('decimal: ","', 'decimal: "/"', r"fmt.yaml: decimal \(line 2\): must be one of '\.', ','; got '/'"),
     ("q1: axis_1", "q_1: axis_1", r"fmt.yaml: columns.q_1 \(line 3\): must be a contract column "
                                   r"\(q1\.\.q12, .*, set\); got 'q_1' \(did you mean 'q1'\?\)"),
     ("q1: axis_1", "q1: ' '", r"fmt.yaml: columns.q1 \(line 3\): must be a non-empty file column name; got ' '"),

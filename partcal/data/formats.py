@@ -31,6 +31,7 @@ from typing import Any, Mapping, NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
+from .._validation import one_of
 from .._yamlio import Section, load_yaml
 from ..errors import ConfigError, DataError
 from ..robot.description import MAX_JOINTS
@@ -158,13 +159,13 @@ def _format_problem(delimiter: Any, decimal: Any, columns: Any, joint_unit: Any,
     if not isinstance(delimiter, str) or len(delimiter) != 1 or delimiter in "\"\r\n":
         return _Problem("delimiter", None, "one character other than a quote or a line break (e.g. ',', ';' or "
                                            "\"\\t\")", delimiter)
-    if not isinstance(decimal, str) or decimal not in (".", ","):
-        return _Problem("decimal", None, "'.' or ','", decimal)
+    if one_of(".", ",").problem(decimal):
+        return _Problem("decimal", None, one_of(".", ",").expected, decimal)
     if decimal == delimiter:
         return _Problem("decimal", None, f"different from the delimiter {delimiter!r}", decimal)
     for key, value, allowed in (("joint_unit", joint_unit, JOINT_UNITS), ("length_unit", length_unit, LENGTH_UNITS)):
-        if not isinstance(value, str) or value not in allowed:
-            return _Problem(key, None, "one of " + ", ".join(repr(a) for a in allowed), value)
+        if one_of(*allowed).problem(value):
+            return _Problem(key, None, one_of(*allowed).expected, value)
     if not isinstance(columns, Mapping):
         return _Problem("columns", None, "a mapping of contract column to file column", columns)
     for key, value in columns.items():

@@ -20,7 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .._io import check_folder_writable, replace_all
-from .._validation import safe_name
+from .._validation import one_of, safe_name
 from .._yamlio import Section, load_yaml, range_check
 from ..errors import ConfigError
 from ..robot.description import joint_columns, load_robot, robot_reference
@@ -240,8 +240,7 @@ def _datasets(sec: Section) -> dict[str, dict]:
         if item.has("sample"):
             spec = {"sample": item.get("sample", "int", check=range_check(1, 10**7, integer=True))}
         else:
-            spec = {"path": item.get("path", "str", check=lambda v: None if v in PATHS
-                                     else "one of " + ", ".join(PATHS)),
+            spec = {"path": item.get("path", "str", check=one_of(*PATHS).problem),
                     "start_mm": item.get("start_mm", "list", default=None, check=_vector3)}
         item.done()
         out[name] = spec

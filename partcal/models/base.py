@@ -114,6 +114,11 @@ class ErrorModelBase(RegressorMixin, BaseEstimator):
         parameter (a key of the config entry) that sets it, or None."""
         return 1, "one sample", None
 
+    def peak_fit_bytes(self, n: int, n_joints: int) -> tuple[float, str]:
+        """Estimated peak memory of a fit on ``n`` poses (``n_joints`` joints), bytes, and what it assumes.
+        Small by default (arrays of ``n x terms``): 0."""
+        return 0.0, ""
+
     def setting_problem(self, n_inputs: int) -> tuple[str, str] | None:
         """A setting this model cannot be fitted with on ``n_inputs`` varying inputs: ``(config key, what it
         must be)``; None if there is none."""

@@ -305,6 +305,27 @@ class GaussianProcessErrorModel(ErrorModelBase):
                 sec.fail(sec.path(key), "applies to a partitioned GP only (add 'partition')")
         return params
 
+    def peak_fit_bytes(self, n: int, n_joints: int, regions: int = 1) -> tuple[float, str]:
+        """Peak memory of a fit on ``n`` poses, as a global GP or the local model of ``regions`` regions.
+
+        In 8-byte numbers, for ``d`` inputs: the hyperparameter search on ``s`` samples holds about
+        ``(d + 9) s^2`` (the kernel matrix, its gradient per hyperparameter, its Cholesky factor, its
+        inverse, the likelihood gradient's products), the solve on a GP's ``m`` samples ``3 m^2``
+        (kernel, factor, a copy). A region is taken to hold ``min(n, 2 overlap n / regions)`` samples:
+        twice its share, for uneven regions. The final fit is the peak (CV folds fit fewer samples).
+        """
+        d = 3 if self.inputs == "cartesian" else n_joints
+        solve = n if regions <= 1 else min(n, -(-2 * self.region_overlap * n // regions))
+        if regions <= 1:
+            search = self.hyper_samples or n
+        elif self.hyperparameters == "shared":
+            search = self.hyper_samples or min(max(n // 10, SHARED_HYPER_SAMPLES[0]), SHARED_HYPER_SAMPLES[1])
+        else:
+            search = self.hyper_samples or solve
+        search, solve = int(min(search, n)), int(solve)
+        return 8.0 * max((d + 9) * search**2, 3 * solve**2), f"hyperparameter search on {search} samples, " \
+                                                              f"solve on {solve}"
+
     def describe(self) -> str:
         kernel = "RBF" if self.kernel == "rbf" else f"Matern {self.nu}"
         return f"Gaussian process ({kernel} kernel) of {self.inputs} inputs"

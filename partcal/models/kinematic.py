@@ -492,6 +492,10 @@ class KinematicModel(ErrorModelBase):
     def n_outputs(self) -> int:
         return 3
 
+    def peak_fit_bytes(self, n: int, n_joints: int) -> tuple[float, str]:
+        """The residual model's fit (the identification holds arrays of ``n x parameters``)."""
+        return self.residual.peak_fit_bytes(n, n_joints) if self.residual is not None else (0.0, "")
+
     def describe(self) -> str:
         text = f"the kinematic parameters of {self.robot_.name}"
         return text + (f", plus a residual {self.residual_.describe()}" if self.residual_ is not None else "")

@@ -346,6 +346,15 @@ class PartitionedErrorModel(ErrorModelBase):
         need = spec.min_samples or need
         return need, f"one region of {need} samples ({why})", key
 
+    def peak_fit_bytes(self, n: int, n_joints: int) -> tuple[float, str]:
+        """The local model's fit with the fewest regions the partition may make (an octree of depth ``t``
+        counted as ``2^t`` regions, a k-means one as its ``n_regions``): the largest regions."""
+        local, spec = self._resolved()
+        if not isinstance(local, GaussianProcessErrorModel):
+            return local.peak_fit_bytes(n, n_joints)
+        regions = 2**spec.max_depth if isinstance(spec, Octree) else spec.n_regions
+        return local.peak_fit_bytes(n, n_joints, regions=regions)
+
     def setting_problem(self, n_inputs: int) -> tuple[str, str] | None:
         """A region of series models may not be set smaller than the local model's terms per output."""
         local, spec = self._resolved()

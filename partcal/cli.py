@@ -9,8 +9,10 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -19,32 +21,17 @@ from .errors import PartcalError
 
 log = logging.getLogger("partcal")
 
-# Table 2 of the paper: uncompensated RMS (mm) per data set, x / y / z.
-PAPER_UNCOMPENSATED = {
-    "identification": (8.0, 7.5, 17.9),
-    "test_rectangle": (16.2, 19.1, 16.6),
-    "test_spiral_xy": (54.3, 5.4, 60.9),
-    "test_spiral_yz": (11.8, 19.4, 2.0),
-}
-
-
 def _cmd_simulate(args) -> int:
     from ._io import check_folder_writable
     from .data.simulate import load_study, simulate, write_study
-    from .metrics import rms_per_axis
+    from .study.tables import simulation_table
 
     start = time.perf_counter()
     study = load_study(args.config)
     check_folder_writable(study.output)          # before the simulation, not after
     data = simulate(study)
     paths = write_study(study, data)
-    print(f"Virtual {study.robot.nominal.name}, seed {study.seed}: uncompensated RMS error (mm)")
-    print(f"{'data set':<18}{'n':>6}{'x':>8}{'y':>8}{'z':>8}   paper Table 2 (x / y / z)")
-    for name, m in data.items():
-        x, y, z = rms_per_axis(m.errors_mm)
-        paper = PAPER_UNCOMPENSATED.get(name)
-        ref = " / ".join(f"{v:.1f}" for v in paper) if paper else "-"
-        print(f"{name:<18}{len(m):>6}{x:>8.2f}{y:>8.2f}{z:>8.2f}   {ref}")
+    print("\n".join(simulation_table(study, data)))
     print(f"wrote {len(paths)} files to {study.output} in {time.perf_counter() - start:.1f} s")
     return 0
 
@@ -75,6 +62,7 @@ def _cmd_run(args) -> int:
     from .study.config import load_config
     from .study.outputs import check_writable, write_run
     from .study.registry import run
+    from .study.tables import results_table
 
     config = load_config(args.config)
     if args.check:
@@ -102,44 +90,14 @@ def _cmd_run(args) -> int:
     return 0
 
 
-def results_table(result) -> str:
-    """The paper's Table 2 layout: RMS x / y / z (mm) per model and data set."""
-    names = list(result.datasets)
-    width = 24
-    head1 = f"{'RMS error (mm)':<{width}}" + "".join(f"{n[:22]:^24}" for n in names)
-    head2 = f"{'model':<{width}}" + "".join(f"{'x':>8}{'y':>8}{'z':>8}" for _ in names)
-    lines = [head1, head2, "-" * len(head2)]
-
-    def row(label, stats):
-        return f"{label[:width - 1]:<{width}}" + "".join("".join(f"{v:8.2f}" for v in stats[n]["rms"]) for n in names)
-
-    lines.append(row("uncompensated", result.uncompensated))
-    for r in result.models:
-        lines.append(row(r.spec.name, r.metrics))
-    best = next(r for r in result.models if r.spec.name == result.best)
-    rule = "validation 3-D RMS" if result.config.rank_by == "validation" else "CV 3-D RMS"
-    lines.append(f"best: {best.spec.name} ({rule} {best.score(result.config.rank_by):.3f} mm), chosen by the "
-                 f"{result.best_reason}")
-    regs = result.registrations
-    for reg in {id(r): r for r in regs.values()}.values():
-        lines.append(_registration_line(reg, [n for n, r in regs.items() if r is reg]))
-    comp = [r for r in result.models if r.compensation]
-    if comp:
-        lines.append("")
-        lines.append("compensation on the virtual robot, 3-D RMS (mm): before / predicted residual / after")
-        for r in comp:
-            cells = "  ".join(f"{n}: {c['before']['rms_3d']:.2f} / {c['predicted_residual']['rms_3d']:.2f} / "
-                              f"{c['after']['rms_3d']:.2f}" for n, c in r.compensation.items())
-            lines.append(f"  {r.spec.name:<22}{cells}")
-    return "\n".join(lines)
-
-
 def _cmd_predict(args) -> int:
     from ._io import atomic_write
     from .data.measurements import read_columns
     from .robot.description import joint_columns
     from .study.predictor import load_predictor
 
+    _refuse_input_as_output(args.output, "predict", [("model file", args.model), ("input file", args.input),
+                                                     ("format file", args.format)])
     predictor = load_predictor(args.model)
     fmt = _format(args)
     if predictor.inputs == "cartesian":
@@ -182,6 +140,8 @@ def _cmd_compensate(args) -> int:
     from .robot.description import joint_columns
     from .study.predictor import load_predictor
 
+    _refuse_input_as_output(args.output, "compensate", [("model file", args.model), ("targets file", args.targets),
+                                                        ("format file", args.format)])
     predictor = load_predictor(args.model)
     n_q = predictor.robot.n_joints if predictor.robot is not None else 0
     optional = joint_columns(n_q) if predictor.inputs == "joint" else []
@@ -216,6 +176,20 @@ def _cmd_compensate(args) -> int:
     return 0
 
 
+def _refuse_input_as_output(output, command: str, inputs) -> None:
+    """Refuse ``-o`` naming one of the command's input files (``inputs``: pairs of what it is and its path).
+
+    Writing there would replace the input (a raw export, the model file) with
+    the output; the same file under another name (a link) counts too.
+    """
+    if output is None or not Path(output).exists():
+        return
+    for what, path in inputs:
+        if path is not None and Path(path).exists() and os.path.samefile(output, path):
+            raise PartcalError(f"{command}: -o {output} is the {what} ({path}); writing there would replace an "
+                               "input, so name another file")
+
+
 def _format(args):
     """The ``--format FILE.yaml`` of a command, or None for the contract."""
     if not getattr(args, "format", None):
@@ -239,6 +213,8 @@ def _cmd_import(args) -> int:
 
     if args.output is None:
         raise PartcalError("import: give the CSV to write with -o OUT.csv")
+    _refuse_input_as_output(args.output, "import", [("input file", args.input), ("format file", args.format),
+                                                    ("robot file", args.robot)])
     if args.frame == "tracker" and not args.robot:
         raise PartcalError("import: --frame tracker needs --robot (a built-in name or a robot YAML)")
     if args.tool_mm is not None and args.frame != "tracker":
@@ -253,9 +229,10 @@ def _cmd_import(args) -> int:
                                source=str(args.input))
         m = registered(m, robot, reg)
         from .study.outputs import registration_comment
+        from .study.tables import registration_line
 
         lines.append(registration_comment(reg, shared=False))
-        print(_registration_line(reg))
+        print(registration_line(reg))
     write_measurements(m, args.output, comment="\n".join(lines))
     rms = float(np.sqrt(np.mean(np.sum(m.errors_mm**2, axis=1))))
     print(f"wrote {len(m)} poses to {args.output} (errors: 3-D RMS {rms:.3f} mm)")
@@ -263,31 +240,25 @@ def _cmd_import(args) -> int:
 
 
 def _import_run(args) -> int:
-    from pathlib import Path
-
     from .study.config import load_config
     from .study.outputs import check_writable, replace_folder, write_datasets
     from .study.registry import load_datasets
+    from .study.tables import registration_line
 
     if args.output is None:
         raise PartcalError("import --config: give the output folder with -o FOLDER")
+    _refuse_input_as_output(args.output, "import", [("run config", args.config)])
     config = load_config(args.config)
+    _refuse_input_as_output(args.output, "import", [("run's input", p) for p in config.inputs()])
     output = Path(args.output)
     check_writable(output, config.inputs())
     datasets, _, registrations = load_datasets(config)
     for reg in {id(r): r for r in registrations.values()}.values():
-        print(_registration_line(reg, [n for n, r in registrations.items() if r is reg]))
+        print(registration_line(reg, [n for n, r in registrations.items() if r is reg]))
     paths = replace_folder(output, lambda tmp: write_datasets(config, datasets, registrations, tmp))
     paths = [output / p.name for p in paths]
     print(f"wrote {len(paths)} data sets ({', '.join(f'{n}: {len(m)}' for n, m in datasets.items())}) to {args.output}")
     return 0
-
-
-def _registration_line(reg, sets=None) -> str:
-    where = f" ({', '.join(sets)})" if sets else ""
-    return (f"tracker registration{where}: {reg.n_poses} poses, residual 3-D RMS {reg.rms_3d:.3f} mm, max "
-            f"{reg.max_3d:.3f} mm, tool [{', '.join(f'{v:.3f}' for v in reg.tool_mm)}] mm "
-            f"({'fitted' if reg.fit_tool else 'given'}), condition {reg.condition:.1f}")
 
 
 def _write_table(path, header, values, atomic_write, flags=None) -> None:

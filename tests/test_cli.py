@@ -1,11 +1,12 @@
 """The command line: exit codes and messages."""
 
 import csv
+import json
 import shutil
 
 import numpy as np
 import pytest
-from conftest import ROOT, partcal_cli
+from conftest import ROOT, SHARED, partcal_cli
 
 import partcal
 from partcal import read_measurements
@@ -315,3 +316,100 @@ def test_a_full_disk_gets_one_line_not_a_traceback(monkeypatch, capsys):
     err = capsys.readouterr().err
     assert err == ("partcal: error: reports/x/.x.partial-1/metrics.json: No space left on device; "
                    "nothing was replaced\n")
+
+
+UR10_EXPORT = SHARED / "datasets" / "ipa_ur10" / "Series_B" / "measurements_joint_configurations.csv"
+UR10_FORMAT = """delimiter: ";"
+decimal: ","
+columns: {q1: shoulder_pan_joint, q2: shoulder_lift_joint, q3: elbow_joint, q4: wrist_1_joint, q5: wrist_2_joint,
+          q6: wrist_3_joint, x_meas: measurement_x, y_meas: measurement_y, z_meas: measurement_z}
+joint_unit: rad
+"""
+
+
+@pytest.fixture
+def ur10_export(tmp_path):
+    """A copy of the UR10 tracker export (series B) and its format: the shared file is never an output."""
+    if not UR10_EXPORT.is_file():
+        pytest.skip("the IPA UR10 data set is not beside the repository")
+    export = tmp_path / "EXPORT.csv"
+    shutil.copy(UR10_EXPORT, export)
+    (tmp_path / "F.yaml").write_text(UR10_FORMAT)
+    return export, tmp_path / "F.yaml"
+
+
+def test_import_never_writes_over_its_own_input_or_format(ur10_export):
+    export, fmt = ur10_export
+    before = export.read_bytes()
+    common = ["--robot", "universal_robots_ur10", "--frame", "tracker", "--rows", "1-200"]
+    for target, what in ((export, "input file"), (fmt, "format file")):
+        kept = target.read_bytes()
+        res = run("import", str(export), "--format", str(fmt), *common, "-o", str(target))
+        assert res.returncode == 2 and res.stderr.count("\n") == 1, res.stderr
+        assert f"import: -o {target} is the {what} ({target})" in res.stderr
+        assert target.read_bytes() == kept
+    (export.parent / "link.csv").symlink_to(export)            # the same file by another name
+    res = run("import", str(export), "--format", str(fmt), *common, "-o", str(export.parent / "link.csv"))
+    assert res.returncode == 2 and "is the input file" in res.stderr, res.stderr
+    assert export.read_bytes() == before
+    res = run("import", str(export), "--format", str(fmt), *common, "-o", str(export.parent / "new.csv"))
+    assert res.returncode == 0, res.stderr
+    assert len(read_measurements(export.parent / "new.csv")) == 200
+
+
+@pytest.mark.parametrize("command, target, what", [
+    ("predict", "MODEL", "model file"), ("predict", "IN", "input file"), ("predict", "FMT", "format file"),
+    ("compensate", "MODEL", "model file"), ("compensate", "IN", "targets file"), ("compensate", "FMT", "format file"),
+])
+def test_predict_and_compensate_never_write_over_an_input(cartesian_model, tmp_path, command, target, what):
+    model = tmp_path / "m.json"
+    shutil.copy(cartesian_model, model)
+    points = tmp_path / "rect.csv"
+    points.write_text("x,y,z\n1000,0,500\n")
+    fmt = tmp_path / "fmt.yaml"
+    fmt.write_text("delimiter: ','\n")
+    paths = {"MODEL": model, "IN": points, "FMT": fmt}
+    kept = paths[target].read_bytes()
+    res = run(command, str(model), str(points), "--format", str(fmt), "-o", str(paths[target]))
+    assert res.returncode == 2 and res.stderr.count("\n") == 1, res.stderr
+    assert f"{command}: -o {paths[target]} is the {what}" in res.stderr
+    assert paths[target].read_bytes() == kept
+
+
+def test_import_config_never_writes_over_its_config(tmp_path):
+    config = tmp_path / "c.yaml"
+    config.write_text(f"name: c\ndata:\n  identification: {DATA / 'identification.csv'}\n"
+                      "models:\n  - {name: A, solver: {method: lstsq}}\n")
+    kept = config.read_bytes()
+    res = run("import", "--config", str(config), "-o", str(config))
+    assert res.returncode == 2 and res.stderr.count("\n") == 1 and f"-o {config} is the run config" in res.stderr
+    assert config.read_bytes() == kept
+
+
+def test_a_rerun_refuses_files_added_to_an_earlier_output_and_replaces_its_own(tmp_path):
+    config = tmp_path / "configs" / "c.yaml"
+    config.parent.mkdir()
+    out = tmp_path / "out"
+    config.write_text(f"name: c\ndata:\n  identification: {DATA / 'identification.csv'}\n"
+                      f"models:\n  - {{name: A, solver: {{method: lstsq}}}}\noutput: {out}\n")
+    assert run("run", "-q", str(config)).returncode == 0
+    (out / "NOTES.txt").write_text("tracker moved on Tuesday\n")
+    (out / "raw").mkdir()
+    (out / "raw" / "export.csv").write_text("1,2,3\n")
+    (out / "models" / "mine.json").write_text("{}\n")
+    for check in ([], ["--check"]):
+        res = run("run", "-q", *check, str(config))
+        assert res.returncode == 2 and res.stderr.count("\n") == 1, res.stderr
+        assert f"{out}: exists and holds files partcal did not write (NOTES.txt, models/mine.json, raw)" in res.stderr
+    assert (out / "NOTES.txt").read_text() == "tracker moved on Tuesday\n"
+    assert (out / "raw" / "export.csv").read_text() == "1,2,3\n" and (out / "models" / "mine.json").is_file()
+    for added in (out / "NOTES.txt", out / "raw" / "export.csv", out / "models" / "mine.json"):
+        added.unlink()
+    (out / "raw").rmdir()
+    (out / "metrics.json").write_text("{}\n")       # partcal's own files, even changed, are replaced by a rerun
+    res = run("run", "-q", str(config))
+    assert res.returncode == 0, res.stderr
+    assert json.loads((out / "metrics.json").read_text())["name"] == "c"
+    listed = (out / ".partcal-output").read_text().splitlines()[1:]
+    assert sorted(listed) == sorted(f"- {p.relative_to(out)}" for p in out.rglob("*")
+                                    if p.is_file() and p.name != ".partcal-output")

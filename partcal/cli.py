@@ -12,6 +12,7 @@ import logging
 import os
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -37,10 +38,11 @@ def _cmd_simulate(args) -> int:
 
 
 class Progress:
-    """Progress on stderr: a bar that rewrites itself on a terminal, plain lines otherwise."""
+    """Progress on stderr, one line per finished model (on a terminal too: a warning never lands inside
+    a half-drawn bar)."""
 
     def __init__(self, quiet: bool = False, banner: str = ""):
-        self.quiet, self.tty, self.banner = quiet, sys.stderr.isatty(), banner
+        self.quiet, self.banner = quiet, banner
 
     def __call__(self, done: int, total: int, text: str) -> None:
         if self.quiet:
@@ -48,13 +50,7 @@ class Progress:
         if self.banner:      # shown with the first result, so bad input still gets exactly one line
             sys.stderr.write(self.banner + "\n")
             self.banner = ""
-        if self.tty:
-            bar = "#" * round(20 * done / total)
-            sys.stderr.write(f"\r[{bar:<20}] {done}/{total} {text[:60]:<60}")
-            if done == total:
-                sys.stderr.write("\n")
-        else:
-            sys.stderr.write(f"partcal: [{done}/{total}] {text}\n")
+        sys.stderr.write(f"partcal: [{done}/{total}] {text}\n")
         sys.stderr.flush()
 
 
@@ -74,6 +70,8 @@ def _cmd_run(args) -> int:
         sizes = ", ".join(f"{name} {len(m)}" for name, m in data.items())
         print(f"{args.config}: OK: {len(config.models)} models; data sets (poses): {sizes}; nothing fitted")
         return 0
+    if args.screenshot:
+        _check_browser()                       # before the fits, not after them
     check_writable(config.output, config.inputs())
     progress = Progress(args.quiet, f"partcal {__version__}: run {config.name!r}, {len(config.models)} models, "
                                     f"{1 + len(config.tests)} data sets, seed {config.seed}")
@@ -88,6 +86,18 @@ def _cmd_run(args) -> int:
     print(results_table(result))
     print(f"outputs: {out}")
     return 0
+
+
+def _check_browser() -> None:
+    """``run --screenshot`` needs Chromium and Playwright: refuse before fitting when either is missing."""
+    from .report.browser import chromium_path
+
+    chromium_path()
+    try:
+        import playwright.sync_api  # noqa: F401
+    except ImportError:
+        raise PartcalError("--screenshot needs the Python package 'playwright' (pip install 'partcal[browser]'; it "
+                           "uses the system's chromium)") from None
 
 
 def _cmd_predict(args) -> int:
@@ -106,6 +116,7 @@ def _cmd_predict(args) -> int:
     else:
         cols, X, _ = read_columns(args.input, [joint_columns(predictor.n_inputs)], fmt=fmt)
         errors = predictor.predict(joints=X)
+    predictor.refuse_implausible(X, errors, source=args.input)     # nothing is written then
     _write_table(args.output, cols + ["dx", "dy", "dz"], np.hstack([X, errors]), atomic_write)
     _warn_if_far(predictor, X)
     print(f"predicted errors for {len(X)} points: {args.output}")
@@ -119,8 +130,10 @@ def _far_from_data(predictor, X) -> str:
     far = predictor.distance_to_data(**({"positions": X} if predictor.inputs == "cartesian" else {"joints": X}))
     if not (far > EXTRAPOLATION_LIMIT).any():
         return ""
+    unit = "mm" if predictor.inputs == "cartesian" else "deg"
     return (f"{int((far > EXTRAPOLATION_LIMIT).sum())} of {len(far)} points lie more than {EXTRAPOLATION_LIMIT:g} "
-            f"{'mm' if predictor.inputs == 'cartesian' else 'deg'} from the data the model was fitted on")
+            f"{unit} from the data the model was fitted on (the farthest, data row {int(np.argmax(far)) + 1}, "
+            f"{far.max():.4g} {unit})")
 
 
 def _warn_if_far(predictor, X) -> None:
@@ -131,8 +144,6 @@ def _warn_if_far(predictor, X) -> None:
 
 
 def _cmd_compensate(args) -> int:
-    import warnings
-
     from ._io import atomic_write
     from .data.measurements import read_columns
     from .metrics import ExtrapolationWarning
@@ -145,7 +156,8 @@ def _cmd_compensate(args) -> int:
     predictor = load_predictor(args.model)
     n_q = predictor.robot.n_joints if predictor.robot is not None else 0
     optional = joint_columns(n_q) if predictor.inputs == "joint" else []
-    cols, targets, seeds = read_columns(args.targets, [["x", "y", "z"]], optional, fmt=_format(args))
+    cols, targets, seeds = read_columns(args.targets, [["x", "y", "z"], ["x_nom", "y_nom", "z_nom"]], optional,
+                                        fmt=_format(args))
     with warnings.catch_warnings():       # exit code 3 and one stderr line below say it instead
         warnings.simplefilter("ignore", CompensationWarning)
         warnings.simplefilter("ignore", ExtrapolationWarning)
@@ -251,7 +263,7 @@ def _import_run(args) -> int:
     config = load_config(args.config)
     _refuse_input_as_output(args.output, "import", [("run's input", p) for p in config.inputs()])
     output = Path(args.output)
-    check_writable(output, config.inputs())
+    check_writable(output, config.inputs(), option="-o")
     datasets, _, registrations = load_datasets(config)
     for reg in {id(r): r for r in registrations.values()}.values():
         print(registration_line(reg, [n for n, r in registrations.items() if r is reg]))
@@ -325,7 +337,8 @@ def build_parser() -> argparse.ArgumentParser:
     pred.set_defaults(func=_cmd_predict)
     comp = sub.add_parser("compensate", help="false targets that make the robot reach the given targets")
     comp.add_argument("model", help="model file (models/<name>.json of a run)")
-    comp.add_argument("targets", help="CSV with x,y,z (mm); joint models also read q1..qN as IK seeds")
+    comp.add_argument("targets", help="CSV with x,y,z (or x_nom,y_nom,z_nom) in mm; joint models also read q1..qN "
+                                      "as IK seeds")
     comp.add_argument("-o", "--output", required=True,
                       help="CSV to write (targets + x_cmd,y_cmd,z_cmd[,qK_cmd],converged); exit code 3 when any "
                            "target did not converge")
@@ -355,19 +368,70 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class _Once(logging.Filter):
+    """Lets each message through once: a warning repeated by every fold or data set is said one time."""
+
+    def __init__(self):
+        super().__init__()
+        self.seen: set[str] = set()
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        text = record.getMessage()
+        if text in self.seen:
+            return False
+        self.seen.add(text)
+        return True
+
+
+class _Format(logging.Formatter):
+    """``partcal: warning: ...``: the one format of every message partcal prints on stderr."""
+
+    def format(self, record: logging.LogRecord) -> str:
+        where = f" {record.name}" if record.levelno < logging.WARNING else ""
+        return f"partcal: {record.levelname.lower()}{where}: {record.getMessage()}"
+
+
+_HANDLER = logging.StreamHandler()
+_HANDLER.setFormatter(_Format())
+_HANDLER.addFilter(_Once())
+
+
+def _log_to_stderr(level: int) -> None:
+    """partcal's log records at ``level`` and above on stderr, each message once."""
+    _HANDLER.stream = sys.stderr
+    _HANDLER.filters[0].seen.clear()
+    root = logging.getLogger()
+    if _HANDLER not in root.handlers:
+        root.addHandler(_HANDLER)
+    root.setLevel(level)
+    for name in ("matplotlib", "PIL", "asyncio", "urllib3"):        # other libraries' debug chatter
+        logging.getLogger(name).setLevel(max(level, logging.INFO))
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """Python warnings (a library's, or partcal's own) in the same one-line format, each once."""
+    log.warning("%s", message)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
         parser.print_help(sys.stderr)
         return 2
-    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING,
-                        format="%(levelname)s %(name)s: %(message)s")
+    _log_to_stderr(logging.DEBUG if args.verbose else logging.WARNING)
     try:
-        return args.func(args)
+        with np.errstate(all="ignore"), warnings.catch_warnings():      # numbers are checked, never warned about
+            warnings.simplefilter("ignore", RuntimeWarning)
+            warnings.showwarning = _show_warning
+            return args.func(args)
     except PartcalError as exc:
         print(f"partcal: error: {exc}", file=sys.stderr)
         return 2
+    except MemoryError:
+        print("partcal: error: out of memory: the machine could not hold what this command needs (a Gaussian "
+              "process on many samples? see 'partcal run --check'); nothing was replaced", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         print("partcal: interrupted", file=sys.stderr)
         return 130

@@ -32,7 +32,8 @@ log = logging.getLogger(__name__)
 MARKER = ".partcal-output"      # in every folder partcal replaces whole: it may replace it again
 
 
-def check_writable(output: Path, inputs: Iterable[Path] = (), create: bool = True) -> None:
+def check_writable(output: Path, inputs: Iterable[Path] = (), create: bool = True,
+                   option: str = "output: in the config") -> None:
     """Fail early, before any fitting, if the output folder cannot be created or replaced.
 
     A run replaces its output folder whole, so an existing folder is replaced
@@ -40,6 +41,8 @@ def check_writable(output: Path, inputs: Iterable[Path] = (), create: bool = Tru
     never when it holds one of ``inputs`` (the config and data files).
     ``create=False`` (``run --check``) creates no missing parent folder: the
     nearest existing one must be a folder where a folder can be made.
+    ``option`` is what names the folder (``output:`` of a run config, ``-o``
+    of ``import --config``), for the messages.
     """
     parent = output.parent
     try:
@@ -62,7 +65,7 @@ def check_writable(output: Path, inputs: Iterable[Path] = (), create: bool = Tru
     for path in inputs:
         if where in Path(path).resolve().parents:
             raise PartcalError(f"{output}: holds {path}, an input of this run; the output folder is replaced whole, "
-                               "so name a folder of its own (output: in the config, or -o)")
+                               f"so name a folder of its own ({option})")
     entries = sorted(p.name for p in output.iterdir())
     foreign = foreign_entries(output, entries) if entries else []
     if foreign:

@@ -102,7 +102,7 @@ def check_measured(source: str, rows: list[int], q_deg: NDArray[np.float64], nom
     if robot is None and (len(nominal_mm) < MIN_POSES or _spread(nominal_mm) < MIN_WORKSPACE_MM):
         return                                  # without a robot, a few poses close together give no reach
     reach = robot.reach_mm if robot is not None else _reach_of(nominal_mm)
-    check_errors(source, [f"{source}:{r}" for r in rows], nominal_mm, measured_mm, reach, limits,
+    check_errors([f"{source}:{r}" for r in rows], nominal_mm, measured_mm, reach, limits,
                  robot=robot.name if robot is not None else None)
 
 
@@ -118,9 +118,8 @@ def check_joint_units(source: str, rows: list[int], q_deg: NDArray[np.float64]) 
                         f"converts them)")
 
 
-def check_errors(source: str, where: list[str], nominal_mm, measured_mm, reach_mm: float,
-                 limits: Plausibility = Plausibility(), *, what: str = "the error measured - nominal",
-                 robot: str | None = None) -> None:
+def check_errors(where: list[str], nominal_mm, measured_mm, reach_mm: float,
+                 limits: Plausibility = Plausibility(), *, robot: str | None = None) -> None:
     """Refuse errors larger than ``limits.max_error_of_reach`` of the reach; ``where[i]`` names pose ``i``."""
     errors = np.linalg.norm(np.asarray(measured_mm) - np.asarray(nominal_mm), axis=1)
     limit = limits.max_error_of_reach * reach_mm
@@ -128,7 +127,7 @@ def check_errors(source: str, where: list[str], nominal_mm, measured_mm, reach_m
     if errors[worst] > limit:
         reach_of = f"robot {robot}'s reach" if robot else "the largest nominal distance from the base"
         raise DataError(
-            f"{where[worst]}: {what} is {errors[worst]:.4g} mm ({np.count_nonzero(errors > limit)} of {len(errors)} "
+            f"{where[worst]}: the error measured - nominal is {errors[worst]:.4g} mm ({np.count_nonzero(errors > limit)} of {len(errors)} "
             f"poses beyond {limit:.4g} mm, {limits.max_error_of_reach:g} of {reach_of}, {reach_mm:.0f} mm; "
             f"data.checks.max_error_of_reach): no calibrated robot errs that much: "
             f"{likely_cause(nominal_mm, measured_mm, None, 'measured', robot=robot)}")

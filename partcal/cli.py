@@ -9,8 +9,11 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import sys
 import time
+import warnings
+from pathlib import Path
 
 import numpy as np
 
@@ -19,41 +22,27 @@ from .errors import PartcalError
 
 log = logging.getLogger("partcal")
 
-# Table 2 of the paper: uncompensated RMS (mm) per data set, x / y / z.
-PAPER_UNCOMPENSATED = {
-    "identification": (8.0, 7.5, 17.9),
-    "test_rectangle": (16.2, 19.1, 16.6),
-    "test_spiral_xy": (54.3, 5.4, 60.9),
-    "test_spiral_yz": (11.8, 19.4, 2.0),
-}
-
-
 def _cmd_simulate(args) -> int:
     from ._io import check_folder_writable
     from .data.simulate import load_study, simulate, write_study
-    from .metrics import rms_per_axis
+    from .study.tables import simulation_table
 
     start = time.perf_counter()
     study = load_study(args.config)
     check_folder_writable(study.output)          # before the simulation, not after
     data = simulate(study)
     paths = write_study(study, data)
-    print(f"Virtual {study.robot.nominal.name}, seed {study.seed}: uncompensated RMS error (mm)")
-    print(f"{'data set':<18}{'n':>6}{'x':>8}{'y':>8}{'z':>8}   paper Table 2 (x / y / z)")
-    for name, m in data.items():
-        x, y, z = rms_per_axis(m.errors_mm)
-        paper = PAPER_UNCOMPENSATED.get(name)
-        ref = " / ".join(f"{v:.1f}" for v in paper) if paper else "-"
-        print(f"{name:<18}{len(m):>6}{x:>8.2f}{y:>8.2f}{z:>8.2f}   {ref}")
+    print("\n".join(simulation_table(study, data)))
     print(f"wrote {len(paths)} files to {study.output} in {time.perf_counter() - start:.1f} s")
     return 0
 
 
 class Progress:
-    """Progress on stderr: a bar that rewrites itself on a terminal, plain lines otherwise."""
+    """Progress on stderr, one line per finished model (on a terminal too: a warning never lands inside
+    a half-drawn bar)."""
 
     def __init__(self, quiet: bool = False, banner: str = ""):
-        self.quiet, self.tty, self.banner = quiet, sys.stderr.isatty(), banner
+        self.quiet, self.banner = quiet, banner
 
     def __call__(self, done: int, total: int, text: str) -> None:
         if self.quiet:
@@ -61,13 +50,7 @@ class Progress:
         if self.banner:      # shown with the first result, so bad input still gets exactly one line
             sys.stderr.write(self.banner + "\n")
             self.banner = ""
-        if self.tty:
-            bar = "#" * round(20 * done / total)
-            sys.stderr.write(f"\r[{bar:<20}] {done}/{total} {text[:60]:<60}")
-            if done == total:
-                sys.stderr.write("\n")
-        else:
-            sys.stderr.write(f"partcal: [{done}/{total}] {text}\n")
+        sys.stderr.write(f"partcal: [{done}/{total}] {text}\n")
         sys.stderr.flush()
 
 
@@ -75,6 +58,7 @@ def _cmd_run(args) -> int:
     from .study.config import load_config
     from .study.outputs import check_writable, write_run
     from .study.registry import run
+    from .study.tables import results_table
 
     config = load_config(args.config)
     if args.check:
@@ -86,6 +70,8 @@ def _cmd_run(args) -> int:
         sizes = ", ".join(f"{name} {len(m)}" for name, m in data.items())
         print(f"{args.config}: OK: {len(config.models)} models; data sets (poses): {sizes}; nothing fitted")
         return 0
+    if args.screenshot:
+        _check_browser()                       # before the fits, not after them
     check_writable(config.output, config.inputs())
     progress = Progress(args.quiet, f"partcal {__version__}: run {config.name!r}, {len(config.models)} models, "
                                     f"{1 + len(config.tests)} data sets, seed {config.seed}")
@@ -102,36 +88,16 @@ def _cmd_run(args) -> int:
     return 0
 
 
-def results_table(result) -> str:
-    """The paper's Table 2 layout: RMS x / y / z (mm) per model and data set."""
-    names = list(result.datasets)
-    width = 24
-    head1 = f"{'RMS error (mm)':<{width}}" + "".join(f"{n[:22]:^24}" for n in names)
-    head2 = f"{'model':<{width}}" + "".join(f"{'x':>8}{'y':>8}{'z':>8}" for _ in names)
-    lines = [head1, head2, "-" * len(head2)]
+def _check_browser() -> None:
+    """``run --screenshot`` needs Chromium and Playwright: refuse before fitting when either is missing."""
+    from .report.browser import chromium_path
 
-    def row(label, stats):
-        return f"{label[:width - 1]:<{width}}" + "".join("".join(f"{v:8.2f}" for v in stats[n]["rms"]) for n in names)
-
-    lines.append(row("uncompensated", result.uncompensated))
-    for r in result.models:
-        lines.append(row(r.spec.name, r.metrics))
-    best = next(r for r in result.models if r.spec.name == result.best)
-    rule = "validation 3-D RMS" if result.config.rank_by == "validation" else "CV 3-D RMS"
-    lines.append(f"best: {best.spec.name} ({rule} {best.score(result.config.rank_by):.3f} mm), chosen by the "
-                 f"{result.best_reason}")
-    regs = result.registrations
-    for reg in {id(r): r for r in regs.values()}.values():
-        lines.append(_registration_line(reg, [n for n, r in regs.items() if r is reg]))
-    comp = [r for r in result.models if r.compensation]
-    if comp:
-        lines.append("")
-        lines.append("compensation on the virtual robot, 3-D RMS (mm): before / predicted residual / after")
-        for r in comp:
-            cells = "  ".join(f"{n}: {c['before']['rms_3d']:.2f} / {c['predicted_residual']['rms_3d']:.2f} / "
-                              f"{c['after']['rms_3d']:.2f}" for n, c in r.compensation.items())
-            lines.append(f"  {r.spec.name:<22}{cells}")
-    return "\n".join(lines)
+    chromium_path()
+    try:
+        import playwright.sync_api  # noqa: F401
+    except ImportError:
+        raise PartcalError("--screenshot needs the Python package 'playwright' (pip install 'partcal[browser]'; it "
+                           "uses the system's chromium)") from None
 
 
 def _cmd_predict(args) -> int:
@@ -140,6 +106,8 @@ def _cmd_predict(args) -> int:
     from .robot.description import joint_columns
     from .study.predictor import load_predictor
 
+    _refuse_input_as_output(args.output, "predict", [("model file", args.model), ("input file", args.input),
+                                                     ("format file", args.format)])
     predictor = load_predictor(args.model)
     fmt = _format(args)
     if predictor.inputs == "cartesian":
@@ -148,6 +116,7 @@ def _cmd_predict(args) -> int:
     else:
         cols, X, _ = read_columns(args.input, [joint_columns(predictor.n_inputs)], fmt=fmt)
         errors = predictor.predict(joints=X)
+    predictor.refuse_implausible(X, errors, source=args.input)     # nothing is written then
     _write_table(args.output, cols + ["dx", "dy", "dz"], np.hstack([X, errors]), atomic_write)
     _warn_if_far(predictor, X)
     print(f"predicted errors for {len(X)} points: {args.output}")
@@ -161,8 +130,10 @@ def _far_from_data(predictor, X) -> str:
     far = predictor.distance_to_data(**({"positions": X} if predictor.inputs == "cartesian" else {"joints": X}))
     if not (far > EXTRAPOLATION_LIMIT).any():
         return ""
+    unit = "mm" if predictor.inputs == "cartesian" else "deg"
     return (f"{int((far > EXTRAPOLATION_LIMIT).sum())} of {len(far)} points lie more than {EXTRAPOLATION_LIMIT:g} "
-            f"{'mm' if predictor.inputs == 'cartesian' else 'deg'} from the data the model was fitted on")
+            f"{unit} from the data the model was fitted on (the farthest, data row {int(np.argmax(far)) + 1}, "
+            f"{far.max():.4g} {unit})")
 
 
 def _warn_if_far(predictor, X) -> None:
@@ -173,8 +144,6 @@ def _warn_if_far(predictor, X) -> None:
 
 
 def _cmd_compensate(args) -> int:
-    import warnings
-
     from ._io import atomic_write
     from .data.measurements import read_columns
     from .metrics import ExtrapolationWarning
@@ -182,10 +151,13 @@ def _cmd_compensate(args) -> int:
     from .robot.description import joint_columns
     from .study.predictor import load_predictor
 
+    _refuse_input_as_output(args.output, "compensate", [("model file", args.model), ("targets file", args.targets),
+                                                        ("format file", args.format)])
     predictor = load_predictor(args.model)
     n_q = predictor.robot.n_joints if predictor.robot is not None else 0
     optional = joint_columns(n_q) if predictor.inputs == "joint" else []
-    cols, targets, seeds = read_columns(args.targets, [["x", "y", "z"]], optional, fmt=_format(args))
+    cols, targets, seeds = read_columns(args.targets, [["x", "y", "z"], ["x_nom", "y_nom", "z_nom"]], optional,
+                                        fmt=_format(args))
     with warnings.catch_warnings():       # exit code 3 and one stderr line below say it instead
         warnings.simplefilter("ignore", CompensationWarning)
         warnings.simplefilter("ignore", ExtrapolationWarning)
@@ -216,6 +188,20 @@ def _cmd_compensate(args) -> int:
     return 0
 
 
+def _refuse_input_as_output(output, command: str, inputs) -> None:
+    """Refuse ``-o`` naming one of the command's input files (``inputs``: pairs of what it is and its path).
+
+    Writing there would replace the input (a raw export, the model file) with
+    the output; the same file under another name (a link) counts too.
+    """
+    if output is None or not Path(output).exists():
+        return
+    for what, path in inputs:
+        if path is not None and Path(path).exists() and os.path.samefile(output, path):
+            raise PartcalError(f"{command}: -o {output} is the {what} ({path}); writing there would replace an "
+                               "input, so name another file")
+
+
 def _format(args):
     """The ``--format FILE.yaml`` of a command, or None for the contract."""
     if not getattr(args, "format", None):
@@ -239,6 +225,8 @@ def _cmd_import(args) -> int:
 
     if args.output is None:
         raise PartcalError("import: give the CSV to write with -o OUT.csv")
+    _refuse_input_as_output(args.output, "import", [("input file", args.input), ("format file", args.format),
+                                                    ("robot file", args.robot)])
     if args.frame == "tracker" and not args.robot:
         raise PartcalError("import: --frame tracker needs --robot (a built-in name or a robot YAML)")
     if args.tool_mm is not None and args.frame != "tracker":
@@ -253,9 +241,10 @@ def _cmd_import(args) -> int:
                                source=str(args.input))
         m = registered(m, robot, reg)
         from .study.outputs import registration_comment
+        from .study.tables import registration_line
 
         lines.append(registration_comment(reg, shared=False))
-        print(_registration_line(reg))
+        print(registration_line(reg))
     write_measurements(m, args.output, comment="\n".join(lines))
     rms = float(np.sqrt(np.mean(np.sum(m.errors_mm**2, axis=1))))
     print(f"wrote {len(m)} poses to {args.output} (errors: 3-D RMS {rms:.3f} mm)")
@@ -263,31 +252,25 @@ def _cmd_import(args) -> int:
 
 
 def _import_run(args) -> int:
-    from pathlib import Path
-
     from .study.config import load_config
     from .study.outputs import check_writable, replace_folder, write_datasets
     from .study.registry import load_datasets
+    from .study.tables import registration_line
 
     if args.output is None:
         raise PartcalError("import --config: give the output folder with -o FOLDER")
+    _refuse_input_as_output(args.output, "import", [("run config", args.config)])
     config = load_config(args.config)
+    _refuse_input_as_output(args.output, "import", [("run's input", p) for p in config.inputs()])
     output = Path(args.output)
-    check_writable(output, config.inputs())
+    check_writable(output, config.inputs(), option="-o")
     datasets, _, registrations = load_datasets(config)
     for reg in {id(r): r for r in registrations.values()}.values():
-        print(_registration_line(reg, [n for n, r in registrations.items() if r is reg]))
+        print(registration_line(reg, [n for n, r in registrations.items() if r is reg]))
     paths = replace_folder(output, lambda tmp: write_datasets(config, datasets, registrations, tmp))
     paths = [output / p.name for p in paths]
     print(f"wrote {len(paths)} data sets ({', '.join(f'{n}: {len(m)}' for n, m in datasets.items())}) to {args.output}")
     return 0
-
-
-def _registration_line(reg, sets=None) -> str:
-    where = f" ({', '.join(sets)})" if sets else ""
-    return (f"tracker registration{where}: {reg.n_poses} poses, residual 3-D RMS {reg.rms_3d:.3f} mm, max "
-            f"{reg.max_3d:.3f} mm, tool [{', '.join(f'{v:.3f}' for v in reg.tool_mm)}] mm "
-            f"({'fitted' if reg.fit_tool else 'given'}), condition {reg.condition:.1f}")
 
 
 def _write_table(path, header, values, atomic_write, flags=None) -> None:
@@ -354,7 +337,8 @@ def build_parser() -> argparse.ArgumentParser:
     pred.set_defaults(func=_cmd_predict)
     comp = sub.add_parser("compensate", help="false targets that make the robot reach the given targets")
     comp.add_argument("model", help="model file (models/<name>.json of a run)")
-    comp.add_argument("targets", help="CSV with x,y,z (mm); joint models also read q1..qN as IK seeds")
+    comp.add_argument("targets", help="CSV with x,y,z (or x_nom,y_nom,z_nom) in mm; joint models also read q1..qN "
+                                      "as IK seeds")
     comp.add_argument("-o", "--output", required=True,
                       help="CSV to write (targets + x_cmd,y_cmd,z_cmd[,qK_cmd],converged); exit code 3 when any "
                            "target did not converge")
@@ -384,19 +368,70 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class _Once(logging.Filter):
+    """Lets each message through once: a warning repeated by every fold or data set is said one time."""
+
+    def __init__(self):
+        super().__init__()
+        self.seen: set[str] = set()
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        text = record.getMessage()
+        if text in self.seen:
+            return False
+        self.seen.add(text)
+        return True
+
+
+class _Format(logging.Formatter):
+    """``partcal: warning: ...``: the one format of every message partcal prints on stderr."""
+
+    def format(self, record: logging.LogRecord) -> str:
+        where = f" {record.name}" if record.levelno < logging.WARNING else ""
+        return f"partcal: {record.levelname.lower()}{where}: {record.getMessage()}"
+
+
+_HANDLER = logging.StreamHandler()
+_HANDLER.setFormatter(_Format())
+_HANDLER.addFilter(_Once())
+
+
+def _log_to_stderr(level: int) -> None:
+    """partcal's log records at ``level`` and above on stderr, each message once."""
+    _HANDLER.stream = sys.stderr
+    _HANDLER.filters[0].seen.clear()
+    root = logging.getLogger()
+    if _HANDLER not in root.handlers:
+        root.addHandler(_HANDLER)
+    root.setLevel(level)
+    for name in ("matplotlib", "PIL", "asyncio", "urllib3"):        # other libraries' debug chatter
+        logging.getLogger(name).setLevel(max(level, logging.INFO))
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """Python warnings (a library's, or partcal's own) in the same one-line format, each once."""
+    log.warning("%s", message)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
         parser.print_help(sys.stderr)
         return 2
-    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING,
-                        format="%(levelname)s %(name)s: %(message)s")
+    _log_to_stderr(logging.DEBUG if args.verbose else logging.WARNING)
     try:
-        return args.func(args)
+        with np.errstate(all="ignore"), warnings.catch_warnings():      # numbers are checked, never warned about
+            warnings.simplefilter("ignore", RuntimeWarning)
+            warnings.showwarning = _show_warning
+            return args.func(args)
     except PartcalError as exc:
         print(f"partcal: error: {exc}", file=sys.stderr)
         return 2
+    except MemoryError:
+        print("partcal: error: out of memory: the machine could not hold what this command needs (a Gaussian "
+              "process on many samples? see 'partcal run --check'); nothing was replaced", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         print("partcal: interrupted", file=sys.stderr)
         return 130

@@ -1,11 +1,12 @@
 """The command line: exit codes and messages."""
 
 import csv
+import json
 import shutil
 
 import numpy as np
 import pytest
-from conftest import ROOT, partcal_cli
+from conftest import ROOT, SHARED, partcal_cli
 
 import partcal
 from partcal import read_measurements
@@ -315,3 +316,218 @@ def test_a_full_disk_gets_one_line_not_a_traceback(monkeypatch, capsys):
     err = capsys.readouterr().err
     assert err == ("partcal: error: reports/x/.x.partial-1/metrics.json: No space left on device; "
                    "nothing was replaced\n")
+
+
+UR10_EXPORT = SHARED / "datasets" / "ipa_ur10" / "Series_B" / "measurements_joint_configurations.csv"
+UR10_FORMAT = """delimiter: ";"
+decimal: ","
+columns: {q1: shoulder_pan_joint, q2: shoulder_lift_joint, q3: elbow_joint, q4: wrist_1_joint, q5: wrist_2_joint,
+          q6: wrist_3_joint, x_meas: measurement_x, y_meas: measurement_y, z_meas: measurement_z}
+joint_unit: rad
+"""
+
+
+@pytest.fixture
+def ur10_export(tmp_path):
+    """A copy of the UR10 tracker export (series B) and its format: the shared file is never an output."""
+    if not UR10_EXPORT.is_file():
+        pytest.skip("the IPA UR10 data set is not beside the repository")
+    export = tmp_path / "EXPORT.csv"
+    shutil.copy(UR10_EXPORT, export)
+    (tmp_path / "F.yaml").write_text(UR10_FORMAT)
+    return export, tmp_path / "F.yaml"
+
+
+def test_import_never_writes_over_its_own_input_or_format(ur10_export):
+    export, fmt = ur10_export
+    before = export.read_bytes()
+    common = ["--robot", "universal_robots_ur10", "--frame", "tracker", "--rows", "1-200"]
+    for target, what in ((export, "input file"), (fmt, "format file")):
+        kept = target.read_bytes()
+        res = run("import", str(export), "--format", str(fmt), *common, "-o", str(target))
+        assert res.returncode == 2 and res.stderr.count("\n") == 1, res.stderr
+        assert f"import: -o {target} is the {what} ({target})" in res.stderr
+        assert target.read_bytes() == kept
+    (export.parent / "link.csv").symlink_to(export)            # the same file by another name
+    res = run("import", str(export), "--format", str(fmt), *common, "-o", str(export.parent / "link.csv"))
+    assert res.returncode == 2 and "is the input file" in res.stderr, res.stderr
+    assert export.read_bytes() == before
+    res = run("import", str(export), "--format", str(fmt), *common, "-o", str(export.parent / "new.csv"))
+    assert res.returncode == 0, res.stderr
+    assert len(read_measurements(export.parent / "new.csv")) == 200
+
+
+@pytest.mark.parametrize("command, target, what", [
+    ("predict", "MODEL", "model file"), ("predict", "IN", "input file"), ("predict", "FMT", "format file"),
+    ("compensate", "MODEL", "model file"), ("compensate", "IN", "targets file"), ("compensate", "FMT", "format file"),
+])
+def test_predict_and_compensate_never_write_over_an_input(cartesian_model, tmp_path, command, target, what):
+    model = tmp_path / "m.json"
+    shutil.copy(cartesian_model, model)
+    points = tmp_path / "rect.csv"
+    points.write_text("x,y,z\n1000,0,500\n")
+    fmt = tmp_path / "fmt.yaml"
+    fmt.write_text("delimiter: ','\n")
+    paths = {"MODEL": model, "IN": points, "FMT": fmt}
+    kept = paths[target].read_bytes()
+    res = run(command, str(model), str(points), "--format", str(fmt), "-o", str(paths[target]))
+    assert res.returncode == 2 and res.stderr.count("\n") == 1, res.stderr
+    assert f"{command}: -o {paths[target]} is the {what}" in res.stderr
+    assert paths[target].read_bytes() == kept
+
+
+def test_import_config_never_writes_over_its_config(tmp_path):
+    config = tmp_path / "c.yaml"
+    config.write_text(f"name: c\ndata:\n  identification: {DATA / 'identification.csv'}\n"
+                      "models:\n  - {name: A, solver: {method: lstsq}}\n")
+    kept = config.read_bytes()
+    res = run("import", "--config", str(config), "-o", str(config))
+    assert res.returncode == 2 and res.stderr.count("\n") == 1 and f"-o {config} is the run config" in res.stderr
+    assert config.read_bytes() == kept
+
+
+def test_a_rerun_refuses_files_added_to_an_earlier_output_and_replaces_its_own(tmp_path):
+    config = tmp_path / "configs" / "c.yaml"
+    config.parent.mkdir()
+    out = tmp_path / "out"
+    config.write_text(f"name: c\ndata:\n  identification: {DATA / 'identification.csv'}\n"
+                      f"models:\n  - {{name: A, solver: {{method: lstsq}}}}\noutput: {out}\n")
+    assert run("run", "-q", str(config)).returncode == 0
+    (out / "NOTES.txt").write_text("tracker moved on Tuesday\n")
+    (out / "raw").mkdir()
+    (out / "raw" / "export.csv").write_text("1,2,3\n")
+    (out / "models" / "mine.json").write_text("{}\n")
+    for check in ([], ["--check"]):
+        res = run("run", "-q", *check, str(config))
+        assert res.returncode == 2 and res.stderr.count("\n") == 1, res.stderr
+        assert f"{out}: exists and holds files partcal did not write (NOTES.txt, models/mine.json, raw)" in res.stderr
+    assert (out / "NOTES.txt").read_text() == "tracker moved on Tuesday\n"
+    assert (out / "raw" / "export.csv").read_text() == "1,2,3\n" and (out / "models" / "mine.json").is_file()
+    for added in (out / "NOTES.txt", out / "raw" / "export.csv", out / "models" / "mine.json"):
+        added.unlink()
+    (out / "raw").rmdir()
+    (out / "metrics.json").write_text("{}\n")       # partcal's own files, even changed, are replaced by a rerun
+    res = run("run", "-q", str(config))
+    assert res.returncode == 0, res.stderr
+    assert json.loads((out / "metrics.json").read_text())["name"] == "c"
+    listed = (out / ".partcal-output").read_text().splitlines()[1:]
+    assert sorted(listed) == sorted(f"- {p.relative_to(out)}" for p in out.rglob("*")
+                                    if p.is_file() and p.name != ".partcal-output")
+
+
+@pytest.fixture(scope="module")
+def ur10_models(tmp_path_factory):
+    """A Cartesian and a joint model of the UR10 (errors of a millimetre per metre), with the robot in the files."""
+    from partcal import ErrorModel, load_robot
+    from partcal.study.persist import save_model
+
+    ur10 = load_robot("universal_robots_ur10")
+    q = np.random.default_rng(0).uniform(ur10.limits_deg[:, 0], ur10.limits_deg[:, 1], (200, 6))
+    p = ur10.positions(q)
+    e = 1e-3 * p[:, [1, 2, 0]]
+    tmp = tmp_path_factory.mktemp("ur10")
+    save_model(ErrorModel(degree=1, solver="lstsq").fit(p, e), tmp / "ci.json", robot=ur10)
+    save_model(ErrorModel(inputs="joint", degree=1, solver="lstsq").fit(q, e), tmp / "ai.json", robot=ur10)
+    return tmp / "ci.json", tmp / "ai.json"
+
+
+@pytest.mark.parametrize("kind", [0, 1])
+def test_targets_the_ur10_cannot_reach_exit_3_for_every_model_kind(ur10_models, tmp_path, kind):
+    from partcal import load_robot
+
+    ur10 = load_robot("universal_robots_ur10")
+    reachable = ur10.positions(np.array([[30.0, -60, 80, -90, -90, 0]]))[0]
+    targets = tmp_path / "t.csv"
+    targets.write_text("x,y,z\n0,0,0\n1480,0,0\n" + ",".join(f"{v:.6f}" for v in reachable) + "\n")
+    res = run("compensate", str(ur10_models[kind]), str(targets), "-o", str(tmp_path / "c.csv"))
+    assert res.returncode == 3 and res.stderr.count("\n") == 1, res.stderr
+    assert "2 of 3 targets did not converge or are unreachable (first: data row 1 of" in res.stderr
+    with open(tmp_path / "c.csv") as handle:
+        assert [r["converged"] for r in csv.DictReader(handle)] == ["false", "false", "true"]
+
+
+def test_absurd_inputs_are_refused_in_one_line_without_numpy_warnings(cartesian_model, joint_model, tmp_path):
+    points = tmp_path / "p.csv"
+    points.write_text("x,y,z\n1000,0,500\n1e200,0,0\n1e300,1e300,1e300\n")
+    out = tmp_path / "o.csv"
+    res = run("predict", str(cartesian_model), str(points), "-o", str(out))
+    assert res.returncode == 2 and res.stderr.count("\n") == 1, res.stderr
+    assert f"{points}: data row 2: the predicted error is not finite (2 of 3 rows); the input [1e+200, 0, 0]" \
+        in res.stderr and res.stderr.endswith("nothing written\n")
+    assert "Warning" not in res.stderr and not out.exists()
+    from partcal import load_predictor
+
+    size = np.linalg.norm(load_predictor(cartesian_model).predict(positions=[[60000.0, 0, 0]]))
+    assert size > 4413.2                                                     # the SK120's reach (every link out)
+    points.write_text("x,y,z\n1000,0,500\n60000,0,0\n")
+    res = run("predict", str(cartesian_model), str(points), "-o", str(out))
+    assert res.returncode == 2 and res.stderr.count("\n") == 1, res.stderr
+    assert (f"data row 2: the predicted error is {size:.4g} mm, more than robot motoman_sk120's reach (4413 mm) "
+            "(1 of 2 rows)") in res.stderr and not out.exists()
+    points.write_text("x,y,z\n1000,0,500\n1e200,0,0\n1e300,1e300,1e300\n")
+    res = run("compensate", str(cartesian_model), str(points), "-o", str(out))
+    assert res.returncode == 3 and res.stderr.count("\n") == 1 and "Warning" not in res.stderr, res.stderr
+    assert "2 of 3 targets did not converge or are unreachable (first: data row 2" in res.stderr
+    joints = tmp_path / "q.csv"
+    joints.write_text("q1,q2,q3,q4,q5,q6\n0,-120,-170,0,0,0\n1e200,-120,-170,0,0,0\n")
+    res = run("predict", str(joint_model), str(joints), "-o", str(out))
+    assert res.returncode == 2 and res.stderr.count("\n") == 1 and "Warning" not in res.stderr, res.stderr
+    assert f"{joints}: data row 2: the predicted error is not finite (1 of 2 rows)" in res.stderr
+
+
+def test_the_extrapolation_warning_names_the_farthest_point(cartesian_model, tmp_path):
+    m = read_measurements(DATA / "identification.csv")
+    points = tmp_path / "p.csv"
+    rows = [m.nominal_mm[0], m.nominal_mm[1] + [0, 0, -300], m.nominal_mm[2] + [0, 0, -200]]
+    points.write_text("x,y,z\n" + "\n".join(",".join(f"{v:.6f}" for v in r) for r in rows) + "\n")
+    from partcal import load_predictor
+
+    far = load_predictor(cartesian_model).distance_to_data(positions=np.array(rows))
+    res = run("predict", str(cartesian_model), str(points), "-o", str(tmp_path / "o.csv"))
+    assert res.returncode == 0, res.stderr
+    assert res.stderr == (f"partcal: warning: 2 of 3 points lie more than 50 mm from the data the model was fitted on "
+                          f"(the farthest, data row 2, {far[1]:.4g} mm)\n")
+
+
+def test_compensate_reads_the_nominal_columns_of_a_measurement_csv(cartesian_model, tmp_path):
+    from partcal import load_predictor
+
+    res = run("compensate", str(cartesian_model), str(DATA / "identification.csv"), "-o", str(tmp_path / "c.csv"))
+    assert res.returncode == 0, res.stderr
+    with open(tmp_path / "c.csv") as handle:
+        rows = list(csv.DictReader(handle))
+    m = read_measurements(DATA / "identification.csv")
+    assert list(rows[0])[:3] == ["x_nom", "y_nom", "z_nom"] and len(rows) == 85
+    cmd = np.array([[float(r[k]) for k in ("x_cmd", "y_cmd", "z_cmd")] for r in rows])
+    np.testing.assert_allclose(cmd + load_predictor(cartesian_model).predict(positions=cmd), m.nominal_mm, atol=2e-4)
+
+
+def test_screenshot_without_a_browser_is_refused_before_fitting(tmp_path):
+    import subprocess
+    import sys
+
+    config = tmp_path / "configs" / "c.yaml"
+    config.parent.mkdir()
+    config.write_text(f"name: c\ndata:\n  identification: {DATA / 'identification.csv'}\n"
+                      "models:\n  - {name: A, solver: {method: lstsq}}\n")
+    res = subprocess.run([sys.executable, "-m", "partcal", "run", "--screenshot", str(config)], capture_output=True,
+                         text=True, env={"PATH": str(tmp_path)})           # no chromium on this PATH
+    assert res.returncode == 2 and res.stderr == ("partcal: error: no chromium found: install the Debian package "
+                                                  "'chromium' for screenshots\n"), res.stderr
+    assert not (tmp_path / "reports").exists()
+
+
+def test_a_run_warns_in_one_format_once_and_progress_has_its_own_lines(tmp_path, capsys):
+    from partcal.cli import main
+
+    config = tmp_path / "configs" / "c.yaml"
+    config.parent.mkdir()
+    config.write_text(f"name: c\ndata:\n  identification: {DATA / 'identification.csv'}\n  tests:\n"
+                      f"    a: {DATA / 'test_rectangle.csv'}\n"
+                      "models:\n  - {name: Oct, solver: {method: lstsq}, partition: {method: octree, max_depth: 2}}\n")
+    assert main(["run", str(config)]) == 0
+    err = capsys.readouterr().err.splitlines()
+    warned = [line for line in err if "regions, but on the cross-validation folds" in line]
+    assert len(warned) == 1 and warned[0].startswith("partcal: warning: Oct: fitted on all the identification data")
+    progress = [line for line in err if line.startswith("partcal: [1/1] Oct: CV RMS")]
+    assert len(progress) == 1 and ", cross-validated in " in progress[0]

@@ -101,9 +101,12 @@ def test_shipped_configs_load():
 
 
 def data_file(tmp_path, rows, name="few.csv"):
-    """A measurement CSV of the given joint rows (six joints), nominal = measured + 1 mm."""
+    """A measurement CSV of the given joint rows (six joints) of the SK120, measured = nominal + 1 mm."""
+    from partcal import load_robot
+
     lines = ["q1,q2,q3,q4,q5,q6,x_nom,y_nom,z_nom,x_meas,y_meas,z_meas"]
-    lines += [",".join(str(v) for v in [*q, *p, *(np.asarray(p) + 1)]) for q, p in rows]
+    nominal = load_robot("motoman_sk120").positions(np.array([q for q, _ in rows], dtype=float))
+    lines += [",".join(str(v) for v in [*q, *p, *(p + 1)]) for (q, _), p in zip(rows, nominal)]
     path = tmp_path / name
     path.write_text("\n".join(lines) + "\n")
     return path
@@ -123,7 +126,7 @@ def test_data_problems_are_found_before_any_fit(tmp_path, case, message):
     elif case == "constant":
         rows = [((0, -120, -170, 0, 0, 0), (1000.0, 0.0, 500.0))] * 10
     else:
-        rows = [((0, -120, -170, 0, 0, 0), tuple(rng.uniform(0, 1000, 3))) for _ in range(20)]
+        rows = [((rng.uniform(-30, 30), rng.uniform(-130, -110), -170, 0, 0, 0), None) for _ in range(20)]
     text = BASE.replace(str(DATA / "identification.csv"), str(data_file(tmp_path, rows)))
     text = text.replace("    degree: 2\n", "    degree: 2\n    inputs: cartesian\n") if case == "constant" else text
     cfg = load_config(write(tmp_path, text))

@@ -197,3 +197,44 @@ def test_fuzzed_model_files(files, tmp_path, data):
         X = np.array([[float(v) for v in r[:3]] for r in rows])
         got = np.loadtxt(out, delimiter=",", skiprows=1, ndmin=2)[:, 3:]
         np.testing.assert_allclose(got, load_predictor(files["model"]).predict(positions=X), atol=5e-7)
+
+
+# ---------------------------------------------------------------------- units and column swaps
+def write_measurement_csv(path, q, nominal, measured):
+    rows = np.hstack([q, nominal, measured])
+    path.write_text("q1,q2,q3,q4,q5,q6,x_nom,y_nom,z_nom,x_meas,y_meas,z_meas\n"
+                    + "".join(",".join(repr(float(v)) for v in r) + "\n" for r in rows))
+
+
+@settings(FUZZ, max_examples=min(EXAMPLES, 30))       # each example reads a file twice: keep make test fast
+@given(data=st.data())
+def test_fuzzed_units_and_column_swaps_are_refused_with_their_cause(files, tmp_path, data):
+    """A subset of the shipped poses with one mistake (positions in metres, joints in radians, two measured
+    columns swapped, another robot): every one is refused before any fit, naming the likely cause."""
+    from partcal.errors import DataError
+
+    m = read_measurements(DATA / "identification.csv")
+    rows = data.draw(st.lists(st.integers(0, len(m) - 1), min_size=20, max_size=60, unique=True))
+    q, nominal, measured = m.q_deg[rows], m.nominal_mm[rows], m.measured_mm[rows]
+    mistake = data.draw(st.sampled_from(["metres", "nominal metres", "radians", "swap", "robot"]))
+    robot = data.draw(st.sampled_from([None, "motoman_sk120"])) if mistake in ("metres", "swap") else "motoman_sk120"
+    if mistake == "metres":
+        measured, cause = measured / 1000, "are they in metres?"
+    elif mistake == "nominal metres":
+        nominal, cause = nominal / 1000, "x_nom, y_nom, z_nom lie"
+    elif mistake == "radians":
+        q, cause = np.radians(q), "they look like radians"
+    elif mistake == "swap":
+        i, j = data.draw(st.sampled_from([(0, 1), (0, 2), (1, 2)]))
+        order = [0, 1, 2]
+        order[i], order[j] = j, i
+        measured, cause = measured[:, order], f"columns {'xyz'[i]}_meas and {'xyz'[j]}_meas look swapped"
+    else:
+        robot, cause = "universal_robots_ur10", "is it robot 'universal_robots_ur10'?"
+    path = tmp_path / "bad.csv"
+    write_measurement_csv(path, q, nominal, measured)
+    with pytest.raises(DataError, match=__import__("re").escape(cause)):
+        read_measurements(path, robot)
+    write_measurement_csv(path, m.q_deg[rows], m.nominal_mm[rows], m.measured_mm[rows])
+    right = "motoman_sk120" if mistake == "robot" else robot
+    assert len(read_measurements(path, right)) == len(rows)             # the same poses without the mistake

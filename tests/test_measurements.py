@@ -16,8 +16,9 @@ def write(tmp_path, text, name="m.csv"):
 
 def test_round_trip_and_errors(tmp_path):
     rng = np.random.default_rng(0)
-    m = Measurements(rng.uniform(-90, 90, (7, 6)), rng.uniform(-1e3, 1e3, (7, 3)),
-                     rng.uniform(-1e3, 1e3, (7, 3)), name="demo", labels=("a,b",) * 7)
+    nominal = rng.uniform(-1e3, 1e3, (7, 3))
+    m = Measurements(rng.uniform(-90, 90, (7, 6)), nominal, nominal + rng.uniform(-20, 20, (7, 3)), name="demo",
+                     labels=("a,b",) * 7)
     path = tmp_path / "demo.csv"
     write_measurements(m, path, comment="two\nlines")
     back = read_measurements(path)

@@ -31,6 +31,7 @@ from ..errors import DataError
 from ..robot.description import MAX_JOINTS, joint_columns, load_robot
 from ..robot.kinematics import Robot
 from .formats import MeasurementFormat, RowSelection
+from .plausibility import Plausibility, check_measured
 
 NOMINAL = ("x_nom", "y_nom", "z_nom")
 MEASURED = ("x_meas", "y_meas", "z_meas")
@@ -90,7 +91,7 @@ class Measurements:
 
 def read_measurements(path: str | Path, robot: str | Robot | None = None, *, name: str | None = None,
                       fmt: MeasurementFormat | None = None, rows: RowSelection | None = None,
-                      frame: str = "base") -> Measurements:
+                      frame: str = "base", plausibility: Plausibility | None = None) -> Measurements:
     """Read a measurement CSV, or a foreign file described by ``fmt``.
 
     Parameters
@@ -111,6 +112,11 @@ def read_measurements(path: str | Path, robot: str | Robot | None = None, *, nam
         registered (:mod:`partcal.data.registration`); the nominal positions
         then always come from ``robot`` (required), and nominal columns in the
         file are refused rather than silently ignored.
+    plausibility : Plausibility, optional
+        The limits of physically plausible data (default
+        :class:`~partcal.data.plausibility.Plausibility()`): nominal columns
+        against the robot's forward kinematics, joint angles in radians,
+        errors larger than a fraction of the reach.
 
     Returns
     -------
@@ -120,7 +126,8 @@ def read_measurements(path: str | Path, robot: str | Robot | None = None, *, nam
     Raises
     ------
     DataError
-        For any malformed content, naming the file, line and column.
+        For any malformed content, naming the file, line and column; for data
+        no robot can have produced, naming the worst row and the likely cause.
     """
     if frame not in ("base", "tracker"):
         raise DataError(f"The 'frame' parameter of read_measurements must be 'base' or 'tracker'. "
@@ -150,6 +157,8 @@ def read_measurements(path: str | Path, robot: str | Robot | None = None, *, nam
         raise DataError(f"{path}: the file has {n_q} joint columns (q1..q{n_q}) but robot {model.name!r} has "
                         f"{model.n_joints} joints")
     nominal = values[:, n_q:n_q + 3] if nom_cols else model.positions(q)
+    check_measured(str(path), [data[i][0] for i in keep], q, nominal, meas, model, nominal_given=bool(nom_cols),
+                   frame=frame, limits=plausibility or Plausibility())
     labels = None
     if columns["set"] is not None:
         labels = tuple(data[i][1][columns["set"]].strip() for i in keep)

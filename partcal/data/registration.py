@@ -35,6 +35,7 @@ from .._validation import check_array
 from ..errors import DataError
 from ..robot.kinematics import Robot
 from .measurements import Measurements
+from .plausibility import Plausibility, check_residuals
 
 log = logging.getLogger(__name__)
 
@@ -127,7 +128,8 @@ def kabsch(source, target) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
 
 
 def register_tracker(robot: Robot, q_deg, measured_mm, *, tool_mm=None, fit_tool: bool = True,
-                     source: str = "registration", max_condition: float = MAX_CONDITION) -> Registration:
+                     source: str = "registration", max_condition: float = MAX_CONDITION,
+                     plausibility: Plausibility | None = None) -> Registration:
     """Fit the tracker frame (and the tool offset) to measured poses.
 
     Parameters
@@ -147,6 +149,9 @@ def register_tracker(robot: Robot, q_deg, measured_mm, *, tool_mm=None, fit_tool
         Names the data in error messages (a file name).
     max_condition : float
         Refuse registrations whose condition number exceeds this.
+    plausibility : Plausibility, optional
+        Residuals beyond its ``max_error_of_reach`` of the robot's reach are
+        refused, with the likely cause (metres, swapped columns, another robot).
 
     Returns
     -------
@@ -155,7 +160,8 @@ def register_tracker(robot: Robot, q_deg, measured_mm, *, tool_mm=None, fit_tool
     Raises
     ------
     DataError
-        Too few poses, or poses that do not determine the parameters.
+        Too few poses, poses that do not determine the parameters, or
+        residuals no calibrated robot has.
     """
     q = robot.check_joints(q_deg)
     meas = check_array(measured_mm, "measured_mm", columns=3)
@@ -181,6 +187,8 @@ def register_tracker(robot: Robot, q_deg, measured_mm, *, tool_mm=None, fit_tool
     rot = Rotation.from_rotvec(sol.x[:3]).as_matrix() @ rot0
     tool = sol.x[6:9].copy() if fit_tool else tool0.copy()
     registered = meas @ rot.T + sol.x[3:6]
+    check_residuals(source, sol.fun.reshape(-1, 3), p_fl + r_fl @ tool0, meas, robot.reach_mm, robot.name,
+                    plausibility or Plausibility())
     condition, weakest = _conditioning(registered, r_fl, fit_tool)
     if not condition <= max_condition:
         raise DataError(f"{source}: the tracker registration is ill-conditioned (condition number {condition:.3g} > "

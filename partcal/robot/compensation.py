@@ -7,6 +7,12 @@ mm over metres); points that do not reach the tolerance are reported, never
 silently returned. Joint models solve ``FK(q') + e(q') = p`` for the joints
 directly, by damped least squares on the whole equation (joints the model
 never saw move kept fixed).
+
+Either way the answer must be one the robot can take: joint solutions that
+break the robot's limits or coupled constraints (the SK120's ``q2 - q3`` in
+[10, 120]) are not converged, and a Cartesian command is converged only
+where the robot's inverse kinematics reaches it within those limits
+(:func:`reachable`).
 """
 
 from __future__ import annotations
@@ -108,5 +114,33 @@ def false_target_joints(predict: Callable[[NDArray[np.float64]], NDArray[np.floa
     q, iterations = ik.solve(robot, targets_mm, q, free, ik.Settings(max_iter=max_iter), bias=predict,
                              tol_mm=tol_mm)
     reached = robot._positions(q)
-    residual = np.linalg.norm(reached + predict(q) - targets_mm, axis=1)
-    return CompensationResult(reached, q, iterations, residual, residual <= tol_mm)
+    with np.errstate(over="ignore", invalid="ignore"):
+        residual = np.linalg.norm(reached + predict(q) - targets_mm, axis=1)
+    converged = (residual <= tol_mm) & robot.within_limits(q)      # a pose the robot cannot take is no answer
+    return CompensationResult(reached, q, iterations, residual, converged)
+
+
+def reachable(robot: Robot, points_mm: NDArray[np.float64], seeds_deg: NDArray[np.float64] | None = None, *,
+              tol_mm: float = 1e-6, tries: int = 40) -> NDArray[np.bool_]:
+    """Which points ``(n, 3)`` mm the robot's tool reaches with joints inside its limits and constraints.
+
+    Position IK (all joints free) from ``seeds_deg`` (default the home
+    pose); points it misses are tried again from up to ``tries - 1`` more
+    seeds spread over the joint ranges inside the constraints (drawn once
+    from a fixed seed: the same for every call), since damped least squares
+    can stop at a limit, or cross a coupled constraint, from one seed and
+    not from another.
+    """
+    points = np.asarray(points_mm, dtype=float)
+    ok = np.zeros(len(points), dtype=bool)
+    low, high = robot.limits_deg[:, 0], robot.limits_deg[:, 1]
+    spread = np.random.default_rng(0).uniform(low, high, (64 * tries, len(low)))    # fixed: the same every call
+    seeds = [robot.home_deg if seeds_deg is None else seeds_deg, *spread[robot.within_limits(spread)][:tries - 1]]
+    finite = np.all(np.isfinite(points), axis=1)
+    for seed in seeds:
+        todo = np.flatnonzero(~ok & finite)
+        if todo.size == 0:
+            break
+        start = seed if np.ndim(seed) == 1 else np.asarray(seed)[todo]
+        ok[todo] = robot.inverse(points[todo], start, tol_mm=tol_mm).success
+    return ok

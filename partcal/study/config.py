@@ -13,9 +13,10 @@ import re
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-from .._validation import integer, one_of, safe_name
+from .._validation import integer, one_of, real, safe_name
 from .._yamlio import Section, load_yaml
 from ..data.formats import MeasurementFormat, RowSelection
+from ..data.plausibility import Plausibility
 from ..errors import PartcalError
 from ..models.kinds import KINDS, config_kinds
 from ..models.partition import PARTITIONS
@@ -114,6 +115,7 @@ class DataOptions:
     own_frame: tuple[str, ...] = ()
     tool_mm: tuple[float, float, float] | None = None
     fit_tool: bool = True
+    plausibility: Plausibility = Plausibility()      # data.checks: the limits of plausible data
 
     @property
     def converted(self) -> bool:
@@ -124,7 +126,9 @@ class DataOptions:
         return {"format": self.format.to_dict() if self.format else None, "frame": self.frame,
                 "rows": {k: v.to_dict() for k, v in self.rows.items()}, "own_frame": list(self.own_frame),
                 "registration": ({"tool_mm": list(self.tool_mm) if self.tool_mm else None, "fit_tool": self.fit_tool}
-                                 if self.frame == "tracker" else None)}
+                                 if self.frame == "tracker" else None),
+                "checks": {"max_error_of_reach": self.plausibility.max_error_of_reach,
+                           "nominal_tolerance_mm": self.plausibility.nominal_tolerance_mm}}
 
 
 @dataclass(frozen=True)
@@ -260,6 +264,10 @@ def _data(data_sec: Section, top: Section, base: Path, *, has_robot: bool
     for reserved in RESERVED_NAMES & set(tests):     # they share a JSON object with these keys in metrics.json
         tests_sec.fail(tests_sec.path(reserved), f"a test set may not be called {reserved!r} (reserved: "
                                                  f"{', '.join(sorted(RESERVED_NAMES))})")
+    checks = data_sec.section("checks")
+    plausibility = Plausibility(checks.rule("max_error_of_reach", real(1e-6, 1, default=0.05)),
+                                checks.rule("nominal_tolerance_mm", real(1e-9, default=0.01)))
+    checks.done()
     data_sec.done()
     reg = top.section("registration")
     if reg.data and frame != "tracker":
@@ -270,7 +278,7 @@ def _data(data_sec: Section, top: Section, base: Path, *, has_robot: bool
     reg.done()
     return ident, tests, validation, DataOptions(format=fmt, frame=frame, rows={k: v for k, v in rows.items() if v is not None},
                                      own_frame=tuple(own), tool_mm=tuple(float(x) for x in tool) if tool else None,
-                                     fit_tool=fit_tool)
+                                     fit_tool=fit_tool, plausibility=plausibility)
 
 
 def _data_file(sec: Section, key: str, base: Path, *, tracker: bool | None

@@ -32,7 +32,8 @@ log = logging.getLogger(__name__)
 MARKER = ".partcal-output"      # in every folder partcal replaces whole: it may replace it again
 
 
-def check_writable(output: Path, inputs: Iterable[Path] = (), create: bool = True) -> None:
+def check_writable(output: Path, inputs: Iterable[Path] = (), create: bool = True,
+                   option: str = "output: in the config") -> None:
     """Fail early, before any fitting, if the output folder cannot be created or replaced.
 
     A run replaces its output folder whole, so an existing folder is replaced
@@ -40,6 +41,8 @@ def check_writable(output: Path, inputs: Iterable[Path] = (), create: bool = Tru
     never when it holds one of ``inputs`` (the config and data files).
     ``create=False`` (``run --check``) creates no missing parent folder: the
     nearest existing one must be a folder where a folder can be made.
+    ``option`` is what names the folder (``output:`` of a run config, ``-o``
+    of ``import --config``), for the messages.
     """
     parent = output.parent
     try:
@@ -62,19 +65,31 @@ def check_writable(output: Path, inputs: Iterable[Path] = (), create: bool = Tru
     for path in inputs:
         if where in Path(path).resolve().parents:
             raise PartcalError(f"{output}: holds {path}, an input of this run; the output folder is replaced whole, "
-                               "so name a folder of its own (output: in the config, or -o)")
+                               f"so name a folder of its own ({option})")
     entries = sorted(p.name for p in output.iterdir())
-    if entries and not _written_by_partcal(output, entries):
-        shown = ", ".join(entries[:3]) + (f" and {len(entries) - 3} more" if len(entries) > 3 else "")
+    foreign = foreign_entries(output, entries) if entries else []
+    if foreign:
+        shown = ", ".join(foreign[:3]) + (f" and {len(foreign) - 3} more" if len(foreign) > 3 else "")
         raise PartcalError(f"{output}: exists and holds files partcal did not write ({shown}); the output folder "
                            "is replaced whole, so name a new or empty folder, or an earlier partcal output")
 
 
-def _written_by_partcal(folder: Path, entries: list[str]) -> bool:
-    """The folder carries partcal's marker, or is an output of a version before the marker: a run's
-    (metrics.json and config.resolved.yaml) or an import's (CSVs whose first line names partcal)."""
+def foreign_entries(folder: Path, entries: list[str]) -> list[str]:
+    """The entries of an existing output folder partcal did not write (relative paths, sorted).
+
+    The marker lists every file partcal wrote; anything else (a ``NOTES.txt``,
+    a ``raw/`` folder added after the run) is not partcal's to replace. A
+    marker of a version before the list, or no marker at all (a version
+    before the marker), counts as partcal's when the folder holds only what
+    such a run or import writes.
+    """
+    listed = _listed(folder / MARKER) if MARKER in entries else None
+    if listed is not None:
+        present = sorted(str(p.relative_to(folder)) for p in folder.rglob("*") if not p.is_dir())
+        allowed = listed | {MARKER}
+        return sorted({_top_foreign(name, allowed) for name in present if name not in allowed})
     if MARKER in entries or {"metrics.json", "config.resolved.yaml"} <= set(entries):
-        return True
+        return [name for name in entries if name not in _RUN_ENTRIES]
 
     def converted(name: str) -> bool:
         try:
@@ -82,7 +97,34 @@ def _written_by_partcal(folder: Path, entries: list[str]) -> bool:
                 return "(partcal " in handle.readline()
         except (OSError, UnicodeDecodeError):
             return False
-    return all(name.endswith(".csv") and converted(name) for name in entries)
+    return [name for name in entries if not (name.endswith(".csv") and converted(name))]
+
+
+# what a run of a version before the marker's file list wrote at the top of its folder
+_RUN_ENTRIES = {MARKER, "metrics.json", "config.resolved.yaml", "index.html", "report.png", "models", "predictions",
+                "data"}
+_MARKER_HEAD = "written by partcal: a later run or import may replace this folder whole; its files:"
+
+
+def _listed(marker: Path) -> set[str] | None:
+    """The files a marker lists, or None for a marker of a version that listed none."""
+    try:
+        lines = marker.read_text(encoding="utf-8").splitlines()
+    except (OSError, UnicodeDecodeError):
+        return None
+    if not lines or lines[0] != _MARKER_HEAD:
+        return None
+    return {line[2:] for line in lines[1:] if line.startswith("- ")}
+
+
+def _top_foreign(name: str, allowed: set[str]) -> str:
+    """A foreign file's shortest path no listed file lies under (``raw/a.csv`` -> ``raw``)."""
+    parts = Path(name).parts
+    for k in range(1, len(parts) + 1):
+        head = "/".join(parts[:k])
+        if not any(a == head or a.startswith(head + "/") for a in allowed):
+            return head
+    return name
 
 
 def metrics_document(result: RunResult) -> dict:
@@ -152,7 +194,8 @@ def replace_folder(output: Path, fill: Callable[[Path], Any]) -> Any:
     tmp = Path(tempfile.mkdtemp(prefix=f".{output.name}.partial-", dir=output.parent))
     try:
         value = fill(tmp)
-        (tmp / MARKER).write_text("written by partcal: a later run or import may replace this folder whole\n")
+        files = sorted(str(p.relative_to(tmp)) for p in tmp.rglob("*") if not p.is_dir())
+        (tmp / MARKER).write_text(_MARKER_HEAD + "\n" + "".join(f"- {f}\n" for f in files))
         os.chmod(tmp, 0o755)
         if output.exists():
             old = Path(tempfile.mkdtemp(prefix=f".{output.name}.old-", dir=output.parent))

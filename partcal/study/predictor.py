@@ -21,7 +21,7 @@ from .._validation import check_array
 from ..errors import DataError
 from ..metrics import warn_far
 from ..models.bases import varying_inputs
-from ..robot.compensation import CompensationResult, false_target, false_target_joints
+from ..robot.compensation import CompensationResult, false_target, false_target_joints, reachable
 from ..robot.description import robot_from_dict
 from ..robot.kinematics import Robot
 from .persist import load_model
@@ -100,7 +100,10 @@ class Predictor:
 
         ``joints`` (n, N) degrees are IK seeds for joint models (default: the
         robot's home pose, with the joints the model never saw move held at
-        their value in the training data). Unconverged targets warn as in
+        their value in the training data), and the seeds of a Cartesian
+        model's reachability check: with a robot in the file, a command is
+        converged only where the robot's IK reaches it within its joint limits
+        and constraints. Unconverged targets warn as in
         :meth:`compensate`; the distance to the data is left to the caller
         (:meth:`distance_to_data` of the commanded inputs).
         """
@@ -111,10 +114,12 @@ class Predictor:
                                       np.zeros(0, bool))
         if self.inputs == "cartesian":
             result = false_target(self._errors, targets, tol_mm=tol_mm, max_iter=max_iter)
-            if self.robot is not None:      # a commanded point beyond the arm's reach is not a solution
-                far = np.linalg.norm(result.commanded_mm - self.robot.base_mm, axis=1) > self.robot.reach_mm
-                if far.any():
-                    result = dataclasses.replace(result, converged=result.converged & ~far)
+            if self.robot is not None:      # a command the arm cannot reach (IK within its limits) is no solution
+                seeds = None if joints is None else check_array(joints, "joints", columns=self.robot.n_joints)
+                live = np.flatnonzero(result.converged)
+                ok = np.zeros(len(targets), dtype=bool)
+                ok[live] = reachable(self.robot, result.commanded_mm[live], None if seeds is None else seeds[live])
+                result = dataclasses.replace(result, converged=ok)
         else:
             if self.robot is None:
                 raise DataError("compensating a joint model needs its robot, and this model file names none")
@@ -137,6 +142,28 @@ class Predictor:
         active = varying_inputs(np.stack([low, high]))
         fixed = tuple(int(j) + 1 for j in np.flatnonzero(~active))
         return fixed, low[[j - 1 for j in fixed]]
+
+    def refuse_implausible(self, X, errors, source: str = "input") -> None:
+        """Refuse predicted errors ``(n, 3)`` mm that are not finite or longer than the robot's reach.
+
+        Such a number is the model extrapolated beyond meaning (a polynomial
+        at 1e200 mm), not an error: a :class:`DataError` names the first such
+        data row of ``source``, its input ``X`` and its distance from the data.
+        """
+        size = np.linalg.norm(errors, axis=1)
+        limit = self.robot.reach_mm if self.robot is not None else np.inf
+        bad = ~np.isfinite(size) | (size > limit)
+        if not bad.any():
+            return
+        k = int(np.flatnonzero(bad)[0])
+        what = "is not finite" if not np.isfinite(size[k]) else (f"is {size[k]:.4g} mm, more than robot "
+                                                                  f"{self.robot.name}'s reach ({limit:.0f} mm)")
+        key = "positions" if self.inputs == "cartesian" else "joints"
+        far = self.distance_to_data(**{key: X[k:k + 1]})[0]
+        raise DataError(f"{source}: data row {k + 1}: the predicted error {what} ({int(bad.sum())} of {len(bad)} "
+                        f"rows); the input [{', '.join(f'{v:.6g}' for v in X[k])}] lies {far:.4g} "
+                        f"{'mm' if self.inputs == 'cartesian' else 'deg'} from the data the model was fitted on: "
+                        "nothing written")
 
     def distance_to_data(self, positions=None, joints=None) -> NDArray[np.float64]:
         """Distance of each input to the nearest training sample, input units (mm or degrees).

@@ -35,6 +35,7 @@ from ..models.partitioned import fold_regions
 from ..robot.description import load_robot
 from ..robot.kinematics import Robot
 from .config import ModelSpec, RunConfig
+from .memory import check_memory
 from .predictor import Predictor
 
 log = logging.getLogger(__name__)
@@ -110,7 +111,8 @@ def load_datasets(config: RunConfig) -> tuple[dict[str, Measurements], Robot | N
     robot = load_robot(config.robot) if config.robot else None
 
     def read(name: str, path) -> Measurements:
-        return read_measurements(path, robot, name=name, fmt=opts.format, rows=opts.rows.get(name), frame=opts.frame)
+        return read_measurements(path, robot, name=name, fmt=opts.format, rows=opts.rows.get(name), frame=opts.frame,
+                                 plausibility=opts.plausibility)
 
     data = {"identification": read("identification", config.identification)}
     n = data["identification"].n_joints
@@ -131,12 +133,13 @@ def _register(config: RunConfig, data: dict[str, Measurements], robot: Robot):
     opts = config.data_options
     ident = data["identification"]
     shared = register_tracker(robot, ident.q_deg, ident.measured_mm, tool_mm=opts.tool_mm, fit_tool=opts.fit_tool,
-                              source=f"{config.identification} (identification)")
+                              source=f"{config.identification} (identification)", plausibility=opts.plausibility)
     regs = {}
     for name, m in data.items():
         if name in opts.own_frame:
             regs[name] = register_tracker(robot, m.q_deg, m.measured_mm, tool_mm=shared.tool_mm, fit_tool=False,
-                                          source=f"{config.tests[name]} ({name}, own tracker frame)")
+                                          source=f"{config.tests[name]} ({name}, own tracker frame)",
+                                          plausibility=opts.plausibility)
         else:
             regs[name] = shared
     robot = robot.replace(tool_mm=shared.tool_mm.copy())
@@ -189,6 +192,7 @@ def check_run(config: RunConfig, data: dict[str, Measurements]) -> None:
                 config.fail(_key(config, i, prefix + (key or "kind")),
                             f"{entry.name!r} needs {why}, but the smallest cross-validation training fold "
                             f"of the {n}-pose identification set holds {train} samples")
+    check_memory(config, n, ident.n_joints)          # a Gaussian process on many samples outgrows the machine
 
 
 def _key(config: RunConfig, i: int, key: str) -> str:
@@ -326,7 +330,8 @@ def run(config: RunConfig, progress: Callable[[int, int, str], None] | None = No
             results.append(result)
             if progress:
                 progress(len(results), len(jobs), f"{result.spec.name}: CV RMS {result.cv_rms_3d:.3f} mm, "
-                                                  f"fitted in {result.fit_seconds:.2f} s")
+                                                  f"fitted in {result.fit_seconds:.2f} s, cross-validated in "
+                                                  f"{result.cv_seconds:.2f} s")
     if virtual is not None:
         for result in results:
             result.compensation = verify_compensation(result, data, robot, virtual, config.seed)

@@ -1,0 +1,83 @@
+"""Text tables of a finished run (and of simulated data sets): what the command line prints.
+
+The command line only parses arguments and maps errors to exit codes; the
+lines it prints about results are formatted here, beside the run they
+describe. Every number keeps its column apart at any magnitude: a cell that
+does not fit its width switches to exponent notation.
+"""
+
+from __future__ import annotations
+
+from ..metrics import rms_per_axis
+
+# Table 2 of the paper: uncompensated RMS (mm) per data set, x / y / z.
+PAPER_UNCOMPENSATED = {
+    "identification": (8.0, 7.5, 17.9),
+    "test_rectangle": (16.2, 19.1, 16.6),
+    "test_spiral_xy": (54.3, 5.4, 60.9),
+    "test_spiral_yz": (11.8, 19.4, 2.0),
+}
+
+
+def cell(value: float, width: int = 8) -> str:
+    """``value`` right-aligned in ``width`` characters with at least one leading space.
+
+    >>> cell(2.254), cell(321518.0), cell(float("nan"))
+    ('    2.25', ' 3.2e+05', '     nan')
+    """
+    text = f"{value:.2f}"
+    if len(text) > width - 1:
+        text = f"{value:.{max(width - 7, 0)}e}"
+    return f"{text:>{width}}"
+
+
+def simulation_table(study, data: dict) -> list[str]:
+    """The uncompensated RMS of simulated data sets beside the paper's Table 2 (``partcal simulate``)."""
+    lines = [f"Virtual {study.robot.nominal.name}, seed {study.seed}: uncompensated RMS error (mm)",
+             f"{'data set':<18}{'n':>6}{'x':>8}{'y':>8}{'z':>8}   paper Table 2 (x / y / z)"]
+    for name, m in data.items():
+        paper = PAPER_UNCOMPENSATED.get(name)
+        ref = " / ".join(f"{v:.1f}" for v in paper) if paper else "-"
+        lines.append(f"{name:<18}{len(m):>6}" + "".join(cell(v) for v in rms_per_axis(m.errors_mm)) + f"   {ref}")
+    return lines
+
+
+def results_table(result) -> str:
+    """The paper's Table 2 layout: RMS x / y / z (mm) per model and data set, the best model, registrations
+    and the compensation check (``partcal run``)."""
+    names = list(result.datasets)
+    width = 24
+    head1 = f"{'RMS error (mm)':<{width}}" + "".join(f"{n[:22]:^24}" for n in names)
+    head2 = f"{'model':<{width}}" + "".join(f"{'x':>8}{'y':>8}{'z':>8}" for _ in names)
+    lines = [head1, head2, "-" * len(head2)]
+
+    def row(label, stats):
+        return f"{label[:width - 1]:<{width}}" + "".join("".join(cell(v) for v in stats[n]["rms"]) for n in names)
+
+    lines.append(row("uncompensated", result.uncompensated))
+    for r in result.models:
+        lines.append(row(r.spec.name, r.metrics))
+    best = next(r for r in result.models if r.spec.name == result.best)
+    rule = "validation 3-D RMS" if result.config.rank_by == "validation" else "CV 3-D RMS"
+    lines.append(f"best: {best.spec.name} ({rule} {best.score(result.config.rank_by):.3f} mm), chosen by the "
+                 f"{result.best_reason}")
+    regs = result.registrations
+    for reg in {id(r): r for r in regs.values()}.values():
+        lines.append(registration_line(reg, [n for n, r in regs.items() if r is reg]))
+    comp = [r for r in result.models if r.compensation]
+    if comp:
+        lines.append("")
+        lines.append("compensation on the virtual robot, 3-D RMS (mm): before / predicted residual / after")
+        for r in comp:
+            cells = "  ".join(f"{n}: {c['before']['rms_3d']:.2f} / {c['predicted_residual']['rms_3d']:.2f} / "
+                              f"{c['after']['rms_3d']:.2f}" for n, c in r.compensation.items())
+            lines.append(f"  {r.spec.name:<22}{cells}")
+    return "\n".join(lines)
+
+
+def registration_line(reg, sets=None) -> str:
+    """One line on a tracker registration: poses, residual, tool offset, condition."""
+    where = f" ({', '.join(sets)})" if sets else ""
+    return (f"tracker registration{where}: {reg.n_poses} poses, residual 3-D RMS {reg.rms_3d:.3f} mm, max "
+            f"{reg.max_3d:.3f} mm, tool [{', '.join(f'{v:.3f}' for v in reg.tool_mm)}] mm "
+            f"({'fitted' if reg.fit_tool else 'given'}), condition {reg.condition:.1f}")

@@ -281,13 +281,6 @@ def _uncertainty(jac: NDArray[np.float64], resid: NDArray[np.float64]) -> tuple[
 RESIDUAL_MODELS = (ErrorModel, PartitionedErrorModel, GaussianProcessErrorModel)
 
 
-def inputs_of(model) -> str:
-    """What a model reads: ``cartesian`` (positions, mm) or ``joint`` (angles, degrees)."""
-    if isinstance(model, PartitionedErrorModel):
-        return (model.local if model.local is not None else ErrorModel()).inputs
-    return model.inputs
-
-
 class KinematicModel(ErrorModelBase):
     """Kinematic calibration as an error model, optionally with a model of what it leaves.
 
@@ -395,7 +388,7 @@ class KinematicModel(ErrorModelBase):
 
     def _residual_inputs(self, X: NDArray[np.float64], nominal: NDArray[np.float64]) -> NDArray[np.float64]:
         """What the residual model reads: the nominal positions ``nominal`` (mm) or the joints ``X`` (deg)."""
-        return nominal if inputs_of(self.residual_) == "cartesian" else X
+        return nominal if self.residual_.inputs == "cartesian" else X
 
     # ------------------------------------------------------------------ prediction
     def predict(self, X) -> NDArray[np.float64]:

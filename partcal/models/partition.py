@@ -278,11 +278,6 @@ BLEND_WIDTH = real(0.6, 10.0, default=0.7)       # kernel widths relative to the
 PARTITIONS = {"octree": Octree, "kmeans": KMeansPartition}     # a run config's partition.method -> settings
 
 
-def check_width(value) -> float:
-    """Kernel widths relative to the regions: below 0.6 neighbouring kernels barely overlap."""
-    return float(BLEND_WIDTH.check("PartitionedErrorModel", "blend_width", value))
-
-
 def partition_from_file(p: FieldReader, m: int, n_in: int, active: np.ndarray) -> Partition:
     """A model file's partition of ``m`` regions in ``n_in`` coordinates, with every index in range and every
     kernel width positive on the varying axes.

@@ -7,7 +7,7 @@ from conftest import ROOT, SHARED, partcal_cli
 from partcal import load_robot, read_measurements
 from partcal.data.plausibility import Plausibility
 from partcal.data.registration import register_tracker
-from partcal.errors import DataError
+from partcal.errors import DataError, PartcalError
 
 DATA = ROOT / "data" / "sk120"
 UR10 = SHARED / "datasets" / "ipa_ur10" / "Series_B" / "measurements_joint_configurations.csv"
@@ -89,7 +89,8 @@ def test_an_error_limit_is_configurable(ident, tmp_path):
     assert len(read_measurements(path, "motoman_sk120")) == 85          # 150 mm < 5% of the 4413 mm reach
     with pytest.raises(DataError, match=r"is 150 mm \(85 of 85 poses beyond 132.4 mm, 0.03 of robot"):
         read_measurements(path, "motoman_sk120", plausibility=Plausibility(max_error_of_reach=0.03))
-    with pytest.raises(DataError, match="max_error_of_reach' parameter of Plausibility must be a number in"):
+    with pytest.raises(PartcalError, match=r"The 'max_error_of_reach' parameter of Plausibility must be a real "
+                                           r"number in \(0\.0, 1\.0\]\. Got 0 instead\."):
         Plausibility(max_error_of_reach=0)
 
 

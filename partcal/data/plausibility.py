@@ -32,6 +32,7 @@ from itertools import permutations
 import numpy as np
 from numpy.typing import NDArray
 
+from .._validation import check_params, real
 from ..errors import DataError
 
 _AXES = ("x", "y", "z")
@@ -56,13 +57,11 @@ class Plausibility:
     max_error_of_reach: float = 0.05
     nominal_tolerance_mm: float = 0.01
 
+    rules = {"max_error_of_reach": real(0.0, 1.0, default=0.05, low_open=True),     # read by the config too
+             "nominal_tolerance_mm": real(0.0, default=0.01, low_open=True)}
+
     def __post_init__(self):
-        if not 0 < self.max_error_of_reach <= 1:
-            raise DataError(f"The 'max_error_of_reach' parameter of Plausibility must be a number in (0, 1]. "
-                            f"Got {self.max_error_of_reach!r} instead.")
-        if not 0 < self.nominal_tolerance_mm < float("inf"):
-            raise DataError(f"The 'nominal_tolerance_mm' parameter of Plausibility must be a positive number. "
-                            f"Got {self.nominal_tolerance_mm!r} instead.")
+        check_params("Plausibility", self.rules, (), {name: getattr(self, name) for name in self.rules})
 
 
 def check_measured(source: str, rows: list[int], q_deg: NDArray[np.float64], nominal_mm, measured_mm,
@@ -198,11 +197,10 @@ def _spread(p: NDArray[np.float64]) -> float:
 def _mismatch(expected: NDArray[np.float64], got: NDArray[np.float64], rigid: bool) -> float:
     """3-D RMS of ``got - expected``, after the best rigid motion of ``got`` with ``rigid``."""
     if rigid and len(got) >= 3:
-        g0, e0 = got.mean(axis=0), expected.mean(axis=0)
-        u, _, vt = np.linalg.svd((got - g0).T @ (expected - e0))
-        d = np.sign(np.linalg.det(vt.T @ u.T)) or 1.0
-        rot = vt.T @ np.diag([1.0, 1.0, d]) @ u.T
-        got = (got - g0) @ rot.T + e0
+        from .registration import kabsch          # registration imports this module
+
+        rot, shift = kabsch(got, expected)
+        got = got @ rot.T + shift
     return float(np.sqrt(np.mean(np.sum((got - expected) ** 2, axis=1))))
 
 

@@ -13,7 +13,7 @@ import re
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-from .._validation import integer, one_of, real, safe_name
+from .._validation import integer, one_of, safe_name
 from .._yamlio import Section, load_yaml
 from ..data.formats import MeasurementFormat, RowSelection
 from ..data.plausibility import Plausibility
@@ -265,8 +265,7 @@ def _data(data_sec: Section, top: Section, base: Path, *, has_robot: bool
         tests_sec.fail(tests_sec.path(reserved), f"a test set may not be called {reserved!r} (reserved: "
                                                  f"{', '.join(sorted(RESERVED_NAMES))})")
     checks = data_sec.section("checks")
-    plausibility = Plausibility(checks.rule("max_error_of_reach", real(1e-6, 1, default=0.05)),
-                                checks.rule("nominal_tolerance_mm", real(1e-9, default=0.01)))
+    plausibility = Plausibility(**{key: checks.rule(key, rule) for key, rule in Plausibility.rules.items()})
     checks.done()
     data_sec.done()
     reg = top.section("registration")

@@ -72,6 +72,9 @@ KINDS: dict[str, Kind] = {kind.name: kind for kind in (
 )}
 
 
+BUILT_IN = tuple(KINDS)
+
+
 def register_kind(kind: Kind) -> Kind:
     """Add a kind to the table (a name, or a model-file name, already taken is refused); returns it."""
     if not (isinstance(kind.estimator, type) and issubclass(kind.estimator, ErrorModelBase)):
@@ -88,7 +91,7 @@ def register_kind(kind: Kind) -> Kind:
 
 def unregister_kind(name: str) -> None:
     """Remove a kind added by :func:`register_kind` (the built-in ones stay)."""
-    if name in ("series", "gaussian_process", "kinematic", "partitioned"):
+    if name in BUILT_IN:
         raise PartcalError(f"kind {name!r} is built in")
     KINDS.pop(name, None)
 

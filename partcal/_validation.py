@@ -176,9 +176,10 @@ def integer(low: int, high: int | None = None, *, default: Any = None, none: boo
     return Rule("int", low if default is None and not none else default, low, high, none=none)
 
 
-def real(low: float | None = None, high: float | None = None, *, default: float, low_open: bool = False) -> Rule:
-    """A rule for a finite real number in ``[low, high]`` (``(low, high]`` with ``low_open``)."""
-    return Rule("float", default, low, high, low_open=low_open)
+def real(low: float | None = None, high: float | None = None, *, default: float | None, low_open: bool = False,
+         none: bool = False) -> Rule:
+    """A rule for a finite real number in ``[low, high]`` (``(low, high]`` with ``low_open``; None too with ``none``)."""
+    return Rule("float", default, low, high, low_open=low_open, none=none)
 
 
 def boolean(default: bool) -> Rule:

@@ -47,10 +47,10 @@ class Progress:
     def __call__(self, done: int, total: int, text: str) -> None:
         if self.quiet:
             return
-        if self.banner:      # shown with the first result, so bad input still gets exactly one line
+        if self.banner:      # shown with the first line, so bad input still gets exactly one line
             sys.stderr.write(self.banner + "\n")
             self.banner = ""
-        sys.stderr.write(f"partcal: [{done}/{total}] {text}\n")
+        sys.stderr.write(f"partcal: [{done}/{total}] {text}\n" if done else f"partcal: {text}\n")
         sys.stderr.flush()
 
 
@@ -65,10 +65,11 @@ def _cmd_run(args) -> int:
         from .study.registry import check_run, load_datasets
 
         data, _, _ = load_datasets(config)
-        check_run(config, data)
+        plan = check_run(config, data)
         check_writable(config.output, config.inputs(), create=False)
         sizes = ", ".join(f"{name} {len(m)}" for name, m in data.items())
-        print(f"{args.config}: OK: {len(config.models)} models; data sets (poses): {sizes}; nothing fitted")
+        print(f"{args.config}: OK: {len(plan.models)} models; data sets (rows): {sizes}; cross-validation: "
+              f"{plan.cv.describe()}; nothing fitted")
         return 0
     if args.screenshot:
         _check_browser()                       # before the fits, not after them

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Callable
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -30,19 +32,171 @@ def summary(errors_mm: NDArray[np.float64]) -> dict:
     }
 
 
+LEAVE_ONE_OUT_UP_TO = 30      # cv_folds: auto -> leave one pose out up to this many poses, 5 folds above
+
+
+def pose_groups(q_deg: NDArray[np.float64], decimals: int = 6) -> NDArray[np.intp]:
+    """Group label of each row: rows with the same joint angles (to ``10**-decimals`` deg) are one pose.
+
+    Labels count from 0 in the order poses first appear, so a file without
+    repeats gets ``0, 1, 2, ...``.
+
+    >>> pose_groups(np.array([[0.0, 1.0], [5.0, 0.0], [0.0, 1.0]])).tolist()
+    [0, 1, 0]
+    """
+    q = np.round(np.asarray(q_deg, dtype=float), decimals).reshape(len(q_deg), -1)
+    return _first_appearance(np.unique(q, axis=0, return_index=True, return_inverse=True))
+
+
+def labels_as_groups(labels) -> NDArray[np.intp]:
+    """Group numbers (from 0, in order of first appearance) of any labels, a user's group column say.
+
+    >>> labels_as_groups(["b", "a", "b"]).tolist()
+    [0, 1, 0]
+    """
+    return _first_appearance(np.unique(np.asarray(labels), return_index=True, return_inverse=True))
+
+
+def _first_appearance(unique) -> NDArray[np.intp]:
+    _, first, inverse = unique
+    rank = np.empty(len(first), dtype=np.intp)
+    rank[np.argsort(first, kind="stable")] = np.arange(len(first))
+    return rank[np.ravel(inverse)]
+
+
+def repeat_scatter_mm(errors_mm: NDArray[np.float64], groups: NDArray[np.intp]) -> float | None:
+    """Standard deviation of one coordinate between repeated measurements of a pose, mm; None without repeats.
+
+    Pooled over the poses measured more than once: ``sqrt(sum |e - mean of its pose|^2 / (3 (n - G)))``
+    over their ``n`` rows in ``G`` poses.
+
+    >>> repeat_scatter_mm(np.array([[1.0, 0, 0], [-1.0, 0, 0], [5.0, 5, 5]]), np.array([0, 0, 1]))
+    0.816496580927726
+    """
+    groups = np.asarray(groups, dtype=np.intp)
+    counts = np.bincount(groups)
+    repeated = counts[groups] > 1
+    if not repeated.any():
+        return None
+    e, g = np.asarray(errors_mm, dtype=float)[repeated], groups[repeated]
+    means = np.stack([np.bincount(g, weights=e[:, j], minlength=len(counts)) for j in range(e.shape[1])], axis=1)
+    spread = e - means[g] / counts[g][:, None]
+    dof = e.shape[1] * (len(e) - len(np.unique(g)))
+    return float(np.sqrt(np.sum(spread**2) / dof))
+
+
+def fold_rule(cv_folds: int | str, n_groups: int) -> int | str:
+    """The folds a run uses: ``cv_folds`` (an int k, ``"leave_one_out"`` or ``"auto"``) for ``n_groups`` poses.
+
+    ``auto`` leaves one pose out up to :data:`LEAVE_ONE_OUT_UP_TO` poses (on
+    few poses a fifth of them held out leaves too few to fit a many-parameter
+    model, and five fold scores are too few to compare models), 5 folds above.
+    An int is capped at the number of poses.
+
+    >>> fold_rule("auto", 16), fold_rule("auto", 85), fold_rule(10, 6)
+    ('leave_one_out', 5, 6)
+    """
+    if cv_folds == "auto":
+        return "leave_one_out" if n_groups <= LEAVE_ONE_OUT_UP_TO else 5
+    if cv_folds == "leave_one_out":
+        return cv_folds
+    return min(int(cv_folds), n_groups)
+
+
+def fold_name(rule: int | str) -> str:
+    """``5`` -> ``'5-fold'``; ``'leave_one_out'`` -> ``'leave-one-pose-out'``."""
+    return "leave-one-pose-out" if rule == "leave_one_out" else f"{rule}-fold"
+
+
+def grouped_splits(groups: NDArray[np.intp], rule: int | str, random_state: int = 0
+                   ) -> list[tuple[NDArray[np.intp], NDArray[np.intp]]]:
+    """``(train, test)`` row indices that never split a group: ``rule`` folds of shuffled groups, or one per group.
+
+    ``groups`` numbers the groups from 0 (see :func:`pose_groups`). With every
+    row its own group, k folds are exactly scikit-learn's shuffled ``KFold``
+    (:func:`kfold_splits`), so files without repeats keep their folds.
+
+    >>> folds = grouped_splits(np.array([0, 0, 1, 2, 2, 3]), 2, random_state=0)
+    >>> [test.tolist() for _, test in folds]
+    [[3, 4, 5], [0, 1, 2]]
+    """
+    groups = np.asarray(groups, dtype=np.intp)
+    n_groups = int(groups.max()) + 1
+    if rule == "leave_one_out":
+        chunks = [np.array([g]) for g in range(n_groups)]
+    else:
+        k = int(rule)
+        if not 2 <= k <= n_groups:
+            raise ValueError(f"{k} folds need at least {k} groups (poses), got {n_groups}")
+        order = np.arange(n_groups)
+        np.random.RandomState(random_state).shuffle(order)         # KFold's own shuffle, on groups
+        bounds = np.cumsum([0] + [n_groups // k + (i < n_groups % k) for i in range(k)])
+        chunks = [order[a:b] for a, b in zip(bounds[:-1], bounds[1:])]
+    out = []
+    for chunk in chunks:
+        held = np.isin(groups, chunk)
+        out.append((np.flatnonzero(~held), np.flatnonzero(held)))
+    return out
+
+
 def kfold_splits(n: int, folds: int, random_state: int = 0) -> list[tuple[NDArray[np.intp], NDArray[np.intp]]]:
     """Shuffled k-fold ``(train, test)`` index pairs for ``n`` samples (scikit-learn's ``KFold``).
 
-    A batch run draws these once, from its seed, and scores every model on the
-    same folds, so that the ranking compares models and not luck.
+    A batch run draws its folds once, from its seed, and scores every model on
+    the same folds, so that the ranking compares models and not luck.
 
     >>> folds = kfold_splits(10, 5, random_state=0)
     >>> sorted(i for _, test in folds for i in test) == list(range(10)), [len(t) for _, t in folds]
     (True, [2, 2, 2, 2, 2])
     """
-    from sklearn.model_selection import KFold
+    return grouped_splits(np.arange(n), folds, random_state)
 
-    return list(KFold(n_splits=folds, shuffle=True, random_state=random_state).split(np.zeros((n, 1))))
+
+def held_out_residuals(model, X, y, folds, *, fitted: list | None = None,
+                       progress: Callable[[int, int], None] | None = None) -> NDArray[np.float64]:
+    """``y - prediction`` of every sample by ``model`` fitted on the folds without it, shape of ``y``.
+
+    ``fitted`` receives the model fitted on each fold; ``progress(done, total)`` is called after each fold.
+    """
+    from sklearn.base import clone
+
+    X, y = np.asarray(X, dtype=float), np.asarray(y, dtype=float)
+    resid = np.empty_like(y)
+    for i, (train, test) in enumerate(folds):
+        fold = clone(model).fit(X[train], y[train])
+        resid[test] = y[test] - fold.predict(X[test])
+        if fitted is not None:
+            fitted.append(fold)
+        if progress is not None:
+            progress(i + 1, len(folds))
+    return resid
+
+
+def pooled_rms(resid: NDArray[np.float64]) -> float:
+    """3-D RMS of residuals ``(n, m)``: ``sqrt(mean(|e|^2))`` over the rows."""
+    return float(np.sqrt(np.mean(np.sum(resid.reshape(len(resid), -1) ** 2, axis=1))))
+
+
+def rms_standard_error(resid: NDArray[np.float64], groups: NDArray[np.intp]) -> float:
+    """Standard error of :func:`pooled_rms` of held-out residuals, from its spread over the groups (poses).
+
+    The mean square is a ratio of sums over ``G`` groups (``s_g``: the group's
+    sum of ``|e|^2``, ``n_g`` its rows); its standard error is that of a ratio
+    estimator, ``sqrt(sum((s_g - MSE n_g)^2) / (G (G - 1))) / mean(n_g)``, and
+    the RMS's follows by the delta method, divided by ``2 RMS``.
+
+    >>> e = np.array([[1.0, 0, 0], [3.0, 0, 0]])
+    >>> round(rms_standard_error(e, np.array([0, 1])), 4)     # MSE 5 +- 4, RMS 2.236 +- 4 / (2 * 2.236)
+    0.8944
+    """
+    sq = np.sum(resid.reshape(len(resid), -1) ** 2, axis=1)
+    groups = np.asarray(groups, dtype=np.intp)
+    s, n = np.bincount(groups, weights=sq), np.bincount(groups).astype(float)
+    if len(s) < 2:
+        return float("nan")
+    mse = s.sum() / n.sum()
+    se_mse = np.sqrt(np.sum((s - mse * n) ** 2) / (len(s) * (len(s) - 1))) / n.mean()
+    return float(se_mse / (2.0 * np.sqrt(mse))) if mse > 0 else 0.0
 
 
 def cross_validated_rms(model, X, y, *, folds=5, random_state=0, fitted: list | None = None) -> float:
@@ -55,22 +209,13 @@ def cross_validated_rms(model, X, y, *, folds=5, random_state=0, fitted: list | 
     ----------
     folds : int or list of (train, test) index arrays
         The number of shuffled folds (drawn with ``random_state``), or the
-        folds themselves (see :func:`kfold_splits`).
+        folds themselves (see :func:`kfold_splits`, :func:`grouped_splits`).
     fitted : list, optional
         Receives the model fitted on each fold (to see, say, how many regions
         a partition kept with fewer samples).
     """
-    from sklearn.base import clone
-
-    X, y = np.asarray(X, dtype=float), np.asarray(y, dtype=float)
     splits = kfold_splits(len(X), folds, random_state) if isinstance(folds, int) else folds
-    resid = np.empty_like(y)
-    for train, test in splits:
-        fold = clone(model).fit(X[train], y[train])
-        resid[test] = y[test] - fold.predict(X[test])
-        if fitted is not None:
-            fitted.append(fold)
-    return float(np.sqrt(np.mean(np.sum(resid.reshape(len(y), -1) ** 2, axis=1))))
+    return pooled_rms(held_out_residuals(model, X, y, splits, fitted=fitted))
 
 
 def select_by_cv(candidates, X, y, *, folds, fold_models: list | None = None
@@ -96,27 +241,72 @@ def select_by_cv(candidates, X, y, *, folds, fold_models: list | None = None
     return min(range(len(scores)), key=scores.__getitem__), scores, fitted, seconds
 
 
-def nested_cross_validated_rms(candidates, X, y, *, folds, inner_folds: int = 5, random_state=0) -> float:
-    """Honest CV score of "choose among ``candidates`` by CV, then fit": the choice is made inside each fold.
+def nested_residuals(candidates, X, y, *, folds, inner: Callable[[NDArray[np.intp]], list],
+                     progress: Callable[[int, int], None] | None = None) -> NDArray[np.float64]:
+    """Held-out residuals of "choose among ``candidates`` by CV, then fit": the choice is made inside each fold.
 
     For every outer ``(train, test)`` fold the candidate (an unfitted
-    estimator; granularities of a partitioned model, say) is chosen by
-    ``inner_folds``-fold CV on the outer training set alone (folds drawn with
-    ``random_state``; the first of equal scores), fitted there, and scored on
-    the held-out test set. Returns the pooled 3-D RMS of those held-out
-    predictions, mm. Scoring the chosen candidate on the folds that chose it
-    would flatter it.
+    estimator; granularities of a partitioned model, say) is chosen by CV on
+    the outer training rows alone, on the folds ``inner(train)`` returns
+    (index pairs into ``train``; the first of equal scores), fitted there and
+    scored on the held-out rows. Scoring the chosen candidate on the folds
+    that chose it would flatter it. Each candidate may first be frozen on the
+    outer training rows (``candidate.frozen(X, y)``: a Gaussian process fixes
+    the hyperparameters it learns there), so the inner fits only solve; no
+    fold learns anything from its held-out rows.
     """
-    from sklearn.base import clone
-
     X, y = np.asarray(X, dtype=float), np.asarray(y, dtype=float)
     resid = np.empty_like(y)
-    for train, test in folds:
-        inner = kfold_splits(len(train), inner_folds, random_state)
-        scores = [cross_validated_rms(c, X[train], y[train], folds=inner) for c in candidates]
-        chosen = candidates[min(range(len(scores)), key=scores.__getitem__)]
-        resid[test] = y[test] - clone(chosen).fit(X[train], y[train]).predict(X[test])
-    return float(np.sqrt(np.mean(np.sum(resid.reshape(len(y), -1) ** 2, axis=1))))
+    for i, (train, test) in enumerate(folds):
+        Xt, yt = X[train], y[train]
+        frozen = [_frozen(c, Xt, yt) for c in candidates]
+        scores = [pooled_rms(held_out_residuals(c, Xt, yt, inner(train))) for c in frozen]
+        chosen = frozen[min(range(len(scores)), key=scores.__getitem__)]
+        resid[test] = y[test] - _clone(chosen).fit(Xt, yt).predict(X[test])
+        if progress is not None:
+            progress(i + 1, len(folds))
+    return resid
+
+
+def nested_cross_validated_rms(candidates, X, y, *, folds, inner_folds: int = 5, random_state=0) -> float:
+    """Honest CV score (pooled 3-D RMS, mm) of "choose among ``candidates`` by CV, then fit".
+
+    See :func:`nested_residuals`; here the inner folds are ``inner_folds``
+    shuffled folds of each outer training set (drawn with ``random_state``;
+    at most one per sample).
+    """
+    def inner(train):
+        return kfold_splits(len(train), min(inner_folds, len(train)), random_state)
+
+    return pooled_rms(nested_residuals(candidates, X, y, folds=folds, inner=inner))
+
+
+def choose_simplest(scores, errors, sizes) -> int:
+    """The index a run picks: the simplest model whose score is within one standard error of the best.
+
+    ``scores``: CV RMS per model; ``errors``: their standard errors; ``sizes``:
+    effective parameter counts. Among the models scoring at most ``best +
+    its standard error``, the fewest parameters wins (then the lower score,
+    then the first). A NaN standard error counts as 0 (the lowest score wins).
+
+    >>> choose_simplest([0.30, 0.28, 0.50], [0.02, 0.03, 0.01], [26, 90, 10])
+    0
+    """
+    best = min(range(len(scores)), key=lambda i: (scores[i], i))
+    se = errors[best] if np.isfinite(errors[best]) else 0.0
+    within = [i for i in range(len(scores)) if scores[i] <= scores[best] + se]
+    return min(within, key=lambda i: (sizes[i], scores[i], i))
+
+
+def _frozen(model, X, y):
+    freeze = getattr(model, "frozen", None)
+    return freeze(X, y) if freeze is not None else model
+
+
+def _clone(model):
+    from sklearn.base import clone
+
+    return clone(model)
 
 
 class ExtrapolationWarning(UserWarning):

@@ -54,6 +54,11 @@ class Measurements:
         The data set's name (the file stem by default).
     labels : tuple of str, optional
         The ``set`` column, when present.
+    groups : tuple of str, optional
+        The pose each row measures, from a column the reader was told to read
+        (``group_column``): rows of one pose are held out together by
+        cross-validation. Without it, rows with identical joint angles are one
+        pose.
     """
 
     q_deg: NDArray[np.float64]
@@ -61,6 +66,7 @@ class Measurements:
     measured_mm: NDArray[np.float64]
     name: str = "measurements"
     labels: tuple[str, ...] | None = field(default=None)
+    groups: tuple[str, ...] | None = field(default=None)
 
     def __post_init__(self):
         q = check_array(self.q_deg, "q_deg", min_rows=1)
@@ -73,8 +79,10 @@ class Measurements:
                 raise DataError(f"{attr} has {arr.shape[0]} rows but q_deg has {n}")
             object.__setattr__(self, attr, arr)
         object.__setattr__(self, "q_deg", q)
-        if self.labels is not None and len(self.labels) != n:
-            raise DataError(f"labels has {len(self.labels)} entries but q_deg has {n} rows")
+        for name in ("labels", "groups"):
+            given = getattr(self, name)
+            if given is not None and len(given) != n:
+                raise DataError(f"{name} has {len(given)} entries but q_deg has {n} rows")
 
     def __len__(self) -> int:
         return self.q_deg.shape[0]
@@ -91,7 +99,8 @@ class Measurements:
 
 def read_measurements(path: str | Path, robot: str | Robot | None = None, *, name: str | None = None,
                       fmt: MeasurementFormat | None = None, rows: RowSelection | None = None,
-                      frame: str = "base", plausibility: Plausibility | None = None) -> Measurements:
+                      frame: str = "base", plausibility: Plausibility | None = None,
+                      group_column: str | None = None) -> Measurements:
     """Read a measurement CSV, or a foreign file described by ``fmt``.
 
     Parameters
@@ -117,6 +126,9 @@ def read_measurements(path: str | Path, robot: str | Robot | None = None, *, nam
         :class:`~partcal.data.plausibility.Plausibility()`): nominal columns
         against the robot's forward kinematics, joint angles in radians,
         errors larger than a fraction of the reach.
+    group_column : str, optional
+        A column of the file (any text) naming the pose each row measures:
+        kept as :attr:`Measurements.groups`.
 
     Returns
     -------
@@ -159,11 +171,16 @@ def read_measurements(path: str | Path, robot: str | Robot | None = None, *, nam
     nominal = values[:, n_q:n_q + 3] if nom_cols else model.positions(q)
     check_measured(str(path), [data[i][0] for i in keep], q, nominal, meas, model, nominal_given=bool(nom_cols),
                    frame=frame, limits=plausibility or Plausibility())
-    labels = None
+    labels = groups = None
     if columns["set"] is not None:
         labels = tuple(data[i][1][columns["set"]].strip() for i in keep)
+    if group_column is not None:
+        if group_column not in seen:
+            raise DataError(f"{path}:{line}: column {group_column!r} is missing (data.groups names it as the "
+                            f"column of each row's pose); the file has {', '.join(h.strip(chr(39)) for h in header)}")
+        groups = tuple(data[i][1][seen[group_column]].strip() for i in keep)
     return Measurements(q_deg=q, nominal_mm=nominal, measured_mm=meas,
-                        name=name if name is not None else path.stem, labels=labels)
+                        name=name if name is not None else path.stem, labels=labels, groups=groups)
 
 
 def _rows(path: Path, delimiter: str = ","):

@@ -243,4 +243,4 @@ def registered(m: Measurements, robot: Robot, reg: Registration) -> Measurements
     """
     nominal = robot.replace(tool_mm=np.asarray(reg.tool_mm, dtype=float)).positions(m.q_deg)
     return Measurements(q_deg=m.q_deg, nominal_mm=nominal, measured_mm=reg.to_base(m.measured_mm), name=m.name,
-                        labels=m.labels)
+                        labels=m.labels, groups=m.groups)

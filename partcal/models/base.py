@@ -114,6 +114,21 @@ class ErrorModelBase(RegressorMixin, BaseEstimator):
         parameter (a key of the config entry) that sets it, or None."""
         return 1, "one sample", None
 
+    def effective_parameters(self) -> float:
+        """Effective degrees of freedom of the fitted model over all its outputs (the trace of its hat
+        matrix: the coefficient count of a linear model); a run prefers the fewer among models whose
+        CV scores are within a standard error. NaN when unknown (never preferred as simpler)."""
+        return float("nan")
+
+    def fit_notes(self) -> list[str]:
+        """What went wrong in a fit without failing it, in words (a run warns of each); none by default."""
+        return []
+
+    def frozen(self, X, y) -> "ErrorModelBase":
+        """An unfitted copy that repeats no costly search learnt on ``X, y`` (nested CV's inner folds);
+        itself when there is nothing to keep."""
+        return self
+
     def peak_fit_bytes(self, n: int, n_joints: int) -> tuple[float, str]:
         """Estimated peak memory of a fit on ``n`` poses (``n_joints`` joints), bytes, and what it assumes.
         Small by default (arrays of ``n x terms``): 0."""

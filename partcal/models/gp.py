@@ -20,8 +20,10 @@ docs/models.md).
 
 from __future__ import annotations
 
+import hashlib
 import logging
 import warnings
+from collections import OrderedDict
 
 import numpy as np
 from numpy.typing import NDArray
@@ -33,8 +35,10 @@ from sklearn.utils.validation import check_is_fitted, validate_data
 
 from .._validation import FieldReader, integer, one_of, real
 from ..metrics import distance_outside_boxes
+from . import likelihood
 from .angles import InputMap
 from .base import ErrorModelBase, seed_from
+from .combine import one_blas_thread
 
 log = logging.getLogger(__name__)
 INPUTS = ("cartesian", "joint")
@@ -46,6 +50,9 @@ NOISE_BOUNDS = (1e-12, 1.0)
 SHARED_HYPER_SAMPLES = (500, 2000)  # a partition's shared search: a tenth of the samples, within these bounds
 HYPERPARAMETERS = ("shared", "per_region")
 SAMPLES_PER_INPUT = 10             # default smallest region: 10 samples per varying input
+AUTO_RESTARTS = ((200, 4), (1000, 1))   # restarts: None -> 4 extra starts on a search of <= 200 samples, ...
+AT_BOUND = 1.05                    # a hyperparameter within 5% of a bound sits on it
+WHITE_NOISE = 0.05                 # neighbours correlated less than this (median): the GP predicts the mean
 _BLOCK = 2048
 
 
@@ -60,9 +67,19 @@ class GaussianProcessErrorModel(ErrorModelBase):
         Anisotropic squared-exponential, or Matern of smoothness ``nu``.
     nu : {0.5, 1.5, 2.5}
         Matern smoothness (ignored for ``rbf``).
-    restarts : int in [0, 20]
+    restarts : int in [0, 20] or None
         Extra starts of the marginal-likelihood optimiser, drawn from the
-        hyperparameter bounds with ``random_state``.
+        hyperparameter bounds with ``random_state``. None (the default): as
+        many as are cheap (:data:`AUTO_RESTARTS`: 4 on a search of up to 200
+        samples, 1 up to 1,000, none above); a single start often ends on a
+        bound (every length scale at its smallest: white noise).
+    noise_floor_mm : float >= 0 or None
+        The smallest noise standard deviation (mm) the search may settle on:
+        the scatter of repeated measurements of one pose, say. Without it the
+        noise term can sink to nothing and the GP then reproduces noisy
+        training data exactly. A batch run sets it from the data's repeated
+        poses when the config does not; None: no floor beyond
+        ``NOISE_BOUNDS``.
     hyper_samples : int >= 20 or None
         Most samples the marginal-likelihood search sees: a seeded random
         subset when there are more, which keeps every input's smallest and
@@ -87,6 +104,9 @@ class GaussianProcessErrorModel(ErrorModelBase):
         accurate where regions meet, and where data are sparse for the
         input dimension) at the cost of larger solves and slower predictions.
         A global GP ignores it.
+    fixed_kernel : dict or None
+        Set by :meth:`frozen`, not by hand: an input map and kernel
+        hyperparameters learnt elsewhere; ``fit`` then only solves.
     random_state : None, int, RandomState or Generator
 
     Attributes
@@ -115,15 +135,18 @@ class GaussianProcessErrorModel(ErrorModelBase):
     True
     """
 
-    def __init__(self, *, inputs="cartesian", kernel="rbf", nu=2.5, restarts=1, hyper_samples=None,
-                 hyperparameters="shared", region_overlap=1.0, random_state=None):
+    def __init__(self, *, inputs="cartesian", kernel="rbf", nu=2.5, restarts=None, noise_floor_mm=None,
+                 hyper_samples=None, hyperparameters="shared", region_overlap=1.0, fixed_kernel=None,
+                 random_state=None):
         self.inputs = inputs
         self.kernel = kernel
         self.nu = nu
         self.restarts = restarts
+        self.noise_floor_mm = noise_floor_mm
         self.hyper_samples = hyper_samples
         self.hyperparameters = hyperparameters
         self.region_overlap = region_overlap
+        self.fixed_kernel = fixed_kernel
         self.random_state = random_state
 
     kind = "gaussian_process"
@@ -133,7 +156,8 @@ class GaussianProcessErrorModel(ErrorModelBase):
         "inputs": one_of(*INPUTS),
         "kernel": one_of(*KERNELS),
         "nu": one_of(*NUS, default=2.5),
-        "restarts": integer(0, 20, default=1),
+        "restarts": integer(0, 20, none=True),
+        "noise_floor_mm": real(0.0, 1e3, default=None, none=True),
         "hyper_samples": integer(20, none=True),
         "hyperparameters": one_of(*HYPERPARAMETERS),
         "region_overlap": real(1.0, 3.0, default=1.0),
@@ -167,9 +191,11 @@ class GaussianProcessErrorModel(ErrorModelBase):
             keep = np.asarray(sample_weight, dtype=float) > 0
             X, Y = X[keep], Y[keep]
         if shared is None:
-            self.input_map_ = InputMap.fit(X, angles=self.inputs == "joint")
+            fixed = self.fixed_kernel
+            self.input_map_ = InputMap.fit(X, angles=self.inputs == "joint") if fixed is None else fixed["input_map"]
             Z = self.input_map_.transform(X)
-            gpr = self._search(Z, Y)
+            gpr = self._search(Z, Y) if fixed is None else \
+                GaussianProcessRegressor(self._fixed_sklearn_kernel(), normalize_y=True, optimizer=None).fit(Z, Y)
             self.y_mean_ = np.broadcast_to(gpr._y_train_mean, (Y.shape[1],)).astype(float)
             self.y_std_ = np.broadcast_to(gpr._y_train_std, (Y.shape[1],)).astype(float)
         else:
@@ -185,6 +211,7 @@ class GaussianProcessErrorModel(ErrorModelBase):
         self.length_scale_ = np.broadcast_to(params["k1__k2__length_scale"], (Z.shape[1],)).astype(float)
         self.noise_ = float(params["k2__noise_level"])
         self.log_marginal_likelihood_ = float(gpr.log_marginal_likelihood_value_)
+        self.noise_bounds_ = self._noise_bounds(Y) if shared is None else shared.noise_bounds_
         wrapped = self.input_map_.wrap(X)
         self.data_bounds_ = np.stack([wrapped.min(axis=0), wrapped.max(axis=0)])
         self.n_train_ = int(len(Z))
@@ -205,22 +232,39 @@ class GaussianProcessErrorModel(ErrorModelBase):
         return clone(self).set_params(hyper_samples=None)._fit(X[subset], Y[subset], None)
 
     def _search(self, Z: NDArray[np.float64], Y: NDArray[np.float64]) -> GaussianProcessRegressor:
-        """Hyperparameters by marginal likelihood (on at most ``hyper_samples`` of the samples), then the solve on all."""
+        """Hyperparameters by marginal likelihood (on at most ``hyper_samples`` of the samples), then the solve on all.
+
+        BLAS runs on one thread: the search is a long chain of ``n x n``
+        factorisations, and OpenBLAS's threads, on a machine whose cores are
+        busy, made each up to 50 times slower (``benchmarks/bench_gp.py``).
+        """
         seed = seed_from(self.random_state) % 2**32
         subset = _search_subset(Z, len(Z) if self.hyper_samples is None else int(self.hyper_samples), seed)
-        gpr = GaussianProcessRegressor(self._kernel(Z.shape[1]), normalize_y=True,
-                                       n_restarts_optimizer=int(self.restarts), random_state=seed)
+        Zs, Ys = Z[subset], Y[subset]
+        kernel = self._kernel(Z.shape[1], self._noise_bounds(Y))
+        restarts = self.restarts_for(len(Zs))
+        with one_blas_thread():
+            if self.kernel == "rbf" or float(self.nu) in likelihood.NUS:
+                theta = _searched(Zs, Ys, None if self.kernel == "rbf" else float(self.nu), kernel, restarts, seed)
+                gpr = GaussianProcessRegressor(kernel.clone_with_theta(theta), normalize_y=True,
+                                               optimizer=None).fit(Zs, Ys)
+            else:
+                gpr = self._sklearn_search(Zs, Ys, kernel, restarts, seed)
+            if isinstance(subset, np.ndarray):
+                log.info("GP hyperparameters from %d of %d samples: %s", len(subset), len(Z), gpr.kernel_)
+                gpr = GaussianProcessRegressor(gpr.kernel_, normalize_y=True, optimizer=None).fit(Z, Y)
+        return gpr
+
+    @staticmethod
+    def _sklearn_search(Z, Y, kernel, restarts: int, seed: int) -> GaussianProcessRegressor:
+        """scikit-learn's own search (the kernels :mod:`partcal.models.likelihood` does not differentiate)."""
+        gpr = GaussianProcessRegressor(kernel, normalize_y=True, n_restarts_optimizer=restarts, random_state=seed)
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", ConvergenceWarning)
-            gpr.fit(Z[subset], Y[subset])
-        for w in caught:          # bounds reached are normal (noise-free data): a log line, not a warning
-            if issubclass(w.category, ConvergenceWarning):
-                log.info("GP hyperparameters: %s", w.message)
-            else:
+            gpr.fit(Z, Y)
+        for w in caught:          # bounds reached: fit_notes() says what it means
+            if not issubclass(w.category, ConvergenceWarning):
                 warnings.warn(w.message, w.category, stacklevel=3)
-        if isinstance(subset, np.ndarray):
-            log.info("GP hyperparameters from %d of %d samples: %s", len(subset), len(Z), gpr.kernel_)
-            gpr = GaussianProcessRegressor(gpr.kernel_, normalize_y=True, optimizer=None).fit(Z, Y)
         return gpr
 
     def _prepare(self) -> "GaussianProcessErrorModel":
@@ -239,10 +283,80 @@ class GaussianProcessErrorModel(ErrorModelBase):
         self._cache = (np.ascontiguousarray(augmented), self.dual_coef_ * self.amplitude_, centre)
         return super()._prepare()
 
-    def _kernel(self, d: int):
+    def restarts_for(self, n_search: int) -> int:
+        """Extra optimiser starts for a search on ``n_search`` samples: ``restarts``, or the cheap default."""
+        if self.restarts is not None:
+            return int(self.restarts)
+        return next((r for most, r in AUTO_RESTARTS if n_search <= most), 0)
+
+    def _noise_bounds(self, Y: NDArray[np.float64]) -> tuple[float, float]:
+        """Bounds of the white-noise variance on normalised outputs: ``noise_floor_mm`` over the smallest
+        output scale, squared, below (at most half the outputs' variance), ``NOISE_BOUNDS`` otherwise."""
+        low, high = NOISE_BOUNDS
+        if self.noise_floor_mm:
+            scale = float(np.min(np.std(Y, axis=0)))
+            low = max(low, min((float(self.noise_floor_mm) / scale) ** 2 if scale > 0 else high, 0.5 * high))
+        return low, high
+
+    def _kernel(self, d: int, noise_bounds: tuple[float, float] = NOISE_BOUNDS):
         shape = RBF(np.ones(d), LENGTH_BOUNDS) if self.kernel == "rbf" else \
             Matern(np.ones(d), LENGTH_BOUNDS, nu=float(self.nu))
-        return ConstantKernel(1.0, AMPLITUDE_BOUNDS) * shape + WhiteKernel(1e-4, NOISE_BOUNDS)
+        noise = min(max(1e-4, 2.0 * noise_bounds[0]), noise_bounds[1])
+        return ConstantKernel(1.0, AMPLITUDE_BOUNDS) * shape + WhiteKernel(noise, noise_bounds)
+
+    def _fixed_sklearn_kernel(self):
+        fixed = self.fixed_kernel
+        shape = RBF(np.array(fixed["length_scale"], dtype=float)) if self.kernel == "rbf" else \
+            Matern(np.array(fixed["length_scale"], dtype=float), nu=float(self.nu))
+        return ConstantKernel(fixed["amplitude"]) * shape + WhiteKernel(fixed["noise"])
+
+    def frozen(self, X, y) -> "GaussianProcessErrorModel":
+        """An unfitted copy whose fits only solve, with the input map and hyperparameters learnt on ``X, y``.
+
+        Nested cross-validation freezes a candidate on each outer training
+        set, so its inner folds do not repeat the search (see
+        :func:`partcal.metrics.nested_residuals`).
+        """
+        fitted = clone(self).fit(X, y)
+        return clone(self).set_params(fixed_kernel=fitted.learnt_kernel())
+
+    def learnt_kernel(self) -> dict:
+        """The fitted input map and kernel hyperparameters (what :meth:`frozen` keeps)."""
+        check_is_fitted(self, "dual_coef_")
+        return {"input_map": self.input_map_, "amplitude": self.amplitude_,
+                "length_scale": self.length_scale_.copy(), "noise": self.noise_}
+
+    def fit_notes(self) -> list[str]:
+        """Hyperparameters the search left on a bound, in words: the fit is then not what a GP should be."""
+        check_is_fitted(self, "dual_coef_")
+        if self.fixed_kernel is not None:
+            return []
+        notes = []
+        if self.n_train_ > 1 and self._neighbour_correlation() < WHITE_NOISE:
+            notes.append("length scales shorter than the spacing of the data: a white-noise fit that predicts the "
+                         "mean between the training poses")
+        low = getattr(self, "noise_bounds_", NOISE_BOUNDS)[0]
+        if self.noise_ <= low * AT_BOUND and low <= NOISE_BOUNDS[0] * AT_BOUND:
+            notes.append("the noise term at its lower bound: the GP reproduces its training data exactly "
+                         "(set noise_floor_mm to the measurement scatter)")
+        return notes
+
+    def _neighbour_correlation(self) -> float:
+        """Median kernel correlation of a training input with its nearest other training input."""
+        from scipy.spatial import cKDTree
+
+        scaled = self.X_train_ / self.length_scale_
+        d = cKDTree(scaled).query(scaled, k=2)[0][:, 1]
+        return float(np.median(self._shape(-0.5 * d * d)))
+
+    def effective_parameters(self) -> float:
+        """Effective degrees of freedom: ``trace(K (K + noise I)^-1)`` per output, times the outputs."""
+        check_is_fitted(self, "dual_coef_")
+        scaled = self.X_train_ / self.length_scale_
+        sq = np.einsum("ij,ij->i", scaled, scaled)
+        K = self.amplitude_ * self._shape(np.minimum(scaled @ scaled.T - 0.5 * (sq[:, None] + sq[None, :]), 0.0))
+        eig = np.clip(np.linalg.eigvalsh(K), 0.0, None)
+        return float(np.sum(eig / (eig + self.noise_)) * self.n_outputs())
 
     def sklearn_kernel(self):
         """The fitted kernel as a scikit-learn object (rebuilt from the stored numbers)."""
@@ -338,7 +452,8 @@ class GaussianProcessErrorModel(ErrorModelBase):
         return int(self.dual_coef_.shape[1])
 
     def file_section(self) -> dict:
-        return {"kernel": self.kernel, "nu": float(self.nu), "restarts": int(self.restarts),
+        return {"kernel": self.kernel, "nu": float(self.nu), "restarts": self.restarts,
+                "noise_floor_mm": self.noise_floor_mm,
                 "hyper_samples": None if self.hyper_samples is None else int(self.hyper_samples),
                 "hyperparameters": self.hyperparameters, "region_overlap": float(self.region_overlap),
                 "input_map": self.input_map_.to_dict(), "x_train": self.X_train_.tolist(),
@@ -354,7 +469,7 @@ class GaussianProcessErrorModel(ErrorModelBase):
         imap = InputMap.from_file(r.sub("input_map"), n_in)
         d = max(imap.n_active, 1)
         n = len(r.get("x_train", list))
-        older = {"hyper_samples": None, "hyperparameters": "per_region", "region_overlap": 1.0}
+        older = {"hyper_samples": None, "hyperparameters": "per_region", "region_overlap": 1.0, "noise_floor_mm": None}
         params = {key: r.rule(key, rules[key]) if key in r.doc or key not in older else older[key]
                   for key in ("kernel", "nu", "restarts", *older)}
         model = cls(inputs=inputs, **params)
@@ -372,6 +487,33 @@ class GaussianProcessErrorModel(ErrorModelBase):
         model.data_bounds_ = r.array("data_bounds", (2, n_in))
         model.n_features_in_, model.n_train_, model._y_1d = n_in, n, False
         return model._prepare()
+
+
+_SEARCHED: OrderedDict = OrderedDict()     # the last searches of this process: key -> log hyperparameters
+_SEARCHED_KEPT = 16
+
+
+def _searched(Z: NDArray[np.float64], Y: NDArray[np.float64], nu: float | None, kernel, restarts: int, seed: int
+              ) -> NDArray[np.float64]:
+    """The searched hyperparameters (log) of inputs ``Z``, outputs ``Y`` (normalised here, as scikit-learn does).
+
+    A search already made in this process on the same numbers with the same
+    settings is not made again: cross-validation fits the candidates of a
+    granularity list on the same folds, and nested CV freezes them there too.
+    """
+    mean, std = Y.mean(axis=0), Y.std(axis=0)
+    Yn = (Y - mean) / np.where(std > 0, std, 1.0)
+    key = hashlib.sha256(b"".join([np.ascontiguousarray(Z).tobytes(), np.ascontiguousarray(Yn).tobytes(),
+                                   repr((nu, kernel.theta.tolist(), kernel.bounds.tolist(), restarts, seed)).encode()])
+                         ).hexdigest()
+    if key in _SEARCHED:
+        _SEARCHED.move_to_end(key)
+        return _SEARCHED[key].copy()
+    theta, _ = likelihood.search(Z, Yn, nu=nu, start=kernel.theta, bounds=kernel.bounds, restarts=restarts, seed=seed)
+    _SEARCHED[key] = theta
+    if len(_SEARCHED) > _SEARCHED_KEPT:
+        _SEARCHED.popitem(last=False)
+    return theta.copy()
 
 
 def _search_subset(X: NDArray[np.float64], n: int, seed: int) -> NDArray[np.intp] | slice:

@@ -500,6 +500,27 @@ class KinematicModel(ErrorModelBase):
     def family(self) -> str:
         return "Kinematic models" if self.residual is None else "Hybrid models (kinematic + residual)"
 
+    def effective_parameters(self) -> float:
+        """The identified parameters, plus the residual model's."""
+        own = sum(status == "identified" for status in self.identification_.status)
+        return float(own + (self.residual_.effective_parameters() if self.residual_ is not None else 0.0))
+
+    def fit_notes(self) -> list[str]:
+        return self.residual_.fit_notes() if self.residual_ is not None else []
+
+    def frozen(self, X, y) -> "KinematicModel":
+        """With a residual model: the residual frozen on what the kinematics identified on ``X, y`` leave."""
+        if self.residual is None:
+            return self
+        fitted = clone(self).set_params(residual=None).fit(X, y)
+        X = np.asarray(X, dtype=float)
+        nominal = fitted.robot_.positions(X)
+        leftover = np.asarray(y, dtype=float) - fitted.predict(X)
+        inputs = nominal if self.residual.inputs == "cartesian" else X
+        seed = int(np.random.SeedSequence(seed_from(self.random_state)).spawn(1)[0].generate_state(1)[0])
+        residual = clone(self.residual).set_params(random_state=seed).frozen(inputs, leftover)
+        return clone(self).set_params(residual=residual)
+
     def regions_model(self):
         return self.residual_.regions_model() if getattr(self, "residual_", None) is not None else None
 

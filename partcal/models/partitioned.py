@@ -380,6 +380,26 @@ class PartitionedErrorModel(ErrorModelBase):
         local = self._resolved()[0]
         return "Partitioned" + local.family()[len("Global"):]
 
+    def effective_parameters(self) -> float:
+        """The regions' own, summed (the blend shares them between regions: an upper bound)."""
+        return float(sum(m.effective_parameters() for m in self.models_))
+
+    def fit_notes(self) -> list[str]:
+        return sorted({note for m in self.models_ for note in m.fit_notes()})
+
+    def frozen(self, X, y) -> "PartitionedErrorModel":
+        """With Gaussian-process regions sharing hyperparameters: those learnt on ``X, y`` kept
+        (see :meth:`GaussianProcessErrorModel.frozen`); otherwise itself."""
+        local, _ = self._resolved()
+        if not isinstance(local, GaussianProcessErrorModel) or local.hyperparameters != "shared" \
+                or local.fixed_kernel is not None:
+            return self
+        X, y = np.asarray(X, dtype=float), np.asarray(y, dtype=float)
+        Y = y.reshape(len(y), -1)
+        coords = InputMap.fit(X, angles=True).wrap(X) if local.inputs == "joint" else X     # as fit() does
+        shared = clone(local).set_params(random_state=seed_from(self.random_state)).fit_shared(coords, Y)
+        return clone(self).set_params(local=clone(local).set_params(fixed_kernel=shared.learnt_kernel()))
+
     def pso_rms_ratio(self) -> float | None:
         ratios = [m.pso_rms_ratio() for m in self.models_]
         return None if any(v is None for v in ratios) else float(max(ratios))

@@ -409,6 +409,10 @@ class ErrorModel(ErrorModelBase):
     def n_outputs(self) -> int:
         return int(self.coef_.shape[1])
 
+    def effective_parameters(self) -> float:
+        """Coefficients over all outputs (terms x outputs)."""
+        return float(self.coef_.size)
+
     def pso_rms_ratio(self) -> float | None:
         return float(self.rms_ratio_) if self.solver == "pso" else None
 

@@ -26,6 +26,7 @@ from ..robot.description import load_robot, robot_reference
 RESERVED_NAMES = {"identification", "validation", "file", "fit_seconds", "cv_seconds", "cv", "inputs", "solver",
                   "regions", "pso_rms_ratio", "granularity", "compensation", "kind", "kinematic"}
 RANK_RULES = ("cv", "validation")
+FOLD_WORDS = ("auto", "leave_one_out")
 
 
 @dataclass(frozen=True)
@@ -35,6 +36,11 @@ class PartitionSpec:
     min_samples: int | None = None
     blend: str = "gaussian"
     blend_width: float = 0.7
+
+    def fewest_regions(self, size: int) -> int:
+        """Regions a fit at granularity ``size`` must be able to make to be that granularity: k-means
+        its ``n_regions``; an octree of depth >= 1 two (a split), of depth 0 one."""
+        return size if self.method == "kmeans" else min(size + 1, 2)
 
     def build(self, size: int):
         cls = PARTITIONS[self.method]
@@ -116,6 +122,7 @@ class DataOptions:
     tool_mm: tuple[float, float, float] | None = None
     fit_tool: bool = True
     plausibility: Plausibility = Plausibility()      # data.checks: the limits of plausible data
+    groups: str | None = None                         # data.groups: the column naming each row's pose
 
     @property
     def converted(self) -> bool:
@@ -128,7 +135,8 @@ class DataOptions:
                 "registration": ({"tool_mm": list(self.tool_mm) if self.tool_mm else None, "fit_tool": self.fit_tool}
                                  if self.frame == "tracker" else None),
                 "checks": {"max_error_of_reach": self.plausibility.max_error_of_reach,
-                           "nominal_tolerance_mm": self.plausibility.nominal_tolerance_mm}}
+                           "nominal_tolerance_mm": self.plausibility.nominal_tolerance_mm},
+                "groups": self.groups}
 
 
 @dataclass(frozen=True)
@@ -144,7 +152,7 @@ class RunConfig:
     robot: str | None = None
     seed: int = 0
     n_jobs: int = 1
-    cv_folds: int = 5
+    cv_folds: int | str = "auto"        # an int k, "leave_one_out", or "auto" (metrics.fold_rule)
     dask_address: str | None = None
     virtual_robot: Path | None = None
     rank_by: str = "cv"
@@ -198,7 +206,7 @@ def load_config(path: str | Path) -> RunConfig:
         robot = robot_ref
     seed = top.get("seed", "int", default=0, check=integer(0, 2**32 - 1).problem)
     n_jobs = top.get("n_jobs", "int", default=1, check=lambda v: None if v == -1 or v >= 1 else "-1 or >= 1")
-    cv_folds = top.get("cv_folds", "int", default=5, check=integer(2, 100).problem)
+    cv_folds = top.get("cv_folds", "any", default="auto", check=_fold_problem)
     rank_by = top.get("rank_by", "str", default="cv", check=one_of(*RANK_RULES).problem)
     dask = top.section("dask")
     address = dask.get("address", "str", default=None) if dask.data else None
@@ -228,6 +236,13 @@ def load_config(path: str | Path) -> RunConfig:
                      output=Path(os.path.normpath(output)), robot=robot, seed=seed, n_jobs=n_jobs,
                      cv_folds=cv_folds, dask_address=address, virtual_robot=virtual, rank_by=rank_by,
                      validation=validation, lines=lines, data_options=data_options)
+
+
+def _fold_problem(value) -> str | None:
+    """``cv_folds``: an int in [2, 100], ``auto`` or ``leave_one_out``."""
+    if value in FOLD_WORDS or (integer(2, 100).problem(value) is None):
+        return None
+    return "an int in [2, 100], 'auto' or 'leave_one_out'"
 
 
 def _existing(sec: Section, key: str, base: Path) -> Path:
@@ -264,6 +279,7 @@ def _data(data_sec: Section, top: Section, base: Path, *, has_robot: bool
     for reserved in RESERVED_NAMES & set(tests):     # they share a JSON object with these keys in metrics.json
         tests_sec.fail(tests_sec.path(reserved), f"a test set may not be called {reserved!r} (reserved: "
                                                  f"{', '.join(sorted(RESERVED_NAMES))})")
+    groups = data_sec.get("groups", "str", default=None, check=lambda v: None if v.strip() else "a column name")
     checks = data_sec.section("checks")
     plausibility = Plausibility(**{key: checks.rule(key, rule) for key, rule in Plausibility.rules.items()})
     checks.done()
@@ -277,7 +293,7 @@ def _data(data_sec: Section, top: Section, base: Path, *, has_robot: bool
     reg.done()
     return ident, tests, validation, DataOptions(format=fmt, frame=frame, rows={k: v for k, v in rows.items() if v is not None},
                                      own_frame=tuple(own), tool_mm=tuple(float(x) for x in tool) if tool else None,
-                                     fit_tool=fit_tool, plausibility=plausibility)
+                                     fit_tool=fit_tool, plausibility=plausibility, groups=groups)
 
 
 def _data_file(sec: Section, key: str, base: Path, *, tracker: bool | None

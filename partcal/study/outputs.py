@@ -135,7 +135,13 @@ def metrics_document(result: RunResult) -> dict:
         entry = {"file": f"models/{r.spec.slug}.json", "fit_seconds": round(r.fit_seconds, 4),
                  "cv_seconds": round(r.cv_seconds, 4)}
         entry.update(r.metrics)
-        entry["cv"] = {"folds": cfg.cv_folds, "rms_3d": r.cv_rms_3d, "nested": r.nested}
+        plan = result.plan
+        folds = len(plan.cv.folds) if plan is not None else cfg.cv_folds
+        entry["cv"] = {"folds": folds, "rms_3d": r.cv_rms_3d, "standard_error": _number(r.cv_se),
+                       "nested": r.nested}
+        entry["effective_parameters"] = _number(r.effective_parameters)
+        if r.notes:
+            entry["notes"] = r.notes
         entry["inputs"], entry["solver"], entry["regions"] = r.spec.inputs, r.model.solver_name, r.n_regions
         entry["kind"] = r.spec.kind if r.spec.residual is None else f"{r.spec.kind} + {r.spec.residual.kind}"
         entry.update(r.model.run_summary())
@@ -157,9 +163,17 @@ def metrics_document(result: RunResult) -> dict:
         "best": result.best,
         "best_reason": result.best_reason,
     }
+    if result.plan is not None:
+        doc["cv"] = {**result.plan.cv.to_dict(), "left_out": list(result.plan.notes),
+                     "repeat_scatter_mm": result.plan.repeat_scatter_mm}
     if result.registrations:
         doc["registration"] = registration_document(result.registrations)
     return doc
+
+
+def _number(value: float) -> float | None:
+    """A float for JSON; None for NaN (JSON has no NaN)."""
+    return float(value) if np.isfinite(value) else None
 
 
 def registration_document(registrations: dict) -> dict:

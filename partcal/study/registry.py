@@ -1,23 +1,31 @@
 """The model registry of a batch run: fit, evaluate, cross-validate, rank, verify.
 
 Every model is fitted on the identification set, evaluated on every data set
-and by k-fold cross-validation on the identification set, and ranked by its
-cross-validated 3-D RMS (``rank_by: cv``) or by its 3-D RMS on a held-out
-validation set (``rank_by: validation``); never by a test set. Every model is
-cross-validated on the same folds, drawn once from the run seed; a model
-with a list of granularities is scored by nested cross-validation (the
-granularity is chosen inside each outer training fold). Models run in parallel with
+and by cross-validation on the identification set, and ranked by its
+cross-validated 3-D RMS (``rank_by: cv``: the simplest model within one
+standard error of the lowest) or by its 3-D RMS on a held-out validation set
+(``rank_by: validation``); never by a test set. Every model is
+cross-validated on the same folds, drawn once from the run seed, and the rows
+of one pose (identical joint angles, or a group column) are always held out
+together: leave-one-pose-out on few poses, 5 folds on more (``cv_folds``). A
+model with a list of granularities is scored by nested cross-validation (the
+granularity is chosen inside each outer training fold); a granularity no
+inner fold can support is left out with a note. Models run in parallel with
 joblib (``n_jobs``; a Dask cluster when the config gives its address); each
-gets its own child seed, so results do not depend on ``n_jobs`` or the order
-in which jobs finish. With a virtual robot, compensation is verified end to
-end: the compensated targets are commanded on the simulated true robot.
+model's seed comes from the run seed and its name, so results depend neither
+on ``n_jobs``, nor on the order in which jobs finish, nor on the model's place
+in the list. With a virtual robot, compensation is verified end to end: the
+compensated targets are commanded on the simulated true robot.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import logging
+import sys
 import time
+import warnings
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Callable
@@ -29,7 +37,9 @@ from numpy.typing import NDArray
 from ..data.measurements import Measurements, read_measurements
 from ..data.registration import Registration, kabsch, register_tracker, registered
 from ..errors import ConfigError, DataError
-from ..metrics import cross_validated_rms, kfold_splits, nested_cross_validated_rms, select_by_cv, summary
+from ..metrics import (choose_simplest, fold_name, fold_rule, grouped_splits, held_out_residuals, labels_as_groups,
+                       nested_residuals, pooled_rms, pose_groups, repeat_scatter_mm, rms_standard_error, select_by_cv,
+                       summary)
 from ..models.bases import varying_inputs
 from ..models.partitioned import fold_regions
 from ..robot.description import load_robot
@@ -57,6 +67,9 @@ class ModelResult:
     cv_seconds: float = 0.0             # cross-validation (and the granularity choice)
     nested: bool = False
     cv_regions: list[int] | None = None  # partitioned: [fewest, most] regions of the CV fold fits
+    cv_se: float = float("nan")         # standard error of cv_rms_3d, over the identification poses
+    effective_parameters: float = float("nan")   # what "simpler" means when two CV scores are close
+    notes: list[str] = field(default_factory=list)   # fits on a bound and the like: warned, and in the report
 
     def score(self, rank_by: str) -> float:
         """The number the run ranks by: CV 3-D RMS, or 3-D RMS on the validation set (mm)."""
@@ -83,19 +96,99 @@ class RunResult:
     best: str
     seconds: float
     registrations: dict[str, Registration] = field(default_factory=dict)
+    plan: "RunPlan | None" = None
 
     @property
     def best_reason(self) -> str:
         """Which rule chose ``best``, in words (metrics.json, the report and the printed table say it)."""
-        return rank_reason(self.config)
+        return rank_reason(self.config, self.plan.cv if self.plan else None)
 
 
-def rank_reason(config: RunConfig) -> str:
+def rank_reason(config: RunConfig, cv: "CVPlan | None" = None) -> str:
     """The ranking rule of a run, in words."""
     if config.rank_by == "validation":
         return f"lowest 3-D RMS on the validation set {config.validation.name} (held out, never fitted)"
-    return (f"lowest {config.cv_folds}-fold cross-validated 3-D RMS on the identification set (the same folds "
-            "for every model; nested for granularity lists)")
+    folds = fold_name(cv.rule) if cv is not None else f"{config.cv_folds}-fold"
+    return (f"simplest model (fewest effective parameters) whose {folds} cross-validated 3-D RMS on the "
+            "identification set is within one standard error of the lowest (the same folds for every model, "
+            "a pose's rows held out together; nested for granularity lists)")
+
+
+@dataclass(frozen=True)
+class CVPlan:
+    """How a run cross-validates: the pose (group) of each identification row, the fold rule and the folds.
+
+    ``inner(train)`` gives the folds of nested CV inside an outer training set:
+    the same rule on its poses (leave-one-pose-out stays so; k folds become at
+    most one per pose).
+    """
+
+    groups: NDArray[np.intp]
+    rule: int | str
+    folds: list
+    seed: int
+    grouped_by: str
+
+    @classmethod
+    def of(cls, config: RunConfig, ident: Measurements) -> "CVPlan":
+        if ident.groups is not None:
+            groups, by = labels_as_groups(ident.groups), f"column {config.data_options.groups!r}"
+        else:
+            groups, by = pose_groups(ident.q_deg), "identical joint angles"
+        rule = fold_rule(config.cv_folds, int(groups.max()) + 1)
+        folds = grouped_splits(groups, rule, config.seed) if int(groups.max()) >= 1 else []
+        return cls(groups, rule, folds, config.seed, by)
+
+    @property
+    def n_groups(self) -> int:
+        return int(self.groups.max()) + 1
+
+    def inner(self, train: NDArray[np.intp]) -> list:
+        groups = labels_as_groups(self.groups[train])
+        n = int(groups.max()) + 1
+        if n < 2:
+            return []
+        return grouped_splits(groups, self.rule if self.rule == "leave_one_out" else fold_rule(self.rule, n), self.seed)
+
+    def smallest_train(self, nested: bool = False) -> int:
+        """Rows of the smallest training fold (of the inner folds with ``nested``); 0 if there is none."""
+        if not nested:
+            return min((len(train) for train, _ in self.folds), default=0)
+        sizes = [len(inner) for train, _ in self.folds for inner, _ in self.inner(train) or [((), ())]]
+        return min(sizes, default=0)
+
+    def describe(self) -> str:
+        """``'leave-one-pose-out over 16 poses (160 rows: ...)'``: what the output says of the folds."""
+        n = len(self.groups)
+        text = f"{fold_name(self.rule)} over {self.n_groups} poses"
+        if n > self.n_groups:
+            text += f" ({n} rows; the rows of one pose, by {self.grouped_by}, are held out together)"
+        return text
+
+    def to_dict(self) -> dict:
+        return {"rule": fold_name(self.rule), "folds": len(self.folds), "poses": self.n_groups,
+                "rows": len(self.groups), "grouped_by": self.grouped_by}
+
+
+@dataclass(frozen=True)
+class RunPlan:
+    """What a run will fit: its cross-validation, the entries it can fit (granularities that no fold
+    supports left out), the notes about what was left out, and the repeat scatter of the data (mm)."""
+
+    cv: CVPlan
+    models: tuple[ModelSpec, ...]
+    notes: tuple[str, ...] = ()
+    repeat_scatter_mm: float | None = None
+
+
+def model_seed(run_seed: int, name: str) -> int:
+    """A model's seed: from the run's seed and the model's name, never from its place in the list.
+
+    >>> model_seed(0, "GP(AI)") == model_seed(0, "GP(AI)") != model_seed(1, "GP(AI)")
+    True
+    """
+    digest = int.from_bytes(hashlib.sha256(name.encode("utf-8")).digest()[:8], "little")
+    return int(np.random.SeedSequence([run_seed, digest]).generate_state(1)[0])
 
 
 def load_datasets(config: RunConfig) -> tuple[dict[str, Measurements], Robot | None, dict[str, Registration]]:
@@ -111,8 +204,15 @@ def load_datasets(config: RunConfig) -> tuple[dict[str, Measurements], Robot | N
     robot = load_robot(config.robot) if config.robot else None
 
     def read(name: str, path) -> Measurements:
-        return read_measurements(path, robot, name=name, fmt=opts.format, rows=opts.rows.get(name), frame=opts.frame,
-                                 plausibility=opts.plausibility)
+        m = read_measurements(path, robot, name=name, fmt=opts.format, rows=opts.rows.get(name), frame=opts.frame,
+                              plausibility=opts.plausibility, group_column=opts.groups if name == "identification"
+                              else None)
+        poses = int(pose_groups(m.q_deg).max()) + 1
+        if poses < len(m):
+            log.warning("%s (%s): %d rows measure %d distinct poses (identical joint angles): repeated measurements%s",
+                        path, name, len(m), poses, "; cross-validation holds out a pose's rows together"
+                        if name == "identification" else "")
+        return m
 
     data = {"identification": read("identification", config.identification)}
     n = data["identification"].n_joints
@@ -152,47 +252,101 @@ def _register(config: RunConfig, data: dict[str, Measurements], robot: Robot):
     return out, robot, regs
 
 
-def check_run(config: RunConfig, data: dict[str, Measurements]) -> None:
-    """Refuse, before anything is fitted, every model the identification set cannot support.
+def check_run(config: RunConfig, data: dict[str, Measurements]) -> RunPlan:
+    """Plan the run, and refuse before anything is fitted every model the identification set cannot support.
 
     Checks the identification set (at least two poses, some input that
-    varies) and, for every model, that the smallest cross-validation training
-    fold (the inner folds of nested CV for granularity lists) holds enough
-    samples for its terms (series models) or for one region (partitioned
-    models). Errors name the config file, the key path and its line.
+    varies) and, for every model (and its residual), that the smallest
+    cross-validation training fold holds enough samples for its terms or for
+    one region. A granularity that the inner folds of nested CV cannot give
+    its regions is left out with a note, as long as one remains (one left:
+    no nesting, so the outer folds must hold it). Every model that cannot be
+    fitted is named in one error (the config file, key path and line each).
     """
     ident = data["identification"]
-    n, k = len(ident), config.cv_folds
-    if n < 2:
-        config.fail("data.identification", f"{config.identification} holds {n} pose; a fit needs at least 2")
-    if n < k:
-        config.fail("cv_folds", f"{k} folds need at least {k} identification poses; "
-                                f"{config.identification} holds {n}")
-    smallest = n - -(-n // k)                  # the smallest training fold: n - ceil(n / k)
+    cv = CVPlan.of(config, ident)
+    if cv.n_groups < 2:
+        config.fail("data.identification", f"{config.identification} holds {cv.n_groups} pose; a fit needs at "
+                                           "least 2")
+    if isinstance(config.cv_folds, int) and cv.n_groups < config.cv_folds:
+        log.warning("cv_folds: %d folds asked, but %s holds %d poses: %d folds", config.cv_folds,
+                    config.identification, cv.n_groups, cv.rule)
+    problems, notes, models = [], [], []
     for i, entry in enumerate(config.models):
-        X = model_inputs(entry.inputs, ident)
-        if int(varying_inputs(X).sum()) == 0:
-            what = "joint angle" if entry.inputs == "joint" else "nominal coordinate"
-            config.fail(_key(config, i, "inputs"), f"every {what} of the identification set "
-                                                    f"{config.identification} is constant: nothing to fit")
-        # an entry and its residual (fitted to what the entry leaves) must each fit in a fold
-        for spec, prefix in ((entry, ""), (entry.residual, "residual.")):
-            if spec is None:
-                continue
-            varying = int(varying_inputs(model_inputs(spec.inputs, ident)).sum())
-            model = (spec if spec.residual is None else dataclasses.replace(spec, residual=None)).build(None)
-            problem = model.setting_problem(varying)
-            if problem is not None:
-                config.fail(_key(config, i, prefix + problem[0]), problem[1])
-            need, why, key = model.min_samples(varying)
-            train = smallest
-            if spec.partition is not None and len(spec.partition.sizes) > 1:    # nested CV: inner folds smaller
-                train = smallest - -(-smallest // k)
-            if train < need:
-                config.fail(_key(config, i, prefix + (key or "kind")),
-                            f"{entry.name!r} needs {why}, but the smallest cross-validation training fold "
-                            f"of the {n}-pose identification set holds {train} samples")
-    check_memory(config, n, ident.n_joints)          # a Gaussian process on many samples outgrows the machine
+        try:
+            spec, dropped = _feasible(config, i, entry, ident, cv)
+        except ConfigError as exc:
+            problems.append(str(exc))
+            continue
+        models.append(spec)
+        notes += dropped
+    if problems:
+        raise ConfigError(problems[0] if len(problems) == 1 else
+                          f"{len(problems)} models cannot be fitted:\n  " + "\n  ".join(problems))
+    for note in notes:
+        log.warning("%s", note)
+    check_memory(config, len(ident), ident.n_joints)          # a Gaussian process on many samples outgrows the machine
+    repeats = repeat_scatter_mm(ident.errors_mm, cv.groups)
+    return RunPlan(cv, tuple(models), tuple(notes), repeats)
+
+
+def _feasible(config: RunConfig, i: int, entry: ModelSpec, ident: Measurements, cv: CVPlan
+              ) -> tuple[ModelSpec, list[str]]:
+    """The entry with the granularities the folds support, and notes on those left out; ConfigError if none."""
+    X = model_inputs(entry.inputs, ident)
+    if int(varying_inputs(X).sum()) == 0:
+        what = "joint angle" if entry.inputs == "joint" else "nominal coordinate"
+        config.fail(_key(config, i, "inputs"), f"every {what} of the identification set "
+                                                f"{config.identification} is constant: nothing to fit")
+    sizes, notes = list(entry.sizes), []
+    # an entry and its residual (fitted to what the entry leaves) must each fit in a fold
+    for spec, prefix in ((entry, ""), (entry.residual, "residual.")):
+        if spec is None:
+            continue
+        varying = int(varying_inputs(model_inputs(spec.inputs, ident)).sum())
+        model = (spec if spec.residual is None else dataclasses.replace(spec, residual=None)).build(None)
+        problem = model.setting_problem(varying)
+        if problem is not None:
+            config.fail(_key(config, i, prefix + problem[0]), problem[1])
+        need, why, key = model.min_samples(varying)
+        part = spec.partition
+        if part is not None and len(sizes) > 1:
+            inner = cv.smallest_train(nested=True)
+            fits = [size for size in sizes if part.fewest_regions(size) * need <= inner]
+            if len(fits) < 2:          # no nesting: one granularity, on the outer folds
+                fits = [size for size in sizes if part.fewest_regions(size) * need <= cv.smallest_train()][:1]
+            if not fits:               # not even one: refused below, against the outer folds
+                sizes = sizes[:1]
+            elif fits != sizes:
+                notes.append(f"{entry.name!r}: granularity {', '.join(map(str, sorted(set(sizes) - set(fits))))} "
+                             f"left out: its regions need {need} samples each, and the smallest inner training "
+                             f"fold of nested cross-validation ({cv.describe()}) holds {inner}")
+                sizes = fits
+        train = cv.smallest_train(nested=len(sizes) > 1)
+        if train < need:
+            config.fail(_key(config, i, prefix + (key or "kind")),
+                        f"{entry.name!r} needs {why}, but the smallest cross-validation training fold "
+                        f"({cv.describe()}) holds {train} samples")
+    return _with_sizes(entry, tuple(sizes)), notes
+
+
+def _with_sizes(entry: ModelSpec, sizes: tuple[int, ...]) -> ModelSpec:
+    """``entry`` with its (or its residual's) granularities replaced by ``sizes``."""
+    if sizes == entry.sizes:
+        return entry
+    if entry.partition is not None:
+        return dataclasses.replace(entry, partition=dataclasses.replace(entry.partition, sizes=sizes))
+    return dataclasses.replace(entry, residual=_with_sizes(entry.residual, sizes))
+
+
+def _with_noise_floor(entry: ModelSpec, noise_mm: float) -> ModelSpec:
+    """``entry`` (and its residual) with ``noise_floor_mm`` set to the data's repeat scatter where a kind
+    declares that parameter and the config left it out."""
+    params = entry.params
+    if "noise_floor_mm" in params and params["noise_floor_mm"] is None:
+        params = {**params, "noise_floor_mm": noise_mm}
+    residual = _with_noise_floor(entry.residual, noise_mm) if entry.residual is not None else None
+    return dataclasses.replace(entry, params=params, residual=residual)
 
 
 def _key(config: RunConfig, i: int, key: str) -> str:
@@ -206,29 +360,57 @@ def model_inputs(inputs: str, m: Measurements) -> NDArray[np.float64]:
     return m.nominal_mm if inputs == "cartesian" else m.q_deg
 
 
-def fit_model(spec: ModelSpec, seed: int, data: dict[str, Measurements], folds: list, run_seed: int = 0,
-              own_frame: tuple[str, ...] = ()) -> ModelResult:
+SLOW_SECONDS = 5.0          # a model still cross-validating after this long reports each fold
+
+
+class FoldLines:
+    """Progress lines of a model's slow cross-validation, written to stderr by whichever process fits it
+    (a joblib worker shares the terminal): ``partcal: GP(AI): cross-validation fold 3/5 (12 s)``."""
+
+    def __call__(self, text: str) -> None:
+        sys.stderr.write(f"partcal: {text}\n")
+        sys.stderr.flush()
+
+
+def fit_model(spec: ModelSpec, seed: int, data: dict[str, Measurements], cv: CVPlan,
+              own_frame: tuple[str, ...] = (), lines: Callable[[str], None] | None = None) -> ModelResult:
     """Fit one registry entry and evaluate it (runs in a joblib worker).
 
-    ``folds`` are the run's shared ``(train, test)`` index pairs on the
-    identification set; ``run_seed`` draws the inner folds of nested CV.
-    Data sets in ``own_frame`` are scored by :func:`errors_left`.
+    ``cv`` holds the run's shared folds on the identification set (and the
+    inner folds of nested CV). Data sets in ``own_frame`` are scored by
+    :func:`errors_left`. Warnings of the fit are collected, not printed, so
+    that the run says them once, in one format, whichever process fitted
+    (:attr:`ModelResult.notes`). ``lines`` receives per-fold progress once
+    the cross-validation has taken :data:`SLOW_SECONDS`.
     """
+    with _collected() as said:
+        result = _fit_model(spec, seed, data, cv, own_frame, lines)
+    result.notes = list(dict.fromkeys(said + result.model.fit_notes()))
+    return result
+
+
+def _fit_model(spec, seed, data, cv, own_frame, lines) -> ModelResult:
     ident = data["identification"]
     X, y = model_inputs(spec.inputs, ident), ident.errors_mm
     granularity, nested = None, False
     start = time.perf_counter()
+
+    def fold_done(done: int, total: int) -> None:
+        elapsed = time.perf_counter() - start
+        if lines is not None and elapsed > SLOW_SECONDS:
+            lines(f"{spec.name}: cross-validation fold {done}/{total} ({elapsed:.0f} s)")
+
     cv_regions = None
     if len(spec.sizes) > 1:
         candidates = [spec.build(seed, size) for size in spec.sizes]
-        cv = nested_cross_validated_rms(candidates, X, y, folds=folds, inner_folds=len(folds), random_state=run_seed)
-        estimator, granularity, fit_seconds = choose_granularity(spec, seed, X, y, folds)      # returned fitted
+        resid = nested_residuals(candidates, X, y, folds=cv.folds, inner=cv.inner, progress=fold_done)
+        estimator, granularity, fit_seconds = choose_granularity(spec, seed, X, y, cv.folds)      # returned fitted
         cv_seconds, nested = time.perf_counter() - start - fit_seconds, True
         chosen = min(range(len(granularity)), key=lambda i: granularity[i]["cv_rms_3d"])
         cv_regions = granularity[chosen]["cv_regions"]
     else:
         fold_fits: list = []
-        cv = cross_validated_rms(spec.build(seed), X, y, folds=folds, fitted=fold_fits)
+        resid = held_out_residuals(spec.build(seed), X, y, cv.folds, fitted=fold_fits, progress=fold_done)
         cv_seconds = time.perf_counter() - start
         start = time.perf_counter()
         estimator = spec.build(seed).fit(X, y)
@@ -242,8 +424,34 @@ def fit_model(spec: ModelSpec, seed: int, data: dict[str, Measurements], folds: 
     predictions = {name: estimator.predict(model_inputs(spec.inputs, m)) for name, m in data.items()}
     metrics = {name: summary(errors_left(m, predictions[name], name in own_frame)) for name, m in data.items()}
     ratio = estimator.pso_rms_ratio()
-    return ModelResult(spec, estimator, fit_seconds, cv, metrics, predictions, ratio, granularity,
-                       cv_seconds=cv_seconds, nested=nested, cv_regions=cv_regions)
+    return ModelResult(spec, estimator, fit_seconds, pooled_rms(resid), metrics, predictions, ratio, granularity,
+                       cv_seconds=cv_seconds, nested=nested, cv_regions=cv_regions,
+                       cv_se=rms_standard_error(resid, cv.groups),
+                       effective_parameters=estimator.effective_parameters())
+
+
+@contextmanager
+def _collected():
+    """Collect partcal's log warnings and Python warnings of a block (a list of texts), printing none."""
+    said: list[str] = []
+
+    class Collect(logging.Handler):
+        def emit(self, record: logging.LogRecord) -> None:
+            said.append(record.getMessage())
+
+    logger, handler = logging.getLogger("partcal"), Collect(logging.WARNING)
+    propagate = logger.propagate
+    logger.addHandler(handler)
+    logger.propagate = False
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            warnings.simplefilter("ignore", RuntimeWarning)      # numbers are checked, never warned about
+            yield said
+        said += [str(w.message) for w in caught]
+    finally:
+        logger.removeHandler(handler)
+        logger.propagate = propagate
 
 
 def _regions_text(counts: list[int]) -> str:
@@ -314,31 +522,52 @@ def _backend(config: RunConfig):
 
 
 def run(config: RunConfig, progress: Callable[[int, int, str], None] | None = None) -> RunResult:
-    """Fit and evaluate every model of ``config``; verify compensation when a virtual robot is given."""
+    """Fit and evaluate every model of ``config``; verify compensation when a virtual robot is given.
+
+    ``progress(done, total, text)`` hears of each finished model (and, with
+    ``done = 0``, of the plan); per-fold lines of slow models go to stderr
+    unless ``progress`` is None.
+    """
     start = time.perf_counter()
     data, robot, registrations = load_datasets(config)
-    check_run(config, data)
+    plan = check_run(config, data)
     virtual = _virtual_robot(config, robot)
-    seeds = [int(s.generate_state(1)[0]) for s in np.random.SeedSequence(config.seed).spawn(len(config.models))]
-    folds = kfold_splits(len(data["identification"]), config.cv_folds, config.seed)    # one split for every model
+    specs = plan.models
+    if plan.repeat_scatter_mm is not None:
+        specs = tuple(_with_noise_floor(spec, plan.repeat_scatter_mm) for spec in specs)
+    if progress:
+        progress(0, len(specs), f"cross-validation: {plan.cv.describe()}")
     own = config.data_options.own_frame
-    jobs = [delayed(fit_model)(spec, seed, data, folds, config.seed, own) for spec, seed in zip(config.models, seeds)]
+    lines = FoldLines() if progress else None
+    jobs = [delayed(fit_model)(spec, model_seed(config.seed, spec.name), data, plan.cv, own, lines)
+            for spec in specs]
     results: list[ModelResult] = []
     with _backend(config):
         stream = Parallel(n_jobs=config.n_jobs, return_as="generator")(jobs)
         for result in stream:
             results.append(result)
+            for note in result.notes:
+                name = result.spec.name
+                log.warning("%s", note if note.startswith(f"{name}:") else f"{name}: {note}")
             if progress:
-                progress(len(results), len(jobs), f"{result.spec.name}: CV RMS {result.cv_rms_3d:.3f} mm, "
-                                                  f"fitted in {result.fit_seconds:.2f} s, cross-validated in "
-                                                  f"{result.cv_seconds:.2f} s")
+                progress(len(results), len(jobs), f"{result.spec.name}: CV RMS {result.cv_rms_3d:.3f} "
+                                                  f"+- {result.cv_se:.3f} mm, fitted in {result.fit_seconds:.2f} s, "
+                                                  f"cross-validated in {result.cv_seconds:.2f} s")
     if virtual is not None:
         for result in results:
             result.compensation = verify_compensation(result, data, robot, virtual, config.seed)
     uncompensated = {name: summary(errors_left(m, np.zeros_like(m.errors_mm), name in own)) for name, m in data.items()}
-    best = min(results, key=lambda r: r.score(config.rank_by)).spec.name
-    return RunResult(config, data, robot, uncompensated, results, best, time.perf_counter() - start,
-                     registrations=registrations)
+    return RunResult(config, data, robot, uncompensated, results, choose_best(results, config.rank_by),
+                     time.perf_counter() - start, registrations=registrations, plan=plan)
+
+
+def choose_best(results: list[ModelResult], rank_by: str) -> str:
+    """The name of the run's best model: lowest validation RMS, or by CV the simplest model (fewest
+    effective parameters) within one standard error of the lowest CV score (:func:`choose_simplest`)."""
+    if rank_by == "validation":
+        return min(results, key=lambda r: r.score(rank_by)).spec.name
+    sizes = [r.effective_parameters if np.isfinite(r.effective_parameters) else np.inf for r in results]
+    return results[choose_simplest([r.cv_rms_3d for r in results], [r.cv_se for r in results], sizes)].spec.name
 
 
 def _virtual_robot(config: RunConfig, robot: Robot | None):

@@ -19,13 +19,13 @@ PAPER_UNCOMPENSATED = {
 }
 
 
-def cell(value: float, width: int = 8) -> str:
+def cell(value: float, width: int = 8, decimals: int = 2) -> str:
     """``value`` right-aligned in ``width`` characters with at least one leading space.
 
-    >>> cell(2.254), cell(321518.0), cell(float("nan"))
-    ('    2.25', ' 3.2e+05', '     nan')
+    >>> cell(2.254), cell(321518.0), cell(float("nan")), cell(0.0412, 7, 3)
+    ('    2.25', ' 3.2e+05', '     nan', '  0.041')
     """
-    text = f"{value:.2f}"
+    text = f"{value:.{decimals}f}"
     if len(text) > width - 1:
         text = f"{value:.{max(width - 7, 0)}e}"
     return f"{text:>{width}}"
@@ -47,16 +47,23 @@ def results_table(result) -> str:
     and the compensation check (``partcal run``)."""
     names = list(result.datasets)
     width = 24
-    head1 = f"{'RMS error (mm)':<{width}}" + "".join(f"{n[:22]:^24}" for n in names)
-    head2 = f"{'model':<{width}}" + "".join(f"{'x':>8}{'y':>8}{'z':>8}" for _ in names)
+    head1 = f"{'RMS error (mm)':<{width}}" + "".join(f"{n[:22]:^24}" for n in names) + f"{'CV 3-D (mm)':^18}"
+    head2 = f"{'model':<{width}}" + "".join(f"{'x':>8}{'y':>8}{'z':>8}" for _ in names) + f"{'RMS +- SE':>11}{'params':>7}"
     lines = [head1, head2, "-" * len(head2)]
 
     def row(label, stats):
         return f"{label[:width - 1]:<{width}}" + "".join("".join(cell(v) for v in stats[n]["rms"]) for n in names)
 
     lines.append(row("uncompensated", result.uncompensated))
+    noted = []
     for r in result.models:
-        lines.append(row(r.spec.name, r.metrics))
+        mark = "*" if r.notes else ""
+        label = r.spec.name[:width - 1 - len(mark)] + mark
+        lines.append(row(label, r.metrics) + cell(r.cv_rms_3d, 7, 3) + " +-" + cell(r.cv_se, 6, 3).lstrip().ljust(5)
+                     + cell(r.effective_parameters, 7, 0))
+        noted += [f"  * {r.spec.name}: {note}" for note in r.notes]
+    if noted:
+        lines += ["", "warnings (also in the report):"] + noted
     best = next(r for r in result.models if r.spec.name == result.best)
     rule = "validation 3-D RMS" if result.config.rank_by == "validation" else "CV 3-D RMS"
     lines.append(f"best: {best.spec.name} ({rule} {best.score(result.config.rank_by):.3f} mm), chosen by the "

@@ -37,9 +37,12 @@ def test_the_estimate_is_the_size_of_the_matrices():
     from partcal.models.partition import KMeansPartition
     from partcal.models.partitioned import PartitionedErrorModel
 
-    gp = GaussianProcessErrorModel(inputs="joint")
-    assert gp.peak_fit_bytes(20000, 6) == (8.0 * 15 * 20000**2, "hyperparameter search on 20000 samples, "
-                                                                 "solve on 20000")
+    gp = GaussianProcessErrorModel(inputs="joint")              # by default the search sees 500 samples
+    assert gp.peak_fit_bytes(20000, 6) == (8.0 * 3 * 20000**2, "hyperparameter search on 500 samples, "
+                                                                "solve on 20000")
+    every = GaussianProcessErrorModel(inputs="joint", hyper_samples=20000)
+    assert every.peak_fit_bytes(20000, 6) == (8.0 * 15 * 20000**2, "hyperparameter search on 20000 samples, "
+                                                                    "solve on 20000")
     regions = PartitionedErrorModel(partition=KMeansPartition(8),
                                     local=GaussianProcessErrorModel(inputs="joint", hyper_samples=2000))
     assert regions.peak_fit_bytes(20000, 6) == (8.0 * 3 * 5000**2, "hyperparameter search on 2000 samples, "
@@ -47,12 +50,12 @@ def test_the_estimate_is_the_size_of_the_matrices():
 
 
 def test_a_global_gp_on_20000_poses_is_refused_by_check_before_any_fit(big, monkeypatch):
-    text = CONFIG + "  - {name: GP(AI), kind: gaussian_process, inputs: joint}\n"
+    text = CONFIG + "  - {name: GP(AI), kind: gaussian_process, inputs: joint, hyper_samples: 20000}\n"
     (big / "gp.yaml").write_text(text)
     config = load_config(big / "gp.yaml")
     data, _, _ = load_datasets(config)
     monkeypatch.setattr(memory, "available_bytes", lambda: 16 * 1024.0**3)        # a 16 GB machine
-    with pytest.raises(ValueError, match=r"models\[1\] \(line 7\): 'GP\(AI\)': its fit would need about "
+    with pytest.raises(ValueError, match=r"models\[1\]\.hyper_samples \(line 7\): 'GP\(AI\)': its fit would need about "
                                          r"44.7 GB \(hyperparameter search on 20000 samples, solve on 20000\) but the "
                                          r"machine has 16.0 GB available: set hyper_samples"):
         check_run(config, data)
@@ -78,6 +81,7 @@ def test_check_refuses_it_from_the_command_line_on_this_machine(big):
     available = memory.available_bytes()
     if available is None or available > 8.0 * 15 * 20000**2:
         pytest.skip("this machine could hold the fit")
-    (big / "gp.yaml").write_text(CONFIG + "  - {name: GP(AI), kind: gaussian_process, inputs: joint}\n")
+    (big / "gp.yaml").write_text(CONFIG + "  - {name: GP(AI), kind: gaussian_process, inputs: joint, "
+                                          "hyper_samples: 20000}\n")
     res = partcal_cli("run", "--check", str(big / "gp.yaml"))
     assert res.returncode == 2 and res.stderr.count("\n") == 1 and "would need about 44.7 GB" in res.stderr, res.stderr

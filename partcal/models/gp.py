@@ -50,7 +50,8 @@ NOISE_BOUNDS = (1e-12, 1.0)
 SHARED_HYPER_SAMPLES = (500, 2000)  # a partition's shared search: a tenth of the samples, within these bounds
 HYPERPARAMETERS = ("shared", "per_region")
 SAMPLES_PER_INPUT = 10             # default smallest region: 10 samples per varying input
-AUTO_RESTARTS = ((200, 4), (1000, 1))   # restarts: None -> 4 extra starts on a search of <= 200 samples, ...
+AUTO_RESTARTS = ((200, 4), (500, 1))    # restarts: None -> 4 extra starts on a search of <= 200 samples, ...
+GLOBAL_HYPER_SAMPLES = 500         # hyper_samples: None -> a global GP searches on at most 500 samples
 AT_BOUND = 1.05                    # a hyperparameter within 5% of a bound sits on it
 WHITE_NOISE = 0.05                 # neighbours correlated less than this (median): the GP predicts the mean
 _BLOCK = 2048
@@ -71,8 +72,8 @@ class GaussianProcessErrorModel(ErrorModelBase):
         Extra starts of the marginal-likelihood optimiser, drawn from the
         hyperparameter bounds with ``random_state``. None (the default): as
         many as are cheap (:data:`AUTO_RESTARTS`: 4 on a search of up to 200
-        samples, 1 up to 1,000, none above); a single start often ends on a
-        bound (every length scale at its smallest: white noise).
+        samples, 1 up to 500); a single start often ends on a bound (every
+        length scale at its smallest: white noise).
     noise_floor_mm : float >= 0 or None
         The smallest noise standard deviation (mm) the search may settle on:
         the scatter of repeated measurements of one pose, say. Without it the
@@ -86,10 +87,12 @@ class GaussianProcessErrorModel(ErrorModelBase):
         largest value; the GP is then solved on all samples with
         the hyperparameters found. The search costs O(n^3) per step and takes
         dozens of steps, the solve one step, so this is where a large fit's
-        time goes. None: all samples for a global GP (scikit-learn's way); for
-        the shared hyperparameters of a partition, a tenth of the samples, but
-        at least 500 and at most 2,000 (``SHARED_HYPER_SAMPLES``; fewer search
-        samples than that miss fine structure and read it as noise).
+        time goes. None: at most 500 for a global GP (``GLOBAL_HYPER_SAMPLES``:
+        on 700 and 2,000 real and virtual poses the test RMS within 2% of a
+        search on all, 3 to 50 times faster); for the shared hyperparameters of
+        a partition, a tenth of the samples, but at least 500 and at most 2,000
+        (``SHARED_HYPER_SAMPLES``; fewer search samples than that miss fine
+        structure and read it as noise).
     hyperparameters : {"shared", "per_region"}
         As the local model of a ``PartitionedErrorModel``: one set of
         hyperparameters learnt from the whole training set (a subset of
@@ -229,7 +232,8 @@ class GaussianProcessErrorModel(ErrorModelBase):
         low, high = SHARED_HYPER_SAMPLES
         subset = _search_subset(X, int(self.hyper_samples or min(max(len(X) // 10, low), high)),
                                 seed_from(self.random_state))
-        return clone(self).set_params(hyper_samples=None)._fit(X[subset], Y[subset], None)
+        n = len(X) if isinstance(subset, slice) else len(subset)
+        return clone(self).set_params(hyper_samples=n)._fit(X[subset], Y[subset], None)
 
     def _search(self, Z: NDArray[np.float64], Y: NDArray[np.float64]) -> GaussianProcessRegressor:
         """Hyperparameters by marginal likelihood (on at most ``hyper_samples`` of the samples), then the solve on all.
@@ -239,7 +243,8 @@ class GaussianProcessErrorModel(ErrorModelBase):
         busy, made each up to 50 times slower (``benchmarks/bench_gp.py``).
         """
         seed = seed_from(self.random_state) % 2**32
-        subset = _search_subset(Z, len(Z) if self.hyper_samples is None else int(self.hyper_samples), seed)
+        limit = GLOBAL_HYPER_SAMPLES if self.hyper_samples is None else int(self.hyper_samples)
+        subset = _search_subset(Z, limit, seed)
         Zs, Ys = Z[subset], Y[subset]
         kernel = self._kernel(Z.shape[1], self._noise_bounds(Y))
         restarts = self.restarts_for(len(Zs))
@@ -431,7 +436,7 @@ class GaussianProcessErrorModel(ErrorModelBase):
         d = 3 if self.inputs == "cartesian" else n_joints
         solve = n if regions <= 1 else min(n, -(-2 * self.region_overlap * n // regions))
         if regions <= 1:
-            search = self.hyper_samples or n
+            search = self.hyper_samples or GLOBAL_HYPER_SAMPLES
         elif self.hyperparameters == "shared":
             search = self.hyper_samples or min(max(n // 10, SHARED_HYPER_SAMPLES[0]), SHARED_HYPER_SAMPLES[1])
         else:

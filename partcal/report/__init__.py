@@ -70,6 +70,9 @@ def context(result: RunResult) -> dict:
         "families": family_sentences(result),
         "table": comparison_rows(result),
         "descriptions": [{"name": r.spec.name, "text": r.model.describe()} for r in result.models],
+        "cv_plan": result.plan.cv.describe() if result.plan else f"{cfg.cv_folds}-fold",
+        "fit_warnings": [{"model": r.spec.name, "text": note} for r in result.models for note in r.notes],
+        "left_out": list(result.plan.notes) if result.plan else [],
         "granularity": granularity_rows(result),
         "coarser_in_cv": coarser_in_cv(result),
         "shown_models": [r.spec.name for r in shown],
@@ -141,18 +144,22 @@ def comparison_rows(result: RunResult) -> list[dict]:
             values = [*s["rms"], s["rms_3d"], s["max_3d"]]
             for key, v in zip(("x", "y", "z", "3d", "max"), values):
                 cells.append({"key": f"{n}.{key}", "value": v, "text": f"{v:.2f}"})
-        extra = [("cv", r.cv_rms_3d if r else None, "{:.3f}"), ("regions", r.n_regions if r else None, "{}"),
+        extra = [("cv", r.cv_rms_3d if r else None, "{:.3f}"),
+                 ("params", r.effective_parameters if r else None, "{:.0f}"),
+                 ("regions", r.n_regions if r else None, "{}"),
                  ("fit_seconds", r.fit_seconds if r else None, "{:.2f}"),
                  ("pso_ratio", r.rms_ratio if r else None, "{:.6f}")]
         for key, v, fmt in extra:
             cells.append({"key": key, "value": v, "text": fmt.format(v) if v is not None else "–"})
+        if r is not None:                # the CV score with its standard error
+            cells[-5]["text"] += f" ± {r.cv_se:.3f}"
         return cells
 
     rows.append({"name": "uncompensated", "uncompensated": True, "cells": cells_for(result.uncompensated, None)})
     for r in result.models:
         rows.append({"name": r.spec.name, "uncompensated": False, "cells": cells_for(r.metrics, r)})
     for col in range(len(rows[0]["cells"])):       # best per column among the models
-        if rows[0]["cells"][col]["key"] in ("regions", "fit_seconds", "pso_ratio"):
+        if rows[0]["cells"][col]["key"] in ("params", "regions", "fit_seconds", "pso_ratio"):
             continue
         values = [row["cells"][col]["value"] for row in rows[1:]]
         low = min(v for v in values if v is not None)

@@ -323,6 +323,8 @@ def _cmd_plan(args) -> int:
     say = (lambda text: None) if args.quiet else (lambda text: print(f"partcal: plan: {text}", file=sys.stderr))
     start = time.perf_counter()
     options = {"base": not args.no_base, "tool": not args.no_tool}
+    evaluated = read_columns(args.evaluate, [joint_columns(robot.n_joints)], fmt=_format(args))[1] \
+        if args.evaluate else None
     if args.candidates:
         q = plan.check_candidates(robot, read_columns(args.candidates, [joint_columns(robot.n_joints)],
                                                       fmt=_format(args))[1], str(args.candidates))
@@ -334,9 +336,11 @@ def _cmd_plan(args) -> int:
                                f"got {args.box}")
         space = plan.workspace(robot, random_state=args.seed, n_poses=args.pool, box_mm=box, **options)
         where = f"{args.pool} random poses within the joint limits" + (" and the box" if box is not None else "")
+    if planning:
+        plan.check_count(robot, args.n, space)            # bad input gets its one line before any progress
     say(f"{robot.name}: {space.structural.size} identifiable parameters over {where} ({time.perf_counter() - start:.1f} s)")
     if args.evaluate:
-        q = read_columns(args.evaluate, [joint_columns(robot.n_joints)], fmt=_format(args))[1]
+        q = evaluated
         print(f"{args.evaluate}: {len(q)} poses of {robot.name}")
         print("\n".join(plan.evaluate(robot, q, space=space, noise_mm=args.noise_mm, **options).lines()))
     if planning:

@@ -37,7 +37,7 @@ from numpy.typing import NDArray
 from ..errors import PartcalError
 from ..robot.kinematics import Robot
 from .base import seed_from
-from .kinematic import _identifiable, identification_jacobian, nominal_values, parameter_names
+from .kinematic import identification_jacobian, nominal_values, parameter_names
 
 log = logging.getLogger(__name__)
 
@@ -85,8 +85,29 @@ def parameter_scales(robot: Robot) -> NDArray[np.float64]:
 
 def identifiable(robot: Robot, q_deg: NDArray[np.float64], wanted: NDArray[np.bool_], rcond: float = 1e-6
                  ) -> NDArray[np.intp]:
-    """Indices of the parameters that poses ``q_deg`` identify (the rule of the kinematic fit)."""
-    return _identifiable(robot, q_deg, wanted, rcond)[0]
+    """Indices of the parameters that poses ``q_deg`` identify: the first of each group of equivalent ones.
+
+    The rank is the kinematic fit's rule (singular values of the unit-column
+    Jacobian above ``rcond`` times the largest). Which parameters stand for a
+    group that positions cannot separate (the first joint's offset and the
+    base's turn about z, the ``d`` of parallel axes) is decided in the order of
+    the parameter table (DH rows, then tool, then base), so it does not depend
+    on the poses: indices of different pose sets are over the same parameters.
+    """
+    jac, _ = model_jacobian(robot, q_deg)
+    norms = np.linalg.norm(jac, axis=0)
+    candidates = np.flatnonzero(wanted & (norms > 1e-12 * max(norms.max(), 1e-300)))
+    if candidates.size == 0:
+        return candidates
+    unit = jac[:, candidates] / norms[candidates]
+    gram = unit.T @ unit
+    floor = rcond**2 * np.linalg.eigvalsh(gram)[-1]          # (rcond s_1)^2 in eigenvalues of J^T J
+    kept: list[int] = []
+    for k in range(candidates.size):
+        trial = kept + [k]
+        if np.linalg.eigvalsh(gram[np.ix_(trial, trial)])[0] > floor:
+            kept = trial
+    return candidates[kept]
 
 
 # ---------------------------------------------------------------------- indices
@@ -127,8 +148,13 @@ class Indices:
 
 
 def indices_from_singular(singular: NDArray[np.float64], n_poses: int) -> Indices:
-    """The four indices from the singular values of a scaled Jacobian (any order) of ``n_poses`` poses."""
+    """The four indices from the singular values of a scaled Jacobian (any order) of ``n_poses`` poses.
+
+    Singular values below ``1e-12`` of the largest are rounding noise and count as zero.
+    """
     s = np.sort(np.asarray(singular, dtype=float))[::-1]
+    if s.size:
+        s[s <= 1e-12 * s[0]] = 0.0          # rounding noise of a rank-deficient matrix counts as zero
     if s.size == 0:
         return Indices(0.0, np.inf, 0.0, 0.0, n_poses, 0)
     small, large = max(float(s[-1]), 0.0), float(s[0])
@@ -191,9 +217,7 @@ class ExchangeResult:
 
 def information_logdet(blocks: NDArray[np.float64], chosen, ridge: float = 0.0) -> float:
     """``log det(sum_i J_i^T J_i + ridge I)`` over the chosen blocks (``-inf`` when singular)."""
-    b = blocks[np.asarray(chosen, dtype=np.intp)]
-    info = np.einsum("nik,nil->kl", b, b) + ridge * np.eye(blocks.shape[2])
-    sign, value = np.linalg.slogdet(info)
+    sign, value = np.linalg.slogdet(_information(blocks, list(np.asarray(chosen, dtype=np.intp)), ridge))
     return float(value) if sign > 0 else -np.inf
 
 
@@ -243,7 +267,7 @@ def detmax(blocks: NDArray[np.float64], n: int, *, start=None, random_state=None
         if len(design) != n or len(set(design)) != n or min(design) < 0 or max(design) >= count:
             raise PartcalError(f"detmax: start must be {n} distinct candidate indices in [0, {count - 1}]")
     flat = blocks.reshape(count * blocks.shape[1], width)
-    ridge = 1e-9 * float(np.einsum("ij,ij->", flat, flat)) / count / width
+    ridge = 1e-9 * float(np.einsum("ij,ij->", flat, flat)) / count / width or 1e-300
     start_logdet = information_logdet(blocks, design, ridge)
     logdet, exchanges, nit, k = start_logdet, 0, 0, 1
     limit = 50 * n if max_exchanges is None else max_exchanges
@@ -263,26 +287,28 @@ def detmax(blocks: NDArray[np.float64], n: int, *, start=None, random_state=None
 
 
 def _excursion(blocks: NDArray[np.float64], design: list[int], k: int, ridge: float) -> list[int]:
-    """Add the ``k`` best candidates one by one, then remove the ``k`` cheapest points one by one."""
+    """Add the ``k`` best candidates one by one, then remove as many of the cheapest points one by one."""
     design = list(design)
-    info = np.einsum("nik,nil->kl", blocks[design], blocks[design]) + ridge * np.eye(blocks.shape[2])
     free = np.ones(blocks.shape[0], dtype=bool)
     free[design] = False
-    for _ in range(k):
-        if not free.any():
-            break
-        gain = _logdet_rank_update(blocks, info, +1.0)
+    added = 0
+    for _ in range(min(k, int(free.sum()))):
+        gain = _logdet_rank_update(blocks, _information(blocks, design, ridge), +1.0)
         gain[~free] = -np.inf
         best = int(np.argmax(gain))
         design.append(best)
         free[best] = False
-        info = info + blocks[best].T @ blocks[best]
-    for _ in range(k):
-        loss = _logdet_rank_update(blocks[design], info, -1.0)
-        worst = int(np.argmax(loss))
-        info = info - blocks[design[worst]].T @ blocks[design[worst]]
-        design.pop(worst)
+        added += 1
+    for _ in range(added):
+        loss = _logdet_rank_update(blocks[design], _information(blocks, design, ridge), -1.0)
+        design.pop(int(np.argmax(loss)))
     return design
+
+
+def _information(blocks: NDArray[np.float64], design: list[int], ridge: float) -> NDArray[np.float64]:
+    """``sum J_i^T J_i + ridge I`` over the design, summed afresh (no drift from updates)."""
+    b = blocks[design]
+    return np.einsum("nik,nil->kl", b, b) + ridge * np.eye(blocks.shape[2])
 
 
 def _logdet_rank_update(blocks: NDArray[np.float64], info: NDArray[np.float64], sign: float) -> NDArray[np.float64]:

@@ -34,7 +34,7 @@ log = logging.getLogger(__name__)
 DEFAULT_NOISE_MM = 0.03     # a laser tracker at 2-3 m: about 15 um + 6 um/m per coordinate
 DEFAULT_POOL = 2000         # candidate poses drawn within the limits (or the box)
 WORKSPACE_POSES = 1000      # joint-limit poses over which a pose set's uncertainty is predicted
-_MAX_DRAWS = 2_000_000      # uniform joint-space draws before a candidate search gives up
+_MAX_DRAWS = 400_000        # uniform joint-space draws before a candidate search gives up
 
 
 # ---------------------------------------------------------------------- candidates
@@ -232,6 +232,15 @@ def min_poses(n_parameters: int) -> int:
     return max(1, math.ceil(n_parameters / 3))
 
 
+def check_count(robot: Robot, n, space: Workspace) -> None:
+    """Refuse a pose count below what the identifiable parameters need or above the candidates."""
+    count, need = len(space.q_deg), min_poses(space.structural.size)
+    if not isinstance(n, (int, np.integer)) or isinstance(n, bool) or n < need or n > count:
+        raise PartcalError(f"the number of poses must be a whole number in [{need}, {count}]: at least "
+                           f"{need} poses for the {space.structural.size} identifiable parameters of {robot.name} "
+                           f"(3 coordinates per pose), at most the {count} candidates; got {n!r}")
+
+
 def plan_poses(robot: Robot, n: int, *, space: Workspace | None = None, noise_mm: float = DEFAULT_NOISE_MM,
                base: bool = True, tool: bool = True, random_state=0, callback=None) -> Plan:
     """Choose ``n`` poses of the candidate pool that make the kinematic model best identifiable.
@@ -256,16 +265,12 @@ def plan_poses(robot: Robot, n: int, *, space: Workspace | None = None, noise_mm
     if space is None:
         space = workspace(robot, base=base, tool=tool, random_state=np.random.default_rng(seeds[0]),
                           n_poses=DEFAULT_POOL)
-    count, need = len(space.q_deg), min_poses(space.structural.size)
-    if not isinstance(n, (int, np.integer)) or isinstance(n, bool) or n < need or n > count:
-        raise PartcalError(f"the number of poses must be a whole number in [{need}, {count}]: at least "
-                           f"{need} poses for the {space.structural.size} identifiable parameters of {robot.name} "
-                           f"(3 coordinates per pose), at most the {count} candidates; got {n!r}")
+    check_count(robot, n, space)
     blocks = space.blocks[:, :, space.structural]
     result = design.detmax(blocks, int(n), random_state=np.random.default_rng(seeds[1]), callback=callback)
     q = space.q_deg[result.indices]
     return Plan(q, result.indices, evaluate(robot, q, space=space, noise_mm=noise_mm, base=base, tool=tool),
-                result, count)
+                result, len(space.q_deg))
 
 
 def pose_curve(robot: Robot, counts, *, space: Workspace, noise_mm: float = DEFAULT_NOISE_MM, base: bool = True,

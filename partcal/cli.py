@@ -317,8 +317,8 @@ def _cmd_plan(args) -> int:
         raise PartcalError("plan: give either --candidates FILE.csv or --box, not both")
     if not (args.noise_mm > 0 and np.isfinite(args.noise_mm)):
         raise PartcalError(f"plan: --noise-mm must be a positive number of mm; got {args.noise_mm!r}")
-    _refuse_input_as_output(args.output, "plan", [("candidate file", args.candidates), ("evaluated file", args.evaluate),
-                                                 ("format file", args.format), ("robot file", args.robot)])
+    _refuse_input_as_output(args.output, "plan", [("candidate file", args.candidates), ("format file", args.format),
+                                                 ("evaluated file", args.evaluate), ("robot file", args.robot)])
     robot = load_robot(args.robot)
     say = (lambda text: None) if args.quiet else (lambda text: print(f"partcal: plan: {text}", file=sys.stderr))
     start = time.perf_counter()
@@ -338,13 +338,16 @@ def _cmd_plan(args) -> int:
         where = f"{args.pool} random poses within the joint limits" + (" and the box" if box is not None else "")
     if planning:
         plan.check_count(robot, args.n, space)            # bad input gets its one line before any progress
-    say(f"{robot.name}: {space.structural.size} identifiable parameters over {where} ({time.perf_counter() - start:.1f} s)")
+    say(f"{robot.name}: {space.structural.size} identifiable parameters over {where} "
+        f"({time.perf_counter() - start:.1f} s)")
     if args.evaluate:
         q = evaluated
         print(f"{args.evaluate}: {len(q)} poses of {robot.name}")
         print("\n".join(plan.evaluate(robot, q, space=space, noise_mm=args.noise_mm, **options).lines()))
     if planning:
-        progress = lambda k, logdet: say(f"DETMAX exchange {k}: log det {logdet:.4f}") if k % 10 == 0 else None  # noqa: E731
+        def progress(k: int, logdet: float) -> None:
+            if k % 10 == 0:
+                say(f"DETMAX exchange {k}: log det {logdet:.4f}")
         result = plan.plan_poses(robot, args.n, space=space, noise_mm=args.noise_mm, random_state=args.seed,
                                  callback=progress, **options)
         plan.write_plan(robot, result.q_deg, args.output, comment=(
@@ -353,7 +356,8 @@ def _cmd_plan(args) -> int:
             f"tracker's positions become x_meas,y_meas,z_meas (mm).\n{result.evaluation.indices.text()}"))
         print("\n".join(result.evaluation.lines()))
         print(f"wrote {args.n} poses to {args.output} ({result.exchange.exchanges} exchanges, log det "
-              f"{result.exchange.start_logdet:.3f} -> {result.exchange.logdet:.3f}, {time.perf_counter() - start:.1f} s)")
+              f"{result.exchange.start_logdet:.3f} -> {result.exchange.logdet:.3f}, "
+              f"{time.perf_counter() - start:.1f} s)")
     if args.curve:
         largest = args.curve_max or max(3 * space.structural.size, args.n or 0)
         counts = plan.curve_counts(space.structural.size, min(largest, len(space.q_deg)))
@@ -444,8 +448,10 @@ def build_parser() -> argparse.ArgumentParser:
     pln.add_argument("--candidates", metavar="FILE.csv", help="the reachable, safe poses to choose from (q1..qN)")
     pln.add_argument("--box", nargs=6, type=float, metavar=("XMIN", "YMIN", "ZMIN", "XMAX", "YMAX", "ZMAX"),
                      help="candidates with the nominal tool position inside this box (mm, base frame)")
-    pln.add_argument("--format", metavar="FILE.yaml", help="format of --candidates / --evaluate files, see docs/data.md")
-    pln.add_argument("--pool", type=_positive_int, default=2000, help="candidates drawn within the limits (default 2000)")
+    pln.add_argument("--format", metavar="FILE.yaml",
+                     help="format of --candidates / --evaluate files, see docs/data.md")
+    pln.add_argument("--pool", type=_positive_int, default=2000,
+                     help="candidates drawn within the limits (default 2000)")
     pln.add_argument("--noise-mm", type=float, default=0.03,
                      help="tracker noise per coordinate for the predictions (default 0.03 mm)")
     pln.add_argument("--seed", type=int, default=0, help="seed of the candidates and the exchange (default 0)")

@@ -43,6 +43,15 @@ log = logging.getLogger(__name__)
 
 
 # ---------------------------------------------------------------------- the planned model
+def model_parameters(robot: Robot) -> tuple[list[tuple[str, str]], NDArray[np.float64]]:
+    """``(name, unit)`` of the planned model's parameters and their nominal values, shape ``(P,)``.
+
+    The one place that says which kinematic model is planned for (DH rows, tool and base today);
+    :func:`model_jacobian` and :func:`parameter_scales` read it.
+    """
+    return parameter_names(robot), nominal_values(robot)
+
+
 def model_jacobian(robot: Robot, q_deg: NDArray[np.float64], *, base: bool = True, tool: bool = True
                    ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
     """The identification Jacobian at the nominal parameters and the mask of parameters asked for.
@@ -62,8 +71,9 @@ def model_jacobian(robot: Robot, q_deg: NDArray[np.float64], *, base: bool = Tru
         ``d p / d parameters`` (mm per mm, mm per degree); rows run over poses, then x, y, z.
     wanted : ndarray of bool, shape (P,)
     """
-    _, jac = identification_jacobian(robot, q_deg, nominal_values(robot))   # the model planned for
-    names = [n for n, _ in parameter_names(robot)]
+    names, values = model_parameters(robot)
+    _, jac = identification_jacobian(robot, q_deg, values)
+    names = [n for n, _ in names]
     wanted = np.array([(tool or not n.startswith("tool.")) and (base or not n.startswith("base."))
                        for n in names])
     return jac, wanted
@@ -73,14 +83,15 @@ def parameter_scales(robot: Robot) -> NDArray[np.float64]:
     """Column scales that make every parameter a length: 1 for mm, ``180 / (pi L)`` for degrees.
 
     ``L`` is the robot's reach (mm): one "mm" of an angle is the arc it sweeps
-    at the reach. Shape ``(P,)``.
+    at the reach. Parameters in other units keep them (scale 1). Shape ``(P,)``.
 
     >>> from partcal.robot import load_robot
     >>> s = parameter_scales(load_robot("universal_robots_ur10"))
     >>> float(s[1]), round(float(s[0]) * np.pi / 180 * load_robot("universal_robots_ur10").reach_mm, 12)
     (1.0, 1.0)
     """
-    return np.array([1.0 if unit == "mm" else 180.0 / (np.pi * robot.reach_mm) for _, unit in parameter_names(robot)])
+    arc = 180.0 / (np.pi * robot.reach_mm)
+    return np.array([arc if unit == "deg" else 1.0 for _, unit in model_parameters(robot)[0]])
 
 
 def identifiable(robot: Robot, q_deg: NDArray[np.float64], wanted: NDArray[np.bool_], rcond: float = 1e-6
@@ -312,7 +323,11 @@ def _information(blocks: NDArray[np.float64], design: list[int], ridge: float) -
 
 
 def _logdet_rank_update(blocks: NDArray[np.float64], info: NDArray[np.float64], sign: float) -> NDArray[np.float64]:
-    """``log det(info + sign J_c^T J_c) - log det(info)`` for every block ``J_c``: ``log det(I + sign J_c M^-1 J_c^T)``."""
+    """``log det(info + sign J_c^T J_c) - log det(info)`` for every block ``J_c``.
+
+    By the determinant lemma that is ``log det(I + sign J_c M^-1 J_c^T)`` (``M = info``): one small
+    determinant per candidate.
+    """
     factor = scipy.linalg.cho_factor(info)
     solved = scipy.linalg.cho_solve(factor, blocks.reshape(-1, blocks.shape[2]).T).T.reshape(blocks.shape)
     small = sign * np.einsum("cik,cjk->cij", solved, blocks) + np.eye(blocks.shape[1])

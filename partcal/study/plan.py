@@ -26,7 +26,6 @@ from .._io import atomic_write
 from ..errors import DataError, PartcalError
 from ..models import design
 from ..models.base import seed_from
-from ..models.kinematic import parameter_names
 from ..robot.description import joint_columns
 from ..robot.kinematics import Robot
 
@@ -91,8 +90,8 @@ class Evaluation:
     missing : tuple of str
         Parameters joint-limit (workspace) poses identify but this set does not: its weakness.
     never : tuple of str
-        Parameters that positions cannot separate from the others, whatever the poses (every fit keeps
-        them nominal; equivalent parameters carry their effect).
+        Parameters no pose of the workspace identifies: positions cannot separate them from the others
+        (equivalent parameters carry their effect), or the candidates never move what they need.
     std_error : ndarray, shape (P,)
         Predicted standard error of each identified parameter (mm, deg; NaN otherwise).
     noise_mm : float
@@ -120,8 +119,8 @@ class Evaluation:
         out = [f"observability ({ind.n_poses} poses, {ind.n_parameters} identified parameters): {ind.text()}",
                "not identifiable from this set (joint-limit poses would identify them): "
                + (", ".join(self.missing) if self.missing else "none"),
-               "not separable from the others by positions (kept nominal; equivalent parameters carry their "
-               "effect): "
+               "not identifiable from any pose of the workspace (kept nominal; where positions cannot separate "
+               "them, equivalent parameters carry their effect): "
                + (", ".join(self.never) if self.never else "none"),
                f"predicted position uncertainty of the identified robot over the workspace, tracker noise "
                f"{self.noise_mm:g} mm per coordinate: RMS {self.position_rms_mm:.4f} mm, 95% "
@@ -187,7 +186,7 @@ def evaluate(robot: Robot, q_deg, *, space: Workspace | None = None, noise_mm: f
     within = np.zeros_like(wanted)
     within[space.structural] = True
     own = design.identifiable(robot, q_deg, within, rcond)      # a subset of what the workspace identifies
-    names = parameter_names(robot)
+    names = design.model_parameters(robot)[0]
     label = [n for n, _ in names]
     scaled = jac[:, own] * space.scales[own]
     ind = design.indices(scaled, len(q_deg))
@@ -278,7 +277,8 @@ def pose_curve(robot: Robot, counts, *, space: Workspace, noise_mm: float = DEFA
     """Planned sets of each size in ``counts``: indices and predicted uncertainty, one dict per size.
 
     Each dict: ``n``, ``o1``, ``condition``, ``position_rms_mm``, ``position_p95_mm``,
-    ``missing`` (parameters the set cannot identify), and ``random_position_rms_mm`` and ``random_missing`` (the same for a random set of the size, for scale).
+    ``missing`` (parameters the set cannot identify), and ``random_position_rms_mm`` and
+    ``random_missing`` (the same for a random set of the size, for scale).
     """
     rows = []
     rng = np.random.default_rng(seed_from(random_state))
@@ -317,7 +317,9 @@ def curve_lines(rows: list[dict], noise_mm: float) -> list[str]:
 
 # ---------------------------------------------------------------------- output
 def write_plan(robot: Robot, q_deg: NDArray[np.float64], path: str | Path, *, comment: str = "") -> None:
-    """Write poses as a pose list in the measurement-CSV layout: ``q1..qN`` (deg), ``x_nom, y_nom, z_nom`` (mm), ``set``.
+    """Write poses as a pose list in the measurement-CSV layout.
+
+    Columns ``q1..qN`` (deg), ``x_nom, y_nom, z_nom`` (mm, forward kinematics) and ``set`` (``plan``).
 
     The measured columns ``x_meas, y_meas, z_meas`` are left out: they come
     from the tracker. Written atomically.

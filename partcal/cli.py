@@ -336,8 +336,8 @@ def _cmd_plan(args) -> int:
                                f"got {args.box}")
         space = plan.workspace(robot, random_state=args.seed, n_poses=args.pool, box_mm=box, **options)
         where = f"{args.pool} random poses within the joint limits" + (" and the box" if box is not None else "")
-    if planning:
-        plan.check_count(robot, args.n, space)            # bad input gets its one line before any progress
+    if planning or args.curve:                             # bad input gets its one line before any progress
+        plan.check_count(robot, args.n if planning else plan.min_poses(space.structural.size), space)
     say(f"{robot.name}: {space.structural.size} identifiable parameters over {where} "
         f"({time.perf_counter() - start:.1f} s)")
     if args.evaluate:

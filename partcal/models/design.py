@@ -318,8 +318,8 @@ def _excursion(blocks: NDArray[np.float64], design: list[int], k: int, ridge: fl
 
 def _information(blocks: NDArray[np.float64], design: list[int], ridge: float) -> NDArray[np.float64]:
     """``sum J_i^T J_i + ridge I`` over the design, summed afresh (no drift from updates)."""
-    b = blocks[design]
-    return np.einsum("nik,nil->kl", b, b) + ridge * np.eye(blocks.shape[2])
+    b = blocks[design].reshape(-1, blocks.shape[2])
+    return b.T @ b + ridge * np.eye(blocks.shape[2])
 
 
 def _logdet_rank_update(blocks: NDArray[np.float64], info: NDArray[np.float64], sign: float) -> NDArray[np.float64]:
@@ -328,8 +328,8 @@ def _logdet_rank_update(blocks: NDArray[np.float64], info: NDArray[np.float64], 
     By the determinant lemma that is ``log det(I + sign J_c M^-1 J_c^T)`` (``M = info``): one small
     determinant per candidate.
     """
-    factor = scipy.linalg.cho_factor(info)
-    solved = scipy.linalg.cho_solve(factor, blocks.reshape(-1, blocks.shape[2]).T).T.reshape(blocks.shape)
-    small = sign * np.einsum("cik,cjk->cij", solved, blocks) + np.eye(blocks.shape[1])
+    inverse = scipy.linalg.cho_solve(scipy.linalg.cho_factor(info), np.eye(info.shape[0]))
+    solved = (blocks.reshape(-1, blocks.shape[2]) @ inverse).reshape(blocks.shape)
+    small = sign * (solved @ blocks.transpose(0, 2, 1)) + np.eye(blocks.shape[1])
     det_sign, value = np.linalg.slogdet(small)
     return np.where(det_sign > 0, value, -np.inf)

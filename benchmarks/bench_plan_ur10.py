@@ -70,7 +70,7 @@ def main() -> None:
         for label, rows in chosen.items():
             table = identify(robot, b.q_deg[rows], b.measured_mm[rows])
             rest = np.setdiff1d(np.arange(len(b)), rows)
-            ev = plan.evaluate(robot, b.q_deg[rows], space=space)
+            ev = plan.evaluate_poses(robot, b.q_deg[rows], space=space)
             results[label].append([rms(robot, table.value, b, rest), rms(robot, table.value, c),
                                    ev.indices.o1, ev.indices.condition, ev.position_rms_mm, len(ev.missing)])
         print(f"seed {seed + 1}/{args.seeds}", file=sys.stderr)

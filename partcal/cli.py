@@ -343,7 +343,7 @@ def _cmd_plan(args) -> int:
     if args.evaluate:
         q = evaluated
         print(f"{args.evaluate}: {len(q)} poses of {robot.name}")
-        print("\n".join(plan.evaluate(robot, q, space=space, noise_mm=args.noise_mm, **options).lines()))
+        print("\n".join(plan.evaluate_poses(robot, q, space=space, noise_mm=args.noise_mm, **options).lines()))
     if planning:
         def progress(k: int, logdet: float) -> None:
             if k % 10 == 0:

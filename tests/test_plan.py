@@ -94,8 +94,8 @@ def test_evaluate_names_what_a_set_without_elbow_motion_cannot_identify():
     robot = planar_arm()
     space = plan.workspace(robot, random_state=0, n_poses=200)
     stiff = np.column_stack([np.linspace(-150, 150, 12), np.full(12, 40.0)])     # the elbow never moves
-    weak = plan.evaluate(robot, stiff, space=space)
-    full = plan.evaluate(robot, space.q_deg[:12], space=space)
+    weak = plan.evaluate_poses(robot, stiff, space=space)
+    full = plan.evaluate_poses(robot, space.q_deg[:12], space=space)
     assert full.missing == () and len(weak.missing) >= 1
     assert set(weak.missing) | set(weak.identified) == set(full.identified)
     assert np.isnan(weak.std_error[columns(robot, list(weak.missing))]).all()
@@ -110,7 +110,7 @@ def test_predicted_standard_errors_scale_with_the_noise_and_match_monte_carlo():
     robot = planar_arm()
     space = plan.workspace(robot, random_state=1, n_poses=300)
     q = space.q_deg[:10]
-    ev1, ev2 = (plan.evaluate(robot, q, space=space, noise_mm=s) for s in (0.01, 0.04))
+    ev1, ev2 = (plan.evaluate_poses(robot, q, space=space, noise_mm=s) for s in (0.01, 0.04))
     np.testing.assert_allclose(ev2.std_error, 4 * ev1.std_error, rtol=1e-9)
     assert ev2.position_rms_mm == pytest.approx(4 * ev1.position_rms_mm)
     # Monte Carlo on the linear model: least squares on noisy data gives the predicted spread
@@ -175,7 +175,7 @@ def test_a_plan_of_the_sk120_respects_its_limits_and_beats_random_sets(sk120, sk
     np.testing.assert_array_equal(result.q_deg, sk120_space.q_deg[result.chosen])
     assert result.exchange.logdet > result.exchange.start_logdet
     rng = np.random.default_rng(1)
-    random = [plan.evaluate(sk120, sk120_space.q_deg[rng.choice(400, 15, replace=False)], space=sk120_space)
+    random = [plan.evaluate_poses(sk120, sk120_space.q_deg[rng.choice(400, 15, replace=False)], space=sk120_space)
               for _ in range(9)]
     assert result.evaluation.indices.o1 > np.median([r.indices.o1 for r in random])
     assert result.evaluation.position_rms_mm < np.median([r.position_rms_mm for r in random])
@@ -276,7 +276,7 @@ def test_run_prints_and_reports_the_identification_sets_indices(tmp_path):
     line = next(x for x in stdout.splitlines() if x.startswith("identification set: O1 "))
     robot = load_robot("motoman_sk120")
     q = read_columns(DATA / "identification.csv", [["q1", "q2", "q3", "q4", "q5", "q6"]])[1]
-    expected = plan.evaluate(robot, q)
+    expected = plan.evaluate_poses(robot, q)
     assert expected.indices.text() in line
     assert "theta[7]" in line or "d[7]" in line          # the paper's wrist stays at q4 = q5 = 0
     html = (tmp_path / "reports" / "c" / "index.html").read_text()

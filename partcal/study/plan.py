@@ -3,7 +3,7 @@
 ``plan_poses`` draws a candidate pool (joint-limit poses, poses whose tool is
 inside a Cartesian box, or the user's own list of reachable and safe poses)
 and keeps the ``n`` that make the kinematic model best identifiable
-(D-optimal, DETMAX; see :mod:`partcal.models.design`). ``evaluate`` reports
+(D-optimal, DETMAX; see :mod:`partcal.models.design`). ``evaluate_poses`` reports
 the observability indices of any pose set, the parameters it cannot
 identify, the predicted standard error of each parameter and the predicted
 position uncertainty of the identified robot over the workspace, for a given
@@ -161,7 +161,7 @@ def workspace(robot: Robot, q_deg=None, *, base: bool = True, tool: bool = True,
     return Workspace(q_deg, (jac * scales).reshape(len(q_deg), 3, -1), structural, wanted, scales)
 
 
-def evaluate(robot: Robot, q_deg, *, space: Workspace | None = None, noise_mm: float = DEFAULT_NOISE_MM,
+def evaluate_poses(robot: Robot, q_deg, *, space: Workspace | None = None, noise_mm: float = DEFAULT_NOISE_MM,
              base: bool = True, tool: bool = True, rcond: float = 1e-6) -> Evaluation:
     """The indices, identifiable parameters and predicted uncertainties of a pose set.
 
@@ -268,7 +268,8 @@ def plan_poses(robot: Robot, n: int, *, space: Workspace | None = None, noise_mm
     blocks = space.blocks[:, :, space.structural]
     result = design.detmax(blocks, int(n), random_state=np.random.default_rng(seeds[1]), callback=callback)
     q = space.q_deg[result.indices]
-    return Plan(q, result.indices, evaluate(robot, q, space=space, noise_mm=noise_mm, base=base, tool=tool),
+    return Plan(q, result.indices,
+                evaluate_poses(robot, q, space=space, noise_mm=noise_mm, base=base, tool=tool),
                 result, len(space.q_deg))
 
 
@@ -285,8 +286,8 @@ def pose_curve(robot: Robot, counts, *, space: Workspace, noise_mm: float = DEFA
     for k, n in enumerate(counts):
         plan = plan_poses(robot, int(n), space=space, noise_mm=noise_mm, base=base, tool=tool, random_state=rng)
         ev = plan.evaluation
-        rand = evaluate(robot, space.q_deg[rng.choice(len(space.q_deg), int(n), replace=False)], space=space,
-                        noise_mm=noise_mm, base=base, tool=tool)
+        rand = evaluate_poses(robot, space.q_deg[rng.choice(len(space.q_deg), int(n), replace=False)],
+                              space=space, noise_mm=noise_mm, base=base, tool=tool)
         rows.append({"n": int(n), "o1": ev.indices.o1, "condition": ev.indices.condition,
                      "position_rms_mm": ev.position_rms_mm, "position_p95_mm": ev.position_p95_mm,
                      "missing": len(ev.missing),
@@ -336,4 +337,4 @@ def write_plan(robot: Robot, q_deg: NDArray[np.float64], path: str | Path, *, co
 
 def run_indices(robot: Robot, q_deg) -> Evaluation:
     """The evaluation of a run's identification set (what ``partcal run`` prints and the report shows)."""
-    return evaluate(robot, q_deg)
+    return evaluate_poses(robot, q_deg)

@@ -22,7 +22,7 @@ O1 above the random sets' median. Measured (20 seeds, 2026-11-23), test RMS agai
 positions: SK120 31% / 30% / 16% less for N = 20 / 30 / 50, UR10 13% / 9% / 12%; against the
 tracker's measurements (which add its own noise, about 0.07 mm 3-D at 3.5 m) 14% / 8% / 2% and
 6% / 3% / 3%; the planned O1 is above the random median for every seed. The linear prediction
-(``plan.evaluate``'s position uncertainty) gives the same picture, and an I-optimal exchange does no
+(``plan.evaluate_poses``' position uncertainty) gives the same picture, and an I-optimal exchange does no
 better: uniform random poses over wide joint ranges are already within 10-30% of the optimum, so
 the 25% target is met only for the SK120 at N = 20 and 30.
 

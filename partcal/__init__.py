@@ -29,6 +29,7 @@ _EXPORTS = {
     "models.partition": ["KMeansPartition", "Octree"],
     "models.partitioned": ["PartitionedErrorModel", "select_granularity"],
     "study.predictor": ["Predictor", "load_predictor"],
+    "study.plan": ["evaluate_poses", "plan_poses"],
 }
 _WHERE = {name: module for module, names in _EXPORTS.items() for name in names}
 __all__ = ["__version__", *_WHERE]

@@ -85,6 +85,11 @@ def _cmd_run(args) -> int:
         log.warning("no report: %s", exc)
     out = write_run(result, render)
     print(results_table(result))
+    if result.robot is not None:
+        from .study.plan import run_indices
+
+        ev = run_indices(result.robot, result.datasets["identification"].q_deg)
+        print(f"identification set: {ev.indices.text()}; not identifiable from it: {', '.join(ev.missing) or 'none'}")
     print(f"outputs: {out}")
     return 0
 
@@ -296,6 +301,73 @@ def _cmd_equations(args) -> int:
     return 0
 
 
+def _cmd_plan(args) -> int:
+    from .data.measurements import read_columns
+    from .robot.description import joint_columns, load_robot
+    from .study import plan
+
+    planning = args.n is not None
+    if not (planning or args.evaluate or args.curve):
+        raise PartcalError("plan: give -n N -o POSES.csv (plan poses), --evaluate DATA.csv (judge a pose set) or "
+                           "--curve (predicted uncertainty against the number of poses)")
+    if planning != (args.output is not None):
+        raise PartcalError("plan: -n N and -o POSES.csv go together (how many poses, and the CSV to write)")
+    if planning and args.evaluate:
+        raise PartcalError("plan: give either -n N -o POSES.csv or --evaluate DATA.csv, not both")
+    if args.candidates and args.box:
+        raise PartcalError("plan: give either --candidates FILE.csv or --box, not both")
+    if not (args.noise_mm > 0 and np.isfinite(args.noise_mm)):
+        raise PartcalError(f"plan: --noise-mm must be a positive number of mm; got {args.noise_mm!r}")
+    _refuse_input_as_output(args.output, "plan", [("candidate file", args.candidates), ("format file", args.format),
+                                                 ("evaluated file", args.evaluate), ("robot file", args.robot)])
+    robot = load_robot(args.robot)
+    say = (lambda text: None) if args.quiet else (lambda text: print(f"partcal: plan: {text}", file=sys.stderr))
+    start = time.perf_counter()
+    options = {"base": not args.no_base, "tool": not args.no_tool}
+    evaluated = read_columns(args.evaluate, [joint_columns(robot.n_joints)], fmt=_format(args))[1] \
+        if args.evaluate else None
+    if args.candidates:
+        q = plan.check_candidates(robot, read_columns(args.candidates, [joint_columns(robot.n_joints)],
+                                                      fmt=_format(args))[1], str(args.candidates))
+        space, where = plan.workspace(robot, q, **options), f"the {len(q)} poses of {args.candidates}"
+    else:
+        box = None if args.box is None else np.array(args.box, dtype=float).reshape(2, 3)
+        if box is not None and np.any(box[0] >= box[1]):
+            raise PartcalError(f"plan: --box takes XMIN YMIN ZMIN XMAX YMAX ZMAX (mm) with each min below its max; "
+                               f"got {args.box}")
+        space = plan.workspace(robot, random_state=args.seed, n_poses=args.pool, box_mm=box, **options)
+        where = f"{args.pool} random poses within the joint limits" + (" and the box" if box is not None else "")
+    if planning or args.curve:                             # bad input gets its one line before any progress
+        plan.check_count(robot, args.n if planning else plan.min_poses(space.structural.size), space)
+    say(f"{robot.name}: {space.structural.size} identifiable parameters over {where} "
+        f"({time.perf_counter() - start:.1f} s)")
+    if args.evaluate:
+        q = evaluated
+        print(f"{args.evaluate}: {len(q)} poses of {robot.name}")
+        print("\n".join(plan.evaluate_poses(robot, q, space=space, noise_mm=args.noise_mm, **options).lines()))
+    if planning:
+        def progress(k: int, logdet: float) -> None:
+            if k % 10 == 0:
+                say(f"DETMAX exchange {k}: log det {logdet:.4f}")
+        result = plan.plan_poses(robot, args.n, space=space, noise_mm=args.noise_mm, random_state=args.seed,
+                                 callback=progress, **options)
+        plan.write_plan(robot, result.q_deg, args.output, comment=(
+            f"Pose list planned by partcal {__version__} for {robot.name}: {args.n} of {where}, D-optimal (DETMAX), "
+            f"seed {args.seed}.\nJoint angles in degrees, nominal tool positions in mm. Measure these poses; the "
+            f"tracker's positions become x_meas,y_meas,z_meas (mm).\n{result.evaluation.indices.text()}"))
+        print("\n".join(result.evaluation.lines()))
+        print(f"wrote {args.n} poses to {args.output} ({result.exchange.exchanges} exchanges, log det "
+              f"{result.exchange.start_logdet:.3f} -> {result.exchange.logdet:.3f}, "
+              f"{time.perf_counter() - start:.1f} s)")
+    if args.curve:
+        largest = args.curve_max or max(3 * space.structural.size, args.n or 0)
+        counts = plan.curve_counts(space.structural.size, min(largest, len(space.q_deg)))
+        rows = plan.pose_curve(robot, counts, space=space, noise_mm=args.noise_mm, random_state=args.seed,
+                               callback=lambda k, total, row: say(f"curve [{k}/{total}] {row['n']} poses"), **options)
+        print("\n".join(plan.curve_lines(rows, args.noise_mm)))
+    return 0
+
+
 class _Parser(argparse.ArgumentParser):
     """argparse with the project's rule for bad input: one line on stderr, exit 2 (no usage block)."""
 
@@ -366,6 +438,28 @@ def build_parser() -> argparse.ArgumentParser:
     imp.add_argument("--config", metavar="RUN.yaml",
                      help="convert the data of a run config (format, subsets, registration) without fitting")
     imp.set_defaults(func=_cmd_import)
+    pln = sub.add_parser("plan", help="choose the poses to measure (D-optimal), or judge a pose set's observability")
+    pln.add_argument("robot", help="built-in robot name or robot YAML")
+    pln.add_argument("-n", type=_positive_int, help="number of poses to plan")
+    pln.add_argument("-o", "--output", help="pose list to write (q1..qN deg, x_nom,y_nom,z_nom mm)")
+    pln.add_argument("--evaluate", metavar="DATA.csv", help="print the observability indices, unidentifiable "
+                                                            "parameters and predicted uncertainty of a pose set")
+    pln.add_argument("--curve", action="store_true", help="print the predicted uncertainty against the number of poses")
+    pln.add_argument("--curve-max", type=_positive_int, help="largest pose count of --curve (default 3 x parameters)")
+    pln.add_argument("--candidates", metavar="FILE.csv", help="the reachable, safe poses to choose from (q1..qN)")
+    pln.add_argument("--box", nargs=6, type=float, metavar=("XMIN", "YMIN", "ZMIN", "XMAX", "YMAX", "ZMAX"),
+                     help="candidates with the nominal tool position inside this box (mm, base frame)")
+    pln.add_argument("--format", metavar="FILE.yaml",
+                     help="format of --candidates / --evaluate files, see docs/data.md")
+    pln.add_argument("--pool", type=_positive_int, default=2000,
+                     help="candidates drawn within the limits (default 2000)")
+    pln.add_argument("--noise-mm", type=float, default=0.03,
+                     help="tracker noise per coordinate for the predictions (default 0.03 mm)")
+    pln.add_argument("--seed", type=int, default=0, help="seed of the candidates and the exchange (default 0)")
+    pln.add_argument("--no-base", action="store_true", help="the base pose is known (not identified)")
+    pln.add_argument("--no-tool", action="store_true", help="the tool offset is known (not identified)")
+    pln.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
+    pln.set_defaults(func=_cmd_plan)
     return parser
 
 

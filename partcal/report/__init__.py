@@ -22,6 +22,7 @@ import numpy as np
 
 from .. import __version__
 from ..models.kinematic import BASE_PARAMETERS, ROW_PARAMETERS, TOOL_PARAMETERS
+from ..study.plan import run_indices
 from ..study.registry import ModelResult, RunResult, partitioned_part
 from . import figures
 from .scene import render_scenes
@@ -87,7 +88,18 @@ def context(result: RunResult) -> dict:
         "kinematic": kinematic_tables(result),
         **compensation_entries(result),
         "registration": registration_rows(result),
+        "design": design_summary(result),
     }
+
+
+def design_summary(result: RunResult) -> dict | None:
+    """The observability of the identification set (a run with a robot), as ``partcal run`` prints it."""
+    if result.robot is None:
+        return None
+    ev = run_indices(result.robot, result.datasets["identification"].q_deg)
+    return {"text": ev.indices.text(), "o1": ev.indices.o1, "condition": ev.indices.condition,
+            "poses": ev.indices.n_poses, "parameters": ev.indices.n_parameters, "missing": list(ev.missing),
+            "noise": ev.noise_mm, "position_rms": ev.position_rms_mm}
 
 
 def registration_rows(result: RunResult) -> list[dict]:

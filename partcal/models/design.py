@@ -1,0 +1,335 @@
+"""Experiment design for kinematic identification: observability indices and D-optimal pose selection.
+
+Which poses to measure decides how well the parameters of
+:mod:`partcal.models.kinematic` can be identified. Everything here works on
+the identification Jacobian ``J`` (``d positions / d parameters``, one block of
+three rows per pose) at the nominal parameters:
+
+- **indices** of the literature from the singular values ``s_1 >= ... >= s_L``
+  of the scaled Jacobian: O1 = ``(s_1 ... s_L)^(1/L) / sqrt(m)`` for ``m``
+  poses (Borm and Menq 1991), the condition number ``s_1 / s_L`` (Driels and
+  Pathre 1990), the smallest singular value ``s_L`` (Nahvi, Hollerbach and
+  Hayward 1994) and the noise amplification ``s_L^2 / s_1`` (Nahvi and
+  Hollerbach 1996). Parameters have different units, so the columns are scaled
+  first: a length stays in mm, an angle is counted as the arc it sweeps at the
+  robot's reach (mm), so a column means "mm of tool motion per mm of
+  parameter" for both (:func:`parameter_scales`).
+- **predicted uncertainty** for a tracker noise ``sigma`` (mm, per
+  coordinate): the parameter covariance ``sigma^2 (J^T J)^-1``, and from it
+  the standard deviation of the identified robot's position anywhere.
+- **D-optimal selection**: Mitchell's DETMAX exchange, which maximises
+  ``det(J^T J)`` over subsets of a candidate pool; the result never has a
+  smaller determinant than the start.
+
+The Jacobian comes from :func:`model_jacobian`, the one place that says which
+kinematic model is planned for.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg
+from numpy.typing import NDArray
+
+from ..errors import PartcalError
+from ..robot.kinematics import Robot
+from .base import seed_from
+from .kinematic import identification_jacobian, nominal_values, parameter_names
+
+log = logging.getLogger(__name__)
+
+
+# ---------------------------------------------------------------------- the planned model
+def model_parameters(robot: Robot) -> tuple[list[tuple[str, str]], NDArray[np.float64]]:
+    """``(name, unit)`` of the planned model's parameters and their nominal values, shape ``(P,)``.
+
+    The one place that says which kinematic model is planned for (DH rows, tool and base today);
+    :func:`model_jacobian` and :func:`parameter_scales` read it.
+    """
+    return parameter_names(robot), nominal_values(robot)
+
+
+def model_jacobian(robot: Robot, q_deg: NDArray[np.float64], *, base: bool = True, tool: bool = True
+                   ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """The identification Jacobian at the nominal parameters and the mask of parameters asked for.
+
+    Parameters
+    ----------
+    robot : Robot
+    q_deg : ndarray, shape (n, N)
+        Joint angles, degrees.
+    base, tool : bool
+        Whether the base pose and the tool offset are identified (as in
+        :class:`~partcal.models.kinematic.KinematicModel`).
+
+    Returns
+    -------
+    jac : ndarray, shape (3 n, P)
+        ``d p / d parameters`` (mm per mm, mm per degree); rows run over poses, then x, y, z.
+    wanted : ndarray of bool, shape (P,)
+    """
+    names, values = model_parameters(robot)
+    _, jac = identification_jacobian(robot, q_deg, values)
+    names = [n for n, _ in names]
+    wanted = np.array([(tool or not n.startswith("tool.")) and (base or not n.startswith("base."))
+                       for n in names])
+    return jac, wanted
+
+
+def parameter_scales(robot: Robot) -> NDArray[np.float64]:
+    """Column scales that make every parameter a length: 1 for mm, ``180 / (pi L)`` for degrees.
+
+    ``L`` is the robot's reach (mm): one "mm" of an angle is the arc it sweeps
+    at the reach. Parameters in other units keep them (scale 1). Shape ``(P,)``.
+
+    >>> from partcal.robot import load_robot
+    >>> s = parameter_scales(load_robot("universal_robots_ur10"))
+    >>> float(s[1]), round(float(s[0]) * np.pi / 180 * load_robot("universal_robots_ur10").reach_mm, 12)
+    (1.0, 1.0)
+    """
+    arc = 180.0 / (np.pi * robot.reach_mm)
+    return np.array([arc if unit == "deg" else 1.0 for _, unit in model_parameters(robot)[0]])
+
+
+def identifiable(robot: Robot, q_deg: NDArray[np.float64], wanted: NDArray[np.bool_], rcond: float = 1e-6
+                 ) -> NDArray[np.intp]:
+    """Indices of the parameters that poses ``q_deg`` identify: the first of each group of equivalent ones.
+
+    The rank is the kinematic fit's rule (singular values of the unit-column
+    Jacobian above ``rcond`` times the largest). Which parameters stand for a
+    group that positions cannot separate (the first joint's offset and the
+    base's turn about z, the ``d`` of parallel axes) is decided in the order of
+    the parameter table (DH rows, then tool, then base), so it does not depend
+    on the poses: indices of different pose sets are over the same parameters.
+    """
+    jac, _ = model_jacobian(robot, q_deg)
+    norms = np.linalg.norm(jac, axis=0)
+    candidates = np.flatnonzero(wanted & (norms > 1e-12 * max(norms.max(), 1e-300)))
+    if candidates.size == 0:
+        return candidates
+    unit = jac[:, candidates] / norms[candidates]
+    gram = unit.T @ unit
+    floor = rcond**2 * np.linalg.eigvalsh(gram)[-1]          # (rcond s_1)^2 in eigenvalues of J^T J
+    kept: list[int] = []
+    for k in range(candidates.size):
+        trial = kept + [k]
+        if np.linalg.eigvalsh(gram[np.ix_(trial, trial)])[0] > floor:
+            kept = trial
+    return candidates[kept]
+
+
+# ---------------------------------------------------------------------- indices
+@dataclass(frozen=True)
+class Indices:
+    """Observability indices of a pose set for a parameter set.
+
+    Attributes
+    ----------
+    o1 : float
+        Borm and Menq's O1, the geometric mean of the singular values over ``sqrt(n_poses)``.
+    condition : float
+        Largest over smallest singular value (``inf`` when the smallest is 0).
+    smallest : float
+        The smallest singular value (mm per mm).
+    noise_amplification : float
+        Nahvi and Hollerbach's index, ``smallest^2 / largest``.
+    n_poses, n_parameters : int
+    """
+
+    o1: float
+    condition: float
+    smallest: float
+    noise_amplification: float
+    n_poses: int
+    n_parameters: int
+
+    def text(self) -> str:
+        """One line: ``O1 ..., condition ..., smallest singular value ..., noise amplification ...``."""
+        return (f"O1 {self.o1:.4g}, condition number {self.condition:.4g}, smallest singular value "
+                f"{self.smallest:.4g}, noise amplification {self.noise_amplification:.4g} "
+                f"({self.n_parameters} parameters, {self.n_poses} poses)")
+
+    def to_dict(self) -> dict:
+        return {"o1": self.o1, "condition": self.condition, "smallest": self.smallest,
+                "noise_amplification": self.noise_amplification, "n_poses": self.n_poses,
+                "n_parameters": self.n_parameters}
+
+
+def indices_from_singular(singular: NDArray[np.float64], n_poses: int) -> Indices:
+    """The four indices from the singular values of a scaled Jacobian (any order) of ``n_poses`` poses.
+
+    Singular values below ``1e-12`` of the largest are rounding noise and count as zero.
+    """
+    s = np.sort(np.asarray(singular, dtype=float))[::-1]
+    if s.size:
+        s[s <= 1e-12 * s[0]] = 0.0          # rounding noise of a rank-deficient matrix counts as zero
+    if s.size == 0:
+        return Indices(0.0, np.inf, 0.0, 0.0, n_poses, 0)
+    small, large = max(float(s[-1]), 0.0), float(s[0])
+    with np.errstate(divide="ignore"):
+        o1 = float(np.exp(np.mean(np.log(np.maximum(s, 0.0))))) / np.sqrt(n_poses)
+    return Indices(o1, large / small if small > 0 else np.inf, small, small**2 / large if large > 0 else 0.0,
+                   n_poses, int(s.size))
+
+
+def indices(jac_scaled: NDArray[np.float64], n_poses: int) -> Indices:
+    """The indices of a scaled Jacobian ``(3 n, L)`` (columns: the parameters considered)."""
+    return indices_from_singular(np.linalg.svd(jac_scaled, compute_uv=False), n_poses)
+
+
+# ---------------------------------------------------------------------- predicted uncertainty
+def parameter_covariance(jac: NDArray[np.float64], noise_mm: float) -> NDArray[np.float64]:
+    """``noise_mm^2 (J^T J)^-1`` for a full-rank Jacobian ``(3 n, L)`` in parameter units, shape ``(L, L)``.
+
+    ``noise_mm``: standard deviation of each measured coordinate, mm.
+    """
+    _, s, vt = np.linalg.svd(jac, full_matrices=False)
+    with np.errstate(divide="ignore"):
+        inv = np.where(s > 0, 1.0 / s**2, np.inf)
+    return noise_mm**2 * (vt.T * inv) @ vt
+
+
+def position_std(blocks: NDArray[np.float64], covariance: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Standard deviation (3-D, ``sqrt`` of the trace) of the identified position at each pose.
+
+    ``blocks`` are the Jacobian rows of the poses, ``(m, 3, L)``; returns ``(m,)`` mm.
+    """
+    return np.sqrt(np.maximum(np.einsum("mik,kl,mil->m", blocks, covariance, blocks), 0.0))
+
+
+# ---------------------------------------------------------------------- DETMAX
+@dataclass(frozen=True)
+class ExchangeResult:
+    """Outcome of :func:`detmax`.
+
+    Attributes
+    ----------
+    indices : ndarray of int, shape (n,)
+        The chosen candidates, sorted.
+    logdet, start_logdet : float
+        ``log det(J^T J + eps I)`` of the result and of the start.
+    exchanges : int
+        Accepted excursions.
+    nit : int
+        Excursions tried.
+    message : str
+    """
+
+    indices: NDArray[np.intp]
+    logdet: float
+    start_logdet: float
+    exchanges: int
+    nit: int
+    message: str
+
+
+def information_logdet(blocks: NDArray[np.float64], chosen, ridge: float = 0.0) -> float:
+    """``log det(sum_i J_i^T J_i + ridge I)`` over the chosen blocks (``-inf`` when singular)."""
+    sign, value = np.linalg.slogdet(_information(blocks, list(np.asarray(chosen, dtype=np.intp)), ridge))
+    return float(value) if sign > 0 else -np.inf
+
+
+def detmax(blocks: NDArray[np.float64], n: int, *, start=None, random_state=None, max_excursion: int = 3,
+           max_exchanges: int | None = None, callback=None) -> ExchangeResult:
+    """Choose ``n`` of the candidates that maximise ``det(J^T J)``: Mitchell's DETMAX exchange.
+
+    From a start design, an excursion of length ``k`` adds the ``k``
+    candidates that raise the determinant most (one at a time), then removes
+    the ``k`` design points whose loss is smallest. A better design is kept
+    and the excursions start again at ``k = 1``; otherwise ``k`` grows up to
+    ``max_excursion``. Candidates are never chosen twice. A tiny ridge
+    (``1e-9`` of the mean information of one candidate) keeps a singular start
+    workable; the result's determinant is never smaller than the start's.
+
+    Parameters
+    ----------
+    blocks : ndarray, shape (C, r, L)
+        The Jacobian rows of every candidate (``r`` rows per candidate, 3 for
+        positions), columns scaled alike.
+    n : int
+        Design size, ``1 <= n <= C``.
+    start : array-like of int, optional
+        Initial candidates (``n`` distinct indices); default a random subset.
+    random_state : None, int or Generator
+        Seed of the random start.
+    max_excursion : int
+        The longest excursion tried before stopping.
+    max_exchanges : int, optional
+        Stop after this many accepted excursions (default ``50 n``).
+    callback : callable, optional
+        ``callback(exchanges, logdet)`` after every accepted excursion.
+
+    Returns
+    -------
+    ExchangeResult
+    """
+    blocks = np.asarray(blocks, dtype=float)
+    count, _, width = blocks.shape
+    if not 1 <= n <= count:
+        raise PartcalError(f"detmax: the design size must be in [1, {count}] (the candidates); got {n}")
+    if start is None:
+        rng = np.random.default_rng(seed_from(random_state))
+        design = list(rng.choice(count, size=n, replace=False))
+    else:
+        design = [int(i) for i in np.asarray(start).ravel()]
+        if len(design) != n or len(set(design)) != n or min(design) < 0 or max(design) >= count:
+            raise PartcalError(f"detmax: start must be {n} distinct candidate indices in [0, {count - 1}]")
+    flat = blocks.reshape(count * blocks.shape[1], width)
+    ridge = 1e-9 * float(np.einsum("ij,ij->", flat, flat)) / count / width or 1e-300
+    start_logdet = information_logdet(blocks, design, ridge)
+    logdet, exchanges, nit, k = start_logdet, 0, 0, 1
+    limit = 50 * n if max_exchanges is None else max_exchanges
+    while k <= max_excursion and exchanges < limit:
+        nit += 1
+        trial = _excursion(blocks, design, k, ridge)
+        value = information_logdet(blocks, trial, ridge)
+        if value > logdet + 1e-10 * max(1.0, abs(logdet)):
+            design, logdet, exchanges, k = trial, value, exchanges + 1, 1
+            if callback is not None:
+                callback(exchanges, logdet)
+        else:
+            k += 1
+    message = "no excursion improves the design" if k > max_excursion else f"stopped after {limit} exchanges"
+    log.debug("detmax: %d exchanges in %d excursions, log det %.6g -> %.6g", exchanges, nit, start_logdet, logdet)
+    return ExchangeResult(np.sort(np.array(design, dtype=np.intp)), logdet, start_logdet, exchanges, nit, message)
+
+
+def _excursion(blocks: NDArray[np.float64], design: list[int], k: int, ridge: float) -> list[int]:
+    """Add the ``k`` best candidates one by one, then remove as many of the cheapest points one by one."""
+    design = list(design)
+    free = np.ones(blocks.shape[0], dtype=bool)
+    free[design] = False
+    added = 0
+    for _ in range(min(k, int(free.sum()))):
+        gain = _logdet_rank_update(blocks, _information(blocks, design, ridge), +1.0)
+        gain[~free] = -np.inf
+        best = int(np.argmax(gain))
+        design.append(best)
+        free[best] = False
+        added += 1
+    for _ in range(added):
+        loss = _logdet_rank_update(blocks[design], _information(blocks, design, ridge), -1.0)
+        design.pop(int(np.argmax(loss)))
+    return design
+
+
+def _information(blocks: NDArray[np.float64], design: list[int], ridge: float) -> NDArray[np.float64]:
+    """``sum J_i^T J_i + ridge I`` over the design, summed afresh (no drift from updates)."""
+    b = blocks[design].reshape(-1, blocks.shape[2])
+    return b.T @ b + ridge * np.eye(blocks.shape[2])
+
+
+def _logdet_rank_update(blocks: NDArray[np.float64], info: NDArray[np.float64], sign: float) -> NDArray[np.float64]:
+    """``log det(info + sign J_c^T J_c) - log det(info)`` for every block ``J_c``.
+
+    By the determinant lemma that is ``log det(I + sign J_c M^-1 J_c^T)`` (``M = info``): one small
+    determinant per candidate.
+    """
+    inverse = scipy.linalg.cho_solve(scipy.linalg.cho_factor(info), np.eye(info.shape[0]))
+    solved = (blocks.reshape(-1, blocks.shape[2]) @ inverse).reshape(blocks.shape)
+    small = sign * (solved @ blocks.transpose(0, 2, 1)) + np.eye(blocks.shape[1])
+    det_sign, value = np.linalg.slogdet(small)
+    return np.where(det_sign > 0, value, -np.inf)

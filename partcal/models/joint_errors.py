@@ -1,0 +1,167 @@
+"""Joint errors the geometry cannot carry: gravity compliance and cyclic transmission errors.
+
+A joint does not take the angle it is commanded. Its reducer adds a cyclic
+error, a few harmonics of the joint angle (``sin(k q)`` and ``cos(k q)``,
+``k = 1..K``), and gravity bends it: the torque of the masses beyond the
+joint, over the joint's stiffness. The actual joint angles are
+
+    q_actual = q + sum_k (s_k sin(k q) + c_k cos(k q)) + deflection(q_h)
+
+with ``q_h`` the angles after the transmission errors, and the kinematic
+model's forward kinematics runs on ``q_actual``.
+
+The gravity torque about a horizontal joint axis ``z`` depends on where the
+masses are. partcal lumps them at the origins of the DH frames beyond the
+joint (its first row's frame and every later one) and identifies one *sag*
+parameter per joint and frame: the deflection per metre of lever arm,
+``compliance x weight`` (deg/m), with the lever ``phi(p) = (z_y p_x - z_x
+p_y) / 1000`` m of a point ``p`` (mm, robot base frame, gravity along its
+``-z``). A known payload (kg) at the tool point adds ``compliance x g x
+payload x (phi(tool) - phi(pivot))``, so with data at two payloads the
+compliance itself (deg/(N m)) is identified. Every column is linear in its
+parameter; which of them positions can tell apart (lumped masses on frames
+that share an origin, a sag that is a first harmonic of its own joint, a
+harmonic of a joint that never moves) is the identifiability analysis's job
+(see :mod:`partcal.models.kinematic`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from numbers import Integral
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..robot.kinematics import Robot
+
+GRAVITY_M_S2 = 9.80665
+MAX_HARMONICS = 8
+
+
+def compliance_problem(value, n_joints: int) -> str | None:
+    """None if ``value`` is a list of distinct joint numbers in ``1..n_joints``, else what is expected."""
+    expected = f"a list of distinct joint numbers in [1, {n_joints}]"
+    if not isinstance(value, (list, tuple)):
+        return expected
+    ok = all(isinstance(j, Integral) and not isinstance(j, bool) and 1 <= j <= n_joints for j in value)
+    return None if ok and len(set(value)) == len(value) else expected
+
+
+def harmonics_problem(value, n_joints: int) -> str | None:
+    """None if ``value`` is an int in ``[0, 8]`` or a list of ``n_joints`` of them, else what is expected."""
+    expected = f"an int in [0, {MAX_HARMONICS}] or a list of {n_joints} such ints"
+
+    def one(v):
+        return isinstance(v, Integral) and not isinstance(v, bool) and 0 <= v <= MAX_HARMONICS
+
+    if isinstance(value, (list, tuple)):
+        return None if len(value) == n_joints and all(one(v) for v in value) else expected
+    return None if one(value) else expected
+
+
+def harmonics_per_joint(value, n_joints: int) -> tuple[int, ...]:
+    """``joint_harmonics`` (an int for every joint, or one per joint) as one int per joint."""
+    return tuple(int(v) for v in value) if isinstance(value, (list, tuple)) else (int(value),) * n_joints
+
+
+@dataclass(frozen=True)
+class JointErrors:
+    """Which joint errors a kinematic model identifies, for one robot.
+
+    Attributes
+    ----------
+    compliance : tuple of int
+        1-based joints that yield under gravity.
+    harmonics : tuple of int, length N
+        Harmonics of each joint's transmission error.
+    pivots : tuple of int
+        Per compliant joint, the DH frame whose z axis it turns about (its first row).
+    signs : tuple of float
+        Per compliant joint, the sign of the joint in that row (``+1``: it turns about ``+z``).
+    n_frames : int
+        ``R + 1`` DH frames.
+    """
+
+    compliance: tuple[int, ...]
+    harmonics: tuple[int, ...]
+    pivots: tuple[int, ...]
+    signs: tuple[float, ...]
+    n_frames: int
+
+    @classmethod
+    def for_robot(cls, robot: Robot, compliance=(), harmonics=0) -> "JointErrors":
+        """The joint errors of ``robot``: ``compliance`` joints (1-based), ``harmonics`` (an int or one per joint)."""
+        pivots, signs = [], []
+        for j in compliance:
+            row = int(np.flatnonzero(robot.coupling[:, j - 1])[0])
+            pivots.append(row)
+            signs.append(float(np.sign(robot.coupling[row, j - 1])))
+        return cls(tuple(int(j) for j in compliance), harmonics_per_joint(harmonics, robot.n_joints),
+                   tuple(pivots), tuple(signs), robot.alpha_deg.size + 1)
+
+    @property
+    def empty(self) -> bool:
+        return not self.compliance and not any(self.harmonics)
+
+    def names(self) -> list[tuple[str, str]]:
+        """``(name, unit)`` of every parameter: harmonics (``sin1[2]``, ``cos1[2]``, ... deg), then per
+        compliant joint its sags (``sag[2,f3]``, deg/m, frame 3) and its compliance (``compliance[2]``)."""
+        out = [(f"{t}{k}[{j + 1}]", "deg") for j, count in enumerate(self.harmonics)
+               for k in range(1, count + 1) for t in ("sin", "cos")]
+        for j, pivot in zip(self.compliance, self.pivots):
+            out += [(f"sag[{j},f{f}]", "deg/m") for f in range(pivot, self.n_frames)]
+            out.append((f"compliance[{j}]", "deg/(N m)"))
+        return out
+
+    @property
+    def size(self) -> int:
+        return 2 * sum(self.harmonics) + sum(self.n_frames - p + 1 for p in self.pivots)
+
+    def design(self, geometry: Robot, q_deg: NDArray[np.float64], values: NDArray[np.float64],
+               payload_kg: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """The actual joint angles and ``d q_actual / d values``.
+
+        Parameters
+        ----------
+        geometry : Robot
+            The robot's geometry in its own base frame (gravity along its ``-z``).
+        q_deg : ndarray, shape (n, N)
+            Commanded joint angles, degrees.
+        values : ndarray, shape (P,)
+            The parameters, in the order of :meth:`names`.
+        payload_kg : ndarray, shape (n,)
+            Payload at the tool point per pose, kg.
+
+        Returns
+        -------
+        q_actual : ndarray, shape (n, N)
+            degrees.
+        design : ndarray, shape (n, N, P)
+            The joint-angle columns of every parameter. The deflection is
+            linear in them; its columns are evaluated at the angles after the
+            transmission errors, whose own effect on the lever arms (second
+            order) the design leaves out.
+        """
+        n, n_joints = q_deg.shape
+        out = np.zeros((n, n_joints, values.size))
+        col = 0
+        for j, count in enumerate(self.harmonics):
+            rad = np.radians(q_deg[:, j])
+            for k in range(1, count + 1):
+                out[:, j, col], out[:, j, col + 1] = np.sin(k * rad), np.cos(k * rad)
+                col += 2
+        q_h = q_deg + out[:, :, :col] @ values[:col]
+        if self.compliance:
+            origins, axes = geometry.frames(q_h)
+            tool = geometry.positions(q_h)
+            weight = GRAVITY_M_S2 * payload_kg
+            for j, pivot, sign in zip(self.compliance, self.pivots, self.signs):
+                z = sign * axes[:, pivot]
+                lever = (z[:, None, 1] * origins[:, pivot:, 0] - z[:, None, 0] * origins[:, pivot:, 1]) / 1000.0
+                frames = lever.shape[1]
+                out[:, j - 1, col:col + frames] = lever
+                tool_lever = (z[:, 1] * tool[:, 0] - z[:, 0] * tool[:, 1]) / 1000.0
+                out[:, j - 1, col + frames] = weight * (tool_lever - lever[:, 0])
+                col += frames + 1
+        return q_deg + out @ values, out

@@ -10,15 +10,17 @@ joint, over the joint's stiffness. The actual joint angles are
 with ``q_h`` the angles after the transmission errors, and the kinematic
 model's forward kinematics runs on ``q_actual``.
 
-The gravity torque about a horizontal joint axis ``z`` depends on where the
-masses are. partcal lumps them at the origins of the DH frames beyond the
-joint (its first row's frame and every later one) and identifies one *sag*
-parameter per joint and frame: the deflection per metre of lever arm,
-``compliance x weight`` (deg/m), with the lever ``phi(p) = (z_y p_x - z_x
-p_y) / 1000`` m of a point ``p`` (mm, robot base frame, gravity along its
-``-z``). A known payload (kg) at the tool point adds ``compliance x g x
-payload x (phi(tool) - phi(pivot))``, so with data at two payloads the
-compliance itself (deg/(N m)) is identified. Every column is linear in its
+The gravity torque about a joint's axis (the z axis of the first DH row it
+turns, through that frame's origin ``o``) depends on where the masses are.
+partcal lumps them at the origins of the DH frames beyond the joint (every
+later frame that a row moves away from the previous one: a row with
+``a = d = 0`` adds no new place) and identifies one *sag* parameter per joint
+and frame: the deflection per metre of lever arm, ``compliance x weight``
+(deg/m), with the lever ``phi(p) = (z_y r_x - z_x r_y) / 1000`` m of a point
+``p`` (``r = p - o``, mm, robot base frame, gravity along its ``-z``). A known
+payload (kg) at the tool point adds ``compliance x g x payload x
+phi(tool)``, so with data at two payloads the compliance itself
+(deg/(N m)) is identified. Every column is linear in its
 parameter; which of them positions can tell apart (lumped masses on frames
 that share an origin, a sag that is a first harmonic of its own joint, a
 harmonic of a joint that never moves) is the identifiability analysis's job
@@ -79,26 +81,30 @@ class JointErrors:
         Per compliant joint, the DH frame whose z axis it turns about (its first row).
     signs : tuple of float
         Per compliant joint, the sign of the joint in that row (``+1``: it turns about ``+z``).
-    n_frames : int
-        ``R + 1`` DH frames.
+    frames : tuple of tuple of int
+        Per compliant joint, the frames that may carry a lumped mass: every frame after the pivot whose
+        row moves its origin (a row with ``a = d = 0`` puts its frame where the previous one is, so
+        that frame would only repeat it).
     """
 
     compliance: tuple[int, ...]
     harmonics: tuple[int, ...]
     pivots: tuple[int, ...]
     signs: tuple[float, ...]
-    n_frames: int
+    frames: tuple[tuple[int, ...], ...]
 
     @classmethod
     def for_robot(cls, robot: Robot, compliance=(), harmonics=0) -> "JointErrors":
         """The joint errors of ``robot``: ``compliance`` joints (1-based), ``harmonics`` (an int or one per joint)."""
-        pivots, signs = [], []
+        pivots, signs, frames = [], [], []
+        moves = (robot.a_mm != 0) | (robot.d_mm != 0)          # row r moves frame r + 1 away from frame r
         for j in compliance:
             row = int(np.flatnonzero(robot.coupling[:, j - 1])[0])
             pivots.append(row)
             signs.append(float(np.sign(robot.coupling[row, j - 1])))
+            frames.append(tuple(f for f in range(row + 1, robot.alpha_deg.size + 1) if moves[f - 1]))
         return cls(tuple(int(j) for j in compliance), harmonics_per_joint(harmonics, robot.n_joints),
-                   tuple(pivots), tuple(signs), robot.alpha_deg.size + 1)
+                   tuple(pivots), tuple(signs), tuple(frames))
 
     @property
     def empty(self) -> bool:
@@ -109,14 +115,14 @@ class JointErrors:
         compliant joint its sags (``sag[2,f3]``, deg/m, frame 3) and its compliance (``compliance[2]``)."""
         out = [(f"{t}{k}[{j + 1}]", "deg") for j, count in enumerate(self.harmonics)
                for k in range(1, count + 1) for t in ("sin", "cos")]
-        for j, pivot in zip(self.compliance, self.pivots):
-            out += [(f"sag[{j},f{f}]", "deg/m") for f in range(pivot, self.n_frames)]
+        for j, frames in zip(self.compliance, self.frames):
+            out += [(f"sag[{j},f{f}]", "deg/m") for f in frames]
             out.append((f"compliance[{j}]", "deg/(N m)"))
         return out
 
     @property
     def size(self) -> int:
-        return 2 * sum(self.harmonics) + sum(self.n_frames - p + 1 for p in self.pivots)
+        return 2 * sum(self.harmonics) + sum(len(f) + 1 for f in self.frames)
 
     def design(self, geometry: Robot, q_deg: NDArray[np.float64], values: NDArray[np.float64],
                payload_kg: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -156,12 +162,11 @@ class JointErrors:
             origins, axes = geometry.frames(q_h)
             tool = geometry.positions(q_h)
             weight = GRAVITY_M_S2 * payload_kg
-            for j, pivot, sign in zip(self.compliance, self.pivots, self.signs):
+            for j, pivot, sign, frames in zip(self.compliance, self.pivots, self.signs, self.frames):
                 z = sign * axes[:, pivot]
-                lever = (z[:, None, 1] * origins[:, pivot:, 0] - z[:, None, 0] * origins[:, pivot:, 1]) / 1000.0
-                frames = lever.shape[1]
-                out[:, j - 1, col:col + frames] = lever
-                tool_lever = (z[:, 1] * tool[:, 0] - z[:, 0] * tool[:, 1]) / 1000.0
-                out[:, j - 1, col + frames] = weight * (tool_lever - lever[:, 0])
-                col += frames + 1
+                arm = np.concatenate([origins[:, list(frames)], tool[:, None]], axis=1) - origins[:, pivot, None]
+                lever = (z[:, None, 1] * arm[:, :, 0] - z[:, None, 0] * arm[:, :, 1]) / 1000.0
+                out[:, j - 1, col:col + len(frames)] = lever[:, :-1]
+                out[:, j - 1, col + len(frames)] = weight * lever[:, -1]
+                col += len(frames) + 1
         return q_deg + out @ values, out

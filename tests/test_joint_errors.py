@@ -14,7 +14,8 @@ from test_kinematic import sk120_poses
 from partcal import KinematicModel, PartcalError
 from partcal.data.simulate import Compliance, Tracker, VirtualRobot
 from partcal.models.joint_errors import JointErrors
-from partcal.models.kinematic import actual_joints, nominal_values, parameter_names, robot_with
+from partcal.models.kinematic import (actual_joints, model_jacobian, model_positions, nominal_values,
+                                      parameter_names, robot_with)
 from partcal.robot.kinematics import matrix_from_euler_deg
 
 GEARS = ((1, 0.02, 1, 30.0), (2, 0.03, 2, -45.0), (3, 0.03, 2, 60.0), (6, 0.05, 1, 0.0))
@@ -182,3 +183,25 @@ def test_a_bad_payload_per_pose_is_refused(sk120, exact_fit):
         exact_fit[2].predict(q, payload_kg=[1.0, 2.0])
     with pytest.raises(PartcalError, match=r"Expected payload_kg as one number >= 0 or 5 of them"):
         exact_fit[2].predict(q, payload_kg=-3.0)
+
+
+def test_the_analytic_jacobian_matches_central_differences(sk120):
+    """Every column, at a point where every parameter (harmonics of all joints, sags, compliances, a payload
+    per pose) is off zero: the lever arms move with the DH rows, the tool and the harmonics."""
+    q = sk120_poses(sk120, 30, 19)
+    errors = JointErrors.for_robot(sk120, [2, 3], [1, 2, 2, 1, 1, 1])
+    rng = np.random.default_rng(20)
+    names = [n for n, _ in parameter_names(sk120, errors)]
+    values = nominal_values(sk120, errors) + rng.normal(size=len(names)) * 0.05
+    values[41:] = rng.normal(size=errors.size) * 0.3
+    values[[k for k, n in enumerate(names) if n.startswith("compliance")]] = 1e-4
+    payload = rng.uniform(0, 100, len(q))
+    jac = model_jacobian(sk120, errors, q, values, payload)[1]
+    for k in range(values.size):
+        step = 1e-5 * max(1.0, abs(values[k]))
+        up, down = values.copy(), values.copy()
+        up[k] += step
+        down[k] -= step
+        central = (model_positions(sk120, errors, q, up, payload)
+                   - model_positions(sk120, errors, q, down, payload)).ravel() / (2 * step)
+        assert np.linalg.norm(jac[:, k] - central) <= 1e-6 * np.linalg.norm(central), names[k]

@@ -125,7 +125,7 @@ class JointErrors:
         return 2 * sum(self.harmonics) + sum(len(f) + 1 for f in self.frames)
 
     def design(self, geometry: Robot, q_deg: NDArray[np.float64], values: NDArray[np.float64],
-               payload_kg: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+               payload_kg: NDArray[np.float64], derivatives: bool = False):
         """The actual joint angles and ``d q_actual / d values``.
 
         Parameters
@@ -138,35 +138,120 @@ class JointErrors:
             The parameters, in the order of :meth:`names`.
         payload_kg : ndarray, shape (n,)
             Payload at the tool point per pose, kg.
+        derivatives : bool
+            Also the lever arms' dependence on the geometry and on the
+            transmission errors (see Returns).
 
         Returns
         -------
         q_actual : ndarray, shape (n, N)
             degrees.
         design : ndarray, shape (n, N, P)
-            The joint-angle columns of every parameter. The deflection is
-            linear in them; its columns are evaluated at the angles after the
-            transmission errors, whose own effect on the lever arms (second
-            order) the design leaves out.
+            ``d q_actual / d values``. Without ``derivatives`` a harmonic's
+            column leaves out how its turn moves the lever arms (the
+            deflection is still linear in the other parameters).
+        moves : ndarray, shape (n, N, 4 R + 3), or None
+            With ``derivatives``: ``d q_actual / d`` every DH row parameter
+            (theta, d, a, alpha per row) and the tool's x, y, z, through the
+            lever arms.
         """
         n, n_joints = q_deg.shape
         out = np.zeros((n, n_joints, values.size))
-        col = 0
+        col, turned = 0, []                                     # turned: the joint of each harmonic column
         for j, count in enumerate(self.harmonics):
             rad = np.radians(q_deg[:, j])
             for k in range(1, count + 1):
                 out[:, j, col], out[:, j, col + 1] = np.sin(k * rad), np.cos(k * rad)
+                turned += [j, j]
                 col += 2
         q_h = q_deg + out[:, :, :col] @ values[:col]
+        moves = None
         if self.compliance:
-            origins, axes = geometry.frames(q_h)
-            tool = geometry.positions(q_h)
+            origins, xs, zs = geometry.frame_axes(q_h)
+            ys = np.cross(zs[:, -1], xs[:, -1])
+            tool_mm = geometry.tool_mm
+            tool = origins[:, -1] + tool_mm[0] * xs[:, -1] + tool_mm[1] * ys + tool_mm[2] * zs[:, -1]
             weight = GRAVITY_M_S2 * payload_kg
+            frames_of = _Frames(origins, xs, zs, ys, tool)
+            if derivatives:
+                moves = np.zeros((n, n_joints, 4 * (origins.shape[1] - 1) + 3))
             for j, pivot, sign, frames in zip(self.compliance, self.pivots, self.signs, self.frames):
-                z = sign * axes[:, pivot]
+                z = sign * zs[:, pivot]
                 arm = np.concatenate([origins[:, list(frames)], tool[:, None]], axis=1) - origins[:, pivot, None]
-                lever = (z[:, None, 1] * arm[:, :, 0] - z[:, None, 0] * arm[:, :, 1]) / 1000.0
+                lever = _cross_z(arm, z[:, None]) / 1000.0
                 out[:, j - 1, col:col + len(frames)] = lever[:, :-1]
                 out[:, j - 1, col + len(frames)] = weight * lever[:, -1]
+                if derivatives:
+                    w = np.empty((n, len(frames) + 1))
+                    w[:, :-1] = values[col:col + len(frames)]
+                    w[:, -1] = values[col + len(frames)] * weight
+                    moves[:, j - 1] = frames_of.lever_moves(pivot, z, arm, (*frames, len(origins[0])), w)
                 col += len(frames) + 1
-        return q_deg + out @ values, out
+        q_actual = q_deg + out @ values
+        if moves is not None and turned:    # a harmonic turns its joint, and so the rows it drives (per degree)
+            per_joint = moves[:, :, 0:moves.shape[2] - 3:4] @ geometry.coupling      # (n, N, N)
+            for c, j in enumerate(turned):
+                out[:, :, c] += per_joint[:, :, j] * out[:, j, c, None]
+        return q_actual, out, moves
+
+
+def _cross_z(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The z component of ``a x b`` (last axis 3). The torque of a weight of 1 N at ``r`` (m) from a point
+    of the axis ``z`` about it is ``z . (r x (0, 0, -1)) = (r x z)_z``: ``_cross_z(r, z)``."""
+    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+
+
+@dataclass(frozen=True)
+class _Frames:
+    """The DH frames of a batch of poses, for the lever arms' derivatives: origins, x and z axes
+    ``(n, R + 1, 3)``, the last frame's y axis and the tool point ``(n, 3)``."""
+
+    origins: NDArray[np.float64]
+    xs: NDArray[np.float64]
+    zs: NDArray[np.float64]
+    y_last: NDArray[np.float64]
+    tool: NDArray[np.float64]
+
+    def lever_moves(self, pivot: int, z, arm, index: tuple, w) -> NDArray[np.float64]:
+        """``d (sum_k w_k lever_k) / d`` every DH row parameter and the tool, shape (n, 4 R + 3).
+
+        ``arm`` (n, K, 3) mm runs from the pivot to the points, ``index`` (K,) is each point's frame
+        (the tool's is ``R + 1``), ``w`` (n, K) their weights (deg/m). A row before the pivot turns the
+        pivot, its axis and every point together: the lever changes only by a rotation (a tilt against
+        gravity), never by a shift. A row after it moves the points beyond it, the axis staying put.
+        """
+        n, rows = arm.shape[0], self.origins.shape[1] - 1
+        out = np.zeros((n, 4 * rows + 3))
+        index = np.asarray(index)
+        rad = np.pi / 180.0
+
+        def change(dz, moved):
+            value = _cross_z(moved, z[:, None])
+            if dz is not None:
+                value = value + _cross_z(arm, dz[:, None])
+            return np.sum(w * value, axis=1) / 1000.0
+
+        for r in range(rows):
+            turns = ((self.zs[:, r], self.origins[:, r], 0), (self.xs[:, r + 1], self.origins[:, r + 1], 3))
+            shifts = ((self.zs[:, r], 1), (self.xs[:, r + 1], 2))
+            if pivot >= r + 1:                                  # the whole lever turns (shifts change nothing)
+                for u, _, k in turns:
+                    out[:, 4 * r + k] = change(np.cross(u, z), np.cross(u[:, None], arm)) * rad
+                continue
+            beyond = index >= r + 1
+            if not beyond.any():
+                continue
+            points = arm[:, beyond] + self.origins[:, pivot, None]
+            for u, centre, k in turns:
+                moved = np.zeros_like(arm)
+                moved[:, beyond] = np.cross(u[:, None], points - centre[:, None])
+                out[:, 4 * r + k] = change(None, moved) * rad
+            for t, k in shifts:
+                moved = np.zeros_like(arm)
+                moved[:, beyond] = t[:, None]
+                out[:, 4 * r + k] = change(None, moved)
+        for k, axis in enumerate((self.xs[:, -1], self.y_last, self.zs[:, -1])):
+            moved = np.zeros_like(arm)
+            moved[:, -1] = axis
+            out[:, 4 * rows + k] = change(None, moved)
+        return out

@@ -120,15 +120,16 @@ def identification_jacobian(nominal: Robot, q_deg: NDArray[np.float64], values: 
 
 
 def actual_joints(nominal: Robot, errors: JointErrors | None, q_deg: NDArray[np.float64],
-                  values: NDArray[np.float64], payload_kg: NDArray[np.float64]):
-    """The joint angles the arm takes, ``(n, N)`` deg, and their design (see :meth:`JointErrors.design`;
-    None without joint errors). Gravity acts in the robot's own base frame: the base correction is left out."""
+                  values: NDArray[np.float64], payload_kg: NDArray[np.float64], derivatives: bool = False):
+    """The joint angles the arm takes, ``(n, N)`` deg, their design and the lever arms' moves (see
+    :meth:`JointErrors.design`; None without joint errors). Gravity acts in the robot's own base frame:
+    the base correction is left out."""
     if errors is None or errors.empty:
-        return q_deg, None
+        return q_deg, None, None
     size = geometric_size(nominal)
     own = values[:size].copy()
     own[size - 6:] = 0.0
-    return errors.design(robot_with(nominal, own), q_deg, values[size:], payload_kg)
+    return errors.design(robot_with(nominal, own), q_deg, values[size:], payload_kg, derivatives)
 
 
 def model_positions(nominal: Robot, errors: JointErrors | None, q_deg: NDArray[np.float64],
@@ -143,44 +144,20 @@ def model_jacobian(nominal: Robot, errors: JointErrors | None, q_deg: NDArray[np
                    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Positions ``(n, 3)`` mm and ``d p / d values``, shape ``(3 n, P)``, geometry and joint errors.
 
-    The geometric columns are those of :func:`identification_jacobian` at the actual joint angles; a joint
-    error's column is the joint's position Jacobian times its design column. With compliant joints the
-    lever arms also move with the geometry and with the transmission errors: that part,
-    ``d q_actual / d value`` for those parameters, comes from central differences of
-    :func:`actual_joints` (smooth, so accurate to about 1e-9 relative).
+    The geometric columns are those of :func:`identification_jacobian` at the actual joint angles, plus,
+    with compliant joints, how the DH rows and the tool move the lever arms; a joint error's column is
+    the joint's position Jacobian times its design column. All analytic.
     """
-    q_actual, design = actual_joints(nominal, errors, q_deg, values, payload_kg)
+    q_actual, design, moves = actual_joints(nominal, errors, q_deg, values, payload_kg, derivatives=True)
     size = geometric_size(nominal)
     p, jac = identification_jacobian(nominal, q_actual, values[:size])
     if design is None:
         return p, jac
     joints = robot_with(nominal, values).jacobian(q_actual)                       # (n, 3, N) mm/deg
-    if errors.compliance:
-        design = design.copy()
-        moved = _lever_derivatives(nominal, errors, q_deg, values, payload_kg)
-        for k, column in moved.items():
-            if k < size:
-                jac[:, k] += np.einsum("nij,nj->ni", joints, column).ravel()
-            else:
-                design[:, :, k - size] = column
+    if moves is not None:
+        jac[:, :size - 6] += np.einsum("nij,njp->nip", joints, moves).reshape(-1, size - 6)
     extra = np.einsum("nij,njp->nip", joints, design).reshape(-1, design.shape[2])
     return p, np.hstack([jac, extra])
-
-
-def _lever_derivatives(nominal: Robot, errors: JointErrors, q_deg, values, payload_kg) -> dict:
-    """``d q_actual / d value`` (n, N) of the parameters the lever arms depend on (the DH rows, the tool, the
-    harmonics), by central differences; the base correction does not move them."""
-    size = geometric_size(nominal)
-    out = {}
-    for k in [*range(size - 6), *range(size, size + 2 * sum(errors.harmonics))]:
-        step = 1e-6 * max(1.0, abs(values[k]))
-        up, down = values.copy(), values.copy()
-        up[k] += step
-        down[k] -= step
-        change = (actual_joints(nominal, errors, q_deg, up, payload_kg)[0]
-                  - actual_joints(nominal, errors, q_deg, down, payload_kg)[0]) / (2 * step)
-        out[k] = change
-    return out
 
 
 # ---------------------------------------------------------------------- identification

@@ -9,6 +9,7 @@ import dataclasses
 
 import numpy as np
 import pytest
+from threadpoolctl import threadpool_limits
 from test_kinematic import sk120_poses
 
 from partcal import KinematicModel, PartcalError
@@ -17,6 +18,13 @@ from partcal.models.joint_errors import JointErrors
 from partcal.models.kinematic import (actual_joints, model_jacobian, model_positions, nominal_values,
                                       parameter_names, robot_with)
 from partcal.robot.kinematics import matrix_from_euler_deg
+
+@pytest.fixture(autouse=True, scope="module")
+def one_blas_thread():
+    """Small matrices: BLAS threads only wait on each other on a busy machine (ten times slower)."""
+    with threadpool_limits(1):
+        yield
+
 
 GEARS = ((1, 0.02, 1, 30.0), (2, 0.03, 2, -45.0), (3, 0.03, 2, 60.0), (6, 0.05, 1, 0.0))
 HARMONICS = [1, 2, 2, 0, 0, 1]

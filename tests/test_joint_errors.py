@@ -213,3 +213,115 @@ def test_the_analytic_jacobian_matches_central_differences(sk120):
         central = (model_positions(sk120, errors, q, up, payload)
                    - model_positions(sk120, errors, q, down, payload)).ravel() / (2 * step)
         assert np.linalg.norm(jac[:, k] - central) <= 1e-6 * np.linalg.norm(central), names[k]
+
+
+RUN = """name: physics
+robot: motoman_sk120
+seed: 3
+cv_folds: 5
+data:
+  identification: {data}/identification.csv
+  tests:
+    rectangle: {data}/test_rectangle.csv
+verify:
+  virtual_robot: {root}/configs/sk120_virtual.yaml
+models:
+  - {{name: DH, kind: kinematic}}
+  - {{name: DH+C+H, kind: kinematic, compliance: [2, 3], joint_harmonics: 2}}
+  - {{name: DH+C+H + FDP(AI), kind: kinematic, compliance: [2, 3], joint_harmonics: [1, 2, 2, 0, 0, 1],
+      residual: {{inputs: joint, degree: 1, solver: {{method: lstsq}}}}}}
+"""
+
+
+@pytest.fixture(scope="module")
+def physics_run(tmp_path_factory):
+    from conftest import ROOT
+
+    from partcal.report import render_report
+    from partcal.study.config import load_config
+    from partcal.study.outputs import write_run
+    from partcal.study.registry import run
+
+    tmp = tmp_path_factory.mktemp("physics")
+    (tmp / "run.yaml").write_text(RUN.format(data=ROOT / "data" / "sk120", root=ROOT))
+    result = run(load_config(tmp / "run.yaml"))
+    return result, write_run(result, render_report)
+
+
+def test_a_run_fits_ranks_saves_compensates_and_reports_the_joint_errors(physics_run):
+    import json
+
+    import html5lib
+
+    from partcal import load_predictor
+
+    result, out = physics_run
+    doc = json.loads((out / "metrics.json").read_text())
+    models = doc["models"]
+    assert models["DH+C+H"]["rectangle"]["rms_3d"] < 0.1 < models["DH"]["rectangle"]["rms_3d"]
+    assert doc["best"] in ("DH+C+H", "DH+C+H + FDP(AI)")
+    spec = {r.spec.name: r for r in result.models}
+    for name in ("DH+C+H", "DH+C+H + FDP(AI)"):
+        p = load_predictor(out / models[name]["file"])
+        assert p.model.joint_errors_.compliance == (2, 3)
+        q = spec[name].model.data_bounds_
+        np.testing.assert_array_equal(p.predict(joints=q), spec[name].model.predict(q))
+        c = spec[name].compensation["rectangle"]
+        assert c["converged"] == c["n"] and c["after"]["rms_3d"] < 0.1 * c["before"]["rms_3d"], name
+    text = (out / "index.html").read_text()
+    tree = html5lib.parse(text, namespaceHTMLElements=False)
+    tables = [t for t in tree.iter("table") if t.get("class") == "dh joint-errors"]
+    assert len(tables) == 2                          # the hybrid's joint harmonics differ: its own table
+    table = json.loads((out / models["DH+C+H"]["file"]).read_text())["model"]["identification"]
+    cells = {td.get("data-name"): td for td in tables[0].iter("td") if td.get("data-name")}
+    joint = table["names"][41:]
+    assert list(cells) == joint and len(joint) == 2 * 2 * 6 + 5 + 1 + 6 + 1
+    for name, value, se, status in zip(table["names"][41:], table["value"][41:], table["std_error"][41:],
+                                       table["status"][41:]):
+        fixed = name.startswith(("sin", "cos"))
+        show = (lambda v: f"{v:.4f}") if fixed else (lambda v: f"{v:.4g}")
+        expected = show(value) + (f" ± {show(se)}" if status == "identified" else "")
+        assert cells[name].text.startswith(expected) and cells[name].get("class") == status, name
+
+
+def test_a_payload_is_a_prediction_input_only_of_a_compliant_model(physics_run, sk120):
+    from partcal import PartcalError, load_predictor
+
+    result, out = physics_run
+    doc = __import__("json").loads((out / "metrics.json").read_text())
+    q = sk120_poses(sk120, 5, 21)
+    q[:, 3:5] = 0.0
+    dh = load_predictor(out / doc["models"]["DH"]["file"])
+    with pytest.raises(PartcalError, match=r"model 'DH' has no joint that yields under gravity, so a payload "
+                                           r"changes nothing it predicts; got payload_kg=10\.0"):
+        dh.predict(joints=q, payload_kg=10.0)
+    physics = load_predictor(out / doc["models"]["DH+C+H"]["file"])
+    heavier = physics.predict(joints=q, payload_kg=50.0) - physics.predict(joints=q)
+    # without data at two payloads the compliance is unidentifiable (held at 0): the payload moves nothing
+    assert "compliance[2]" in physics.model.identification_.unidentifiable()
+    np.testing.assert_array_equal(heavier, 0.0)
+
+
+@pytest.mark.parametrize("old, new, message", [
+    ("compliance: [2, 3], joint_harmonics: 2}", "compliance: [7], joint_harmonics: 2}",
+     r"models\[1\]\.compliance \(line {line}\): must be a list of distinct joint numbers in \[1, 6\]; got a list"),
+    ("compliance: [2, 3], joint_harmonics: 2}", "compliance: [2, 3], joint_harmonics: two}",
+     r"models\[1\]\.joint_harmonics \(line {line}\): must be an int in \[0, 8\] or a list of 6 such ints; "
+     r"got 'two'"),
+    ("{name: DH, kind: kinematic}", "{name: DH, inputs: joint, compliance: [2]}",
+     r"models\[0\]\.compliance \(line {line}\): applies to kind: kinematic only; this entry is kind: series"),
+    ("{name: DH, kind: kinematic}", "{name: DH, kind: kinematic, payload_kg: -5}",
+     r"models\[0\]\.payload_kg \(line {line}\): must be a real number in \[0\.0, 100000\.0\]; got -5\.0"),
+])
+def test_joint_error_keys_of_a_run_config_are_checked_with_path_and_line(tmp_path, old, new, message):
+    from conftest import ROOT
+
+    from partcal.errors import ConfigError
+    from partcal.study.config import load_config
+
+    text = RUN.format(data=ROOT / "data" / "sk120", root=ROOT).replace(old, new, 1)
+    line = text[:text.index(new)].count("\n") + 1
+    path = tmp_path / "run.yaml"
+    path.write_text(text)
+    with pytest.raises(ConfigError, match=message.format(line=line)):
+        load_config(path)

@@ -639,6 +639,11 @@ class KinematicModel(ErrorModelBase):
     def predict_validated(self, X: NDArray[np.float64], payload_kg=None) -> NDArray[np.float64]:
         return self._predict_trusted(X, payload_kg)
 
+    @property
+    def reads_payload(self) -> bool:
+        """Whether a payload changes the prediction (some joint yields under gravity)."""
+        return bool(self.joint_errors_.compliance)
+
 
 def _identification_from(ident: FieldReader, robot: Robot, errors: JointErrors | None = None) -> Identification:
     """A model file's identified table, which must agree with its robot: the robot's parameter names and

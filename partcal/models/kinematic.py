@@ -18,8 +18,14 @@ columns scaled to unit length; the rank from the singular values, the choice
 of which parameters to keep from a QR factorisation with column pivoting).
 They stay at their nominal values and are reported as unidentifiable.
 
+Joint errors the geometry cannot carry, gravity compliance and cyclic
+transmission errors (:mod:`partcal.models.joint_errors`), are identified with
+the geometry: their parameters follow the geometric ones in the same vector,
+the same rank analysis and the same fit; the forward kinematics then runs on
+the joint angles the arm actually takes.
+
 ``KinematicModel`` wraps this as an error model: its predicted error is
-``FK(identified, q) - FK(nominal, q)``. With ``residual=`` another error
+``FK(identified, q_actual) - FK(nominal, q)``. With ``residual=`` another error
 model is fitted to what the identified kinematics leave, and the two
 predictions add up (a hybrid model).
 """

@@ -325,3 +325,28 @@ def test_joint_error_keys_of_a_run_config_are_checked_with_path_and_line(tmp_pat
     path.write_text(text)
     with pytest.raises(ConfigError, match=message.format(line=line)):
         load_config(path)
+
+
+def test_model_files_round_trip_and_files_without_joint_errors_still_load(tmp_path, sk120, exact_fit):
+    import json
+
+    from conftest import ROOT
+
+    from partcal.errors import ModelFileError
+    from partcal.study.persist import load_model, model_to_dict, save_model
+
+    _, q, model = exact_fit
+    save_model(model, tmp_path / "physics.json", name="DH+C+H", robot=sk120)
+    loaded, doc = load_model(tmp_path / "physics.json")
+    assert doc["model"]["compliance"] == [2, 3] and doc["model"]["joint_harmonics"] == HARMONICS
+    assert np.array_equal(loaded.predict(q), model.predict(q))
+    assert model_to_dict(loaded) | {"partcal_version": 0} == model_to_dict(model) | {"partcal_version": 0}
+    old, _ = load_model(ROOT / "tests" / "fixtures" / "format2_dh-gp-ai-k-means.json")     # before issue 21
+    assert old.joint_errors_.empty and not old.reads_payload and old.payload_kg == 0.0
+    # a file whose joint errors disagree with its table is refused, naming the field
+    doc["model"]["joint_harmonics"] = [1, 2, 2, 0, 0, 2]
+    doc.pop("checksum")
+    (tmp_path / "edited.json").write_text(json.dumps(doc))
+    with pytest.raises(ModelFileError, match=r"edited\.json: field 'model\.identification\.names': expected the "
+                                             r"\d+ parameters of motoman_sk120"):
+        load_model(tmp_path / "edited.json")

@@ -95,7 +95,13 @@ class JointErrors:
 
     @classmethod
     def for_robot(cls, robot: Robot, compliance=(), harmonics=0) -> "JointErrors":
-        """The joint errors of ``robot``: ``compliance`` joints (1-based), ``harmonics`` (an int or one per joint)."""
+        """The joint errors of ``robot``: ``compliance`` joints (1-based), ``harmonics`` (an int or one per joint).
+
+        >>> from partcal.robot import load_robot
+        >>> errors = JointErrors.for_robot(load_robot("motoman_sk120"), [3], [0, 0, 1, 0, 0, 0])
+        >>> [name for name, _ in errors.names()]        # row 7 (q5) has a = d = 0: no frame 7
+        ['sin1[3]', 'cos1[3]', 'sag[3,f2]', 'sag[3,f3]', 'sag[3,f4]', 'sag[3,f5]', 'sag[3,f6]', 'sag[3,f8]', 'compliance[3]']
+        """
         pivots, signs, frames = [], [], []
         moves = (robot.a_mm != 0) | (robot.d_mm != 0)          # row r moves frame r + 1 away from frame r
         for j in compliance:
@@ -155,44 +161,55 @@ class JointErrors:
             (theta, d, a, alpha per row) and the tool's x, y, z, through the
             lever arms.
         """
-        n, n_joints = q_deg.shape
-        out = np.zeros((n, n_joints, values.size))
-        col, turned = 0, []                                     # turned: the joint of each harmonic column
-        for j, count in enumerate(self.harmonics):
-            rad = np.radians(q_deg[:, j])
-            for k in range(1, count + 1):
-                out[:, j, col], out[:, j, col + 1] = np.sin(k * rad), np.cos(k * rad)
-                turned += [j, j]
-                col += 2
+        out = np.zeros((*q_deg.shape, values.size))
+        turned = self._harmonic_columns(q_deg, out)
+        col = len(turned)
         q_h = q_deg + out[:, :, :col] @ values[:col]
-        moves = None
-        if self.compliance:
-            origins, xs, zs = geometry.frame_axes(q_h)
-            ys = np.cross(zs[:, -1], xs[:, -1])
-            tool_mm = geometry.tool_mm
-            tool = origins[:, -1] + tool_mm[0] * xs[:, -1] + tool_mm[1] * ys + tool_mm[2] * zs[:, -1]
-            weight = GRAVITY_M_S2 * payload_kg
-            frames_of = _Frames(origins, xs, zs, ys, tool)
-            if derivatives:
-                moves = np.zeros((n, n_joints, 4 * (origins.shape[1] - 1) + 3))
-            for j, pivot, sign, frames in zip(self.compliance, self.pivots, self.signs, self.frames):
-                z = sign * zs[:, pivot]
-                arm = np.concatenate([origins[:, list(frames)], tool[:, None]], axis=1) - origins[:, pivot, None]
-                lever = _cross_z(arm, z[:, None]) / 1000.0
-                out[:, j - 1, col:col + len(frames)] = lever[:, :-1]
-                out[:, j - 1, col + len(frames)] = weight * lever[:, -1]
-                if derivatives:
-                    w = np.empty((n, len(frames) + 1))
-                    w[:, :-1] = values[col:col + len(frames)]
-                    w[:, -1] = values[col + len(frames)] * weight
-                    moves[:, j - 1] = frames_of.lever_moves(pivot, z, arm, (*frames, len(origins[0])), w)
-                col += len(frames) + 1
+        moves = self._sag_columns(geometry, q_h, values, payload_kg, out, col, derivatives) \
+            if self.compliance else None
         q_actual = q_deg + out @ values
         if moves is not None and turned:    # a harmonic turns its joint, and so the rows it drives (per degree)
             per_joint = moves[:, :, 0:moves.shape[2] - 3:4] @ geometry.coupling      # (n, N, N)
             for c, j in enumerate(turned):
                 out[:, :, c] += per_joint[:, :, j] * out[:, j, c, None]
         return q_actual, out, moves
+
+    def _harmonic_columns(self, q_deg: NDArray[np.float64], out: NDArray[np.float64]) -> list[int]:
+        """Write ``sin(k q_j)``, ``cos(k q_j)`` into the first columns of ``out`` (n, N, P); return the joint
+        (0-based) of each."""
+        col, turned = 0, []
+        for j, count in enumerate(self.harmonics):
+            rad = np.radians(q_deg[:, j])
+            for k in range(1, count + 1):
+                out[:, j, col], out[:, j, col + 1] = np.sin(k * rad), np.cos(k * rad)
+                turned += [j, j]
+                col += 2
+        return turned
+
+    def _sag_columns(self, geometry: Robot, q_h, values, payload_kg, out, col: int, derivatives: bool):
+        """Write the lever arms of every compliant joint (sags, then the payload's) into ``out`` from column
+        ``col`` on, for the joint angles ``q_h``; with ``derivatives`` return how the DH rows and the tool
+        move them, ``(n, N, 4 R + 3)`` (None otherwise)."""
+        origins, xs, zs = geometry.frame_axes(q_h)
+        ys = np.cross(zs[:, -1], xs[:, -1])
+        tool_mm = geometry.tool_mm
+        tool = origins[:, -1] + tool_mm[0] * xs[:, -1] + tool_mm[1] * ys + tool_mm[2] * zs[:, -1]
+        weight = GRAVITY_M_S2 * payload_kg
+        frames_of = _Frames(origins, xs, zs, ys, tool)
+        moves = np.zeros((*q_h.shape, 4 * (origins.shape[1] - 1) + 3)) if derivatives else None
+        for j, pivot, sign, frames in zip(self.compliance, self.pivots, self.signs, self.frames):
+            z = sign * zs[:, pivot]
+            arm = np.concatenate([origins[:, list(frames)], tool[:, None]], axis=1) - origins[:, pivot, None]
+            lever = _cross_z(arm, z[:, None]) / 1000.0
+            out[:, j - 1, col:col + len(frames)] = lever[:, :-1]
+            out[:, j - 1, col + len(frames)] = weight * lever[:, -1]
+            if derivatives:
+                w = np.empty((len(q_h), len(frames) + 1))
+                w[:, :-1] = values[col:col + len(frames)]
+                w[:, -1] = values[col + len(frames)] * weight
+                moves[:, j - 1] = frames_of.lever_moves(pivot, z, arm, (*frames, origins.shape[1]), w)
+            col += len(frames) + 1
+        return moves
 
 
 def _cross_z(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:

@@ -133,9 +133,15 @@ def actual_joints(nominal: Robot, errors: JointErrors | None, q_deg: NDArray[np.
     if errors is None or errors.empty:
         return q_deg, None, None
     size = geometric_size(nominal)
-    own = values[:size].copy()
-    own[size - 6:] = 0.0
-    return errors.design(robot_with(nominal, own), q_deg, values[size:], payload_kg, derivatives)
+    return errors.design(own_geometry(nominal, values), q_deg, values[size:], payload_kg, derivatives)
+
+
+def own_geometry(nominal: Robot, values: NDArray[np.float64]) -> Robot:
+    """The robot with ``values`` in its own base frame (the base correction left out): where gravity acts
+    along ``-z``, and the joint errors' lever arms are taken."""
+    own = values[:geometric_size(nominal)].copy()
+    own[-6:] = 0.0
+    return robot_with(nominal, own)
 
 
 def model_positions(nominal: Robot, errors: JointErrors | None, q_deg: NDArray[np.float64],
@@ -450,7 +456,7 @@ class KinematicModel(ErrorModelBase):
         self.identification_ = identify(robot, X, nominal + y, base=bool(self.base), tool=bool(self.tool),
                                         rcond=float(self.rcond), errors=self.joint_errors_, payload_kg=payload)
         self.robot_ = robot
-        self.identified_robot_ = robot_with(robot, self.identification_.value)
+        self._build_robots()
         self.active_ = varying_inputs(X)
         self.data_bounds_ = np.stack([X.min(axis=0), X.max(axis=0)])
         self.residual_ = None
@@ -468,9 +474,8 @@ class KinematicModel(ErrorModelBase):
         one pose through both robots does it here, not in ``predict``. The
         residual model prepares its own (see :meth:`ErrorModelBase._prepare`).
         """
-        for robot in (self.robot_, self.identified_robot_):
+        for robot in (self.robot_, self.identified_robot_, self._geometry):
             robot.positions(self.data_bounds_[:1])
-        self._kinematic(self.data_bounds_[:1], np.zeros(1))
         if self.residual_ is not None:
             self.residual_._prepare()
         return super()._prepare()
@@ -489,9 +494,19 @@ class KinematicModel(ErrorModelBase):
                             f"{arr.size} values, smallest {arr.min() if arr.size else 'none'}.")
         return np.broadcast_to(arr, (n,)).copy()
 
+    def _build_robots(self) -> None:
+        """The identified robot, and its geometry in its own base frame (where the joint errors' lever arms
+        are taken), from ``robot_`` and the identified table (after fitting or loading)."""
+        self.identified_robot_ = robot_with(self.robot_, self.identification_.value)
+        self._geometry = own_geometry(self.robot_, self.identification_.value)
+
     def _kinematic(self, X: NDArray[np.float64], payload: NDArray[np.float64]) -> NDArray[np.float64]:
         """Tool positions of the identified model (geometry and joint errors), (n, 3) mm."""
-        return model_positions(self.robot_, self.joint_errors_, X, self.identification_.value, payload)
+        errors = self.joint_errors_
+        if not errors.empty:
+            size = geometric_size(self.robot_)
+            X = errors.design(self._geometry, X, self.identification_.value[size:], payload)[0]
+        return self.identified_robot_.positions(X)
 
     def predict(self, X, payload_kg=None) -> NDArray[np.float64]:
         """Predicted errors ``FK(identified) - FK(nominal)`` (+ the residual model), shape (n, 3) mm.
@@ -576,7 +591,7 @@ class KinematicModel(ErrorModelBase):
         errors = JointErrors.for_robot(robot, joint["compliance"], joint["joint_harmonics"])
         table = _identification_from(r.sub("identification"), robot, errors)
         model.robot_, model.identification_, model.joint_errors_ = robot, table, errors
-        model.identified_robot_ = robot_with(robot, table.value)
+        model._build_robots()
         model.data_bounds_ = r.array("data_bounds", (2, n_in))
         if np.any(model.data_bounds_[0] > model.data_bounds_[1]):
             r.fail("data_bounds", "a low bound exceeds its high bound")

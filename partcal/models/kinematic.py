@@ -18,14 +18,21 @@ columns scaled to unit length; the rank from the singular values, the choice
 of which parameters to keep from a QR factorisation with column pivoting).
 They stay at their nominal values and are reported as unidentifiable.
 
+Joint errors the geometry cannot carry, gravity compliance and cyclic
+transmission errors (:mod:`partcal.models.joint_errors`), are identified with
+the geometry: their parameters follow the geometric ones in the same vector,
+the same rank analysis and the same fit; the forward kinematics then runs on
+the joint angles the arm actually takes.
+
 ``KinematicModel`` wraps this as an error model: its predicted error is
-``FK(identified, q) - FK(nominal, q)``. With ``residual=`` another error
+``FK(identified, q_actual) - FK(nominal, q)``. With ``residual=`` another error
 model is fitted to what the identified kinematics leave, and the two
 predictions add up (a hybrid model).
 """
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 from dataclasses import dataclass
@@ -46,6 +53,7 @@ from ..robot.kinematics import Robot, matrix_from_euler_deg
 from .base import ErrorModelBase, box_points, seed_from
 from .bases import varying_inputs
 from .gp import GaussianProcessErrorModel
+from .joint_errors import JointErrors, compliance_problem, harmonics_problem
 from .partitioned import PartitionedErrorModel
 from .series import ErrorModel
 
@@ -58,31 +66,38 @@ STATUSES = ("identified", "unidentifiable", "fixed")
 
 
 # ---------------------------------------------------------------------- the parameter vector
-def parameter_names(robot: Robot) -> list[tuple[str, str]]:
-    """``(name, unit)`` of every geometric parameter: ``theta[1], d[1], a[1], alpha[1], ..., tool.*, base.*``.
+def parameter_names(robot: Robot, errors: JointErrors | None = None) -> list[tuple[str, str]]:
+    """``(name, unit)`` of every parameter: ``theta[1], d[1], a[1], alpha[1], ..., tool.*, base.*``, then the
+    joint errors' (:meth:`JointErrors.names`).
 
     >>> [n for n, _ in parameter_names(load_robot("motoman_sk120"))][:5]
     ['theta[1]', 'd[1]', 'a[1]', 'alpha[1]', 'theta[2]']
     """
     rows = [(f"{p}[{r + 1}]", unit) for r in range(robot.alpha_deg.size) for p, unit in ROW_PARAMETERS]
-    return rows + list(TOOL_PARAMETERS) + list(BASE_PARAMETERS)
+    return rows + list(TOOL_PARAMETERS) + list(BASE_PARAMETERS) + (errors.names() if errors is not None else [])
 
 
-def nominal_values(robot: Robot) -> NDArray[np.float64]:
-    """The robot's own parameter values, shape ``(4 R + 9,)``: rows, tool, then a zero base correction."""
+def nominal_values(robot: Robot, errors: JointErrors | None = None) -> NDArray[np.float64]:
+    """The robot's own parameter values, shape ``(4 R + 9 [+ P],)``: rows, tool, a zero base correction, and
+    zero joint errors."""
     rows = np.column_stack([robot.theta_offset_deg, robot.d_mm, robot.a_mm, robot.alpha_deg]).ravel()
-    return np.concatenate([rows, robot.tool_mm, np.zeros(6)])
+    return np.concatenate([rows, robot.tool_mm, np.zeros(6 + (errors.size if errors is not None else 0))])
+
+
+def geometric_size(robot: Robot) -> int:
+    """Number of geometric parameters, ``4 R + 9`` (the joint errors' follow them)."""
+    return 4 * robot.alpha_deg.size + 9
 
 
 def robot_with(nominal: Robot, values: NDArray[np.float64]) -> Robot:
-    """The robot with parameter ``values`` (``(4 R + 9,)``, as :func:`nominal_values`).
+    """The robot with parameter ``values`` (``(4 R + 9,)``, as :func:`nominal_values`; joint errors ignored).
 
     The base correction turns the nominal base by ``Rz Ry Rx`` about the
     measurement frame's axes and then shifts it.
     """
     rows = nominal.alpha_deg.size
     dh = values[:4 * rows].reshape(rows, 4)
-    turn = matrix_from_euler_deg(values[4 * rows + 6:])
+    turn = matrix_from_euler_deg(values[4 * rows + 6:4 * rows + 9])
     return nominal.replace(theta_offset_deg=dh[:, 0].copy(), d_mm=dh[:, 1].copy(), a_mm=dh[:, 2].copy(),
                            alpha_deg=dh[:, 3].copy(), tool_mm=values[4 * rows:4 * rows + 3].copy(),
                            base_rotation=turn @ nominal.base_rotation,
@@ -98,7 +113,7 @@ def identification_jacobian(nominal: Robot, q_deg: NDArray[np.float64], values: 
     robot = robot_with(nominal, values)
     p, chain = robot.parameter_jacobian(q_deg)
     rows = nominal.alpha_deg.size
-    _, ry, rz = values[4 * rows + 6:]
+    _, ry, rz = values[4 * rows + 6:4 * rows + 9]
     lever = p - values[4 * rows + 3:4 * rows + 6]                # about the shifted base origin
     turn_z = matrix_from_euler_deg(np.array([0.0, 0.0, rz]))
     axes = [turn_z @ matrix_from_euler_deg(np.array([0.0, ry, 0.0])) @ [1.0, 0, 0], turn_z @ [0, 1.0, 0],
@@ -108,6 +123,53 @@ def identification_jacobian(nominal: Robot, q_deg: NDArray[np.float64], values: 
     for k, axis in enumerate(axes):
         base[:, :, 3 + k] = np.cross(axis, lever) * (np.pi / 180.0)
     return p, np.concatenate([chain, base], axis=2).reshape(-1, 4 * rows + 9)
+
+
+def actual_joints(nominal: Robot, errors: JointErrors | None, q_deg: NDArray[np.float64],
+                  values: NDArray[np.float64], payload_kg: NDArray[np.float64], derivatives: bool = False):
+    """The joint angles the arm takes, ``(n, N)`` deg, their design and the lever arms' moves (see
+    :meth:`JointErrors.design`; None without joint errors). Gravity acts in the robot's own base frame:
+    the base correction is left out."""
+    if errors is None or errors.empty:
+        return q_deg, None, None
+    size = geometric_size(nominal)
+    return errors.design(own_geometry(nominal, values), q_deg, values[size:], payload_kg, derivatives)
+
+
+def own_geometry(nominal: Robot, values: NDArray[np.float64]) -> Robot:
+    """The robot with ``values`` in its own base frame (the base correction left out): where gravity acts
+    along ``-z``, and the joint errors' lever arms are taken."""
+    own = values[:geometric_size(nominal)].copy()
+    own[-6:] = 0.0
+    return robot_with(nominal, own)
+
+
+def model_positions(nominal: Robot, errors: JointErrors | None, q_deg: NDArray[np.float64],
+                    values: NDArray[np.float64], payload_kg: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Tool positions ``(n, 3)`` mm of the model with ``values`` (geometry and joint errors)."""
+    q_actual = actual_joints(nominal, errors, q_deg, values, payload_kg)[0]
+    return robot_with(nominal, values).positions(q_actual)
+
+
+def model_jacobian(nominal: Robot, errors: JointErrors | None, q_deg: NDArray[np.float64],
+                   values: NDArray[np.float64], payload_kg: NDArray[np.float64]
+                   ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Positions ``(n, 3)`` mm and ``d p / d values``, shape ``(3 n, P)``, geometry and joint errors.
+
+    The geometric columns are those of :func:`identification_jacobian` at the actual joint angles, plus,
+    with compliant joints, how the DH rows and the tool move the lever arms; a joint error's column is
+    the joint's position Jacobian times its design column. All analytic.
+    """
+    q_actual, design, moves = actual_joints(nominal, errors, q_deg, values, payload_kg, derivatives=True)
+    size = geometric_size(nominal)
+    p, jac = identification_jacobian(nominal, q_actual, values[:size])
+    if design is None:
+        return p, jac
+    joints = robot_with(nominal, values).jacobian(q_actual)                       # (n, 3, N) mm/deg
+    if moves is not None:
+        jac[:, :size - 6] += np.einsum("nij,njp->nip", joints, moves).reshape(-1, size - 6)
+    extra = np.einsum("nij,njp->nip", joints, design).reshape(-1, design.shape[2])
+    return p, np.hstack([jac, extra])
 
 
 # ---------------------------------------------------------------------- identification
@@ -181,8 +243,9 @@ class Identification:
 
 
 def identify(robot: Robot, q_deg: NDArray[np.float64], measured_mm: NDArray[np.float64], *, base: bool = True,
-             tool: bool = True, rcond: float = 1e-6) -> Identification:
-    """Identify the geometric parameters that bring FK through measured positions.
+             tool: bool = True, rcond: float = 1e-6, errors: JointErrors | None = None,
+             payload_kg=0.0) -> Identification:
+    """Identify the parameters that bring the model's forward kinematics through measured positions.
 
     Parameters
     ----------
@@ -198,6 +261,11 @@ def identify(robot: Robot, q_deg: NDArray[np.float64], measured_mm: NDArray[np.f
     rcond : float
         Singular values of the unit-column Jacobian below ``rcond`` times the
         largest count as zero: those directions are unidentifiable.
+    errors : JointErrors, optional
+        Joint compliance and transmission errors identified with the geometry
+        (their parameters follow the geometric ones).
+    payload_kg : float or ndarray, shape (n,)
+        Payload at the tool point, kg (only read by compliant joints).
 
     Returns
     -------
@@ -207,12 +275,14 @@ def identify(robot: Robot, q_deg: NDArray[np.float64], measured_mm: NDArray[np.f
     measured_mm = check_array(measured_mm, "measured_mm", columns=3)
     if len(measured_mm) != len(q_deg):
         raise DataError(f"measured_mm has {len(measured_mm)} rows but q_deg has {len(q_deg)}")
-    v0 = nominal_values(robot)
+    payload = np.broadcast_to(np.asarray(payload_kg, dtype=float), (len(q_deg),))
+    v0 = nominal_values(robot, errors)
     rows = robot.alpha_deg.size
     wanted = np.ones(v0.size, dtype=bool)
     wanted[4 * rows:4 * rows + 3] = tool
-    wanted[4 * rows + 3:] = base
-    free, rank = _identifiable(robot, q_deg, wanted, rcond)
+    wanted[4 * rows + 3:4 * rows + 9] = base
+    jac_at = functools.partial(model_jacobian, robot, errors, q_deg, payload_kg=payload)
+    free, rank = _identifiable(jac_at(v0)[1], wanted, rcond)
 
     def values_of(x):
         v = v0.copy()
@@ -220,24 +290,22 @@ def identify(robot: Robot, q_deg: NDArray[np.float64], measured_mm: NDArray[np.f
         return v
 
     def residuals(x):
-        return (robot_with(robot, values_of(x)).positions(q_deg) - measured_mm).ravel()
-
-    def jacobian(x):
-        return identification_jacobian(robot, q_deg, values_of(x))[1][:, free]
+        return (model_positions(robot, errors, q_deg, values_of(x), payload) - measured_mm).ravel()
 
     v, evaluations = v0.copy(), 0
     if free.size:
-        sol = least_squares(residuals, v0[free], jac=jacobian, method="lm", x_scale="jac",
-                            ftol=1e-15, xtol=1e-15, gtol=1e-15, max_nfev=200 * (free.size + 1))
+        sol = least_squares(residuals, v0[free], jac=lambda x: jac_at(values_of(x))[1][:, free], method="lm",
+                            x_scale="jac", ftol=1e-15, xtol=1e-15, gtol=1e-15, max_nfev=200 * (free.size + 1))
         v, evaluations = values_of(sol.x), int(sol.nfev)
-    p, jac = identification_jacobian(robot, q_deg, v)
+        log.debug("least squares: %s (%d evaluations)", sol.message, sol.nfev)
+    p, jac = jac_at(v)
     resid = p - measured_mm
     std, condition = _uncertainty(jac[:, free], resid)
     std_full = np.full(v.size, np.nan)
     std_full[free] = std
     status = np.where(wanted, "unidentifiable", "fixed").astype(object)
     status[free] = "identified"
-    names = parameter_names(robot)
+    names = parameter_names(robot, errors)
     result = Identification(tuple(n for n, _ in names), tuple(u for _, u in names), v0, v, std_full,
                             tuple(str(s) for s in status), rank, condition,
                             float(np.sqrt(np.mean(np.sum(resid**2, axis=1)))), q_deg.shape[0], evaluations)
@@ -246,14 +314,15 @@ def identify(robot: Robot, q_deg: NDArray[np.float64], measured_mm: NDArray[np.f
     return result
 
 
-def _identifiable(robot: Robot, q_deg, wanted: NDArray[np.bool_], rcond: float) -> tuple[NDArray[np.intp], int]:
-    """Indices of the parameters to identify, and the rank, from the unit-column Jacobian at nominal.
+def _identifiable(jac0: NDArray[np.float64], wanted: NDArray[np.bool_], rcond: float
+                  ) -> tuple[NDArray[np.intp], int]:
+    """Indices of the parameters to identify, and the rank, from the Jacobian ``jac0`` at nominal.
 
-    The rank counts singular values above ``rcond`` times the largest; a QR
-    factorisation with column pivoting picks that many columns (the most
-    independent first). Columns that do not move the tool at all never count.
+    The columns are scaled to unit length; the rank counts singular values
+    above ``rcond`` times the largest; a QR factorisation with column
+    pivoting picks that many columns (the most independent first). Columns
+    that do not move the tool at all never count.
     """
-    _, jac0 = identification_jacobian(robot, q_deg, nominal_values(robot))
     norms = np.linalg.norm(jac0, axis=0)
     candidates = np.flatnonzero(wanted & (norms > 1e-12 * max(norms.max(), 1e-300)))
     if candidates.size == 0:
@@ -295,6 +364,14 @@ class KinematicModel(ErrorModelBase):
     rcond : float in (0, 1)
         Relative singular-value threshold below which a parameter direction
         counts as unidentifiable (see :func:`identify`).
+    compliance : sequence of int
+        1-based joints that yield under gravity (see :mod:`partcal.models.joint_errors`).
+    joint_harmonics : int or sequence of int
+        Harmonics of the cyclic transmission error of every joint (an int),
+        or of each joint (one int per joint); 0: none.
+    payload_kg : float >= 0
+        The payload at the tool point, kg, of data given without one per
+        pose (``fit``, ``predict``: ``payload_kg=`` per pose overrides it).
     residual : ErrorModel, PartitionedErrorModel or GaussianProcessErrorModel, optional
         Fitted to the errors the identified kinematics leave; its prediction
         is added (a hybrid model). A Cartesian residual reads the nominal
@@ -308,6 +385,8 @@ class KinematicModel(ErrorModelBase):
     identification_ : Identification
         The identified table with standard errors and the condition number.
     residual_ : estimator or None
+    joint_errors_ : JointErrors
+        The joint errors identified (their values are the identified table's last entries).
     active_ : ndarray of bool, shape (N,)
         Joints that moved in the training data.
 
@@ -323,11 +402,15 @@ class KinematicModel(ErrorModelBase):
 
     inputs = "joint"
 
-    def __init__(self, *, robot=None, base=True, tool=True, rcond=1e-6, residual=None, random_state=None):
+    def __init__(self, *, robot=None, base=True, tool=True, rcond=1e-6, compliance=(), joint_harmonics=0,
+                 payload_kg=0.0, residual=None, random_state=None):
         self.robot = robot
         self.base = base
         self.tool = tool
         self.rcond = rcond
+        self.compliance = compliance
+        self.joint_harmonics = joint_harmonics
+        self.payload_kg = payload_kg
         self.residual = residual
         self.random_state = random_state
 
@@ -335,7 +418,9 @@ class KinematicModel(ErrorModelBase):
     file_kind = "kinematic"
     takes_residual = True
     _parameter_rules = {"base": boolean(True), "tool": boolean(True),
-                        "rcond": real(0.0, 1.0, default=1e-6, low_open=True)}
+                        "rcond": real(0.0, 1.0, default=1e-6, low_open=True),
+                        "payload_kg": real(0.0, 1e5, default=0.0)}
+    _joint_rules = {"compliance": ((), compliance_problem), "joint_harmonics": (0, harmonics_problem)}
 
     def _check_params(self) -> Robot:
         own = type(self).__name__
@@ -343,13 +428,20 @@ class KinematicModel(ErrorModelBase):
             raise param_error(own, "robot", "a Robot, a built-in robot name or a robot YAML path", self.robot)
         robot = load_robot(self.robot)
         self._check_rules()
+        for name, (_, problem) in self._joint_rules.items():
+            expected = problem(getattr(self, name), robot.n_joints)
+            if expected is not None:
+                raise param_error(own, name, expected, getattr(self, name))
         if self.residual is not None and not isinstance(self.residual, RESIDUAL_MODELS):
             raise param_error(own, "residual", "None, an ErrorModel, a PartitionedErrorModel or a "
                               "GaussianProcessErrorModel", self.residual)
         return robot
 
-    def fit(self, X, y):
-        """Identify the parameters from joint angles ``X`` (n, N) deg and errors ``y`` (n, 3) mm. Returns self."""
+    def fit(self, X, y, payload_kg=None):
+        """Identify the parameters from joint angles ``X`` (n, N) deg and errors ``y`` (n, 3) mm. Returns self.
+
+        ``payload_kg`` (n,) kg per pose, or a number; default the parameter ``payload_kg``.
+        """
         robot = self._check_params()
         X, y = validate_data(self, X, y, multi_output=True, y_numeric=True, dtype=np.float64)
         if X.shape[1] != robot.n_joints:
@@ -359,16 +451,18 @@ class KinematicModel(ErrorModelBase):
             raise DataError(f"Expected y (position errors) with shape (n, 3), got array with shape {y.shape}.")
         self._y_1d = False
         nominal = robot.positions(X)
+        self.joint_errors_ = JointErrors.for_robot(robot, list(self.compliance), self.joint_harmonics)
+        payload = self._payload(payload_kg, len(X))
         self.identification_ = identify(robot, X, nominal + y, base=bool(self.base), tool=bool(self.tool),
-                                        rcond=float(self.rcond))
+                                        rcond=float(self.rcond), errors=self.joint_errors_, payload_kg=payload)
         self.robot_ = robot
-        self.identified_robot_ = robot_with(robot, self.identification_.value)
+        self._build_robots()
         self.active_ = varying_inputs(X)
         self.data_bounds_ = np.stack([X.min(axis=0), X.max(axis=0)])
         self.residual_ = None
         if self.residual is not None:
             seed = int(np.random.SeedSequence(seed_from(self.random_state)).spawn(1)[0].generate_state(1)[0])
-            leftover = y - (self.identified_robot_.positions(X) - nominal)
+            leftover = y - (self._kinematic(X, payload) - nominal)
             self.residual_ = clone(self.residual).set_params(random_state=seed)
             self.residual_.fit(self._residual_inputs(X, nominal), leftover)
         return self._prepare()
@@ -380,7 +474,7 @@ class KinematicModel(ErrorModelBase):
         one pose through both robots does it here, not in ``predict``. The
         residual model prepares its own (see :meth:`ErrorModelBase._prepare`).
         """
-        for robot in (self.robot_, self.identified_robot_):
+        for robot in (self.robot_, self.identified_robot_, self._geometry):
             robot.positions(self.data_bounds_[:1])
         if self.residual_ is not None:
             self.residual_._prepare()
@@ -391,21 +485,47 @@ class KinematicModel(ErrorModelBase):
         return nominal if self.residual_.inputs == "cartesian" else X
 
     # ------------------------------------------------------------------ prediction
-    def predict(self, X) -> NDArray[np.float64]:
-        """Predicted errors ``FK(identified) - FK(nominal)`` (+ the residual model), shape (n, 3) mm."""
+    def _payload(self, payload_kg, n: int) -> NDArray[np.float64]:
+        """The payload per pose (n,) kg: ``payload_kg`` (a number or n values >= 0), default the parameter."""
+        value = self.payload_kg if payload_kg is None else payload_kg
+        arr = check_array(np.atleast_1d(np.asarray(value, dtype=float)), "payload_kg", ndim=1)
+        if arr.size not in (1, n) or np.any(arr < 0):
+            raise DataError(f"Expected payload_kg as one number >= 0 or {n} of them (kg, one per pose), got "
+                            f"{arr.size} values, smallest {arr.min() if arr.size else 'none'}.")
+        return np.broadcast_to(arr, (n,)).copy()
+
+    def _build_robots(self) -> None:
+        """The identified robot, and its geometry in its own base frame (where the joint errors' lever arms
+        are taken), from ``robot_`` and the identified table (after fitting or loading)."""
+        self.identified_robot_ = robot_with(self.robot_, self.identification_.value)
+        self._geometry = own_geometry(self.robot_, self.identification_.value)
+
+    def _kinematic(self, X: NDArray[np.float64], payload: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Tool positions of the identified model (geometry and joint errors), (n, 3) mm."""
+        errors = self.joint_errors_
+        if not errors.empty:
+            size = geometric_size(self.robot_)
+            X = errors.design(self._geometry, X, self.identification_.value[size:], payload)[0]
+        return self.identified_robot_.positions(X)
+
+    def predict(self, X, payload_kg=None) -> NDArray[np.float64]:
+        """Predicted errors ``FK(identified) - FK(nominal)`` (+ the residual model), shape (n, 3) mm.
+
+        ``payload_kg`` (n,) kg per pose, or a number; default the parameter ``payload_kg``.
+        """
         check_is_fitted(self, "identification_")
         X = validate_data(self, X, reset=False, dtype=np.float64)
-        return self._predict_trusted(X)
+        return self._predict_trusted(X, payload_kg)
 
-    def predict_kinematic(self, X) -> NDArray[np.float64]:
+    def predict_kinematic(self, X, payload_kg=None) -> NDArray[np.float64]:
         """The kinematic part alone, ``FK(identified) - FK(nominal)``, shape (n, 3) mm."""
         check_is_fitted(self, "identification_")
         X = validate_data(self, X, reset=False, dtype=np.float64)
-        return self.identified_robot_.positions(X) - self.robot_.positions(X)
+        return self._kinematic(X, self._payload(payload_kg, len(X))) - self.robot_.positions(X)
 
-    def _predict_trusted(self, X: NDArray[np.float64]) -> NDArray[np.float64]:
+    def _predict_trusted(self, X: NDArray[np.float64], payload_kg=None) -> NDArray[np.float64]:
         nominal = self.robot_.positions(X)
-        out = self.identified_robot_.positions(X) - nominal
+        out = self._kinematic(X, self._payload(payload_kg, len(X))) - nominal
         if self.residual_ is not None:
             out += self.residual_.predict(self._residual_inputs(X, nominal))
         return out
@@ -419,10 +539,18 @@ class KinematicModel(ErrorModelBase):
     # ------------------------------------------------------------------ the kind: config, files, run, report
     @classmethod
     def params_from_config(cls, sec, context: dict) -> dict:
-        """``base``, ``tool`` and ``rcond``; the robot is the run's (top-level key ``robot``)."""
+        """``base``, ``tool``, ``rcond``, ``payload_kg``, ``compliance`` and ``joint_harmonics``; the robot is the
+        run's (top-level key ``robot``)."""
         if context.get("robot") is None:
             sec.fail(sec.path("kind"), "kind: kinematic needs the run's robot (top-level key 'robot')")
-        return {"robot": context["robot"], **super().params_from_config(sec, context)}
+        n_joints = load_robot(context["robot"]).n_joints
+        joint = {name: sec.get(name, "any", default=default, check=lambda v, p=problem: p(v, n_joints))
+                 for name, (default, problem) in cls._joint_rules.items()}
+        return {"robot": context["robot"], **super().params_from_config(sec, context), **joint}
+
+    @classmethod
+    def config_keys(cls) -> set[str]:
+        return super().config_keys() | set(cls._joint_rules)
 
     @classmethod
     def from_params(cls, params: dict, random_state=None) -> "KinematicModel":
@@ -435,8 +563,11 @@ class KinematicModel(ErrorModelBase):
     def file_section(self) -> dict:
         from .kinds import body_of      # the table of kinds knows this module
 
+        errors = self.joint_errors_
         return {"robot": robot_to_dict(self.robot_), "base": bool(self.base), "tool": bool(self.tool),
-                "rcond": float(self.rcond), "identification": self.identification_.to_dict(),
+                "rcond": float(self.rcond), "payload_kg": float(self.payload_kg),
+                "compliance": list(errors.compliance), "joint_harmonics": list(errors.harmonics),
+                "identification": self.identification_.to_dict(),
                 "data_bounds": self.data_bounds_.tolist(), "active": self.active_.tolist(),
                 "residual": body_of(self.residual_) if self.residual_ is not None else None}
 
@@ -450,10 +581,17 @@ class KinematicModel(ErrorModelBase):
             raise ModelFileError(str(exc)) from None
         if robot.n_joints != n_in or n_out != 3:
             r.fail("robot", f"a robot with {n_in} joints and 3 outputs; got {robot.n_joints} joints, {n_out} outputs")
-        table = _identification_from(r.sub("identification"), robot)
-        model = cls(robot=robot, **{key: r.rule(key, rule) for key, rule in cls._parameter_rules.items()})
-        model.robot_, model.identification_ = robot, table
-        model.identified_robot_ = robot_with(robot, table.value)
+        joint = {}
+        for name, (default, problem) in cls._joint_rules.items():       # files before the joint errors: none
+            joint[name] = r.doc.get(name, default)
+            if problem(joint[name], robot.n_joints) is not None:
+                r.fail(name, f"expected {problem(joint[name], robot.n_joints)}; got {joint[name]!r}"[:200])
+        rules = {key: rule for key, rule in cls._parameter_rules.items() if key in r.doc or key != "payload_kg"}
+        model = cls(robot=robot, **{key: r.rule(key, rule) for key, rule in rules.items()}, **joint)
+        errors = JointErrors.for_robot(robot, joint["compliance"], joint["joint_harmonics"])
+        table = _identification_from(r.sub("identification"), robot, errors)
+        model.robot_, model.identification_, model.joint_errors_ = robot, table, errors
+        model._build_robots()
         model.data_bounds_ = r.array("data_bounds", (2, n_in))
         if np.any(model.data_bounds_[0] > model.data_bounds_[1]):
             r.fail("data_bounds", "a low bound exceeds its high bound")
@@ -472,7 +610,8 @@ class KinematicModel(ErrorModelBase):
         puts it, at the corners and centre of the joint box of the data; a residual model is checked too."""
         poses = box_points(*self.data_bounds_)
         with np.errstate(all="ignore"):
-            shift = np.linalg.norm(self.identified_robot_.positions(poses) - self.robot_.positions(poses), axis=1)
+            moved = self._kinematic(poses, self._payload(None, len(poses)))
+            shift = np.linalg.norm(moved - self.robot_.positions(poses), axis=1)
         reach = self.robot_.reach_mm
         if not np.all(np.isfinite(shift)) or shift.max() > reach:
             worst = f"{shift.max():.4g} mm" if np.all(np.isfinite(shift)) else "a non-finite distance"
@@ -491,6 +630,12 @@ class KinematicModel(ErrorModelBase):
 
     def describe(self) -> str:
         text = f"the kinematic parameters of {self.robot_.name}"
+        errors = self.joint_errors_
+        if errors.compliance:
+            text += f", the gravity compliance of joint{'s' if len(errors.compliance) > 1 else ''} " + \
+                ", ".join(str(j) for j in errors.compliance)
+        if any(errors.harmonics):
+            text += f", transmission errors (up to {max(errors.harmonics)} harmonics per joint)"
         return text + (f", plus a residual {self.residual_.describe()}" if self.residual_ is not None else "")
 
     @property
@@ -533,14 +678,19 @@ class KinematicModel(ErrorModelBase):
                               "unidentifiable": table.unidentifiable(), "condition": table.condition,
                               "rms_3d": table.rms_mm}}
 
-    def predict_validated(self, X: NDArray[np.float64]) -> NDArray[np.float64]:
-        return self._predict_trusted(X)
+    def predict_validated(self, X: NDArray[np.float64], payload_kg=None) -> NDArray[np.float64]:
+        return self._predict_trusted(X, payload_kg)
+
+    @property
+    def reads_payload(self) -> bool:
+        """Whether a payload changes the prediction (some joint yields under gravity)."""
+        return bool(self.joint_errors_.compliance)
 
 
-def _identification_from(ident: FieldReader, robot: Robot) -> Identification:
+def _identification_from(ident: FieldReader, robot: Robot, errors: JointErrors | None = None) -> Identification:
     """A model file's identified table, which must agree with its robot: the robot's parameter names and
     nominal values, unidentified parameters kept nominal, standard errors finite and >= 0 (or null)."""
-    names = [n for n, _ in parameter_names(robot)]
+    names = [n for n, _ in parameter_names(robot, errors)]
     if ident.get("names", list) != names:
         ident.fail("names", f"expected the {len(names)} parameters of {robot.name} ({names[0]} ... {names[-1]})")
     status = ident.get("status", list)
@@ -550,7 +700,7 @@ def _identification_from(ident: FieldReader, robot: Robot) -> Identification:
     if len(std) != len(names) or not all(v is None or isinstance(v, (int, float)) for v in std):
         ident.fail("std_error", f"expected {len(names)} numbers or nulls")
     nominal, value = ident.array("nominal", (len(names),)), ident.array("value", (len(names),))
-    expected = nominal_values(robot)
+    expected = nominal_values(robot, errors)
     off = np.flatnonzero(~np.isclose(nominal, expected, rtol=1e-12, atol=1e-9))
     if off.size:
         k = off[0]

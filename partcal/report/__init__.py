@@ -253,17 +253,27 @@ def kinematic_tables(result: RunResult) -> list[dict]:
                     "rms": table.rms_mm, "unidentifiable": table.unidentifiable(),
                     "dh": [{"row": k + 1, "cells": [cells[f"{p}[{k + 1}]"] for p, _ in ROW_PARAMETERS]}
                            for k in range(n_rows)],
-                    "extra": [cells[n] for n, _ in TOOL_PARAMETERS + BASE_PARAMETERS]})
+                    "extra": [cells[n] for n, _ in TOOL_PARAMETERS + BASE_PARAMETERS],
+                    "joint_errors": [cells[n] for n in table.names[4 * n_rows + 9:]]})
     return out
 
 
 def _parameter_cell(row: dict) -> dict:
+    """One parameter as the report shows it: value ± standard error in its unit (deg and mm in fixed
+    notation; sags and compliances in 4 significant digits, a compliance with its stiffness)."""
+    fixed = row["unit"] in ("deg", "mm")
     digits = 4 if row["unit"] == "deg" else 3
-    text = f"{row['value']:.{digits}f}"
+
+    def show(v, sign=""):
+        return f"{v:{sign}.{digits}f}" if fixed else f"{v:{sign}.4g}"
+
+    text = show(row["value"])
     if row["status"] == "identified":
-        text += f" ± {row['std_error']:.{digits}f}"
+        text += f" ± {show(row['std_error'])}"
+        if row["unit"] == "deg/(N m)" and row["value"] > 0:
+            text += f" ({1.0 / row['value']:.4g} N m/deg)"
     return {"name": row["name"], "unit": row["unit"], "status": row["status"], "text": text,
-            "nominal": f"{row['nominal']:.{digits}f}", "correction": f"{row['correction']:+.{digits}f}"}
+            "nominal": show(row["nominal"]), "correction": show(row["correction"], "+")}
 
 
 def scene_entries(result: RunResult) -> list[dict]:

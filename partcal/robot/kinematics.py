@@ -255,6 +255,14 @@ class Robot:
         keys = sorted(frames)
         return (np.stack([frames[k][1].T for k in keys], axis=1), np.stack([frames[k][0].T for k in keys], axis=1))
 
+    def frame_axes(self, q_deg) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """Origins, x axes and z axes of the DH frames 0..R, each of shape ``(n, R + 1, 3)``.
+
+        Frame 0 is the first DH frame (the base); frame ``k`` follows row ``k``.
+        """
+        _, _, (origins, xs, zs) = self._chain(self.check_joints(q_deg), keep_axes=True)
+        return np.stack(origins, axis=1), np.stack(xs, axis=1), np.stack(zs, axis=1)
+
     def positions(self, q_deg) -> NDArray[np.float64]:
         """Tool positions, shape ``(n, 3)`` mm, for joint angles ``(n, N)`` degrees.
 

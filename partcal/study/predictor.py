@@ -52,18 +52,29 @@ class Predictor:
     def __repr__(self) -> str:
         return f"Predictor({self.name!r}, inputs={self.inputs!r}, kind={self.document['kind']!r})"
 
-    def _errors(self, X: NDArray[np.float64]) -> NDArray[np.float64]:
+    def _errors(self, X: NDArray[np.float64], payload_kg=None) -> NDArray[np.float64]:
         if len(X) == 0:                 # no points, no errors (scikit-learn refuses empty inputs)
             return np.zeros((0, 3))
-        return self.model.predict_validated(X)
+        if payload_kg is None:
+            return self.model.predict_validated(X)
+        return self.model.predict_validated(X, payload_kg=payload_kg)
 
-    def predict(self, positions=None, joints=None) -> NDArray[np.float64]:
+    def _check_payload(self, payload_kg) -> None:
+        if payload_kg is not None and not getattr(self.model, "reads_payload", False):
+            raise DataError(f"model {self.name!r} has no joint that yields under gravity, so a payload changes "
+                            f"nothing it predicts; got payload_kg={payload_kg!r}")
+
+    def predict(self, positions=None, joints=None, payload_kg=None) -> NDArray[np.float64]:
         """Predicted errors (measured - nominal), shape (n, 3) mm.
 
         Cartesian models take ``positions`` (n, 3) mm, or ``joints`` when the
         model file carries a robot; joint models take ``joints`` (n, N) degrees.
+        ``payload_kg`` (one number, or one per row) is the payload at the tool
+        point for a model with compliant joints (default: the payload it was
+        given when fitted, see the model's ``payload_kg``).
         """
-        return self._errors(self._inputs(positions, joints))
+        self._check_payload(payload_kg)
+        return self._errors(self._inputs(positions, joints), payload_kg)
 
     def _inputs(self, positions, joints) -> NDArray[np.float64]:
         if (positions is None) == (joints is None):
@@ -80,22 +91,26 @@ class Predictor:
                             "pass positions= (mm)")
         return self.robot.positions(check_array(joints, "joints", columns=self.robot.n_joints))
 
-    def compensate(self, targets_mm, joints=None, *, tol_mm: float = 1e-4, max_iter: int = 50) -> NDArray[np.float64]:
+    def compensate(self, targets_mm, joints=None, *, payload_kg: float | None = None, tol_mm: float = 1e-4,
+                   max_iter: int = 50) -> NDArray[np.float64]:
         """Commanded ("false target") positions, shape (n, 3) mm, so that the robot reaches the targets.
+
+        ``payload_kg`` (one number) is the payload the robot carries, for a
+        model with compliant joints (see :meth:`predict`).
 
         Targets that do not converge to ``tol_mm`` raise a ``CompensationWarning``
         naming them, and commanded inputs farther than ``EXTRAPOLATION_LIMIT``
         (50 mm or degrees) from the training data an ``ExtrapolationWarning``;
         :meth:`compensate_full` returns the details.
         """
-        result = self.compensate_full(targets_mm, joints, tol_mm=tol_mm, max_iter=max_iter)
+        result = self.compensate_full(targets_mm, joints, payload_kg=payload_kg, tol_mm=tol_mm, max_iter=max_iter)
         evaluated = result.commanded_mm if self.inputs == "cartesian" else result.joints_deg
         if len(evaluated):
             warn_far(self.model.distance_to_data(evaluated), EXTRAPOLATION_LIMIT)     # names the caller's line
         return result.commanded_mm
 
-    def compensate_full(self, targets_mm, joints=None, *, tol_mm: float = 1e-4, max_iter: int = 50
-                        ) -> CompensationResult:
+    def compensate_full(self, targets_mm, joints=None, *, payload_kg: float | None = None, tol_mm: float = 1e-4,
+                        max_iter: int = 50) -> CompensationResult:
         """Like :meth:`compensate`, with joints (joint models), iterations and residuals per target.
 
         ``joints`` (n, N) degrees are IK seeds for joint models (default: the
@@ -108,12 +123,20 @@ class Predictor:
         (:meth:`distance_to_data` of the commanded inputs).
         """
         targets = check_array(targets_mm, "targets_mm", columns=3)
+        self._check_payload(payload_kg)
+        if payload_kg is not None and np.ndim(payload_kg) != 0:
+            raise DataError(f"compensate takes one payload_kg for all targets; got an array of shape "
+                            f"{np.shape(payload_kg)}")
+
+        def errors(X):
+            return self._errors(X, payload_kg)
+
         if len(targets) == 0:
             joints_out = None if self.inputs == "cartesian" else np.zeros((0, self.n_inputs))
             return CompensationResult(np.zeros((0, 3)), joints_out, np.zeros(0, np.int64), np.zeros(0),
                                       np.zeros(0, bool))
         if self.inputs == "cartesian":
-            result = false_target(self._errors, targets, tol_mm=tol_mm, max_iter=max_iter)
+            result = false_target(errors, targets, tol_mm=tol_mm, max_iter=max_iter)
             if self.robot is not None:      # a command the arm cannot reach (IK within its limits) is no solution
                 seeds = None if joints is None else check_array(joints, "joints", columns=self.robot.n_joints)
                 live = np.flatnonzero(result.converged)
@@ -131,7 +154,7 @@ class Predictor:
                 seeds = check_array(joints, "joints", columns=self.robot.n_joints)
                 if seeds.shape[0] != targets.shape[0]:
                     raise DataError(f"joints has {seeds.shape[0]} rows but targets_mm has {targets.shape[0]}")
-            result = false_target_joints(self._errors, self.robot, targets, seeds, fixed, tol_mm=tol_mm,
+            result = false_target_joints(errors, self.robot, targets, seeds, fixed, tol_mm=tol_mm,
                                          max_iter=max_iter)
         result.warn_unconverged(tol_mm)
         return result

@@ -37,8 +37,8 @@ def test_the_estimate_is_the_size_of_the_matrices():
     from partcal.models.partition import KMeansPartition
     from partcal.models.partitioned import PartitionedErrorModel
 
-    gp = GaussianProcessErrorModel(inputs="joint")              # by default the search sees 500 samples
-    assert gp.peak_fit_bytes(20000, 6) == (8.0 * 3 * 20000**2, "hyperparameter search on 500 samples, "
+    gp = GaussianProcessErrorModel(inputs="joint")              # by default the search sees 1,000 samples
+    assert gp.peak_fit_bytes(20000, 6) == (8.0 * 3 * 20000**2, "hyperparameter search on 1000 samples, "
                                                                 "solve on 20000")
     every = GaussianProcessErrorModel(inputs="joint", hyper_samples=20000)
     assert every.peak_fit_bytes(20000, 6) == (8.0 * 15 * 20000**2, "hyperparameter search on 20000 samples, "

@@ -51,7 +51,7 @@ SHARED_HYPER_SAMPLES = (500, 2000)  # a partition's shared search: a tenth of th
 HYPERPARAMETERS = ("shared", "per_region")
 SAMPLES_PER_INPUT = 10             # default smallest region: 10 samples per varying input
 AUTO_RESTARTS = ((200, 4), (500, 1))    # restarts: None -> 4 extra starts on a search of <= 200 samples, ...
-GLOBAL_HYPER_SAMPLES = 500         # hyper_samples: None -> a global GP searches on at most 500 samples
+GLOBAL_HYPER_SAMPLES = 1000        # hyper_samples: None -> a global GP searches on at most 1,000 samples
 AT_BOUND = 1.05                    # a hyperparameter within 5% of a bound sits on it
 WHITE_NOISE = 0.05                 # neighbours correlated less than this (median): the GP predicts the mean
 _BLOCK = 2048
@@ -87,9 +87,10 @@ class GaussianProcessErrorModel(ErrorModelBase):
         largest value; the GP is then solved on all samples with
         the hyperparameters found. The search costs O(n^3) per step and takes
         dozens of steps, the solve one step, so this is where a large fit's
-        time goes. None: at most 500 for a global GP (``GLOBAL_HYPER_SAMPLES``:
-        on 700 and 2,000 real and virtual poses the test RMS within 2% of a
-        search on all, 3 to 50 times faster); for the shared hyperparameters of
+        time goes. None: at most 1,000 for a global GP (``GLOBAL_HYPER_SAMPLES``;
+        on 2,000 virtual poses a search on 500 loses 1% and is 50 times faster,
+        but on the UR10's 1,000 real poses a search on 500 found an
+        interpolating optimum, 10% worse on held-out poses); for the shared hyperparameters of
         a partition, a tenth of the samples, but at least 500 and at most 2,000
         (``SHARED_HYPER_SAMPLES``; fewer search samples than that miss fine
         structure and read it as noise).

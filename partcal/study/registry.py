@@ -385,7 +385,9 @@ def fit_model(spec: ModelSpec, seed: int, data: dict[str, Measurements], cv: CVP
     """
     with _collected() as said:
         result = _fit_model(spec, seed, data, cv, own_frame, lines)
-    result.notes = list(dict.fromkeys(said + result.model.fit_notes()))
+    own = f"{spec.name}: "                   # the run names the model once, in front of each note
+    result.notes = list(dict.fromkeys(t[len(own):] if t.startswith(own) else t
+                                      for t in said + result.model.fit_notes()))
     return result
 
 
@@ -539,16 +541,16 @@ def run(config: RunConfig, progress: Callable[[int, int, str], None] | None = No
         progress(0, len(specs), f"cross-validation: {plan.cv.describe()}")
     own = config.data_options.own_frame
     lines = FoldLines() if progress else None
-    jobs = [delayed(fit_model)(spec, model_seed(config.seed, spec.name), data, plan.cv, own, lines)
-            for spec in specs]
+    order = _costliest_first(specs, data["identification"])
+    jobs = [delayed(fit_model)(specs[i], model_seed(config.seed, specs[i].name), data, plan.cv, own, lines)
+            for i in order]
     results: list[ModelResult] = []
     with _backend(config):
         stream = Parallel(n_jobs=config.n_jobs, return_as="generator")(jobs)
         for result in stream:
             results.append(result)
             for note in result.notes:
-                name = result.spec.name
-                log.warning("%s", note if note.startswith(f"{name}:") else f"{name}: {note}")
+                log.warning("%s: %s", result.spec.name, note)
             if progress:
                 progress(len(results), len(jobs), f"{result.spec.name}: CV RMS {result.cv_rms_3d:.3f} "
                                                   f"+- {result.cv_se:.3f} mm, fitted in {result.fit_seconds:.2f} s, "
@@ -556,9 +558,21 @@ def run(config: RunConfig, progress: Callable[[int, int, str], None] | None = No
     if virtual is not None:
         for result in results:
             result.compensation = verify_compensation(result, data, robot, virtual, config.seed)
+    results = [results[order.index(i)] for i in range(len(specs))]        # back in the config's order
     uncompensated = {name: summary(errors_left(m, np.zeros_like(m.errors_mm), name in own)) for name, m in data.items()}
     return RunResult(config, data, robot, uncompensated, results, choose_best(results, config.rank_by),
                      time.perf_counter() - start, registrations=registrations, plan=plan)
+
+
+def _costliest_first(specs, ident: Measurements) -> list[int]:
+    """The order to start the fits in: nested cross-validation first, then by the memory a fit holds (a
+    Gaussian process's matrices), so that the longest fits do not start last on a busy pool."""
+    def cost(spec: ModelSpec) -> tuple:
+        model = spec.build(None)
+        return (len(spec.sizes) > 1, model.peak_fit_bytes(len(ident), ident.n_joints)[0])
+
+    costs = [cost(spec) for spec in specs]
+    return sorted(range(len(specs)), key=lambda i: costs[i], reverse=True)
 
 
 def choose_best(results: list[ModelResult], rank_by: str) -> str:

@@ -13,7 +13,7 @@ leave-one-pose-out (the default on up to 30 poses). Models: DH, DH + FDP(AI), FD
 GP(AI), GP(CI). Each cell: the model the run chose and its test 3-D RMS over that of the best
 model on the test set (1.00: the best; the target is <= 1.10 for the default rule).
 
-Run: .venv/bin/python benchmarks/bench_choice.py   (about 2 minutes on 2 cores)
+Run: .venv/bin/python benchmarks/bench_choice.py   (about 5 minutes on 2 cores)
 """
 
 import os

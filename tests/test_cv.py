@@ -106,6 +106,14 @@ models:
 """
 
 
+def first_poses(tmp_path, n: int):
+    """A measurement file of the first ``n`` identification poses."""
+    path = tmp_path / f"first{n}.csv"
+    write_measurements(Measurements(IDENT.q_deg[:n], IDENT.nominal_mm[:n], IDENT.measured_mm[:n],
+                                    name="identification"), path)
+    return path
+
+
 def config(tmp_path, models: str, ident=DATA / "identification.csv", extra: str = ""):
     path = tmp_path / "configs" / "run.yaml"
     path.parent.mkdir(exist_ok=True)
@@ -130,13 +138,10 @@ def test_repeated_poses_are_held_out_together_and_floor_the_gp_noise(tmp_path):
 
 
 def test_a_granularity_no_fold_supports_is_left_out_and_said(tmp_path):
-    m = read_measurements(DATA / "identification.csv")
-    few = Measurements(m.q_deg[:40], m.nominal_mm[:40], m.measured_mm[:40], name="identification")
-    write_measurements(few, tmp_path / "few.csv")
     models = ("  - {name: FDP(CI), degree: 1, solver: {method: lstsq}}\n"
               "  - name: FDP(CI) k-means\n    degree: 1\n    solver: {method: lstsq}\n"
               "    partition: {method: kmeans, n_regions: [1, 2, 3], min_samples: 12}")
-    cfg = config(tmp_path, models, ident=tmp_path / "few.csv", extra="cv_folds: 5")
+    cfg = config(tmp_path, models, ident=first_poses(tmp_path, 40), extra="cv_folds: 5")
     result = run(cfg)
     # 40 poses, 5 folds: outer training folds of 32, inner ones of 25-26: two regions of 12 fit, three do not
     kept = next(r for r in result.models if r.spec.name == "FDP(CI) k-means")
@@ -147,13 +152,10 @@ def test_a_granularity_no_fold_supports_is_left_out_and_said(tmp_path):
 
 
 def test_every_model_that_cannot_be_fitted_is_named_at_once(tmp_path):
-    m = read_measurements(DATA / "identification.csv")
-    few = Measurements(m.q_deg[:12], m.nominal_mm[:12], m.measured_mm[:12], name="identification")
-    write_measurements(few, tmp_path / "few.csv")
     models = ("  - {name: FDP(CI), degree: 1, solver: {method: lstsq}}\n"
               "  - {name: TDP(AI), inputs: joint, degree: 3, solver: {method: lstsq}}\n"
               "  - {name: QDP(CI), degree: 4, solver: {method: lstsq}}")
-    cfg = config(tmp_path, models, ident=tmp_path / "few.csv")      # 12 poses: training folds of 11, 13 terms
+    cfg = config(tmp_path, models, ident=first_poses(tmp_path, 12))      # 12 poses: training folds of 11, 13 terms
     data, _, _ = load_datasets(cfg)
     with pytest.raises(ConfigError) as caught:
         check_run(cfg, data)
@@ -167,13 +169,10 @@ def test_every_model_that_cannot_be_fitted_is_named_at_once(tmp_path):
 @settings(max_examples=10, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 def test_any_fold_count_runs_or_is_refused_cleanly(tmp_path, folds, n, sizes):
     """cv_folds: 16 on 16 poses with a granularity list used to crash (inner folds asked of too few poses)."""
-    m = read_measurements(DATA / "identification.csv")
-    part = Measurements(m.q_deg[:n], m.nominal_mm[:n], m.measured_mm[:n], name="identification")
-    write_measurements(part, tmp_path / "part.csv")
     models = ("  - {name: FDP(AI), inputs: joint, degree: 1, solver: {method: lstsq}}\n"
               f"  - {{name: grid, inputs: joint, degree: 1, solver: {{method: lstsq}}, "
               f"partition: {{method: kmeans, n_regions: {sizes}, min_samples: 5}}}}")
-    cfg = config(tmp_path, models, ident=tmp_path / "part.csv", extra=f"cv_folds: {folds}")
+    cfg = config(tmp_path, models, ident=first_poses(tmp_path, n), extra=f"cv_folds: {folds}")
     try:
         result = run(cfg)
     except ConfigError as exc:

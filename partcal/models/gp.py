@@ -1,12 +1,17 @@
 """``GaussianProcessErrorModel``: position errors by Gaussian-process regression.
 
-scikit-learn's ``GaussianProcessRegressor`` fits the model: a constant times
+The model is scikit-learn's ``GaussianProcessRegressor``: a constant times
 an anisotropic RBF (or Matern) kernel, plus white noise, on inputs scaled to
 [-1, 1] (joint angles wrapped where their data straddle ±180 degrees, see
 ``angles``). The hyperparameters (amplitude, one length scale per input,
 noise) maximise the log marginal likelihood, from the default start and
 ``restarts`` seeded random starts; x, y and z share them, each normalised to
-zero mean and unit variance.
+zero mean and unit variance. The search is partcal's own
+(:mod:`partcal.models.likelihood`: the same optimum, one Cholesky for the
+three outputs and an analytic gradient, a quarter of scikit-learn's time per
+step), except for the Matern kernel of smoothness 0.5; a fit whose
+hyperparameters make it white noise or an interpolator of noisy data says so
+(:meth:`GaussianProcessErrorModel.fit_notes`).
 
 After fitting, the model is plain numbers: the scaled training inputs, the
 dual coefficients ``alpha = (K + noise)^-1 y`` and the kernel parameters.

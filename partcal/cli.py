@@ -85,10 +85,8 @@ def _cmd_run(args) -> int:
         log.warning("no report: %s", exc)
     out = write_run(result, render)
     print(results_table(result))
-    if result.robot is not None:
-        from .study.plan import run_indices
-
-        ev = run_indices(result.robot, result.datasets["identification"].q_deg)
+    ev = result.design
+    if ev is not None:
         print(f"identification set: {ev.indices.text()}; not identifiable from it: {', '.join(ev.missing) or 'none'}")
     print(f"outputs: {out}")
     return 0

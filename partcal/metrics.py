@@ -260,7 +260,8 @@ def nested_residuals(candidates, X, y, *, folds, inner: Callable[[NDArray[np.int
     for i, (train, test) in enumerate(folds):
         Xt, yt = X[train], y[train]
         frozen = [_frozen(c, Xt, yt) for c in candidates]
-        scores = [pooled_rms(held_out_residuals(c, Xt, yt, inner(train))) for c in frozen]
+        splits = inner(train)
+        scores = [pooled_rms(held_out_residuals(c, Xt, yt, splits)) for c in frozen]
         chosen = frozen[min(range(len(scores)), key=scores.__getitem__)]
         resid[test] = y[test] - _clone(chosen).fit(Xt, yt).predict(X[test])
         if progress is not None:

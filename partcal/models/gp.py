@@ -32,6 +32,7 @@ from collections import OrderedDict
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.spatial import cKDTree
 from sklearn.base import clone
 from sklearn.exceptions import ConvergenceWarning
 from sklearn.gaussian_process import GaussianProcessRegressor
@@ -204,7 +205,7 @@ class GaussianProcessErrorModel(ErrorModelBase):
             self.input_map_ = InputMap.fit(X, angles=self.inputs == "joint") if fixed is None else fixed["input_map"]
             Z = self.input_map_.transform(X)
             gpr = self._search(Z, Y) if fixed is None else \
-                GaussianProcessRegressor(self._fixed_sklearn_kernel(), normalize_y=True, optimizer=None).fit(Z, Y)
+                _solved(self._kernel_of(fixed["amplitude"], fixed["length_scale"], fixed["noise"]), Z, Y)
             self.y_mean_ = np.broadcast_to(gpr._y_train_mean, (Y.shape[1],)).astype(float)
             self.y_std_ = np.broadcast_to(gpr._y_train_std, (Y.shape[1],)).astype(float)
         else:
@@ -257,13 +258,12 @@ class GaussianProcessErrorModel(ErrorModelBase):
         with one_blas_thread():
             if self.kernel == "rbf" or float(self.nu) in likelihood.NUS:
                 theta = _searched(Zs, Ys, None if self.kernel == "rbf" else float(self.nu), kernel, restarts, seed)
-                gpr = GaussianProcessRegressor(kernel.clone_with_theta(theta), normalize_y=True,
-                                               optimizer=None).fit(Zs, Ys)
+                gpr = _solved(kernel.clone_with_theta(theta), Zs, Ys)
             else:
                 gpr = self._sklearn_search(Zs, Ys, kernel, restarts, seed)
             if isinstance(subset, np.ndarray):
                 log.info("GP hyperparameters from %d of %d samples: %s", len(subset), len(Z), gpr.kernel_)
-                gpr = GaussianProcessRegressor(gpr.kernel_, normalize_y=True, optimizer=None).fit(Z, Y)
+                gpr = _solved(gpr.kernel_, Z, Y)
         return gpr
 
     @staticmethod
@@ -315,11 +315,11 @@ class GaussianProcessErrorModel(ErrorModelBase):
         noise = min(max(1e-4, 2.0 * noise_bounds[0]), noise_bounds[1])
         return ConstantKernel(1.0, AMPLITUDE_BOUNDS) * shape + WhiteKernel(noise, noise_bounds)
 
-    def _fixed_sklearn_kernel(self):
-        fixed = self.fixed_kernel
-        shape = RBF(np.array(fixed["length_scale"], dtype=float)) if self.kernel == "rbf" else \
-            Matern(np.array(fixed["length_scale"], dtype=float), nu=float(self.nu))
-        return ConstantKernel(fixed["amplitude"]) * shape + WhiteKernel(fixed["noise"])
+    def _kernel_of(self, amplitude: float, length_scale, noise: float):
+        """This model's kind of kernel with the given hyperparameters, as a scikit-learn object."""
+        scales = np.array(length_scale, dtype=float)
+        shape = RBF(scales) if self.kernel == "rbf" else Matern(scales, nu=float(self.nu))
+        return ConstantKernel(amplitude) * shape + WhiteKernel(noise)
 
     def frozen(self, X, y) -> "GaussianProcessErrorModel":
         """An unfitted copy whose fits only solve, with the input map and hyperparameters learnt on ``X, y``.
@@ -354,8 +354,6 @@ class GaussianProcessErrorModel(ErrorModelBase):
 
     def _neighbour_correlation(self) -> float:
         """Median kernel correlation of a training input with its nearest other training input."""
-        from scipy.spatial import cKDTree
-
         scaled = self.X_train_ / self.length_scale_
         d = cKDTree(scaled).query(scaled, k=2)[0][:, 1]
         return float(np.median(self._shape(-0.5 * d * d)))
@@ -372,9 +370,7 @@ class GaussianProcessErrorModel(ErrorModelBase):
     def sklearn_kernel(self):
         """The fitted kernel as a scikit-learn object (rebuilt from the stored numbers)."""
         check_is_fitted(self, "dual_coef_")
-        shape = RBF(self.length_scale_.copy()) if self.kernel == "rbf" else \
-            Matern(self.length_scale_.copy(), nu=float(self.nu))
-        return ConstantKernel(self.amplitude_) * shape + WhiteKernel(self.noise_)
+        return self._kernel_of(self.amplitude_, self.length_scale_, self.noise_)
 
     # ------------------------------------------------------------------ prediction
     def predict(self, X) -> NDArray[np.float64]:
@@ -498,6 +494,11 @@ class GaussianProcessErrorModel(ErrorModelBase):
         model.data_bounds_ = r.array("data_bounds", (2, n_in))
         model.n_features_in_, model.n_train_, model._y_1d = n_in, n, False
         return model._prepare()
+
+
+def _solved(kernel, Z: NDArray[np.float64], Y: NDArray[np.float64]) -> GaussianProcessRegressor:
+    """scikit-learn's GP with ``kernel`` as it is (no search), solved on ``Z, Y`` (outputs normalised)."""
+    return GaussianProcessRegressor(kernel, normalize_y=True, optimizer=None).fit(Z, Y)
 
 
 _SEARCHED: OrderedDict = OrderedDict()     # the last searches of this process: key -> log hyperparameters

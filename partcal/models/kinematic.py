@@ -461,7 +461,7 @@ class KinematicModel(ErrorModelBase):
         self.data_bounds_ = np.stack([X.min(axis=0), X.max(axis=0)])
         self.residual_ = None
         if self.residual is not None:
-            seed = int(np.random.SeedSequence(seed_from(self.random_state)).spawn(1)[0].generate_state(1)[0])
+            seed = self._residual_seed()
             leftover = y - (self._kinematic(X, payload) - nominal)
             self.residual_ = clone(self.residual).set_params(random_state=seed)
             self.residual_.fit(self._residual_inputs(X, nominal), leftover)
@@ -653,6 +653,10 @@ class KinematicModel(ErrorModelBase):
     def fit_notes(self) -> list[str]:
         return self.residual_.fit_notes() if self.residual_ is not None else []
 
+    def _residual_seed(self) -> int:
+        """The residual model's seed: a child of this model's."""
+        return int(np.random.SeedSequence(seed_from(self.random_state)).spawn(1)[0].generate_state(1)[0])
+
     def frozen(self, X, y) -> "KinematicModel":
         """With a residual model: the residual frozen on what the kinematics identified on ``X, y`` leave."""
         if self.residual is None:
@@ -662,7 +666,7 @@ class KinematicModel(ErrorModelBase):
         nominal = fitted.robot_.positions(X)
         leftover = np.asarray(y, dtype=float) - fitted.predict(X)
         inputs = nominal if self.residual.inputs == "cartesian" else X
-        seed = int(np.random.SeedSequence(seed_from(self.random_state)).spawn(1)[0].generate_state(1)[0])
+        seed = self._residual_seed()
         residual = clone(self.residual).set_params(random_state=seed).frozen(inputs, leftover)
         return clone(self).set_params(residual=residual)
 

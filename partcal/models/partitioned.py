@@ -135,7 +135,7 @@ class PartitionedErrorModel(ErrorModelBase):
         models = [clone(local).set_params(random_state=int(s.generate_state(1)[0])) for s in seeds]
         shared = None
         if isinstance(local, GaussianProcessErrorModel) and local.hyperparameters == "shared":
-            shared = clone(local).set_params(random_state=seed).fit_shared(X, Y)
+            shared = self._shared_search(local, X, Y)
             log.info("shared GP hyperparameters: %s", shared.sklearn_kernel())
         self.models_ = _fit_regions(models, [(X[idx], Y[idx], w) for idx, w in groups], self.n_jobs, shared)
         self.partition_ = partition
@@ -387,6 +387,10 @@ class PartitionedErrorModel(ErrorModelBase):
     def fit_notes(self) -> list[str]:
         return sorted({note for m in self.models_ for note in m.fit_notes()})
 
+    def _shared_search(self, local: GaussianProcessErrorModel, X, Y) -> GaussianProcessErrorModel:
+        """The hyperparameters the regions share, searched on the local models' inputs ``X``."""
+        return clone(local).set_params(random_state=seed_from(self.random_state)).fit_shared(X, Y)
+
     def frozen(self, X, y) -> "PartitionedErrorModel":
         """With Gaussian-process regions sharing hyperparameters: those learnt on ``X, y`` kept
         (see :meth:`GaussianProcessErrorModel.frozen`); otherwise itself."""
@@ -397,7 +401,7 @@ class PartitionedErrorModel(ErrorModelBase):
         X, y = np.asarray(X, dtype=float), np.asarray(y, dtype=float)
         Y = y.reshape(len(y), -1)
         coords = InputMap.fit(X, angles=True).wrap(X) if local.inputs == "joint" else X     # as fit() does
-        shared = clone(local).set_params(random_state=seed_from(self.random_state)).fit_shared(coords, Y)
+        shared = self._shared_search(local, coords, Y)
         return clone(self).set_params(local=clone(local).set_params(fixed_kernel=shared.learnt_kernel()))
 
     def pso_rms_ratio(self) -> float | None:

@@ -22,7 +22,6 @@ import numpy as np
 
 from .. import __version__
 from ..models.kinematic import BASE_PARAMETERS, ROW_PARAMETERS, TOOL_PARAMETERS
-from ..study.plan import run_indices
 from ..study.registry import ModelResult, RunResult, partitioned_part
 from . import figures
 from .scene import render_scenes
@@ -94,9 +93,9 @@ def context(result: RunResult) -> dict:
 
 def design_summary(result: RunResult) -> dict | None:
     """The observability of the identification set (a run with a robot), as ``partcal run`` prints it."""
-    if result.robot is None:
+    ev = result.design
+    if ev is None:
         return None
-    ev = run_indices(result.robot, result.datasets["identification"].q_deg)
     return {"text": ev.indices.text(), "o1": ev.indices.o1, "condition": ev.indices.condition,
             "poses": ev.indices.n_poses, "parameters": ev.indices.n_parameters, "missing": list(ev.missing),
             "noise": ev.noise_mm, "position_rms": ev.position_rms_mm}

@@ -21,6 +21,7 @@ compensated targets are commanded on the simulated true robot.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 import logging
 import sys
@@ -98,6 +99,16 @@ class RunResult:
     registrations: dict[str, Registration] = field(default_factory=dict)
     plan: "RunPlan | None" = None
 
+    @functools.cached_property
+    def design(self):
+        """The observability of the identification set (:func:`partcal.study.plan.run_indices`; None without a
+        robot), computed once for what ``partcal run`` prints and the report shows."""
+        if self.robot is None:
+            return None
+        from .plan import run_indices
+
+        return run_indices(self.robot, self.datasets["identification"].q_deg)
+
     @property
     def best_reason(self) -> str:
         """Which rule chose ``best``, in words (metrics.json, the report and the printed table say it)."""
@@ -152,8 +163,10 @@ class CVPlan:
 
     def smallest_train(self, nested: bool = False) -> int:
         """Rows of the smallest training fold (of the inner folds with ``nested``); 0 if there is none."""
-        if not nested:
-            return min((len(train) for train, _ in self.folds), default=0)
+        return self._smallest_inner_train if nested else min((len(train) for train, _ in self.folds), default=0)
+
+    @functools.cached_property
+    def _smallest_inner_train(self) -> int:
         sizes = [len(inner) for train, _ in self.folds for inner, _ in self.inner(train) or [((), ())]]
         return min(sizes, default=0)
 
@@ -385,9 +398,7 @@ def fit_model(spec: ModelSpec, seed: int, data: dict[str, Measurements], cv: CVP
     """
     with _collected() as said:
         result = _fit_model(spec, seed, data, cv, own_frame, lines)
-    own = f"{spec.name}: "                   # the run names the model once, in front of each note
-    result.notes = list(dict.fromkeys(t[len(own):] if t.startswith(own) else t
-                                      for t in said + result.model.fit_notes()))
+    result.notes = list(dict.fromkeys(said + result.model.fit_notes()))      # the run names the model in front
     return result
 
 
@@ -420,8 +431,8 @@ def _fit_model(spec, seed, data, cv, own_frame, lines) -> ModelResult:
         if partitioned_part(estimator) is not None:
             cv_regions = fold_regions([partitioned_part(m) for m in fold_fits])
     if cv_regions is not None and cv_regions[0] < partitioned_part(estimator).partition_.n_regions:
-        log.warning("%s: fitted on all the identification data it has %d regions, but on the cross-validation "
-                    "folds %s, so its CV score is that of a coarser model", spec.name,
+        log.warning("fitted on all the identification data it has %d regions, but on the cross-validation "
+                    "folds %s, so its CV score is that of a coarser model",
                     partitioned_part(estimator).partition_.n_regions, _regions_text(cv_regions))
     predictions = {name: estimator.predict(model_inputs(spec.inputs, m)) for name, m in data.items()}
     metrics = {name: summary(errors_left(m, predictions[name], name in own_frame)) for name, m in data.items()}

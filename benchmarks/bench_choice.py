@@ -143,6 +143,7 @@ def main() -> None:
             rows.append([label, f"{best_name} {test[best_name]:.3f}"] + cells)
             print(f"{label}: " + ", ".join(f"{r.spec.name} CV {r.cv_rms_3d:.3f} +- {r.cv_se:.3f} "
                                            f"({r.effective_parameters:.0f} p), test {test[r.spec.name]:.3f}"
+                                           + (f" [{'; '.join(r.notes)}]" if r.notes else "")
                                            for r in chosen_default.models), flush=True)
     header = ["data set", "best on test (mm)"]
     for rule_label in RULES:

@@ -282,21 +282,29 @@ def nested_cross_validated_rms(candidates, X, y, *, folds, inner_folds: int = 5,
     return pooled_rms(nested_residuals(candidates, X, y, folds=folds, inner=inner))
 
 
-def choose_simplest(scores, errors, sizes) -> int:
-    """The index a run picks: the simplest model whose score is within one standard error of the best.
+def choose_simplest(scores, errors, sizes, physical) -> int:
+    """The index a run picks: the simplest physical model within one standard error of the best, else the best.
 
-    ``scores``: CV RMS per model; ``errors``: their standard errors; ``sizes``:
-    effective parameter counts. Among the models scoring at most ``best +
-    its standard error``, the fewest parameters wins (then the lower score,
-    then the first). A NaN standard error counts as 0 (the lowest score wins).
+    ``scores``: CV RMS per model; ``errors``: their standard errors;
+    ``sizes``: parameter counts; ``physical``: whether a model is physical
+    (a kinematic model without a data-driven residual). The order of
+    simplicity is two-tiered: a physical model is simpler than any model
+    with a data-driven part (its parameters are lengths, angles and
+    stiffnesses that hold over the whole workspace), and physical models
+    are ordered by parameter count. Data-driven models are not ordered
+    among themselves: their effective parameter counts do not compare (a
+    Gaussian process that learnt nothing has almost none), so among them
+    the lowest score wins. A NaN standard error counts as 0.
 
-    >>> choose_simplest([0.30, 0.28, 0.50], [0.02, 0.03, 0.01], [26, 90, 10])
+    >>> choose_simplest([0.30, 0.28, 0.50], [0.02, 0.03, 0.01], [26, 90, 10], [True, False, True])
     0
+    >>> choose_simplest([0.35, 0.28, 0.30], [0.02, 0.03, 0.01], [26, 90, 10], [True, False, False])
+    1
     """
     best = min(range(len(scores)), key=lambda i: (scores[i], i))
     se = errors[best] if np.isfinite(errors[best]) else 0.0
-    within = [i for i in range(len(scores)) if scores[i] <= scores[best] + se]
-    return min(within, key=lambda i: (sizes[i], scores[i], i))
+    within = [i for i in range(len(scores)) if physical[i] and scores[i] <= scores[best] + se]
+    return min(within, key=lambda i: (sizes[i], scores[i], i)) if within else best
 
 
 def _frozen(model, X, y):

@@ -77,10 +77,15 @@ def test_standard_error_and_the_choice_against_a_hand_computation():
     se_mse = np.sqrt(((2 - 2 * mse) ** 2 + (4 - 2 * mse) ** 2 + (10 - 2 * mse) ** 2) / 6) / 2
     assert pooled_rms(resid) == pytest.approx(np.sqrt(mse), rel=1e-12)
     assert rms_standard_error(resid, groups) == pytest.approx(se_mse / (2 * np.sqrt(mse)), rel=1e-12)
-    # lowest 0.50 +- 0.05: 0.54 is within, 0.56 is not; of those within, the fewest parameters wins
-    assert choose_simplest([0.50, 0.54, 0.56], [0.05, 0.01, 0.01], [90, 26, 10]) == 1
-    assert choose_simplest([0.50, 0.54, 0.56], [0.05, 0.01, 0.01], [90, 95, 10]) == 0
-    assert choose_simplest([0.50, 0.50], [np.nan, np.nan], [5, 4]) == 1          # equal scores: the simpler
+    # lowest 0.50 +- 0.05: 0.54 is within, 0.56 is not; of the physical models within, the fewest parameters wins
+    physical = [True, True, True]
+    assert choose_simplest([0.50, 0.54, 0.56], [0.05, 0.01, 0.01], [90, 26, 10], physical) == 1
+    assert choose_simplest([0.50, 0.54, 0.56], [0.05, 0.01, 0.01], [90, 95, 10], physical) == 0
+    assert choose_simplest([0.50, 0.50], [np.nan, np.nan], [5, 4], [True, True]) == 1     # equal scores: the simpler
+    # a data-driven model is never "simpler": within one SE the physical model wins whatever its size, and
+    # without a physical model within, the lowest score wins (not the fewest parameters)
+    assert choose_simplest([0.50, 0.54, 0.52], [0.05, 0.01, 0.01], [90, 26, 1], [False, True, False]) == 1
+    assert choose_simplest([0.50, 0.56, 0.52], [0.05, 0.01, 0.01], [90, 26, 1], [False, True, False]) == 0
 
 
 def test_repeat_scatter_is_the_pooled_standard_deviation():

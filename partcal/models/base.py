@@ -116,9 +116,14 @@ class ErrorModelBase(RegressorMixin, BaseEstimator):
 
     def effective_parameters(self) -> float:
         """Effective degrees of freedom of the fitted model over all its outputs (the trace of its hat
-        matrix: the coefficient count of a linear model); a run prefers the fewer among models whose
-        CV scores are within a standard error. NaN when unknown (never preferred as simpler)."""
+        matrix: the coefficient count of a linear model); a run prefers the fewer among physical models
+        whose CV scores are within a standard error. NaN when unknown (never preferred as simpler)."""
         return float("nan")
+
+    def is_physical(self) -> bool:
+        """Whether every parameter is physical (a kinematic model without a data-driven residual): a run
+        prefers such a model when its CV score is within a standard error of the best."""
+        return False
 
     def fit_notes(self) -> list[str]:
         """What went wrong in a fit without failing it, in words (a run warns of each); none by default."""

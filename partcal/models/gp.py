@@ -60,6 +60,7 @@ AUTO_RESTARTS = ((200, 4), (500, 1))    # restarts: None -> 4 extra starts on a 
 GLOBAL_HYPER_SAMPLES = 1000        # hyper_samples: None -> a global GP searches on at most 1,000 samples
 AT_BOUND = 1.05                    # a hyperparameter within 5% of a bound sits on it
 WHITE_NOISE = 0.05                 # neighbours correlated less than this (median): the GP predicts the mean
+NEAR_MEAN = 0.5                    # fewer effective parameters per output beyond the mean: a near-constant fit
 _BLOCK = 2048
 
 
@@ -343,7 +344,11 @@ class GaussianProcessErrorModel(ErrorModelBase):
         if self.fixed_kernel is not None:
             return []
         notes = []
-        if self.n_train_ > 1 and self._neighbour_correlation() < WHITE_NOISE:
+        learnt = self.effective_parameters() / self.n_outputs() - 1.0
+        if self.n_train_ > 1 and learnt < NEAR_MEAN:
+            notes.append(f"amplitude negligible next to the noise ({learnt:.2f} effective parameters per output "
+                         "beyond the mean): the fit predicts nearly the mean of the training errors everywhere")
+        elif self.n_train_ > 1 and self._neighbour_correlation() < WHITE_NOISE:
             notes.append("length scales shorter than the spacing of the data: a white-noise fit that predicts the "
                          "mean between the training poses")
         low = getattr(self, "noise_bounds_", NOISE_BOUNDS)[0]
@@ -359,13 +364,13 @@ class GaussianProcessErrorModel(ErrorModelBase):
         return float(np.median(self._shape(-0.5 * d * d)))
 
     def effective_parameters(self) -> float:
-        """Effective degrees of freedom: ``trace(K (K + noise I)^-1)`` per output, times the outputs."""
+        """Effective degrees of freedom: ``trace(K (K + noise I)^-1)`` per output plus its mean, times the outputs."""
         check_is_fitted(self, "dual_coef_")
         scaled = self.X_train_ / self.length_scale_
         sq = np.einsum("ij,ij->i", scaled, scaled)
         K = self.amplitude_ * self._shape(np.minimum(scaled @ scaled.T - 0.5 * (sq[:, None] + sq[None, :]), 0.0))
         eig = np.clip(np.linalg.eigvalsh(K), 0.0, None)
-        return float(np.sum(eig / (eig + self.noise_)) * self.n_outputs())
+        return float((np.sum(eig / (eig + self.noise_)) + 1.0) * self.n_outputs())
 
     def sklearn_kernel(self):
         """The fitted kernel as a scikit-learn object (rebuilt from the stored numbers)."""

@@ -653,6 +653,9 @@ class KinematicModel(ErrorModelBase):
     def fit_notes(self) -> list[str]:
         return self.residual_.fit_notes() if self.residual_ is not None else []
 
+    def is_physical(self) -> bool:
+        return self.residual is None
+
     def _residual_seed(self) -> int:
         """The residual model's seed: a child of this model's."""
         return int(np.random.SeedSequence(seed_from(self.random_state)).spawn(1)[0].generate_state(1)[0])

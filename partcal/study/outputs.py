@@ -144,6 +144,7 @@ def metrics_document(result: RunResult) -> dict:
             entry["notes"] = r.notes
         entry["inputs"], entry["solver"], entry["regions"] = r.spec.inputs, r.model.solver_name, r.n_regions
         entry["kind"] = r.spec.kind if r.spec.residual is None else f"{r.spec.kind} + {r.spec.residual.kind}"
+        entry["physical"] = r.model.is_physical()
         entry.update(r.model.run_summary())
         if r.rms_ratio is not None:
             entry["pso_rms_ratio"] = r.rms_ratio

@@ -71,6 +71,7 @@ class ModelResult:
     cv_se: float = float("nan")         # standard error of cv_rms_3d, over the identification poses
     effective_parameters: float = float("nan")   # what "simpler" means when two CV scores are close
     notes: list[str] = field(default_factory=list)   # fits on a bound and the like: warned, and in the report
+    cv_residuals: NDArray[np.float64] | None = None  # held-out errors of the identification rows (n, 3) mm
 
     def score(self, rank_by: str) -> float:
         """The number the run ranks by: CV 3-D RMS, or 3-D RMS on the validation set (mm)."""
@@ -120,9 +121,10 @@ def rank_reason(config: RunConfig, cv: "CVPlan | None" = None) -> str:
     if config.rank_by == "validation":
         return f"lowest 3-D RMS on the validation set {config.validation.name} (held out, never fitted)"
     folds = fold_name(cv.rule) if cv is not None else f"{config.cv_folds}-fold"
-    return (f"simplest model (fewest effective parameters) whose {folds} cross-validated 3-D RMS on the "
-            "identification set is within one standard error of the lowest (the same folds for every model, "
-            "a pose's rows held out together; nested for granularity lists)")
+    return (f"the physical model (kinematic, no data-driven residual) with the fewest parameters whose {folds} "
+            "cross-validated 3-D RMS on the identification set is within one standard error of the lowest, else "
+            "the lowest (the same folds for every model, a pose's rows held out together; nested for granularity "
+            "lists)")
 
 
 @dataclass(frozen=True)
@@ -440,7 +442,7 @@ def _fit_model(spec, seed, data, cv, own_frame, lines) -> ModelResult:
     return ModelResult(spec, estimator, fit_seconds, pooled_rms(resid), metrics, predictions, ratio, granularity,
                        cv_seconds=cv_seconds, nested=nested, cv_regions=cv_regions,
                        cv_se=rms_standard_error(resid, cv.groups),
-                       effective_parameters=estimator.effective_parameters())
+                       effective_parameters=estimator.effective_parameters(), cv_residuals=resid)
 
 
 @contextmanager
@@ -587,12 +589,14 @@ def _costliest_first(specs, ident: Measurements) -> list[int]:
 
 
 def choose_best(results: list[ModelResult], rank_by: str) -> str:
-    """The name of the run's best model: lowest validation RMS, or by CV the simplest model (fewest
-    effective parameters) within one standard error of the lowest CV score (:func:`choose_simplest`)."""
+    """The name of the run's best model: lowest validation RMS, or by CV the physical model with the fewest
+    parameters within one standard error of the lowest CV score, else the lowest CV score
+    (:func:`choose_simplest`)."""
     if rank_by == "validation":
         return min(results, key=lambda r: r.score(rank_by)).spec.name
     sizes = [r.effective_parameters if np.isfinite(r.effective_parameters) else np.inf for r in results]
-    return results[choose_simplest([r.cv_rms_3d for r in results], [r.cv_se for r in results], sizes)].spec.name
+    return results[choose_simplest([r.cv_rms_3d for r in results], [r.cv_se for r in results], sizes,
+                                   [r.model.is_physical() for r in results])].spec.name
 
 
 def _virtual_robot(config: RunConfig, robot: Robot | None):

@@ -27,7 +27,7 @@ import numpy as np  # noqa: E402
 from _table import best_time, print_table  # noqa: E402
 from sklearn.base import clone  # noqa: E402
 
-from partcal.models.combine import one_blas_thread  # noqa: E402
+from partcal.models.threads import one_blas_thread  # noqa: E402
 from partcal.models.partition import KMeansPartition, Octree  # noqa: E402
 from partcal.models.partitioned import PartitionedErrorModel, _fit_regions  # noqa: E402
 from partcal.models.series import ErrorModel, fit_swarms  # noqa: E402

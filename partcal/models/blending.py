@@ -82,6 +82,9 @@ def cell_distance_matrix(centres: NDArray[np.float64], inv_sigmas: NDArray[np.fl
                          origin: NDArray[np.float64], half: NDArray[np.float64]) -> NDArray[np.float64]:
     """Matrix ``A`` (K, 2d + 1) with ``A @ cell_features(X, origin, half) = r^2`` (K, m).
 
+    ``origin`` is the cell centre (d,), or one per kernel (K, d) to build the
+    rows of several cells at once.
+
     With ``v = (x - o) / h`` and ``rho = h / sigma``, ``r^2 = sum(rho^2 (v - (c - o) / h)^2)``,
     expanded about the cell centre ``o``; ``h`` is the cell's half-size.
     """

@@ -25,7 +25,6 @@ from typing import Iterator
 
 import numpy as np
 from numpy.typing import NDArray
-from threadpoolctl import ThreadpoolController
 
 from .bases import Basis, Scaling, lift_coefficients
 from .blending import cell_distance_matrix, cell_features, normalised_weights, sq_distances
@@ -36,20 +35,6 @@ from .series import ErrorModel
 
 MAX_ROWS = 4096               # points per block: the (kernels, points) arrays stay in cache
 MAX_REFRAME_ENTRIES = 4096    # larger term lists (high-degree cross terms) take the generic way
-_THREADPOOLS: list = []       # one threadpoolctl controller, made on first use
-
-
-def one_blas_thread():
-    """Context in which BLAS runs on one thread.
-
-    A blend makes many small matrix products (tens of rows by a few thousand
-    points). OpenBLAS splits each over all cores, which costs more than it
-    saves, and on a busy machine every product waits for the other threads:
-    300 times slower was measured with two busy cores.
-    """
-    if not _THREADPOOLS:
-        _THREADPOOLS.append(ThreadpoolController())
-    return _THREADPOOLS[0].limit(limits=1, user_api="blas")
 
 
 @dataclass(frozen=True)
@@ -83,19 +68,36 @@ class BlendWeights:
         return plan, Xs, self._iterate(plan, np.ascontiguousarray(Xs[:, p.active]))
 
     def prepare(self, cells) -> None:
-        """Compute the matrices of every cell in ``cells`` not seen yet (a fitted model: all cells)."""
-        for cell in cells:
-            self._cell(cell)
+        """Compute the matrices of every cell in ``cells`` not seen yet (a fitted model: all cells), in batches
+        of cells whose kernel lists hold at most a million entries together."""
+        lookup = self.partition.lookup
+        todo = np.array([c for c in cells if c not in self._cells], dtype=np.intp)
+        sizes = lookup.indptr[todo + 1] - lookup.indptr[todo]
+        ends = np.cumsum(sizes)
+        start = 0
+        while start < todo.size:
+            stop = max(start + 1, int(np.searchsorted(ends, (ends[start - 1] if start else 0) + 1_000_000)))
+            self._prepare_batch(todo[start:stop], sizes[start:stop])
+            start = stop
+
+    def _prepare_batch(self, cells: NDArray[np.intp], sizes: NDArray[np.intp]) -> None:
+        """``(kernels, centre, distance matrix)`` of each of ``cells``, computed for all of them at once."""
+        p, lookup = self.partition, self.partition.lookup
+        first = lookup.indptr[cells]
+        offsets = np.repeat(first - np.cumsum(sizes) + sizes, sizes) + np.arange(int(sizes.sum()))
+        kernels, centres = lookup.kernels[offsets], lookup.centres(cells)
+        A = cell_distance_matrix(p.kernel_centres[kernels], p.kernel_inv_sigmas[kernels],
+                                 np.repeat(centres, sizes, axis=0), lookup.size / 2)
+        bounds = np.concatenate([[0], np.cumsum(sizes)])
+        for i, cell in enumerate(cells.tolist()):
+            a, b = bounds[i], bounds[i + 1]
+            self._cells[cell] = (kernels[a:b], centres[i], A[a:b])
 
     def _cell(self, cell: int) -> tuple:
         """``(kernels, centre, distance matrix)`` of one lookup cell, kept for the next blocks in it."""
-        cached = self._cells.get(cell)
-        if cached is None:
-            p, lookup = self.partition, self.partition.lookup
-            kernels, centre = lookup.candidates(cell), lookup.centre(cell)
-            A = cell_distance_matrix(p.kernel_centres[kernels], p.kernel_inv_sigmas[kernels], centre, lookup.size / 2)
-            cached = self._cells[cell] = (kernels, centre, A)
-        return cached
+        if cell not in self._cells:
+            self.prepare([cell])
+        return self._cells[cell]
 
     def _iterate(self, plan: BlockPlan, Xa) -> Iterator[Block]:
         p, lookup = self.partition, self.partition.lookup

@@ -44,7 +44,7 @@ from ..metrics import distance_outside_boxes
 from . import likelihood
 from .angles import InputMap
 from .base import ErrorModelBase, seed_from
-from .combine import one_blas_thread
+from .threads import one_blas_thread
 
 log = logging.getLogger(__name__)
 INPUTS = ("cartesian", "joint")

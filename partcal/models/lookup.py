@@ -80,7 +80,12 @@ class Lookup:
 
     def centre(self, cell: int) -> NDArray[np.float64]:
         """Centre of one cell, shape (a,); every cell's half-size is ``size / 2``."""
-        return self.low + (np.array(np.unravel_index(cell, self.shape), dtype=float) + 0.5) * self.size
+        return self.centres(np.array([cell]))[0]
+
+    def centres(self, cells: NDArray[np.intp]) -> NDArray[np.float64]:
+        """Centres of several cells, shape (len(cells), a)."""
+        index = np.stack(np.unravel_index(cells, self.shape), axis=1).astype(float)
+        return self.low + (index + 0.5) * self.size
 
     def candidates(self, cell: int) -> NDArray[np.intp]:
         return self.kernels[self.indptr[cell]:self.indptr[cell + 1]]

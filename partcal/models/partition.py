@@ -32,6 +32,7 @@ from .._validation import FieldReader, check_int, integer, param_error, real
 from ..errors import PartcalError
 from .bases import varying_inputs
 from .lookup import BlockPlan, Lookup, grid_lookup, octree_lookup
+from .threads import one_openmp_thread
 
 
 @dataclass(frozen=True)
@@ -251,7 +252,8 @@ def _build_kmeans(X, n_regions: int, min_samples: int, random_state, width: floa
     else:
         seed = int(np.random.default_rng(random_state).integers(2**31 - 1)) if not isinstance(random_state, int) \
             else random_state
-        km = KMeans(n_clusters=k, random_state=seed, n_init=4).fit(Xa)
+        with one_openmp_thread():
+            km = KMeans(n_clusters=k, random_state=seed, n_init=4).fit(Xa)
         centres, labels = km.cluster_centers_.copy(), km.labels_.copy()
     while True:       # merge the smallest too-small cluster into its nearest remaining centre
         counts = np.bincount(labels, minlength=len(centres))

@@ -27,10 +27,11 @@ from ..metrics import distance_outside_boxes, kfold_splits, select_by_cv
 from .angles import InputMap
 from .base import ErrorModelBase, seed_from
 from .bases import varying_inputs
-from .combine import BlendWeights, FrameCombiner, combine_generic, one_blas_thread, region_weights
+from .combine import BlendWeights, FrameCombiner, combine_generic, region_weights
 from .gp import GaussianProcessErrorModel
 from .partition import BLEND_WIDTH, KMeansPartition, Octree, Partition, partition_from_file
 from .series import ErrorModel, fit_swarms
+from .threads import one_blas_thread
 
 log = logging.getLogger(__name__)
 MIN_SAMPLES_PER_TERM = 3

@@ -152,19 +152,27 @@ def kfold_splits(n: int, folds: int, random_state: int = 0) -> list[tuple[NDArra
     return grouped_splits(np.arange(n), folds, random_state)
 
 
+def rows_of(per_row: dict | None, rows) -> dict:
+    """The per-row arguments of fit and predict (``{"payload_kg": (n,) array}``) at ``rows``."""
+    return {key: value[rows] for key, value in (per_row or {}).items()}
+
+
 def held_out_residuals(model, X, y, folds, *, fitted: list | None = None,
-                       progress: Callable[[int, int], None] | None = None) -> NDArray[np.float64]:
+                       progress: Callable[[int, int], None] | None = None,
+                       per_row: dict | None = None) -> NDArray[np.float64]:
     """``y - prediction`` of every sample by ``model`` fitted on the folds without it, shape of ``y``.
 
     ``fitted`` receives the model fitted on each fold; ``progress(done, total)`` is called after each fold.
+    ``per_row`` holds arguments of ``fit`` and ``predict`` with one value per sample (a payload per pose),
+    split with the samples.
     """
     from sklearn.base import clone
 
     X, y = np.asarray(X, dtype=float), np.asarray(y, dtype=float)
     resid = np.empty_like(y)
     for i, (train, test) in enumerate(folds):
-        fold = clone(model).fit(X[train], y[train])
-        resid[test] = y[test] - fold.predict(X[test])
+        fold = clone(model).fit(X[train], y[train], **rows_of(per_row, train))
+        resid[test] = y[test] - fold.predict(X[test], **rows_of(per_row, test))
         if fitted is not None:
             fitted.append(fold)
         if progress is not None:
@@ -199,7 +207,8 @@ def rms_standard_error(resid: NDArray[np.float64], groups: NDArray[np.intp]) -> 
     return float(se_mse / (2.0 * np.sqrt(mse))) if mse > 0 else 0.0
 
 
-def cross_validated_rms(model, X, y, *, folds=5, random_state=0, fitted: list | None = None) -> float:
+def cross_validated_rms(model, X, y, *, folds=5, random_state=0, fitted: list | None = None,
+                        per_row: dict | None = None) -> float:
     """Pooled 3-D RMS of k-fold held-out predictions, mm.
 
     Every sample is predicted once by a model fitted without it; the result is
@@ -213,36 +222,40 @@ def cross_validated_rms(model, X, y, *, folds=5, random_state=0, fitted: list | 
     fitted : list, optional
         Receives the model fitted on each fold (to see, say, how many regions
         a partition kept with fewer samples).
+    per_row : dict, optional
+        Per-sample arguments of ``fit`` and ``predict`` (see :func:`held_out_residuals`).
     """
     splits = kfold_splits(len(X), folds, random_state) if isinstance(folds, int) else folds
-    return pooled_rms(held_out_residuals(model, X, y, splits, fitted=fitted))
+    return pooled_rms(held_out_residuals(model, X, y, splits, fitted=fitted, per_row=per_row))
 
 
-def select_by_cv(candidates, X, y, *, folds, fold_models: list | None = None
+def select_by_cv(candidates, X, y, *, folds, fold_models: list | None = None, per_row: dict | None = None
                  ) -> tuple[int, list[float], list, list[float]]:
     """Score unfitted ``candidates`` by CV on ``folds``, then fit each on all of ``X, y``.
 
     Returns ``(best, scores, fitted, seconds)``: the index of the lowest score
     (the first of equals), the pooled 3-D RMS of each candidate, the fitted
     candidates and the seconds of each final fit. ``fold_models`` receives,
-    per candidate, the list of its models fitted on the folds.
+    per candidate, the list of its models fitted on the folds; ``per_row``:
+    see :func:`held_out_residuals`.
     """
     import time
 
     scores, fitted, seconds = [], [], []
     for candidate in candidates:
         folds_fitted: list = []
-        scores.append(cross_validated_rms(candidate, X, y, folds=folds, fitted=folds_fitted))
+        scores.append(cross_validated_rms(candidate, X, y, folds=folds, fitted=folds_fitted, per_row=per_row))
         if fold_models is not None:
             fold_models.append(folds_fitted)
         begin = time.perf_counter()
-        fitted.append(candidate.fit(X, y))
+        fitted.append(candidate.fit(X, y, **(per_row or {})))
         seconds.append(time.perf_counter() - begin)
     return min(range(len(scores)), key=scores.__getitem__), scores, fitted, seconds
 
 
 def nested_residuals(candidates, X, y, *, folds, inner: Callable[[NDArray[np.intp]], list],
-                     progress: Callable[[int, int], None] | None = None) -> NDArray[np.float64]:
+                     progress: Callable[[int, int], None] | None = None,
+                     per_row: dict | None = None) -> NDArray[np.float64]:
     """Held-out residuals of "choose among ``candidates`` by CV, then fit": the choice is made inside each fold.
 
     For every outer ``(train, test)`` fold the candidate (an unfitted
@@ -253,17 +266,18 @@ def nested_residuals(candidates, X, y, *, folds, inner: Callable[[NDArray[np.int
     that chose it would flatter it. Each candidate may first be frozen on the
     outer training rows (``candidate.frozen(X, y)``: a Gaussian process fixes
     the hyperparameters it learns there), so the inner fits only solve; no
-    fold learns anything from its held-out rows.
+    fold learns anything from its held-out rows. ``per_row``: see
+    :func:`held_out_residuals`.
     """
     X, y = np.asarray(X, dtype=float), np.asarray(y, dtype=float)
     resid = np.empty_like(y)
     for i, (train, test) in enumerate(folds):
-        Xt, yt = X[train], y[train]
-        frozen = [_frozen(c, Xt, yt) for c in candidates]
+        Xt, yt, rows = X[train], y[train], rows_of(per_row, train)
+        frozen = [_frozen(c, Xt, yt, rows) for c in candidates]
         splits = inner(train)
-        scores = [pooled_rms(held_out_residuals(c, Xt, yt, splits)) for c in frozen]
+        scores = [pooled_rms(held_out_residuals(c, Xt, yt, splits, per_row=rows)) for c in frozen]
         chosen = frozen[min(range(len(scores)), key=scores.__getitem__)]
-        resid[test] = y[test] - _clone(chosen).fit(Xt, yt).predict(X[test])
+        resid[test] = y[test] - _clone(chosen).fit(Xt, yt, **rows).predict(X[test], **rows_of(per_row, test))
         if progress is not None:
             progress(i + 1, len(folds))
     return resid
@@ -307,9 +321,9 @@ def choose_simplest(scores, errors, sizes, physical) -> int:
     return min(within, key=lambda i: (sizes[i], scores[i], i)) if within else best
 
 
-def _frozen(model, X, y):
+def _frozen(model, X, y, rows: dict):
     freeze = getattr(model, "frozen", None)
-    return freeze(X, y) if freeze is not None else model
+    return freeze(X, y, **rows) if freeze is not None else model
 
 
 def _clone(model):

@@ -94,7 +94,7 @@ def test_bad_foreign_files_name_file_line_and_column(tmp_path, kwargs, text, mat
     ({"columns": [("q1", "a")]}, r"The 'columns' parameter of MeasurementFormat must be a mapping of contract "
                                  r"column to file column"),
     ({"columns": {"q13": "a"}}, r"The 'columns' entry 'q13' of MeasurementFormat must be a contract column "
-                                r"\(q1\.\.q12, .*, set\)\. Got 'q13'"),
+                                r"\(q1\.\.q12, .*, set, payload_kg\)\. Got 'q13'"),
     ({"columns": {"temperature": "a"}}, r"Got 'temperature' instead"),
     ({"columns": {"xmeas": "a"}}, r"Got 'xmeas' \(did you mean 'x_meas'\?\) instead"),
     ({"columns": {"q1": " "}}, r"The 'columns' entry 'q1' of MeasurementFormat must be a non-empty file column "
@@ -129,7 +129,7 @@ def test_format_yaml_round_trip(tmp_path):
                                          r"got ','"),
     ('decimal: ","', 'decimal: "/"', r"fmt.yaml: decimal \(line 2\): must be one of '\.', ','; got '/'"),
     ("q1: axis_1", "q_1: axis_1", r"fmt.yaml: columns.q_1 \(line 3\): must be a contract column "
-                                  r"\(q1\.\.q12, .*, set\); got 'q_1' \(did you mean 'q1'\?\)"),
+                                  r"\(q1\.\.q12, .*, set, payload_kg\); got 'q_1' \(did you mean 'q1'\?\)"),
     ("q1: axis_1", "q1: ' '", r"fmt.yaml: columns.q1 \(line 3\): must be a non-empty file column name; got ' '"),
     ("x_meas: smr_x", "x_meas: axis_1", r"columns.x_meas \(line 3\): must be a file column that holds no other "
                                         r"contract column; got 'axis_1' \(already mapped to q1\)"),

@@ -29,6 +29,18 @@ def test_round_trip_and_errors(tmp_path):
     assert (tmp_path / "again.csv").read_bytes() == path.read_bytes()
 
 
+def test_payload_per_pose_round_trip(tmp_path):
+    m = Measurements(np.zeros((3, 2)), np.zeros((3, 3)), np.ones((3, 3)), payload_kg=np.array([0.0, 12.5, 100.0]))
+    write_measurements(m, tmp_path / "p.csv")
+    assert (tmp_path / "p.csv").read_text().splitlines()[0].endswith(",payload_kg")
+    back = read_measurements(tmp_path / "p.csv")
+    assert back.payload_kg.tolist() == [0.0, 12.5, 100.0]
+    assert back.take([2, 0]).payload_kg.tolist() == [100.0, 0.0]
+    assert read_measurements(write(tmp_path, HEADER + "\n1,2,3,4,5,6,7,8\n")).payload_kg is None
+    with pytest.raises(DataError, match=r"Expected payload_kg as 3 masses in \[0, 100000\] kg \(one per pose\), got 2"):
+        Measurements(np.zeros((3, 2)), np.zeros((3, 3)), np.ones((3, 3)), payload_kg=np.array([1.0, 2.0]))
+
+
 def test_comments_blank_lines_and_extra_columns(tmp_path):
     path = write(tmp_path, "# a comment\n\nq1,note,x_nom,y_nom,z_nom,x_meas,y_meas,z_meas\n"
                            "# inside\n10,hello,1,2,3,1.5,2,2\n")
@@ -77,6 +89,10 @@ def test_nominal_from_forward_kinematics(tmp_path, sk120):
     (HEADER + '\n1,2,3,4,5,6,"7,5",8\n', r"m.csv:2: column 'y_meas': expected a number with a decimal point '\.', "
                                           r"got '7,5' \(is the decimal mark ','\? set the format's decimal\)"),
     (HEADER + "\n1,2,3,4,5,6,7,5,8\n", r"m.csv:2: expected 8 cells as in the header, got 9 \(a decimal comma"),
+    (HEADER + ",payload_kg\n1,2,3,4,5,6,7,8,5\n1,2,3,4,5,6,7,8,-2.5\n",
+     r"m.csv:3: column 'payload_kg': expected a payload mass in \[0, 100000\] kg, got -2.5"),
+    (HEADER + ",payload_kg\n1,2,3,4,5,6,7,8,heavy\n", r"m.csv:2: column 'payload_kg': expected a finite number, got 'heavy'"),
+    (HEADER + ",payload_kg\n1,2,3,4,5,6,7,8,\n", r"m.csv:2: column 'payload_kg': expected a finite number, got an empty"),
 ])
 def test_bad_files_get_one_clear_error(tmp_path, text, match):
     with pytest.raises(DataError, match=match):

@@ -38,7 +38,7 @@ from ..robot.description import MAX_JOINTS
 
 JOINTS = tuple(f"q{j}" for j in range(1, MAX_JOINTS + 1))
 LENGTHS = ("x_nom", "y_nom", "z_nom", "x_meas", "y_meas", "z_meas", "x", "y", "z")
-CONTRACT_COLUMNS = JOINTS + LENGTHS + ("set",)
+CONTRACT_COLUMNS = JOINTS + LENGTHS + ("set", "payload_kg")
 JOINT_UNITS = ("deg", "rad")
 LENGTH_UNITS = ("mm", "m")
 _RANGE = re.compile(r"^\s*(\d+)\s*(?:-\s*(\d+)\s*)?$")
@@ -172,7 +172,7 @@ def _format_problem(delimiter: Any, decimal: Any, columns: Any, joint_unit: Any,
         if key not in CONTRACT_COLUMNS:
             close = difflib.get_close_matches(str(key), CONTRACT_COLUMNS, n=1, cutoff=0.6)
             return _Problem("columns", key, f"a contract column (q1..q{MAX_JOINTS}, x_nom, y_nom, z_nom, x_meas, "
-                                            "y_meas, z_meas, x, y, z, set)", key,
+                                            "y_meas, z_meas, x, y, z, set, payload_kg)", key,
                             f" (did you mean {close[0]!r}?)" if close else "")
         if not isinstance(value, str) or not value.strip():
             return _Problem("columns", key, "a non-empty file column name", value)

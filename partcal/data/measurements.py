@@ -3,8 +3,10 @@
 One row per pose, one header line, ``#`` comment lines allowed. Columns:
 ``q1..qN`` (joint angles, degrees), ``x_nom, y_nom, z_nom`` (nominal tool
 position, mm; optional when a robot model is given), ``x_meas, y_meas,
-z_meas`` (measured position, mm) and an optional text column ``set``. Other
-columns are accepted and ignored. Errors are ``measured - nominal``.
+z_meas`` (measured position, mm), an optional text column ``set`` and an
+optional ``payload_kg`` (the payload at the tool point when the pose was
+measured, kg). Other columns are accepted and ignored. Errors are
+``measured - nominal``.
 
 Every problem is reported once, as ``FILE:LINE: column 'NAME': what was wrong``,
 where LINE is the line number an editor shows.
@@ -35,6 +37,8 @@ from .plausibility import Plausibility, check_measured
 
 NOMINAL = ("x_nom", "y_nom", "z_nom")
 MEASURED = ("x_meas", "y_meas", "z_meas")
+PAYLOAD = "payload_kg"
+MAX_PAYLOAD_KG = 1e5          # the kinematic model's payload_kg rule: a real number in [0, 1e5]
 _JOINT = re.compile(r"^q(\d+)$")
 _NUMBER = re.compile(r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
 _CONTRACT = MeasurementFormat()
@@ -59,6 +63,11 @@ class Measurements:
         (``group_column``): rows of one pose are held out together by
         cross-validation. Without it, rows with identical joint angles are one
         pose.
+    payload_kg : ndarray, shape (n,), optional
+        The payload at the tool point of each pose, kg (the ``payload_kg``
+        column). Kinematic models with joint compliance read it; it is None
+        when the file has no such column (the model's own ``payload_kg`` then
+        applies).
     """
 
     q_deg: NDArray[np.float64]
@@ -67,6 +76,7 @@ class Measurements:
     name: str = "measurements"
     labels: tuple[str, ...] | None = field(default=None)
     groups: tuple[str, ...] | None = field(default=None)
+    payload_kg: NDArray[np.float64] | None = field(default=None)
 
     def __post_init__(self):
         q = check_array(self.q_deg, "q_deg", min_rows=1)
@@ -83,6 +93,20 @@ class Measurements:
             given = getattr(self, name)
             if given is not None and len(given) != n:
                 raise DataError(f"{name} has {len(given)} entries but q_deg has {n} rows")
+        if self.payload_kg is not None:
+            payload = check_array(self.payload_kg, "payload_kg", ndim=1)
+            if payload.shape[0] != n or np.any(payload < 0) or np.any(payload > MAX_PAYLOAD_KG):
+                raise DataError(f"Expected payload_kg as {n} masses in [0, {MAX_PAYLOAD_KG:g}] kg (one per pose), "
+                                f"got {payload.shape[0]} values from {payload.min():g} to {payload.max():g}")
+            object.__setattr__(self, "payload_kg", payload)
+
+    def take(self, rows, name: str | None = None) -> "Measurements":
+        """The rows ``rows`` (indices or a boolean mask) as a data set of their own, every column kept."""
+        pick = (lambda v: None if v is None else tuple(np.asarray(v, dtype=object)[rows].tolist()))
+        return Measurements(self.q_deg[rows], self.nominal_mm[rows], self.measured_mm[rows],
+                            name=self.name if name is None else name, labels=pick(self.labels),
+                            groups=pick(self.groups),
+                            payload_kg=None if self.payload_kg is None else self.payload_kg[rows])
 
     def __len__(self) -> int:
         return self.q_deg.shape[0]
@@ -179,8 +203,20 @@ def read_measurements(path: str | Path, robot: str | Robot | None = None, *, nam
             raise DataError(f"{path}:{line}: column {group_column!r} is missing (data.groups names it as the "
                             f"column of each row's pose); the file has {', '.join(h.strip(chr(39)) for h in header)}")
         groups = tuple(data[i][1][seen[group_column]].strip() for i in keep)
+    payload = _payloads(path, header, data, seen[PAYLOAD], fmt.decimal)[keep] if PAYLOAD in seen else None
     return Measurements(q_deg=q, nominal_mm=nominal, measured_mm=meas,
-                        name=name if name is not None else path.stem, labels=labels, groups=groups)
+                        name=name if name is not None else path.stem, labels=labels, groups=groups,
+                        payload_kg=payload)
+
+
+def _payloads(path: Path, header: list[str], data: list, column: int, decimal: str) -> NDArray[np.float64]:
+    """The ``payload_kg`` column: a mass in [0, MAX_PAYLOAD_KG] kg on every row."""
+    values = np.array([_number(path, number, header[column], cells[column], decimal) for number, cells in data])
+    bad = np.flatnonzero((values < 0) | (values > MAX_PAYLOAD_KG))
+    if bad.size:
+        raise DataError(f"{path}:{data[bad[0]][0]}: column {header[column]}: expected a payload mass in "
+                        f"[0, {MAX_PAYLOAD_KG:g}] kg, got {values[bad[0]]:g}")
+    return values
 
 
 def _rows(path: Path, delimiter: str = ","):
@@ -316,13 +352,16 @@ def write_measurements(m: Measurements, path: str | Path, *, comment: str | None
     The file is written to a temporary name and renamed when complete.
     """
     header = joint_columns(m.n_joints) + list(NOMINAL) + list(MEASURED)
+    if m.payload_kg is not None:
+        header.append(PAYLOAD)
     if m.labels is not None:
         header.append("set")
     with atomic_write(path, newline="") as handle:
         for text in (comment or "").splitlines():
             handle.write(f"# {text}\n")
         handle.write(",".join(header) + "\n")
-        numbers = np.hstack([m.q_deg, m.nominal_mm, m.measured_mm])
+        numbers = np.hstack([m.q_deg, m.nominal_mm, m.measured_mm]
+                            + ([m.payload_kg[:, None]] if m.payload_kg is not None else []))
         for i, row in enumerate(numbers):
             cells = [f"{v:.6f}" for v in row]
             if m.labels is not None:

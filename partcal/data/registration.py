@@ -24,6 +24,7 @@ stay below :data:`MAX_CONDITION`.
 from __future__ import annotations
 
 import logging
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -242,5 +243,4 @@ def registered(m: Measurements, robot: Robot, reg: Registration) -> Measurements
     recomputed by forward kinematics with the registration's tool offset.
     """
     nominal = robot.replace(tool_mm=np.asarray(reg.tool_mm, dtype=float)).positions(m.q_deg)
-    return Measurements(q_deg=m.q_deg, nominal_mm=nominal, measured_mm=reg.to_base(m.measured_mm), name=m.name,
-                        labels=m.labels, groups=m.groups)
+    return dataclasses.replace(m, nominal_mm=nominal, measured_mm=reg.to_base(m.measured_mm))

@@ -120,6 +120,11 @@ class ErrorModelBase(RegressorMixin, BaseEstimator):
         whose CV scores are within a standard error. NaN when unknown (never preferred as simpler)."""
         return float("nan")
 
+    @property
+    def reads_payload(self) -> bool:
+        """Whether ``fit`` and ``predict`` take a payload per pose (``payload_kg=``) that changes the errors."""
+        return False
+
     def is_physical(self) -> bool:
         """Whether every parameter is physical (a kinematic model without a data-driven residual): a run
         prefers such a model when its CV score is within a standard error of the best."""

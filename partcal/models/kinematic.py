@@ -660,14 +660,14 @@ class KinematicModel(ErrorModelBase):
         """The residual model's seed: a child of this model's."""
         return int(np.random.SeedSequence(seed_from(self.random_state)).spawn(1)[0].generate_state(1)[0])
 
-    def frozen(self, X, y) -> "KinematicModel":
+    def frozen(self, X, y, payload_kg=None) -> "KinematicModel":
         """With a residual model: the residual frozen on what the kinematics identified on ``X, y`` leave."""
         if self.residual is None:
             return self
-        fitted = clone(self).set_params(residual=None).fit(X, y)
+        fitted = clone(self).set_params(residual=None).fit(X, y, payload_kg=payload_kg)
         X = np.asarray(X, dtype=float)
         nominal = fitted.robot_.positions(X)
-        leftover = np.asarray(y, dtype=float) - fitted.predict(X)
+        leftover = np.asarray(y, dtype=float) - fitted.predict(X, payload_kg=payload_kg)
         inputs = nominal if self.residual.inputs == "cartesian" else X
         seed = self._residual_seed()
         residual = clone(self.residual).set_params(random_state=seed).frozen(inputs, leftover)
@@ -691,7 +691,7 @@ class KinematicModel(ErrorModelBase):
     @property
     def reads_payload(self) -> bool:
         """Whether a payload changes the prediction (some joint yields under gravity)."""
-        return bool(self.joint_errors_.compliance)
+        return bool(self.compliance)
 
 
 def _identification_from(ident: FieldReader, robot: Robot, errors: JointErrors | None = None) -> Identification:

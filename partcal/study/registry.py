@@ -375,6 +375,12 @@ def model_inputs(inputs: str, m: Measurements) -> NDArray[np.float64]:
     return m.nominal_mm if inputs == "cartesian" else m.q_deg
 
 
+def per_row_arguments(model, m: Measurements) -> dict:
+    """Per-pose arguments of the model's ``fit`` and ``predict`` from a data set: the payload of each pose
+    (``payload_kg`` column) for a model that reads one; none otherwise (the model's own ``payload_kg``)."""
+    return {"payload_kg": m.payload_kg} if m.payload_kg is not None and model.reads_payload else {}
+
+
 SLOW_SECONDS = 5.0          # a model still cross-validating after this long reports each fold
 
 
@@ -407,6 +413,7 @@ def fit_model(spec: ModelSpec, seed: int, data: dict[str, Measurements], cv: CVP
 def _fit_model(spec, seed, data, cv, own_frame, lines) -> ModelResult:
     ident = data["identification"]
     X, y = model_inputs(spec.inputs, ident), ident.errors_mm
+    rows = per_row_arguments(spec.build(seed), ident)
     granularity, nested = None, False
     start = time.perf_counter()
 
@@ -418,17 +425,18 @@ def _fit_model(spec, seed, data, cv, own_frame, lines) -> ModelResult:
     cv_regions = None
     if len(spec.sizes) > 1:
         candidates = [spec.build(seed, size) for size in spec.sizes]
-        resid = nested_residuals(candidates, X, y, folds=cv.folds, inner=cv.inner, progress=fold_done)
-        estimator, granularity, fit_seconds = choose_granularity(spec, seed, X, y, cv.folds)      # returned fitted
+        resid = nested_residuals(candidates, X, y, folds=cv.folds, inner=cv.inner, progress=fold_done, per_row=rows)
+        estimator, granularity, fit_seconds = choose_granularity(spec, seed, X, y, cv.folds, rows)   # returned fitted
         cv_seconds, nested = time.perf_counter() - start - fit_seconds, True
         chosen = min(range(len(granularity)), key=lambda i: granularity[i]["cv_rms_3d"])
         cv_regions = granularity[chosen]["cv_regions"]
     else:
         fold_fits: list = []
-        resid = held_out_residuals(spec.build(seed), X, y, cv.folds, fitted=fold_fits, progress=fold_done)
+        resid = held_out_residuals(spec.build(seed), X, y, cv.folds, fitted=fold_fits, progress=fold_done,
+                                   per_row=rows)
         cv_seconds = time.perf_counter() - start
         start = time.perf_counter()
-        estimator = spec.build(seed).fit(X, y)
+        estimator = spec.build(seed).fit(X, y, **rows)
         fit_seconds = time.perf_counter() - start
         if partitioned_part(estimator) is not None:
             cv_regions = fold_regions([partitioned_part(m) for m in fold_fits])
@@ -436,7 +444,8 @@ def _fit_model(spec, seed, data, cv, own_frame, lines) -> ModelResult:
         log.warning("fitted on all the identification data it has %d regions, but on the cross-validation "
                     "folds %s, so its CV score is that of a coarser model",
                     partitioned_part(estimator).partition_.n_regions, _regions_text(cv_regions))
-    predictions = {name: estimator.predict(model_inputs(spec.inputs, m)) for name, m in data.items()}
+    predictions = {name: estimator.predict(model_inputs(spec.inputs, m), **per_row_arguments(estimator, m))
+                   for name, m in data.items()}
     metrics = {name: summary(errors_left(m, predictions[name], name in own_frame)) for name, m in data.items()}
     ratio = estimator.pso_rms_ratio()
     return ModelResult(spec, estimator, fit_seconds, pooled_rms(resid), metrics, predictions, ratio, granularity,
@@ -493,17 +502,19 @@ def errors_left(m: Measurements, predicted: NDArray[np.float64], own_frame: bool
     return m.measured_mm - (model_mm @ rot.T + shift)
 
 
-def choose_granularity(spec: ModelSpec, seed: int, X, y, folds: list) -> tuple[object, list[dict], float]:
+def choose_granularity(spec: ModelSpec, seed: int, X, y, folds: list, per_row: dict | None = None
+                       ) -> tuple[object, list[dict], float]:
     """Choose the partition granularity of an entry (or of its residual) by cross-validation on ``folds``.
 
     The same choice as :func:`partcal.models.partitioned.select_granularity`, for any entry kind:
     returns the best candidate fitted on all of ``X, y``, a row per candidate
     (``granularity``, ``cv_rms_3d``, ``regions``, and ``cv_regions``: the fewest and most regions of
-    the fits on the folds) and the seconds of that final fit.
+    the fits on the folds) and the seconds of that final fit. ``per_row``: a payload per pose, as for
+    :func:`partcal.metrics.held_out_residuals`.
     """
     fold_models: list = []
     best, scores, fitted, seconds = select_by_cv([spec.build(seed, size) for size in spec.sizes], X, y, folds=folds,
-                                                 fold_models=fold_models)
+                                                 fold_models=fold_models, per_row=per_row)
     table = [{"granularity": int(size), "cv_rms_3d": score, "regions": int(partitioned_part(f).partition_.n_regions),
               "cv_regions": fold_regions([partitioned_part(m) for m in folded])}
              for size, score, f, folded in zip(spec.sizes, scores, fitted, fold_models)]

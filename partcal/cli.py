@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from . import __version__
-from .errors import PartcalError
+from .errors import DataError, PartcalError
 
 log = logging.getLogger("partcal")
 
@@ -117,14 +117,29 @@ def _cmd_predict(args) -> int:
     if predictor.inputs == "cartesian":
         cols, X, _ = read_columns(args.input, [["x", "y", "z"], ["x_nom", "y_nom", "z_nom"]], fmt=fmt)
         errors = predictor.predict(positions=X)
-    else:
-        cols, X, _ = read_columns(args.input, [joint_columns(predictor.n_inputs)], fmt=fmt)
-        errors = predictor.predict(joints=X)
+        payload = None
+    else:     # a model with compliant joints reads the payload of each row too, when the file has it
+        optional = ["payload_kg"] if predictor.model.reads_payload else []
+        cols, X, payload = read_columns(args.input, [joint_columns(predictor.n_inputs)], optional, fmt=fmt)
+        if payload is not None:
+            _check_payloads(args.input, payload[:, 0])
+        errors = predictor.predict(joints=X, payload_kg=None if payload is None else payload[:, 0])
     predictor.refuse_implausible(X, errors, source=args.input)     # nothing is written then
-    _write_table(args.output, cols + ["dx", "dy", "dz"], np.hstack([X, errors]), atomic_write)
+    given = [X] if payload is None else [X, payload]
+    _write_table(args.output, cols + (["payload_kg"] if payload is not None else []) + ["dx", "dy", "dz"],
+                 np.hstack(given + [errors]), atomic_write)
     _warn_if_far(predictor, X)
     print(f"predicted errors for {len(X)} points: {args.output}")
     return 0
+
+
+def _check_payloads(path, payload) -> None:
+    from .data.measurements import MAX_PAYLOAD_KG
+
+    bad = np.flatnonzero((payload < 0) | (payload > MAX_PAYLOAD_KG))
+    if bad.size:
+        raise DataError(f"{path}: data row {bad[0] + 1}: column 'payload_kg': expected a payload mass in "
+                        f"[0, {MAX_PAYLOAD_KG:g}] kg, got {payload[bad[0]]:g}")
 
 
 def _far_from_data(predictor, X) -> str:

@@ -383,7 +383,7 @@ models:
     return tmp
 
 
-def test_a_run_reads_the_payload_of_each_pose_from_its_file(payload_files):
+def test_a_run_reads_the_payload_of_each_pose_from_its_file(payload_files, capsys):
     """The column reaches the identification, every CV fold and the test predictions: noise-free data are
     then reproduced at a payload never measured (to 1e-3 mm: the files keep micro-degrees, and QR pivoting
     on the rounded angles picks other columns of the same rank than the virtual robot's errors use, which
@@ -400,6 +400,25 @@ def test_a_run_reads_the_payload_of_each_pose_from_its_file(payload_files):
     assert dhc.metrics["half_load"]["rms_3d"] < 1e-3 and dhc.cv_rms_3d < 1e-3       # mm
     assert dh.metrics["half_load"]["rms_3d"] > 0.1 and dh.cv_rms_3d > 0.1
     assert result.best == "DH + C"
+    # the model file predicts the same from the file's payload column (partcal predict)
+    from partcal.cli import main
+    from partcal.study.persist import save_model
+
+    save_model(dhc.model, payload_files / "dhc.json", name="DH + C")
+    assert main(["predict", str(payload_files / "dhc.json"), str(payload_files / "half_load.csv"),
+                 "-o", str(payload_files / "pred.csv")]) == 0
+    out = np.genfromtxt(payload_files / "pred.csv", delimiter=",", names=True)
+    assert out.dtype.names[6:] == ("payload_kg", "dx", "dy", "dz") and set(out["payload_kg"]) == {50.0}
+    np.testing.assert_allclose(np.column_stack([out["dx"], out["dy"], out["dz"]]), dhc.predictions["half_load"],
+                               atol=2e-6)
+    text = (payload_files / "half_load.csv").read_text().splitlines()
+    (payload_files / "bad.csv").write_text("\n".join([text[0], text[1], text[2].rsplit(",", 1)[0] + ",-5"]) + "\n")
+    capsys.readouterr()
+    assert main(["predict", str(payload_files / "dhc.json"), str(payload_files / "bad.csv"), "-o",
+                 str(payload_files / "bad_out.csv")]) == 2
+    assert capsys.readouterr().err == (f"partcal: error: {payload_files / 'bad.csv'}: data row 2: column 'payload_kg': "
+                                       "expected a payload mass in [0, 100000] kg, got -5\n")
+    assert not (payload_files / "bad_out.csv").exists()
     for name in ("identification.csv", "half_load.csv"):        # the same poses, the payload column dropped
         text = (payload_files / name).read_text().splitlines()
         column = text[0].split(",").index("payload_kg")

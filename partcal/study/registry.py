@@ -121,7 +121,7 @@ def rank_reason(config: RunConfig, cv: "CVPlan | None" = None) -> str:
     if config.rank_by == "validation":
         return f"lowest 3-D RMS on the validation set {config.validation.name} (held out, never fitted)"
     folds = fold_name(cv.rule) if cv is not None else f"{config.cv_folds}-fold"
-    return (f"the physical model (kinematic, no data-driven residual) with the fewest parameters whose {folds} "
+    return (f"physical model (kinematic, no data-driven residual) with the fewest parameters whose {folds} "
             "cross-validated 3-D RMS on the identification set is within one standard error of the lowest, else "
             "the lowest (the same folds for every model, a pose's rows held out together; nested for granularity "
             "lists)")

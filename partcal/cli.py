@@ -134,12 +134,12 @@ def _cmd_predict(args) -> int:
 
 
 def _check_payloads(path, payload) -> None:
-    from .data.measurements import MAX_PAYLOAD_KG
+    from .data.measurements import MAX_PAYLOAD_KG, first_bad_payload
 
-    bad = np.flatnonzero((payload < 0) | (payload > MAX_PAYLOAD_KG))
-    if bad.size:
-        raise DataError(f"{path}: data row {bad[0] + 1}: column 'payload_kg': expected a payload mass in "
-                        f"[0, {MAX_PAYLOAD_KG:g}] kg, got {payload[bad[0]]:g}")
+    bad = first_bad_payload(payload)
+    if bad is not None:
+        raise DataError(f"{path}: data row {bad + 1}: column 'payload_kg': expected a payload mass in "
+                        f"[0, {MAX_PAYLOAD_KG:g}] kg, got {payload[bad]:g}")
 
 
 def _far_from_data(predictor, X) -> str:

@@ -39,6 +39,8 @@ def test_payload_per_pose_round_trip(tmp_path):
     assert read_measurements(write(tmp_path, HEADER + "\n1,2,3,4,5,6,7,8\n")).payload_kg is None
     with pytest.raises(DataError, match=r"Expected payload_kg as 3 masses in \[0, 100000\] kg \(one per pose\), got 2"):
         Measurements(np.zeros((3, 2)), np.zeros((3, 3)), np.ones((3, 3)), payload_kg=np.array([1.0, 2.0]))
+    with pytest.raises(DataError, match=r"got -1 kg at row 2"):
+        Measurements(np.zeros((3, 2)), np.zeros((3, 3)), np.ones((3, 3)), payload_kg=np.array([1.0, -1.0, 2.0]))
 
 
 def test_comments_blank_lines_and_extra_columns(tmp_path):

@@ -95,9 +95,11 @@ class Measurements:
                 raise DataError(f"{name} has {len(given)} entries but q_deg has {n} rows")
         if self.payload_kg is not None:
             payload = check_array(self.payload_kg, "payload_kg", ndim=1)
-            if payload.shape[0] != n or np.any(payload < 0) or np.any(payload > MAX_PAYLOAD_KG):
+            bad = first_bad_payload(payload)
+            if payload.shape[0] != n or bad is not None:
+                got = f"{payload[bad]:g} kg at row {bad + 1}" if bad is not None else f"{payload.shape[0]} values"
                 raise DataError(f"Expected payload_kg as {n} masses in [0, {MAX_PAYLOAD_KG:g}] kg (one per pose), "
-                                f"got {payload.shape[0]} values from {payload.min():g} to {payload.max():g}")
+                                f"got {got}")
             object.__setattr__(self, "payload_kg", payload)
 
     def take(self, rows, name: str | None = None) -> "Measurements":
@@ -209,13 +211,19 @@ def read_measurements(path: str | Path, robot: str | Robot | None = None, *, nam
                         payload_kg=payload)
 
 
+def first_bad_payload(values: NDArray[np.float64]) -> int | None:
+    """Index of the first payload outside [0, MAX_PAYLOAD_KG] kg, or None."""
+    bad = np.flatnonzero((values < 0) | (values > MAX_PAYLOAD_KG))
+    return int(bad[0]) if bad.size else None
+
+
 def _payloads(path: Path, header: list[str], data: list, column: int, decimal: str) -> NDArray[np.float64]:
     """The ``payload_kg`` column: a mass in [0, MAX_PAYLOAD_KG] kg on every row."""
     values = np.array([_number(path, number, header[column], cells[column], decimal) for number, cells in data])
-    bad = np.flatnonzero((values < 0) | (values > MAX_PAYLOAD_KG))
-    if bad.size:
-        raise DataError(f"{path}:{data[bad[0]][0]}: column {header[column]}: expected a payload mass in "
-                        f"[0, {MAX_PAYLOAD_KG:g}] kg, got {values[bad[0]]:g}")
+    bad = first_bad_payload(values)
+    if bad is not None:
+        raise DataError(f"{path}:{data[bad][0]}: column {header[column]}: expected a payload mass in "
+                        f"[0, {MAX_PAYLOAD_KG:g}] kg, got {values[bad]:g}")
     return values
 
 

@@ -23,8 +23,8 @@ stay below :data:`MAX_CONDITION`.
 
 from __future__ import annotations
 
-import logging
 import dataclasses
+import logging
 from dataclasses import dataclass
 
 import numpy as np

@@ -203,7 +203,7 @@ class FrameCombiner:
         if self.monomials is not None:     # u = (x - m) / s, v = (x - o) / h: u = (v - (m - o) / h) / (s / h)
             d = p.active.size
             centre, half = np.zeros((len(regions), d)), np.ones(d)
-            centre[:, p.active] = np.repeat(np.array([p.lookup.centre(c) for c in cells]).reshape(len(cells), -1),
+            centre[:, p.active] = np.repeat(p.lookup.centres(np.asarray(cells, dtype=np.intp)),
                                             counts, axis=0)
             half[p.active] = p.lookup.size / 2
             coefs = coef_from_scaled(self.terms, coefs, self.scales[regions] / half,

@@ -78,12 +78,8 @@ class Lookup:
         strides = np.array([np.prod(self.shape[i + 1:]) for i in range(len(self.shape))], dtype=float)
         return np.where(inside, idx @ strides, -1).astype(np.intp)
 
-    def centre(self, cell: int) -> NDArray[np.float64]:
-        """Centre of one cell, shape (a,); every cell's half-size is ``size / 2``."""
-        return self.centres(np.array([cell]))[0]
-
     def centres(self, cells: NDArray[np.intp]) -> NDArray[np.float64]:
-        """Centres of several cells, shape (len(cells), a)."""
+        """Centres of cells, shape (len(cells), a); every cell's half-size is ``size / 2``."""
         index = np.stack(np.unravel_index(cells, self.shape), axis=1).astype(float)
         return self.low + (index + 0.5) * self.size
 

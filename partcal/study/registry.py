@@ -71,7 +71,6 @@ class ModelResult:
     cv_se: float = float("nan")         # standard error of cv_rms_3d, over the identification poses
     effective_parameters: float = float("nan")   # what "simpler" means when two CV scores are close
     notes: list[str] = field(default_factory=list)   # fits on a bound and the like: warned, and in the report
-    cv_residuals: NDArray[np.float64] | None = None  # held-out errors of the identification rows (n, 3) mm
 
     def score(self, rank_by: str) -> float:
         """The number the run ranks by: CV 3-D RMS, or 3-D RMS on the validation set (mm)."""
@@ -451,7 +450,7 @@ def _fit_model(spec, seed, data, cv, own_frame, lines) -> ModelResult:
     return ModelResult(spec, estimator, fit_seconds, pooled_rms(resid), metrics, predictions, ratio, granularity,
                        cv_seconds=cv_seconds, nested=nested, cv_regions=cv_regions,
                        cv_se=rms_standard_error(resid, cv.groups),
-                       effective_parameters=estimator.effective_parameters(), cv_residuals=resid)
+                       effective_parameters=estimator.effective_parameters())
 
 
 @contextmanager

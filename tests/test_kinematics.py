@@ -292,3 +292,43 @@ def test_matrix_from_euler_is_scipys_extrinsic_xyz(angles_deg):
     rot = matrix_from_euler_deg(angles_deg)
     np.testing.assert_allclose(rot, Rotation.from_euler("xyz", angles_deg, degrees=True).as_matrix(), atol=1e-14)
     np.testing.assert_allclose(rot @ rot.T, np.eye(3), atol=1e-14)
+
+
+@pytest.mark.parametrize("name", ["motoman_sk120", "universal_robots_ur10"])
+def test_full_pose_ik_reaches_position_and_orientation(name):
+    """Poses of random admissible joints, solved from seeds 8 degrees off: the reached transform (forward
+    kinematics) equals the wanted one, and the reported errors are the independent ones (distance, and
+    the angle of R_wanted R^T from its trace)."""
+    robot = load_robot(name)
+    rng = np.random.default_rng(3)
+    lo, hi = np.maximum(robot.limits_deg[:, 0], -150), np.minimum(robot.limits_deg[:, 1], 150)
+    q = rng.uniform(lo, hi, (400, robot.n_joints))
+    q = q[robot.within_limits(q)][:150]
+    wanted = robot.forward(q)
+    result = robot.inverse_pose(wanted, np.clip(q + rng.normal(0, 8, q.shape), robot.limits_deg[:, 0],
+                                                robot.limits_deg[:, 1]))
+    assert result.success.mean() > 0.95
+    reached = robot.forward(result.q_deg)
+    ok = result.success
+    np.testing.assert_allclose(reached[ok], wanted[ok], atol=1e-7)
+    cos = (np.einsum("nij,nij->n", wanted[:, :3, :3], reached[:, :3, :3]) - 1) / 2
+    np.testing.assert_allclose(result.error_deg, np.degrees(np.arccos(np.clip(cos, -1, 1))), atol=1e-5)
+    np.testing.assert_allclose(result.error_mm, np.linalg.norm(wanted[:, :3, 3] - reached[:, :3, 3], axis=1))
+    alone = robot.inverse_pose(wanted[:3], robot.home_deg)                  # the batch does not matter
+    np.testing.assert_allclose(alone.q_deg, robot.inverse_pose(wanted, robot.home_deg).q_deg[:3], atol=1e-9)
+
+
+def test_full_pose_ik_with_a_joint_held_and_bad_poses(sk120):
+    """Five free joints cannot reach an arbitrary orientation: the least-squares compromise is not a
+    success; a transform whose rotation block is not a rotation is refused, naming the pose."""
+    q = np.array([[10.0, -120, -170, 20, 30, 40]])
+    wanted = sk120.forward(q)
+    wanted[0, :3, :3] = Rotation.from_rotvec([0.3, 0.2, 0.1]).as_matrix() @ wanted[0, :3, :3]
+    held = sk120.inverse_pose(wanted, q, fixed=(6,))
+    assert not held.success[0] and held.error_deg[0] > 0.1 and held.q_deg[0, 5] == 40.0
+    bad = sk120.forward(np.repeat(q, 2, axis=0))
+    bad[1, :3, :3] *= 2.0
+    with pytest.raises(partcal.DataError, match=r"poses\[1\]: the upper-left 3 x 3 block must be a rotation"):
+        sk120.inverse_pose(bad)
+    with pytest.raises(partcal.DataError, match=r"Expected poses with shape \(n, 4, 4\)"):
+        sk120.inverse_pose(np.zeros((2, 3, 4)))

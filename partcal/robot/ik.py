@@ -163,6 +163,65 @@ def _dls_step(jac: NDArray[np.float64], err: NDArray[np.float64], damping: float
     return step
 
 
+# ---------------------------------------------------------------------- full poses
+def solve_pose(robot, positions: NDArray[np.float64], rotations: NDArray[np.float64], q: NDArray[np.float64],
+               free: NDArray[np.intp], settings: Settings, tol_deg: float, length_mm: float) -> tuple:
+    """Damped least squares on position and orientation; returns joints (n, N) degrees and iterations (n,).
+
+    ``positions`` (n, 3) mm and ``rotations`` (n, 3, 3) are the wanted tool
+    poses. The error of a pose is the position difference and the rotation
+    vector of ``R_wanted R^T`` (radians, in the base frame) times
+    ``length_mm``; the step solves the 6 x 6 damped system of every pose.
+    """
+    out = np.array(q, dtype=float)
+    iterations = np.zeros(len(out), dtype=np.int64)
+    tol_rad = np.radians(tol_deg)
+    for start in range(0, len(out), _CHUNK):
+        block = slice(start, start + _CHUNK)
+        out[block], iterations[block] = _pose_block(robot, positions[block].T, rotations[block], out[block].T,
+                                                    free, settings, tol_rad, length_mm)
+    return out, iterations
+
+
+def _pose_block(robot, targets, rotations, qT, free, settings: Settings, tol_rad: float, length: float):
+    """:func:`solve_pose` on one block: ``targets`` (3, m), ``rotations`` (m, 3, 3), ``qT`` (N, m)."""
+    qT = qT.copy()
+    record = robot._moving(free)
+    lo, hi = robot.limits_deg[free, 0][:, None], robot.limits_deg[free, 1][:, None]
+    idx, done_q = np.arange(qT.shape[1]), qT
+    iterations = np.zeros(qT.shape[1], dtype=np.int64)
+    for _ in range(settings.max_iter):
+        p, axes, frames = robot._walk(robot._trig(qT), record=record)
+        reached = np.stack([np.broadcast_to(a, p.shape) for a in axes], axis=1).transpose(2, 0, 1)   # (m, 3, 3)
+        turn = rotation_vectors(rotations @ reached.transpose(0, 2, 1)).T                             # (3, m) rad
+        err = np.concatenate([targets - p, length * turn])
+        keep = (np.sum(err[:3] ** 2, axis=0) > settings.tol_mm ** 2) | (np.sum(turn ** 2, axis=0) > tol_rad ** 2)
+        if not keep.any():
+            break
+        if not keep.all():                              # drop the converged poses
+            done_q[:, idx[~keep]] = qT[:, ~keep]
+            idx, qT, targets, rotations, err = idx[keep], qT[:, keep], targets[:, keep], rotations[keep], err[:, keep]
+            p, frames = p[:, keep], {r: (z[:, keep], o[:, keep]) for r, (z, o) in frames.items()}
+        jac = np.concatenate([robot._jacobian(p, frames, free), length * robot._jacobian(p, frames, free, True)],
+                             axis=1)                                                            # (F, 6, m)
+        J = jac.transpose(2, 1, 0)                                                              # (m, 6, F)
+        A = J @ J.transpose(0, 2, 1) + settings.damping ** 2 * np.eye(6)
+        step = (J.transpose(0, 2, 1) @ np.linalg.solve(A, err.T[:, :, None]))[:, :, 0].T        # (F, m)
+        biggest = np.maximum(np.abs(step).max(axis=0), 1e-300)
+        step *= np.minimum(1.0, settings.max_step_deg / biggest)
+        qT[free] = np.clip(qT[free] + step, lo, hi)
+        iterations[idx] += 1
+    done_q[:, idx] = qT
+    return done_q.T, iterations
+
+
+def rotation_vectors(R: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Rotation vectors (axis times angle, radians) of rotation matrices ``(n, 3, 3)``, shape (n, 3)."""
+    from scipy.spatial.transform import Rotation
+
+    return Rotation.from_matrix(R).as_rotvec()
+
+
 # ---------------------------------------------------------------------- paths
 def solve_path(robot, targets: NDArray[np.float64], seed: NDArray[np.float64], free: NDArray[np.intp],
                settings: Settings) -> NDArray[np.float64]:

@@ -316,8 +316,9 @@ class Robot:
         free = {int(j) for j in free}
         return [r for r, row in enumerate(self._rows) if any(j in free for j, _ in row.terms)]
 
-    def _jacobian(self, p: NDArray[np.float64], frames: dict, free) -> NDArray[np.float64]:
-        """The Jacobian ``(F, 3, n)`` mm/deg from a walk that recorded the rows :meth:`_moving` gives.
+    def _jacobian(self, p: NDArray[np.float64], frames: dict, free, angular: bool = False) -> NDArray[np.float64]:
+        """The Jacobian ``(F, 3, n)`` mm/deg from a walk that recorded the rows :meth:`_moving` gives; with
+        ``angular``, that of the tool's orientation instead (rad/deg: the axes the joints turn about).
 
         Sums run in a fixed order, elementwise in the poses: a pose gets the
         same bits alone or in any batch (batched path IK relies on it).
@@ -327,10 +328,13 @@ class Robot:
         if not moving:
             return jac
         z = np.stack([frames[r][0] for r in moving])               # (M, 3, n) axes
-        lever = p[None] - np.stack([frames[r][1] for r in moving])  # (M, 3, n) origin -> tool
-        cross = z[:, _I1] * lever[:, _I2]
-        cross -= z[:, _I2] * lever[:, _I1]
-        cross *= np.pi / 180.0
+        if angular:
+            cross = z * (np.pi / 180.0)
+        else:
+            lever = p[None] - np.stack([frames[r][1] for r in moving])  # (M, 3, n) origin -> tool
+            cross = z[:, _I1] * lever[:, _I2]
+            cross -= z[:, _I2] * lever[:, _I1]
+            cross *= np.pi / 180.0
         for k, f, c in plan:                                       # column f += c * (row k's contribution)
             if c == 1.0:
                 jac[f] += cross[k]
@@ -416,6 +420,54 @@ class Robot:
         q = ik.solve(self, targets, q, free, ik.Settings(tol_mm, max_iter, max_step_deg, damping))[0]
         dist = np.linalg.norm(targets - self._positions(q), axis=1)
         return IKResult(q_deg=q, error_mm=dist, success=(dist <= tol_mm) & self.within_limits(q))
+
+    def inverse_pose(
+        self, poses, seeds_deg=None, *, fixed=(), tol_mm: float = 1e-8, tol_deg: float = 1e-8,
+        length_mm: float = 1000.0, max_iter: int = 100, max_step_deg: float = 10.0, damping: float = 0.05,
+    ) -> "IKResult":
+        """Full-pose (position and orientation) inverse kinematics by damped least squares, all at once.
+
+        Parameters
+        ----------
+        poses : array-like, shape (n, 4, 4)
+            Tool poses as homogeneous transforms (mm), as :meth:`forward` gives.
+        seeds_deg, fixed, max_iter, max_step_deg, damping
+            As for :meth:`inverse`.
+        tol_mm, tol_deg : float
+            A pose counts as reached when its position error is below
+            ``tol_mm`` and its orientation error (the angle of the rotation
+            between the reached and the wanted orientation) below ``tol_deg``.
+        length_mm : float
+            How a step weighs orientation against position: one radian of
+            orientation error counts as ``length_mm`` mm (about the arm's reach).
+
+        Returns
+        -------
+        IKResult
+            With ``q_deg``, ``error_mm``, ``error_deg`` and ``success``. A
+            robot with fewer than six free joints reaches only some poses; the
+            others end at the least-squares compromise and are not a success.
+        """
+        poses = np.asarray(poses, dtype=float)
+        if poses.ndim != 3 or poses.shape[1:] != (4, 4) or not np.isfinite(poses).all():
+            raise DataError(f"Expected poses with shape (n, 4, 4) (homogeneous transforms, mm), got array with "
+                            f"shape {poses.shape}" + ("" if np.isfinite(poses).all() else " and non-finite values"))
+        rotations = poses[:, :3, :3]
+        orthogonal = np.abs(rotations @ rotations.transpose(0, 2, 1) - np.eye(3)).max(axis=(1, 2)) < 1e-6
+        if not (orthogonal.all() and (np.linalg.det(rotations) > 0).all()):
+            bad = int(np.flatnonzero(~orthogonal | (np.linalg.det(rotations) <= 0))[0])
+            raise DataError(f"poses[{bad}]: the upper-left 3 x 3 block must be a rotation matrix (orthonormal, "
+                            "determinant +1)")
+        n = poses.shape[0]
+        seeds = self.home_deg if seeds_deg is None else seeds_deg
+        q = self.check_joints(np.array(np.broadcast_to(np.asarray(seeds, dtype=float), (n, self.n_joints))),
+                              "seeds_deg")
+        free = self._free_joints(fixed)
+        settings = ik.Settings(tol_mm, max_iter, max_step_deg, damping)
+        q = ik.solve_pose(self, poses[:, :3, 3], rotations, q, free, settings, tol_deg, length_mm)[0]
+        error_mm, error_deg = pose_errors(self.forward(q), poses)
+        return IKResult(q_deg=q, error_mm=error_mm, error_deg=error_deg,
+                        success=(error_mm <= tol_mm) & (error_deg <= tol_deg) & self.within_limits(q))
 
     def _free_joints(self, fixed) -> NDArray[np.intp]:
         bad = [j for j in fixed if not (isinstance(j, (int, np.integer)) and 1 <= j <= self.n_joints)]
@@ -503,8 +555,19 @@ def _rotors(theta_deg: NDArray[np.float64]) -> NDArray[np.complex128]:
 
 @dataclass(frozen=True)
 class IKResult:
-    """Outcome of :meth:`Robot.inverse`: angles, remaining error and success per target."""
+    """Outcome of :meth:`Robot.inverse` (and :meth:`Robot.inverse_pose`, which also gives the orientation
+    error ``error_deg``): angles, remaining error and success per target."""
 
     q_deg: NDArray[np.float64]
     error_mm: NDArray[np.float64]
     success: NDArray[np.bool_]
+    error_deg: NDArray[np.float64] | None = None
+
+
+def pose_errors(reached: NDArray[np.float64], wanted: NDArray[np.float64]
+                ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Position error (mm) and orientation error (deg: the angle of ``R_wanted R_reached^T``) of poses
+    ``(n, 4, 4)``, each shape (n,)."""
+    dist = np.linalg.norm(wanted[:, :3, 3] - reached[:, :3, 3], axis=1)
+    return dist, np.degrees(np.linalg.norm(ik.rotation_vectors(wanted[:, :3, :3] @ reached[:, :3, :3]
+                                                               .transpose(0, 2, 1)), axis=1))

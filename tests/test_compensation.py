@@ -130,3 +130,42 @@ def test_reachable_is_the_robots_ik_within_its_limits(sk120):
     assert reachable(sk120, sk120.positions(inside)).all()             # every pose the robot can take is reached
     far = np.array([[0.0, 0.0, 0.0], [5000.0, 0.0, 0.0], [np.inf, 0.0, 0.0]])
     assert not reachable(sk120, far).any()                             # its own base, beyond reach, not a number
+
+
+@pytest.mark.parametrize("name", ["motoman_sk120", "universal_robots_ur10"])
+def test_full_pose_false_targets_put_the_true_robot_on_the_wanted_pose(name):
+    """The error model is the exact pose error of a 'true' robot (other DH lengths and twists): commanding
+    the nominal robot to the compensated joints puts the true robot's tool on the wanted pose, position and
+    orientation, checked with the true robot's forward kinematics."""
+    from scipy.spatial.transform import Rotation
+
+    from partcal import load_robot
+    from partcal.robot.compensation import false_target_poses
+
+    nominal = load_robot(name).replace(tool_mm=np.array([30.0, -20.0, 150.0]))
+    rng = np.random.default_rng(5)
+    rows = nominal.alpha_deg.size
+    true = nominal.replace(a_mm=nominal.a_mm + rng.normal(0, 1.0, rows), d_mm=nominal.d_mm + rng.normal(0, 1.0, rows),
+                           alpha_deg=nominal.alpha_deg + rng.normal(0, 0.05, rows),
+                           theta_offset_deg=nominal.theta_offset_deg + rng.normal(0, 0.05, rows))
+
+    def pose_error(q):
+        T, N = true.forward(q), nominal.forward(q)
+        turn = Rotation.from_matrix(T[:, :3, :3] @ N[:, :3, :3].transpose(0, 2, 1)).as_rotvec()
+        return np.hstack([T[:, :3, 3] - N[:, :3, 3], turn])
+
+    lo, hi = np.maximum(nominal.limits_deg[:, 0], -150), np.minimum(nominal.limits_deg[:, 1], 150)
+    q = rng.uniform(lo, hi, (300, nominal.n_joints))
+    q = q[nominal.within_limits(q)][:60]
+    wanted = nominal.forward(q)
+    result = false_target_poses(pose_error, nominal, wanted, q, tol_mm=1e-6, tol_deg=1e-6)
+    assert result.converged.mean() > 0.9
+    ok = result.converged
+    reached = true.forward(result.joints_deg[ok])
+    np.testing.assert_allclose(reached[:, :3, 3], wanted[ok, :3, 3], atol=1e-5)
+    np.testing.assert_allclose(reached[:, :3, :3], wanted[ok, :3, :3], atol=1e-7)
+    commanded = nominal.forward(result.joints_deg)
+    np.testing.assert_allclose(result.commanded_mm, commanded[:, :3, 3])
+    np.testing.assert_allclose(result.commanded_rotation, commanded[:, :3, :3])
+    before = true.forward(q)                                   # uncompensated: the true robot misses
+    assert np.linalg.norm(before[:, :3, 3] - wanted[:, :3, 3], axis=1).min() > 0.1

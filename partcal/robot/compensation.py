@@ -44,6 +44,8 @@ class CompensationResult:
     iterations: NDArray[np.int64]
     residual_mm: NDArray[np.float64]
     converged: NDArray[np.bool_]
+    commanded_rotation: NDArray[np.float64] | None = None    # full-pose compensation: (n, 3, 3)
+    residual_deg: NDArray[np.float64] | None = None          # and its predicted orientation miss
 
     def warn_unconverged(self, tol_mm: float) -> None:
         bad = np.flatnonzero(~self.converged)
@@ -118,6 +120,39 @@ def false_target_joints(predict: Callable[[NDArray[np.float64]], NDArray[np.floa
         residual = np.linalg.norm(reached + predict(q) - targets_mm, axis=1)
     converged = (residual <= tol_mm) & robot.within_limits(q)      # a pose the robot cannot take is no answer
     return CompensationResult(reached, q, iterations, residual, converged)
+
+
+def false_target_poses(predict: Callable[[NDArray[np.float64]], NDArray[np.float64]], robot: Robot,
+                       poses: NDArray[np.float64], seeds_deg: NDArray[np.float64], fixed: tuple[int, ...] = (), *,
+                       tol_mm: float = 1e-4, tol_deg: float = 1e-5, length_mm: float = 1000.0,
+                       max_iter: int = 50) -> CompensationResult:
+    """Full-pose false targets for a joint-angle model ``predict(q_deg) -> (n, 6)`` pose errors.
+
+    The predicted error of a pose is its position error (mm) and the rotation
+    vector (radians, base frame) that turns the nominal orientation into the
+    real one: the robot commanded to ``q`` reaches ``p(q) + dp`` with the
+    orientation ``exp(dr) R(q)``. As :func:`false_target_joints`: the plain
+    full-pose IK of every pose from its seed, then damped least-squares steps
+    on the whole equation with the model's slope neglected. The commanded
+    pose is the nominal pose at the solution (``commanded_mm``,
+    ``commanded_rotation``); ``residual_mm`` and ``residual_deg`` are the
+    predicted misses.
+    """
+    poses = np.asarray(poses, dtype=float)
+    free = robot._free_joints(fixed)
+    positions, rotations = poses[:, :3, 3], poses[:, :3, :3]
+    q = ik.solve_pose(robot, positions, rotations, np.array(seeds_deg, dtype=float), free, ik.Settings(), 1e-8,
+                      length_mm)[0]
+    q, iterations = ik.solve_pose(robot, positions, rotations, q, free,
+                                  ik.Settings(tol_mm=tol_mm, max_iter=max_iter), tol_deg, length_mm, bias=predict)
+    nominal = robot.forward(q)
+    with np.errstate(over="ignore", invalid="ignore"):
+        at, turned = ik.biased_pose(nominal[:, :3, 3].T, nominal[:, :3, :3], predict(q))
+    residual_mm = np.linalg.norm(at.T - positions, axis=1)
+    residual_deg = np.degrees(np.linalg.norm(ik.rotation_vectors(rotations @ turned.transpose(0, 2, 1)), axis=1))
+    converged = (residual_mm <= tol_mm) & (residual_deg <= tol_deg) & robot.within_limits(q)
+    return CompensationResult(nominal[:, :3, 3], q, iterations, residual_mm, converged,
+                              commanded_rotation=nominal[:, :3, :3], residual_deg=residual_deg)
 
 
 def reachable(robot: Robot, points_mm: NDArray[np.float64], seeds_deg: NDArray[np.float64] | None = None, *,

@@ -165,13 +165,19 @@ def _dls_step(jac: NDArray[np.float64], err: NDArray[np.float64], damping: float
 
 # ---------------------------------------------------------------------- full poses
 def solve_pose(robot, positions: NDArray[np.float64], rotations: NDArray[np.float64], q: NDArray[np.float64],
-               free: NDArray[np.intp], settings: Settings, tol_deg: float, length_mm: float) -> tuple:
+               free: NDArray[np.intp], settings: Settings, tol_deg: float, length_mm: float,
+               bias: Callable | None = None) -> tuple:
     """Damped least squares on position and orientation; returns joints (n, N) degrees and iterations (n,).
 
     ``positions`` (n, 3) mm and ``rotations`` (n, 3, 3) are the wanted tool
     poses. The error of a pose is the position difference and the rotation
     vector of ``R_wanted R^T`` (radians, in the base frame) times
     ``length_mm``; the step solves the 6 x 6 damped system of every pose.
+    ``bias(q (m, N) deg) -> (m, 6)``, if given, is a pose error added to the
+    forward kinematics (position mm, then a rotation vector in radians that
+    turns the tool's orientation in the base frame): the solution then
+    satisfies ``FK(q) + bias(q) = pose`` (false targets of joint models; the
+    bias's Jacobian is neglected, as for :func:`solve`).
     """
     out = np.array(q, dtype=float)
     iterations = np.zeros(len(out), dtype=np.int64)
@@ -179,11 +185,18 @@ def solve_pose(robot, positions: NDArray[np.float64], rotations: NDArray[np.floa
     for start in range(0, len(out), _CHUNK):
         block = slice(start, start + _CHUNK)
         out[block], iterations[block] = _pose_block(robot, positions[block].T, rotations[block], out[block].T,
-                                                    free, settings, tol_rad, length_mm)
+                                                    free, settings, tol_rad, length_mm, bias)
     return out, iterations
 
 
-def _pose_block(robot, targets, rotations, qT, free, settings: Settings, tol_rad: float, length: float):
+def biased_pose(p: NDArray[np.float64], reached: NDArray[np.float64], error: NDArray[np.float64]) -> tuple:
+    """The pose ``(p (3, m), R (m, 3, 3))`` moved by a pose error ``(m, 6)``: position mm, rotation vector rad."""
+    from scipy.spatial.transform import Rotation
+
+    return p + error[:, :3].T, Rotation.from_rotvec(error[:, 3:]).as_matrix() @ reached
+
+
+def _pose_block(robot, targets, rotations, qT, free, settings: Settings, tol_rad: float, length: float, bias=None):
     """:func:`solve_pose` on one block: ``targets`` (3, m), ``rotations`` (m, 3, 3), ``qT`` (N, m)."""
     qT = qT.copy()
     record = robot._moving(free)
@@ -193,8 +206,9 @@ def _pose_block(robot, targets, rotations, qT, free, settings: Settings, tol_rad
     for _ in range(settings.max_iter):
         p, axes, frames = robot._walk(robot._trig(qT), record=record)
         reached = np.stack([np.broadcast_to(a, p.shape) for a in axes], axis=1).transpose(2, 0, 1)   # (m, 3, 3)
-        turn = rotation_vectors(rotations @ reached.transpose(0, 2, 1)).T                             # (3, m) rad
-        err = np.concatenate([targets - p, length * turn])
+        at, turned = (p, reached) if bias is None else biased_pose(p, reached, bias(qT.T))
+        turn = rotation_vectors(rotations @ turned.transpose(0, 2, 1)).T                              # (3, m) rad
+        err = np.concatenate([targets - at, length * turn])
         keep = (np.sum(err[:3] ** 2, axis=0) > settings.tol_mm ** 2) | (np.sum(turn ** 2, axis=0) > tol_rad ** 2)
         if not keep.any():
             break

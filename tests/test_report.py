@@ -93,10 +93,11 @@ def test_report_survives_when_3d_rendering_is_impossible(report, tmp_path, monke
     result, _ = report
     if failure == "no interpreter":
         monkeypatch.setattr(scene.sys, "executable", str(tmp_path / "no-such-python"))
-    else:
-        def crashed(*args, **kwargs):
-            return type("Completed", (), {"returncode": -11, "stderr": "Segmentation fault"})()
-        monkeypatch.setattr(scene.subprocess, "run", crashed)
+    else:                 # a child that dies as a broken OpenGL stack kills it
+        crashing = tmp_path / "crashing-python"
+        crashing.write_text("#!/bin/sh\necho 'Segmentation fault' >&2\nkill -SEGV $$\n")
+        crashing.chmod(0o755)
+        monkeypatch.setattr(scene.sys, "executable", str(crashing))
     text = render_report(result, tmp_path).read_text()
     assert note in text
     assert "The rest of the report is complete" in text and "id=\"compensation\"" in text

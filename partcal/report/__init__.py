@@ -24,7 +24,7 @@ from .. import __version__
 from ..models.kinematic import BASE_PARAMETERS, ROW_PARAMETERS, TOOL_PARAMETERS
 from ..study.registry import ModelResult, RunResult, partitioned_part
 from . import figures
-from .scene import render_scenes
+from .scene import SceneRendering
 
 log = logging.getLogger(__name__)
 
@@ -58,7 +58,9 @@ def context(result: RunResult) -> dict:
     global_best = next((r for r in ranked if partitioned_part(r.model) is None), None)
     part_best = next((r for r in ranked if partitioned_part(r.model) is not None), None)
     shown = [r for r in (global_best, part_best) if r is not None]
-    return {
+    scenes, captions = scene_specs(result)
+    rendering = SceneRendering(scenes)            # a child process draws them while the figures are made here
+    out = {
         "name": cfg.name, "version": __version__, "seed": cfg.seed, "seconds": result.seconds,
         "date": _dt.datetime.now().strftime("%Y-%m-%d %H:%M"), "config_path": str(cfg.source),
         "folds": cfg.cv_folds, "models": result.models,
@@ -80,7 +82,6 @@ def context(result: RunResult) -> dict:
                            "path_svg": _b64(figures.errors_along_path(n, m.errors_mm, {r.spec.name: r.predictions[n] for r in shown})),
                            "hist_svg": _b64(figures.residual_histogram(n, m.errors_mm, {r.spec.name: r.predictions[n] for r in shown}))}
                           for n, m in result.datasets.items()],
-        "scenes": scene_entries(result),
         "convergence_svg": _optional_b64(figures.convergence({r.spec.name: r.model for r in result.models})),
         "equations": [{"name": r.spec.name, "lines": lines} for r in result.models
                       if (lines := r.model.equations()) is not None],
@@ -89,6 +90,8 @@ def context(result: RunResult) -> dict:
         "registration": registration_rows(result),
         "design": design_summary(result),
     }
+    out["scenes"] = scene_entries(rendering, captions)
+    return out
 
 
 def design_summary(result: RunResult) -> dict | None:
@@ -275,8 +278,8 @@ def _parameter_cell(row: dict) -> dict:
             "nominal": show(row["nominal"]), "correction": show(row["correction"], "+")}
 
 
-def scene_entries(result: RunResult) -> list[dict]:
-    """3-D pictures of every partitioned model, also the residual of a hybrid (rendered in a child process)."""
+def scene_specs(result: RunResult) -> tuple[dict[str, dict], dict[str, str]]:
+    """What the 3-D picture of every partitioned model (also the residual of a hybrid) shows, and its caption."""
     ident = result.datasets["identification"]
     tests = {n: m for n, m in result.datasets.items() if n != "identification"}
     specs, captions = {}, {}
@@ -303,12 +306,17 @@ def scene_entries(result: RunResult) -> list[dict]:
                                  f"in {space}; identification points coloured by region"
                                  f"{f', {part.region_noun}s as boxes' if boxes is not None else ''}; test paths "
                                  "coloured by the residual error after the model's prediction.")
-    pngs, problem = render_scenes(specs)
+    return specs, captions
+
+
+def scene_entries(rendering: SceneRendering, captions: dict[str, str]) -> list[dict]:
+    """The report's 3-D pictures, once their child process has drawn them."""
+    pngs, problem = rendering.result()
     if problem:
         log.warning("report: %s", problem)
     return [{"name": name, "caption": captions[name], "png": _b64(pngs[name]) if name in pngs else None,
              "note": f"No picture: {problem or 'rendering unavailable'}. The rest of the report is complete."}
-            for name in specs]
+            for name in captions]
 
 
 def compensation_entries(result: RunResult) -> dict:

@@ -23,31 +23,52 @@ TIMEOUT_S = 180
 
 def render_scenes(scenes: dict[str, dict]) -> tuple[dict[str, bytes], str | None]:
     """Render each scene to PNG bytes; return ``(pngs, problem)`` (problem: why some are missing)."""
-    if not scenes:
-        return {}, None
-    with tempfile.TemporaryDirectory(prefix="partcal-scene-") as tmp:
+    return SceneRendering(scenes).result()
+
+
+class SceneRendering:
+    """The scenes' child process, started at once; :meth:`result` waits for it (the report draws its
+    other figures meanwhile, on the other core)."""
+
+    def __init__(self, scenes: dict[str, dict]):
+        self.names, self.proc, self.problem = list(scenes), None, None
+        self._tmp = tempfile.TemporaryDirectory(prefix="partcal-scene-")
+        if not scenes:
+            return
         arrays = {}
         for i, spec in enumerate(scenes.values()):
             for key, value in spec.items():
                 arrays[f"{i}__{key}"] = np.asarray(value)
-        np.savez(Path(tmp) / "scenes.npz", n=len(scenes), **arrays)
+        np.savez(Path(self._tmp.name) / "scenes.npz", n=len(scenes), **arrays)
         env = {**os.environ, "VTK_DEFAULT_OPENGL_WINDOW": "vtkEGLRenderWindow"}
         try:
-            proc = subprocess.run([sys.executable, "-m", "partcal.report.scene", tmp], capture_output=True,
-                                  text=True, timeout=TIMEOUT_S, env=env)
-        except subprocess.TimeoutExpired:
-            return {}, f"3-D rendering took longer than {TIMEOUT_S} s and was stopped"
+            self.proc = subprocess.Popen([sys.executable, "-m", "partcal.report.scene", self._tmp.name],
+                                         stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=env)
         except OSError as exc:
-            return {}, f"3-D rendering could not start ({exc.strerror or exc})"
-        pngs = {}
-        for i, name in enumerate(scenes):
-            png = Path(tmp) / f"{i}.png"
-            if png.exists():
-                pngs[name] = png.read_bytes()
-        if proc.returncode != 0 or len(pngs) < len(scenes):
-            last = (proc.stderr.strip().splitlines() or ["no message"])[-1]
-            return pngs, f"3-D rendering failed (exit {proc.returncode}: {last[:200]})"
-        return pngs, None
+            self.problem = f"3-D rendering could not start ({exc.strerror or exc})"
+
+    def result(self) -> tuple[dict[str, bytes], str | None]:
+        """``(pngs, problem)``: PNG bytes per scene name, and why some are missing (None if none is)."""
+        try:
+            if self.proc is None:
+                return {}, self.problem
+            try:
+                _, stderr = self.proc.communicate(timeout=TIMEOUT_S)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.communicate()
+                return {}, f"3-D rendering took longer than {TIMEOUT_S} s and was stopped"
+            pngs = {}
+            for i, name in enumerate(self.names):
+                png = Path(self._tmp.name) / f"{i}.png"
+                if png.exists():
+                    pngs[name] = png.read_bytes()
+            if self.proc.returncode != 0 or len(pngs) < len(self.names):
+                last = (stderr.strip().splitlines() or ["no message"])[-1]
+                return pngs, f"3-D rendering failed (exit {self.proc.returncode}: {last[:200]})"
+            return pngs, None
+        finally:
+            self._tmp.cleanup()
 
 
 def _draw(spec: dict, path: Path) -> None:

@@ -53,6 +53,8 @@ TRACKERS = {"motoman_sk120": [3500.0, 0.0, -800.0], "universal_robots_ur10": [25
 # The UR10's built-in tool is the bare flange centre, on the last joint's axis; a tracker target sits off it
 # (with the target on the axis, the rank analysis at nominal drops a parameter the true robot needs).
 TOOLS = {"universal_robots_ur10": [60.0, 0.0, 120.0]}
+BOUND_POOL = 10_000       # candidates of the bound for any design
+BOUND_TEST = 5000         # test poses of the linear prediction
 
 
 def virtual_robot(nominal, rng: np.random.Generator) -> VirtualRobot:
@@ -77,16 +79,66 @@ def trial(nominal, vr, q, test_q, test_meas, test_true, rng, space) -> tuple[flo
     return rms[0], rms[1], o1
 
 
+def noise_sigma(nominal, q) -> np.ndarray:
+    """The bench tracker's noise per coordinate at poses ``q`` (mm): 10 ppm of the distance."""
+    return 1e-5 * np.linalg.norm(nominal.positions(q) - TRACKERS[nominal.name], axis=1)
+
+
+def predicted_rms(blocks, sigma, target) -> float:
+    """Predicted 3-D test RMS (mm) of an unweighted fit on ``blocks`` (n, 3, L) with noise ``sigma`` (n,)."""
+    flat = blocks.reshape(-1, blocks.shape[2])
+    inverse = np.linalg.inv(flat.T @ flat)
+    noise = (flat * np.repeat(sigma**2, 3)[:, None]).T @ flat
+    return float(np.sqrt(np.trace(target @ inverse @ noise @ inverse)))
+
+
+def linear_rows(nominal, designs: dict, seeds: int) -> list[list]:
+    """The linear prediction for the seeds' planned and random sets, and the bound for any design.
+
+    Over ``BOUND_POOL`` joint-limit candidates and ``BOUND_TEST`` test poses (a fixed seed: the nominal
+    robot, and so the Jacobian, is the same for every seed). The bound with the tracker's noise weights
+    each pose by its noise (a weighted fit); with uniform noise it is what a planner that does not know
+    where the tracker stands can hope for, compared with random sets under the same uniform noise.
+    """
+    rng = np.random.default_rng([22, 1])
+    space = plan.workspace(nominal, random_state=rng, n_poses=BOUND_POOL)
+    test = plan.workspace(nominal, random_state=rng, n_poses=BOUND_TEST)
+    s = space.structural
+    target = np.einsum("cri,crj->ij", test.blocks[:, :, s], test.blocks[:, :, s]) / BOUND_TEST
+    sigma = noise_sigma(nominal, space.q_deg)
+    uniform = float(np.sqrt(np.mean(sigma**2)))
+    bound_tracker = design.i_optimal_bound(space.blocks[:, :, s] / sigma[:, None, None], target).bound
+    bound_uniform = design.i_optimal_bound(space.blocks[:, :, s], target).bound * uniform**2
+    rows = []
+    for n in COUNTS:
+        pred = {}
+        for label in ("planned", "random"):
+            for noise in ("tracker", "uniform"):
+                values = []
+                for q in designs[n][label]:
+                    blocks = (design.model_jacobian(nominal, q)[0] * space.scales).reshape(len(q), 3, -1)[:, :, s]
+                    values.append(predicted_rms(blocks, noise_sigma(nominal, q) if noise == "tracker"
+                                                else np.full(len(q), uniform), target))
+                pred[label, noise] = float(np.median(values))
+        row = [nominal.name, n]
+        for noise, bound in (("tracker", bound_tracker), ("uniform", bound_uniform)):
+            rd, pl, bd = pred["random", noise], pred["planned", noise], float(np.sqrt(bound / n))
+            row += [f"{rd:.4f}", f"{pl:.4f}", f"{100 * (1 - pl / rd):.0f}%", f"{bd:.4f}", f"{100 * (1 - bd / rd):.0f}%"]
+        rows.append(row)
+    return rows
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=20)
     args = parser.parse_args()
-    rows = []
+    rows, linear = [], []
     for name in TRACKERS:
         nominal = load_robot(name)
         if name in TOOLS:
             nominal = nominal.replace(tool_mm=np.array(TOOLS[name]))
         results = {n: {"planned": [], "random": []} for n in COUNTS}
+        designs = {n: {"planned": [], "random": []} for n in COUNTS}
         start = time.perf_counter()
         for seed in range(args.seeds):
             rng = np.random.default_rng([seed, 22])
@@ -99,6 +151,7 @@ def main() -> None:
                 random = plan.candidates_within_limits(nominal, n, rng)
                 for label, q in (("planned", planned), ("random", random)):
                     results[n][label].append(trial(nominal, vr, q, test_q, test_meas, test_true, rng, space))
+                    designs[n][label].append(q)
             print(f"{name}: seed {seed + 1}/{args.seeds} ({time.perf_counter() - start:.0f} s)", file=sys.stderr)
         for n in COUNTS:
             pl, rd = np.array(results[n]["planned"]), np.array(results[n]["random"])
@@ -106,9 +159,15 @@ def main() -> None:
             rows.append([name, n, f"{med_p[0]:.4f}", f"{med_r[0]:.4f}", f"{100 * (1 - med_p[0] / med_r[0]):.0f}%",
                          f"{med_p[1]:.4f}", f"{med_r[1]:.4f}", f"{100 * (1 - med_p[1] / med_r[1]):.0f}%",
                          f"{med_p[2]:.4f}", f"{med_r[2]:.4f}", f"{np.mean(pl[:, 2] > med_r[2]):.0%}"])
+        linear += linear_rows(nominal, designs, args.seeds)
+        print(f"{name}: bound ({time.perf_counter() - start:.0f} s)", file=sys.stderr)
     print_table(f"DH test RMS (mm, medians over {args.seeds} seeds, 500 test poses): planned vs random poses",
                 ["robot", "N", "meas planned", "meas random", "less", "true planned", "true random", "less",
                  "O1 planned", "O1 random", "O1 > random median"], rows)
+    print_table(f"Predicted test RMS (mm, linear, medians over {args.seeds} seeds, {BOUND_TEST} test poses) and the "
+                f"bound for any N poses of {BOUND_POOL} candidates; 'less' is against random",
+                ["robot", "N", "tracker: random", "planned", "less", "bound (weighted fit)", "less",
+                 "uniform: random", "planned", "less", "bound", "less"], linear)
 
 
 if __name__ == "__main__":

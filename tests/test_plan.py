@@ -161,6 +161,26 @@ def test_detmax_refuses_a_bad_size_or_start():
         design.detmax(blocks, 2, start=[1, 1])
 
 
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2**31 - 1), st.integers(2, 5), st.integers(1, 3))
+def test_the_i_optimal_bound_is_below_every_exact_design(seed, width, rows):
+    rng = np.random.default_rng(seed)
+    count = 12
+    blocks = rng.normal(size=(count, rows, width)) * rng.uniform(0.1, 10, size=width)
+    test = rng.normal(size=(40, width))
+    target = test.T @ test / 40
+    result = design.i_optimal_bound(blocks, target)
+    assert result.bound <= result.value * (1 + 1e-12) and result.weights.sum() == pytest.approx(1.0)
+    uniform = np.einsum("cri,crj->ij", blocks, blocks) / count
+    assert result.value <= np.trace(np.linalg.solve(uniform, target)) * (1 + 1e-9)   # never worse than its start
+    n = max(-(-width // rows), 1) + 1
+    for start in (None, rng.choice(count, n, replace=False)):
+        chosen = design.detmax(blocks, n, start=start, random_state=seed).indices if start is None else start
+        b = blocks[chosen].reshape(-1, width)
+        if np.linalg.matrix_rank(b) == width:
+            assert n * np.trace(np.linalg.solve(b.T @ b, target)) >= result.bound * (1 - 1e-9)
+
+
 # ---------------------------------------------------------------------- planning
 @pytest.fixture(scope="module")
 def sk120_space(sk120):

@@ -355,8 +355,9 @@ def _cmd_plan(args) -> int:
                                  callback=progress)
         plan.write_plan(robot, result.q_deg, args.output, comment=(
             f"Pose list planned by partcal {__version__} for {robot.name} ({model.describe(robot)}): {args.n} of "
-            f"{where}, D-optimal (DETMAX), seed {args.seed}.\nJoint angles in degrees, nominal tool positions in mm. Measure these poses; the "
-            f"tracker's positions become x_meas,y_meas,z_meas (mm).\n{result.evaluation.indices.text()}"))
+            f"{where}, D-optimal (DETMAX), seed {args.seed}.\nJoint angles in degrees, nominal tool positions in "
+            f"mm. Measure these poses; the tracker's positions become x_meas,y_meas,z_meas (mm).\n"
+            f"{result.evaluation.indices.text()}"))
         print("\n".join(result.evaluation.lines()))
         print(f"wrote {args.n} poses to {args.output} ({result.exchange.exchanges} exchanges, log det "
               f"{result.exchange.start_logdet:.3f} -> {result.exchange.logdet:.3f}, "
@@ -382,7 +383,8 @@ def _int_list(text: str) -> tuple[int, ...]:
     try:
         return tuple(int(v) for v in text.split(","))
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected whole numbers separated by commas (2,3); got {text!r}") from None
+        raise argparse.ArgumentTypeError(f"expected whole numbers separated by commas (2,3); got {text!r}") \
+            from None
 
 
 def _one_or_many(values: tuple[int, ...]):

@@ -262,6 +262,8 @@ def test_compliance_is_planned_for_by_its_sags_and_by_the_payload_when_there_is_
         assert any(n.startswith("sag[3,") for n in ev.identified)
     # without a payload the compliance has no column; with one it is the tool point's share of the sags
     assert {"compliance[2]", "compliance[3]"} <= set(evs[0].never)
+    assert "a compliance has no column without a payload" in evs[0].lines()[2]
+    assert "without a payload" not in evs[1].lines()[2]
     assert {"compliance[2]", "compliance[3]"} <= set(evs[1].identified)
 
 
@@ -283,7 +285,7 @@ def test_a_plan_with_harmonics_identifies_what_random_sets_do_and_raises_its_det
 def test_a_workspace_of_another_model_is_refused(sk120, sk120_space):
     with pytest.raises(ValueError, match="differs from the workspace's"):
         plan.plan_poses(sk120, 15, space=sk120_space, model=design.PlannedModel(joint_harmonics=1))
-    with pytest.raises(ValueError, match=r"compliance must be a list of distinct joint numbers in \[1, 6\].*got \(7,\)"):
+    with pytest.raises(ValueError, match=r"compliance must be a list of distinct joint numbers in \[1, 6\].*\(7,\)"):
         plan.workspace(sk120, model=design.PlannedModel(compliance=(7,)))
 
 

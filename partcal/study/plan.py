@@ -101,6 +101,8 @@ class Evaluation:
     position_rms_mm, position_p95_mm, position_max_mm : float
         Predicted 3-D standard deviation of the identified robot's position over the
         workspace poses: RMS, 95th percentile and largest.
+    note : str
+        Why some of ``never`` cannot be identified, where the model says (a compliance without a payload).
     """
 
     indices: design.Indices
@@ -114,6 +116,7 @@ class Evaluation:
     position_rms_mm: float
     position_p95_mm: float
     position_max_mm: float
+    note: str = ""
 
     def lines(self) -> list[str]:
         """The text ``partcal plan --evaluate`` prints."""
@@ -123,7 +126,8 @@ class Evaluation:
                + (", ".join(self.missing) if self.missing else "none"),
                "not identifiable from any pose of the workspace (kept nominal; where positions cannot separate "
                "them, equivalent parameters carry their effect): "
-               + (", ".join(self.never) if self.never else "none"),
+               + (", ".join(self.never) if self.never else "none")
+               + (f"; {self.note}" if self.note else ""),
                f"predicted position uncertainty of the identified robot over the workspace, tracker noise "
                f"{self.noise_mm:g} mm per coordinate: RMS {self.position_rms_mm:.4f} mm, 95% "
                f"{self.position_p95_mm:.4f} mm, max {self.position_max_mm:.4f} mm"
@@ -218,9 +222,11 @@ def evaluate_poses(robot: Robot, q_deg, *, space: Workspace | None = None, noise
         uncertainty = design.position_std(space.blocks[:, :, own], cov)
     missing = tuple(label[i] for i in np.setdiff1d(space.structural, own))
     never = tuple(label[i] for i in np.setdiff1d(np.flatnonzero(wanted), space.structural))
+    note = ("a compliance has no column without a payload (payload_kg): the sags carry the gravity"
+            if model.compliance and model.payload_kg == 0 else "")
     return Evaluation(ind, tuple(label), tuple(u for _, u in names), tuple(label[i] for i in own), missing, never, std,
                       float(noise_mm), float(np.sqrt(np.mean(uncertainty**2))), float(np.percentile(uncertainty, 95)),
-                      float(uncertainty.max()))
+                      float(uncertainty.max()), note)
 
 
 # ---------------------------------------------------------------------- planning

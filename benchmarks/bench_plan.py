@@ -20,7 +20,9 @@ of them gets a small O1. The table gives medians over the seeds.
 A second table gives the linear prediction (``sigma^2 tr(T (J^T J)^-1 ...)``
 over 5000 test poses, the parameter noise alone) for the same planned and
 random sets, and the lower bound for ANY N poses of 10,000 candidates: the
-approximate I-optimal design (``design.i_optimal_bound``) divided by N.
+approximate I-optimal design (``design.i_optimal_bound``) divided by N. The
+candidates stand for the whole workspace: 10,000 more with joints at their
+limits lower the bound's RMS by 0.4% (SK120) and 0.005% (UR10).
 
 Target (issue 22): the planned sets' median test RMS at least 25% below the random sets', and their
 O1 above the random sets' median. Measured (20 seeds, 2026-11-23), test RMS against the true

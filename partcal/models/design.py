@@ -78,6 +78,11 @@ class PlannedModel:
     joint_harmonics: int | tuple[int, ...] = 0
     payload_kg: float = 0.0
 
+    def __post_init__(self):
+        for name in ("compliance", "joint_harmonics"):          # lists as tuples: the model is a value
+            if isinstance(getattr(self, name), list):
+                object.__setattr__(self, name, tuple(getattr(self, name)))
+
     def check(self, robot: Robot) -> "PlannedModel":
         """Refuse options that do not fit ``robot`` (one line naming the option); returns self."""
         for name, problem in (("compliance", compliance_problem), ("joint_harmonics", harmonics_problem)):

@@ -25,6 +25,7 @@ _EXPORTS = {
     "models.series": ["ErrorModel"],
     "models.gp": ["GaussianProcessErrorModel"],
     "models.kinematic": ["KinematicModel"],
+    "models.design": ["PlannedModel"],
     "models.swarm": ["SwarmConfig", "SwarmResult", "minimize", "minimize_batch"],
     "models.partition": ["KMeansPartition", "Octree"],
     "models.partitioned": ["PartitionedErrorModel", "select_granularity"],

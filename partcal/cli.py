@@ -317,6 +317,7 @@ def _cmd_equations(args) -> int:
 def _cmd_plan(args) -> int:
     from .data.measurements import read_columns
     from .robot.description import joint_columns, load_robot
+    from .models import design
     from .study import plan
 
     planning = args.n is not None
@@ -336,7 +337,10 @@ def _cmd_plan(args) -> int:
     robot = load_robot(args.robot)
     say = (lambda text: None) if args.quiet else (lambda text: print(f"partcal: plan: {text}", file=sys.stderr))
     start = time.perf_counter()
-    options = {"base": not args.no_base, "tool": not args.no_tool}
+    model = design.PlannedModel(base=not args.no_base, tool=not args.no_tool, compliance=args.compliance or (),
+                                joint_harmonics=_one_or_many(args.joint_harmonics or (0,)),
+                                payload_kg=args.payload_kg).check(robot)
+    options = {"model": model}
     evaluated = read_columns(args.evaluate, [joint_columns(robot.n_joints)], fmt=_format(args))[1] \
         if args.evaluate else None
     if args.candidates:
@@ -352,22 +356,23 @@ def _cmd_plan(args) -> int:
         where = f"{args.pool} random poses within the joint limits" + (" and the box" if box is not None else "")
     if planning or args.curve:                             # bad input gets its one line before any progress
         plan.check_count(robot, args.n if planning else plan.min_poses(space.structural.size), space)
-    say(f"{robot.name}: {space.structural.size} identifiable parameters over {where} "
+    say(f"{robot.name}, {model.describe(robot)}: {space.structural.size} identifiable parameters over {where} "
         f"({time.perf_counter() - start:.1f} s)")
     if args.evaluate:
         q = evaluated
         print(f"{args.evaluate}: {len(q)} poses of {robot.name}")
-        print("\n".join(plan.evaluate_poses(robot, q, space=space, noise_mm=args.noise_mm, **options).lines()))
+        print("\n".join(plan.evaluate_poses(robot, q, space=space, noise_mm=args.noise_mm).lines()))
     if planning:
         def progress(k: int, logdet: float) -> None:
             if k % 10 == 0:
                 say(f"DETMAX exchange {k}: log det {logdet:.4f}")
         result = plan.plan_poses(robot, args.n, space=space, noise_mm=args.noise_mm, random_state=args.seed,
-                                 callback=progress, **options)
+                                 callback=progress)
         plan.write_plan(robot, result.q_deg, args.output, comment=(
-            f"Pose list planned by partcal {__version__} for {robot.name}: {args.n} of {where}, D-optimal (DETMAX), "
-            f"seed {args.seed}.\nJoint angles in degrees, nominal tool positions in mm. Measure these poses; the "
-            f"tracker's positions become x_meas,y_meas,z_meas (mm).\n{result.evaluation.indices.text()}"))
+            f"Pose list planned by partcal {__version__} for {robot.name} ({model.describe(robot)}): {args.n} of "
+            f"{where}, D-optimal (DETMAX), seed {args.seed}.\nJoint angles in degrees, nominal tool positions in "
+            f"mm. Measure these poses; the tracker's positions become x_meas,y_meas,z_meas (mm).\n"
+            f"{result.evaluation.indices.text()}"))
         print("\n".join(result.evaluation.lines()))
         print(f"wrote {args.n} poses to {args.output} ({result.exchange.exchanges} exchanges, log det "
               f"{result.exchange.start_logdet:.3f} -> {result.exchange.logdet:.3f}, "
@@ -376,7 +381,7 @@ def _cmd_plan(args) -> int:
         largest = args.curve_max or max(3 * space.structural.size, args.n or 0)
         counts = plan.curve_counts(space.structural.size, min(largest, len(space.q_deg)))
         rows = plan.pose_curve(robot, counts, space=space, noise_mm=args.noise_mm, random_state=args.seed,
-                               callback=lambda k, total, row: say(f"curve [{k}/{total}] {row['n']} poses"), **options)
+                               callback=lambda k, total, row: say(f"curve [{k}/{total}] {row['n']} poses"))
         print("\n".join(plan.curve_lines(rows, args.noise_mm)))
     return 0
 
@@ -386,6 +391,20 @@ class _Parser(argparse.ArgumentParser):
 
     def error(self, message: str):
         self.exit(2, f"partcal: error: {self.prog}: {message} (see '{self.prog} --help')\n")
+
+
+def _int_list(text: str) -> tuple[int, ...]:
+    """``2,3`` -> ``(2, 3)``: whole numbers separated by commas."""
+    try:
+        return tuple(int(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected whole numbers separated by commas (2,3); got {text!r}") \
+            from None
+
+
+def _one_or_many(values: tuple[int, ...]):
+    """One number for every joint, or the list as given."""
+    return values[0] if len(values) == 1 else values
 
 
 def _positive_int(text: str) -> int:
@@ -471,6 +490,12 @@ def build_parser() -> argparse.ArgumentParser:
     pln.add_argument("--seed", type=int, default=0, help="seed of the candidates and the exchange (default 0)")
     pln.add_argument("--no-base", action="store_true", help="the base pose is known (not identified)")
     pln.add_argument("--no-tool", action="store_true", help="the tool offset is known (not identified)")
+    pln.add_argument("--compliance", type=_int_list, metavar="J,J",
+                     help="plan for the gravity compliance of these joints too (as kind: kinematic's compliance)")
+    pln.add_argument("--joint-harmonics", type=_int_list, metavar="K[,K...]",
+                     help="plan for K transmission harmonics of every joint, or one K per joint")
+    pln.add_argument("--payload-kg", type=float, default=0.0,
+                     help="the payload the measurement carries at the tool (kg, default 0; with --compliance)")
     pln.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
     pln.set_defaults(func=_cmd_plan)
     return parser

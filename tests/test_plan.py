@@ -54,7 +54,7 @@ def test_the_jacobian_of_a_planar_arm_is_the_hand_derived_one():
     got = jac[:, columns(robot, list(hand))]
     np.testing.assert_allclose(got, np.column_stack([v.ravel() for v in hand.values()]), atol=1e-12)
     assert wanted.all()
-    assert not design.model_jacobian(robot, q, base=False, tool=False)[1][-9:].any()
+    assert not design.model_jacobian(robot, q, design.PlannedModel(base=False, tool=False))[1][-9:].any()
 
 
 def test_indices_match_a_hand_computation_on_two_poses():
@@ -161,6 +161,26 @@ def test_detmax_refuses_a_bad_size_or_start():
         design.detmax(blocks, 2, start=[1, 1])
 
 
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2**31 - 1), st.integers(2, 5), st.integers(1, 3))
+def test_the_i_optimal_bound_is_below_every_exact_design(seed, width, rows):
+    rng = np.random.default_rng(seed)
+    count = 12
+    blocks = rng.normal(size=(count, rows, width)) * rng.uniform(0.1, 10, size=width)
+    test = rng.normal(size=(40, width))
+    target = test.T @ test / 40
+    result = design.i_optimal_bound(blocks, target)
+    assert result.bound <= result.value * (1 + 1e-12) and result.weights.sum() == pytest.approx(1.0)
+    uniform = np.einsum("cri,crj->ij", blocks, blocks) / count
+    assert result.value <= np.trace(np.linalg.solve(uniform, target)) * (1 + 1e-9)   # never worse than its start
+    n = max(-(-width // rows), 1) + 1
+    for start in (None, rng.choice(count, n, replace=False)):
+        chosen = design.detmax(blocks, n, start=start, random_state=seed).indices if start is None else start
+        b = blocks[chosen].reshape(-1, width)
+        if np.linalg.matrix_rank(b) == width:
+            assert n * np.trace(np.linalg.solve(b.T @ b, target)) >= result.bound * (1 - 1e-9)
+
+
 # ---------------------------------------------------------------------- planning
 @pytest.fixture(scope="module")
 def sk120_space(sk120):
@@ -205,13 +225,77 @@ def test_the_curve_falls_with_the_pose_count(sk120, sk120_space):
     assert all(r["position_rms_mm"] <= r["random_position_rms_mm"] for r in rows)
 
 
+# ---------------------------------------------------------------------- joint errors in the plan
+def test_harmonic_columns_are_the_joint_columns_times_sin_and_cos_by_hand():
+    robot = planar_arm()
+    q = np.array([[30.0, 45.0], [-60.0, 100.0], [10.0, -20.0]])
+    model = design.PlannedModel(joint_harmonics=(1, 2))
+    names = [n for n, _ in design.model_parameters(robot, model)[0]]
+    jac = design.model_jacobian(robot, q, model)[0]
+    assert names[-6:] == ["sin1[1]", "cos1[1]", "sin1[2]", "cos1[2]", "sin2[2]", "cos2[2]"]
+    c1, s1 = np.cos(np.radians(q[:, 0])), np.sin(np.radians(q[:, 0]))
+    c12, s12 = np.cos(np.radians(q.sum(1))), np.sin(np.radians(q.sum(1)))
+    per_deg, zero = np.pi / 180, np.zeros(3)
+    turn1 = np.column_stack([-400 * s1 - 300 * s12, 400 * c1 + 300 * c12, zero]) * per_deg   # d p / d q1, mm/deg
+    turn2 = np.column_stack([-300 * s12, 300 * c12, zero]) * per_deg
+    r1, r2 = np.radians(q[:, 0])[:, None], np.radians(q[:, 1])[:, None]
+    hand = [turn1 * np.sin(r1), turn1 * np.cos(r1), turn2 * np.sin(r2), turn2 * np.cos(r2), turn2 * np.sin(2 * r2),
+            turn2 * np.cos(2 * r2)]
+    np.testing.assert_allclose(jac[:, -6:], np.column_stack([h.ravel() for h in hand]), atol=1e-12)
+
+
+def test_an_arm_turning_about_vertical_axes_has_no_gravity_torque_to_plan_for():
+    robot = planar_arm()
+    model = design.PlannedModel(compliance=(1, 2), payload_kg=10.0)
+    space = plan.workspace(robot, model=model, random_state=0, n_poses=200)
+    ev = plan.evaluate_poses(robot, space.q_deg[:10], space=space)
+    assert {"compliance[1]", "compliance[2]", "sag[1,f2]"} <= set(ev.never)
+    assert not any(n.startswith(("sag", "compliance")) for n in ev.identified)
+
+
+def test_compliance_is_planned_for_by_its_sags_and_by_the_payload_when_there_is_one(sk120):
+    at_rest, loaded = (design.PlannedModel(compliance=(2, 3), payload_kg=p) for p in (0.0, 40.0))
+    spaces = [plan.workspace(sk120, model=m, random_state=3, n_poses=400) for m in (at_rest, loaded)]
+    evs = [plan.plan_poses(sk120, 25, space=s, random_state=0).evaluation for s in spaces]
+    for ev in evs:
+        assert ev.missing == () and any(n.startswith("sag[2,") for n in ev.identified)
+        assert any(n.startswith("sag[3,") for n in ev.identified)
+    # without a payload the compliance has no column; with one it is the tool point's share of the sags
+    assert {"compliance[2]", "compliance[3]"} <= set(evs[0].never)
+    assert "a compliance has no column without a payload" in evs[0].lines()[2]
+    assert "without a payload" not in evs[1].lines()[2]
+    assert {"compliance[2]", "compliance[3]"} <= set(evs[1].identified)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_a_plan_with_harmonics_identifies_what_random_sets_do_and_raises_its_determinant(sk120, seed):
+    model = design.PlannedModel(joint_harmonics=(1, 2, 2, 0, 0, 1))
+    space = plan.workspace(sk120, model=model, random_state=seed, n_poses=300)
+    result = plan.plan_poses(sk120, 20, space=space, random_state=seed)
+    assert result.exchange.logdet >= result.exchange.start_logdet
+    rng = np.random.default_rng(seed)
+    harmonic = {n for n in result.evaluation.names if n.startswith(("sin", "cos"))}
+    assert len(harmonic) == 12
+    for _ in range(5):
+        random = plan.evaluate_poses(sk120, space.q_deg[rng.choice(300, 20, replace=False)], space=space)
+        assert (set(random.identified) & harmonic) <= set(result.evaluation.identified)
+    assert harmonic - set(result.evaluation.never) <= set(result.evaluation.identified)
+
+
+def test_a_workspace_of_another_model_is_refused(sk120, sk120_space):
+    with pytest.raises(ValueError, match="differs from the workspace's"):
+        plan.plan_poses(sk120, 15, space=sk120_space, model=design.PlannedModel(joint_harmonics=1))
+    with pytest.raises(ValueError, match=r"compliance must be a list of distinct joint numbers in \[1, 6\].*\(7,\)"):
+        plan.workspace(sk120, model=design.PlannedModel(compliance=(7,)))
+
+
 # ---------------------------------------------------------------------- the command line
 def test_plan_writes_a_pose_list_that_evaluate_reads(tmp_path):
     out = tmp_path / "poses.csv"
     code, stdout, err = cli("plan", "motoman_sk120", "-n", 12, "-o", out, "--pool", 300, "--seed", 4)
     assert code == 0, err
     assert f"wrote 12 poses to {out}" in stdout and "O1 " in stdout
-    assert err.startswith("partcal: plan: motoman_sk120: ")
+    assert err.startswith("partcal: plan: motoman_sk120, DH with base and tool: ")
     cols, q, _ = read_columns(out, [["q1", "q2", "q3", "q4", "q5", "q6"]])
     _, nominal, _ = read_columns(out, [["x_nom", "y_nom", "z_nom"]])
     robot = load_robot("motoman_sk120")
@@ -238,6 +322,26 @@ def test_plan_from_the_users_candidates(tmp_path):
     assert all(np.abs(q - row).max(axis=1).min() < 1e-5 for row in chosen)
 
 
+def test_plan_for_compliance_and_harmonics_from_the_command_line(tmp_path):
+    out = tmp_path / "poses.csv"
+    code, stdout, err = cli("plan", "motoman_sk120", "-n", 25, "-o", out, "--pool", 300, "--compliance", "2,3",
+                            "--joint-harmonics", "1", "--payload-kg", 40, "-q")
+    assert code == 0, err
+    assert "sin1[2]" in stdout and "sag[2,f3]" in stdout and "compliance[3]" in stdout
+    assert "(DH with base and tool; compliance of joints 2, 3 (payload 40 kg); 1 harmonics per joint)" in \
+        out.read_text().splitlines()[0]
+    code, evaluated, err = cli("plan", "motoman_sk120", "--evaluate", out, "--compliance", "2,3", "--joint-harmonics",
+                               "1,1,1,0,0,0", "-q")
+    assert code == 0, err
+    assert "sag[2,f3]" in evaluated and "sin1[2]" in evaluated and "sin1[6]" not in evaluated
+
+
+def test_a_joint_list_that_is_not_numbers_gets_one_line_and_exit_2(tmp_path):
+    with pytest.raises(SystemExit) as exit_:
+        cli("plan", "motoman_sk120", "-n", 10, "-o", tmp_path / "p.csv", "--compliance", "2;3")
+    assert exit_.value.code == 2
+
+
 @pytest.mark.parametrize("args, message", [
     (["plan", "no_such_robot", "-n", "10", "-o", "{tmp}/p.csv"], "robot 'no_such_robot': no such file"),
     (["plan", "motoman_sk120", "-n", "50", "-o", "{tmp}/p.csv", "--pool", "40"],
@@ -248,6 +352,12 @@ def test_plan_from_the_users_candidates(tmp_path):
     (["plan", "motoman_sk120", "--evaluate", "{tmp}/bad.csv"], r"bad.csv:1: column 'q6' is missing"),
     (["plan", "motoman_sk120", "-n", "10", "-o", "{tmp}/p.csv", "--box", "1", "0", "0", "0", "1", "1"],
      "each min below its max"),
+    (["plan", "motoman_sk120", "-n", "10", "-o", "{tmp}/p.csv", "--compliance", "2,7"],
+     r"compliance must be a list of distinct joint numbers in \[1, 6\]"),
+    (["plan", "motoman_sk120", "-n", "10", "-o", "{tmp}/p.csv", "--joint-harmonics", "1,2"],
+     r"joint_harmonics must be an int in \[0, 8\] or a list of 6 such ints.*got \(1, 2\)"),
+    (["plan", "motoman_sk120", "-n", "10", "-o", "{tmp}/p.csv", "--payload-kg", "-1"],
+     r"payload_kg must be a number >= 0 \(kg\); got -1.0"),
     (["plan", "motoman_sk120", "-n", "10", "-o", "{tmp}/p.csv", "--noise-mm", "0"],
      "--noise-mm must be a positive number of mm; got 0.0"),
     (["plan", "motoman_sk120", "-n", "10", "-o", "{tmp}/cand.csv", "--candidates", "{tmp}/cand.csv"],

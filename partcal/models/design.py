@@ -20,14 +20,20 @@ three rows per pose) at the nominal parameters:
 - **D-optimal selection**: Mitchell's DETMAX exchange, which maximises
   ``det(J^T J)`` over subsets of a candidate pool; the result never has a
   smaller determinant than the start.
+- **how far from the best any design can be**: the approximate (continuous)
+  I-optimal design over the candidates, whose value bounds from below the
+  predicted mean squared position error of every ``n``-pose design
+  (:func:`i_optimal_bound`).
 
-The Jacobian comes from :func:`model_jacobian`, the one place that says which
-kinematic model is planned for.
+The Jacobian comes from :func:`model_jacobian` for a :class:`PlannedModel`
+(the options of ``kind: kinematic``: base, tool, compliance, joint harmonics,
+payload), the one place that says which kinematic model is planned for.
 """
 
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -37,22 +43,89 @@ from numpy.typing import NDArray
 from ..errors import PartcalError
 from ..robot.kinematics import Robot
 from .base import seed_from
+from .joint_errors import GRAVITY_M_S2, JointErrors, compliance_problem, harmonics_problem
 from .kinematic import identification_jacobian, nominal_values, parameter_names
+from .kinematic import model_jacobian as kinematic_jacobian
 
 log = logging.getLogger(__name__)
 
 
 # ---------------------------------------------------------------------- the planned model
-def model_parameters(robot: Robot) -> tuple[list[tuple[str, str]], NDArray[np.float64]]:
+@dataclass(frozen=True)
+class PlannedModel:
+    """Which kinematic model a pose set is planned for: the options of ``kind: kinematic``.
+
+    Attributes
+    ----------
+    base, tool : bool
+        Whether the base pose and the tool offset are identified.
+    compliance : tuple of int
+        1-based joints that yield under gravity (:mod:`partcal.models.joint_errors`).
+    joint_harmonics : int or tuple of int
+        Harmonics of every joint's transmission error, or one count per joint.
+    payload_kg : float
+        The payload the measurement carries at the tool point (kg). At 0 a
+        compliance parameter has no column (only the lumped masses' sags
+        are planned for); at one payload it is the tool point's share of the
+        sags, and only data at a second payload separate it from the masses.
+
+    Several targets (one tool offset per target) will be one more field here.
+    """
+
+    base: bool = True
+    tool: bool = True
+    compliance: tuple[int, ...] = ()
+    joint_harmonics: int | tuple[int, ...] = 0
+    payload_kg: float = 0.0
+
+    def __post_init__(self):
+        for name in ("compliance", "joint_harmonics"):          # lists as tuples: the model is a value
+            if isinstance(getattr(self, name), list):
+                object.__setattr__(self, name, tuple(getattr(self, name)))
+
+    def check(self, robot: Robot) -> "PlannedModel":
+        """Refuse options that do not fit ``robot`` (one line naming the option); returns self."""
+        for name, problem in (("compliance", compliance_problem), ("joint_harmonics", harmonics_problem)):
+            value = getattr(self, name)
+            expected = problem(list(value) if isinstance(value, tuple) else value, robot.n_joints)
+            if expected is not None:
+                raise PartcalError(f"the planned model's {name} must be {expected} for {robot.name}; got {value!r}")
+        if not (math.isfinite(self.payload_kg) and self.payload_kg >= 0):
+            raise PartcalError(f"the planned model's payload_kg must be a number >= 0 (kg); got {self.payload_kg!r}")
+        return self
+
+    def joint_errors(self, robot: Robot) -> JointErrors | None:
+        """The joint errors planned for (None without)."""
+        errors = JointErrors.for_robot(robot, list(self.compliance), self.joint_harmonics)
+        return None if errors.empty else errors
+
+    def describe(self, robot: Robot) -> str:
+        """``DH with base and tool; compliance of joints 2, 3 (payload 0 kg); 2 harmonics per joint``."""
+        flags = [name for name, flag in (("base", self.base), ("tool", self.tool)) if flag]
+        parts = ["DH" + (" with " + " and ".join(flags) if flags else "")]
+        if self.compliance:
+            parts.append(f"compliance of joints {', '.join(map(str, self.compliance))} "
+                         f"(payload {self.payload_kg:g} kg)")
+        counts = JointErrors.for_robot(robot, (), self.joint_harmonics).harmonics
+        if any(counts):
+            parts.append(f"harmonics {list(counts)}" if len(set(counts)) > 1 else f"{counts[0]} harmonics per joint")
+        return "; ".join(parts)
+
+
+DH = PlannedModel()         # the geometry, with base and tool: what a plan is for unless told
+
+
+def model_parameters(robot: Robot, model: PlannedModel = DH) -> tuple[list[tuple[str, str]], NDArray[np.float64]]:
     """``(name, unit)`` of the planned model's parameters and their nominal values, shape ``(P,)``.
 
-    The one place that says which kinematic model is planned for (DH rows, tool and base today);
-    :func:`model_jacobian` and :func:`parameter_scales` read it.
+    The one place that says which kinematic model is planned for (DH rows, tool, base, then the joint
+    errors of ``model``); :func:`model_jacobian` and :func:`parameter_scales` read it.
     """
-    return parameter_names(robot), nominal_values(robot)
+    errors = model.joint_errors(robot)
+    return parameter_names(robot, errors), nominal_values(robot, errors)
 
 
-def model_jacobian(robot: Robot, q_deg: NDArray[np.float64], *, base: bool = True, tool: bool = True
+def model_jacobian(robot: Robot, q_deg: NDArray[np.float64], model: PlannedModel = DH
                    ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
     """The identification Jacobian at the nominal parameters and the mask of parameters asked for.
 
@@ -61,29 +134,35 @@ def model_jacobian(robot: Robot, q_deg: NDArray[np.float64], *, base: bool = Tru
     robot : Robot
     q_deg : ndarray, shape (n, N)
         Joint angles, degrees.
-    base, tool : bool
-        Whether the base pose and the tool offset are identified (as in
-        :class:`~partcal.models.kinematic.KinematicModel`).
+    model : PlannedModel
+        The model planned for (the kinematic model's own Jacobian, joint errors included, at
+        ``model.payload_kg``).
 
     Returns
     -------
     jac : ndarray, shape (3 n, P)
-        ``d p / d parameters`` (mm per mm, mm per degree); rows run over poses, then x, y, z.
+        ``d p / d parameters`` (mm per mm, mm per degree, ...); rows run over poses, then x, y, z.
     wanted : ndarray of bool, shape (P,)
     """
-    names, values = model_parameters(robot)
-    _, jac = identification_jacobian(robot, q_deg, values)
-    names = [n for n, _ in names]
-    wanted = np.array([(tool or not n.startswith("tool.")) and (base or not n.startswith("base."))
-                       for n in names])
+    names, values = model_parameters(robot, model)
+    errors = model.joint_errors(robot)
+    if errors is None:
+        jac = identification_jacobian(robot, q_deg, values)[1]
+    else:
+        jac = kinematic_jacobian(robot, errors, q_deg, values, np.full(len(q_deg), float(model.payload_kg)))[1]
+    wanted = np.array([(model.tool or not n.startswith("tool.")) and (model.base or not n.startswith("base."))
+                       for n, _ in names])
     return jac, wanted
 
 
-def parameter_scales(robot: Robot) -> NDArray[np.float64]:
-    """Column scales that make every parameter a length: 1 for mm, ``180 / (pi L)`` for degrees.
+def parameter_scales(robot: Robot, model: PlannedModel = DH) -> NDArray[np.float64]:
+    """Column scales that make every parameter a length, shape ``(P,)``.
 
-    ``L`` is the robot's reach (mm): one "mm" of an angle is the arc it sweeps
-    at the reach. Parameters in other units keep them (scale 1). Shape ``(P,)``.
+    ``L`` is the robot's reach (mm). A length stays in mm (scale 1); an angle
+    counts as the arc it sweeps at the reach, ``180 / (pi L)``; a sag (deg/m)
+    as the arc at the reach of its deflection at a lever of ``L``,
+    ``180 / (pi L) * 1000 / L``; a compliance (deg/(N m)) as the sag of one kg,
+    that over ``g``. Other units keep them (scale 1).
 
     >>> from partcal.robot import load_robot
     >>> s = parameter_scales(load_robot("universal_robots_ur10"))
@@ -91,21 +170,22 @@ def parameter_scales(robot: Robot) -> NDArray[np.float64]:
     (1.0, 1.0)
     """
     arc = 180.0 / (np.pi * robot.reach_mm)
-    return np.array([arc if unit == "deg" else 1.0 for _, unit in model_parameters(robot)[0]])
+    sag = arc * 1000.0 / robot.reach_mm
+    per_unit = {"deg": arc, "deg/m": sag, "deg/(N m)": sag / GRAVITY_M_S2}
+    return np.array([per_unit.get(unit, 1.0) for _, unit in model_parameters(robot, model)[0]])
 
 
-def identifiable(robot: Robot, q_deg: NDArray[np.float64], wanted: NDArray[np.bool_], rcond: float = 1e-6
-                 ) -> NDArray[np.intp]:
-    """Indices of the parameters that poses ``q_deg`` identify: the first of each group of equivalent ones.
+def identifiable(jac: NDArray[np.float64], wanted: NDArray[np.bool_], rcond: float = 1e-6) -> NDArray[np.intp]:
+    """Indices of the parameters a Jacobian ``(3 n, P)`` identifies: the first of each group of equivalent ones.
 
     The rank is the kinematic fit's rule (singular values of the unit-column
     Jacobian above ``rcond`` times the largest). Which parameters stand for a
     group that positions cannot separate (the first joint's offset and the
-    base's turn about z, the ``d`` of parallel axes) is decided in the order of
-    the parameter table (DH rows, then tool, then base), so it does not depend
-    on the poses: indices of different pose sets are over the same parameters.
+    base's turn about z, the ``d`` of parallel axes, a sag and a first
+    harmonic of its joint) is decided in the order of the parameter table
+    (DH rows, tool, base, then the joint errors), so it does not depend on the
+    poses: indices of different pose sets are over the same parameters.
     """
-    jac, _ = model_jacobian(robot, q_deg)
     norms = np.linalg.norm(jac, axis=0)
     candidates = np.flatnonzero(wanted & (norms > 1e-12 * max(norms.max(), 1e-300)))
     if candidates.size == 0:
@@ -333,3 +413,84 @@ def _logdet_rank_update(blocks: NDArray[np.float64], info: NDArray[np.float64], 
     small = sign * (solved @ blocks.transpose(0, 2, 1)) + np.eye(blocks.shape[1])
     det_sign, value = np.linalg.slogdet(small)
     return np.where(det_sign > 0, value, -np.inf)
+
+
+# ---------------------------------------------------------------------- the bound for any design
+@dataclass(frozen=True)
+class DesignBound:
+    """Outcome of :func:`i_optimal_bound`.
+
+    Attributes
+    ----------
+    weights : ndarray, shape (C,)
+        The approximate design: a weight per candidate, summing to 1.
+    value : float
+        ``tr(T M(w)^-1)`` of ``weights``.
+    bound : float
+        ``value^2 / max_i d_i``: no design on the candidates, approximate or exact, does better (``d_i``
+        is the criterion's derivative at candidate ``i``; ``bound = value`` at the optimum).
+    nit : int
+        Iterations.
+    """
+
+    weights: NDArray[np.float64]
+    value: float
+    bound: float
+    nit: int
+
+
+def i_optimal_bound(blocks: NDArray[np.float64], target: NDArray[np.float64], *, rtol: float = 1e-3,
+                    max_iter: int = 5000) -> DesignBound:
+    """The approximate I-optimal design over candidates, and the lower bound it proves.
+
+    Minimises ``phi(w) = tr(T M(w)^-1)``, ``M(w) = sum_i w_i J_i^T J_i`` over
+    weights ``w >= 0`` summing to 1, by the multiplicative algorithm
+    ``w_i <- w_i sqrt(d_i / phi)`` with ``d_i = tr(J_i M^-1 T M^-1 J_i^T)``
+    (Silvey, Titterington and Torsney 1978; monotone for this power, Yu
+    2010). ``phi`` is convex and homogeneous of degree -1 in ``M``, so for any
+    design ``phi* >= phi(w)^2 / max_i d_i`` at every iterate: the bound holds
+    whether or not the iteration has converged. It stops when the bound is
+    within ``rtol`` of the value.
+
+    With ``T`` the mean ``J^T J`` of the test poses, ``sigma^2 tr(T M^-1)`` is
+    the predicted mean squared 3-D position error over them for a tracker
+    noise ``sigma`` (per coordinate). An exact design of ``n`` candidates has
+    ``M_n = n M(w_n)`` (``w_n``: weight ``1 / n`` on each), so its predicted
+    mean squared error is at least ``sigma^2 bound / n``. Rows scaled by
+    ``1 / sigma_i`` give the bound for pose-dependent noise and a weighted fit.
+
+    Parameters
+    ----------
+    blocks : ndarray, shape (C, r, L)
+        The Jacobian rows of every candidate.
+    target : ndarray, shape (L, L)
+        Symmetric positive semi-definite: what the error is measured over.
+
+    Returns
+    -------
+    DesignBound
+
+    Examples
+    --------
+    Two candidates that each identify one parameter: the best design measures both equally.
+
+    >>> b = i_optimal_bound(np.array([[[1.0, 0.0]], [[0.0, 1.0]]]), np.eye(2))
+    >>> np.round(b.weights, 6).tolist(), round(b.value, 6), round(b.bound, 6)
+    ([0.5, 0.5], 4.0, 4.0)
+    """
+    blocks = np.asarray(blocks, dtype=float)
+    count, rows, width = blocks.shape
+    flat = blocks.reshape(-1, width)
+    w = np.full(count, 1.0 / count)
+    value = bound = np.inf
+    for nit in range(1, max_iter + 1):
+        info = (flat * np.repeat(w, rows)[:, None]).T @ flat
+        inverse = np.linalg.inv(info)
+        value = float(np.trace(target @ inverse))
+        d = np.sum((flat @ (inverse @ target @ inverse)) * flat, axis=1).reshape(count, rows).sum(axis=1)
+        bound = value**2 / float(d.max())
+        if value - bound <= rtol * value:
+            break
+        w = w * np.sqrt(np.maximum(d, 0.0) / value)
+        w /= w.sum()
+    return DesignBound(w, value, bound, nit)

@@ -2,7 +2,9 @@
 
 ``plan_poses`` draws a candidate pool (joint-limit poses, poses whose tool is
 inside a Cartesian box, or the user's own list of reachable and safe poses)
-and keeps the ``n`` that make the kinematic model best identifiable
+and keeps the ``n`` that make the kinematic model (a
+:class:`~partcal.models.design.PlannedModel`: geometry, and the joint
+compliance and harmonics of ``kind: kinematic``) best identifiable
 (D-optimal, DETMAX; see :mod:`partcal.models.design`). ``evaluate_poses`` reports
 the observability indices of any pose set, the parameters it cannot
 identify, the predicted standard error of each parameter and the predicted
@@ -99,6 +101,8 @@ class Evaluation:
     position_rms_mm, position_p95_mm, position_max_mm : float
         Predicted 3-D standard deviation of the identified robot's position over the
         workspace poses: RMS, 95th percentile and largest.
+    note : str
+        Why some of ``never`` cannot be identified, where the model says (a compliance without a payload).
     """
 
     indices: design.Indices
@@ -112,6 +116,7 @@ class Evaluation:
     position_rms_mm: float
     position_p95_mm: float
     position_max_mm: float
+    note: str = ""
 
     def lines(self) -> list[str]:
         """The text ``partcal plan --evaluate`` prints."""
@@ -121,7 +126,8 @@ class Evaluation:
                + (", ".join(self.missing) if self.missing else "none"),
                "not identifiable from any pose of the workspace (kept nominal; where positions cannot separate "
                "them, equivalent parameters carry their effect): "
-               + (", ".join(self.never) if self.never else "none"),
+               + (", ".join(self.never) if self.never else "none")
+               + (f"; {self.note}" if self.note else ""),
                f"predicted position uncertainty of the identified robot over the workspace, tracker noise "
                f"{self.noise_mm:g} mm per coordinate: RMS {self.position_rms_mm:.4f} mm, 95% "
                f"{self.position_p95_mm:.4f} mm, max {self.position_max_mm:.4f} mm"
@@ -141,28 +147,43 @@ class Evaluation:
 
 @dataclass(frozen=True)
 class Workspace:
-    """Poses standing for the workspace, their scaled Jacobian blocks and the parameters they identify."""
+    """Poses standing for the workspace, their scaled Jacobian blocks and the parameters they identify,
+    for one planned model."""
 
     q_deg: NDArray[np.float64]
     blocks: NDArray[np.float64]         # (m, 3, P), scaled columns
     structural: NDArray[np.intp]        # parameters the workspace poses identify
     wanted: NDArray[np.bool_]
     scales: NDArray[np.float64]
+    model: design.PlannedModel
 
 
-def workspace(robot: Robot, q_deg=None, *, base: bool = True, tool: bool = True, random_state=0,
+def workspace(robot: Robot, q_deg=None, *, model: design.PlannedModel = design.DH, random_state=0,
               n_poses: int = WORKSPACE_POSES, box_mm=None, rcond: float = 1e-6) -> Workspace:
-    """The workspace a pose set is judged on: ``q_deg`` (candidates), else joint-limit poses (seeded)."""
+    """The workspace a pose set is judged on: ``q_deg`` (candidates), else joint-limit poses (seeded).
+
+    ``model`` is the kinematic model planned for (:class:`~partcal.models.design.PlannedModel`: base,
+    tool, compliance, joint harmonics, payload).
+    """
+    model.check(robot)
     if q_deg is None:
         q_deg = candidates_within_limits(robot, n_poses, np.random.default_rng(random_state), box_mm)
-    jac, wanted = design.model_jacobian(robot, q_deg, base=base, tool=tool)
-    scales = design.parameter_scales(robot)
-    structural = design.identifiable(robot, q_deg, wanted, rcond)
-    return Workspace(q_deg, (jac * scales).reshape(len(q_deg), 3, -1), structural, wanted, scales)
+    jac, wanted = design.model_jacobian(robot, q_deg, model)
+    scales = design.parameter_scales(robot, model)
+    structural = design.identifiable(jac, wanted, rcond)
+    return Workspace(q_deg, (jac * scales).reshape(len(q_deg), 3, -1), structural, wanted, scales, model)
+
+
+def _model_of(space: Workspace | None, model: design.PlannedModel | None) -> design.PlannedModel:
+    """The planned model: the workspace's, or ``model`` (default DH); refused when they differ."""
+    if space is not None and model is not None and model != space.model:
+        raise PartcalError(f"the planned model {model} differs from the workspace's {space.model}; build the "
+                           "workspace for the model (plan.workspace(robot, model=...))")
+    return space.model if space is not None else (model or design.DH)
 
 
 def evaluate_poses(robot: Robot, q_deg, *, space: Workspace | None = None, noise_mm: float = DEFAULT_NOISE_MM,
-             base: bool = True, tool: bool = True, rcond: float = 1e-6) -> Evaluation:
+                   model: design.PlannedModel | None = None, rcond: float = 1e-6) -> Evaluation:
     """The indices, identifiable parameters and predicted uncertainties of a pose set.
 
     Parameters
@@ -175,18 +196,21 @@ def evaluate_poses(robot: Robot, q_deg, *, space: Workspace | None = None, noise
         as identifiable at all (default: :func:`workspace` of the robot's limits).
     noise_mm : float
         Tracker noise, standard deviation per coordinate, mm.
-    base, tool, rcond
+    model : PlannedModel, optional
+        The model the set is judged for: the workspace's (default DH with base and tool).
+    rcond : float
         As for :class:`~partcal.models.kinematic.KinematicModel`.
     """
     q_deg = robot.check_joints(q_deg)
     if not (math.isfinite(noise_mm) and noise_mm > 0):
         raise PartcalError(f"the tracker noise must be a positive number of mm; got {noise_mm!r}")
-    space = space or workspace(robot, base=base, tool=tool)
-    jac, wanted = design.model_jacobian(robot, q_deg, base=base, tool=tool)
+    model = _model_of(space, model)
+    space = space or workspace(robot, model=model)
+    jac, wanted = design.model_jacobian(robot, q_deg, model)
     within = np.zeros_like(wanted)
     within[space.structural] = True
-    own = design.identifiable(robot, q_deg, within, rcond)      # a subset of what the workspace identifies
-    names = design.model_parameters(robot)[0]
+    own = design.identifiable(jac, within, rcond)      # a subset of what the workspace identifies
+    names = design.model_parameters(robot, model)[0]
     label = [n for n, _ in names]
     scaled = jac[:, own] * space.scales[own]
     ind = design.indices(scaled, len(q_deg))
@@ -198,9 +222,11 @@ def evaluate_poses(robot: Robot, q_deg, *, space: Workspace | None = None, noise
         uncertainty = design.position_std(space.blocks[:, :, own], cov)
     missing = tuple(label[i] for i in np.setdiff1d(space.structural, own))
     never = tuple(label[i] for i in np.setdiff1d(np.flatnonzero(wanted), space.structural))
+    note = ("a compliance has no column without a payload (payload_kg): the sags carry the gravity"
+            if model.compliance and model.payload_kg == 0 else "")
     return Evaluation(ind, tuple(label), tuple(u for _, u in names), tuple(label[i] for i in own), missing, never, std,
                       float(noise_mm), float(np.sqrt(np.mean(uncertainty**2))), float(np.percentile(uncertainty, 95)),
-                      float(uncertainty.max()))
+                      float(uncertainty.max()), note)
 
 
 # ---------------------------------------------------------------------- planning
@@ -241,7 +267,7 @@ def check_count(robot: Robot, n, space: Workspace) -> None:
 
 
 def plan_poses(robot: Robot, n: int, *, space: Workspace | None = None, noise_mm: float = DEFAULT_NOISE_MM,
-               base: bool = True, tool: bool = True, random_state=0, callback=None) -> Plan:
+               model: design.PlannedModel | None = None, random_state=0, callback=None) -> Plan:
     """Choose ``n`` poses of the candidate pool that make the kinematic model best identifiable.
 
     Parameters
@@ -255,27 +281,30 @@ def plan_poses(robot: Robot, n: int, *, space: Workspace | None = None, noise_mm
         joint-limit poses drawn with ``random_state``.
     noise_mm : float
         Tracker noise for the predicted uncertainties.
+    model : PlannedModel, optional
+        The kinematic model to make identifiable (geometry, compliance, harmonics): the workspace's,
+        default DH with base and tool.
     random_state : int or Generator
         Seeds the pool (when drawn here) and the exchange's random start.
     callback : callable, optional
         ``callback(exchanges, logdet)`` after each accepted exchange.
     """
     seeds = np.random.SeedSequence(seed_from(random_state)).spawn(2)
+    model = _model_of(space, model)
     if space is None:
-        space = workspace(robot, base=base, tool=tool, random_state=np.random.default_rng(seeds[0]),
-                          n_poses=DEFAULT_POOL)
+        space = workspace(robot, model=model, random_state=np.random.default_rng(seeds[0]), n_poses=DEFAULT_POOL)
     check_count(robot, n, space)
     blocks = space.blocks[:, :, space.structural]
     result = design.detmax(blocks, int(n), random_state=np.random.default_rng(seeds[1]), callback=callback)
     q = space.q_deg[result.indices]
     return Plan(q, result.indices,
-                evaluate_poses(robot, q, space=space, noise_mm=noise_mm, base=base, tool=tool),
+                evaluate_poses(robot, q, space=space, noise_mm=noise_mm),
                 result, len(space.q_deg))
 
 
-def pose_curve(robot: Robot, counts, *, space: Workspace, noise_mm: float = DEFAULT_NOISE_MM, base: bool = True,
-               tool: bool = True, random_state=0, callback=None) -> list[dict]:
-    """Planned sets of each size in ``counts``: indices and predicted uncertainty, one dict per size.
+def pose_curve(robot: Robot, counts, *, space: Workspace, noise_mm: float = DEFAULT_NOISE_MM, random_state=0,
+               callback=None) -> list[dict]:
+    """Planned sets of each size in ``counts`` for the workspace's model: indices and predicted uncertainty.
 
     Each dict: ``n``, ``o1``, ``condition``, ``position_rms_mm``, ``position_p95_mm``,
     ``missing`` (parameters the set cannot identify), and ``random_position_rms_mm`` and
@@ -284,10 +313,10 @@ def pose_curve(robot: Robot, counts, *, space: Workspace, noise_mm: float = DEFA
     rows = []
     rng = np.random.default_rng(seed_from(random_state))
     for k, n in enumerate(counts):
-        plan = plan_poses(robot, int(n), space=space, noise_mm=noise_mm, base=base, tool=tool, random_state=rng)
+        plan = plan_poses(robot, int(n), space=space, noise_mm=noise_mm, random_state=rng)
         ev = plan.evaluation
         rand = evaluate_poses(robot, space.q_deg[rng.choice(len(space.q_deg), int(n), replace=False)],
-                              space=space, noise_mm=noise_mm, base=base, tool=tool)
+                              space=space, noise_mm=noise_mm)
         rows.append({"n": int(n), "o1": ev.indices.o1, "condition": ev.indices.condition,
                      "position_rms_mm": ev.position_rms_mm, "position_p95_mm": ev.position_p95_mm,
                      "missing": len(ev.missing),

@@ -5,8 +5,8 @@ The kernel is ``amplitude * shape(r) + noise * I`` with ``r`` the distance of
 inputs divided by one length scale each, and ``shape`` the RBF ``exp(-r^2 / 2)``
 or a Matern of smoothness 1.5 or 2.5. Its hyperparameters are searched in
 logarithms, as scikit-learn does, within the same bounds and from the same
-seeded starts, so the optimum found is scikit-learn's; what differs is the
-cost of one step. The x, y and z outputs share one Cholesky factor, and the
+seeded starts, so the optimum found is scikit-learn's (given the same
+stopping rule, :data:`SEARCH_FTOL`); what differs is the cost of one step. The x, y and z outputs share one Cholesky factor, and the
 gradient needs the inverse of the kernel matrix (from that factor, LAPACK's
 ``potri``) and, per length scale, two products with an ``n x n`` matrix:
 never the ``n x n x hyperparameters`` array of kernel derivatives.
@@ -24,6 +24,10 @@ from scipy.linalg import lapack
 from scipy.optimize import minimize
 
 JITTER = 1e-10                 # scikit-learn's default ``alpha``: added to the diagonal of every kernel matrix
+# L-BFGS-B stops when a step gains less than this fraction of the likelihood (scipy's default: 2.2e-9).
+# Likelihoods of a few thousand nats: steps below 0.01 nat change nothing a GP predicts (UR10, 800
+# poses: 43 steps instead of 57, held-out RMS 0.55280 mm against 0.55264).
+SEARCH_FTOL = 1e-6
 NUS = (1.5, 2.5)               # the Matern smoothnesses with a closed-form gradient here (and the RBF: None)
 
 
@@ -100,7 +104,7 @@ def search(X: NDArray[np.float64], Y: NDArray[np.float64], *, nu: float | None, 
     starts = [np.asarray(start, dtype=float)] + [rng.uniform(bounds[:, 0], bounds[:, 1]) for _ in range(restarts)]
     best_theta, best = starts[0], np.inf
     for theta0 in starts:
-        res = minimize(objective, theta0, jac=True, method="L-BFGS-B", bounds=bounds)
+        res = minimize(objective, theta0, jac=True, method="L-BFGS-B", bounds=bounds, options={"ftol": SEARCH_FTOL})
         if res.fun < best:
             best_theta, best = res.x, float(res.fun)
     return best_theta, -best

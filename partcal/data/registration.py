@@ -41,7 +41,7 @@ from scipy.spatial.transform import Rotation
 from .._validation import check_array
 from ..errors import DataError
 from ..robot.kinematics import Robot
-from ..robot.kinematics import matrices_from_xyz_deg, xyz_deg_from_matrices
+from ..robot.kinematics import ORIENTATION_MM_PER_RAD, matrices_from_xyz_deg, xyz_deg_from_matrices
 from .measurements import PRIMARY, Measurements
 from .plausibility import Plausibility, check_residuals
 
@@ -49,7 +49,6 @@ log = logging.getLogger(__name__)
 
 MAX_CONDITION = 1000.0
 WARN_CONDITION = 100.0
-ORIENTATION_MM_PER_RAD = 1000.0
 PARAMETERS = ("rotation x", "rotation y", "rotation z", "translation x", "translation y", "translation z",
               "tool x", "tool y", "tool z")
 

@@ -56,6 +56,12 @@ def matrix_from_euler_deg(angles_deg) -> NDArray[np.float64]:
     return rot_z @ rot_y @ rot_x
 
 
+ORIENTATION_MM_PER_RAD = 200.0
+"""How many mm an orientation residual of one radian counts as beside position residuals (registration,
+identification): the displacement a turn causes 200 mm from its axis, about a tool plate's size. For a
+tracker's 0.02-0.03 mm and a 6-D probe's 0.005-0.01 degrees, this weighs each roughly by its noise."""
+
+
 def matrices_from_xyz_deg(angles_deg) -> NDArray[np.float64]:
     """Rotations ``Rx(rx) Ry(ry) Rz(rz)`` from intrinsic XYZ angles ``(n, 3)`` degrees, shape ``(n, 3, 3)``.
 

@@ -160,5 +160,5 @@ def test_the_targets_key_is_checked(tmp_path):
     with pytest.raises(ConfigError, match=r"bad.yaml: targets.C \(line \d+\): must be a list of three numbers"):
         load_study(bad)
     bad.write_text(TARGETS_CONFIG.read_text().replace("  C: [-40, 90, 90]", "  C D: [-40, 90, 0]"))
-    with pytest.raises(ConfigError, match=r"targets.C D \(line \d+\): a target name is letters, digits and '_'; got 'C D'"):
+    with pytest.raises(ConfigError, match=r"targets.C D \(line \d+\): a target name is letters, digits and '_'"):
         load_study(bad)

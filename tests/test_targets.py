@@ -1,7 +1,5 @@
 """Kinematic identification from several targets and the measured orientation (issue 20)."""
 
-import dataclasses
-
 import numpy as np
 import pytest
 from conftest import ROOT
@@ -11,7 +9,7 @@ from partcal import DataError, KinematicModel, load_robot
 from partcal.data.simulate import load_study, simulate
 from partcal.models.design import target_identifiability
 from partcal.models.joint_errors import JointErrors
-from partcal.models.kinematic import identify, nominal_values
+from partcal.models.kinematic import nominal_values
 from partcal.models.targets import Extra, stacked
 
 TOOLS = {"B": np.array([100.0, 0.0, 90.0]), "C": np.array([-40.0, 90.0, 90.0])}

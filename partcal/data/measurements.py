@@ -38,16 +38,13 @@ from .._validation import check_array
 from ..errors import DataError
 from ..robot.description import MAX_JOINTS, joint_columns, load_robot
 from ..robot.kinematics import Robot, matrices_from_xyz_deg, xyz_deg_from_matrices
-from .formats import TARGET_COLUMN, TARGET_NAME, MeasurementFormat, RowSelection
+from .formats import MeasurementFormat, RowSelection
+from .pose_columns import (ORIENTATION_MEASURED, ORIENTATION_NOMINAL, PRIMARY, check_angles, checked_orientation,
+                           checked_targets, orientation_columns, suffixed, target_columns)
 from .plausibility import Plausibility, check_measured
 
 NOMINAL = ("x_nom", "y_nom", "z_nom")
 MEASURED = ("x_meas", "y_meas", "z_meas")
-ORIENTATION_MEASURED = ("rx_meas", "ry_meas", "rz_meas")
-ORIENTATION_NOMINAL = ("rx_nom", "ry_nom", "rz_nom")
-ORIENTATION_RANGES = ((-180.0, 180.0), (-90.0, 90.0), (-180.0, 180.0))
-PRIMARY = "A"
-_ORIENTATION_TARGET = re.compile(r"^r[xyz]_(?:meas|nom)@")
 _JOINT = re.compile(r"^q(\d+)$")
 _NUMBER = re.compile(r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
 _CONTRACT = MeasurementFormat()
@@ -110,42 +107,13 @@ class Measurements:
             given = getattr(self, name)
             if given is not None and len(given) != n:
                 raise DataError(f"{name} has {len(given)} entries but q_deg has {n} rows")
-        self._check_targets(n)
-        self._check_orientation(n)
-
-    def _check_targets(self, n: int) -> None:
-        """Extra targets: valid names other than the primary's, (n, 3) positions, nominal for all or none."""
-        for attr in ("extra_measured_mm", "extra_nominal_mm"):
-            checked = {}
-            for name, arr in dict(getattr(self, attr)).items():
-                if not isinstance(name, str) or not TARGET_NAME.match(name) or name == PRIMARY:
-                    raise DataError(f"Expected target names of letters, digits and '_' other than {PRIMARY!r} "
-                                    f"(the primary target) in {attr}, got {name!r}.")
-                checked[name] = check_array(arr, f"{attr}[{name!r}]", columns=3)
-                if checked[name].shape[0] != n:
-                    raise DataError(f"{attr}[{name!r}] has {checked[name].shape[0]} rows but q_deg has {n}")
-            object.__setattr__(self, attr, checked)
-        if self.extra_nominal_mm and set(self.extra_nominal_mm) != set(self.extra_measured_mm):
-            raise DataError(f"extra_nominal_mm must name the targets of extra_measured_mm "
-                            f"({sorted(self.extra_measured_mm)}) or none; got {sorted(self.extra_nominal_mm)}")
-
-    def _check_orientation(self, n: int) -> None:
-        """Measured and nominal orientation: both or neither, (n, 3) degrees within their ranges."""
-        given = [a is not None for a in (self.measured_orientation_deg, self.nominal_orientation_deg)]
-        if any(given) and not all(given):
-            raise DataError("Expected measured_orientation_deg and nominal_orientation_deg both or neither, got "
-                            f"only {'measured' if given[0] else 'nominal'}_orientation_deg.")
-        for attr in ("measured_orientation_deg", "nominal_orientation_deg"):
-            if getattr(self, attr) is None:
-                continue
-            arr = check_array(getattr(self, attr), attr, columns=3)
-            if arr.shape[0] != n:
-                raise DataError(f"{attr} has {arr.shape[0]} rows but q_deg has {n}")
-            bad = orientation_problem(arr)
-            if bad is not None:
-                row, k, expected = bad
-                raise DataError(f"Expected {attr} within {expected}, got {arr[row, k]!r} in row {row} column {k}.")
+        measured, nominal = checked_targets(self.extra_measured_mm, self.extra_nominal_mm, n)
+        object.__setattr__(self, "extra_measured_mm", measured)
+        object.__setattr__(self, "extra_nominal_mm", nominal)
+        for attr, arr in zip(("measured_orientation_deg", "nominal_orientation_deg"),
+                             checked_orientation(self.measured_orientation_deg, self.nominal_orientation_deg, n)):
             object.__setattr__(self, attr, arr)
+
 
     def __len__(self) -> int:
         return self.q_deg.shape[0]
@@ -193,19 +161,6 @@ class Measurements:
         turn = matrices_from_xyz_deg(self.measured_orientation_deg) @ \
             matrices_from_xyz_deg(self.nominal_orientation_deg).transpose(0, 2, 1)
         return Rotation.from_matrix(turn).as_rotvec(degrees=True)
-
-
-def orientation_problem(angles_deg: NDArray[np.float64]) -> tuple[int, int, str] | None:
-    """The first angle out of its range, as ``(row, column, expected)``, or None.
-
-    ``rx`` and ``rz`` lie in [-180, 180] degrees, ``ry`` in [-90, 90] (the
-    principal range of intrinsic XYZ angles).
-    """
-    for k, (low, high) in enumerate(ORIENTATION_RANGES):
-        bad = np.flatnonzero(~((angles_deg[:, k] >= low) & (angles_deg[:, k] <= high)))
-        if bad.size:
-            return int(bad[0]), k, f"[{low:g}, {high:g}] degrees (intrinsic XYZ angles)"
-    return None
 
 
 def read_measurements(path: str | Path, robot: str | Robot | None = None, *, name: str | None = None,
@@ -270,7 +225,7 @@ def read_measurements(path: str | Path, robot: str | Robot | None = None, *, nam
                             "(or their mapping), or use frame: base")
     names, cols = _numeric_columns(columns)
     values = fmt.to_contract(names, _numbers(path, line, header, data, cols, fmt.decimal))
-    _check_angles(path, header, data, names, cols, values)
+    check_angles(path, header, data, names, cols, values)
     keep = (rows or RowSelection()).indices(len(data), path)
     values = values[keep]
     at = {contract: k for k, contract in enumerate(names)}
@@ -288,8 +243,8 @@ def read_measurements(path: str | Path, robot: str | Robot | None = None, *, nam
     nominal = block(NOMINAL) if columns["nom"] else model.positions(q)
     check_measured(str(path), [data[i][0] for i in keep], q, nominal, meas, model, nominal_given=bool(columns["nom"]),
                    frame=frame, limits=plausibility or Plausibility())
-    extra = {t: block(_suffixed(MEASURED, t)) for t in columns["targets"]}
-    extra_nominal = {t: block(_suffixed(NOMINAL, t)) for t, c in columns["targets"].items() if c["nom"]}
+    extra = {t: block(suffixed("meas", t)) for t in columns["targets"]}
+    extra_nominal = {t: block(suffixed("nom", t)) for t, c in columns["targets"].items() if c["nom"]}
     orientation = nominal_orientation = None
     if columns["rot_meas"]:
         orientation = block(ORIENTATION_MEASURED)
@@ -309,39 +264,19 @@ def read_measurements(path: str | Path, robot: str | Robot | None = None, *, nam
                         measured_orientation_deg=orientation, nominal_orientation_deg=nominal_orientation)
 
 
-def _suffixed(columns: tuple[str, ...], target: str) -> list[str]:
-    """A target's columns: ``x_meas@B, y_meas@B, z_meas@B``."""
-    return [f"{c}@{target}" for c in columns]
-
-
 def _numeric_columns(columns: dict) -> tuple[list[str], list[int]]:
     """The contract names and file positions of every numeric column the header check found."""
     n_q = len(columns["q"])
     names = joint_columns(n_q) + (list(NOMINAL) if columns["nom"] else []) + list(MEASURED)
     cols = columns["q"] + (columns["nom"] or []) + columns["meas"]
     for target, found in columns["targets"].items():
-        names += _suffixed(MEASURED, target) + (_suffixed(NOMINAL, target) if found["nom"] else [])
+        names += suffixed("meas", target) + (suffixed("nom", target) if found["nom"] else [])
         cols += found["meas"] + (found["nom"] or [])
     for kind, contract in (("rot_meas", ORIENTATION_MEASURED), ("rot_nom", ORIENTATION_NOMINAL)):
         if columns[kind]:
             names += list(contract)
             cols += columns[kind]
     return names, cols
-
-
-def _check_angles(path: Path, header: list[str], data: list, names: list[str], cols: list[int],
-                  values: NDArray[np.float64]) -> None:
-    """Refuse an orientation angle out of its range, naming the file, line, column and cell."""
-    for contract in (ORIENTATION_MEASURED, ORIENTATION_NOMINAL):
-        if contract[0] not in names:
-            continue
-        ks = [names.index(c) for c in contract]
-        bad = orientation_problem(values[:, ks])
-        if bad is not None:
-            row, k, expected = bad
-            number, cells = data[row]
-            raise DataError(f"{path}:{number}: column {header[cols[ks[k]]]}: expected an angle in {expected}, "
-                            f"got {cells[cols[ks[k]]].strip()!r}")
 
 
 def _rows(path: Path, delimiter: str = ","):
@@ -451,70 +386,9 @@ def _check_header(path: Path, line: int, seen: dict[str, int], fmt: MeasurementF
         "nom": [seen[c] for c in NOMINAL] if present else None,
         "meas": [seen[c] for c in MEASURED],
         "set": seen.get("set"),
-        "targets": _target_columns(where, seen, fmt),
-        **_orientation_columns(where, seen, fmt, has_robot=has_robot),
+        "targets": target_columns(where, seen, fmt),
+        **orientation_columns(where, seen, fmt, has_robot=has_robot),
     }
-
-
-def _target_columns(where: str, seen: dict[str, int], fmt: MeasurementFormat) -> dict[str, dict]:
-    """Extra targets in header order: name -> ``{"meas": positions, "nom": positions or None}``.
-
-    Refuses a bad or reserved target name, a missing coordinate, nominal
-    columns without measured ones, and nominal columns for some targets only.
-    """
-    found: dict[str, set] = {}
-    for col in seen:
-        if _ORIENTATION_TARGET.match(col):
-            raise DataError(f"{where}: column {fmt.file_column(col)!r}: the orientation is one per pose (the "
-                            f"tool's): give {', '.join(ORIENTATION_MEASURED)} without a target name")
-        m = TARGET_COLUMN.match(col)
-        if m is None:
-            continue
-        target = m.group(2)
-        if not TARGET_NAME.match(target) or target == PRIMARY:
-            why = (f"{PRIMARY!r} names the unsuffixed columns (the primary target)" if target == PRIMARY
-                   else "a target name is letters, digits and '_' (as in x_meas@B)")
-            raise DataError(f"{where}: column {fmt.file_column(col)!r}: {why}")
-        found.setdefault(target, set()).add(m.group(1))
-    out: dict[str, dict] = {}
-    for target, have in found.items():
-        for group in (MEASURED, NOMINAL):
-            if (group is MEASURED or have & set(group)) and not set(group) <= have:
-                missing = next(c for c in _suffixed(group, target) if c not in seen)
-                raise DataError(f"{where}: column {fmt.file_column(missing)!r} is missing (target {target} needs "
-                                f"all of {', '.join(_suffixed(group, target))}"
-                                f"{' when it has nominal columns' if group is NOMINAL else ''})")
-        out[target] = {"meas": [seen[c] for c in _suffixed(MEASURED, target)],
-                       "nom": [seen[c] for c in _suffixed(NOMINAL, target)] if set(NOMINAL) <= have else None}
-    with_nominal = [t for t, c in out.items() if c["nom"]]
-    if with_nominal and len(with_nominal) < len(out):
-        bare = next(t for t, c in out.items() if not c["nom"])
-        raise DataError(f"{where}: column {fmt.file_column(f'x_nom@{bare}')!r} is missing: target "
-                        f"{with_nominal[0]} has nominal columns, so every extra target needs them (or none does)")
-    return out
-
-
-def _orientation_columns(where: str, seen: dict[str, int], fmt: MeasurementFormat, *, has_robot: bool) -> dict:
-    """The measured and nominal orientation columns (``rot_meas``, ``rot_nom``: positions or None).
-
-    Each triple is all or none; nominal ones need measured ones; measured
-    ones need nominal ones unless a robot gives them (as for positions).
-    """
-    out = {}
-    for key, group in (("rot_meas", ORIENTATION_MEASURED), ("rot_nom", ORIENTATION_NOMINAL)):
-        present = [c for c in group if c in seen]
-        if 0 < len(present) < 3:
-            missing = next(c for c in group if c not in seen)
-            raise DataError(f"{where}: column {fmt.file_column(missing)!r} is missing (give all of "
-                            f"{', '.join(fmt.file_column(c) for c in group)} or none)")
-        out[key] = [seen[c] for c in group] if present else None
-    if out["rot_nom"] and not out["rot_meas"]:
-        raise DataError(f"{where}: column {fmt.file_column('rx_meas')!r} is missing: the nominal orientation "
-                        f"columns need the measured ones ({', '.join(ORIENTATION_MEASURED)})")
-    if out["rot_meas"] and not out["rot_nom"] and not has_robot:
-        raise DataError(f"{where}: columns {', '.join(ORIENTATION_NOMINAL)} are missing; give them, or a robot "
-                        "model to compute the nominal orientation by forward kinematics")
-    return out
 
 
 def _number(path: Path, line: int, label: str, cell: str, decimal: str = ".") -> float:
@@ -545,9 +419,9 @@ def write_measurements(m: Measurements, path: str | Path, *, comment: str | None
     blocks = [m.q_deg, m.nominal_mm, m.measured_mm]
     for target, measured in m.extra_measured_mm.items():
         if target in m.extra_nominal_mm:
-            header += _suffixed(NOMINAL, target)
+            header += suffixed("nom", target)
             blocks.append(m.extra_nominal_mm[target])
-        header += _suffixed(MEASURED, target)
+        header += suffixed("meas", target)
         blocks.append(measured)
     if m.has_orientation:
         header += list(ORIENTATION_NOMINAL) + list(ORIENTATION_MEASURED)

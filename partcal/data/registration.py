@@ -42,7 +42,8 @@ from .._validation import check_array
 from ..errors import DataError
 from ..robot.kinematics import Robot
 from ..robot.kinematics import ORIENTATION_MM_PER_RAD, matrices_from_xyz_deg, xyz_deg_from_matrices
-from .measurements import PRIMARY, Measurements
+from .measurements import Measurements
+from .pose_columns import PRIMARY
 from .plausibility import Plausibility, check_residuals
 
 log = logging.getLogger(__name__)
@@ -219,7 +220,7 @@ def register_tracker(robot: Robot, q_deg, measured_mm, *, tool_mm=None, fit_tool
     extra = {name: check_array(p, f"targets[{name!r}]", columns=3) for name, p in (targets or {}).items()}
     tool0 = robot.tool_mm if tool_mm is None else check_array(np.reshape(tool_mm, (1, -1)), "tool_mm", columns=3)[0]
     n_params = (6 + 3 * (1 + len(extra)) * fit_tool) + 3 * (orientation_deg is not None)
-    need = 9 // 3 + 1 if fit_tool else 3
+    need = 4 if fit_tool else 3            # the primary target's frame and offset alone need these
     if q.shape[0] < need:
         raise DataError(f"{source}: a tracker registration {'with' if fit_tool else 'without'} the tool needs at "
                         f"least {need} poses ({9 if fit_tool else 6} parameters); got {q.shape[0]}")

@@ -13,10 +13,9 @@ one YAML file and one seed; see ``docs/virtual_robot.md``.
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -31,7 +30,8 @@ from ..robot.description import joint_columns, load_robot, robot_reference
 from ..robot.kinematics import Robot, matrix_from_euler_deg, xyz_deg_from_matrices
 from ..robot.trajectories import PATHS, paper_path
 from .formats import TARGET_NAME
-from .measurements import PRIMARY, Measurements, write_measurements
+from .measurements import Measurements, write_measurements
+from .pose_columns import PRIMARY
 
 log = logging.getLogger(__name__)
 GRAVITY_M_S2 = 9.80665
@@ -85,7 +85,7 @@ class VirtualRobot:
     gear: tuple[tuple[int, float, float, float], ...]   # (joint, amplitude_deg, cycles_per_rev, phase_deg)
     tracker: Tracker
     tracker_scale: float
-    targets: dict = dataclasses.field(default_factory=dict)     # extra targets: name -> nominal offset (3,) mm
+    targets: dict = field(default_factory=dict)     # extra targets: name -> nominal offset (3,) mm
 
     def actual_joints(self, q_deg: NDArray[np.float64]) -> NDArray[np.float64]:
         """Joint angles the arm really takes when ``q_deg`` is commanded."""

@@ -588,7 +588,8 @@ class KinematicModel(ErrorModelBase):
         X = validate_data(self, X, reset=False, dtype=np.float64)
         names = self.identification_.names
         tool = self.identification_.value[[names.index(f"tool@{target}.{c}") for c in "xyz"]]
-        moved = self.identified_robot_.replace(tool_mm=tool).positions(self._actual(X, self._payload(payload_kg, len(X))))
+        actual = self._actual(X, self._payload(payload_kg, len(X)))
+        moved = self.identified_robot_.replace(tool_mm=tool).positions(actual)
         return moved - self.robot_.replace(tool_mm=self.targets_[target]).positions(X)
 
     def predict(self, X, payload_kg=None) -> NDArray[np.float64]:

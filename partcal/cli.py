@@ -239,7 +239,7 @@ def _cmd_import(args) -> int:
 
     from .data.formats import RowSelection
     from .data.measurements import read_measurements, write_measurements
-    from .data.registration import register_tracker, registered
+    from .data.registration import register_measurements, registered
     from .robot.description import load_robot
 
     if args.output is None:
@@ -256,8 +256,8 @@ def _cmd_import(args) -> int:
     m = read_measurements(args.input, robot, fmt=_format(args), rows=rows, frame=args.frame)
     lines = [f"imported from {args.input} by partcal {__version__}: degrees, mm"]
     if args.frame == "tracker":
-        reg = register_tracker(robot, m.q_deg, m.measured_mm, tool_mm=args.tool_mm, fit_tool=args.tool_mm is None,
-                               source=str(args.input))
+        reg = register_measurements(robot, m, tool_mm=args.tool_mm, fit_tool=args.tool_mm is None,
+                                    source=str(args.input))
         m = registered(m, robot, reg)
         from .study.outputs import registration_comment
         from .study.tables import registration_line

@@ -338,6 +338,36 @@ def ur10_export(tmp_path):
     return export, tmp_path / "F.yaml"
 
 
+def test_import_registers_every_target_and_the_orientation(tmp_path):
+    from scipy.spatial.transform import Rotation
+
+    from partcal import load_robot
+
+    robot = load_robot("universal_robots_ur10")
+    q = np.random.default_rng(6).uniform(-170, 170, (25, 6))
+    tools = {"A": [0.0, 0.0, 120.0], "B": [100.0, 0.0, 90.0]}
+    rot, t = Rotation.from_rotvec([0.2, -0.4, 1.5]).as_matrix(), np.array([2500.0, 300.0, -200.0])
+    seen = {k: (robot.replace(tool_mm=np.array(v)).positions(q) - t) @ rot for k, v in tools.items()}
+    turns = Rotation.from_matrix(rot.T @ robot.forward(q)[:, :3, :3]).as_euler("XYZ", degrees=True)
+    header = "q1,q2,q3,q4,q5,q6,x_meas,y_meas,z_meas,x_meas@B,y_meas@B,z_meas@B,rx_meas,ry_meas,rz_meas"
+    rows = np.column_stack([q, seen["A"], seen["B"], turns])
+    (tmp_path / "t.csv").write_text(header + "\n" + "\n".join(",".join(f"{v:.9f}" for v in r) for r in rows) + "\n")
+    res = run("import", str(tmp_path / "t.csv"), "-o", str(tmp_path / "base.csv"), "--robot", "universal_robots_ur10",
+              "--frame", "tracker")
+    assert res.returncode == 0, res.stderr
+    assert "per target RMS A 0.000, B 0.000 mm; orientation RMS 0.0000 deg" in res.stdout
+    back = read_measurements(tmp_path / "base.csv")
+    np.testing.assert_allclose(back.measured_of("B") - back.nominal_of("B"), 0, atol=1e-5)
+    np.testing.assert_allclose(back.orientation_errors_deg, 0, atol=1e-6)
+    assert "tool@B [100.000000, 0.000000, 90.000000] mm" in (tmp_path / "base.csv").read_text()
+    (tmp_path / "bad.csv").write_text(header.replace(",z_meas@B", "") + "\n" + "1," * 13 + "1\n")
+    res = run("import", str(tmp_path / "bad.csv"), "-o", str(tmp_path / "x.csv"), "--robot", "universal_robots_ur10",
+              "--frame", "tracker")
+    assert res.returncode == 2 and res.stderr.strip() == (f"partcal: error: {tmp_path / 'bad.csv'}:1: column "
+                                                          "'z_meas@B' is missing (target B needs all of x_meas@B, "
+                                                          "y_meas@B, z_meas@B)")
+
+
 def test_import_never_writes_over_its_own_input_or_format(ur10_export):
     export, fmt = ur10_export
     before = export.read_bytes()

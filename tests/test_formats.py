@@ -91,6 +91,9 @@ def test_bad_foreign_files_name_file_line_and_column(tmp_path, kwargs, text, mat
     ({"joint_unit": "grad"}, r"The 'joint_unit' parameter of MeasurementFormat must be one of 'deg', 'rad'\. "
                              r"Got 'grad' instead"),
     ({"length_unit": "cm"}, r"The 'length_unit' parameter of MeasurementFormat must be one of 'mm', 'm'"),
+    ({"orientation_unit": "grad"}, r"The 'orientation_unit' parameter of MeasurementFormat must be one of 'deg', "
+                                   r"'rad'\. Got 'grad' instead"),
+    ({"columns": {"x_meas@": "a"}}, r"The 'columns' entry 'x_meas@' of MeasurementFormat must be a contract column"),
     ({"columns": [("q1", "a")]}, r"The 'columns' parameter of MeasurementFormat must be a mapping of contract "
                                  r"column to file column"),
     ({"columns": {"q13": "a"}}, r"The 'columns' entry 'q13' of MeasurementFormat must be a contract column "
@@ -230,3 +233,34 @@ def test_tracker_frame_needs_a_robot_and_refuses_nominal_columns(tmp_path):
     with pytest.raises(DataError, match=r"The 'frame' parameter of read_measurements must be 'base' or 'tracker'\. "
                                         r"Got 'Tracker' instead"):
         read_measurements(six, "motoman_sk120", frame="Tracker")
+
+
+def test_the_ipa_orientation_columns_read_through_a_format(tmp_path):
+    # the T-Mac's export: orientation in intrinsic XYZ degrees beside the position, each with a std column
+    header = "a1;a2;a3;a4;a5;a6;measurement_x;measurement_std_x;measurement_y;measurement_z;measurement_rx;measurement_ry;" \
+             "measurement_rz;mx;my;mz\n"
+    path = write(tmp_path, header + "0,5;-0,25;1;1;1;1;383,97;0,04;-3240,75;201,72;-90,179563;-20,112975;-90,157388;0;0;0\n")
+    columns = {**{f"q{j}": f"a{j}" for j in range(1, 7)}, "x_meas": "measurement_x", "y_meas": "measurement_y", "z_meas": "measurement_z",
+               "rx_meas": "measurement_rx", "ry_meas": "measurement_ry", "rz_meas": "measurement_rz",
+               "x_nom": "mx", "y_nom": "my", "z_nom": "mz", "rx_nom": "mx", "ry_nom": "my", "rz_nom": "mz"}
+    with pytest.raises(ConfigError, match=r"'columns' entry 'rx_nom' .* Got 'mx' \(already mapped to x_nom\)"):
+        MeasurementFormat(delimiter=";", decimal=",", columns=columns)
+    del columns["rx_nom"], columns["ry_nom"], columns["rz_nom"]
+    fmt = MeasurementFormat(delimiter=";", decimal=",", joint_unit="rad", columns=columns)
+    with pytest.raises(DataError, match=r"f.csv:1: columns rx_nom, ry_nom, rz_nom are missing"):
+        read_measurements(path, fmt=fmt)
+    m = read_measurements(path, "universal_robots_ur10", fmt=MeasurementFormat(
+        **{**fmt.to_dict(), "columns": {k: v for k, v in columns.items() if "nom" not in k}}), frame="tracker")
+    np.testing.assert_allclose(m.measured_orientation_deg, [[-90.179563, -20.112975, -90.157388]], rtol=1e-12)
+    assert m.nominal_orientation_deg.shape == (1, 3)
+
+
+def test_orientation_in_radians_and_target_columns_in_metres(tmp_path):
+    path = write(tmp_path, "q1,x_nom,y_nom,z_nom,x_meas,y_meas,z_meas,tx,ty,tz,rx_nom,ry_nom,rz_nom,rx,ry,rz\n"
+                           f"1,0,0,0,0.001,0,0,0.1,0.2,0.3,0,0,0,{math.pi / 2},{-math.pi / 4},0.1\n")
+    fmt = MeasurementFormat(length_unit="m", orientation_unit="rad", columns={
+        "x_meas@B": "tx", "y_meas@B": "ty", "z_meas@B": "tz", "rx_meas": "rx", "ry_meas": "ry", "rz_meas": "rz"})
+    m = read_measurements(path, fmt=fmt)
+    np.testing.assert_allclose(m.measured_of("B"), [[100, 200, 300]], rtol=1e-12)
+    np.testing.assert_allclose(m.measured_orientation_deg, [[90, -45, math.degrees(0.1)]], rtol=1e-12)
+    assert load_format(write(tmp_path, "orientation_unit: rad\n", "o.yaml")).orientation_unit == "rad"

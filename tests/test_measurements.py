@@ -130,3 +130,119 @@ def test_read_columns_alternatives_and_partial_optional_columns(tmp_path):
         read_columns(path, [["x_nom", "y_nom", "z_nom"]], ["q1", "q2", "q3"])
     with pytest.raises(DataError, match=r"m.csv:2: column 'x' is missing \(expected columns x,y,z\)"):
         read_columns(path, [["x", "y", "z"]])
+
+
+# ---------------------------------------------------------------------- several targets and orientation
+TARGETS = "q1,q2,x_nom,y_nom,z_nom,x_meas,y_meas,z_meas"
+
+
+def _rotation(axis, angle_deg):
+    """A rotation about a coordinate axis, written out by hand."""
+    c, s = np.cos(np.radians(angle_deg)), np.sin(np.radians(angle_deg))
+    return {"x": np.array([[1, 0, 0], [0, c, -s], [0, s, c]]), "y": np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]]),
+            "z": np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])}[axis]
+
+
+def test_targets_and_orientation_round_trip(tmp_path):
+    rng = np.random.default_rng(3)
+    n = 6
+    nominal = rng.uniform(-1e3, 1e3, (n, 3))
+    extra = {"B": nominal + [100, 0, 0], "tip_2": nominal + [0, 50, 0]}
+    angles = np.column_stack([rng.uniform(-180, 180, n), rng.uniform(-90, 90, n), rng.uniform(-180, 180, n)])
+    m = Measurements(rng.uniform(-90, 90, (n, 6)), nominal, nominal + 0.5, name="multi",
+                     extra_measured_mm={k: v + 0.25 for k, v in extra.items()}, extra_nominal_mm=extra,
+                     measured_orientation_deg=angles + 0.01, nominal_orientation_deg=angles)
+    path = tmp_path / "multi.csv"
+    write_measurements(m, path)
+    assert path.read_text().splitlines()[0] == (
+        "q1,q2,q3,q4,q5,q6,x_nom,y_nom,z_nom,x_meas,y_meas,z_meas,x_nom@B,y_nom@B,z_nom@B,x_meas@B,y_meas@B,"
+        "z_meas@B,x_nom@tip_2,y_nom@tip_2,z_nom@tip_2,x_meas@tip_2,y_meas@tip_2,z_meas@tip_2,rx_nom,ry_nom,rz_nom,"
+        "rx_meas,ry_meas,rz_meas")
+    back = read_measurements(path)
+    assert back.target_names == ("A", "B", "tip_2")
+    np.testing.assert_allclose(back.errors_mm, 0.5, atol=2e-6)        # the primary target, as before
+    np.testing.assert_allclose(back.measured_of("B") - back.nominal_of("B"), 0.25, atol=2e-6)
+    np.testing.assert_allclose(back.nominal_of("tip_2"), extra["tip_2"], atol=1e-6)
+    np.testing.assert_allclose(back.measured_orientation_deg, angles + 0.01, atol=1e-6)
+    write_measurements(back, tmp_path / "again.csv")
+    assert (tmp_path / "again.csv").read_bytes() == path.read_bytes()
+    with pytest.raises(DataError, match=r"Expected a target of multi \(A, B, tip_2\), got 'C'"):
+        back.measured_of("C")
+
+
+def test_orientation_convention_is_intrinsic_xyz(tmp_path):
+    from partcal.robot.kinematics import matrices_from_xyz_deg, xyz_deg_from_matrices
+
+    by_hand = _rotation("x", 30) @ _rotation("y", -50) @ _rotation("z", 120)
+    np.testing.assert_allclose(matrices_from_xyz_deg([[30, -50, 120]])[0], by_hand, atol=1e-15)
+    np.testing.assert_allclose(xyz_deg_from_matrices(by_hand[None]), [[30, -50, 120]], atol=1e-12)
+    # an orientation error: the measured tool turned by 0.5 degrees about the base's z axis
+    turned = xyz_deg_from_matrices((_rotation("z", 0.5) @ by_hand)[None])
+    m = Measurements(np.zeros((1, 2)), np.zeros((1, 3)), np.zeros((1, 3)), measured_orientation_deg=turned,
+                     nominal_orientation_deg=[[30, -50, 120]])
+    np.testing.assert_allclose(m.orientation_errors_deg, [[0, 0, 0.5]], atol=1e-12)
+
+
+def test_nominal_orientation_and_extra_targets_with_a_robot(tmp_path, sk120):
+    q = np.array([[0, -90, -180, 0, 0, 0], [10, -80, -170, 20, -30, 40]], dtype=float)
+    p = sk120.positions(q)
+    rows = "\n".join(",".join(f"{v:.9f}" for v in (*qi, *pi, *(pi + 1), 10, 20, 30)) for qi, pi in zip(q, p))
+    path = write(tmp_path, "q1,q2,q3,q4,q5,q6,x_meas,y_meas,z_meas,x_meas@B,y_meas@B,z_meas@B,rx_meas,ry_meas,"
+                           "rz_meas\n" + rows + "\n")
+    m = read_measurements(path, robot=sk120)
+    assert m.nominal_of("B") is None and m.extra_nominal_mm == {}
+    np.testing.assert_allclose(m.measured_of("B"), p + 1, atol=1e-8)
+    # the nominal orientation is the last frame's: check it against the flange axes by an independent reading
+    from scipy.spatial.transform import Rotation
+
+    axes = Rotation.from_euler("XYZ", m.nominal_orientation_deg, degrees=True).as_matrix()
+    np.testing.assert_allclose(axes, sk120.forward(q)[:, :3, :3], atol=1e-12)
+
+
+BAD_TARGETS = "q1,q2,x_nom,y_nom,z_nom,x_meas,y_meas,z_meas,"
+
+
+@pytest.mark.parametrize("extra, cells, match", [
+    ("x_meas@B,y_meas@B", "1,2", r"m.csv:1: column 'z_meas@B' is missing \(target B needs all of x_meas@B, "
+                                 r"y_meas@B, z_meas@B\)"),
+    ("x_nom@B,y_nom@B,z_nom@B", "1,2,3", r"m.csv:1: column 'x_meas@B' is missing"),
+    ("x_meas@B,y_meas@B,z_meas@B,x_nom@B", "1,2,3,4", r"m.csv:1: column 'y_nom@B' is missing \(target B needs "
+                                                      r"all of x_nom@B, y_nom@B, z_nom@B when it has nominal"),
+    ("x_meas@B,y_meas@B,z_meas@B,x_nom@B,y_nom@B,z_nom@B,x_meas@C,y_meas@C,z_meas@C", "1,2,3,4,5,6,7,8,9",
+     r"m.csv:1: column 'x_nom@C' is missing: target B has nominal columns, so every extra target needs them"),
+    ("x_meas@,y_meas@,z_meas@", "1,2,3", r"m.csv:1: column 'x_meas@': a target name is letters, digits and '_'"),
+    ("x_meas@A,y_meas@A,z_meas@A", "1,2,3", r"m.csv:1: column 'x_meas@A': 'A' names the unsuffixed columns"),
+    ("rx_meas@B", "1", r"m.csv:1: column 'rx_meas@B': the orientation is one per pose"),
+    ("rx_meas,ry_meas", "1,2", r"m.csv:1: column 'rz_meas' is missing \(give all of rx_meas, ry_meas, rz_meas"),
+    ("rx_nom,ry_nom,rz_nom", "1,2,3", r"m.csv:1: column 'rx_meas' is missing: the nominal orientation"),
+    ("rx_meas,ry_meas,rz_meas", "1,2,3", r"m.csv:1: columns rx_nom, ry_nom, rz_nom are missing; give them, or a "
+                                         r"robot"),
+    ("rx_meas,ry_meas,rz_meas,rx_nom,ry_nom,rz_nom", "1,95.5,3,1,2,3",
+     r"m.csv:2: column 'ry_meas': expected an angle in \[-90, 90\] degrees \(intrinsic XYZ angles\), got '95.5'"),
+    ("rx_meas,ry_meas,rz_meas,rx_nom,ry_nom,rz_nom", "1,2,3,1,2,-181",
+     r"m.csv:2: column 'rz_nom': expected an angle in \[-180, 180\] degrees \(intrinsic XYZ angles\), got '-181'"),
+    ("rx_meas,ry_meas,rz_meas,rx_nom,ry_nom,rz_nom", "1,nan,3,1,2,3",
+     r"m.csv:2: column 'ry_meas': expected a finite number, got 'nan'"),
+])
+def test_bad_target_and_orientation_columns_get_one_clear_error(tmp_path, extra, cells, match):
+    with pytest.raises(DataError, match=match):
+        read_measurements(write(tmp_path, BAD_TARGETS + extra + "\n1,2,3,4,5,6,7,8," + cells + "\n"))
+
+
+def test_a_tracker_frame_refuses_extra_nominal_columns(tmp_path):
+    path = write(tmp_path, "q1,q2,q3,q4,q5,q6,x_meas,y_meas,z_meas,x_meas@B,y_meas@B,z_meas@B,x_nom@B,y_nom@B,"
+                           "z_nom@B\n" + "1," * 14 + "1\n")
+    with pytest.raises(DataError, match=r"m.csv:1: column 'x_nom@B': with frame: tracker the nominal positions"):
+        read_measurements(path, "motoman_sk120", frame="tracker")
+
+
+def test_measurements_record_checks_targets_and_orientation():
+    z = np.zeros((1, 3))
+    with pytest.raises(DataError, match=r"Expected target names of letters, digits and '_' other than 'A'"):
+        Measurements(np.zeros((1, 2)), z, z, extra_measured_mm={"A": z})
+    with pytest.raises(DataError, match=r"extra_nominal_mm must name the targets of extra_measured_mm"):
+        Measurements(np.zeros((1, 2)), z, z, extra_measured_mm={"B": z}, extra_nominal_mm={"C": z})
+    with pytest.raises(DataError, match=r"Expected measured_orientation_deg and nominal_orientation_deg both"):
+        Measurements(np.zeros((1, 2)), z, z, measured_orientation_deg=z)
+    with pytest.raises(DataError, match=r"Expected nominal_orientation_deg within \[-90, 90\] degrees"):
+        Measurements(np.zeros((1, 2)), z, z, measured_orientation_deg=z, nominal_orientation_deg=[[0, 91, 0]])

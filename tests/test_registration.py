@@ -117,3 +117,51 @@ def test_real_robot_tool_default_is_the_robots():
     seen = (robot.positions(q) - t) @ rot               # the robot's own fixture as the tool
     reg = register_tracker(robot, q, seen, fit_tool=False)
     assert reg.tool_mm.tolist() == robot.tool_mm.tolist() and reg.rms_3d < 1e-6
+
+
+def _three_targets(seed=7, n=30):
+    """A perfect UR10 with three targets and a probe turned on its flange, seen from a known tracker frame."""
+    robot = load_robot("universal_robots_ur10")
+    q, rot, t, tool, seen = synthetic(robot, seed, n=n)
+    rng = np.random.default_rng(seed + 100)
+    tools = {"B": tool + rng.uniform(-100, 100, 3), "C": tool + rng.uniform(-100, 100, 3)}
+    extra = {k: (robot.replace(tool_mm=v).positions(q) - t) @ rot for k, v in tools.items()}
+    probe = Rotation.from_rotvec(rng.normal(size=3)).as_matrix()
+    flange = robot.forward(q)[:, :3, :3]
+    orientation = Rotation.from_matrix(rot.T @ flange @ probe).as_euler("XYZ", degrees=True)   # in the tracker frame
+    return robot, q, rot, t, tool, tools, probe, seen, extra, orientation
+
+
+def test_one_offset_per_target_and_the_probe_rotation_are_recovered_exactly():
+    robot, q, rot, t, tool, tools, probe, seen, extra, orientation = _three_targets()
+    reg = register_tracker(robot, q, seen, targets=extra, orientation_deg=orientation)
+    assert Rotation.from_matrix(reg.rotation @ rot.T).magnitude() < 1e-9
+    np.testing.assert_allclose(reg.translation_mm, t, atol=1e-6)
+    np.testing.assert_allclose(reg.tool_mm, tool, atol=1e-6)
+    for name in ("B", "C"):
+        np.testing.assert_allclose(reg.target_tools_mm[name], tools[name], atol=1e-6)
+    assert Rotation.from_matrix(reg.probe_rotation @ probe.T).magnitude() < 1e-9
+    assert list(reg.target_rms_3d) == ["A", "B", "C"] and max(reg.target_rms_3d.values()) < 1e-6
+    assert reg.orientation_rms_deg < 1e-7
+    d = reg.to_dict()
+    assert sorted(d["targets"]) == ["A", "B", "C"] and d["orientation_rms_deg"] < 1e-7
+    m = Measurements(q, np.zeros_like(seen), seen, extra_measured_mm=extra, extra_nominal_mm={},
+                     measured_orientation_deg=orientation, nominal_orientation_deg=orientation)
+    base = registered(m, robot, reg)
+    for name in ("A", "B", "C"):
+        np.testing.assert_allclose(base.measured_of(name) - base.nominal_of(name), 0, atol=1e-6)
+    np.testing.assert_allclose(base.orientation_errors_deg, 0, atol=1e-7)
+
+
+def test_residuals_are_reported_per_target():
+    robot, q, rot, t, tool, tools, probe, seen, extra, orientation = _three_targets()
+    noisy = {**extra, "C": extra["C"] + np.random.default_rng(0).normal(0, 0.05, extra["C"].shape)}
+    reg = register_tracker(robot, q, seen, targets=noisy)
+    assert reg.target_rms_3d["C"] > 0.05 and reg.target_rms_3d["A"] < 0.02 and reg.probe_rotation is None
+    assert reg.rms_3d == reg.target_rms_3d["A"]
+    with pytest.raises(DataError, match=r"with the tool given \(fit_tool: false\) every target's offset must be "
+                                        r"given too; target B has none"):
+        register_tracker(robot, q, seen, targets=extra, tool_mm=tool, fit_tool=False)
+    fixed = register_tracker(robot, q, seen, targets=extra, tool_mm=tool, fit_tool=False, target_tools_mm=tools)
+    np.testing.assert_allclose(fixed.translation_mm, t, atol=1e-6)
+

@@ -106,3 +106,59 @@ def test_config_errors_name_key_and_line(tmp_path):
     bad.write_text(CONFIG.read_text().replace("seed: 2006", "seed: 1\nseed: 2"))
     with pytest.raises(ConfigError, match=r"seed \(line \d+\): duplicate key"):
         load_study(bad)
+
+
+TARGETS_CONFIG = ROOT / "configs" / "ur10_targets_virtual.yaml"
+
+
+def _noise_free(tmp_path):
+    text = TARGETS_CONFIG.read_text().replace("repeatability_ppm: 10", "repeatability_ppm: 0").replace(
+        "orientation_noise_deg: 0.005", "orientation_noise_deg: 0")
+    path = tmp_path / "quiet.yaml"
+    path.write_text(text)
+    return load_study(path)
+
+
+def test_three_targets_sit_rigidly_on_the_measured_tool(tmp_path):
+    from scipy.spatial.transform import Rotation
+
+    study = _noise_free(tmp_path)
+    m = simulate(study)["identification"]
+    assert m.target_names == ("A", "B", "C") and m.has_orientation
+    # noise-free: the measured orientation carries the plate's drawing onto the measured points
+    turn = Rotation.from_euler("XYZ", m.measured_orientation_deg, degrees=True).as_matrix()
+    for name, offset in (("B", [100, 0, 90]), ("C", [-40, 90, 90])):
+        in_flange = np.einsum("nji,nj->ni", turn, m.measured_of(name) - m.measured_mm)
+        np.testing.assert_allclose(in_flange, np.tile(np.subtract(offset, [0, 0, 120]), (len(m), 1)), atol=1e-9)
+        nominal_robot = study.robot.nominal.replace(tool_mm=np.array(offset, dtype=float))
+        np.testing.assert_allclose(m.nominal_of(name), nominal_robot.positions(m.q_deg), atol=1e-9)
+    np.testing.assert_allclose(study.robot.nominal.tool_mm, [0, 0, 120])     # A is the robot's tool
+    flange = study.robot.nominal.replace(tool_mm=np.zeros(3)).forward(m.q_deg)[:, :3, :3]
+    nominal_turn = Rotation.from_euler("XYZ", m.nominal_orientation_deg, degrees=True).as_matrix()
+    np.testing.assert_allclose(nominal_turn, flange, atol=1e-12)
+
+
+def test_each_target_and_the_orientation_get_their_own_noise():
+    study = load_study(TARGETS_CONFIG)
+    q = np.tile([[0.0, -90, 90, 0, 90, 0]], (4000, 1))
+    m_extra, orientation = study.robot.measure_more(q, np.random.default_rng(5))
+    dist = np.linalg.norm(study.robot.true_positions(q[:1]) - [2500, 0, 0])
+    # 10 ppm per reading, one reading: about 0.025 mm at 2.5 m, per axis and per target
+    for name in ("B", "C"):
+        np.testing.assert_allclose(m_extra[name].std(axis=0), 10e-6 * dist, rtol=0.1)
+    assert abs(np.corrcoef(m_extra["B"][:, 0], m_extra["C"][:, 0])[0, 1]) < 0.1
+    from partcal.data.measurements import Measurements
+
+    same = Measurements(q, np.zeros((4000, 3)), np.zeros((4000, 3)), measured_orientation_deg=orientation,
+                        nominal_orientation_deg=np.tile(orientation.mean(axis=0), (4000, 1)))
+    np.testing.assert_allclose(same.orientation_errors_deg.std(axis=0), 0.005, rtol=0.1)
+
+
+def test_the_targets_key_is_checked(tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(TARGETS_CONFIG.read_text().replace("  C: [-40, 90, 90]", "  C: [-40, 90]"))
+    with pytest.raises(ConfigError, match=r"bad.yaml: targets.C \(line \d+\): must be a list of three numbers"):
+        load_study(bad)
+    bad.write_text(TARGETS_CONFIG.read_text().replace("  C: [-40, 90, 90]", "  C D: [-40, 90, 0]"))
+    with pytest.raises(ConfigError, match=r"targets.C D \(line \d+\): a target name is letters, digits and '_'"):
+        load_study(bad)

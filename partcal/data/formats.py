@@ -38,9 +38,13 @@ from ..robot.description import MAX_JOINTS
 
 JOINTS = tuple(f"q{j}" for j in range(1, MAX_JOINTS + 1))
 LENGTHS = ("x_nom", "y_nom", "z_nom", "x_meas", "y_meas", "z_meas", "x", "y", "z")
-CONTRACT_COLUMNS = JOINTS + LENGTHS + ("set", "payload_kg")
+ORIENTATIONS = ("rx_meas", "ry_meas", "rz_meas", "rx_nom", "ry_nom", "rz_nom")
+CONTRACT_COLUMNS = JOINTS + LENGTHS + ORIENTATIONS + ("set", "payload_kg")
+TARGET_COLUMN = re.compile(r"^([xyz]_(?:meas|nom))@(.*)$")
+TARGET_NAME = re.compile(r"^[A-Za-z0-9_]+$")
 JOINT_UNITS = ("deg", "rad")
 LENGTH_UNITS = ("mm", "m")
+ORIENTATION_UNITS = ("deg", "rad")
 _RANGE = re.compile(r"^\s*(\d+)\s*(?:-\s*(\d+)\s*)?$")
 _ROWS = "data rows such as '1-600' or '1-100, 201-300' (1-based, increasing, not overlapping)"
 
@@ -56,13 +60,16 @@ class MeasurementFormat:
     decimal : str
         The decimal mark, ``"."`` (default) or ``","``; must differ from ``delimiter``.
     columns : mapping of str to str
-        Contract column (``q1``..``q12``, ``x_nom``.., ``x_meas``.., ``x, y, z``,
-        ``set``) -> the file's column that holds it. Unmapped contract columns
-        are looked up under their own name; unmapped file columns are ignored.
+        Contract column (``q1``..``q12``, ``x_nom``.., ``x_meas``.., a target's
+        ``x_meas@B``.., ``rx_meas``.., ``rx_nom``.., ``x, y, z``, ``set``) -> the
+        file's column that holds it. Unmapped contract columns are looked up
+        under their own name; unmapped file columns are ignored.
     joint_unit : {"deg", "rad"}
         Unit of the joint columns in the file.
     length_unit : {"mm", "m"}
         Unit of the position columns in the file.
+    orientation_unit : {"deg", "rad"}
+        Unit of the orientation columns (intrinsic XYZ angles) in the file.
     """
 
     delimiter: str = ","
@@ -70,9 +77,11 @@ class MeasurementFormat:
     columns: Mapping[str, str] = field(default_factory=dict)
     joint_unit: str = "deg"
     length_unit: str = "mm"
+    orientation_unit: str = "deg"
 
     def __post_init__(self):
-        problem = _format_problem(self.delimiter, self.decimal, self.columns, self.joint_unit, self.length_unit)
+        problem = _format_problem(self.delimiter, self.decimal, self.columns, self.joint_unit, self.length_unit,
+                                  self.orientation_unit)
         if problem:
             name = f"{problem.key!r} parameter" if problem.entry is None else f"{problem.key!r} entry {problem.entry!r}"
             raise ConfigError(f"The {name} of MeasurementFormat must be {problem.expected}. "
@@ -94,8 +103,10 @@ class MeasurementFormat:
         for k, name in enumerate(names):
             if name in JOINTS and self.joint_unit == "rad":
                 out[:, k] = np.degrees(out[:, k])
-            elif name in LENGTHS and self.length_unit == "m":
+            elif _is_length(name) and self.length_unit == "m":
                 out[:, k] = out[:, k] * 1000.0
+            elif name in ORIENTATIONS and self.orientation_unit == "rad":
+                out[:, k] = np.degrees(out[:, k])
         return out
 
     @property
@@ -106,7 +117,8 @@ class MeasurementFormat:
     def to_dict(self) -> dict:
         """Plain types, as in the YAML."""
         return {"delimiter": self.delimiter, "decimal": self.decimal, "columns": dict(self.columns),
-                "joint_unit": self.joint_unit, "length_unit": self.length_unit}
+                "joint_unit": self.joint_unit, "length_unit": self.length_unit,
+                "orientation_unit": self.orientation_unit}
 
     @classmethod
     def from_section(cls, sec: Section) -> "MeasurementFormat":
@@ -116,7 +128,8 @@ class MeasurementFormat:
         as ``key (line N): must be ...; got ...``.
         """
         values = {key: sec.get(key, "str", default=default) for key, default in
-                  (("delimiter", ","), ("decimal", "."), ("joint_unit", "deg"), ("length_unit", "mm"))}
+                  (("delimiter", ","), ("decimal", "."), ("joint_unit", "deg"), ("length_unit", "mm"),
+                   ("orientation_unit", "deg"))}
         cols = sec.section("columns")
         values["columns"] = {str(key): _stripped(cols.get(key, "str")) for key in list(cols.data)}
         problem = _format_problem(**values)
@@ -148,8 +161,8 @@ class _Problem(NamedTuple):
     note: str = ""
 
 
-def _format_problem(delimiter: Any, decimal: Any, columns: Any, joint_unit: Any, length_unit: Any
-                    ) -> _Problem | None:
+def _format_problem(delimiter: Any, decimal: Any, columns: Any, joint_unit: Any, length_unit: Any,
+                    orientation_unit: Any = "deg") -> _Problem | None:
     """The first format rule the values break, or None: each rule is checked here and only here.
 
     Both ways of making a format use it: the constructor frames the problem
@@ -163,20 +176,40 @@ def _format_problem(delimiter: Any, decimal: Any, columns: Any, joint_unit: Any,
         return _Problem("decimal", None, one_of(".", ",").expected, decimal)
     if decimal == delimiter:
         return _Problem("decimal", None, f"different from the delimiter {delimiter!r}", decimal)
-    for key, value, allowed in (("joint_unit", joint_unit, JOINT_UNITS), ("length_unit", length_unit, LENGTH_UNITS)):
+    for key, value, allowed in (("joint_unit", joint_unit, JOINT_UNITS), ("length_unit", length_unit, LENGTH_UNITS),
+                                ("orientation_unit", orientation_unit, ORIENTATION_UNITS)):
         if one_of(*allowed).problem(value):
             return _Problem(key, None, one_of(*allowed).expected, value)
     if not isinstance(columns, Mapping):
         return _Problem("columns", None, "a mapping of contract column to file column", columns)
     for key, value in columns.items():
-        if key not in CONTRACT_COLUMNS:
+        if not is_contract_column(key):
             close = difflib.get_close_matches(str(key), CONTRACT_COLUMNS, n=1, cutoff=0.6)
             return _Problem("columns", key, f"a contract column (q1..q{MAX_JOINTS}, x_nom, y_nom, z_nom, x_meas, "
-                                            "y_meas, z_meas, x, y, z, set, payload_kg)", key,
+                                            "y_meas, z_meas, x_meas@NAME.., rx_meas, ry_meas, rz_meas, rx_nom, "
+                                            "ry_nom, rz_nom, x, y, z, set, payload_kg)", key,
                             f" (did you mean {close[0]!r}?)" if close else "")
         if not isinstance(value, str) or not value.strip():
             return _Problem("columns", key, "a non-empty file column name", value)
     return _mapping_problem(columns)
+
+
+def is_contract_column(name: Any) -> bool:
+    """Whether ``name`` is a contract column: a fixed one, or a target's coordinate such as ``x_meas@B``.
+
+    >>> is_contract_column("y_nom@C"), is_contract_column("x_meas@"), is_contract_column("w_meas@B")
+    (True, False, False)
+    """
+    if not isinstance(name, str):
+        return False
+    target = TARGET_COLUMN.match(name)
+    return name in CONTRACT_COLUMNS or (target is not None and TARGET_NAME.match(target.group(2)) is not None)
+
+
+def _is_length(name: str) -> bool:
+    """A position column: ``x_meas``, ``x``, ``y_nom@B`` ..."""
+    target = TARGET_COLUMN.match(name)
+    return name in LENGTHS or target is not None
 
 
 def _mapping_problem(columns: Mapping[str, str]) -> _Problem | None:
@@ -193,7 +226,7 @@ def _mapping_problem(columns: Mapping[str, str]) -> _Problem | None:
             return _Problem("columns", key, one, value, f" (already mapped to {owner[value]})")
         owner[value] = key
     for key, value in columns.items():
-        if value in CONTRACT_COLUMNS and value != key and value not in columns:
+        if is_contract_column(value) and value != key and value not in columns:
             return _Problem("columns", key, one, value, f" (the contract column {value} is not mapped, so it is "
                                                         f"read under its own name: map {value} too)")
     return None

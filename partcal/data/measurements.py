@@ -8,6 +8,13 @@ optional ``payload_kg`` (the payload at the tool point when the pose was
 measured, kg). Other columns are accepted and ignored. Errors are
 ``measured - nominal``.
 
+A pose may carry more: further targets on the tool, each as wide columns with
+the target's name after ``@`` (``x_meas@B, y_meas@B, z_meas@B`` and optionally
+``x_nom@B, ...``; the unsuffixed columns are the primary target, named
+:data:`PRIMARY`), and the tool's measured orientation ``rx_meas, ry_meas,
+rz_meas`` (intrinsic XYZ angles, degrees: ``R = Rx Ry Rz``) with its nominal
+``rx_nom, ry_nom, rz_nom`` (or a robot's forward kinematics).
+
 Every problem is reported once, as ``FILE:LINE: column 'NAME': what was wrong``,
 where LINE is the line number an editor shows.
 
@@ -21,18 +28,22 @@ from __future__ import annotations
 
 import csv
 import re
+import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.spatial.transform import Rotation
 
 from .._io import atomic_write
 from .._validation import check_array
 from ..errors import DataError
 from ..robot.description import MAX_JOINTS, joint_columns, load_robot
-from ..robot.kinematics import Robot
+from ..robot.kinematics import Robot, matrices_from_xyz_deg, xyz_deg_from_matrices
 from .formats import MeasurementFormat, RowSelection
+from .pose_columns import (ORIENTATION_MEASURED, ORIENTATION_NOMINAL, PRIMARY, check_angles, checked_orientation,
+                           checked_targets, orientation_columns, suffixed, target_columns)
 from .plausibility import Plausibility, check_measured
 
 NOMINAL = ("x_nom", "y_nom", "z_nom")
@@ -68,6 +79,16 @@ class Measurements:
         column). Kinematic models with joint compliance read it; it is None
         when the file has no such column (the model's own ``payload_kg`` then
         applies).
+    extra_measured_mm : dict of str to ndarray (n, 3), optional
+        Further targets on the tool (not the primary one), by name: measured
+        positions, mm. ``nominal_mm``, ``measured_mm`` and ``errors_mm`` are
+        always the primary target's (named :data:`PRIMARY`).
+    extra_nominal_mm : dict of str to ndarray (n, 3), optional
+        Their nominal positions, mm: for every extra target or for none.
+    measured_orientation_deg, nominal_orientation_deg : ndarray, shape (n, 3), optional
+        The tool's orientation, intrinsic XYZ angles ``(rx, ry, rz)`` degrees
+        (``R = Rx(rx) Ry(ry) Rz(rz)``, :func:`~partcal.robot.kinematics.matrices_from_xyz_deg`),
+        measured and nominal; both or neither. ``rx, rz`` lie in [-180, 180] and ``ry`` in [-90, 90].
     """
 
     q_deg: NDArray[np.float64]
@@ -77,6 +98,10 @@ class Measurements:
     labels: tuple[str, ...] | None = field(default=None)
     groups: tuple[str, ...] | None = field(default=None)
     payload_kg: NDArray[np.float64] | None = field(default=None)
+    extra_measured_mm: dict = field(default_factory=dict)
+    extra_nominal_mm: dict = field(default_factory=dict)
+    measured_orientation_deg: NDArray[np.float64] | None = None
+    nominal_orientation_deg: NDArray[np.float64] | None = None
 
     def __post_init__(self):
         q = check_array(self.q_deg, "q_deg", min_rows=1)
@@ -93,6 +118,12 @@ class Measurements:
             given = getattr(self, name)
             if given is not None and len(given) != n:
                 raise DataError(f"{name} has {len(given)} entries but q_deg has {n} rows")
+        measured, nominal = checked_targets(self.extra_measured_mm, self.extra_nominal_mm, n)
+        object.__setattr__(self, "extra_measured_mm", measured)
+        object.__setattr__(self, "extra_nominal_mm", nominal)
+        for attr, arr in zip(("measured_orientation_deg", "nominal_orientation_deg"),
+                             checked_orientation(self.measured_orientation_deg, self.nominal_orientation_deg, n)):
+            object.__setattr__(self, attr, arr)
         if self.payload_kg is not None:
             payload = check_array(self.payload_kg, "payload_kg", ndim=1)
             bad = first_bad_payload(payload)
@@ -104,11 +135,19 @@ class Measurements:
 
     def take(self, rows, name: str | None = None) -> "Measurements":
         """The rows ``rows`` (indices or a boolean mask) as a data set of their own, every column kept."""
-        pick = (lambda v: None if v is None else tuple(np.asarray(v, dtype=object)[rows].tolist()))
-        return Measurements(self.q_deg[rows], self.nominal_mm[rows], self.measured_mm[rows],
-                            name=self.name if name is None else name, labels=pick(self.labels),
-                            groups=pick(self.groups),
-                            payload_kg=None if self.payload_kg is None else self.payload_kg[rows])
+        def some(v):
+            return None if v is None else v[rows]
+
+        def texts(v):
+            return None if v is None else tuple(np.asarray(v, dtype=object)[rows].tolist())
+
+        return dataclasses.replace(
+            self, q_deg=self.q_deg[rows], nominal_mm=self.nominal_mm[rows], measured_mm=self.measured_mm[rows],
+            name=self.name if name is None else name, labels=texts(self.labels), groups=texts(self.groups),
+            payload_kg=some(self.payload_kg), extra_measured_mm={k: v[rows] for k, v in self.extra_measured_mm.items()},
+            extra_nominal_mm={k: v[rows] for k, v in self.extra_nominal_mm.items()},
+            measured_orientation_deg=some(self.measured_orientation_deg),
+            nominal_orientation_deg=some(self.nominal_orientation_deg))
 
     def __len__(self) -> int:
         return self.q_deg.shape[0]
@@ -121,6 +160,41 @@ class Measurements:
     def errors_mm(self) -> NDArray[np.float64]:
         """Position errors ``measured - nominal``, shape (n, 3), mm."""
         return self.measured_mm - self.nominal_mm
+
+    @property
+    def target_names(self) -> tuple[str, ...]:
+        """The targets measured: :data:`PRIMARY` first, then the extra ones in file order."""
+        return (PRIMARY, *self.extra_measured_mm)
+
+    def measured_of(self, target: str) -> NDArray[np.float64]:
+        """The measured positions of one target, shape (n, 3), mm."""
+        return self.measured_mm if target == PRIMARY else self.extra_measured_mm[self._target(target)]
+
+    def nominal_of(self, target: str) -> NDArray[np.float64] | None:
+        """The nominal positions of one target, shape (n, 3), mm (None when an extra target has none)."""
+        return self.nominal_mm if target == PRIMARY else self.extra_nominal_mm.get(self._target(target))
+
+    def _target(self, target: str) -> str:
+        if target not in self.extra_measured_mm:
+            raise DataError(f"Expected a target of {self.name} ({', '.join(self.target_names)}), got {target!r}.")
+        return target
+
+    @property
+    def has_orientation(self) -> bool:
+        return self.measured_orientation_deg is not None
+
+    @property
+    def orientation_errors_deg(self) -> NDArray[np.float64]:
+        """Orientation errors as rotation vectors (axis times angle) in the base frame, shape (n, 3), degrees.
+
+        The turn that carries the nominal orientation to the measured one:
+        ``R_meas = exp([e]) R_nom``.
+        """
+        if not self.has_orientation:
+            raise DataError(f"{self.name} has no measured orientation (columns rx_meas, ry_meas, rz_meas)")
+        turn = matrices_from_xyz_deg(self.measured_orientation_deg) @ \
+            matrices_from_xyz_deg(self.nominal_orientation_deg).transpose(0, 2, 1)
+        return Rotation.from_matrix(turn).as_rotvec(degrees=True)
 
 
 def read_measurements(path: str | Path, robot: str | Robot | None = None, *, name: str | None = None,
@@ -177,26 +251,39 @@ def read_measurements(path: str | Path, robot: str | Robot | None = None, *, nam
     if frame == "tracker":
         if robot is None:
             raise DataError(f"{path}: measurements in a tracker frame need a robot model to register them")
-        if columns["nom"]:
-            raise DataError(f"{path}:{line}: column {header[columns['nom'][0]]}: with frame: tracker the nominal "
+        given = (columns["nom"] or []) + [c for t in columns["targets"].values() for c in t["nom"] or []] + \
+            (columns["rot_nom"] or [])
+        if given:
+            raise DataError(f"{path}:{line}: column {header[given[0]]}: with frame: tracker the nominal "
                             "positions come from the robot and the registration; drop the nominal columns "
                             "(or their mapping), or use frame: base")
-    q_cols, nom_cols = columns["q"], columns["nom"]
-    values = _numbers(path, line, header, data, q_cols + (nom_cols or []) + columns["meas"], fmt.decimal)
-    n_q = len(q_cols)
-    names = joint_columns(n_q) + (list(NOMINAL) if nom_cols else []) + list(MEASURED)
-    values = fmt.to_contract(names, values)
+    names, cols = _numeric_columns(columns)
+    values = fmt.to_contract(names, _numbers(path, line, header, data, cols, fmt.decimal))
+    check_angles(path, header, data, names, cols, values)
     keep = (rows or RowSelection()).indices(len(data), path)
     values = values[keep]
-    q = values[:, :n_q]
-    meas = values[:, -3:]
+    at = {contract: k for k, contract in enumerate(names)}
+
+    def block(contract: tuple | list) -> NDArray[np.float64]:
+        return values[:, [at[c] for c in contract]]
+
+    n_q = len(columns["q"])
+    q = block(joint_columns(n_q))
+    meas = block(MEASURED)
     model = load_robot(robot) if robot is not None else None
     if model is not None and model.n_joints != n_q:     # even with nominal columns: joint models read q1..qN
         raise DataError(f"{path}: the file has {n_q} joint columns (q1..q{n_q}) but robot {model.name!r} has "
                         f"{model.n_joints} joints")
-    nominal = values[:, n_q:n_q + 3] if nom_cols else model.positions(q)
-    check_measured(str(path), [data[i][0] for i in keep], q, nominal, meas, model, nominal_given=bool(nom_cols),
+    nominal = block(NOMINAL) if columns["nom"] else model.positions(q)
+    check_measured(str(path), [data[i][0] for i in keep], q, nominal, meas, model, nominal_given=bool(columns["nom"]),
                    frame=frame, limits=plausibility or Plausibility())
+    extra = {t: block(suffixed("meas", t)) for t in columns["targets"]}
+    extra_nominal = {t: block(suffixed("nom", t)) for t, c in columns["targets"].items() if c["nom"]}
+    orientation = nominal_orientation = None
+    if columns["rot_meas"]:
+        orientation = block(ORIENTATION_MEASURED)
+        nominal_orientation = (block(ORIENTATION_NOMINAL) if columns["rot_nom"]
+                               else xyz_deg_from_matrices(model.forward(q)[:, :3, :3]))
     labels = groups = None
     if columns["set"] is not None:
         labels = tuple(data[i][1][columns["set"]].strip() for i in keep)
@@ -208,7 +295,8 @@ def read_measurements(path: str | Path, robot: str | Robot | None = None, *, nam
     payload = _payloads(path, header, data, seen[PAYLOAD], fmt.decimal)[keep] if PAYLOAD in seen else None
     return Measurements(q_deg=q, nominal_mm=nominal, measured_mm=meas,
                         name=name if name is not None else path.stem, labels=labels, groups=groups,
-                        payload_kg=payload)
+                        payload_kg=payload, extra_measured_mm=extra, extra_nominal_mm=extra_nominal,
+                        measured_orientation_deg=orientation, nominal_orientation_deg=nominal_orientation)
 
 
 def first_bad_payload(values: NDArray[np.float64]) -> int | None:
@@ -225,6 +313,21 @@ def _payloads(path: Path, header: list[str], data: list, column: int, decimal: s
         raise DataError(f"{path}:{data[bad][0]}: column {header[column]}: expected a payload mass in "
                         f"[0, {MAX_PAYLOAD_KG:g}] kg, got {values[bad]:g}")
     return values
+
+
+def _numeric_columns(columns: dict) -> tuple[list[str], list[int]]:
+    """The contract names and file positions of every numeric column the header check found."""
+    n_q = len(columns["q"])
+    names = joint_columns(n_q) + (list(NOMINAL) if columns["nom"] else []) + list(MEASURED)
+    cols = columns["q"] + (columns["nom"] or []) + columns["meas"]
+    for target, found in columns["targets"].items():
+        names += suffixed("meas", target) + (suffixed("nom", target) if found["nom"] else [])
+        cols += found["meas"] + (found["nom"] or [])
+    for kind, contract in (("rot_meas", ORIENTATION_MEASURED), ("rot_nom", ORIENTATION_NOMINAL)):
+        if columns[kind]:
+            names += list(contract)
+            cols += columns[kind]
+    return names, cols
 
 
 def _rows(path: Path, delimiter: str = ","):
@@ -334,6 +437,8 @@ def _check_header(path: Path, line: int, seen: dict[str, int], fmt: MeasurementF
         "nom": [seen[c] for c in NOMINAL] if present else None,
         "meas": [seen[c] for c in MEASURED],
         "set": seen.get("set"),
+        "targets": target_columns(where, seen, fmt),
+        **orientation_columns(where, seen, fmt, has_robot=has_robot),
     }
 
 
@@ -355,21 +460,33 @@ def _number(path: Path, line: int, label: str, cell: str, decimal: str = ".") ->
 def write_measurements(m: Measurements, path: str | Path, *, comment: str | None = None) -> None:
     """Write measurements as a CSV that :func:`read_measurements` reads back.
 
+    Extra targets (with their nominal columns when present) follow the
+    primary one; the orientation, nominal then measured, follows them.
     Angles are written with 6 decimals (micro-degrees) and positions with 6
     decimals (nanometres), so files are identical whenever the data are.
     The file is written to a temporary name and renamed when complete.
     """
     header = joint_columns(m.n_joints) + list(NOMINAL) + list(MEASURED)
+    blocks = [m.q_deg, m.nominal_mm, m.measured_mm]
+    for target, measured in m.extra_measured_mm.items():
+        if target in m.extra_nominal_mm:
+            header += suffixed("nom", target)
+            blocks.append(m.extra_nominal_mm[target])
+        header += suffixed("meas", target)
+        blocks.append(measured)
+    if m.has_orientation:
+        header += list(ORIENTATION_NOMINAL) + list(ORIENTATION_MEASURED)
+        blocks += [m.nominal_orientation_deg, m.measured_orientation_deg]
     if m.payload_kg is not None:
         header.append(PAYLOAD)
+        blocks.append(m.payload_kg[:, None])
     if m.labels is not None:
         header.append("set")
     with atomic_write(path, newline="") as handle:
         for text in (comment or "").splitlines():
             handle.write(f"# {text}\n")
         handle.write(",".join(header) + "\n")
-        numbers = np.hstack([m.q_deg, m.nominal_mm, m.measured_mm]
-                            + ([m.payload_kg[:, None]] if m.payload_kg is not None else []))
+        numbers = np.hstack(blocks)
         for i, row in enumerate(numbers):
             cells = [f"{v:.6f}" for v in row]
             if m.labels is not None:

@@ -13,6 +13,13 @@ least squares (``scipy.optimize.least_squares``) from a closed-form Kabsch
 start, on the identification set only; the same transform then carries every
 test set measured from the same tracker position into the base frame.
 
+Several targets on the tool (``x_meas@B``..) each get their own offset in the
+flange frame, fitted with the frame from all of them; a measured orientation
+(a 6-D probe) adds the probe's constant rotation on the flange, and its
+residual, the small turn from the model's flange to the measured one, counts
+``orientation_mm_per_rad`` mm per radian beside the positions' mm. Residuals are
+reported per target, and for the orientation in degrees.
+
 Whatever the robot's rigid error is, the registration absorbs it: what
 remains, ``measured - nominal`` after registration, is the error an error
 model can learn. A registration whose poses do not determine the parameters
@@ -25,7 +32,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -35,7 +42,9 @@ from scipy.spatial.transform import Rotation
 from .._validation import check_array
 from ..errors import DataError
 from ..robot.kinematics import Robot
+from ..robot.kinematics import ORIENTATION_MM_PER_RAD, matrices_from_xyz_deg, xyz_deg_from_matrices
 from .measurements import Measurements
+from .pose_columns import PRIMARY
 from .plausibility import Plausibility, check_residuals
 
 log = logging.getLogger(__name__)
@@ -68,6 +77,15 @@ class Registration:
         Poses the registration was fitted on.
     fit_tool : bool
         Whether ``tool_mm`` was fitted (else it was given).
+    target_tools_mm : dict of str to ndarray (3,)
+        The extra targets' offsets in the flange frame, mm (empty for one target).
+    target_rms_3d : dict of str to float
+        3-D RMS of each target's residuals, mm, the primary (:data:`PRIMARY`) first (empty for one target).
+    probe_rotation : ndarray, shape (3, 3), optional
+        The measured frame's rotation on the flange (``R_flange @ probe_rotation`` is what the probe
+        reads, in the base frame), when an orientation was measured.
+    orientation_rms_deg : float, optional
+        RMS angle of the orientation residuals, degrees.
     """
 
     rotation: NDArray[np.float64]
@@ -78,6 +96,10 @@ class Registration:
     condition: float
     n_poses: int
     fit_tool: bool
+    target_tools_mm: dict = field(default_factory=dict)
+    target_rms_3d: dict = field(default_factory=dict)
+    probe_rotation: NDArray[np.float64] | None = None
+    orientation_rms_deg: float | None = None
 
     @property
     def rotation_deg(self) -> NDArray[np.float64]:
@@ -95,7 +117,23 @@ class Registration:
                 "rotation_deg": [float(v) for v in self.rotation_deg],
                 "translation_mm": [float(v) for v in self.translation_mm],
                 "tool_mm": [float(v) for v in self.tool_mm], "condition": float(self.condition),
-                "n": int(self.n_poses), "fit_tool": bool(self.fit_tool)}
+                "n": int(self.n_poses), "fit_tool": bool(self.fit_tool), **self._more_dict()}
+
+    def _more_dict(self) -> dict:
+        """The extra targets' and the orientation's fields (none for one target without orientation)."""
+        out = {}
+        if self.target_rms_3d:
+            out["targets"] = {name: {"rms_3d": float(rms), "tool_mm": [float(v) for v in self.tool_of(name)]}
+                              for name, rms in self.target_rms_3d.items()}
+        if self.probe_rotation is not None:
+            out["probe_rotation_deg"] = [float(v) for v in Rotation.from_matrix(self.probe_rotation).as_rotvec(
+                degrees=True)]
+            out["orientation_rms_deg"] = float(self.orientation_rms_deg)
+        return out
+
+    def tool_of(self, target: str) -> NDArray[np.float64]:
+        """A target's offset in the flange frame, mm."""
+        return self.tool_mm if target == PRIMARY else self.target_tools_mm[target]
 
 
 def kabsch(source, target) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -130,8 +168,10 @@ def kabsch(source, target) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
 
 def register_tracker(robot: Robot, q_deg, measured_mm, *, tool_mm=None, fit_tool: bool = True,
                      source: str = "registration", max_condition: float = MAX_CONDITION,
-                     plausibility: Plausibility | None = None) -> Registration:
-    """Fit the tracker frame (and the tool offset) to measured poses.
+                     plausibility: Plausibility | None = None, targets: dict | None = None,
+                     target_tools_mm: dict | None = None, orientation_deg=None,
+                     orientation_mm_per_rad: float = ORIENTATION_MM_PER_RAD) -> Registration:
+    """Fit the tracker frame (and the tool offsets) to measured poses.
 
     Parameters
     ----------
@@ -140,12 +180,12 @@ def register_tracker(robot: Robot, q_deg, measured_mm, *, tool_mm=None, fit_tool
     q_deg : array-like, shape (n, N)
         Joint angles, degrees.
     measured_mm : array-like, shape (n, 3)
-        The target measured in the tracker frame, mm.
+        The (primary) target measured in the tracker frame, mm.
     tool_mm : array-like, shape (3,), optional
         The target's offset in the flange frame, mm: fixed with
         ``fit_tool=False``, the starting value otherwise. Default the robot's.
     fit_tool : bool
-        Estimate the tool offset too (9 parameters instead of 6).
+        Estimate the tool offsets too (3 parameters per target).
     source : str
         Names the data in error messages (a file name).
     max_condition : float
@@ -153,6 +193,16 @@ def register_tracker(robot: Robot, q_deg, measured_mm, *, tool_mm=None, fit_tool
     plausibility : Plausibility, optional
         Residuals beyond its ``max_error_of_reach`` of the robot's reach are
         refused, with the likely cause (metres, swapped columns, another robot).
+    targets : dict of str to array-like (n, 3), optional
+        Further targets measured in the tracker frame, mm, by name.
+    target_tools_mm : dict of str to array-like (3,), optional
+        Their offsets in the flange frame, mm: required with ``fit_tool=False``;
+        by default each starts from the mean offset the Kabsch frame gives it.
+    orientation_deg : array-like, shape (n, 3), optional
+        The probe's orientation in the tracker frame, intrinsic XYZ degrees:
+        fits the probe's rotation on the flange too.
+    orientation_mm_per_rad : float
+        Weight of an orientation residual: one radian counts as this many mm.
 
     Returns
     -------
@@ -168,29 +218,42 @@ def register_tracker(robot: Robot, q_deg, measured_mm, *, tool_mm=None, fit_tool
     meas = check_array(measured_mm, "measured_mm", columns=3)
     if meas.shape[0] != q.shape[0]:
         raise DataError(f"{source}: {meas.shape[0]} measured points but {q.shape[0]} poses")
+    extra = {name: check_array(p, f"targets[{name!r}]", columns=3) for name, p in (targets or {}).items()}
     tool0 = robot.tool_mm if tool_mm is None else check_array(np.reshape(tool_mm, (1, -1)), "tool_mm", columns=3)[0]
-    n_params = 9 if fit_tool else 6
-    need = n_params // 3 + 1
+    n_params = (6 + 3 * (1 + len(extra)) * fit_tool) + 3 * (orientation_deg is not None)
+    need = 4 if fit_tool else 3            # the primary target's frame and offset alone need these
     if q.shape[0] < need:
         raise DataError(f"{source}: a tracker registration {'with' if fit_tool else 'without'} the tool needs at "
-                        f"least {need} poses ({n_params} parameters); got {q.shape[0]}")
+                        f"least {need} poses ({9 if fit_tool else 6} parameters); got {q.shape[0]}")
     flange = robot.replace(tool_mm=np.zeros(3)).forward(q)
     p_fl, r_fl = flange[:, :3, 3], flange[:, :3, :3]
     rot0, t0 = kabsch(meas, p_fl + r_fl @ tool0)
+    tools0 = np.vstack([tool0] + [_start_tool(name, extra[name], rot0, t0, p_fl, r_fl, target_tools_mm, fit_tool,
+                                              source) for name in extra])
+    points = np.stack([meas, *extra.values()])                                     # (K, n, 3)
+    probe = None if orientation_deg is None else _Probe(q.shape[0], orientation_deg, rot0, r_fl, orientation_mm_per_rad)
+    k_tools = 3 * len(tools0) if fit_tool else 0
+
+    def unpack(x):
+        rot = Rotation.from_rotvec(x[:3]).as_matrix() @ rot0
+        tools = x[6:6 + k_tools].reshape(-1, 3) if fit_tool else tools0
+        return rot, x[3:6], tools
+
+    def position_residuals(x):
+        rot, shift, tools = unpack(x)
+        return points @ rot.T + shift - p_fl - np.einsum("nij,kj->kni", r_fl, tools)
 
     def residuals(x):
-        rot = Rotation.from_rotvec(x[:3]).as_matrix() @ rot0
-        tool = x[6:9] if fit_tool else tool0
-        return (meas @ rot.T + x[3:6] - p_fl - r_fl @ tool).ravel()
+        out = position_residuals(x).ravel()
+        return out if probe is None else np.concatenate([out, probe.residuals(unpack(x)[0], x[6 + k_tools:])])
 
-    x0 = np.concatenate([np.zeros(3), t0, tool0 if fit_tool else []])
+    x0 = np.concatenate([np.zeros(3), t0, tools0.ravel() if fit_tool else [], np.zeros(3 if probe else 0)])
     sol = least_squares(residuals, x0, method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15, max_nfev=200 * n_params)
-    rot = Rotation.from_rotvec(sol.x[:3]).as_matrix() @ rot0
-    tool = sol.x[6:9].copy() if fit_tool else tool0.copy()
-    registered = meas @ rot.T + sol.x[3:6]
-    check_residuals(source, sol.fun.reshape(-1, 3), p_fl + r_fl @ tool0, meas, robot.reach_mm, robot.name,
+    rot, shift, tools = unpack(sol.x)
+    resid = position_residuals(sol.x)
+    check_residuals(source, resid[0], p_fl + r_fl @ tool0, meas, robot.reach_mm, robot.name,
                     plausibility or Plausibility())
-    condition, weakest = _conditioning(registered, r_fl, fit_tool)
+    condition, weakest = _conditioning(points @ rot.T + shift, r_fl, fit_tool, [PRIMARY, *extra])
     if not condition <= max_condition:
         raise DataError(f"{source}: the tracker registration is ill-conditioned (condition number {condition:.3g} > "
                         f"{max_condition:g}): the {q.shape[0]} poses do not determine {weakest}; measure poses "
@@ -199,40 +262,97 @@ def register_tracker(robot: Robot, q_deg, measured_mm, *, tool_mm=None, fit_tool
     if condition > WARN_CONDITION:
         log.warning("%s: the tracker registration is poorly conditioned (condition number %.0f): the poses "
                     "barely determine %s", source, condition, weakest)
-    norms = np.linalg.norm(sol.fun.reshape(-1, 3), axis=1)
-    reg = Registration(rotation=rot, translation_mm=sol.x[3:6].copy(), tool_mm=tool,
-                       rms_3d=float(np.sqrt(np.mean(norms**2))), max_3d=float(norms.max()), condition=condition,
-                       n_poses=q.shape[0], fit_tool=fit_tool)
+    rms = np.sqrt(np.mean(np.sum(resid**2, axis=2), axis=1))
+    norms = np.linalg.norm(resid[0], axis=1)
+    reg = Registration(rotation=rot, translation_mm=shift.copy(), tool_mm=tools[0].copy(),
+                       rms_3d=float(rms[0]), max_3d=float(norms.max()), condition=condition,
+                       n_poses=q.shape[0], fit_tool=fit_tool,
+                       target_tools_mm={name: tools[k + 1].copy() for k, name in enumerate(extra)},
+                       target_rms_3d=dict(zip([PRIMARY, *extra], map(float, rms))) if extra else {},
+                       **(probe.result(rot, sol.x[6 + k_tools:]) if probe else {}))
     log.info("%s: registered %d poses, RMS %.4f mm, condition %.1f", source, q.shape[0], reg.rms_3d, condition)
     return reg
 
 
-def _conditioning(points_mm: NDArray[np.float64], r_flange: NDArray[np.float64], fit_tool: bool) -> tuple[float, str]:
+def register_measurements(robot: Robot, m: Measurements, **options) -> Registration:
+    """:func:`register_tracker` on a data set: its primary target, its extra targets and its orientation.
+
+    ``options`` are :func:`register_tracker`'s keywords (``tool_mm``, ``fit_tool``, ``source`` ...).
+    """
+    return register_tracker(robot, m.q_deg, m.measured_mm, targets=m.extra_measured_mm,
+                            orientation_deg=m.measured_orientation_deg, **options)
+
+
+def _start_tool(name: str, points: NDArray[np.float64], rot0, t0, p_fl, r_fl, given: dict | None, fit_tool: bool,
+                source: str) -> NDArray[np.float64]:
+    """An extra target's offset: given, or (to start the fit) the mean one the Kabsch frame puts it at."""
+    if given is not None and name in given:
+        return check_array(np.reshape(given[name], (1, -1)), f"target_tools_mm[{name!r}]", columns=3)[0]
+    if not fit_tool:
+        raise DataError(f"{source}: with the tool given (fit_tool: false) every target's offset must be given too; "
+                        f"target {name} has none")
+    return np.einsum("nji,nj->i", r_fl, points @ rot0.T + t0 - p_fl) / len(points)
+
+
+class _Probe:
+    """The orientation part of a registration: the probe's rotation on the flange and its residuals.
+
+    The residual is the small turn ``log(R @ R_meas @ probe^T @ R_flange^T)`` (a
+    rotation vector in the base frame, radians) times ``mm_per_rad``.
+    """
+
+    def __init__(self, n: int, orientation_deg, rot0, r_fl, mm_per_rad: float):
+        angles = check_array(orientation_deg, "orientation_deg", columns=3)
+        if angles.shape[0] != n:
+            raise DataError(f"orientation_deg has {angles.shape[0]} rows but q_deg has {n}")
+        self.measured, self.r_fl, self.weight = matrices_from_xyz_deg(angles), r_fl, float(mm_per_rad)
+        u, _, vt = np.linalg.svd(np.mean(r_fl.transpose(0, 2, 1) @ rot0 @ self.measured, axis=0))
+        self.start = u @ np.diag([1.0, 1.0, np.linalg.det(u @ vt)]) @ vt          # the mean rotation
+
+    def turns(self, rot, x) -> NDArray[np.float64]:
+        probe = Rotation.from_rotvec(x).as_matrix() @ self.start
+        return Rotation.from_matrix(rot @ self.measured @ probe.T @ self.r_fl.transpose(0, 2, 1)).as_rotvec()
+
+    def residuals(self, rot, x) -> NDArray[np.float64]:
+        return (self.weight * self.turns(rot, x)).ravel()
+
+    def result(self, rot, x) -> dict:
+        angles = np.linalg.norm(self.turns(rot, x), axis=1)
+        return {"probe_rotation": Rotation.from_rotvec(x).as_matrix() @ self.start,
+                "orientation_rms_deg": float(np.degrees(np.sqrt(np.mean(angles**2))))}
+
+
+def _conditioning(points_mm: NDArray[np.float64], r_flange: NDArray[np.float64], fit_tool: bool,
+                  names: list[str]) -> tuple[float, str]:
     """Condition number of the scaled Jacobian, and the weakest parameter combination in words.
 
-    Rotations are taken about the centroid of the registered points and
-    scaled by the points' RMS distance from it (a rotation counts as the
-    displacement it causes there), so that neither a tracker standing far
-    away nor the choice of units looks like a badly posed problem; translation
-    and tool columns are in mm.
+    ``points_mm`` (K, n, 3) are the registered points of the K targets. Rotations are
+    taken about their centroid and scaled by the points' RMS distance from it (a
+    rotation counts as the displacement it causes there), so that neither a
+    tracker standing far away nor the choice of units looks like a badly posed
+    problem; translation and tool columns are in mm. The orientation's rows are
+    left out: the number says what the positions determine.
     """
-    lever = points_mm - points_mm.mean(axis=0)
+    k_targets, n = points_mm.shape[:2]
+    lever = (points_mm - points_mm.reshape(-1, 3).mean(axis=0)).reshape(-1, 3)
     size = float(np.sqrt(np.mean(np.einsum("ij,ij->i", lever, lever))))
     if size == 0.0:
         return float("inf"), "the rotation (all points coincide)"
-    n = lever.shape[0]
-    jac = np.zeros((n, 3, 9 if fit_tool else 6))
+    labels = list(PARAMETERS[:6])
+    jac = np.zeros((k_targets * n, 3, 6 + 3 * k_targets * fit_tool))
     for k in range(3):
         axis = np.zeros(3)
         axis[k] = 1.0
         jac[:, :, k] = np.cross(axis, lever / size)
         jac[:, k, 3 + k] = 1.0
     if fit_tool:
-        jac[:, :, 6:9] = -r_flange
-    _, sv, vt = np.linalg.svd(jac.reshape(3 * n, -1), full_matrices=False)
+        for t, name in enumerate(names):
+            jac[t * n:(t + 1) * n, :, 6 + 3 * t:9 + 3 * t] = -r_flange
+            labels += [f"tool {c}" if name == PRIMARY else f"tool@{name} {c}" for c in "xyz"]
+    _, sv, vt = np.linalg.svd(jac.reshape(3 * k_targets * n, -1), full_matrices=False)
     condition = float(sv[0] / sv[-1]) if sv[-1] > sv[0] * 1e-15 else float("inf")
     weakest = vt[-1]
-    big = [PARAMETERS[i] for i in np.argsort(-np.abs(weakest)) if abs(weakest[i]) >= 0.3][:3]
+    big = [labels[i] for i in np.argsort(-np.abs(weakest)) if abs(weakest[i]) >= 0.3][:3]
     return condition, "the combination of " + ", ".join(big) if len(big) > 1 else big[0]
 
 
@@ -240,7 +360,21 @@ def registered(m: Measurements, robot: Robot, reg: Registration) -> Measurements
     """A data set in the tracker frame carried into the base frame.
 
     The measured points are transformed by ``reg``; the nominal positions are
-    recomputed by forward kinematics with the registration's tool offset.
+    recomputed by forward kinematics with the registration's tool offsets.
+    Extra targets come along when ``reg`` has their offsets; a measured
+    orientation when ``reg`` fitted the probe's rotation: it becomes the
+    measured flange's (``R @ R_meas @ probe^T``), beside the nominal flange's.
     """
+    flange = robot.replace(tool_mm=np.zeros(3)).forward(m.q_deg)
+    p_fl, r_fl = flange[:, :3, 3], flange[:, :3, :3]
     nominal = robot.replace(tool_mm=np.asarray(reg.tool_mm, dtype=float)).positions(m.q_deg)
-    return dataclasses.replace(m, nominal_mm=nominal, measured_mm=reg.to_base(m.measured_mm))
+    kept = [name for name in m.extra_measured_mm if name in reg.target_tools_mm]
+    orientation = {}
+    if m.has_orientation and reg.probe_rotation is not None:
+        turned = reg.rotation @ matrices_from_xyz_deg(m.measured_orientation_deg) @ reg.probe_rotation.T
+        orientation = {"measured_orientation_deg": xyz_deg_from_matrices(turned),
+                       "nominal_orientation_deg": xyz_deg_from_matrices(r_fl)}
+    return dataclasses.replace(m, nominal_mm=nominal, measured_mm=reg.to_base(m.measured_mm),
+                               extra_measured_mm={name: reg.to_base(m.extra_measured_mm[name]) for name in kept},
+                               extra_nominal_mm={name: p_fl + r_fl @ reg.target_tools_mm[name] for name in kept},
+                               **orientation)

@@ -5,28 +5,33 @@ paper names: link length, offset and twist deviations and joint zero offsets
 (random, per DH row), a tool-fixture error, a misaligned base frame, joint
 compliance under gravity (lumped masses, configuration dependent) and a
 cyclic gear-transmission error. The tracker adds a scale error of its own
-(its ppm accuracy) and averages noisy readings (its ppm repeatability). All
-of it comes from one YAML file and one seed; see ``docs/virtual_robot.md``.
+(its ppm accuracy) and averages noisy readings (its ppm repeatability). The
+tool may carry several targets (reflectors), each read with its own noise,
+and the tracker may measure the tool's orientation too. All of it comes from
+one YAML file and one seed; see ``docs/virtual_robot.md``.
 """
 
 from __future__ import annotations
 
 import logging
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.spatial.transform import Rotation
 
 from .._io import check_folder_writable, replace_all
 from .._validation import one_of, safe_name
 from .._yamlio import Section, load_yaml, range_check
 from ..errors import ConfigError
 from ..robot.description import joint_columns, load_robot, robot_reference
-from ..robot.kinematics import Robot, matrix_from_euler_deg
+from ..robot.kinematics import Robot, matrix_from_euler_deg, xyz_deg_from_matrices
 from ..robot.trajectories import PATHS, paper_path
+from .formats import TARGET_NAME
 from .measurements import Measurements, write_measurements
+from .pose_columns import PRIMARY
 
 log = logging.getLogger(__name__)
 GRAVITY_M_S2 = 9.80665
@@ -65,6 +70,7 @@ class Tracker:
     accuracy_ppm: float
     repeatability_ppm: float
     readings: int
+    orientation_noise_deg: float | None = None      # None: the orientation is not measured
 
 
 @dataclass(frozen=True, eq=False)
@@ -79,6 +85,7 @@ class VirtualRobot:
     gear: tuple[tuple[int, float, float, float], ...]   # (joint, amplitude_deg, cycles_per_rev, phase_deg)
     tracker: Tracker
     tracker_scale: float
+    targets: dict = field(default_factory=dict)     # extra targets: name -> nominal offset (3,) mm
 
     def actual_joints(self, q_deg: NDArray[np.float64]) -> NDArray[np.float64]:
         """Joint angles the arm really takes when ``q_deg`` is commanded."""
@@ -96,15 +103,41 @@ class VirtualRobot:
         p = self.true.positions(self.actual_joints(q_deg))
         return p @ self.base_rotation.T + self.base_mm
 
+    def true_flange(self, q_deg) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Noise-free flange (last frame) positions ``(n, 3)`` mm and orientations ``(n, 3, 3)`` in the base frame."""
+        pose = self.true.replace(tool_mm=np.zeros(3)).forward(self.actual_joints(q_deg))
+        return pose[:, :3, 3] @ self.base_rotation.T + self.base_mm, self.base_rotation @ pose[:, :3, :3]
+
+    def true_tool(self, target: str) -> NDArray[np.float64]:
+        """An extra target's true offset in the flange frame, mm: its nominal one moved by the fixture error."""
+        return self.targets[target] + (self.true.tool_mm - self.nominal.tool_mm)
+
     def measure(self, q_deg, rng: np.random.Generator) -> NDArray[np.float64]:
-        """What the tracker reports: the mean of ``readings`` noisy readings per pose."""
-        p = self.true_positions(q_deg)
+        """What the tracker reports of the primary target: the mean of ``readings`` noisy readings per pose."""
+        return self._read(self.true_positions(q_deg), rng)
+
+    def _read(self, p: NDArray[np.float64], rng: np.random.Generator) -> NDArray[np.float64]:
+        """The tracker's reading of true points ``(n, 3)`` mm: its scale error and averaged noise."""
         t = self.tracker
         dist = np.linalg.norm(p - t.position_mm, axis=1)
         scaled = t.position_mm + (1.0 + self.tracker_scale) * (p - t.position_mm)
         sigma = t.repeatability_ppm * 1e-6 * dist
         noise = rng.standard_normal((p.shape[0], t.readings, 3)).mean(axis=1)
         return scaled + sigma[:, None] * noise
+
+    def measure_more(self, q_deg, rng: np.random.Generator) -> tuple[dict, NDArray[np.float64] | None]:
+        """The extra targets (name -> ``(n, 3)`` mm, each with its own noise) and the tool's orientation
+        (intrinsic XYZ degrees, turned by a small random rotation of ``orientation_noise_deg`` per axis; None
+        when not measured)."""
+        if not self.targets and self.tracker.orientation_noise_deg is None:
+            return {}, None
+        p_fl, r_fl = self.true_flange(q_deg)
+        extra = {name: self._read(p_fl + r_fl @ self.true_tool(name), rng) for name in self.targets}
+        sigma = self.tracker.orientation_noise_deg
+        if sigma is None:
+            return extra, None
+        turns = Rotation.from_rotvec(rng.standard_normal((len(p_fl), 3)) * sigma, degrees=True).as_matrix()
+        return extra, xyz_deg_from_matrices(turns @ r_fl)
 
 
 @dataclass(frozen=True)
@@ -125,7 +158,7 @@ def load_study(path: str | Path) -> Study:
     path = Path(path)
     data, lines = load_yaml(path)
     top = Section(data, "", lines, str(path))
-    nominal = load_robot(robot_reference(top.get("robot", "str"), path.parent))
+    nominal, targets = _targets(top, load_robot(robot_reference(top.get("robot", "str"), path.parent)))
     seed = top.get("seed", "int", check=range_check(0, integer=True))
     output = Path(os.path.normpath(path.parent / top.get("output", "str")))
     seeds = np.random.SeedSequence(seed).spawn(2)
@@ -139,7 +172,8 @@ def load_study(path: str | Path) -> Study:
         position_mm=np.asarray(tr.get("position_mm", "list", check=_vector3), dtype=float),
         accuracy_ppm=tr.get("accuracy_ppm", "float", check=range_check(0)),
         repeatability_ppm=tr.get("repeatability_ppm", "float", check=range_check(0)),
-        readings=tr.get("readings", "int", check=range_check(1, 10_000, integer=True)))
+        readings=tr.get("readings", "int", check=range_check(1, 10_000, integer=True)),
+        orientation_noise_deg=tr.get("orientation_noise_deg", "float", default=None, check=range_check(0)))
     tr.done()
     errors.done()
     scale = np.random.default_rng(seeds[1]).uniform(-1, 1) * tracker.accuracy_ppm * 1e-6
@@ -149,8 +183,26 @@ def load_study(path: str | Path) -> Study:
     sampling.done()
     datasets = _datasets(top.section("datasets", required=True))
     top.done()
-    robot = VirtualRobot(nominal, true, base_rot, base_mm, compliance, gear, tracker, scale)
+    robot = VirtualRobot(nominal, true, base_rot, base_mm, compliance, gear, tracker, scale, targets)
     return Study(robot, seed, output, datasets, ranges, fixed, path)
+
+
+def _targets(top: Section, nominal: Robot) -> tuple[Robot, dict]:
+    """The nominal robot (its tool the primary target ``A`` when given) and the extra targets' offsets.
+
+    ``targets: {A: [x, y, z], B: [...]}``: offsets in the flange frame, mm.
+    Without ``A`` the primary target is the robot's own tool.
+    """
+    sec = top.section("targets")
+    out = {}
+    for name in list(sec.data):
+        if not isinstance(name, str) or not TARGET_NAME.match(name):
+            sec.fail(sec.path(str(name)), f"a target name is letters, digits and '_'; got {name!r}")
+        out[name] = np.asarray(sec.get(name, "list", check=_vector3), dtype=float)
+    sec.done()
+    if PRIMARY in out:
+        nominal = nominal.replace(tool_mm=out.pop(PRIMARY))
+    return nominal, out
 
 
 def _vector3(value) -> str | None:
@@ -295,7 +347,15 @@ def simulate(study: Study) -> dict[str, Measurements]:
                 seed[j - 1] = value
             q = vr.nominal.inverse_path(targets, seed, fixed=tuple(study.fixed_deg))
         nominal = vr.nominal.positions(q)
-        out[name] = Measurements(q, nominal, vr.measure(q, rng), name=name, labels=(name,) * len(q))
+        measured = vr.measure(q, rng)
+        extra, orientation = vr.measure_more(q, rng)
+        flange = vr.nominal.replace(tool_mm=np.zeros(3)).forward(q)
+        out[name] = Measurements(q, nominal, measured, name=name, labels=(name,) * len(q), extra_measured_mm=extra,
+                                 extra_nominal_mm={t: flange[:, :3, 3] + flange[:, :3, :3] @ vr.targets[t]
+                                                   for t in extra},
+                                 measured_orientation_deg=orientation,
+                                 nominal_orientation_deg=None if orientation is None
+                                 else xyz_deg_from_matrices(flange[:, :3, :3]))
         log.info("simulated %s: %d poses", name, len(q))
     return out
 

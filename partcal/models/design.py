@@ -46,6 +46,7 @@ from .base import seed_from
 from .joint_errors import GRAVITY_M_S2, JointErrors, compliance_problem, harmonics_problem
 from .kinematic import identification_jacobian, nominal_values, parameter_names
 from .kinematic import model_jacobian as kinematic_jacobian
+from .targets import Extra, stacked
 
 log = logging.getLogger(__name__)
 
@@ -199,6 +200,86 @@ def identifiable(jac: NDArray[np.float64], wanted: NDArray[np.bool_], rcond: flo
         if np.linalg.eigvalsh(gram[np.ix_(trial, trial)])[0] > floor:
             kept = trial
     return candidates[kept]
+
+
+# ---------------------------------------------------------------------- several targets
+@dataclass(frozen=True)
+class TargetIdentifiability:
+    """What the primary target's positions identify, against all targets (and the orientation).
+
+    Attributes
+    ----------
+    one : tuple of str
+        Parameters of the one-target table (DH rows, tool, base) the primary target identifies.
+    one_total : int
+        Size of that table.
+    all : tuple of str
+        Parameters of the table with one offset per target (and the probe's turn) that all the
+        measurements identify.
+    all_total : int
+    gained : tuple of str
+        Parameters of the one-target table identifiable from all, not from one. Parameters that
+        positions cannot tell apart form groups; a group is represented by its first parameter in
+        the table's order (as in :func:`identifiable`), so these name the groups that grew.
+    """
+
+    one: tuple[str, ...]
+    one_total: int
+    all: tuple[str, ...]
+    all_total: int
+    gained: tuple[str, ...]
+
+    @property
+    def all_of_one(self) -> int:
+        """How many parameters of the one-target table all the measurements identify."""
+        return len(self.one) + len(self.gained)
+
+    def text(self) -> str:
+        return (f"identifiable from the primary target: {len(self.one)} of {self.one_total} parameters; from all "
+                f"targets: {len(self.all)} of {self.all_total} ({self.all_of_one} of the same {self.one_total})" +
+                (f"; made identifiable: {', '.join(self.gained)}" if self.gained else ""))
+
+
+def target_identifiability(robot: Robot, q_deg: NDArray[np.float64], tools_mm: dict, *, orientation: bool = False,
+                           base: bool = True, tool: bool = True, rcond: float = 1e-6) -> TargetIdentifiability:
+    """Which parameters poses ``q_deg`` identify from one target, and from targets at offsets ``tools_mm``.
+
+    Parameters
+    ----------
+    robot : Robot
+        The nominal robot; its ``tool_mm`` is the primary target.
+    q_deg : ndarray, shape (n, N)
+    tools_mm : dict of str to array-like (3,)
+        The extra targets' offsets in the flange frame, mm.
+    orientation : bool
+        Whether the orientation is measured too (weighted as in the identification).
+
+    Examples
+    --------
+    >>> from partcal.robot import load_robot
+    >>> ur10 = load_robot("universal_robots_ur10").replace(tool_mm=np.array([0.0, 0.0, 120.0]))
+    >>> q = np.random.default_rng(0).uniform(-170, 170, (20, 6))
+    >>> found = target_identifiability(ur10, q, {"B": [100, 0, 90], "C": [-40, 90, 90]})
+    >>> len(found.one), found.one_total, len(found.all), found.all_total
+    (23, 33, 31, 39)
+    >>> found.gained            # the wrist's last offsets and the tool, which one point leaves to others
+    ('a[5]', 'alpha[5]', 'theta[6]', 'tool.x', 'tool.y', 'tool.z')
+    """
+    jac, wanted = model_jacobian(robot, q_deg, PlannedModel(base=base, tool=tool))
+    one = identifiable(jac, wanted, rcond)
+    flange = robot.forward(q_deg)[:, :3, :3]
+    tools = {name: np.asarray(t, dtype=float) for name, t in tools_mm.items()}
+    extra = Extra(tools, {name: robot.replace(tool_mm=t).positions(q_deg) for name, t in tools.items()},
+                  flange if orientation else None)
+    values = np.concatenate([nominal_values(robot), extra.nominal()])
+    jac_all = stacked(robot, None, q_deg, values, np.zeros(len(q_deg)), robot.positions(q_deg), extra)[1]
+    wanted_all = np.concatenate([wanted, np.full(extra.size, True)])
+    wanted_all[wanted.size:wanted.size + 3 * len(tools)] = tool
+    found = identifiable(jac_all, wanted_all, rcond)
+    names = [n for n, _ in model_parameters(robot)[0]] + [n for n, _ in extra.names()]
+    gained = sorted(set(found[found < wanted.size]) - set(one))
+    return TargetIdentifiability(tuple(names[i] for i in one), int(wanted.sum()), tuple(names[i] for i in found),
+                                 int(wanted_all.sum()), tuple(names[i] for i in gained))
 
 
 # ---------------------------------------------------------------------- indices

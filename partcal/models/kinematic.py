@@ -35,7 +35,7 @@ from __future__ import annotations
 import functools
 import logging
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import PurePath
 
 import numpy as np
@@ -49,13 +49,14 @@ from .._validation import FieldReader, boolean, check_array, param_error, real
 from ..errors import DataError, ModelFileError
 from ..metrics import distance_outside_boxes
 from ..robot.description import load_robot, robot_from_dict, robot_to_dict
-from ..robot.kinematics import Robot, matrix_from_euler_deg
+from ..robot.kinematics import ORIENTATION_MM_PER_RAD, Robot, matrix_from_euler_deg
 from .base import ErrorModelBase, box_points, seed_from
 from .bases import varying_inputs
 from .gp import GaussianProcessErrorModel
 from .joint_errors import JointErrors, compliance_problem, harmonics_problem
 from .partitioned import PartitionedErrorModel
 from .series import ErrorModel
+from .targets import Extra, added_names, added_nominal, extra_from, stacked
 
 log = logging.getLogger(__name__)
 ROW_PARAMETERS = (("theta", "deg"), ("d", "mm"), ("a", "mm"), ("alpha", "deg"))
@@ -63,6 +64,7 @@ TOOL_PARAMETERS = (("tool.x", "mm"), ("tool.y", "mm"), ("tool.z", "mm"))
 BASE_PARAMETERS = (("base.x", "mm"), ("base.y", "mm"), ("base.z", "mm"),
                    ("base.rx", "deg"), ("base.ry", "deg"), ("base.rz", "deg"))
 STATUSES = ("identified", "unidentifiable", "fixed")
+PRIMARY_TARGET = "A"        # the data's unsuffixed target (partcal.data.measurements.PRIMARY)
 
 
 # ---------------------------------------------------------------------- the parameter vector
@@ -113,16 +115,21 @@ def identification_jacobian(nominal: Robot, q_deg: NDArray[np.float64], values: 
     robot = robot_with(nominal, values)
     p, chain = robot.parameter_jacobian(q_deg)
     rows = nominal.alpha_deg.size
-    _, ry, rz = values[4 * rows + 6:4 * rows + 9]
     lever = p - values[4 * rows + 3:4 * rows + 6]                # about the shifted base origin
-    turn_z = matrix_from_euler_deg(np.array([0.0, 0.0, rz]))
-    axes = [turn_z @ matrix_from_euler_deg(np.array([0.0, ry, 0.0])) @ [1.0, 0, 0], turn_z @ [0, 1.0, 0],
-            np.array([0, 0, 1.0])]                               # d/drx, d/dry, d/drz of Rz Ry Rx
     base = np.empty((p.shape[0], 3, 6))
     base[:, :, :3] = np.eye(3)
-    for k, axis in enumerate(axes):
+    for k, axis in enumerate(base_axes(nominal, values)):
         base[:, :, 3 + k] = np.cross(axis, lever) * (np.pi / 180.0)
     return p, np.concatenate([chain, base], axis=2).reshape(-1, 4 * rows + 9)
+
+
+def base_axes(nominal: Robot, values: NDArray[np.float64]) -> list[NDArray[np.float64]]:
+    """The axes ``(3,)`` the base correction's ``rx, ry, rz`` turn about (``Rz Ry Rx``), in the measurement frame."""
+    rows = nominal.alpha_deg.size
+    _, ry, rz = values[4 * rows + 6:4 * rows + 9]
+    turn_z = matrix_from_euler_deg(np.array([0.0, 0.0, rz]))
+    return [turn_z @ matrix_from_euler_deg(np.array([0.0, ry, 0.0])) @ [1.0, 0, 0], turn_z @ [0, 1.0, 0],
+            np.array([0, 0, 1.0])]
 
 
 def actual_joints(nominal: Robot, errors: JointErrors | None, q_deg: NDArray[np.float64],
@@ -133,7 +140,8 @@ def actual_joints(nominal: Robot, errors: JointErrors | None, q_deg: NDArray[np.
     if errors is None or errors.empty:
         return q_deg, None, None
     size = geometric_size(nominal)
-    return errors.design(own_geometry(nominal, values), q_deg, values[size:], payload_kg, derivatives)
+    return errors.design(own_geometry(nominal, values), q_deg, values[size:size + errors.size], payload_kg,
+                         derivatives)
 
 
 def own_geometry(nominal: Robot, values: NDArray[np.float64]) -> Robot:
@@ -194,8 +202,16 @@ class Identification:
         Rank of the scaled identification Jacobian, and the condition number
         of its identified columns (at the solution).
     rms_mm : float
-        3-D RMS of the remaining position error on the identification data.
+        3-D RMS of the remaining position error on the identification data (the primary target's).
     n_poses, evaluations : int
+    target_rms_mm : dict of str to float
+        With several targets or an orientation: each target's 3-D RMS, mm, the primary first.
+    orientation_rms_deg : float, optional
+        With an orientation: the RMS angle of the remaining orientation error, degrees.
+    primary_identifiable : int, optional
+        With several targets or an orientation: how many of the model's own parameters (those of a
+        one-target table) the primary target's positions alone would identify, to compare with
+        the count identified here.
     """
 
     names: tuple[str, ...]
@@ -209,6 +225,9 @@ class Identification:
     rms_mm: float
     n_poses: int
     evaluations: int
+    target_rms_mm: dict = field(default_factory=dict)
+    orientation_rms_deg: float | None = None
+    primary_identifiable: int | None = None
 
     @property
     def correction(self) -> NDArray[np.float64]:
@@ -231,7 +250,9 @@ class Identification:
                 "value": self.value.tolist(),
                 "std_error": [None if np.isnan(v) else float(v) for v in self.std_error],
                 "status": list(self.status), "rank": int(self.rank), "condition": float(self.condition),
-                "rms_mm": float(self.rms_mm), "n_poses": int(self.n_poses), "evaluations": int(self.evaluations)}
+                "rms_mm": float(self.rms_mm), "n_poses": int(self.n_poses), "evaluations": int(self.evaluations),
+                **({"target_rms_mm": dict(self.target_rms_mm), "orientation_rms_deg": self.orientation_rms_deg,
+                    "primary_identifiable": self.primary_identifiable} if self.target_rms_mm else {})}
 
     @classmethod
     def from_dict(cls, d: dict) -> "Identification":
@@ -239,12 +260,13 @@ class Identification:
                    np.asarray(d["value"], dtype=float),
                    np.array([np.nan if v is None else v for v in d["std_error"]], dtype=float),
                    tuple(d["status"]), int(d["rank"]), float(d["condition"]), float(d["rms_mm"]),
-                   int(d["n_poses"]), int(d["evaluations"]))
+                   int(d["n_poses"]), int(d["evaluations"]), dict(d.get("target_rms_mm", {})),
+                   d.get("orientation_rms_deg"), d.get("primary_identifiable"))
 
 
 def identify(robot: Robot, q_deg: NDArray[np.float64], measured_mm: NDArray[np.float64], *, base: bool = True,
              tool: bool = True, rcond: float = 1e-6, errors: JointErrors | None = None,
-             payload_kg=0.0) -> Identification:
+             payload_kg=0.0, extra: Extra | None = None) -> Identification:
     """Identify the parameters that bring the model's forward kinematics through measured positions.
 
     Parameters
@@ -255,9 +277,9 @@ def identify(robot: Robot, q_deg: NDArray[np.float64], measured_mm: NDArray[np.f
     q_deg : ndarray, shape (n, N)
         Commanded joint angles, degrees.
     measured_mm : ndarray, shape (n, 3)
-        Measured tool positions in the base (measurement) frame, mm.
+        Measured (primary) tool positions in the base (measurement) frame, mm.
     base, tool : bool
-        Whether the base pose and the tool offset are identified too.
+        Whether the base pose and the tool offsets are identified too.
     rcond : float
         Singular values of the unit-column Jacobian below ``rcond`` times the
         largest count as zero: those directions are unidentifiable.
@@ -266,6 +288,10 @@ def identify(robot: Robot, q_deg: NDArray[np.float64], measured_mm: NDArray[np.f
         (their parameters follow the geometric ones).
     payload_kg : float or ndarray, shape (n,)
         Payload at the tool point, kg (only read by compliant joints).
+    extra : Extra, optional
+        Further targets and the measured orientation (:mod:`partcal.models.targets`):
+        their residuals are stacked with the primary's, one offset per target
+        and the probe's turn are identified too (their parameters come last).
 
     Returns
     -------
@@ -277,41 +303,65 @@ def identify(robot: Robot, q_deg: NDArray[np.float64], measured_mm: NDArray[np.f
         raise DataError(f"measured_mm has {len(measured_mm)} rows but q_deg has {len(q_deg)}")
     payload = np.broadcast_to(np.asarray(payload_kg, dtype=float), (len(q_deg),))
     v0 = nominal_values(robot, errors)
-    rows = robot.alpha_deg.size
-    wanted = np.ones(v0.size, dtype=bool)
+    rows, own = robot.alpha_deg.size, v0.size
+    wanted = np.ones(v0.size + (extra.size if extra is not None else 0), dtype=bool)
     wanted[4 * rows:4 * rows + 3] = tool
     wanted[4 * rows + 3:4 * rows + 9] = base
-    jac_at = functools.partial(model_jacobian, robot, errors, q_deg, payload_kg=payload)
-    free, rank = _identifiable(jac_at(v0)[1], wanted, rcond)
+    if extra is None:
+        def jac_at(v, jacobian=True):
+            if not jacobian:
+                return (model_positions(robot, errors, q_deg, v, payload) - measured_mm).ravel(), None
+            p, jac = model_jacobian(robot, errors, q_deg, v, payload)
+            return (p - measured_mm).ravel(), jac
+    else:
+        v0 = np.concatenate([v0, extra.nominal()])
+        wanted[own:own + 3 * len(extra.tools_mm)] = tool
+        jac_at = functools.partial(stacked, robot, errors, q_deg, payload_kg=payload, measured_mm=measured_mm,
+                                   extra=extra)
+    jac0 = jac_at(v0)[1]
+    free, rank = _identifiable(jac0, wanted, rcond)
 
     def values_of(x):
         v = v0.copy()
         v[free] = x
         return v
 
-    def residuals(x):
-        return (model_positions(robot, errors, q_deg, values_of(x), payload) - measured_mm).ravel()
-
     v, evaluations = v0.copy(), 0
     if free.size:
-        sol = least_squares(residuals, v0[free], jac=lambda x: jac_at(values_of(x))[1][:, free], method="lm",
+        sol = least_squares(lambda x: jac_at(values_of(x), jacobian=False)[0], v0[free],
+                            jac=lambda x: jac_at(values_of(x))[1][:, free], method="lm",
                             x_scale="jac", ftol=1e-15, xtol=1e-15, gtol=1e-15, max_nfev=200 * (free.size + 1))
         v, evaluations = values_of(sol.x), int(sol.nfev)
         log.debug("least squares: %s (%d evaluations)", sol.message, sol.nfev)
-    p, jac = jac_at(v)
-    resid = p - measured_mm
+    resid, jac = jac_at(v)
     std, condition = _uncertainty(jac[:, free], resid)
     std_full = np.full(v.size, np.nan)
     std_full[free] = std
     status = np.where(wanted, "unidentifiable", "fixed").astype(object)
     status[free] = "identified"
-    names = parameter_names(robot, errors)
+    names = parameter_names(robot, errors) + (extra.names() if extra is not None else [])
+    rms, angle = _target_rms(resid, len(q_deg), extra)
+    more = {} if extra is None else {
+        "target_rms_mm": dict(zip([PRIMARY_TARGET, *extra.tools_mm], rms)), "orientation_rms_deg": angle,
+        "primary_identifiable": _identifiable(jac0[:3 * len(q_deg), :own], wanted[:own], rcond)[1]}
     result = Identification(tuple(n for n, _ in names), tuple(u for _, u in names), v0, v, std_full,
-                            tuple(str(s) for s in status), rank, condition,
-                            float(np.sqrt(np.mean(np.sum(resid**2, axis=1)))), q_deg.shape[0], evaluations)
+                            tuple(str(s) for s in status), rank, condition, rms[0], q_deg.shape[0], evaluations,
+                            **more)
     log.info("identified %d of %d parameters (condition %.3g): RMS %.4f mm", free.size, v.size, condition,
              result.rms_mm)
     return result
+
+
+def _target_rms(resid: NDArray[np.float64], n: int, extra: Extra | None) -> tuple[list[float], float | None]:
+    """3-D RMS of each target's position residuals (mm, the primary first) and the orientation's RMS angle
+    (degrees, None without one), from the stacked residuals of :func:`identify`."""
+    k = 1 + (len(extra.tools_mm) if extra is not None else 0)
+    blocks = resid[:3 * n * k].reshape(k, n, 3)
+    rms = [float(np.sqrt(np.mean(np.sum(b**2, axis=1)))) for b in blocks]
+    if extra is None or extra.rotations is None:
+        return rms, None
+    turns = resid[3 * n * k:].reshape(n, 3) / extra.mm_per_rad
+    return rms, float(np.degrees(np.sqrt(np.mean(np.sum(turns**2, axis=1)))))
 
 
 def _identifiable(jac0: NDArray[np.float64], wanted: NDArray[np.bool_], rcond: float
@@ -437,10 +487,20 @@ class KinematicModel(ErrorModelBase):
                               "GaussianProcessErrorModel", self.residual)
         return robot
 
-    def fit(self, X, y, payload_kg=None):
+    def fit(self, X, y, payload_kg=None, *, targets=None, orientation_deg=None,
+            orientation_mm_per_rad=ORIENTATION_MM_PER_RAD):
         """Identify the parameters from joint angles ``X`` (n, N) deg and errors ``y`` (n, 3) mm. Returns self.
 
         ``payload_kg`` (n,) kg per pose, or a number; default the parameter ``payload_kg``.
+
+        ``y`` are the primary target's errors. Further targets on the tool and the measured
+        orientation, when given, are identified from too (:mod:`partcal.models.targets`):
+        ``targets`` maps a target's name to ``(offset, errors)``, its nominal offset in the
+        flange frame (3,) mm and its errors (n, 3) mm; ``orientation_deg`` (n, 3) are the
+        orientation errors, rotation vectors from the nominal flange orientation to the
+        measured one in the base frame, degrees, their residuals weighted by
+        ``orientation_mm_per_rad`` (one radian counts as that many mm). The prediction stays the
+        primary target's (:meth:`predict_target` gives another's).
         """
         robot = self._check_params()
         X, y = validate_data(self, X, y, multi_output=True, y_numeric=True, dtype=np.float64)
@@ -453,8 +513,12 @@ class KinematicModel(ErrorModelBase):
         nominal = robot.positions(X)
         self.joint_errors_ = JointErrors.for_robot(robot, list(self.compliance), self.joint_harmonics)
         payload = self._payload(payload_kg, len(X))
+        extra = extra_from(robot, X, targets, orientation_deg, orientation_mm_per_rad)
         self.identification_ = identify(robot, X, nominal + y, base=bool(self.base), tool=bool(self.tool),
-                                        rcond=float(self.rcond), errors=self.joint_errors_, payload_kg=payload)
+                                        rcond=float(self.rcond), errors=self.joint_errors_, payload_kg=payload,
+                                        extra=extra)
+        self.targets_ = dict(extra.tools_mm) if extra is not None else {}
+        self.orientation_ = extra is not None and extra.rotations is not None
         self.robot_ = robot
         self._build_robots()
         self.active_ = varying_inputs(X)
@@ -500,13 +564,33 @@ class KinematicModel(ErrorModelBase):
         self.identified_robot_ = robot_with(self.robot_, self.identification_.value)
         self._geometry = own_geometry(self.robot_, self.identification_.value)
 
+    def _actual(self, X: NDArray[np.float64], payload: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The joint angles the identified arm takes (its joint errors), (n, N) deg."""
+        errors = self.joint_errors_
+        if errors.empty:
+            return X
+        size = geometric_size(self.robot_)
+        return errors.design(self._geometry, X, self.identification_.value[size:size + errors.size], payload)[0]
+
     def _kinematic(self, X: NDArray[np.float64], payload: NDArray[np.float64]) -> NDArray[np.float64]:
         """Tool positions of the identified model (geometry and joint errors), (n, 3) mm."""
-        errors = self.joint_errors_
-        if not errors.empty:
-            size = geometric_size(self.robot_)
-            X = errors.design(self._geometry, X, self.identification_.value[size:], payload)[0]
-        return self.identified_robot_.positions(X)
+        return self.identified_robot_.positions(self._actual(X, payload))
+
+    def predict_target(self, X, target: str, payload_kg=None) -> NDArray[np.float64]:
+        """The kinematic error of a target the model was fitted on, shape (n, 3) mm: ``FK(identified, its
+        identified offset) - FK(nominal, its nominal offset)`` (the primary's: :meth:`predict_kinematic`)."""
+        check_is_fitted(self, "identification_")
+        if target == PRIMARY_TARGET:
+            return self.predict_kinematic(X, payload_kg)
+        if target not in self.targets_:
+            raise DataError(f"Expected a target the model was fitted on "
+                            f"({', '.join([PRIMARY_TARGET, *self.targets_])}), got {target!r}.")
+        X = validate_data(self, X, reset=False, dtype=np.float64)
+        names = self.identification_.names
+        tool = self.identification_.value[[names.index(f"tool@{target}.{c}") for c in "xyz"]]
+        actual = self._actual(X, self._payload(payload_kg, len(X)))
+        moved = self.identified_robot_.replace(tool_mm=tool).positions(actual)
+        return moved - self.robot_.replace(tool_mm=self.targets_[target]).positions(X)
 
     def predict(self, X, payload_kg=None) -> NDArray[np.float64]:
         """Predicted errors ``FK(identified) - FK(nominal)`` (+ the residual model), shape (n, 3) mm.
@@ -568,6 +652,8 @@ class KinematicModel(ErrorModelBase):
                 "rcond": float(self.rcond), "payload_kg": float(self.payload_kg),
                 "compliance": list(errors.compliance), "joint_harmonics": list(errors.harmonics),
                 "identification": self.identification_.to_dict(),
+                **({"targets": {k: [float(v) for v in t] for k, t in self.targets_.items()},
+                    "orientation": bool(self.orientation_)} if self.targets_ or self.orientation_ else {}),
                 "data_bounds": self.data_bounds_.tolist(), "active": self.active_.tolist(),
                 "residual": body_of(self.residual_) if self.residual_ is not None else None}
 
@@ -589,8 +675,10 @@ class KinematicModel(ErrorModelBase):
         rules = {key: rule for key, rule in cls._parameter_rules.items() if key in r.doc or key != "payload_kg"}
         model = cls(robot=robot, **{key: r.rule(key, rule) for key, rule in rules.items()}, **joint)
         errors = JointErrors.for_robot(robot, joint["compliance"], joint["joint_harmonics"])
-        table = _identification_from(r.sub("identification"), robot, errors)
+        tools, orientation = _targets_from(r)
+        table = _identification_from(r.sub("identification"), robot, errors, tools, orientation)
         model.robot_, model.identification_, model.joint_errors_ = robot, table, errors
+        model.targets_, model.orientation_ = tools, orientation
         model._build_robots()
         model.data_bounds_ = r.array("data_bounds", (2, n_in))
         if np.any(model.data_bounds_[0] > model.data_bounds_[1]):
@@ -683,7 +771,7 @@ class KinematicModel(ErrorModelBase):
         table = self.identification_
         return {"kinematic": {"identified": table.status.count("identified"), "parameters": len(table.names),
                               "unidentifiable": table.unidentifiable(), "condition": table.condition,
-                              "rms_3d": table.rms_mm}}
+                              "rms_3d": table.rms_mm, **_targets_summary(table)}}
 
     def predict_validated(self, X: NDArray[np.float64], payload_kg=None) -> NDArray[np.float64]:
         return self._predict_trusted(X, payload_kg)
@@ -694,10 +782,34 @@ class KinematicModel(ErrorModelBase):
         return bool(self.compliance)
 
 
-def _identification_from(ident: FieldReader, robot: Robot, errors: JointErrors | None = None) -> Identification:
+def _targets_summary(table: Identification) -> dict:
+    """metrics.json fields of a fit on several targets or an orientation (none for one target)."""
+    if not table.target_rms_mm:
+        return {}
+    return {"targets_rms_3d": dict(table.target_rms_mm), "orientation_rms_deg": table.orientation_rms_deg,
+            "identifiable_from_primary": table.primary_identifiable}
+
+
+def _targets_from(r: FieldReader) -> tuple[dict, bool]:
+    """A model file's extra targets (name -> nominal offset, mm) and whether it read an orientation (files of
+    one target have neither)."""
+    tools = r.doc.get("targets", {})
+    if not isinstance(tools, dict) or not all(
+            isinstance(k, str) and isinstance(v, list) and len(v) == 3 and
+            all(isinstance(c, (int, float)) and not isinstance(c, bool) and math.isfinite(c) for c in v)
+            for k, v in tools.items()):
+        r.fail("targets", "a mapping of target name to its offset [x, y, z] (mm)")
+    orientation = r.doc.get("orientation", False)
+    if not isinstance(orientation, bool):
+        r.fail("orientation", "true or false")
+    return {k: np.asarray(v, dtype=float) for k, v in tools.items()}, orientation
+
+
+def _identification_from(ident: FieldReader, robot: Robot, errors: JointErrors | None = None, tools=None,
+                         orientation: bool = False) -> Identification:
     """A model file's identified table, which must agree with its robot: the robot's parameter names and
     nominal values, unidentified parameters kept nominal, standard errors finite and >= 0 (or null)."""
-    names = [n for n, _ in parameter_names(robot, errors)]
+    names = [n for n, _ in parameter_names(robot, errors) + added_names(tools or {}, orientation)]
     if ident.get("names", list) != names:
         ident.fail("names", f"expected the {len(names)} parameters of {robot.name} ({names[0]} ... {names[-1]})")
     status = ident.get("status", list)
@@ -707,7 +819,7 @@ def _identification_from(ident: FieldReader, robot: Robot, errors: JointErrors |
     if len(std) != len(names) or not all(v is None or isinstance(v, (int, float)) for v in std):
         ident.fail("std_error", f"expected {len(names)} numbers or nulls")
     nominal, value = ident.array("nominal", (len(names),)), ident.array("value", (len(names),))
-    expected = nominal_values(robot, errors)
+    expected = np.concatenate([nominal_values(robot, errors), added_nominal(tools or {}, orientation)])
     off = np.flatnonzero(~np.isclose(nominal, expected, rtol=1e-12, atol=1e-9))
     if off.size:
         k = off[0]

@@ -56,6 +56,47 @@ def matrix_from_euler_deg(angles_deg) -> NDArray[np.float64]:
     return rot_z @ rot_y @ rot_x
 
 
+ORIENTATION_MM_PER_RAD = 200.0
+"""How many mm an orientation residual of one radian counts as beside position residuals (registration,
+identification): the displacement a turn causes 200 mm from its axis, about a tool plate's size. For a
+tracker's 0.02-0.03 mm and a 6-D probe's 0.005-0.01 degrees, this weighs each roughly by its noise."""
+
+
+def matrices_from_xyz_deg(angles_deg) -> NDArray[np.float64]:
+    """Rotations ``Rx(rx) Ry(ry) Rz(rz)`` from intrinsic XYZ angles ``(n, 3)`` degrees, shape ``(n, 3, 3)``.
+
+    Turns about the moving x, then the new y, then the newest z axis (the
+    same rotation as turns about the fixed z, y, then x axes). The convention
+    of the measured orientation columns ``rx_meas, ry_meas, rz_meas`` and of a
+    Leica T-Mac's export; :func:`matrix_from_euler_deg` is the other order.
+
+    >>> (matrices_from_xyz_deg([[90.0, 0.0, 90.0]])[0] @ [1.0, 0.0, 0.0]).round(12) + 0.0   # x: to y, then to z
+    array([0., 0., 1.])
+    """
+    rad = np.radians(np.atleast_2d(np.asarray(angles_deg, dtype=float)))
+    cx, cy, cz = np.cos(rad).T
+    sx, sy, sz = np.sin(rad).T
+    out = np.empty((rad.shape[0], 3, 3))
+    out[:, 0] = np.stack([cy * cz, -cy * sz, sy], axis=1)
+    out[:, 1] = np.stack([cx * sz + sx * sy * cz, cx * cz - sx * sy * sz, -sx * cy], axis=1)
+    out[:, 2] = np.stack([sx * sz - cx * sy * cz, sx * cz + cx * sy * sz, cx * cy], axis=1)
+    return out
+
+
+def xyz_deg_from_matrices(rotations) -> NDArray[np.float64]:
+    """Intrinsic XYZ angles ``(n, 3)`` degrees of rotations ``(n, 3, 3)``: the inverse of
+    :func:`matrices_from_xyz_deg`, with ``rx, rz`` in [-180, 180] and ``ry`` in [-90, 90].
+
+    >>> xyz_deg_from_matrices(matrices_from_xyz_deg([[10.0, -20.0, 30.0]])).round(12).tolist()
+    [[10.0, -20.0, 30.0]]
+    """
+    rot = np.asarray(rotations, dtype=float).reshape(-1, 3, 3)
+    ry = np.arcsin(np.clip(rot[:, 0, 2], -1.0, 1.0))
+    rx = np.arctan2(-rot[:, 1, 2], rot[:, 2, 2])
+    rz = np.arctan2(-rot[:, 0, 1], rot[:, 0, 0])
+    return np.degrees(np.stack([rx, ry, rz], axis=1))
+
+
 @dataclass(frozen=True, eq=False)
 class Robot:
     """A serial chain of standard DH rows, possibly with coupled joints.

@@ -276,7 +276,8 @@ def registration_comment(reg, shared: bool) -> str:
     how = "registered on the identification set" if shared else "registered on this set"
     return (f"base frame: tracker frame {how} ({reg.n_poses} poses, RMS {reg.rms_3d:.4f} mm); rotation vector "
             f"{_triple(reg.rotation_deg)} deg, translation {_triple(reg.translation_mm)} mm, tool "
-            f"{_triple(reg.tool_mm)} mm in the flange frame")
+            f"{_triple(reg.tool_mm)} mm in the flange frame" +
+            "".join(f"; tool@{name} {_triple(tool)} mm" for name, tool in reg.target_tools_mm.items()))
 
 
 def _triple(values) -> str:

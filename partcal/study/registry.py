@@ -36,7 +36,7 @@ from joblib import Parallel, delayed, parallel_config
 from numpy.typing import NDArray
 
 from ..data.measurements import Measurements, read_measurements
-from ..data.registration import Registration, kabsch, register_tracker, registered
+from ..data.registration import Registration, kabsch, register_measurements, registered
 from ..errors import ConfigError, DataError
 from ..metrics import (choose_simplest, fold_name, fold_rule, grouped_splits, held_out_residuals, labels_as_groups,
                        nested_residuals, pooled_rms, pose_groups, repeat_scatter_mm, rms_standard_error, select_by_cv,
@@ -246,14 +246,15 @@ def _register(config: RunConfig, data: dict[str, Measurements], robot: Robot):
     """Registration on the identification set, shared by the test sets (or their own, when they have one)."""
     opts = config.data_options
     ident = data["identification"]
-    shared = register_tracker(robot, ident.q_deg, ident.measured_mm, tool_mm=opts.tool_mm, fit_tool=opts.fit_tool,
-                              source=f"{config.identification} (identification)", plausibility=opts.plausibility)
+    shared = register_measurements(robot, ident, tool_mm=opts.tool_mm, fit_tool=opts.fit_tool,
+                                   source=f"{config.identification} (identification)", plausibility=opts.plausibility)
     regs = {}
     for name, m in data.items():
         if name in opts.own_frame:
-            regs[name] = register_tracker(robot, m.q_deg, m.measured_mm, tool_mm=shared.tool_mm, fit_tool=False,
-                                          source=f"{config.tests[name]} ({name}, own tracker frame)",
-                                          plausibility=opts.plausibility)
+            regs[name] = register_measurements(robot, m, tool_mm=shared.tool_mm, fit_tool=False,
+                                               target_tools_mm=shared.target_tools_mm,
+                                               source=f"{config.tests[name]} ({name}, own tracker frame)",
+                                               plausibility=opts.plausibility)
         else:
             regs[name] = shared
     robot = robot.replace(tool_mm=shared.tool_mm.copy())

@@ -83,8 +83,19 @@ def results_table(result) -> str:
 
 
 def registration_line(reg, sets=None) -> str:
-    """One line on a tracker registration: poses, residual, tool offset, condition."""
+    """One line on a tracker registration: poses, residual, tool offset, condition (and each target's
+    residual, the orientation's)."""
     where = f" ({', '.join(sets)})" if sets else ""
     return (f"tracker registration{where}: {reg.n_poses} poses, residual 3-D RMS {reg.rms_3d:.3f} mm, max "
             f"{reg.max_3d:.3f} mm, tool [{', '.join(f'{v:.3f}' for v in reg.tool_mm)}] mm "
-            f"({'fitted' if reg.fit_tool else 'given'}), condition {reg.condition:.1f}")
+            f"({'fitted' if reg.fit_tool else 'given'}), condition {reg.condition:.1f}{_more_registered(reg)}")
+
+
+def _more_registered(reg) -> str:
+    """The per-target residuals and the orientation's, when the registration had them."""
+    text = ""
+    if reg.target_rms_3d:
+        text += "; per target RMS " + ", ".join(f"{k} {v:.3f}" for k, v in reg.target_rms_3d.items()) + " mm"
+    if reg.probe_rotation is not None:
+        text += f"; orientation RMS {reg.orientation_rms_deg:.4f} deg"
+    return text

@@ -1,0 +1,150 @@
+"""Kinematic identification from several targets and the measured orientation (issue 20)."""
+
+import numpy as np
+import pytest
+from conftest import ROOT
+from scipy.spatial.transform import Rotation
+
+from partcal import DataError, KinematicModel, load_robot
+from partcal.data.simulate import load_study, simulate
+from partcal.models.design import target_identifiability
+from partcal.models.joint_errors import JointErrors
+from partcal.models.kinematic import nominal_values
+from partcal.models.targets import Extra, stacked
+
+TOOLS = {"B": np.array([100.0, 0.0, 90.0]), "C": np.array([-40.0, 90.0, 90.0])}
+CONFIG = ROOT / "configs" / "ur10_targets_virtual.yaml"
+
+
+@pytest.fixture(scope="module")
+def ur10():
+    return load_robot("universal_robots_ur10").replace(tool_mm=np.array([0.0, 0.0, 120.0]))
+
+
+def _true_robot(ur10, seed=1):
+    """The UR10 with random DH deviations, a moved tool plate and a turned, shifted base."""
+    rng = np.random.default_rng(seed)
+    rows = ur10.alpha_deg.size
+    return ur10.replace(a_mm=ur10.a_mm + rng.normal(0, 0.5, rows), d_mm=ur10.d_mm + rng.normal(0, 0.5, rows),
+                        alpha_deg=ur10.alpha_deg + rng.normal(0, 0.03, rows),
+                        theta_offset_deg=ur10.theta_offset_deg + rng.normal(0, 0.05, rows),
+                        tool_mm=ur10.tool_mm + [0.3, -0.2, 0.4],
+                        base_rotation=Rotation.from_rotvec([2e-4, -3e-4, 5e-4]).as_matrix(),
+                        base_mm=np.array([1.0, -0.5, 0.8]))
+
+
+def _observed(ur10, true, q):
+    """Errors of the three targets and the orientation errors a perfect tracker sees (base frame)."""
+    shift = true.tool_mm - ur10.tool_mm
+    errors = {k: true.replace(tool_mm=t + shift).positions(q) - ur10.replace(tool_mm=t).positions(q)
+              for k, t in TOOLS.items()}
+    turn = true.forward(q)[:, :3, :3] @ ur10.forward(q)[:, :3, :3].transpose(0, 2, 1)
+    return true.positions(q) - ur10.positions(q), errors, Rotation.from_matrix(turn).as_rotvec(degrees=True)
+
+
+def test_noise_free_targets_and_orientation_are_recovered(ur10):
+    true = _true_robot(ur10)
+    rng = np.random.default_rng(2)
+    q, q_new = rng.uniform(-170, 170, (30, 6)), rng.uniform(-170, 170, (50, 6))
+    y, errors, turns = _observed(ur10, true, q)
+    model = KinematicModel(robot=ur10).fit(q, y, targets={k: (TOOLS[k], e) for k, e in errors.items()},
+                                           orientation_deg=turns)
+    table = model.identification_
+    assert max(table.target_rms_mm.values()) < 1e-8 and table.orientation_rms_deg < 1e-9
+    assert list(table.target_rms_mm) == ["A", "B", "C"]
+    y_new, errors_new, _ = _observed(ur10, true, q_new)
+    np.testing.assert_allclose(model.predict(q_new), y_new, atol=1e-8)       # the primary target, as ever
+    np.testing.assert_allclose(model.predict_target(q_new, "C"), errors_new["C"], atol=1e-8)
+    np.testing.assert_allclose(model.predict_target(q_new, "A"), y_new, atol=1e-8)
+    with pytest.raises(DataError, match=r"Expected a target the model was fitted on \(A, B, C\), got 'D'"):
+        model.predict_target(q_new, "D")
+    names = table.names
+    assert names[-9:] == ("tool@B.x", "tool@B.y", "tool@B.z", "tool@C.x", "tool@C.y", "tool@C.z",
+                          "probe.rx", "probe.ry", "probe.rz")
+
+
+def test_one_target_fits_exactly_as_before(ur10):
+    true = _true_robot(ur10, seed=3)
+    q = np.random.default_rng(4).uniform(-170, 170, (25, 6))
+    y = true.positions(q) - ur10.positions(q) + np.random.default_rng(5).normal(0, 0.02, (25, 3))
+    plain = KinematicModel(robot=ur10).fit(q, y)
+    same = KinematicModel(robot=ur10).fit(q, y, targets={}, orientation_deg=None)
+    assert np.array_equal(plain.identification_.value, same.identification_.value)
+    assert plain.identification_.target_rms_mm == {} and "targets_rms_3d" not in plain.run_summary()["kinematic"]
+
+
+@pytest.mark.parametrize("compliance", [(), (2, 3)])
+def test_stacked_jacobian_matches_finite_differences(ur10, compliance):
+    rng = np.random.default_rng(6)
+    q = rng.uniform(-170, 170, (12, 6))
+    errors = JointErrors.for_robot(ur10, list(compliance), 1) if compliance else None
+    turned = Rotation.from_rotvec(rng.normal(0, 0.02, (12, 3))).as_matrix() @ ur10.forward(q)[:, :3, :3]
+    extra = Extra(TOOLS, {k: ur10.replace(tool_mm=t).positions(q) + 0.1 for k, t in TOOLS.items()}, turned)
+    values = np.concatenate([nominal_values(ur10, errors), extra.nominal()]) + rng.normal(0, 1e-2, 33 + 9 + (
+        errors.size if errors else 0))
+    payload = np.full(12, 4.0)
+    args = (ur10, errors, q)
+    jac = stacked(*args, values, payload, ur10.positions(q), extra)[1]
+    step = 1e-6
+    numeric = np.column_stack([
+        (stacked(*args, values + step * e, payload, ur10.positions(q), extra, jacobian=False)[0]
+         - stacked(*args, values - step * e, payload, ur10.positions(q), extra, jacobian=False)[0]) / (2 * step)
+        for e in np.eye(values.size)])
+    scale = np.abs(numeric).max(axis=0) + 1e-9
+    # the probe's columns are exact to first order in its own turn (here 1e-2 degrees)
+    assert np.max(np.abs(numeric - jac) / scale) < 1e-3
+
+
+def test_the_identifiability_report_compares_one_target_with_all(ur10):
+    q = np.random.default_rng(0).uniform(-170, 170, (20, 6))
+    found = target_identifiability(ur10, q, TOOLS)
+    assert (len(found.one), found.one_total, len(found.all), found.all_total) == (23, 33, 31, 39)
+    assert set(found.one) < set(found.all) and found.all_of_one == 29
+    # a fit says the same: identified parameters, and what the primary alone would have identified
+    true = _true_robot(ur10)
+    y, errors, turns = _observed(ur10, true, q)
+    table = KinematicModel(robot=ur10).fit(q, y, targets={k: (TOOLS[k], e) for k, e in errors.items()}
+                                           ).identification_
+    assert table.status.count("identified") == 31 and table.primary_identifiable == 23
+    with_orientation = target_identifiability(ur10, q, TOOLS, orientation=True)
+    assert (len(with_orientation.all), with_orientation.all_total) == (34, 42)
+
+
+def _study(tmp_path, seed):
+    path = tmp_path / f"targets_{seed}.yaml"
+    path.write_text(CONFIG.read_text().replace("seed: 20", f"seed: {seed}"))
+    return load_study(path)
+
+
+@pytest.mark.parametrize("seed", [20, 21, 22])
+def test_three_targets_identify_more_and_predict_the_primary_better(tmp_path, seed):
+    """Done means (issue 20): a virtual robot with three targets on its tool."""
+    study = _study(tmp_path, seed)
+    data = simulate(study)
+    ident, test = data["identification"], data["test"]
+    robot = study.robot.nominal
+    one = KinematicModel(robot=robot).fit(ident.q_deg, ident.errors_mm)
+    targets = {k: (study.robot.targets[k], ident.measured_of(k) - ident.nominal_of(k)) for k in ("B", "C")}
+    three = KinematicModel(robot=robot).fit(ident.q_deg, ident.errors_mm, targets=targets)
+    counts = [m.identification_.status.count("identified") for m in (one, three)]
+    assert counts == [23, 31] and three.identification_.primary_identifiable == 23
+    rms = [float(np.sqrt(np.mean(np.sum((test.errors_mm - m.predict(test.q_deg)) ** 2, axis=1))))
+           for m in (one, three)]
+    assert rms[1] < rms[0], rms             # on the measured test set (its own tracker noise included)
+    true = study.robot.true_positions(test.q_deg) - test.nominal_mm
+    left = [float(np.sqrt(np.mean(np.sum((true - m.predict(test.q_deg)) ** 2, axis=1)))) for m in (one, three)]
+    assert left[1] < 0.9 * left[0], left    # what the model misses of the robot's true error
+
+
+def test_a_model_file_keeps_the_targets(tmp_path, ur10):
+    from partcal.study.persist import load_model, model_to_dict, save_model
+
+    true = _true_robot(ur10)
+    q = np.random.default_rng(8).uniform(-170, 170, (20, 6))
+    y, errors, turns = _observed(ur10, true, q)
+    model = KinematicModel(robot=ur10).fit(q, y, targets={"B": (TOOLS["B"], errors["B"])}, orientation_deg=turns)
+    save_model(model, tmp_path / "dh.json", name="DH three", robot=ur10)
+    loaded, doc = load_model(tmp_path / "dh.json")
+    assert doc["model"]["targets"] == {"B": [100.0, 0.0, 90.0]} and doc["model"]["orientation"] is True
+    assert np.array_equal(loaded.predict_target(q, "B"), model.predict_target(q, "B"))
+    assert model_to_dict(loaded) | {"partcal_version": 0} == model_to_dict(model) | {"partcal_version": 0}

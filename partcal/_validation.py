@@ -21,6 +21,8 @@ from numpy.typing import NDArray
 
 from .errors import DataError, ModelFileError, PartcalError
 
+MAX_PAYLOAD_KG = 1e5        # a payload at the tool point, kg: data columns, model parameters, predictions
+
 
 def check_array(
     value: Any, name: str, *, ndim: int = 2, columns: int | None = None, min_rows: int = 0

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from . import __version__
-from .errors import DataError, PartcalError
+from .errors import PartcalError
 
 log = logging.getLogger("partcal")
 
@@ -106,7 +106,7 @@ def _check_browser() -> None:
 
 def _cmd_predict(args) -> int:
     from ._io import atomic_write
-    from .data.measurements import read_columns
+    from .data.measurements import read_columns, read_payloads
     from .robot.description import joint_columns
     from .study.predictor import load_predictor
 
@@ -119,27 +119,16 @@ def _cmd_predict(args) -> int:
         errors = predictor.predict(positions=X)
         payload = None
     else:     # a model with compliant joints reads the payload of each row too, when the file has it
-        optional = ["payload_kg"] if predictor.model.reads_payload else []
-        cols, X, payload = read_columns(args.input, [joint_columns(predictor.n_inputs)], optional, fmt=fmt)
-        if payload is not None:
-            _check_payloads(args.input, payload[:, 0])
-        errors = predictor.predict(joints=X, payload_kg=None if payload is None else payload[:, 0])
+        cols, X, _ = read_columns(args.input, [joint_columns(predictor.n_inputs)], fmt=fmt)
+        payload = read_payloads(args.input, fmt) if predictor.model.reads_payload else None
+        errors = predictor.predict(joints=X, payload_kg=payload)
     predictor.refuse_implausible(X, errors, source=args.input)     # nothing is written then
-    given = [X] if payload is None else [X, payload]
+    given = [X] if payload is None else [X, payload[:, None]]
     _write_table(args.output, cols + (["payload_kg"] if payload is not None else []) + ["dx", "dy", "dz"],
                  np.hstack(given + [errors]), atomic_write)
     _warn_if_far(predictor, X)
     print(f"predicted errors for {len(X)} points: {args.output}")
     return 0
-
-
-def _check_payloads(path, payload) -> None:
-    from .data.measurements import MAX_PAYLOAD_KG, first_bad_payload
-
-    bad = first_bad_payload(payload)
-    if bad is not None:
-        raise DataError(f"{path}: data row {bad + 1}: column 'payload_kg': expected a payload mass in "
-                        f"[0, {MAX_PAYLOAD_KG:g}] kg, got {payload[bad]:g}")
 
 
 def _far_from_data(predictor, X) -> str:
@@ -164,7 +153,7 @@ def _warn_if_far(predictor, X) -> None:
 
 def _cmd_compensate(args) -> int:
     from ._io import atomic_write
-    from .data.measurements import read_columns
+    from .data.measurements import read_columns, read_payloads
     from .metrics import ExtrapolationWarning
     from .robot.compensation import CompensationWarning
     from .robot.description import joint_columns
@@ -177,15 +166,19 @@ def _cmd_compensate(args) -> int:
     optional = joint_columns(n_q) if predictor.inputs == "joint" else []
     cols, targets, seeds = read_columns(args.targets, [["x", "y", "z"], ["x_nom", "y_nom", "z_nom"]], optional,
                                         fmt=_format(args))
+    payload = read_payloads(args.targets, _format(args)) if predictor.model.reads_payload else None
     with warnings.catch_warnings():       # exit code 3 and one stderr line below say it instead
         warnings.simplefilter("ignore", CompensationWarning)
         warnings.simplefilter("ignore", ExtrapolationWarning)
-        result = predictor.compensate_full(targets, seeds)
+        result = _compensated(predictor, targets, seeds, payload)
     far = _far_from_data(predictor, result.commanded_mm if predictor.inputs == "cartesian" else result.joints_deg)
     header, parts = list(cols), [targets]
     if seeds is not None:
         header += optional
         parts.append(seeds)
+    if payload is not None:
+        header.append("payload_kg")
+        parts.append(payload[:, None])
     header += ["x_cmd", "y_cmd", "z_cmd"]
     parts.append(result.commanded_mm)
     if result.joints_deg is not None:
@@ -205,6 +198,17 @@ def _cmd_compensate(args) -> int:
         print(f"partcal: warning: {far}", file=sys.stderr)
     print(f"compensated {len(targets)} targets (all converged): {args.output}")
     return 0
+
+
+def _compensated(predictor, targets, seeds, payload):
+    """``compensate_full`` of every target, each at its own payload when ``payload`` (kg per row) is given."""
+    from .robot.compensation import merged
+
+    if payload is None:
+        return predictor.compensate_full(targets, seeds)
+    groups = [payload == kg for kg in np.unique(payload)]
+    return merged([(rows, predictor.compensate_full(targets[rows], None if seeds is None else seeds[rows],
+                                                    payload_kg=float(payload[rows][0]))) for rows in groups])
 
 
 def _refuse_input_as_output(output, command: str, inputs) -> None:

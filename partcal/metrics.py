@@ -307,15 +307,16 @@ def choose_simplest(scores, errors, sizes, physical) -> int:
     stiffnesses that hold over the whole workspace), and physical models
     are ordered by parameter count. Data-driven models are not ordered
     among themselves: their effective parameter counts do not compare (a
-    Gaussian process that learnt nothing has almost none), so among them
-    the lowest score wins. A NaN standard error counts as 0.
+    Gaussian process that learnt nothing has almost none): they share one
+    rank, so among them the lowest score wins. A NaN standard error counts
+    as 0; a NaN score never wins.
 
     >>> choose_simplest([0.30, 0.28, 0.50], [0.02, 0.03, 0.01], [26, 90, 10], [True, False, True])
     0
     >>> choose_simplest([0.35, 0.28, 0.30], [0.02, 0.03, 0.01], [26, 90, 10], [True, False, False])
     1
     """
-    best = min(range(len(scores)), key=lambda i: (scores[i], i))
+    best = min(range(len(scores)), key=lambda i: (not np.isfinite(scores[i]), scores[i], i))
     se = errors[best] if np.isfinite(errors[best]) else 0.0
     within = [i for i in range(len(scores)) if physical[i] and scores[i] <= scores[best] + se]
     return min(within, key=lambda i: (sizes[i], scores[i], i)) if within else best

@@ -78,6 +78,7 @@ def test_every_kind_is_ranked_and_its_model_file_predicts_the_metrics(kinds_run)
     assert doc["best"] == (min(within, key=lambda n: (doc["models"][n]["effective_parameters"], cv[n]["rms_3d"]))
                            if within else lowest)
     assert [n for n, e in doc["models"].items() if e["physical"]] == [n for n, k in KINDS.items() if k == "kinematic"]
+    assert doc["best_reason"].startswith("physical model" if doc["models"][doc["best"]]["physical"] else "lowest")
     assert doc["models"]["DH + GP(AI) k-means"]["regions"] == 2
     assert "granularity" not in doc["models"]["GP(AI) k-means"] and not cv["GP(AI) k-means"]["nested"]
     assert doc["cv"]["left_out"] == ["'GP(AI) k-means': granularity 2 left out: its regions need 40 samples each, "

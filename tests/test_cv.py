@@ -1,6 +1,8 @@
 """Cross-validation that small and repeated data cannot fool (issue 19): grouped folds, the fold rule,
 the standard error and the one-standard-error choice, candidates left out, seeds by name, honest GPs."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 from conftest import ROOT
@@ -86,6 +88,17 @@ def test_standard_error_and_the_choice_against_a_hand_computation():
     # without a physical model within, the lowest score wins (not the fewest parameters)
     assert choose_simplest([0.50, 0.54, 0.52], [0.05, 0.01, 0.01], [90, 26, 1], [False, True, False]) == 1
     assert choose_simplest([0.50, 0.56, 0.52], [0.05, 0.01, 0.01], [90, 26, 1], [False, True, False]) == 0
+    assert choose_simplest([np.nan, 0.40, 0.45], [0.1] * 3, [10, 20, 5], [True, False, True]) == 2    # NaN never wins
+
+
+def test_a_configuration_measured_at_two_payloads_is_two_poses():
+    from partcal.study.registry import measured_poses
+
+    q = np.repeat(IDENT.q_deg[:3], 2, axis=0)               # each configuration twice
+    twice = Measurements(q, IDENT.nominal_mm[[0, 0, 1, 1, 2, 2]], IDENT.measured_mm[[0, 0, 1, 1, 2, 2]])
+    assert measured_poses(twice).tolist() == [0, 0, 1, 1, 2, 2]                  # repeats
+    loaded = dataclasses.replace(twice, payload_kg=np.array([0.0, 50.0, 0.0, 50.0, 0.0, 0.0]))
+    assert measured_poses(loaded).tolist() == [0, 1, 2, 3, 4, 4]                 # the last pair alone repeats
 
 
 def test_repeat_scatter_is_the_pooled_standard_deviation():

@@ -141,6 +141,8 @@ def test_two_payloads_identify_the_compliances_and_predict_a_third(sk120):
     # one payload only: the compliance cannot be told from the masses, and is reported so
     single = KinematicModel(robot=nominal, compliance=[2, 3]).fit(q[:120], measured[:120] - nominal.positions(q[:120]))
     assert {"compliance[2]", "compliance[3]"} <= set(single.identification_.unidentifiable())
+    assert single.fit_notes() == ["compliance[2], compliance[3] not identifiable (data at one payload show only the "
+                                  "sags): the predictions do not change with the payload"]
 
 
 def test_parameters_lie_within_two_standard_errors_over_twenty_noise_draws(sk120, exact_fit):
@@ -188,10 +190,12 @@ def test_bad_joint_error_parameters_are_refused(sk120, params, message):
 
 def test_a_bad_payload_per_pose_is_refused(sk120, exact_fit):
     q = sk120_poses(sk120, 5, 18)
-    with pytest.raises(PartcalError, match=r"Expected payload_kg as one number >= 0 or 5 of them"):
+    with pytest.raises(PartcalError, match=r"Expected payload_kg as one number in \[0, 100000\] or 5 of them"):
         exact_fit[2].predict(q, payload_kg=[1.0, 2.0])
-    with pytest.raises(PartcalError, match=r"Expected payload_kg as one number >= 0 or 5 of them"):
+    with pytest.raises(PartcalError, match=r"Expected payload_kg as one number in \[0, 100000\] or 5 of them"):
         exact_fit[2].predict(q, payload_kg=-3.0)
+    with pytest.raises(PartcalError, match=r"got 1 values from 1000000000.0 to 1000000000.0"):
+        exact_fit[2].predict(q, payload_kg=1e9)
 
 
 def test_the_analytic_jacobian_matches_central_differences(sk120):
@@ -404,7 +408,7 @@ def test_a_run_reads_the_payload_of_each_pose_from_its_file(payload_files, capsy
     from partcal.cli import main
     from partcal.study.persist import save_model
 
-    save_model(dhc.model, payload_files / "dhc.json", name="DH + C")
+    save_model(dhc.model, payload_files / "dhc.json", name="DH + C", robot=dhc.model.robot_)
     assert main(["predict", str(payload_files / "dhc.json"), str(payload_files / "half_load.csv"),
                  "-o", str(payload_files / "pred.csv")]) == 0
     out = np.genfromtxt(payload_files / "pred.csv", delimiter=",", names=True)
@@ -416,9 +420,23 @@ def test_a_run_reads_the_payload_of_each_pose_from_its_file(payload_files, capsy
     capsys.readouterr()
     assert main(["predict", str(payload_files / "dhc.json"), str(payload_files / "bad.csv"), "-o",
                  str(payload_files / "bad_out.csv")]) == 2
-    assert capsys.readouterr().err == (f"partcal: error: {payload_files / 'bad.csv'}: data row 2: column 'payload_kg': "
+    assert capsys.readouterr().err == (f"partcal: error: {payload_files / 'bad.csv'}:3: column 'payload_kg': "
                                        "expected a payload mass in [0, 100000] kg, got -5\n")
     assert not (payload_files / "bad_out.csv").exists()
+    # partcal compensate: each target at its own payload; the identified robot then reaches it (the model's
+    # own prediction of the commanded joints, at that payload, lands on the target)
+    test = read_measurements(payload_files / "half_load.csv")
+    rows = ["x,y,z," + ",".join(f"q{j}" for j in range(1, 7)) + ",payload_kg"]
+    rows += [",".join(f"{v:.6f}" for v in (*p, *q, kg)) for p, q, kg in zip(test.nominal_mm[:6], test.q_deg[:6],
+                                                                            [0, 0, 0, 80, 80, 80])]
+    (payload_files / "targets.csv").write_text("\n".join(rows) + "\n")
+    assert main(["compensate", str(payload_files / "dhc.json"), str(payload_files / "targets.csv"), "-o",
+                 str(payload_files / "cmd.csv")]) == 0
+    cmd = np.genfromtxt(payload_files / "cmd.csv", delimiter=",", names=True, dtype=None, encoding="utf-8")
+    assert list(cmd["payload_kg"]) == [0, 0, 0, 80, 80, 80]
+    q_cmd = np.column_stack([cmd[f"q{j}_cmd"] for j in range(1, 7)])
+    reached = dhc.model.robot_.positions(q_cmd) + dhc.model.predict(q_cmd, payload_kg=cmd["payload_kg"])
+    np.testing.assert_allclose(reached, test.nominal_mm[:6], atol=1e-3)
     for name in ("identification.csv", "half_load.csv"):        # the same poses, the payload column dropped
         text = (payload_files / name).read_text().splitlines()
         column = text[0].split(",").index("payload_kg")

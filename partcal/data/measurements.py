@@ -37,7 +37,7 @@ from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
 from .._io import atomic_write
-from .._validation import check_array
+from .._validation import MAX_PAYLOAD_KG, check_array
 from ..errors import DataError
 from ..robot.description import MAX_JOINTS, joint_columns, load_robot
 from ..robot.kinematics import Robot, matrices_from_xyz_deg, xyz_deg_from_matrices
@@ -49,7 +49,6 @@ from .plausibility import Plausibility, check_measured
 NOMINAL = ("x_nom", "y_nom", "z_nom")
 MEASURED = ("x_meas", "y_meas", "z_meas")
 PAYLOAD = "payload_kg"
-MAX_PAYLOAD_KG = 1e5          # the kinematic model's payload_kg rule: a real number in [0, 1e5]
 _JOINT = re.compile(r"^q(\d+)$")
 _NUMBER = re.compile(r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
 _CONTRACT = MeasurementFormat()
@@ -292,7 +291,7 @@ def read_measurements(path: str | Path, robot: str | Robot | None = None, *, nam
             raise DataError(f"{path}:{line}: column {group_column!r} is missing (data.groups names it as the "
                             f"column of each row's pose); the file has {', '.join(h.strip(chr(39)) for h in header)}")
         groups = tuple(data[i][1][seen[group_column]].strip() for i in keep)
-    payload = _payloads(path, header, data, seen[PAYLOAD], fmt.decimal)[keep] if PAYLOAD in seen else None
+    payload = _payloads(path, line, header, data, seen[PAYLOAD], fmt.decimal)[keep] if PAYLOAD in seen else None
     return Measurements(q_deg=q, nominal_mm=nominal, measured_mm=meas,
                         name=name if name is not None else path.stem, labels=labels, groups=groups,
                         payload_kg=payload, extra_measured_mm=extra, extra_nominal_mm=extra_nominal,
@@ -305,9 +304,18 @@ def first_bad_payload(values: NDArray[np.float64]) -> int | None:
     return int(bad[0]) if bad.size else None
 
 
-def _payloads(path: Path, header: list[str], data: list, column: int, decimal: str) -> NDArray[np.float64]:
+def read_payloads(path: str | Path, fmt: MeasurementFormat | None = None) -> NDArray[np.float64] | None:
+    """The ``payload_kg`` column of a CSV, kg per data row, or None when the file has none (``partcal predict``
+    and ``compensate`` read it for models with compliant joints). Refusals name the file, line and column."""
+    path, fmt = Path(path), fmt or _CONTRACT
+    line, header, seen, data = _table(path, f"...,{PAYLOAD}", fmt)
+    return _payloads(path, line, header, data, seen[PAYLOAD], fmt.decimal) if PAYLOAD in seen else None
+
+
+def _payloads(path: Path, line: int, header: list[str], data: list, column: int, decimal: str
+              ) -> NDArray[np.float64]:
     """The ``payload_kg`` column: a mass in [0, MAX_PAYLOAD_KG] kg on every row."""
-    values = np.array([_number(path, number, header[column], cells[column], decimal) for number, cells in data])
+    values = _numbers(path, line, header, data, [column], decimal)[:, 0]
     bad = first_bad_payload(values)
     if bad is not None:
         raise DataError(f"{path}:{data[bad][0]}: column {header[column]}: expected a payload mass in "

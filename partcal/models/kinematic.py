@@ -45,7 +45,7 @@ from scipy.optimize import least_squares
 from sklearn.base import clone
 from sklearn.utils.validation import check_is_fitted, validate_data
 
-from .._validation import FieldReader, boolean, check_array, param_error, real
+from .._validation import MAX_PAYLOAD_KG, FieldReader, boolean, check_array, param_error, real
 from ..errors import DataError, ModelFileError
 from ..metrics import distance_outside_boxes
 from ..robot.description import load_robot, robot_from_dict, robot_to_dict
@@ -469,7 +469,7 @@ class KinematicModel(ErrorModelBase):
     takes_residual = True
     _parameter_rules = {"base": boolean(True), "tool": boolean(True),
                         "rcond": real(0.0, 1.0, default=1e-6, low_open=True),
-                        "payload_kg": real(0.0, 1e5, default=0.0)}
+                        "payload_kg": real(0.0, MAX_PAYLOAD_KG, default=0.0)}
     _joint_rules = {"compliance": ((), compliance_problem), "joint_harmonics": (0, harmonics_problem)}
 
     def _check_params(self) -> Robot:
@@ -550,12 +550,14 @@ class KinematicModel(ErrorModelBase):
 
     # ------------------------------------------------------------------ prediction
     def _payload(self, payload_kg, n: int) -> NDArray[np.float64]:
-        """The payload per pose (n,) kg: ``payload_kg`` (a number or n values >= 0), default the parameter."""
+        """The payload per pose (n,) kg: ``payload_kg`` (a number or n values in [0, MAX_PAYLOAD_KG]), default
+        the parameter."""
         value = self.payload_kg if payload_kg is None else payload_kg
         arr = check_array(np.atleast_1d(np.asarray(value, dtype=float)), "payload_kg", ndim=1)
-        if arr.size not in (1, n) or np.any(arr < 0):
-            raise DataError(f"Expected payload_kg as one number >= 0 or {n} of them (kg, one per pose), got "
-                            f"{arr.size} values, smallest {arr.min() if arr.size else 'none'}.")
+        if arr.size not in (1, n) or np.any(arr < 0) or np.any(arr > MAX_PAYLOAD_KG):
+            raise DataError(f"Expected payload_kg as one number in [0, {MAX_PAYLOAD_KG:g}] or {n} of them (kg, one "
+                            f"per pose), got {arr.size} values from {arr.min() if arr.size else 'none'} to "
+                            f"{arr.max() if arr.size else 'none'}.")
         return np.broadcast_to(arr, (n,)).copy()
 
     def _build_robots(self) -> None:
@@ -739,7 +741,12 @@ class KinematicModel(ErrorModelBase):
         return float(own + (self.residual_.effective_parameters() if self.residual_ is not None else 0.0))
 
     def fit_notes(self) -> list[str]:
-        return self.residual_.fit_notes() if self.residual_ is not None else []
+        """A compliance the data could not identify (one payload: only its products with the masses, the
+        sags, are seen), so that a payload changes nothing the model predicts; then the residual's notes."""
+        held = [n for n in self.identification_.unidentifiable() if n.startswith("compliance[")]
+        notes = [f"{', '.join(held)} not identifiable (data at one payload show only the sags): the predictions do "
+                 "not change with the payload"] if held else []
+        return notes + (self.residual_.fit_notes() if self.residual_ is not None else [])
 
     def is_physical(self) -> bool:
         return self.residual is None

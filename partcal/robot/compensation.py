@@ -17,6 +17,7 @@ where the robot's inverse kinematics reaches it within those limits
 
 from __future__ import annotations
 
+import dataclasses
 import warnings
 from dataclasses import dataclass
 from typing import Callable
@@ -54,6 +55,22 @@ class CompensationResult:
             more = f" and {bad.size - 5} more" if bad.size > 5 else ""
             warnings.warn(f"{bad.size} of {len(self.converged)} targets did not converge to {tol_mm:g} mm: "
                           f"{listed}{more}", CompensationWarning, stacklevel=3)
+
+
+def merged(parts: list[tuple[NDArray[np.bool_], CompensationResult]]) -> CompensationResult:
+    """One result from results of disjoint row sets: ``parts`` pairs a boolean row mask with its result."""
+    n = len(parts[0][0])
+    first = parts[0][1]
+
+    def gather(field: str):
+        if getattr(first, field) is None:
+            return None
+        out = np.empty((n,) + getattr(first, field).shape[1:], dtype=getattr(first, field).dtype)
+        for rows, result in parts:
+            out[rows] = getattr(result, field)
+        return out
+
+    return CompensationResult(*(gather(f.name) for f in dataclasses.fields(CompensationResult)))
 
 
 def false_target(predict: Callable[[NDArray[np.float64]], NDArray[np.float64]], targets_mm: NDArray[np.float64],

@@ -112,18 +112,22 @@ class RunResult:
     @property
     def best_reason(self) -> str:
         """Which rule chose ``best``, in words (metrics.json, the report and the printed table say it)."""
-        return rank_reason(self.config, self.plan.cv if self.plan else None)
+        best = next(r for r in self.models if r.spec.name == self.best)
+        return rank_reason(self.config, self.plan.cv if self.plan else None, best.model.is_physical())
 
 
-def rank_reason(config: RunConfig, cv: "CVPlan | None" = None) -> str:
-    """The ranking rule of a run, in words."""
+def rank_reason(config: RunConfig, cv: "CVPlan | None", physical: bool) -> str:
+    """Why a run's best model won, in words: by the validation set, as the simplest physical model within one
+    standard error of the lowest CV score, or as the lowest CV score (no physical model within)."""
     if config.rank_by == "validation":
         return f"lowest 3-D RMS on the validation set {config.validation.name} (held out, never fitted)"
     folds = fold_name(cv.rule) if cv is not None else f"{config.cv_folds}-fold"
-    return (f"physical model (kinematic, no data-driven residual) with the fewest parameters whose {folds} "
-            "cross-validated 3-D RMS on the identification set is within one standard error of the lowest, else "
-            "the lowest (the same folds for every model, a pose's rows held out together; nested for granularity "
-            "lists)")
+    how = ("(the same folds for every model, a pose's rows held out together; nested for granularity lists)")
+    if physical:
+        return (f"physical model (kinematic, no data-driven residual) with the fewest parameters whose {folds} "
+                f"cross-validated 3-D RMS on the identification set is within one standard error of the lowest {how}")
+    return (f"lowest {folds} cross-validated 3-D RMS on the identification set, no physical model (kinematic, no "
+            f"data-driven residual) being within one standard error of it {how}")
 
 
 @dataclass(frozen=True)
@@ -146,7 +150,8 @@ class CVPlan:
         if ident.groups is not None:
             groups, by = labels_as_groups(ident.groups), f"column {config.data_options.groups!r}"
         else:
-            groups, by = pose_groups(ident.q_deg), "identical joint angles"
+            payload = " and payload" if ident.payload_kg is not None else ""
+            groups, by = measured_poses(ident), f"identical joint angles{payload}"
         rule = fold_rule(config.cv_folds, int(groups.max()) + 1)
         folds = grouped_splits(groups, rule, config.seed) if int(groups.max()) >= 1 else []
         return cls(groups, rule, folds, config.seed, by)
@@ -221,11 +226,11 @@ def load_datasets(config: RunConfig) -> tuple[dict[str, Measurements], Robot | N
         m = read_measurements(path, robot, name=name, fmt=opts.format, rows=opts.rows.get(name), frame=opts.frame,
                               plausibility=opts.plausibility, group_column=opts.groups if name == "identification"
                               else None)
-        poses = int(pose_groups(m.q_deg).max()) + 1
+        poses = int(measured_poses(m).max()) + 1
         if poses < len(m):
-            log.warning("%s (%s): %d rows measure %d distinct poses (identical joint angles): repeated measurements%s",
-                        path, name, len(m), poses, "; cross-validation holds out a pose's rows together"
-                        if name == "identification" else "")
+            log.warning("%s (%s): %d rows measure %d distinct poses (identical joint angles%s): repeated "
+                        "measurements%s", path, name, len(m), poses, " and payload" if m.payload_kg is not None else "",
+                        "; cross-validation holds out a pose's rows together" if name == "identification" else "")
         return m
 
     data = {"identification": read("identification", config.identification)}
@@ -375,6 +380,12 @@ def model_inputs(inputs: str, m: Measurements) -> NDArray[np.float64]:
     return m.nominal_mm if inputs == "cartesian" else m.q_deg
 
 
+def measured_poses(m: Measurements) -> NDArray[np.intp]:
+    """The pose of each row (:func:`partcal.metrics.pose_groups`): the same joint angles at the same payload.
+    A configuration measured at two payloads is two poses, not a repeat: its rows differ by the sag."""
+    return pose_groups(m.q_deg if m.payload_kg is None else np.column_stack([m.q_deg, m.payload_kg]))
+
+
 def per_row_arguments(model, m: Measurements) -> dict:
     """Per-pose arguments of the model's ``fit`` and ``predict`` from a data set: the payload of each pose
     (``payload_kg`` column) for a model that reads one; none otherwise (the model's own ``payload_kg``)."""
@@ -446,6 +457,10 @@ def _fit_model(spec, seed, data, cv, own_frame, lines) -> ModelResult:
                     partitioned_part(estimator).partition_.n_regions, _regions_text(cv_regions))
     predictions = {name: estimator.predict(model_inputs(spec.inputs, m), **per_row_arguments(estimator, m))
                    for name, m in data.items()}
+    for name, m in data.items():
+        if rows and m.payload_kg is None:
+            log.warning("%s has no payload_kg column: predicted at the entry's payload_kg (%g kg)", name,
+                        estimator.payload_kg)
     metrics = {name: summary(errors_left(m, predictions[name], name in own_frame)) for name, m in data.items()}
     ratio = estimator.pso_rms_ratio()
     return ModelResult(spec, estimator, fit_seconds, pooled_rms(resid), metrics, predictions, ratio, granularity,

@@ -21,7 +21,7 @@ data sets (SK120 16 and 20: DH; UR10 16 and 16 x 10: GP(AI), DH's CV is 0.08-0.1
 lowest with a standard error of 0.07; UR10 20: DH). Lowest CV alone: 1.12 / 1.16 / 1.00 / 1.16 / 1.00.
 The earlier rule, fewest effective parameters within one standard error, gave 1.00 / 1.00 / 1.16 /
 1.37 / 1.30: it picked a GP(CI) that had learnt only the mean (3 effective parameters) and a DH +
-FDP(AI) of 46 against the GP(AI)'s 48.
+FDP(AI) of 46 against the GP(AI)'s 51 (counting its means).
 
 Run: .venv/bin/python benchmarks/bench_choice.py   (about 5 minutes on 2 quiet cores)
 """

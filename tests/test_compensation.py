@@ -169,3 +169,10 @@ def test_full_pose_false_targets_put_the_true_robot_on_the_wanted_pose(name):
     np.testing.assert_allclose(result.commanded_rotation, commanded[:, :3, :3])
     before = true.forward(q)                                   # uncompensated: the true robot misses
     assert np.linalg.norm(before[:, :3, 3] - wanted[:, :3, 3], axis=1).min() > 0.1
+    # predictions that are not finite leave their targets unconverged; a wrong shape is refused
+    broken = false_target_poses(lambda q: np.full((len(q), 6), np.nan), nominal, wanted[:3], q[:3])
+    assert not broken.converged.any() and (broken.residual_mm == np.inf).all()
+    from partcal import DataError
+
+    with pytest.raises(DataError, match=r"predict must give pose errors of shape \(3, 6\)"):
+        false_target_poses(lambda q: np.zeros((len(q), 3)), nominal, wanted[:3])

@@ -326,9 +326,27 @@ def test_full_pose_ik_with_a_joint_held_and_bad_poses(sk120):
     wanted[0, :3, :3] = Rotation.from_rotvec([0.3, 0.2, 0.1]).as_matrix() @ wanted[0, :3, :3]
     held = sk120.inverse_pose(wanted, q, fixed=(6,))
     assert not held.success[0] and held.error_deg[0] > 0.1 and held.q_deg[0, 5] == 40.0
-    bad = sk120.forward(np.repeat(q, 2, axis=0))
-    bad[1, :3, :3] *= 2.0
-    with pytest.raises(partcal.DataError, match=r"poses\[1\]: the upper-left 3 x 3 block must be a rotation"):
-        sk120.inverse_pose(bad)
+    good = sk120.forward(np.repeat(q, 2, axis=0))
+    mirrored = good[1].copy()
+    mirrored[:3, 0] *= -1.0
+    for where, value, what in [((slice(0, 3), slice(0, 3)), 2.0 * good[1, :3, :3], "has a rotation block that is not "
+                                                                                   "orthonormal"),
+                               ((0, 3), np.nan, "has a non-finite entry"),
+                               ((3,), [1, 2, 3, 5], "has a last row other than"),
+                               ((slice(None), slice(None)), mirrored, "has a rotation block that mirrors")]:
+        bad = good.copy()
+        bad[(1,) + where] = value
+        with pytest.raises(partcal.DataError, match=r"poses\[1\] " + what):
+            sk120.inverse_pose(bad)
     with pytest.raises(partcal.DataError, match=r"Expected poses with shape \(n, 4, 4\)"):
         sk120.inverse_pose(np.zeros((2, 3, 4)))
+    for kwargs, message in [({"length_mm": 0.0}, r"length_mm must be a finite number > 0; got 0.0"),
+                            ({"tol_deg": -1.0}, r"tol_deg must be a finite number >= 0"),
+                            ({"max_iter": 2.5}, r"max_iter must be an int >= 1; got 2.5"),
+                            ({"fixed": (1, 2, 3, 4, 5, 6)}, r"fixed holds every joint of motoman_sk120"),
+                            ({"seeds_deg": np.zeros((3, 6))}, r"Expected seeds_deg with shape \(6,\) or \(2, 6\)")]:
+        with pytest.raises(partcal.DataError, match=message):
+            sk120.inverse_pose(good, **kwargs)
+    # a pose written with six decimals (as partcal writes CSVs) is taken, its rotation made orthonormal
+    rounded = sk120.inverse_pose(np.round(good, 6), q)
+    assert rounded.success.all() and rounded.error_mm.max() < 1e-3

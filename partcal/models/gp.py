@@ -59,6 +59,7 @@ SAMPLES_PER_INPUT = 10             # default smallest region: 10 samples per var
 AUTO_RESTARTS = ((200, 4), (500, 1))    # restarts: None -> 4 extra starts on a search of <= 200 samples, ...
 GLOBAL_HYPER_SAMPLES = 1000        # hyper_samples: None -> a global GP searches on at most 1,000 samples
 AT_BOUND = 1.05                    # a hyperparameter within 5% of a bound sits on it
+INTERPOLATING = 1e-8               # noise variance (outputs scaled to unit variance) of a GP that interpolates
 WHITE_NOISE = 0.05                 # neighbours correlated less than this (median): the GP predicts the mean
 NEAR_MEAN = 0.5                    # fewer effective parameters per output beyond the mean: a near-constant fit
 _BLOCK = 2048
@@ -339,7 +340,8 @@ class GaussianProcessErrorModel(ErrorModelBase):
                 "length_scale": self.length_scale_.copy(), "noise": self.noise_}
 
     def fit_notes(self) -> list[str]:
-        """Hyperparameters the search left on a bound, in words: the fit is then not what a GP should be."""
+        """What makes the fit not what a GP should be, in words: a near-constant or white-noise fit, or a noise
+        term at (or within 1e-8 of) its lower bound, which reproduces noisy training data exactly."""
         check_is_fitted(self, "dual_coef_")
         if self.fixed_kernel is not None:
             return []
@@ -352,8 +354,8 @@ class GaussianProcessErrorModel(ErrorModelBase):
             notes.append("length scales shorter than the spacing of the data: a white-noise fit that predicts the "
                          "mean between the training poses")
         low = getattr(self, "noise_bounds_", NOISE_BOUNDS)[0]
-        if self.noise_ <= low * AT_BOUND and low <= NOISE_BOUNDS[0] * AT_BOUND:
-            notes.append("the noise term at its lower bound: the GP reproduces its training data exactly "
+        if self.noise_ <= max(low * AT_BOUND, INTERPOLATING) and low <= NOISE_BOUNDS[0] * AT_BOUND:
+            notes.append("the noise term at or near its lower bound: the GP reproduces its training data exactly "
                          "(set noise_floor_mm to the measurement scatter)")
         return notes
 

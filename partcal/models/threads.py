@@ -4,9 +4,9 @@ A blend or a GP search makes many small matrix products, and a k-means
 partition many small passes over a few hundred points. OpenBLAS and
 OpenMP split each over every core, which costs more than it saves; on a
 busy machine, or beside another fit in a second process, every call then
-waits for threads that are not scheduled: products 300 times slower and a
-k-means of 800 joint configurations 50 times slower were measured on two
-busy cores.
+waits for threads that are not scheduled (small products and a k-means of
+a few hundred joint configurations were measured tens of times slower on
+two busy cores).
 """
 
 from __future__ import annotations

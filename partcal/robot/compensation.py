@@ -25,8 +25,9 @@ from typing import Callable
 import numpy as np
 from numpy.typing import NDArray
 
+from ..errors import DataError
 from . import ik
-from .kinematics import Robot
+from .kinematics import Robot, checked_poses, ik_settings
 
 
 class CompensationWarning(UserWarning):
@@ -140,7 +141,8 @@ def false_target_joints(predict: Callable[[NDArray[np.float64]], NDArray[np.floa
 
 
 def false_target_poses(predict: Callable[[NDArray[np.float64]], NDArray[np.float64]], robot: Robot,
-                       poses: NDArray[np.float64], seeds_deg: NDArray[np.float64], fixed: tuple[int, ...] = (), *,
+                       poses: NDArray[np.float64], seeds_deg: NDArray[np.float64] | None = None,
+                       fixed: tuple[int, ...] = (), *,
                        tol_mm: float = 1e-4, tol_deg: float = 1e-5, length_mm: float = 1000.0,
                        max_iter: int = 50) -> CompensationResult:
     """Full-pose false targets for a joint-angle model ``predict(q_deg) -> (n, 6)`` pose errors.
@@ -155,18 +157,28 @@ def false_target_poses(predict: Callable[[NDArray[np.float64]], NDArray[np.float
     ``commanded_rotation``); ``residual_mm`` and ``residual_deg`` are the
     predicted misses.
     """
-    poses = np.asarray(poses, dtype=float)
-    free = robot._free_joints(fixed)
+    poses = checked_poses(poses)
+    free, settings = robot._free_joints(fixed), ik_settings(tol_mm, max_iter, 10.0, 0.05, tol_deg=tol_deg,
+                                                             length_mm=length_mm)
     positions, rotations = poses[:, :3, 3], poses[:, :3, :3]
-    q = ik.solve_pose(robot, positions, rotations, np.array(seeds_deg, dtype=float), free, ik.Settings(), 1e-8,
+
+    def errors(q):          # the predicted pose errors; a non-finite one moves nothing (and never converges)
+        e = np.asarray(predict(q), dtype=float)
+        if e.shape != (len(q), 6):
+            raise DataError(f"predict must give pose errors of shape ({len(q)}, 6) (mm, then a rotation vector in "
+                            f"radians); got shape {e.shape}")
+        return np.where(np.isfinite(e).all(axis=1, keepdims=True), e, 0.0)
+
+    q = ik.solve_pose(robot, positions, rotations, robot._seeds(seeds_deg, len(poses)), free, ik.Settings(), 1e-8,
                       length_mm)[0]
-    q, iterations = ik.solve_pose(robot, positions, rotations, q, free,
-                                  ik.Settings(tol_mm=tol_mm, max_iter=max_iter), tol_deg, length_mm, bias=predict)
+    q, iterations = ik.solve_pose(robot, positions, rotations, q, free, settings, tol_deg, length_mm, bias=errors)
     nominal = robot.forward(q)
     with np.errstate(over="ignore", invalid="ignore"):
-        at, turned = ik.biased_pose(nominal[:, :3, 3].T, nominal[:, :3, :3], predict(q))
-    residual_mm = np.linalg.norm(at.T - positions, axis=1)
-    residual_deg = np.degrees(np.linalg.norm(ik.rotation_vectors(rotations @ turned.transpose(0, 2, 1)), axis=1))
+        finite = np.isfinite(np.asarray(predict(q), dtype=float)).all(axis=1)
+    at, turned = ik.biased_pose(nominal[:, :3, 3].T, nominal[:, :3, :3], errors(q))
+    residual_mm = np.where(finite, np.linalg.norm(at.T - positions, axis=1), np.inf)
+    residual_deg = np.where(finite, np.degrees(np.linalg.norm(ik.rotation_vectors(rotations @ turned.transpose(0, 2, 1)),
+                                                                axis=1)), np.inf)
     converged = (residual_mm <= tol_mm) & (residual_deg <= tol_deg) & robot.within_limits(q)
     return CompensationResult(nominal[:, :3, 3], q, iterations, residual_mm, converged,
                               commanded_rotation=nominal[:, :3, :3], residual_deg=residual_deg)

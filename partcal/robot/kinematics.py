@@ -489,23 +489,10 @@ class Robot:
             robot with fewer than six free joints reaches only some poses; the
             others end at the least-squares compromise and are not a success.
         """
-        poses = np.asarray(poses, dtype=float)
-        if poses.ndim != 3 or poses.shape[1:] != (4, 4) or not np.isfinite(poses).all():
-            raise DataError(f"Expected poses with shape (n, 4, 4) (homogeneous transforms, mm), got array with "
-                            f"shape {poses.shape}" + ("" if np.isfinite(poses).all() else " and non-finite values"))
-        rotations = poses[:, :3, :3]
-        orthogonal = np.abs(rotations @ rotations.transpose(0, 2, 1) - np.eye(3)).max(axis=(1, 2)) < 1e-6
-        if not (orthogonal.all() and (np.linalg.det(rotations) > 0).all()):
-            bad = int(np.flatnonzero(~orthogonal | (np.linalg.det(rotations) <= 0))[0])
-            raise DataError(f"poses[{bad}]: the upper-left 3 x 3 block must be a rotation matrix (orthonormal, "
-                            "determinant +1)")
-        n = poses.shape[0]
-        seeds = self.home_deg if seeds_deg is None else seeds_deg
-        q = self.check_joints(np.array(np.broadcast_to(np.asarray(seeds, dtype=float), (n, self.n_joints))),
-                              "seeds_deg")
-        free = self._free_joints(fixed)
-        settings = ik.Settings(tol_mm, max_iter, max_step_deg, damping)
-        q = ik.solve_pose(self, poses[:, :3, 3], rotations, q, free, settings, tol_deg, length_mm)[0]
+        poses = checked_poses(poses)
+        q, free = self._seeds(seeds_deg, len(poses)), self._free_joints(fixed)
+        settings = ik_settings(tol_mm, max_iter, max_step_deg, damping, tol_deg=tol_deg, length_mm=length_mm)
+        q = ik.solve_pose(self, poses[:, :3, 3], poses[:, :3, :3], q, free, settings, tol_deg, length_mm)[0]
         error_mm, error_deg = pose_errors(self.forward(q), poses)
         return IKResult(q_deg=q, error_mm=error_mm, error_deg=error_deg,
                         success=(error_mm <= tol_mm) & (error_deg <= tol_deg) & self.within_limits(q))
@@ -514,7 +501,18 @@ class Robot:
         bad = [j for j in fixed if not (isinstance(j, (int, np.integer)) and 1 <= j <= self.n_joints)]
         if bad:
             raise DataError(f"fixed joints must be in 1..{self.n_joints}; got {bad[0]!r}")
-        return np.array([j for j in range(self.n_joints) if j + 1 not in set(fixed)], dtype=np.intp)
+        free = np.array([j for j in range(self.n_joints) if j + 1 not in set(fixed)], dtype=np.intp)
+        if free.size == 0:
+            raise DataError(f"fixed holds every joint of {self.name} (1..{self.n_joints}): nothing is left to move")
+        return free
+
+    def _seeds(self, seeds_deg, n: int) -> NDArray[np.float64]:
+        """IK seeds ``(n, N)`` degrees from one seed (``(N,)`` or ``(1, N)``), one per target, or None (home)."""
+        seeds = np.asarray(self.home_deg if seeds_deg is None else seeds_deg, dtype=float)
+        if seeds.shape not in ((self.n_joints,), (1, self.n_joints), (n, self.n_joints)):
+            raise DataError(f"Expected seeds_deg with shape ({self.n_joints},) or ({n}, {self.n_joints}) (degrees), "
+                            f"got array with shape {seeds.shape}")
+        return self.check_joints(np.array(np.broadcast_to(seeds, (n, self.n_joints))), "seeds_deg")
 
     def inverse_path(self, targets_mm, seed_deg=None, *, fixed=(), tol_mm: float = 1e-8) -> NDArray[np.float64]:
         """Joint angles along a path, each point warm-started from the previous one.
@@ -603,6 +601,51 @@ class IKResult:
     error_mm: NDArray[np.float64]
     success: NDArray[np.bool_]
     error_deg: NDArray[np.float64] | None = None
+
+
+def checked_poses(poses) -> NDArray[np.float64]:
+    """Tool poses ``(n, 4, 4)`` as homogeneous transforms (mm), their rotations made exactly orthonormal.
+
+    A rotation block may be off orthonormal by 1e-4 (the rounding of a file
+    with six decimals); it is replaced by the nearest rotation. Anything else
+    is refused, naming the first bad pose and what was wrong with it.
+    """
+    poses = np.array(poses, dtype=float)
+    if poses.ndim != 3 or poses.shape[1:] != (4, 4) or len(poses) == 0:
+        raise DataError(f"Expected poses with shape (n, 4, 4), n >= 1 (homogeneous transforms, mm), got array with "
+                        f"shape {poses.shape}")
+    rotations = poses[:, :3, :3]
+    with np.errstate(invalid="ignore"):
+        off = np.abs(rotations @ rotations.transpose(0, 2, 1) - np.eye(3)).max(axis=(1, 2))
+        det = np.linalg.det(np.nan_to_num(rotations))
+    problems = [(~np.isfinite(poses).all(axis=(1, 2)), "has a non-finite entry"),
+                (np.abs(poses[:, 3] - [0.0, 0.0, 0.0, 1.0]).max(axis=1) > 0, "has a last row other than [0, 0, 0, 1]"),
+                (~(off <= 1e-4), "has a rotation block that is not orthonormal"), (det <= 0, "has a rotation block "
+                                                                                          "that mirrors (det < 0)")]
+    for bad, what in problems:
+        if bad.any():
+            k = int(np.flatnonzero(bad)[0])
+            raise DataError(f"poses[{k}] {what}: expected a rotation (orthonormal to 1e-4, determinant +1) and a "
+                            f"position; got {np.round(poses[k], 6).tolist()} (largest deviation of R R^T from I: "
+                            f"{off[k]:.3g})")
+    u, _, vt = np.linalg.svd(rotations)
+    poses[:, :3, :3] = u @ vt
+    return poses
+
+
+def ik_settings(tol_mm, max_iter, max_step_deg, damping, *, tol_deg=0.0, length_mm=1.0) -> "ik.Settings":
+    """IK settings, each checked: tolerances >= 0, ``max_iter`` an int >= 1, steps, damping and the orientation
+    length > 0 (all finite)."""
+    rules = [("tol_mm", tol_mm, 0.0, True), ("tol_deg", tol_deg, 0.0, True), ("max_step_deg", max_step_deg, 0.0, False),
+             ("damping", damping, 0.0, False), ("length_mm", length_mm, 0.0, False)]
+    for name, value, low, inclusive in rules:
+        ok = isinstance(value, (int, float, np.integer, np.floating)) and np.isfinite(value) and \
+            (value >= low if inclusive else value > low)
+        if not ok:
+            raise DataError(f"{name} must be a finite number {'>=' if inclusive else '>'} {low:g}; got {value!r}")
+    if not isinstance(max_iter, (int, np.integer)) or isinstance(max_iter, bool) or max_iter < 1:
+        raise DataError(f"max_iter must be an int >= 1; got {max_iter!r}")
+    return ik.Settings(float(tol_mm), int(max_iter), float(max_step_deg), float(damping))
 
 
 def pose_errors(reached: NDArray[np.float64], wanted: NDArray[np.float64]

@@ -60,7 +60,7 @@ class Predictor:
         return self.model.predict_validated(X, payload_kg=payload_kg)
 
     def _check_payload(self, payload_kg) -> None:
-        if payload_kg is not None and not getattr(self.model, "reads_payload", False):
+        if payload_kg is not None and not self.model.reads_payload:
             raise DataError(f"model {self.name!r} has no joint that yields under gravity, so a payload changes "
                             f"nothing it predicts; got payload_kg={payload_kg!r}")
 

@@ -2,8 +2,8 @@
 
 Every model is fitted on the identification set, evaluated on every data set
 and by cross-validation on the identification set, and ranked by its
-cross-validated 3-D RMS (``rank_by: cv``: the simplest model within one
-standard error of the lowest) or by its 3-D RMS on a held-out validation set
+cross-validated 3-D RMS (``rank_by: cv``: the physical model with the fewest
+parameters within one standard error of the lowest, else the lowest) or by its 3-D RMS on a held-out validation set
 (``rank_by: validation``); never by a test set. Every model is
 cross-validated on the same folds, drawn once from the run seed, and the rows
 of one pose (identical joint angles, or a group column) are always held out

@@ -4,7 +4,7 @@ Two runs of ``partcal run``, each a fresh process, as a user runs them:
 - the four-model study of issue 19 on the IPA UR10 (../shared/datasets/ipa_ur10): DH, DH + SDP(AI),
   GP(AI), and DH + GP(AI) k-means [2, 4] (nested CV), identified on the first 700 poses of series
   B, tested on the rest of B and on series C; n_jobs: 2;
-- configs/ur10_ipa.yaml as shipped (11 models on 1,000 poses, n_jobs: 1).
+- configs/ur10_ipa.yaml as shipped (12 models on 1,000 poses, n_jobs: 2).
 Targets: at most 60 s wall each on the quiet 2-core machine (before: 3 min 50 s and 147 s). Wall
 time on a shared machine swings by 2x and more; the CPU time of the run (its workers included)
 is printed beside it. Per model of the study: test 3-D RMS on the rest of B and on C, and the CV

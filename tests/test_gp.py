@@ -252,3 +252,17 @@ def test_hyper_samples_search_a_subset_and_solve_on_all():
         assert gp.input_map_.active.tolist() == moving.tolist()
         np.testing.assert_array_equal(gp.input_map_.centre[moving], ((hi + lo) / 2)[moving])
         np.testing.assert_array_equal(gp.input_map_.scale[moving], ((hi - lo) / 2)[moving])
+
+
+def test_regions_sharing_hyperparameters_count_their_one_mean_once():
+    """Regions of a shared search take the shared output mean (not their own): the partition's effective
+    parameters are the regions' kernel traces plus one mean per output; with per-region searches, one
+    mean per region and output."""
+    q, y = IDENT.q_deg, IDENT.errors_mm
+    for hyper, means in (("shared", 3), ("per_region", 6)):
+        model = PartitionedErrorModel(partition=KMeansPartition(2), local=GaussianProcessErrorModel(
+            inputs="joint", restarts=0, hyperparameters=hyper), random_state=0).fit(q, y)
+        traces = sum(m.effective_parameters() - 3 for m in model.models_)
+        assert model.effective_parameters() == pytest.approx(traces + means, rel=1e-12)
+        same = np.array_equal(model.models_[0].y_mean_, model.models_[1].y_mean_)
+        assert same == (hyper == "shared")

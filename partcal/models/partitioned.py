@@ -382,8 +382,13 @@ class PartitionedErrorModel(ErrorModelBase):
         return "Partitioned" + local.family()[len("Global"):]
 
     def effective_parameters(self) -> float:
-        """The regions' own, summed (the blend shares them between regions: an upper bound)."""
-        return float(sum(m.effective_parameters() for m in self.models_))
+        """The regions' own, summed (the blend shares them between regions: an upper bound); Gaussian
+        processes with shared hyperparameters share one output mean too, counted once."""
+        total = float(sum(m.effective_parameters() for m in self.models_))
+        local = self.local
+        if isinstance(local, GaussianProcessErrorModel) and local.hyperparameters == "shared":
+            total -= (len(self.models_) - 1) * self.n_outputs_
+        return total
 
     def fit_notes(self) -> list[str]:
         return sorted({note for m in self.models_ for note in m.fit_notes()})

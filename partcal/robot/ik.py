@@ -128,17 +128,22 @@ def _solve_block(robot, targets, qT, free, settings: Settings, bias, tol, seed_j
             done_q[:, idx[~keep]] = qT[:, ~keep]
             idx, qT, targets, err, jac = idx[keep], qT[:, keep], targets[:, keep], err[:, keep], jac[:, :, keep]
             fixed_trig = [t[keep] if isinstance(t, np.ndarray) else t for t in fixed_trig]
-        step = _dls_step(jac, err, settings.damping)
-        biggest = np.abs(step).max(axis=0)
-        np.maximum(biggest, 1e-300, out=biggest)
-        step *= np.minimum(1.0, settings.max_step_deg / biggest)
-        step += qT[free]
-        np.minimum(step, hi, out=step)
-        np.maximum(step, lo, out=step)
-        qT[free] = step
+        _take_step(qT, free, _dls_step(jac, err, settings.damping), settings, lo, hi)
         iterations[idx] += 1
     done_q[:, idx] = qT
     return done_q, iterations
+
+
+def _take_step(qT, free, step, settings: Settings, lo, hi) -> None:
+    """Move the free joints of ``qT`` (N, m) by ``step`` (F, m), each target's step capped at
+    ``max_step_deg`` for its largest joint, and clipped to the joint limits ``lo, hi`` (F, 1)."""
+    biggest = np.abs(step).max(axis=0)
+    np.maximum(biggest, 1e-300, out=biggest)
+    step *= np.minimum(1.0, settings.max_step_deg / biggest)
+    step += qT[free]
+    np.minimum(step, hi, out=step)
+    np.maximum(step, lo, out=step)
+    qT[free] = step
 
 
 def _dls_step(jac: NDArray[np.float64], err: NDArray[np.float64], damping: float) -> NDArray[np.float64]:
@@ -221,9 +226,7 @@ def _pose_block(robot, targets, rotations, qT, free, settings: Settings, tol_rad
         J = jac.transpose(2, 1, 0)                                                              # (m, 6, F)
         A = J @ J.transpose(0, 2, 1) + settings.damping ** 2 * np.eye(6)
         step = (J.transpose(0, 2, 1) @ np.linalg.solve(A, err.T[:, :, None]))[:, :, 0].T        # (F, m)
-        biggest = np.maximum(np.abs(step).max(axis=0), 1e-300)
-        step *= np.minimum(1.0, settings.max_step_deg / biggest)
-        qT[free] = np.clip(qT[free] + step, lo, hi)
+        _take_step(qT, free, step, settings, lo, hi)
         iterations[idx] += 1
     done_q[:, idx] = qT
     return done_q.T, iterations

@@ -152,9 +152,21 @@ def kfold_splits(n: int, folds: int, random_state: int = 0) -> list[tuple[NDArra
     return grouped_splits(np.arange(n), folds, random_state)
 
 
-def rows_of(per_row: dict | None, rows) -> dict:
-    """The per-row arguments of fit and predict (``{"payload_kg": (n,) array}``) at ``rows``."""
-    return {key: value[rows] for key, value in (per_row or {}).items()}
+FIT_ONLY = ("targets", "orientation_deg")    # per-row data a fit reads and a prediction does not
+
+
+def rows_of(per_row: dict | None, rows, *, predicting: bool = False) -> dict:
+    """The per-row arguments of fit (or, ``predicting``, of predict) at ``rows``: ``{"payload_kg": (n,)}``,
+    ``{"targets": {name: (offset, (n, 3) errors)}}``, ... A dict is taken key by key, a pair as
+    ``(value for every row, per-row values)``, anything else by its rows."""
+    def take(value):
+        if isinstance(value, dict):
+            return {k: take(v) for k, v in value.items()}
+        if isinstance(value, tuple):
+            return value[0], take(value[1])
+        return value[rows]
+
+    return {key: take(value) for key, value in (per_row or {}).items() if not (predicting and key in FIT_ONLY)}
 
 
 def held_out_residuals(model, X, y, folds, *, fitted: list | None = None,
@@ -172,7 +184,7 @@ def held_out_residuals(model, X, y, folds, *, fitted: list | None = None,
     resid = np.empty_like(y)
     for i, (train, test) in enumerate(folds):
         fold = clone(model).fit(X[train], y[train], **rows_of(per_row, train))
-        resid[test] = y[test] - fold.predict(X[test], **rows_of(per_row, test))
+        resid[test] = y[test] - fold.predict(X[test], **rows_of(per_row, test, predicting=True))
         if fitted is not None:
             fitted.append(fold)
         if progress is not None:
@@ -277,7 +289,8 @@ def nested_residuals(candidates, X, y, *, folds, inner: Callable[[NDArray[np.int
         splits = inner(train)
         scores = [pooled_rms(held_out_residuals(c, Xt, yt, splits, per_row=rows)) for c in frozen]
         chosen = frozen[min(range(len(scores)), key=scores.__getitem__)]
-        resid[test] = y[test] - _clone(chosen).fit(Xt, yt, **rows).predict(X[test], **rows_of(per_row, test))
+        resid[test] = y[test] - _clone(chosen).fit(Xt, yt, **rows).predict(X[test], **rows_of(per_row, test,
+                                                                                               predicting=True))
         if progress is not None:
             progress(i + 1, len(folds))
     return resid

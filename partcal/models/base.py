@@ -121,6 +121,12 @@ class ErrorModelBase(RegressorMixin, BaseEstimator):
         return float("nan")
 
     @property
+    def reads_targets(self) -> bool:
+        """Whether ``fit`` takes further targets and the orientation of each pose (a kinematic model's
+        ``all_targets``, ``use_orientation``)."""
+        return False
+
+    @property
     def reads_payload(self) -> bool:
         """Whether ``fit`` and ``predict`` take a payload per pose (``payload_kg=``) that changes the errors."""
         return False

@@ -453,8 +453,10 @@ class KinematicModel(ErrorModelBase):
     inputs = "joint"
 
     def __init__(self, *, robot=None, base=True, tool=True, rcond=1e-6, compliance=(), joint_harmonics=0,
-                 payload_kg=0.0, residual=None, random_state=None):
+                 payload_kg=0.0, all_targets=False, use_orientation=False, residual=None, random_state=None):
         self.robot = robot
+        self.all_targets = all_targets
+        self.use_orientation = use_orientation
         self.base = base
         self.tool = tool
         self.rcond = rcond
@@ -469,7 +471,9 @@ class KinematicModel(ErrorModelBase):
     takes_residual = True
     _parameter_rules = {"base": boolean(True), "tool": boolean(True),
                         "rcond": real(0.0, 1.0, default=1e-6, low_open=True),
-                        "payload_kg": real(0.0, MAX_PAYLOAD_KG, default=0.0)}
+                        "payload_kg": real(0.0, MAX_PAYLOAD_KG, default=0.0),
+                        "all_targets": boolean(False), "use_orientation": boolean(False)}
+    _from_fitted = ("all_targets", "use_orientation")     # a model file keeps what was fitted on instead
     _joint_rules = {"compliance": ((), compliance_problem), "joint_harmonics": (0, harmonics_problem)}
 
     def _check_params(self) -> Robot:
@@ -674,10 +678,12 @@ class KinematicModel(ErrorModelBase):
             joint[name] = r.doc.get(name, default)
             if problem(joint[name], robot.n_joints) is not None:
                 r.fail(name, f"expected {problem(joint[name], robot.n_joints)}; got {joint[name]!r}"[:200])
-        rules = {key: rule for key, rule in cls._parameter_rules.items() if key in r.doc or key != "payload_kg"}
-        model = cls(robot=robot, **{key: r.rule(key, rule) for key, rule in rules.items()}, **joint)
-        errors = JointErrors.for_robot(robot, joint["compliance"], joint["joint_harmonics"])
+        rules = {key: rule for key, rule in cls._parameter_rules.items()
+                 if key not in cls._from_fitted and (key in r.doc or key != "payload_kg")}
         tools, orientation = _targets_from(r)
+        model = cls(robot=robot, **{key: r.rule(key, rule) for key, rule in rules.items()}, **joint,
+                    all_targets=bool(tools), use_orientation=orientation)
+        errors = JointErrors.for_robot(robot, joint["compliance"], joint["joint_harmonics"])
         table = _identification_from(r.sub("identification"), robot, errors, tools, orientation)
         model.robot_, model.identification_, model.joint_errors_ = robot, table, errors
         model.targets_, model.orientation_ = tools, orientation
@@ -755,11 +761,12 @@ class KinematicModel(ErrorModelBase):
         """The residual model's seed: a child of this model's."""
         return int(np.random.SeedSequence(seed_from(self.random_state)).spawn(1)[0].generate_state(1)[0])
 
-    def frozen(self, X, y, payload_kg=None) -> "KinematicModel":
-        """With a residual model: the residual frozen on what the kinematics identified on ``X, y`` leave."""
+    def frozen(self, X, y, payload_kg=None, **measured) -> "KinematicModel":
+        """With a residual model: the residual frozen on what the kinematics identified on ``X, y`` (and the
+        further targets and orientation of :meth:`fit`, ``measured``) leave."""
         if self.residual is None:
             return self
-        fitted = clone(self).set_params(residual=None).fit(X, y, payload_kg=payload_kg)
+        fitted = clone(self).set_params(residual=None).fit(X, y, payload_kg=payload_kg, **measured)
         X = np.asarray(X, dtype=float)
         nominal = fitted.robot_.positions(X)
         leftover = np.asarray(y, dtype=float) - fitted.predict(X, payload_kg=payload_kg)
@@ -787,6 +794,12 @@ class KinematicModel(ErrorModelBase):
     def reads_payload(self) -> bool:
         """Whether a payload changes the prediction (some joint yields under gravity)."""
         return bool(self.compliance)
+
+    @property
+    def reads_targets(self) -> bool:
+        """Whether ``fit`` takes every measured target and the orientation (``all_targets``,
+        ``use_orientation``): the run then gives them, pose by pose (``targets=``, ``orientation_deg=``)."""
+        return bool(self.all_targets or self.use_orientation)
 
 
 def _targets_summary(table: Identification) -> dict:

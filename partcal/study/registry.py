@@ -39,8 +39,8 @@ from ..data.measurements import Measurements, read_measurements
 from ..data.registration import Registration, kabsch, register_measurements, registered
 from ..errors import ConfigError, DataError
 from ..metrics import (choose_simplest, fold_name, fold_rule, grouped_splits, held_out_residuals, labels_as_groups,
-                       nested_residuals, pooled_rms, pose_groups, repeat_scatter_mm, rms_standard_error, select_by_cv,
-                       summary)
+                       nested_residuals, pooled_rms, pose_groups, repeat_scatter_mm, rms_standard_error,
+                       rows_of, select_by_cv, summary)
 from ..models.bases import varying_inputs
 from ..models.partitioned import fold_regions
 from ..robot.description import load_robot
@@ -318,6 +318,15 @@ def _feasible(config: RunConfig, i: int, entry: ModelSpec, ident: Measurements, 
         what = "joint angle" if entry.inputs == "joint" else "nominal coordinate"
         config.fail(_key(config, i, "inputs"), f"every {what} of the identification set "
                                                 f"{config.identification} is constant: nothing to fit")
+    built = entry.build(None)
+    if getattr(built, "all_targets", False) and not any(ident.nominal_of(t) is not None for t in ident.target_names[1:]):
+        config.fail(_key(config, i, "all_targets"), f"the identification set {config.identification} measures one "
+                                                     "target; all_targets needs further ones with their nominal "
+                                                     "positions (columns x_meas@B, ..., x_nom@B, ..., or a tracker "
+                                                     "registration)")
+    if getattr(built, "use_orientation", False) and not ident.has_orientation:
+        config.fail(_key(config, i, "use_orientation"), f"the identification set {config.identification} has no "
+                                                         "measured orientation (columns rx_meas, ry_meas, rz_meas)")
     sizes, notes = list(entry.sizes), []
     # an entry and its residual (fitted to what the entry leaves) must each fit in a fold
     for spec, prefix in ((entry, ""), (entry.residual, "residual.")):
@@ -388,8 +397,25 @@ def measured_poses(m: Measurements) -> NDArray[np.intp]:
 
 def per_row_arguments(model, m: Measurements) -> dict:
     """Per-pose arguments of the model's ``fit`` and ``predict`` from a data set: the payload of each pose
-    (``payload_kg`` column) for a model that reads one; none otherwise (the model's own ``payload_kg``)."""
-    return {"payload_kg": m.payload_kg} if m.payload_kg is not None and model.reads_payload else {}
+    (``payload_kg`` column) for a model that reads one (none otherwise: the model's own ``payload_kg``); for
+    a model fitted on every target and the orientation, those too (``fit`` only:
+    :data:`partcal.metrics.FIT_ONLY`)."""
+    args = {"payload_kg": m.payload_kg} if m.payload_kg is not None and model.reads_payload else {}
+    if model.reads_targets:
+        if model.all_targets:
+            args["targets"] = {t: (target_offset(load_robot(model.robot), m.q_deg, m.nominal_of(t)),
+                                   m.measured_of(t) - m.nominal_of(t))
+                               for t in m.target_names[1:] if m.nominal_of(t) is not None}
+        if model.use_orientation:
+            args["orientation_deg"] = m.orientation_errors_deg
+    return args
+
+
+def target_offset(robot: Robot, q_deg: NDArray[np.float64], nominal_mm: NDArray[np.float64]) -> NDArray[np.float64]:
+    """A target's offset in the flange frame (3,) mm, from its nominal positions: the mean over the poses of
+    ``R^T (p - o)``, with ``R, o`` the nominal flange pose."""
+    flange = robot.replace(tool_mm=np.zeros(3)).forward(q_deg)
+    return np.einsum("nji,nj->ni", flange[:, :3, :3], nominal_mm - flange[:, :3, 3]).mean(axis=0)
 
 
 SLOW_SECONDS = 5.0          # a model still cross-validating after this long reports each fold
@@ -455,10 +481,11 @@ def _fit_model(spec, seed, data, cv, own_frame, lines) -> ModelResult:
         log.warning("fitted on all the identification data it has %d regions, but on the cross-validation "
                     "folds %s, so its CV score is that of a coarser model",
                     partitioned_part(estimator).partition_.n_regions, _regions_text(cv_regions))
-    predictions = {name: estimator.predict(model_inputs(spec.inputs, m), **per_row_arguments(estimator, m))
+    predictions = {name: estimator.predict(model_inputs(spec.inputs, m),
+                                           **rows_of(per_row_arguments(estimator, m), slice(None), predicting=True))
                    for name, m in data.items()}
     for name, m in data.items():
-        if rows and m.payload_kg is None:
+        if "payload_kg" in rows and m.payload_kg is None:
             log.warning("%s has no payload_kg column: predicted at the entry's payload_kg (%g kg)", name,
                         estimator.payload_kg)
     metrics = {name: summary(errors_left(m, predictions[name], name in own_frame)) for name, m in data.items()}

@@ -166,6 +166,13 @@ def test_a_run_identifies_from_every_target_and_the_orientation(ur10, tmp_path):
                                                                               "output: ../data"))
     study = load_study(tmp_path / "configs" / "sim.yaml")
     write_study(study, simulate(study))
+    import dataclasses
+
+    from partcal.data.measurements import read_measurements, write_measurements
+
+    test = read_measurements(tmp_path / "data" / "test.csv")       # the same poses, one target, no orientation
+    write_measurements(dataclasses.replace(test, extra_measured_mm={}, extra_nominal_mm={}, measured_orientation_deg=None,
+                                           nominal_orientation_deg=None), tmp_path / "data" / "plain.csv")
     (tmp_path / "robot.yaml").write_text(yaml.safe_dump(robot_to_dict(ur10)))
     models = """models:
   - {name: DH, kind: kinematic}
@@ -174,11 +181,12 @@ def test_a_run_identifies_from_every_target_and_the_orientation(ur10, tmp_path):
     (tmp_path / "configs" / "run.yaml").write_text(f"""name: targets
 robot: ../robot.yaml
 cv_folds: 4
-data: {{identification: ../data/identification.csv, tests: {{test: ../data/test.csv}}}}
+data: {{identification: ../data/identification.csv, tests: {{test: ../data/test.csv, plain: ../data/plain.csv}}}}
 {models}""")
     result = run(load_config(tmp_path / "configs" / "run.yaml"))
     one, every = (next(r for r in result.models if r.spec.name == name) for name in ("DH", "DH (all targets)"))
     assert every.metrics["test"]["rms_3d"] < 0.95 * one.metrics["test"]["rms_3d"]
+    assert every.metrics["plain"]["rms_3d"] == pytest.approx(every.metrics["test"]["rms_3d"], rel=1e-6)
     assert every.model.targets_.keys() == TOOLS.keys() and every.model.orientation_
     for name, offset in TOOLS.items():         # derived from the nominal columns (written to 1e-6 mm)
         np.testing.assert_allclose(every.model.targets_[name], offset, atol=1e-5)
@@ -187,7 +195,6 @@ data: {{identification: ../data/identification.csv, tests: {{test: ../data/test.
     # a data set of one target: refused before anything is fitted, naming the key
     config = load_config(tmp_path / "configs" / "run.yaml")
     data, _, _ = load_datasets(config)
-    import dataclasses
 
     plain = dataclasses.replace(data["identification"], extra_measured_mm={}, extra_nominal_mm={},
                                 measured_orientation_deg=None, nominal_orientation_deg=None)

@@ -40,7 +40,7 @@ from ..data.registration import Registration, kabsch, register_measurements, reg
 from ..errors import ConfigError, DataError
 from ..metrics import (choose_simplest, fold_name, fold_rule, grouped_splits, held_out_residuals, labels_as_groups,
                        nested_residuals, pooled_rms, pose_groups, repeat_scatter_mm, rms_standard_error,
-                       rows_of, select_by_cv, summary)
+                       select_by_cv, summary)
 from ..models.bases import varying_inputs
 from ..models.partitioned import fold_regions
 from ..robot.description import load_robot
@@ -395,13 +395,13 @@ def measured_poses(m: Measurements) -> NDArray[np.intp]:
     return pose_groups(m.q_deg if m.payload_kg is None else np.column_stack([m.q_deg, m.payload_kg]))
 
 
-def per_row_arguments(model, m: Measurements) -> dict:
-    """Per-pose arguments of the model's ``fit`` and ``predict`` from a data set: the payload of each pose
-    (``payload_kg`` column) for a model that reads one (none otherwise: the model's own ``payload_kg``); for
-    a model fitted on every target and the orientation, those too (``fit`` only:
-    :data:`partcal.metrics.FIT_ONLY`)."""
+def per_row_arguments(model, m: Measurements, *, fitting: bool = True) -> dict:
+    """Per-pose arguments of the model's ``fit`` (or, not ``fitting``, ``predict``) from a data set: the
+    payload of each pose (``payload_kg`` column) for a model that reads one (none otherwise: the model's own
+    ``payload_kg``); for a fit on every target and the orientation, those too (:data:`partcal.metrics.FIT_ONLY`:
+    a prediction reads neither, so a test set need not have them)."""
     args = {"payload_kg": m.payload_kg} if m.payload_kg is not None and model.reads_payload else {}
-    if model.reads_targets:
+    if fitting and model.reads_targets:
         if model.all_targets:
             args["targets"] = {t: (target_offset(load_robot(model.robot), m.q_deg, m.nominal_of(t)),
                                    m.measured_of(t) - m.nominal_of(t))
@@ -482,7 +482,7 @@ def _fit_model(spec, seed, data, cv, own_frame, lines) -> ModelResult:
                     "folds %s, so its CV score is that of a coarser model",
                     partitioned_part(estimator).partition_.n_regions, _regions_text(cv_regions))
     predictions = {name: estimator.predict(model_inputs(spec.inputs, m),
-                                           **rows_of(per_row_arguments(estimator, m), slice(None), predicting=True))
+                                           **per_row_arguments(estimator, m, fitting=False))
                    for name, m in data.items()}
     for name, m in data.items():
         if "payload_kg" in rows and m.payload_kg is None:

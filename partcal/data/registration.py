@@ -42,7 +42,7 @@ from scipy.spatial.transform import Rotation
 from .._validation import check_array
 from ..errors import DataError
 from ..robot.kinematics import Robot
-from ..robot.kinematics import ORIENTATION_MM_PER_RAD, matrices_from_xyz_deg, xyz_deg_from_matrices
+from ..robot.kinematics import ORIENTATION_MM_PER_RAD, flange_offset, matrices_from_xyz_deg, xyz_deg_from_matrices
 from .measurements import Measurements
 from .pose_columns import PRIMARY
 from .plausibility import Plausibility, check_residuals
@@ -225,11 +225,11 @@ def register_tracker(robot: Robot, q_deg, measured_mm, *, tool_mm=None, fit_tool
     if q.shape[0] < need:
         raise DataError(f"{source}: a tracker registration {'with' if fit_tool else 'without'} the tool needs at "
                         f"least {need} poses ({9 if fit_tool else 6} parameters); got {q.shape[0]}")
-    flange = robot.replace(tool_mm=np.zeros(3)).forward(q)
+    flange = robot.flange(q)
     p_fl, r_fl = flange[:, :3, 3], flange[:, :3, :3]
     rot0, t0 = kabsch(meas, p_fl + r_fl @ tool0)
-    tools0 = np.vstack([tool0] + [_start_tool(name, extra[name], rot0, t0, p_fl, r_fl, target_tools_mm, fit_tool,
-                                              source) for name in extra])
+    tools0 = np.vstack([tool0] + [_start_tool(name, extra[name], rot0, t0, flange, target_tools_mm, fit_tool, source)
+                                  for name in extra])
     points = np.stack([meas, *extra.values()])                                     # (K, n, 3)
     probe = None if orientation_deg is None else _Probe(q.shape[0], orientation_deg, rot0, r_fl, orientation_mm_per_rad)
     k_tools = 3 * len(tools0) if fit_tool else 0
@@ -283,7 +283,7 @@ def register_measurements(robot: Robot, m: Measurements, **options) -> Registrat
                             orientation_deg=m.measured_orientation_deg, **options)
 
 
-def _start_tool(name: str, points: NDArray[np.float64], rot0, t0, p_fl, r_fl, given: dict | None, fit_tool: bool,
+def _start_tool(name: str, points: NDArray[np.float64], rot0, t0, flange, given: dict | None, fit_tool: bool,
                 source: str) -> NDArray[np.float64]:
     """An extra target's offset: given, or (to start the fit) the mean one the Kabsch frame puts it at."""
     if given is not None and name in given:
@@ -291,7 +291,7 @@ def _start_tool(name: str, points: NDArray[np.float64], rot0, t0, p_fl, r_fl, gi
     if not fit_tool:
         raise DataError(f"{source}: with the tool given (fit_tool: false) every target's offset must be given too; "
                         f"target {name} has none")
-    return np.einsum("nji,nj->i", r_fl, points @ rot0.T + t0 - p_fl) / len(points)
+    return flange_offset(flange, points @ rot0.T + t0)
 
 
 class _Probe:
@@ -365,7 +365,7 @@ def registered(m: Measurements, robot: Robot, reg: Registration) -> Measurements
     orientation when ``reg`` fitted the probe's rotation: it becomes the
     measured flange's (``R @ R_meas @ probe^T``), beside the nominal flange's.
     """
-    flange = robot.replace(tool_mm=np.zeros(3)).forward(m.q_deg)
+    flange = robot.flange(m.q_deg)
     p_fl, r_fl = flange[:, :3, 3], flange[:, :3, :3]
     nominal = robot.replace(tool_mm=np.asarray(reg.tool_mm, dtype=float)).positions(m.q_deg)
     kept = [name for name in m.extra_measured_mm if name in reg.target_tools_mm]

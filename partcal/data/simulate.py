@@ -105,7 +105,7 @@ class VirtualRobot:
 
     def true_flange(self, q_deg) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Noise-free flange (last frame) positions ``(n, 3)`` mm and orientations ``(n, 3, 3)`` in the base frame."""
-        pose = self.true.replace(tool_mm=np.zeros(3)).forward(self.actual_joints(q_deg))
+        pose = self.true.flange(self.actual_joints(q_deg))
         return pose[:, :3, 3] @ self.base_rotation.T + self.base_mm, self.base_rotation @ pose[:, :3, :3]
 
     def true_tool(self, target: str) -> NDArray[np.float64]:
@@ -349,7 +349,7 @@ def simulate(study: Study) -> dict[str, Measurements]:
         nominal = vr.nominal.positions(q)
         measured = vr.measure(q, rng)
         extra, orientation = vr.measure_more(q, rng)
-        flange = vr.nominal.replace(tool_mm=np.zeros(3)).forward(q)
+        flange = vr.nominal.flange(q)
         out[name] = Measurements(q, nominal, measured, name=name, labels=(name,) * len(q), extra_measured_mm=extra,
                                  extra_nominal_mm={t: flange[:, :3, 3] + flange[:, :3, :3] @ vr.targets[t]
                                                    for t in extra},

@@ -335,6 +335,10 @@ class Robot:
         out[:, 3, 3] = 1.0
         return out
 
+    def flange(self, q_deg) -> NDArray[np.float64]:
+        """Flange poses, shape ``(n, 4, 4)`` (mm): the tool poses without the tool offset."""
+        return self.replace(tool_mm=np.zeros(3)).forward(q_deg)
+
     def jacobian(self, q_deg) -> NDArray[np.float64]:
         """Position Jacobian ``d p / d q``, shape ``(n, 3, N)``, in mm per degree.
 
@@ -646,6 +650,12 @@ def ik_settings(tol_mm, max_iter, max_step_deg, damping, *, tol_deg=0.0, length_
     if not isinstance(max_iter, (int, np.integer)) or isinstance(max_iter, bool) or max_iter < 1:
         raise DataError(f"max_iter must be an int >= 1; got {max_iter!r}")
     return ik.Settings(float(tol_mm), int(max_iter), float(max_step_deg), float(damping))
+
+
+def flange_offset(flange: NDArray[np.float64], points_mm: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The offset in the flange frame (3,) mm that best puts the tool on ``points_mm`` (n, 3) from flange poses
+    ``(n, 4, 4)``: the mean over the poses of ``R^T (p - o)``."""
+    return np.einsum("nji,nj->i", flange[:, :3, :3], points_mm - flange[:, :3, 3]) / len(points_mm)
 
 
 def pose_errors(reached: NDArray[np.float64], wanted: NDArray[np.float64]

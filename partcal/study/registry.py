@@ -44,7 +44,7 @@ from ..metrics import (choose_simplest, fold_name, fold_rule, grouped_splits, he
 from ..models.bases import varying_inputs
 from ..models.partitioned import fold_regions
 from ..robot.description import load_robot
-from ..robot.kinematics import Robot
+from ..robot.kinematics import Robot, flange_offset
 from .config import ModelSpec, RunConfig
 from .memory import check_memory
 from .predictor import Predictor
@@ -401,21 +401,15 @@ def per_row_arguments(model, m: Measurements, *, fitting: bool = True) -> dict:
     ``payload_kg``); for a fit on every target and the orientation, those too (:data:`partcal.metrics.FIT_ONLY`:
     a prediction reads neither, so a test set need not have them)."""
     args = {"payload_kg": m.payload_kg} if m.payload_kg is not None and model.reads_payload else {}
-    if fitting and model.reads_targets:
-        if model.all_targets:
-            args["targets"] = {t: (target_offset(load_robot(model.robot), m.q_deg, m.nominal_of(t)),
-                                   m.measured_of(t) - m.nominal_of(t))
-                               for t in m.target_names[1:] if m.nominal_of(t) is not None}
-        if model.use_orientation:
-            args["orientation_deg"] = m.orientation_errors_deg
+    if not (fitting and model.reads_targets):
+        return args
+    if model.all_targets:              # each target's offset in the flange frame, from its nominal columns
+        flange = load_robot(model.robot).flange(m.q_deg)
+        args["targets"] = {t: (flange_offset(flange, m.nominal_of(t)), m.measured_of(t) - m.nominal_of(t))
+                           for t in m.target_names[1:] if m.nominal_of(t) is not None}
+    if model.use_orientation:
+        args["orientation_deg"] = m.orientation_errors_deg
     return args
-
-
-def target_offset(robot: Robot, q_deg: NDArray[np.float64], nominal_mm: NDArray[np.float64]) -> NDArray[np.float64]:
-    """A target's offset in the flange frame (3,) mm, from its nominal positions: the mean over the poses of
-    ``R^T (p - o)``, with ``R, o`` the nominal flange pose."""
-    flange = robot.replace(tool_mm=np.zeros(3)).forward(q_deg)
-    return np.einsum("nji,nj->ni", flange[:, :3, :3], nominal_mm - flange[:, :3, 3]).mean(axis=0)
 
 
 SLOW_SECONDS = 5.0          # a model still cross-validating after this long reports each fold

@@ -32,6 +32,17 @@ def summary(errors_mm: NDArray[np.float64]) -> dict:
     }
 
 
+MRAD_PER_DEG = 1000.0 * np.pi / 180.0
+POSITION, ORIENTATION = slice(0, 3), slice(3, 6)   # the columns of a pose error: mm, then a rotation vector, mrad
+
+
+def orientation_summary(errors_mrad: NDArray[np.float64]) -> dict:
+    """``{"rms": [x, y, z], "rms_angle", "max_angle", "p95_angle"}`` of ``(n, 3)`` orientation errors (rotation
+    vectors, base frame), in mrad: :func:`summary` read as angles (the norm of a rotation vector is its angle)."""
+    s = summary(errors_mrad)
+    return {"rms": s["rms"], "rms_angle": s["rms_3d"], "max_angle": s["max_3d"], "p95_angle": s["p95_3d"]}
+
+
 LEAVE_ONE_OUT_UP_TO = 30      # cv_folds: auto -> leave one pose out up to this many poses, 5 folds above
 
 

@@ -135,8 +135,8 @@ def test_bad_parameters_and_inputs_are_refused(sk120, paper_data):
     with pytest.raises(PartcalError, match=r"KinematicModel for motoman_sk120 takes 6 joint angles \(degrees\) "
                                            r"per sample; got X with 5 columns"):
         KinematicModel(robot="motoman_sk120").fit(q[:, :5], y)
-    with pytest.raises(PartcalError, match=r"Expected y \(position errors\) with shape \(n, 3\), got array with "
-                                           r"shape \(85, 2\)"):
+    with pytest.raises(PartcalError, match=r"Expected y with shape \(n, 3\) \(position errors, mm\) or \(n, 6\) "
+                                           r"\(pose errors: .*\), got array with shape \(85, 2\)"):
         KinematicModel(robot=sk120).fit(q, y[:, :2])
 
 

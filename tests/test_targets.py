@@ -5,7 +5,7 @@ import pytest
 from conftest import ROOT
 from scipy.spatial.transform import Rotation
 
-from partcal import DataError, KinematicModel, load_robot
+from partcal import DataError, ErrorModel, KinematicModel, load_robot
 from partcal.data.simulate import load_study, simulate, write_study
 from partcal.models.design import target_identifiability
 from partcal.models.joint_errors import JointErrors
@@ -148,6 +148,57 @@ def test_a_model_file_keeps_the_targets(tmp_path, ur10):
     assert doc["model"]["targets"] == {"B": [100.0, 0.0, 90.0]} and doc["model"]["orientation"] is True
     assert np.array_equal(loaded.predict_target(q, "B"), model.predict_target(q, "B"))
     assert model_to_dict(loaded) | {"partcal_version": 0} == model_to_dict(model) | {"partcal_version": 0}
+
+
+def _pose_errors(y, turns_deg):
+    return np.hstack([y, np.radians(turns_deg) * 1000.0])          # mm, then mrad
+
+
+def test_a_model_of_pose_errors_predicts_the_orientation_too(ur10, tmp_path):
+    """Fitted on (n, 6) pose errors and identified from the orientation, the model predicts the true robot's
+    orientation error (mrad, base frame); identified from the positions alone it predicts the positions as
+    well but the orientation far worse (the tool offset and the last joints trade off in position only). A
+    residual model takes all six, and the model file keeps six outputs."""
+    from partcal.study.persist import load_model, save_model
+
+    true = _true_robot(ur10)
+    rng = np.random.default_rng(5)
+    q, q_new = rng.uniform(-170, 170, (40, 6)), rng.uniform(-170, 170, (30, 6))
+    y, _, turns = _observed(ur10, true, q)
+    y_new, _, turns_new = _observed(ur10, true, q_new)
+    expected = _pose_errors(y_new, turns_new)
+    model = KinematicModel(robot=ur10, use_orientation=True).fit(q, _pose_errors(y, turns))
+    assert model.n_outputs() == 6 and model.orientation_
+    assert np.abs(turns_new).max() > 0.01                                            # 0.17 mrad and more to find
+    np.testing.assert_allclose(model.predict(q_new), expected, atol=1e-7)
+    np.testing.assert_allclose(model.predict_target(q_new, "A"), y_new, atol=1e-7)   # the position, as ever
+    blind = KinematicModel(robot=ur10).fit(q, _pose_errors(y, turns))
+    assert not blind.orientation_
+    np.testing.assert_allclose(blind.predict(q_new)[:, :3], y_new, atol=0.01)
+    assert np.sqrt(np.mean((blind.predict(q_new)[:, 3:] - expected[:, 3:]) ** 2)) > 0.1      # mrad
+    hybrid = KinematicModel(robot=ur10, use_orientation=True,
+                            residual=ErrorModel(inputs="joint", degree=1, solver="lstsq"))
+    hybrid.fit(q, _pose_errors(y, turns))
+    assert hybrid.residual_.n_outputs() == 6
+    np.testing.assert_allclose(hybrid.predict(q_new), expected, atol=1e-6)         # nothing left for the residual
+    save_model(hybrid, tmp_path / "pose.json", name="pose", robot=ur10)
+    loaded, doc = load_model(tmp_path / "pose.json")
+    assert doc["n_outputs"] == 6 and np.array_equal(loaded.predict(q_new), hybrid.predict(q_new))
+
+
+def test_the_probe_turn_is_part_of_the_predicted_orientation(ur10):
+    """Data whose measured frame sits turned on the flange (a probe mounted at 0.5 degrees): identified from the
+    orientation, the model predicts the measured orientation error, the probe's constant turn included."""
+    true = _true_robot(ur10)
+    q = np.random.default_rng(6).uniform(-170, 170, (40, 6))
+    y, _, _ = _observed(ur10, true, q)
+    probe = Rotation.from_rotvec([0.5, -0.2, 0.3], degrees=True).as_matrix()
+    seen = Rotation.from_matrix(true.forward(q)[:, :3, :3] @ probe @ ur10.forward(q)[:, :3, :3].transpose(0, 2, 1))
+    pose = _pose_errors(y, seen.as_rotvec(degrees=True))
+    model = KinematicModel(robot=ur10, use_orientation=True).fit(q, pose)
+    np.testing.assert_allclose(model.predict(q), pose, atol=1e-6)
+    with pytest.raises(DataError, match=r"shape \(n, 3\) \(position errors, mm\) or \(n, 6\)"):
+        KinematicModel(robot=ur10).fit(q, pose[:, :4])
 
 
 def test_a_run_identifies_from_every_target_and_the_orientation(ur10, tmp_path):

@@ -39,6 +39,7 @@ from scipy.spatial.transform import Rotation
 from .._io import atomic_write
 from .._validation import MAX_PAYLOAD_KG, check_array
 from ..errors import DataError
+from ..metrics import MRAD_PER_DEG
 from ..robot.description import MAX_JOINTS, joint_columns, load_robot
 from ..robot.kinematics import Robot, matrices_from_xyz_deg, xyz_deg_from_matrices
 from .formats import MeasurementFormat, RowSelection
@@ -194,6 +195,12 @@ class Measurements:
         turn = matrices_from_xyz_deg(self.measured_orientation_deg) @ \
             matrices_from_xyz_deg(self.nominal_orientation_deg).transpose(0, 2, 1)
         return Rotation.from_matrix(turn).as_rotvec(degrees=True)
+
+    @property
+    def pose_errors(self) -> NDArray[np.float64]:
+        """The pose errors, shape (n, 6): the primary target's position error (mm), then the orientation error
+        (:attr:`orientation_errors_deg`) in mrad: what a model predicting pose errors fits."""
+        return np.hstack([self.errors_mm, self.orientation_errors_deg * MRAD_PER_DEG])
 
 
 def read_measurements(path: str | Path, robot: str | Robot | None = None, *, name: str | None = None,

@@ -121,6 +121,6 @@ def model_from_body(r: FieldReader) -> ErrorModelBase:
     """The fitted model of :func:`body_of`'s fields, every field checked (failing through ``r``)."""
     by_file = {kind.file_kind: kind for kind in KINDS.values()}
     kind = by_file[r.choice("kind", tuple(by_file))]
-    n_in, n_out = r.integer("n_inputs", 1, MAX_JOINTS), r.integer("n_outputs", 1, 3)
+    n_in, n_out = r.integer("n_inputs", 1, MAX_JOINTS), r.integer("n_outputs", 1, 6)   # 6: pose errors
     inputs = r.choice("inputs", INPUT_SPACES)
     return kind.estimator.from_file(r, inputs, n_in, n_out)

@@ -42,12 +42,13 @@ import numpy as np
 import scipy.linalg
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
+from scipy.spatial.transform import Rotation
 from sklearn.base import clone
 from sklearn.utils.validation import check_is_fitted, validate_data
 
 from .._validation import MAX_PAYLOAD_KG, FieldReader, boolean, check_array, param_error, real
 from ..errors import DataError, ModelFileError
-from ..metrics import distance_outside_boxes
+from ..metrics import MRAD_PER_DEG, ORIENTATION, POSITION, distance_outside_boxes
 from ..robot.description import load_robot, robot_from_dict, robot_to_dict
 from ..robot.kinematics import ORIENTATION_MM_PER_RAD, Robot, matrix_from_euler_deg
 from .base import ErrorModelBase, box_points, seed_from
@@ -497,7 +498,13 @@ class KinematicModel(ErrorModelBase):
 
         ``payload_kg`` (n,) kg per pose, or a number; default the parameter ``payload_kg``.
 
-        ``y`` are the primary target's errors. Further targets on the tool and the measured
+        ``y`` are the primary target's errors, or the pose errors (n, 6): those, then the
+        orientation errors as rotation vectors in mrad (``Measurements.pose_errors``). A model
+        fitted on pose errors predicts them: the orientation error of the identified robot (its
+        probe's turn too) against the nominal one; with ``use_orientation`` and no
+        ``orientation_deg``, the identification reads the orientation from ``y``; without
+        ``use_orientation`` it identifies from the positions alone and predicts the orientation
+        all the same (a residual model then fits all six). Further targets on the tool and the measured
         orientation, when given, are identified from too (:mod:`partcal.models.targets`):
         ``targets`` maps a target's name to ``(offset, errors)``, its nominal offset in the
         flange frame (3,) mm and its errors (n, 3) mm; ``orientation_deg`` (n, 3) are the
@@ -511,14 +518,17 @@ class KinematicModel(ErrorModelBase):
         if X.shape[1] != robot.n_joints:
             raise DataError(f"{type(self).__name__} for {robot.name} takes {robot.n_joints} joint angles "
                             f"(degrees) per sample; got X with {X.shape[1]} columns")
-        if y.ndim != 2 or y.shape[1] != 3:
-            raise DataError(f"Expected y (position errors) with shape (n, 3), got array with shape {y.shape}.")
-        self._y_1d = False
+        if y.ndim != 2 or y.shape[1] not in (3, 6):
+            raise DataError(f"Expected y with shape (n, 3) (position errors, mm) or (n, 6) (pose errors: then the "
+                            f"orientation's, a rotation vector in mrad), got array with shape {y.shape}.")
+        self._y_1d, self.n_outputs_ = False, y.shape[1]
+        if self.n_outputs_ == 6 and self.use_orientation and orientation_deg is None:
+            orientation_deg = y[:, ORIENTATION] / MRAD_PER_DEG
         nominal = robot.positions(X)
         self.joint_errors_ = JointErrors.for_robot(robot, list(self.compliance), self.joint_harmonics)
         payload = self._payload(payload_kg, len(X))
         extra = extra_from(robot, X, targets, orientation_deg, orientation_mm_per_rad)
-        self.identification_ = identify(robot, X, nominal + y, base=bool(self.base), tool=bool(self.tool),
+        self.identification_ = identify(robot, X, nominal + y[:, POSITION], base=bool(self.base), tool=bool(self.tool),
                                         rcond=float(self.rcond), errors=self.joint_errors_, payload_kg=payload,
                                         extra=extra)
         self.targets_ = dict(extra.tools_mm) if extra is not None else {}
@@ -530,7 +540,7 @@ class KinematicModel(ErrorModelBase):
         self.residual_ = None
         if self.residual is not None:
             seed = self._residual_seed()
-            leftover = y - (self._kinematic(X, payload) - nominal)
+            leftover = y - self._kinematic_errors(X, payload)
             self.residual_ = clone(self.residual).set_params(random_state=seed)
             self.residual_.fit(self._residual_inputs(X, nominal), leftover)
         return self._prepare()
@@ -582,12 +592,26 @@ class KinematicModel(ErrorModelBase):
         """Tool positions of the identified model (geometry and joint errors), (n, 3) mm."""
         return self.identified_robot_.positions(self._actual(X, payload))
 
+    def _kinematic_errors(self, X: NDArray[np.float64], payload: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The identified model's errors against the nominal one, (n, outputs): the tool position's (mm) and, for
+        a model of pose errors, the turn ``log(R_identified P R_nominal^T)`` (mrad; ``P`` the identified probe
+        turn, identity without one)."""
+        actual = self._actual(X, payload)
+        if self.n_outputs() == 3:
+            return self.identified_robot_.positions(actual) - self.robot_.positions(X)
+        model, nominal = self.identified_robot_.forward(actual), self.robot_.forward(X)
+        if self.orientation_:
+            model[:, :3, :3] = model[:, :3, :3] @ Rotation.from_rotvec(self.identification_.value[-3:],
+                                                                      degrees=True).as_matrix()
+        turns = Rotation.from_matrix(model[:, :3, :3] @ nominal[:, :3, :3].transpose(0, 2, 1)).as_rotvec()
+        return np.hstack([model[:, :3, 3] - nominal[:, :3, 3], turns * 1000.0])
+
     def predict_target(self, X, target: str, payload_kg=None) -> NDArray[np.float64]:
         """The kinematic error of a target the model was fitted on, shape (n, 3) mm: ``FK(identified, its
         identified offset) - FK(nominal, its nominal offset)`` (the primary's: :meth:`predict_kinematic`)."""
         check_is_fitted(self, "identification_")
         if target == PRIMARY_TARGET:
-            return self.predict_kinematic(X, payload_kg)
+            return self.predict_kinematic(X, payload_kg)[:, POSITION]
         if target not in self.targets_:
             raise DataError(f"Expected a target the model was fitted on "
                             f"({', '.join([PRIMARY_TARGET, *self.targets_])}), got {target!r}.")
@@ -599,7 +623,8 @@ class KinematicModel(ErrorModelBase):
         return moved - self.robot_.replace(tool_mm=self.targets_[target]).positions(X)
 
     def predict(self, X, payload_kg=None) -> NDArray[np.float64]:
-        """Predicted errors ``FK(identified) - FK(nominal)`` (+ the residual model), shape (n, 3) mm.
+        """Predicted errors ``FK(identified) - FK(nominal)`` (+ the residual model), shape (n, 3) mm; for a model
+        fitted on pose errors (n, 6), the orientation's in mrad after (see :meth:`fit`).
 
         ``payload_kg`` (n,) kg per pose, or a number; default the parameter ``payload_kg``.
         """
@@ -608,15 +633,15 @@ class KinematicModel(ErrorModelBase):
         return self._predict_trusted(X, payload_kg)
 
     def predict_kinematic(self, X, payload_kg=None) -> NDArray[np.float64]:
-        """The kinematic part alone, ``FK(identified) - FK(nominal)``, shape (n, 3) mm."""
+        """The kinematic part alone, ``FK(identified) - FK(nominal)``, shape (n, 3) mm (a pose model's: (n, 6))."""
         check_is_fitted(self, "identification_")
         X = validate_data(self, X, reset=False, dtype=np.float64)
-        return self._kinematic(X, self._payload(payload_kg, len(X))) - self.robot_.positions(X)
+        return self._kinematic_errors(X, self._payload(payload_kg, len(X)))
 
     def _predict_trusted(self, X: NDArray[np.float64], payload_kg=None) -> NDArray[np.float64]:
-        nominal = self.robot_.positions(X)
-        out = self._kinematic(X, self._payload(payload_kg, len(X))) - nominal
+        out = self._kinematic_errors(X, self._payload(payload_kg, len(X)))
         if self.residual_ is not None:
+            nominal = self.robot_.positions(X) if self.residual_.inputs == "cartesian" else None
             out += self.residual_.predict(self._residual_inputs(X, nominal))
         return out
 
@@ -671,8 +696,9 @@ class KinematicModel(ErrorModelBase):
             robot = robot_from_dict(r.get("robot", dict), source=f"{r.source}: field {r.path('robot')!r}")
         except Exception as exc:  # noqa: BLE001 - any damage in the robot section is a file error
             raise ModelFileError(str(exc)) from None
-        if robot.n_joints != n_in or n_out != 3:
-            r.fail("robot", f"a robot with {n_in} joints and 3 outputs; got {robot.n_joints} joints, {n_out} outputs")
+        if robot.n_joints != n_in or n_out not in (3, 6):
+            r.fail("robot", f"a robot with {n_in} joints and 3 outputs (position errors) or 6 (pose errors); got "
+                            f"{robot.n_joints} joints, {n_out} outputs")
         joint = {}
         for name, (default, problem) in cls._joint_rules.items():       # files before the joint errors: none
             joint[name] = r.doc.get(name, default)
@@ -692,7 +718,7 @@ class KinematicModel(ErrorModelBase):
         if np.any(model.data_bounds_[0] > model.data_bounds_[1]):
             r.fail("data_bounds", "a low bound exceeds its high bound")
         model.active_ = r.array("active", (n_in,), bool)
-        model.n_features_in_, model._y_1d = n_in, False
+        model.n_features_in_, model.n_outputs_, model._y_1d = n_in, n_out, False
         model.residual_ = None
         if r.doc.get("residual") is not None:
             from .kinds import model_from_body      # the table of kinds knows this module
@@ -718,7 +744,7 @@ class KinematicModel(ErrorModelBase):
             self.residual_.check_file(r.sub("model").sub("residual"))
 
     def n_outputs(self) -> int:
-        return 3
+        return int(getattr(self, "n_outputs_", 3))
 
     def peak_fit_bytes(self, n: int, n_joints: int) -> tuple[float, str]:
         """The residual model's fit (the identification holds arrays of ``n x parameters``)."""

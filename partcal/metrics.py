@@ -252,22 +252,24 @@ def cross_validated_rms(model, X, y, *, folds=5, random_state=0, fitted: list | 
     return pooled_rms(held_out_residuals(model, X, y, splits, fitted=fitted, per_row=per_row))
 
 
-def select_by_cv(candidates, X, y, *, folds, fold_models: list | None = None, per_row: dict | None = None
-                 ) -> tuple[int, list[float], list, list[float]]:
+def select_by_cv(candidates, X, y, *, folds, fold_models: list | None = None, per_row: dict | None = None,
+                 score: Callable[[NDArray[np.float64]], float] | None = None) -> tuple[int, list[float], list, list[float]]:
     """Score unfitted ``candidates`` by CV on ``folds``, then fit each on all of ``X, y``.
 
     Returns ``(best, scores, fitted, seconds)``: the index of the lowest score
     (the first of equals), the pooled 3-D RMS of each candidate, the fitted
     candidates and the seconds of each final fit. ``fold_models`` receives,
     per candidate, the list of its models fitted on the folds; ``per_row``:
-    see :func:`held_out_residuals`.
+    see :func:`held_out_residuals`; ``score`` turns held-out residuals into the
+    score (default :func:`pooled_rms`; a run of pose errors scores some columns).
     """
     import time
 
+    score = score or pooled_rms
     scores, fitted, seconds = [], [], []
     for candidate in candidates:
         folds_fitted: list = []
-        scores.append(cross_validated_rms(candidate, X, y, folds=folds, fitted=folds_fitted, per_row=per_row))
+        scores.append(score(held_out_residuals(candidate, X, y, folds, fitted=folds_fitted, per_row=per_row)))
         if fold_models is not None:
             fold_models.append(folds_fitted)
         begin = time.perf_counter()
@@ -277,8 +279,8 @@ def select_by_cv(candidates, X, y, *, folds, fold_models: list | None = None, pe
 
 
 def nested_residuals(candidates, X, y, *, folds, inner: Callable[[NDArray[np.intp]], list],
-                     progress: Callable[[int, int], None] | None = None,
-                     per_row: dict | None = None) -> NDArray[np.float64]:
+                     progress: Callable[[int, int], None] | None = None, per_row: dict | None = None,
+                     score: Callable[[NDArray[np.float64]], float] | None = None) -> NDArray[np.float64]:
     """Held-out residuals of "choose among ``candidates`` by CV, then fit": the choice is made inside each fold.
 
     For every outer ``(train, test)`` fold the candidate (an unfitted
@@ -290,15 +292,16 @@ def nested_residuals(candidates, X, y, *, folds, inner: Callable[[NDArray[np.int
     outer training rows (``candidate.frozen(X, y)``: a Gaussian process fixes
     the hyperparameters it learns there), so the inner fits only solve; no
     fold learns anything from its held-out rows. ``per_row``: see
-    :func:`held_out_residuals`.
+    :func:`held_out_residuals`; ``score``: see :func:`select_by_cv`.
     """
+    score = score or pooled_rms
     X, y = np.asarray(X, dtype=float), np.asarray(y, dtype=float)
     resid = np.empty_like(y)
     for i, (train, test) in enumerate(folds):
         Xt, yt, rows = X[train], y[train], rows_of(per_row, train)
         frozen = [_frozen(c, Xt, yt, rows) for c in candidates]
         splits = inner(train)
-        scores = [pooled_rms(held_out_residuals(c, Xt, yt, splits, per_row=rows)) for c in frozen]
+        scores = [score(held_out_residuals(c, Xt, yt, splits, per_row=rows)) for c in frozen]
         chosen = frozen[min(range(len(scores)), key=scores.__getitem__)]
         resid[test] = y[test] - _clone(chosen).fit(Xt, yt, **rows).predict(X[test], **rows_of(per_row, test,
                                                                                                predicting=True))

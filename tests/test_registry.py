@@ -534,13 +534,25 @@ def test_a_set_in_its_own_tracker_frame_is_scored_up_to_a_rigid_transform():
     rot, shift = Rotation.from_rotvec([0.002, -0.001, 0.003]).as_matrix(), np.array([1.5, -0.7, 2.0])
     measured = (nominal + true_error) @ rot.T + shift                  # seen through a slightly wrong frame
     m = Measurements(np.zeros((60, 1)), nominal, measured)
-    perfect = errors_left(m, true_error, own_frame=True)
-    assert np.abs(perfect).max() < 1e-9
+    perfect, orientation = errors_left(m, true_error, own_frame=True)
+    assert np.abs(perfect).max() < 1e-9 and orientation is None
     assert np.sqrt(np.mean(np.sum((m.errors_mm - true_error) ** 2, axis=1))) > 1.0   # plain subtraction: wrong
     # uncompensated, the same rule: what is left of the error field after the best rigid fit of the nominal
-    left = errors_left(m, np.zeros_like(true_error), own_frame=True)
+    left = errors_left(m, np.zeros_like(true_error), own_frame=True)[0]
     moved = measured - left
     d_nom = np.linalg.norm(nominal[:, None] - nominal[None], axis=2)
     np.testing.assert_allclose(np.linalg.norm(moved[:, None] - moved[None], axis=2), d_nom, atol=1e-9)  # rigid
     assert np.sqrt(np.mean(np.sum(left**2, axis=1))) < np.sqrt(np.mean(np.sum(m.errors_mm**2, axis=1)))
-    np.testing.assert_array_equal(errors_left(m, true_error), m.errors_mm - true_error)   # a shared frame: plain
+    np.testing.assert_array_equal(errors_left(m, true_error)[0], m.errors_mm - true_error)   # a shared frame: plain
+    # pose errors: the frame's turn also turns the measured orientation; a perfect model leaves no turn either
+    from partcal.robot.kinematics import xyz_deg_from_matrices
+
+    nominal_turn = Rotation.from_rotvec(rng.normal(0, 0.5, (60, 3)))
+    true_turn = Rotation.from_rotvec(rng.normal(0, 1e-3, (60, 3)))                 # the robot's, radians
+    seen = Rotation.from_matrix(rot) * true_turn * nominal_turn
+    pose = dataclasses.replace(m, nominal_orientation_deg=xyz_deg_from_matrices(nominal_turn.as_matrix()),
+                               measured_orientation_deg=xyz_deg_from_matrices(seen.as_matrix()))
+    predicted = np.hstack([true_error, true_turn.as_rotvec() * 1000.0])
+    position, turned = errors_left(pose, predicted, own_frame=True)
+    assert np.abs(position).max() < 1e-9 and np.abs(turned).max() < 1e-6                          # mrad
+    assert np.abs(errors_left(pose, predicted, own_frame=False)[1]).max() > 1.0    # the frame's 3.7 mrad turn

@@ -1,5 +1,7 @@
 """Kinematic identification from several targets and the measured orientation (issue 20)."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 from conftest import ROOT
@@ -217,8 +219,6 @@ def test_a_run_identifies_from_every_target_and_the_orientation(ur10, tmp_path):
                                                                               "output: ../data"))
     study = load_study(tmp_path / "configs" / "sim.yaml")
     write_study(study, simulate(study))
-    import dataclasses
-
     from partcal.data.measurements import read_measurements, write_measurements
 
     test = read_measurements(tmp_path / "data" / "test.csv")       # the same poses, one target, no orientation
@@ -253,3 +253,76 @@ data: {{identification: ../data/identification.csv, tests: {{test: ../data/test.
 
     with pytest.raises(ConfigError, match=r"all_targets needs further ones"):
         check_run(config, {**data, "identification": plain})
+
+
+def test_a_run_of_pose_errors_scores_and_ranks_the_orientation(ur10, tmp_path):
+    """``predict: pose``: every kind fits the six pose errors; the orientation metrics are those of the errors
+    left, recomputed here from the data and the model; the ranking reads the position's CV unless ``rank_on:
+    orientation``; data without an orientation, and ``rank_on: orientation`` of positions, are refused."""
+    import json
+
+    import yaml
+    from scipy.spatial.transform import Rotation
+
+    from partcal import ConfigError
+    from partcal.robot.description import robot_to_dict
+    from partcal.study.config import load_config
+    from partcal.study.outputs import write_run
+    from partcal.study.registry import check_run, load_datasets, run
+
+    (tmp_path / "configs").mkdir()
+    (tmp_path / "configs" / "sim.yaml").write_text(CONFIG.read_text().replace("output: ../data/ur10_targets",
+                                                                              "output: ../data"))
+    write_study(study := load_study(tmp_path / "configs" / "sim.yaml"), simulate(study))
+    (tmp_path / "robot.yaml").write_text(yaml.safe_dump(robot_to_dict(ur10)))
+    head = """robot: ../robot.yaml
+cv_folds: 4
+predict: pose
+data: {identification: ../data/identification.csv, tests: {test: ../data/test.csv}}
+models:
+  - {name: DH, kind: kinematic}
+  - {name: DH (orientation), kind: kinematic, use_orientation: true}
+  - {name: FDP(AI), inputs: joint, degree: 1, solver: {method: lstsq}}
+"""
+    (tmp_path / "configs" / "pose.yaml").write_text("name: pose\n" + head)
+    (tmp_path / "configs" / "turn.yaml").write_text("name: turn\nrank_on: orientation\n" + head)
+    result = run(load_config(tmp_path / "configs" / "pose.yaml"))
+    test = result.datasets["test"]
+    measured = Rotation.from_rotvec(test.orientation_errors_deg, degrees=True)
+    assert result.uncompensated["test"]["orientation"]["rms_angle"] == pytest.approx(
+        1000 * np.sqrt(np.mean(measured.magnitude() ** 2)), rel=1e-12)
+    for r in result.models:
+        predicted = r.model.predict(test.q_deg)
+        assert predicted.shape == (len(test), 6)
+        left = (measured * Rotation.from_rotvec(predicted[:, 3:] / 1000).inv()).magnitude()
+        assert r.metrics["test"]["orientation"]["rms_angle"] == pytest.approx(1000 * np.sqrt(np.mean(left**2)))
+        assert r.metrics["test"]["rms_3d"] == pytest.approx(np.sqrt(np.mean(np.sum(
+            (test.errors_mm - predicted[:, :3]) ** 2, axis=1))))
+    by = {r.spec.name: r for r in result.models}
+    angle = {name: r.metrics["test"]["orientation"]["rms_angle"] for name, r in by.items()}
+    noise = 1000 * np.radians(0.005) * np.sqrt(3)        # the tracker's orientation noise, 3-D, mrad
+    assert angle["DH (orientation)"] < 1.5 * noise < angle["FDP(AI)"] < result.uncompensated["test"]["orientation"][
+        "rms_angle"]
+    (tmp_path / "configs" / "position.yaml").write_text("name: position\n" + head.replace("predict: pose\n", ""))
+    position = run(load_config(tmp_path / "configs" / "position.yaml"))      # ranked on the same numbers
+    assert [r.cv_rms_3d for r in result.models] == pytest.approx([r.cv_rms_3d for r in position.models], rel=1e-9)
+    assert result.best == position.best
+    turned = run(load_config(tmp_path / "configs" / "turn.yaml"))
+    assert turned.best == "DH (orientation)"
+    assert {r.spec.name: r.cv_rms_3d for r in turned.models}["DH (orientation)"] < 1.5 * noise
+    write_run(turned)
+    doc = json.loads((tmp_path / "reports" / "turn" / "metrics.json").read_text())
+    assert (doc["predict"], doc["rank_on"], doc["models"]["DH"]["cv"]["unit"]) == ("pose", "orientation", "mrad")
+    header = (tmp_path / "reports" / "turn" / "predictions" / "dh" / "test.csv").read_text().split("\n")[0]
+    assert header.endswith("dx_pred,dy_pred,dz_pred,drx_pred,dry_pred,drz_pred")
+    # refused: data without an orientation, and ranking on the orientation of position models
+    config = load_config(tmp_path / "configs" / "pose.yaml")
+    data, _, _ = load_datasets(config)
+    plain = dataclasses.replace(data["test"], measured_orientation_deg=None, nominal_orientation_deg=None)
+    with pytest.raises(ConfigError, match=r"pose.yaml: predict .*line 4.*'pose' needs a measured orientation in "
+                                          r"every data set; test \(.*test.csv\) has none"):
+        check_run(config, {**data, "test": plain})
+    (tmp_path / "configs" / "bad.yaml").write_text("name: bad\nrank_on: orientation\n" +
+                                                   head.replace("predict: pose\n", ""))
+    with pytest.raises(ConfigError, match=r"rank_on.*'orientation' needs predict: pose"):
+        load_config(tmp_path / "configs" / "bad.yaml")

@@ -79,8 +79,8 @@ def context(result: RunResult) -> dict:
         "coarser_in_cv": coarser_in_cv(result),
         "shown_models": [r.spec.name for r in shown],
         "error_figures": [{"name": n,
-                           "path_svg": _b64(figures.errors_along_path(n, m.errors_mm, {r.spec.name: r.predictions[n] for r in shown})),
-                           "hist_svg": _b64(figures.residual_histogram(n, m.errors_mm, {r.spec.name: r.predictions[n] for r in shown}))}
+                           "path_svg": _b64(figures.errors_along_path(n, m.errors_mm, {r.spec.name: r.predictions[n][:, :3] for r in shown})),
+                           "hist_svg": _b64(figures.residual_histogram(n, m.errors_mm, {r.spec.name: r.predictions[n][:, :3] for r in shown}))}
                           for n, m in result.datasets.items()],
         "convergence_svg": _optional_b64(figures.convergence({r.spec.name: r.model for r in result.models})),
         "equations": [{"name": r.spec.name, "lines": lines} for r in result.models
@@ -292,7 +292,7 @@ def scene_specs(result: RunResult) -> tuple[dict[str, dict], dict[str, str]]:
         X = ident.nominal_mm if cartesian else ident.q_deg
         spec = {"points": ident.nominal_mm, "labels": model.assign(X), "boxes": np.zeros((0, 2, 3)),
                 "n_paths": len(tests)}
-        residuals = [np.linalg.norm(m.errors_mm - r.predictions[n], axis=1) for n, m in tests.items()]
+        residuals = [np.linalg.norm(m.errors_mm - r.predictions[n][:, :3], axis=1) for n, m in tests.items()]
         for k, (m, res) in enumerate(zip(tests.values(), residuals)):
             spec[f"path{k}"], spec[f"residual{k}"] = m.nominal_mm, res
         spec["residual_max"] = max([float(x.max()) for x in residuals] + [1e-9])

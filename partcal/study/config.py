@@ -26,6 +26,8 @@ from ..robot.description import load_robot, robot_reference
 RESERVED_NAMES = {"identification", "validation", "file", "fit_seconds", "cv_seconds", "cv", "inputs", "solver",
                   "regions", "pso_rms_ratio", "granularity", "compensation", "kind", "kinematic"}
 RANK_RULES = ("cv", "validation")
+PREDICTED = ("position", "pose")        # predict: what every model of a run predicts
+RANKED_ON = ("position", "orientation")  # rank_on: the part of a pose error the run ranks by
 FOLD_WORDS = ("auto", "leave_one_out")
 
 
@@ -157,6 +159,8 @@ class RunConfig:
     virtual_robot: Path | None = None
     rank_by: str = "cv"
     validation: Path | None = None
+    predict: str = "position"           # position: (n, 3) mm; pose: and the orientation error, mrad (n, 6)
+    rank_on: str = "position"           # the part of the errors the ranking reads (orientation: pose runs)
     lines: dict = field(default_factory=dict, compare=False, repr=False)   # key path -> line, for messages
 
     def fail(self, where: str, message: str):
@@ -208,6 +212,10 @@ def load_config(path: str | Path) -> RunConfig:
     n_jobs = top.get("n_jobs", "int", default=1, check=lambda v: None if v == -1 or v >= 1 else "-1 or >= 1")
     cv_folds = top.get("cv_folds", "any", default="auto", check=_fold_problem)
     rank_by = top.get("rank_by", "str", default="cv", check=one_of(*RANK_RULES).problem)
+    predict = top.get("predict", "str", default="position", check=one_of(*PREDICTED).problem)
+    rank_on = top.get("rank_on", "str", default="position", check=one_of(*RANKED_ON).problem)
+    if rank_on == "orientation" and predict != "pose":
+        top.fail("rank_on", "'orientation' needs predict: pose (the models then predict the orientation error)")
     dask = top.section("dask")
     address = dask.get("address", "str", default=None) if dask.data else None
     dask.done()
@@ -235,7 +243,8 @@ def load_config(path: str | Path) -> RunConfig:
     return RunConfig(name=name, source=path, identification=ident, tests=tests, models=models,
                      output=Path(os.path.normpath(output)), robot=robot, seed=seed, n_jobs=n_jobs,
                      cv_folds=cv_folds, dask_address=address, virtual_robot=virtual, rank_by=rank_by,
-                     validation=validation, lines=lines, data_options=data_options)
+                     validation=validation, lines=lines, data_options=data_options, predict=predict,
+                     rank_on=rank_on)
 
 
 def _fold_problem(value) -> str | None:

@@ -139,6 +139,8 @@ def metrics_document(result: RunResult) -> dict:
         folds = len(plan.cv.folds) if plan is not None else cfg.cv_folds
         entry["cv"] = {"folds": folds, "rms_3d": r.cv_rms_3d, "standard_error": _number(r.cv_se),
                        "nested": r.nested}
+        if cfg.predict == "pose":            # the score of the ranked part: the position's (mm) or orientation's (mrad)
+            entry["cv"] |= {"on": cfg.rank_on, "unit": "mrad" if cfg.rank_on == "orientation" else "mm"}
         entry["effective_parameters"] = _number(r.effective_parameters)
         if r.notes:
             entry["notes"] = r.notes
@@ -161,6 +163,8 @@ def metrics_document(result: RunResult) -> dict:
         "uncompensated": result.uncompensated,
         "models": models,
         "rank_by": cfg.rank_by,
+        "predict": cfg.predict,
+        "rank_on": cfg.rank_on,
         "best": result.best,
         "best_reason": result.best_reason,
     }
@@ -285,10 +289,14 @@ def _triple(values) -> str:
 
 
 def _write_predictions(path: Path, m, predicted) -> None:
-    """Per point: joints, nominal position, measured and predicted errors (full precision)."""
-    header = joint_columns(m.n_joints) + ["x_nom", "y_nom", "z_nom", "dx_meas", "dy_meas", "dz_meas",
-                                          "dx_pred", "dy_pred", "dz_pred"]
-    values = np.hstack([m.q_deg, m.nominal_mm, m.errors_mm, predicted])
+    """Per point: joints, nominal position, measured and predicted errors (full precision); for pose errors the
+    orientation's too (``drx_meas``.. ``drx_pred``.., rotation vectors in mrad)."""
+    pose = predicted.shape[1] == 6
+    measured = m.pose_errors if pose else m.errors_mm
+    axes = ["dx", "dy", "dz"] + (["drx", "dry", "drz"] if pose else [])
+    header = joint_columns(m.n_joints) + ["x_nom", "y_nom", "z_nom"] + [f"{a}_meas" for a in axes] + \
+        [f"{a}_pred" for a in axes]
+    values = np.hstack([m.q_deg, m.nominal_mm, measured, predicted])
     with path.open("w") as handle:
         handle.write(",".join(header) + "\n")
         for row in values:

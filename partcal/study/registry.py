@@ -34,13 +34,14 @@ from typing import Callable
 import numpy as np
 from joblib import Parallel, delayed, parallel_config
 from numpy.typing import NDArray
+from scipy.spatial.transform import Rotation
 
 from ..data.measurements import Measurements, read_measurements
 from ..data.registration import Registration, kabsch, register_measurements, registered
 from ..errors import ConfigError, DataError
-from ..metrics import (choose_simplest, fold_name, fold_rule, grouped_splits, held_out_residuals, labels_as_groups,
-                       nested_residuals, pooled_rms, pose_groups, repeat_scatter_mm, rms_standard_error,
-                       select_by_cv, summary)
+from ..metrics import (MRAD_PER_DEG, ORIENTATION, POSITION, choose_simplest, fold_name, fold_rule, grouped_splits,
+                       held_out_residuals, labels_as_groups, nested_residuals, orientation_summary, pooled_rms,
+                       pose_groups, repeat_scatter_mm, rms_standard_error, select_by_cv, summary)
 from ..models.bases import varying_inputs
 from ..models.partitioned import fold_regions
 from ..robot.description import load_robot
@@ -71,10 +72,15 @@ class ModelResult:
     cv_se: float = float("nan")         # standard error of cv_rms_3d, over the identification poses
     effective_parameters: float = float("nan")   # what "simpler" means when two CV scores are close
     notes: list[str] = field(default_factory=list)   # fits on a bound and the like: warned, and in the report
+    rank_on: str = "position"           # cv_rms_3d and cv_se are of the position (mm) or the orientation (mrad)
 
     def score(self, rank_by: str) -> float:
-        """The number the run ranks by: CV 3-D RMS, or 3-D RMS on the validation set (mm)."""
-        return self.cv_rms_3d if rank_by == "cv" else self.metrics["validation"]["rms_3d"]
+        """The number the run ranks by: the CV score, or the RMS on the validation set (3-D, mm; with ``rank_on:
+        orientation`` the orientation's RMS angle, mrad)."""
+        if rank_by == "cv":
+            return self.cv_rms_3d
+        validation = self.metrics["validation"]
+        return validation["orientation"]["rms_angle"] if self.rank_on == "orientation" else validation["rms_3d"]
 
     @property
     def n_regions(self) -> int:
@@ -128,6 +134,56 @@ def rank_reason(config: RunConfig, cv: "CVPlan | None", physical: bool) -> str:
                 f"cross-validated 3-D RMS on the identification set is within one standard error of the lowest {how}")
     return (f"lowest {folds} cross-validated 3-D RMS on the identification set, no physical model (kinematic, no "
             f"data-driven residual) being within one standard error of it {how}")
+
+
+@dataclass(frozen=True)
+class Outputs:
+    """What a run's models predict and the part of it the run ranks by (``predict:``, ``rank_on:``).
+
+    ``predict: position`` fits the primary target's errors, (n, 3) mm; ``pose``
+    fits the pose errors (``Measurements.pose_errors``, (n, 6): those, then the
+    orientation error as a rotation vector in mrad). The CV score and its
+    standard error read the ranked columns alone: the position's, or with
+    ``rank_on: orientation`` the orientation's (mrad), never a sum of mm and
+    mrad.
+    """
+
+    predict: str = "position"
+    rank_on: str = "position"
+
+    @classmethod
+    def of(cls, config: RunConfig) -> "Outputs":
+        return cls(config.predict, config.rank_on)
+
+    @property
+    def pose(self) -> bool:
+        return self.predict == "pose"
+
+    @property
+    def unit(self) -> str:
+        """The unit of the ranked score."""
+        return "mrad" if self.rank_on == "orientation" else "mm"
+
+    def errors(self, m: Measurements) -> NDArray[np.float64]:
+        """What the models fit and predict on a data set."""
+        return m.pose_errors if self.pose else m.errors_mm
+
+    def ranked(self, resid: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The ranked columns of residuals of :meth:`errors`."""
+        return resid[:, ORIENTATION if self.rank_on == "orientation" else POSITION]
+
+    def score(self, resid: NDArray[np.float64]) -> float:
+        """The pooled RMS of the ranked columns (mm, or mrad)."""
+        return pooled_rms(self.ranked(resid))
+
+    def evaluate(self, m: Measurements, predicted: NDArray[np.float64], own_frame: bool = False) -> dict:
+        """The metrics of a prediction on a data set: :func:`summary` of the position errors it leaves (mm) and,
+        for pose errors, ``orientation``: :func:`orientation_summary` of the orientation errors left (mrad)."""
+        position, orientation = errors_left(m, predicted, own_frame)
+        out = summary(position)
+        if self.pose:
+            out["orientation"] = orientation_summary(orientation)
+        return out
 
 
 @dataclass(frozen=True)
@@ -284,6 +340,12 @@ def check_run(config: RunConfig, data: dict[str, Measurements]) -> RunPlan:
     fitted is named in one error (the config file, key path and line each).
     """
     ident = data["identification"]
+    if config.predict == "pose":
+        for name, m in data.items():
+            if not m.has_orientation:
+                path = {"identification": config.identification, "validation": config.validation, **config.tests}[name]
+                config.fail("predict", f"'pose' needs a measured orientation in every data set; {name} ({path}) "
+                                       "has none (columns rx_meas, ry_meas, rz_meas)")
     cv = CVPlan.of(config, ident)
     if cv.n_groups < 2:
         config.fail("data.identification", f"{config.identification} holds {cv.n_groups} pose; a fit needs at "
@@ -425,7 +487,8 @@ class FoldLines:
 
 
 def fit_model(spec: ModelSpec, seed: int, data: dict[str, Measurements], cv: CVPlan,
-              own_frame: tuple[str, ...] = (), lines: Callable[[str], None] | None = None) -> ModelResult:
+              own_frame: tuple[str, ...] = (), lines: Callable[[str], None] | None = None,
+              outputs: Outputs = Outputs()) -> ModelResult:
     """Fit one registry entry and evaluate it (runs in a joblib worker).
 
     ``cv`` holds the run's shared folds on the identification set (and the
@@ -433,17 +496,18 @@ def fit_model(spec: ModelSpec, seed: int, data: dict[str, Measurements], cv: CVP
     :func:`errors_left`. Warnings of the fit are collected, not printed, so
     that the run says them once, in one format, whichever process fitted
     (:attr:`ModelResult.notes`). ``lines`` receives per-fold progress once
-    the cross-validation has taken :data:`SLOW_SECONDS`.
+    the cross-validation has taken :data:`SLOW_SECONDS`. ``outputs``: what the
+    model fits and what its CV score reads (:class:`Outputs`).
     """
     with _collected() as said:
-        result = _fit_model(spec, seed, data, cv, own_frame, lines)
+        result = _fit_model(spec, seed, data, cv, own_frame, lines, outputs)
     result.notes = list(dict.fromkeys(said + result.model.fit_notes()))      # the run names the model in front
     return result
 
 
-def _fit_model(spec, seed, data, cv, own_frame, lines) -> ModelResult:
+def _fit_model(spec, seed, data, cv, own_frame, lines, outputs) -> ModelResult:
     ident = data["identification"]
-    X, y = model_inputs(spec.inputs, ident), ident.errors_mm
+    X, y = model_inputs(spec.inputs, ident), outputs.errors(ident)
     rows = per_row_arguments(spec.build(seed), ident)
     granularity, nested = None, False
     start = time.perf_counter()
@@ -456,8 +520,10 @@ def _fit_model(spec, seed, data, cv, own_frame, lines) -> ModelResult:
     cv_regions = None
     if len(spec.sizes) > 1:
         candidates = [spec.build(seed, size) for size in spec.sizes]
-        resid = nested_residuals(candidates, X, y, folds=cv.folds, inner=cv.inner, progress=fold_done, per_row=rows)
-        estimator, granularity, fit_seconds = choose_granularity(spec, seed, X, y, cv.folds, rows)   # returned fitted
+        resid = nested_residuals(candidates, X, y, folds=cv.folds, inner=cv.inner, progress=fold_done, per_row=rows,
+                                 score=outputs.score)
+        estimator, granularity, fit_seconds = choose_granularity(spec, seed, X, y, cv.folds, rows,
+                                                                 outputs.score)                  # returned fitted
         cv_seconds, nested = time.perf_counter() - start - fit_seconds, True
         chosen = min(range(len(granularity)), key=lambda i: granularity[i]["cv_rms_3d"])
         cv_regions = granularity[chosen]["cv_regions"]
@@ -482,12 +548,12 @@ def _fit_model(spec, seed, data, cv, own_frame, lines) -> ModelResult:
         if "payload_kg" in rows and m.payload_kg is None:
             log.warning("%s has no payload_kg column: predicted at the entry's payload_kg (%g kg)", name,
                         estimator.payload_kg)
-    metrics = {name: summary(errors_left(m, predictions[name], name in own_frame)) for name, m in data.items()}
+    metrics = {name: outputs.evaluate(m, predictions[name], name in own_frame) for name, m in data.items()}
     ratio = estimator.pso_rms_ratio()
-    return ModelResult(spec, estimator, fit_seconds, pooled_rms(resid), metrics, predictions, ratio, granularity,
+    return ModelResult(spec, estimator, fit_seconds, outputs.score(resid), metrics, predictions, ratio, granularity,
                        cv_seconds=cv_seconds, nested=nested, cv_regions=cv_regions,
-                       cv_se=rms_standard_error(resid, cv.groups),
-                       effective_parameters=estimator.effective_parameters())
+                       cv_se=rms_standard_error(outputs.ranked(resid), cv.groups),
+                       effective_parameters=estimator.effective_parameters(), rank_on=outputs.rank_on)
 
 
 @contextmanager
@@ -520,8 +586,11 @@ def _regions_text(counts: list[int]) -> str:
     return (f"{low} to {high} regions" if low != high else f"{low} region{'s' if low != 1 else ''}")
 
 
-def errors_left(m: Measurements, predicted: NDArray[np.float64], own_frame: bool = False) -> NDArray[np.float64]:
-    """The errors a model leaves on a data set, (n, 3) mm: measured - nominal - predicted.
+def errors_left(m: Measurements, predicted: NDArray[np.float64], own_frame: bool = False
+                ) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
+    """The errors a model leaves on a data set: the position's, (n, 3) mm, measured - nominal - predicted,
+    and for a prediction of pose errors (n, 6) the orientation's, (n, 3) mrad (else None): the turn from the
+    predicted orientation to the measured one, ``log(exp(e_measured) exp(-e_predicted))``.
 
     A set registered in its own tracker frame (``registration: own``) is known
     only up to a rigid transform: its registration on the nominal model has
@@ -529,28 +598,36 @@ def errors_left(m: Measurements, predicted: NDArray[np.float64], own_frame: bool
     prediction would count it again. There the errors left are the measured
     positions minus the model's positions (nominal + predicted) moved by their
     best rigid fit to them; with ``predicted = 0`` the same gives the
-    uncompensated figure, so both sides are scored alike.
+    uncompensated figure, so both sides are scored alike. The same rotation turns
+    the predicted orientation.
     """
+    rot = np.eye(3)
     if not own_frame:
-        return m.errors_mm - predicted
-    model_mm = m.nominal_mm + predicted
-    rot, shift = kabsch(model_mm, m.measured_mm)
-    return m.measured_mm - (model_mm @ rot.T + shift)
+        position = m.errors_mm - predicted[:, POSITION]
+    else:
+        model_mm = m.nominal_mm + predicted[:, POSITION]
+        rot, shift = kabsch(model_mm, m.measured_mm)
+        position = m.measured_mm - (model_mm @ rot.T + shift)
+    if predicted.shape[1] < 6:
+        return position, None
+    measured = Rotation.from_rotvec(m.orientation_errors_deg, degrees=True)
+    model = Rotation.from_matrix(rot) * Rotation.from_rotvec(predicted[:, ORIENTATION] / 1000.0)
+    return position, (measured * model.inv()).as_rotvec() * 1000.0
 
 
-def choose_granularity(spec: ModelSpec, seed: int, X, y, folds: list, per_row: dict | None = None
-                       ) -> tuple[object, list[dict], float]:
+def choose_granularity(spec: ModelSpec, seed: int, X, y, folds: list, per_row: dict | None = None,
+                       score: Callable[[NDArray[np.float64]], float] = pooled_rms) -> tuple[object, list[dict], float]:
     """Choose the partition granularity of an entry (or of its residual) by cross-validation on ``folds``.
 
     The same choice as :func:`partcal.models.partitioned.select_granularity`, for any entry kind:
     returns the best candidate fitted on all of ``X, y``, a row per candidate
     (``granularity``, ``cv_rms_3d``, ``regions``, and ``cv_regions``: the fewest and most regions of
     the fits on the folds) and the seconds of that final fit. ``per_row``: a payload per pose, as for
-    :func:`partcal.metrics.held_out_residuals`.
+    :func:`partcal.metrics.held_out_residuals`; ``score``: of the held-out residuals (:meth:`Outputs.score`).
     """
     fold_models: list = []
     best, scores, fitted, seconds = select_by_cv([spec.build(seed, size) for size in spec.sizes], X, y, folds=folds,
-                                                 fold_models=fold_models, per_row=per_row)
+                                                 fold_models=fold_models, per_row=per_row, score=score)
     table = [{"granularity": int(size), "cv_rms_3d": score, "regions": int(partitioned_part(f).partition_.n_regions),
               "cv_regions": fold_regions([partitioned_part(m) for m in folded])}
              for size, score, f, folded in zip(spec.sizes, scores, fitted, fold_models)]
@@ -602,7 +679,8 @@ def run(config: RunConfig, progress: Callable[[int, int, str], None] | None = No
     own = config.data_options.own_frame
     lines = FoldLines() if progress else None
     order = _costliest_first(specs, data["identification"])
-    jobs = [delayed(fit_model)(specs[i], model_seed(config.seed, specs[i].name), data, plan.cv, own, lines)
+    outputs = Outputs.of(config)
+    jobs = [delayed(fit_model)(specs[i], model_seed(config.seed, specs[i].name), data, plan.cv, own, lines, outputs)
             for i in order]
     results: list[ModelResult] = []
     with _backend(config):
@@ -613,13 +691,14 @@ def run(config: RunConfig, progress: Callable[[int, int, str], None] | None = No
                 log.warning("%s: %s", result.spec.name, note)
             if progress:
                 progress(len(results), len(jobs), f"{result.spec.name}: CV RMS {result.cv_rms_3d:.3f} "
-                                                  f"+- {result.cv_se:.3f} mm, fitted in {result.fit_seconds:.2f} s, "
+                                                  f"+- {result.cv_se:.3f} {outputs.unit}, fitted in {result.fit_seconds:.2f} s, "
                                                   f"cross-validated in {result.cv_seconds:.2f} s")
     if virtual is not None:
         for result in results:
             result.compensation = verify_compensation(result, data, robot, virtual, config.seed)
     results = [results[order.index(i)] for i in range(len(specs))]        # back in the config's order
-    uncompensated = {name: summary(errors_left(m, np.zeros_like(m.errors_mm), name in own)) for name, m in data.items()}
+    uncompensated = {name: outputs.evaluate(m, np.zeros_like(outputs.errors(m)), name in own)
+                     for name, m in data.items()}
     return RunResult(config, data, robot, uncompensated, results, choose_best(results, config.rank_by),
                      time.perf_counter() - start, registrations=registrations, plan=plan)
 
@@ -682,7 +761,7 @@ def verify_compensation(result: ModelResult, data: dict[str, Measurements], robo
         rng = np.random.default_rng([seed, k])
         reached = virtual.measure(q_cmd, rng)
         out[name] = {"before": summary(m.errors_mm),
-                     "predicted_residual": summary(m.errors_mm - result.predictions[name]),
+                     "predicted_residual": summary(m.errors_mm - result.predictions[name][:, POSITION]),
                      "after": summary(reached - targets),
                      "converged": int(comp.converged.sum()), "n": len(targets)}
     return out

@@ -47,7 +47,8 @@ def results_table(result) -> str:
     and the compensation check (``partcal run``)."""
     names = list(result.datasets)
     width = 24
-    head1 = f"{'RMS error (mm)':<{width}}" + "".join(f"{n[:22]:^24}" for n in names) + f"{'CV 3-D (mm)':^18}"
+    score = "CV angle (mrad)" if result.config.rank_on == "orientation" else "CV 3-D (mm)"
+    head1 = f"{'RMS error (mm)':<{width}}" + "".join(f"{n[:22]:^24}" for n in names) + f"{score:^18}"
     head2 = f"{'model':<{width}}" + "".join(f"{'x':>8}{'y':>8}{'z':>8}" for _ in names) + f"{'RMS +- SE':>11}{'params':>7}"
     lines = [head1, head2, "-" * len(head2)]
 
@@ -62,11 +63,14 @@ def results_table(result) -> str:
         lines.append(row(label, r.metrics) + cell(r.cv_rms_3d, 7, 3) + " +-" + cell(r.cv_se, 6, 3).lstrip().ljust(5)
                      + cell(r.effective_parameters, 7, 0))
         noted += [f"  * {r.spec.name}: {note}" for note in r.notes]
+    if result.config.predict == "pose":
+        lines += orientation_table(result, names, width)
     if noted:
         lines += ["", "warnings (also in the report):"] + noted
     best = next(r for r in result.models if r.spec.name == result.best)
-    rule = "validation 3-D RMS" if result.config.rank_by == "validation" else "CV 3-D RMS"
-    lines.append(f"best: {best.spec.name} ({rule} {best.score(result.config.rank_by):.3f} mm), chosen by the "
+    part, unit = ("orientation RMS", "mrad") if result.config.rank_on == "orientation" else ("3-D RMS", "mm")
+    rule = f"{'validation' if result.config.rank_by == 'validation' else 'CV'} {part}"
+    lines.append(f"best: {best.spec.name} ({rule} {best.score(result.config.rank_by):.3f} {unit}), chosen by the "
                  f"{result.best_reason}")
     regs = result.registrations
     for reg in {id(r): r for r in regs.values()}.values():
@@ -80,6 +84,19 @@ def results_table(result) -> str:
                               f"{c['after']['rms_3d']:.2f}" for n, c in r.compensation.items())
             lines.append(f"  {r.spec.name:<22}{cells}")
     return "\n".join(lines)
+
+
+def orientation_table(result, names: list[str], width: int) -> list[str]:
+    """The orientation errors a run of pose errors leaves: RMS angle (mrad) per model and data set."""
+    lines = ["", f"{'orientation RMS (mrad)':<{width}}" + "".join(f"{n[:15]:>16}" for n in names)]
+
+    def row(label, stats):
+        return f"{label[:width - 1]:<{width}}" + "".join(cell(stats[n]["orientation"]["rms_angle"], 16, 3)
+                                                       for n in names)
+
+    lines.append(row("uncompensated", result.uncompensated))
+    lines += [row(r.spec.name, r.metrics) for r in result.models]
+    return lines
 
 
 def registration_line(reg, sets=None) -> str:

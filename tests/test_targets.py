@@ -1,13 +1,14 @@
 """Kinematic identification from several targets and the measured orientation (issue 20)."""
 
 import dataclasses
+import json
 
 import numpy as np
 import pytest
 from conftest import ROOT
 from scipy.spatial.transform import Rotation
 
-from partcal import DataError, ErrorModel, KinematicModel, load_robot
+from partcal import DataError, ErrorModel, KinematicModel, ModelFileError, load_robot
 from partcal.data.simulate import load_study, simulate, write_study
 from partcal.models.design import target_identifiability
 from partcal.models.joint_errors import JointErrors
@@ -175,17 +176,26 @@ def test_a_model_of_pose_errors_predicts_the_orientation_too(ur10, tmp_path):
     np.testing.assert_allclose(model.predict(q_new), expected, atol=1e-7)
     np.testing.assert_allclose(model.predict_target(q_new, "A"), y_new, atol=1e-7)   # the position, as ever
     blind = KinematicModel(robot=ur10).fit(q, _pose_errors(y, turns))
-    assert not blind.orientation_
+    assert not blind.orientation_ and any("identified from the positions alone" in n for n in blind.fit_notes())
+    assert not any("positions alone" in n for n in model.fit_notes())
+    light = KinematicModel(robot=ur10, use_orientation=True, orientation_mm_per_rad=20).fit(q, _pose_errors(y, turns))
+    same = KinematicModel(robot=ur10, use_orientation=True).fit(q, _pose_errors(y, turns), orientation_mm_per_rad=20)
+    assert np.array_equal(light.identification_.value, same.identification_.value)
+    assert not np.allclose(light.identification_.value, model.identification_.value, rtol=0, atol=1e-9)
     np.testing.assert_allclose(blind.predict(q_new)[:, :3], y_new, atol=0.01)
     assert np.sqrt(np.mean((blind.predict(q_new)[:, 3:] - expected[:, 3:]) ** 2)) > 0.1      # mrad
     hybrid = KinematicModel(robot=ur10, use_orientation=True,
                             residual=ErrorModel(inputs="joint", degree=1, solver="lstsq"))
     hybrid.fit(q, _pose_errors(y, turns))
-    assert hybrid.residual_.n_outputs() == 6
+    assert hybrid.residual_.n_outputs() == hybrid.orientation_residual_.n_outputs() == 3     # one per part
     np.testing.assert_allclose(hybrid.predict(q_new), expected, atol=1e-6)         # nothing left for the residual
     save_model(hybrid, tmp_path / "pose.json", name="pose", robot=ur10)
     loaded, doc = load_model(tmp_path / "pose.json")
     assert doc["n_outputs"] == 6 and np.array_equal(loaded.predict(q_new), hybrid.predict(q_new))
+    del doc["model"]["orientation_residual"], doc["checksum"]
+    (tmp_path / "bad.json").write_text(json.dumps(doc))
+    with pytest.raises(ModelFileError, match=r"bad.json.*orientation_residual"):
+        load_model(tmp_path / "bad.json")
 
 
 def test_the_probe_turn_is_part_of_the_predicted_orientation(ur10):

@@ -436,6 +436,10 @@ class KinematicModel(ErrorModelBase):
     identification_ : Identification
         The identified table with standard errors and the condition number.
     residual_ : estimator or None
+        Fitted on what the kinematics leave of the position errors.
+    orientation_residual_ : estimator or None
+        Fitted on pose errors: a second residual of the same settings, on what is left of the
+        orientation errors (a Gaussian process then learns its own hyperparameters for each).
     joint_errors_ : JointErrors
         The joint errors identified (their values are the identified table's last entries).
     active_ : ndarray of bool, shape (N,)
@@ -454,10 +458,12 @@ class KinematicModel(ErrorModelBase):
     inputs = "joint"
 
     def __init__(self, *, robot=None, base=True, tool=True, rcond=1e-6, compliance=(), joint_harmonics=0,
-                 payload_kg=0.0, all_targets=False, use_orientation=False, residual=None, random_state=None):
+                 payload_kg=0.0, all_targets=False, use_orientation=False,
+                 orientation_mm_per_rad=ORIENTATION_MM_PER_RAD, residual=None, random_state=None):
         self.robot = robot
         self.all_targets = all_targets
         self.use_orientation = use_orientation
+        self.orientation_mm_per_rad = orientation_mm_per_rad
         self.base = base
         self.tool = tool
         self.rcond = rcond
@@ -473,7 +479,8 @@ class KinematicModel(ErrorModelBase):
     _parameter_rules = {"base": boolean(True), "tool": boolean(True),
                         "rcond": real(0.0, 1.0, default=1e-6, low_open=True),
                         "payload_kg": real(0.0, MAX_PAYLOAD_KG, default=0.0),
-                        "all_targets": boolean(False), "use_orientation": boolean(False)}
+                        "all_targets": boolean(False), "use_orientation": boolean(False),
+                        "orientation_mm_per_rad": real(0.0, 1e6, default=ORIENTATION_MM_PER_RAD, low_open=True)}
     _from_fitted = ("all_targets", "use_orientation")     # a model file keeps what was fitted on instead
     _joint_rules = {"compliance": ((), compliance_problem), "joint_harmonics": (0, harmonics_problem)}
 
@@ -492,8 +499,7 @@ class KinematicModel(ErrorModelBase):
                               "GaussianProcessErrorModel", self.residual)
         return robot
 
-    def fit(self, X, y, payload_kg=None, *, targets=None, orientation_deg=None,
-            orientation_mm_per_rad=ORIENTATION_MM_PER_RAD):
+    def fit(self, X, y, payload_kg=None, *, targets=None, orientation_deg=None, orientation_mm_per_rad=None):
         """Identify the parameters from joint angles ``X`` (n, N) deg and errors ``y`` (n, 3) mm. Returns self.
 
         ``payload_kg`` (n,) kg per pose, or a number; default the parameter ``payload_kg``.
@@ -510,7 +516,8 @@ class KinematicModel(ErrorModelBase):
         flange frame (3,) mm and its errors (n, 3) mm; ``orientation_deg`` (n, 3) are the
         orientation errors, rotation vectors from the nominal flange orientation to the
         measured one in the base frame, degrees, their residuals weighted by
-        ``orientation_mm_per_rad`` (one radian counts as that many mm). The prediction stays the
+        ``orientation_mm_per_rad`` (one radian counts as that many mm; default the parameter of
+        that name, 200: one mrad weighs as 0.2 mm). The prediction stays the
         primary target's (:meth:`predict_target` gives another's).
         """
         robot = self._check_params()
@@ -527,7 +534,8 @@ class KinematicModel(ErrorModelBase):
         nominal = robot.positions(X)
         self.joint_errors_ = JointErrors.for_robot(robot, list(self.compliance), self.joint_harmonics)
         payload = self._payload(payload_kg, len(X))
-        extra = extra_from(robot, X, targets, orientation_deg, orientation_mm_per_rad)
+        weight = self.orientation_mm_per_rad if orientation_mm_per_rad is None else orientation_mm_per_rad
+        extra = extra_from(robot, X, targets, orientation_deg, weight)
         self.identification_ = identify(robot, X, nominal + y[:, POSITION], base=bool(self.base), tool=bool(self.tool),
                                         rcond=float(self.rcond), errors=self.joint_errors_, payload_kg=payload,
                                         extra=extra)
@@ -537,12 +545,15 @@ class KinematicModel(ErrorModelBase):
         self._build_robots()
         self.active_ = varying_inputs(X)
         self.data_bounds_ = np.stack([X.min(axis=0), X.max(axis=0)])
-        self.residual_ = None
-        if self.residual is not None:
+        self.residual_ = self.orientation_residual_ = None
+        if self.residual is not None:            # on pose errors one for the position, one for the orientation
             seed = self._residual_seed()
             leftover = y - self._kinematic_errors(X, payload)
-            self.residual_ = clone(self.residual).set_params(random_state=seed)
-            self.residual_.fit(self._residual_inputs(X, nominal), leftover)
+            inputs = nominal if self.residual.inputs == "cartesian" else X
+            self.residual_ = clone(self.residual).set_params(random_state=seed).fit(inputs, leftover[:, POSITION])
+            if self.n_outputs_ == 6:
+                self.orientation_residual_ = clone(self.residual).set_params(random_state=seed).fit(
+                    inputs, leftover[:, ORIENTATION])
         return self._prepare()
 
     def _prepare(self) -> "KinematicModel":
@@ -554,9 +565,13 @@ class KinematicModel(ErrorModelBase):
         """
         for robot in (self.robot_, self.identified_robot_, self._geometry):
             robot.positions(self.data_bounds_[:1])
-        if self.residual_ is not None:
-            self.residual_._prepare()
+        for residual in self._residuals():
+            residual._prepare()
         return super()._prepare()
+
+    def _residuals(self) -> list:
+        """The fitted residual models: none, the position's, or (pose errors) it and the orientation's."""
+        return [m for m in (self.residual_, getattr(self, "orientation_residual_", None)) if m is not None]
 
     def _residual_inputs(self, X: NDArray[np.float64], nominal: NDArray[np.float64]) -> NDArray[np.float64]:
         """What the residual model reads: the nominal positions ``nominal`` (mm) or the joints ``X`` (deg)."""
@@ -642,7 +657,9 @@ class KinematicModel(ErrorModelBase):
         out = self._kinematic_errors(X, self._payload(payload_kg, len(X)))
         if self.residual_ is not None:
             nominal = self.robot_.positions(X) if self.residual_.inputs == "cartesian" else None
-            out += self.residual_.predict(self._residual_inputs(X, nominal))
+            out[:, POSITION] += self.residual_.predict(self._residual_inputs(X, nominal))
+            if self.orientation_residual_ is not None:
+                out[:, ORIENTATION] += self.orientation_residual_.predict(self._residual_inputs(X, nominal))
         return out
 
     def distance_to_data(self, X) -> NDArray[np.float64]:
@@ -681,12 +698,15 @@ class KinematicModel(ErrorModelBase):
         errors = self.joint_errors_
         return {"robot": robot_to_dict(self.robot_), "base": bool(self.base), "tool": bool(self.tool),
                 "rcond": float(self.rcond), "payload_kg": float(self.payload_kg),
+                **({"orientation_mm_per_rad": float(self.orientation_mm_per_rad)} if self.orientation_ else {}),
                 "compliance": list(errors.compliance), "joint_harmonics": list(errors.harmonics),
                 "identification": self.identification_.to_dict(),
                 **({"targets": {k: [float(v) for v in t] for k, t in self.targets_.items()},
                     "orientation": bool(self.orientation_)} if self.targets_ or self.orientation_ else {}),
                 "data_bounds": self.data_bounds_.tolist(), "active": self.active_.tolist(),
-                "residual": body_of(self.residual_) if self.residual_ is not None else None}
+                "residual": body_of(self.residual_) if self.residual_ is not None else None,
+                **({"orientation_residual": body_of(self.orientation_residual_)}
+                   if self.orientation_residual_ is not None else {})}
 
     @classmethod
     def from_file_section(cls, r: FieldReader, inputs: str, n_in: int, n_out: int) -> "KinematicModel":
@@ -705,7 +725,7 @@ class KinematicModel(ErrorModelBase):
             if problem(joint[name], robot.n_joints) is not None:
                 r.fail(name, f"expected {problem(joint[name], robot.n_joints)}; got {joint[name]!r}"[:200])
         rules = {key: rule for key, rule in cls._parameter_rules.items()
-                 if key not in cls._from_fitted and (key in r.doc or key != "payload_kg")}
+                 if key not in cls._from_fitted and (key in r.doc or key not in ("payload_kg", "orientation_mm_per_rad"))}
         tools, orientation = _targets_from(r)
         model = cls(robot=robot, **{key: r.rule(key, rule) for key, rule in rules.items()}, **joint,
                     all_targets=bool(tools), use_orientation=orientation)
@@ -719,12 +739,19 @@ class KinematicModel(ErrorModelBase):
             r.fail("data_bounds", "a low bound exceeds its high bound")
         model.active_ = r.array("active", (n_in,), bool)
         model.n_features_in_, model.n_outputs_, model._y_1d = n_in, n_out, False
-        model.residual_ = None
+        model.residual_ = model.orientation_residual_ = None
         if r.doc.get("residual") is not None:
             from .kinds import model_from_body      # the table of kinds knows this module
 
             model.residual_ = model_from_body(r.sub("residual"))
             model.residual = model.residual_
+            if n_out == 6:
+                model.orientation_residual_ = model_from_body(r.sub("orientation_residual"))
+            for field, part in (("residual", model.residual_), ("orientation_residual", model.orientation_residual_)):
+                if part is not None and (part.n_outputs() != 3 or part.n_features_in_ != (3 if part.inputs ==
+                                                                                          "cartesian" else n_in)):
+                    r.fail(field, f"a model of 3 outputs on the {'nominal positions' if part.inputs == 'cartesian' else 'joints'}; "
+                                  f"got {part.n_outputs()} outputs on {part.n_features_in_} inputs")
         return model
 
     def check_file(self, r: FieldReader) -> None:
@@ -742,6 +769,8 @@ class KinematicModel(ErrorModelBase):
                          f"than the robot's reach ({reach:.0f} mm): the identified values are damaged")
         if self.residual_ is not None:
             self.residual_.check_file(r.sub("model").sub("residual"))
+        if self.orientation_residual_ is not None:
+            self.orientation_residual_.check_file(r.sub("model").sub("orientation_residual"))
 
     def n_outputs(self) -> int:
         return int(getattr(self, "n_outputs_", 3))
@@ -758,6 +787,8 @@ class KinematicModel(ErrorModelBase):
                 ", ".join(str(j) for j in errors.compliance)
         if any(errors.harmonics):
             text += f", transmission errors (up to {max(errors.harmonics)} harmonics per joint)"
+        if self.orientation_residual_ is not None:
+            return text + f", plus residuals of the position and of the orientation, each {self.residual_.describe()}"
         return text + (f", plus a residual {self.residual_.describe()}" if self.residual_ is not None else "")
 
     @property
@@ -770,7 +801,7 @@ class KinematicModel(ErrorModelBase):
     def effective_parameters(self) -> float:
         """The identified parameters, plus the residual model's."""
         own = sum(status == "identified" for status in self.identification_.status)
-        return float(own + (self.residual_.effective_parameters() if self.residual_ is not None else 0.0))
+        return float(own + sum(m.effective_parameters() for m in self._residuals()))
 
     def fit_notes(self) -> list[str]:
         """A compliance the data could not identify (one payload: only its products with the masses, the
@@ -778,6 +809,12 @@ class KinematicModel(ErrorModelBase):
         held = [n for n in self.identification_.unidentifiable() if n.startswith("compliance[")]
         notes = [f"{', '.join(held)} not identifiable (data at one payload show only the sags): the predictions do "
                  "not change with the payload"] if held else []
+        if self.n_outputs() == 6 and not self.orientation_:
+            notes.append("identified from the positions alone, it predicts the orientation its parameters imply, "
+                         "which the positions do not determine (use_orientation: true identifies from it)")
+        if self.orientation_residual_ is not None:
+            return notes + [f"{part} residual: {note}" for part, m in zip(("position", "orientation"), self._residuals())
+                            for note in m.fit_notes()]
         return notes + (self.residual_.fit_notes() if self.residual_ is not None else [])
 
     def is_physical(self) -> bool:
@@ -789,8 +826,9 @@ class KinematicModel(ErrorModelBase):
 
     def frozen(self, X, y, payload_kg=None, **measured) -> "KinematicModel":
         """With a residual model: the residual frozen on what the kinematics identified on ``X, y`` (and the
-        further targets and orientation of :meth:`fit`, ``measured``) leave."""
-        if self.residual is None:
+        further targets and orientation of :meth:`fit`, ``measured``) leave. Pose errors: itself (the two
+        residuals search their own hyperparameters in every fold)."""
+        if self.residual is None or np.shape(y)[1:] == (6,):
             return self
         fitted = clone(self).set_params(residual=None).fit(X, y, payload_kg=payload_kg, **measured)
         X = np.asarray(X, dtype=float)

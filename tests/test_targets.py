@@ -187,14 +187,15 @@ def test_a_model_of_pose_errors_predicts_the_orientation_too(ur10, tmp_path):
     hybrid = KinematicModel(robot=ur10, use_orientation=True,
                             residual=ErrorModel(inputs="joint", degree=1, solver="lstsq"))
     hybrid.fit(q, _pose_errors(y, turns))
-    assert hybrid.residual_.n_outputs() == hybrid.orientation_residual_.n_outputs() == 3     # one per part
+    parts = hybrid.residual_.position_, hybrid.residual_.orientation_                   # one per part, 3 outputs
+    assert [p.n_outputs() for p in parts] == [3, 3] and parts[0].coef_.shape == parts[1].coef_.shape
     np.testing.assert_allclose(hybrid.predict(q_new), expected, atol=1e-6)         # nothing left for the residual
     save_model(hybrid, tmp_path / "pose.json", name="pose", robot=ur10)
     loaded, doc = load_model(tmp_path / "pose.json")
     assert doc["n_outputs"] == 6 and np.array_equal(loaded.predict(q_new), hybrid.predict(q_new))
-    del doc["model"]["orientation_residual"], doc["checksum"]
+    del doc["model"]["residual"]["model"]["orientation"], doc["checksum"]
     (tmp_path / "bad.json").write_text(json.dumps(doc))
-    with pytest.raises(ModelFileError, match=r"bad.json.*orientation_residual"):
+    with pytest.raises(ModelFileError, match=r"bad.json: field 'model.residual.model.orientation': missing"):
         load_model(tmp_path / "bad.json")
 
 
@@ -293,6 +294,9 @@ models:
   - {name: DH, kind: kinematic}
   - {name: DH (orientation), kind: kinematic, use_orientation: true}
   - {name: FDP(AI), inputs: joint, degree: 1, solver: {method: lstsq}}
+  - {name: GP(AI), kind: gaussian_process, inputs: joint, restarts: 0}
+  - {name: FDP(CI) k-means, inputs: cartesian, degree: 1, solver: {method: lstsq}, partition: {method: kmeans, n_regions: 2}}
+  - {name: DH (orientation) + GP(AI), kind: kinematic, use_orientation: true, residual: {kind: gaussian_process, inputs: joint, restarts: 0}}
 """
     (tmp_path / "configs" / "pose.yaml").write_text("name: pose\n" + head)
     (tmp_path / "configs" / "turn.yaml").write_text("name: turn\nrank_on: orientation\n" + head)
@@ -302,7 +306,7 @@ models:
     assert result.uncompensated["test"]["orientation"]["rms_angle"] == pytest.approx(
         1000 * np.sqrt(np.mean(measured.magnitude() ** 2)), rel=1e-12)
     for r in result.models:
-        predicted = r.model.predict(test.q_deg)
+        predicted = r.model.predict(test.nominal_mm if r.spec.inputs == "cartesian" else test.q_deg)
         assert predicted.shape == (len(test), 6)
         left = (measured * Rotation.from_rotvec(predicted[:, 3:] / 1000).inv()).magnitude()
         assert r.metrics["test"]["orientation"]["rms_angle"] == pytest.approx(1000 * np.sqrt(np.mean(left**2)))
@@ -323,6 +327,14 @@ models:
     write_run(turned)
     doc = json.loads((tmp_path / "reports" / "turn" / "metrics.json").read_text())
     assert (doc["predict"], doc["rank_on"], doc["models"]["DH"]["cv"]["unit"]) == ("pose", "orientation", "mrad")
+    from partcal.study.persist import load_model
+
+    by_turn = {r.spec.name: r for r in turned.models}
+    for name, slug in (("GP(AI)", "gp-ai"), ("FDP(CI) k-means", "fdp-ci-k-means"),
+                       ("DH (orientation) + GP(AI)", "dh-orientation-gp-ai")):
+        loaded, doc = load_model(tmp_path / "reports" / "turn" / "models" / f"{slug}.json")
+        inputs = test.nominal_mm if by_turn[name].spec.inputs == "cartesian" else test.q_deg
+        assert doc["n_outputs"] == 6 and np.array_equal(loaded.predict(inputs), by_turn[name].model.predict(inputs))
     header = (tmp_path / "reports" / "turn" / "predictions" / "dh" / "test.csv").read_text().split("\n")[0]
     assert header.endswith("dx_pred,dy_pred,dz_pred,drx_pred,dry_pred,drz_pred")
     # refused: data without an orientation, and ranking on the orientation of position models

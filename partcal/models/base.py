@@ -67,6 +67,8 @@ class ErrorModelBase(RegressorMixin, BaseEstimator):
         return set(cls._parameter_rules) | ({"residual"} if cls.takes_residual else set())
 
     takes_residual: ClassVar[bool] = False       # a config entry may give a ``residual`` model (kinematic)
+    fits_pose_errors: ClassVar[bool] = False     # fits (n, 6) pose errors as one model (kinematic); others are
+                                                 # fitted twice in a run of pose errors (models/pose.py)
 
     @classmethod
     def input_space(cls, params: dict[str, Any]) -> str:

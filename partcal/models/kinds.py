@@ -24,6 +24,7 @@ from .base import ErrorModelBase
 from .gp import GaussianProcessErrorModel
 from .kinematic import KinematicModel
 from .partitioned import PartitionedErrorModel
+from .pose import PoseErrorModel
 from .series import ErrorModel
 
 INPUT_SPACES = ("cartesian", "joint")
@@ -69,6 +70,7 @@ KINDS: dict[str, Kind] = {kind.name: kind for kind in (
     Kind("gaussian_process", GaussianProcessErrorModel, regions=True),
     Kind("kinematic", KinematicModel, residual=False),
     Kind("partitioned", PartitionedErrorModel, in_config=False),
+    Kind("pose", PoseErrorModel, in_config=False, residual=False),
 )}
 
 

@@ -56,6 +56,7 @@ from .bases import varying_inputs
 from .gp import GaussianProcessErrorModel
 from .joint_errors import JointErrors, compliance_problem, harmonics_problem
 from .partitioned import PartitionedErrorModel
+from .pose import PoseErrorModel
 from .series import ErrorModel
 from .targets import Extra, added_names, added_nominal, extra_from, stacked
 
@@ -437,9 +438,9 @@ class KinematicModel(ErrorModelBase):
         The identified table with standard errors and the condition number.
     residual_ : estimator or None
         Fitted on what the kinematics leave of the position errors.
-    orientation_residual_ : estimator or None
-        Fitted on pose errors: a second residual of the same settings, on what is left of the
-        orientation errors (a Gaussian process then learns its own hyperparameters for each).
+        On pose errors a :class:`~partcal.models.pose.PoseErrorModel`: two residuals of the
+        given settings, one on what is left of the position and one of the orientation (a
+        Gaussian process then learns its own hyperparameters for each).
     joint_errors_ : JointErrors
         The joint errors identified (their values are the identified table's last entries).
     active_ : ndarray of bool, shape (N,)
@@ -476,6 +477,7 @@ class KinematicModel(ErrorModelBase):
     kind = "kinematic"
     file_kind = "kinematic"
     takes_residual = True
+    fits_pose_errors = True
     _parameter_rules = {"base": boolean(True), "tool": boolean(True),
                         "rcond": real(0.0, 1.0, default=1e-6, low_open=True),
                         "payload_kg": real(0.0, MAX_PAYLOAD_KG, default=0.0),
@@ -545,15 +547,13 @@ class KinematicModel(ErrorModelBase):
         self._build_robots()
         self.active_ = varying_inputs(X)
         self.data_bounds_ = np.stack([X.min(axis=0), X.max(axis=0)])
-        self.residual_ = self.orientation_residual_ = None
-        if self.residual is not None:            # on pose errors one for the position, one for the orientation
+        self.residual_ = None
+        if self.residual is not None:
             seed = self._residual_seed()
             leftover = y - self._kinematic_errors(X, payload)
-            inputs = nominal if self.residual.inputs == "cartesian" else X
-            self.residual_ = clone(self.residual).set_params(random_state=seed).fit(inputs, leftover[:, POSITION])
-            if self.n_outputs_ == 6:
-                self.orientation_residual_ = clone(self.residual).set_params(random_state=seed).fit(
-                    inputs, leftover[:, ORIENTATION])
+            residual = clone(self.residual).set_params(random_state=seed)
+            self.residual_ = PoseErrorModel(residual) if self.n_outputs_ == 6 else residual    # one per part
+            self.residual_.fit(self._residual_inputs(X, nominal), leftover)
         return self._prepare()
 
     def _prepare(self) -> "KinematicModel":
@@ -565,13 +565,9 @@ class KinematicModel(ErrorModelBase):
         """
         for robot in (self.robot_, self.identified_robot_, self._geometry):
             robot.positions(self.data_bounds_[:1])
-        for residual in self._residuals():
-            residual._prepare()
+        if self.residual_ is not None:
+            self.residual_._prepare()
         return super()._prepare()
-
-    def _residuals(self) -> list:
-        """The fitted residual models: none, the position's, or (pose errors) it and the orientation's."""
-        return [m for m in (self.residual_, getattr(self, "orientation_residual_", None)) if m is not None]
 
     def _residual_inputs(self, X: NDArray[np.float64], nominal: NDArray[np.float64]) -> NDArray[np.float64]:
         """What the residual model reads: the nominal positions ``nominal`` (mm) or the joints ``X`` (deg)."""
@@ -657,9 +653,7 @@ class KinematicModel(ErrorModelBase):
         out = self._kinematic_errors(X, self._payload(payload_kg, len(X)))
         if self.residual_ is not None:
             nominal = self.robot_.positions(X) if self.residual_.inputs == "cartesian" else None
-            out[:, POSITION] += self.residual_.predict(self._residual_inputs(X, nominal))
-            if self.orientation_residual_ is not None:
-                out[:, ORIENTATION] += self.orientation_residual_.predict(self._residual_inputs(X, nominal))
+            out += self.residual_.predict(self._residual_inputs(X, nominal))
         return out
 
     def distance_to_data(self, X) -> NDArray[np.float64]:
@@ -704,9 +698,7 @@ class KinematicModel(ErrorModelBase):
                 **({"targets": {k: [float(v) for v in t] for k, t in self.targets_.items()},
                     "orientation": bool(self.orientation_)} if self.targets_ or self.orientation_ else {}),
                 "data_bounds": self.data_bounds_.tolist(), "active": self.active_.tolist(),
-                "residual": body_of(self.residual_) if self.residual_ is not None else None,
-                **({"orientation_residual": body_of(self.orientation_residual_)}
-                   if self.orientation_residual_ is not None else {})}
+                "residual": body_of(self.residual_) if self.residual_ is not None else None}
 
     @classmethod
     def from_file_section(cls, r: FieldReader, inputs: str, n_in: int, n_out: int) -> "KinematicModel":
@@ -739,19 +731,14 @@ class KinematicModel(ErrorModelBase):
             r.fail("data_bounds", "a low bound exceeds its high bound")
         model.active_ = r.array("active", (n_in,), bool)
         model.n_features_in_, model.n_outputs_, model._y_1d = n_in, n_out, False
-        model.residual_ = model.orientation_residual_ = None
+        model.residual_ = None
         if r.doc.get("residual") is not None:
             from .kinds import model_from_body      # the table of kinds knows this module
 
             model.residual_ = model_from_body(r.sub("residual"))
-            model.residual = model.residual_
-            if n_out == 6:
-                model.orientation_residual_ = model_from_body(r.sub("orientation_residual"))
-            for field, part in (("residual", model.residual_), ("orientation_residual", model.orientation_residual_)):
-                if part is not None and (part.n_outputs() != 3 or part.n_features_in_ != (3 if part.inputs ==
-                                                                                          "cartesian" else n_in)):
-                    r.fail(field, f"a model of 3 outputs on the {'nominal positions' if part.inputs == 'cartesian' else 'joints'}; "
-                                  f"got {part.n_outputs()} outputs on {part.n_features_in_} inputs")
+            model.residual = model.residual_ if n_out == 3 else model.residual_.model
+            if model.residual_.n_outputs() != n_out:
+                r.sub("residual").fail("n_outputs", f"the model's own, {n_out}; got {model.residual_.n_outputs()}")
         return model
 
     def check_file(self, r: FieldReader) -> None:
@@ -769,8 +756,6 @@ class KinematicModel(ErrorModelBase):
                          f"than the robot's reach ({reach:.0f} mm): the identified values are damaged")
         if self.residual_ is not None:
             self.residual_.check_file(r.sub("model").sub("residual"))
-        if self.orientation_residual_ is not None:
-            self.orientation_residual_.check_file(r.sub("model").sub("orientation_residual"))
 
     def n_outputs(self) -> int:
         return int(getattr(self, "n_outputs_", 3))
@@ -787,8 +772,6 @@ class KinematicModel(ErrorModelBase):
                 ", ".join(str(j) for j in errors.compliance)
         if any(errors.harmonics):
             text += f", transmission errors (up to {max(errors.harmonics)} harmonics per joint)"
-        if self.orientation_residual_ is not None:
-            return text + f", plus residuals of the position and of the orientation, each {self.residual_.describe()}"
         return text + (f", plus a residual {self.residual_.describe()}" if self.residual_ is not None else "")
 
     @property
@@ -801,7 +784,7 @@ class KinematicModel(ErrorModelBase):
     def effective_parameters(self) -> float:
         """The identified parameters, plus the residual model's."""
         own = sum(status == "identified" for status in self.identification_.status)
-        return float(own + sum(m.effective_parameters() for m in self._residuals()))
+        return float(own + (self.residual_.effective_parameters() if self.residual_ is not None else 0.0))
 
     def fit_notes(self) -> list[str]:
         """A compliance the data could not identify (one payload: only its products with the masses, the
@@ -812,9 +795,6 @@ class KinematicModel(ErrorModelBase):
         if self.n_outputs() == 6 and not self.orientation_:
             notes.append("identified from the positions alone, it predicts the orientation its parameters imply, "
                          "which the positions do not determine (use_orientation: true identifies from it)")
-        if self.orientation_residual_ is not None:
-            return notes + [f"{part} residual: {note}" for part, m in zip(("position", "orientation"), self._residuals())
-                            for note in m.fit_notes()]
         return notes + (self.residual_.fit_notes() if self.residual_ is not None else [])
 
     def is_physical(self) -> bool:

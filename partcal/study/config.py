@@ -8,6 +8,7 @@ file. Every problem is reported once as ``FILE: models[2].partition.max_depth
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import re
 from dataclasses import asdict, dataclass, field
@@ -21,6 +22,7 @@ from ..errors import PartcalError
 from ..models.kinds import KINDS, config_kinds
 from ..models.partition import PARTITIONS
 from ..models.partitioned import PartitionedErrorModel
+from ..models.pose import PoseErrorModel
 from ..robot.description import load_robot, robot_reference
 
 RESERVED_NAMES = {"identification", "validation", "file", "fit_seconds", "cv_seconds", "cv", "inputs", "solver",
@@ -64,6 +66,7 @@ class ModelSpec:
     params: dict = field(default_factory=dict)
     partition: PartitionSpec | None = None
     residual: "ModelSpec | None" = None
+    pose: bool = False                  # the run predicts pose errors (predict: pose)
 
     @property
     def estimator_class(self) -> type:
@@ -86,15 +89,17 @@ class ModelSpec:
         return part.sizes if part is not None else ()
 
     def build(self, random_state: int | None, size: int | None = None):
-        """The estimator, unfitted (``size`` picks one granularity of the partition, or of the residual's)."""
+        """The estimator, unfitted (``size`` picks one granularity of the partition, or of the residual's); for
+        pose errors a model of one kind for the position and one for the orientation
+        (:class:`~partcal.models.pose.PoseErrorModel`), unless the kind predicts them itself (kinematic)."""
         model = self.estimator_class.from_params(self.params, random_state)
         if self.residual is not None:
             model.set_params(residual=self.residual.build(random_state, size))
-        if self.partition is None:
-            return model
-        p = self.partition
-        return PartitionedErrorModel(partition=p.build(size if size is not None else p.sizes[0]), local=model,
-                                     blend=p.blend, blend_width=p.blend_width, random_state=random_state)
+        if self.partition is not None:
+            p = self.partition
+            model = PartitionedErrorModel(partition=p.build(size if size is not None else p.sizes[0]), local=model,
+                                          blend=p.blend, blend_width=p.blend_width, random_state=random_state)
+        return PoseErrorModel(model) if self.pose and not model.fits_pose_errors else model
 
 
 @dataclass(frozen=True)
@@ -224,8 +229,8 @@ def load_config(path: str | Path) -> RunConfig:
     if rank_by == "validation" and validation is None:
         top.fail("rank_by", "'validation' needs data.validation: FILE, a held-out set measured near the task")
     models_raw = top.get("models", "list", check=lambda v: None if v else "a non-empty list")
-    models = tuple(_model(Section(m, f"models[{i}]", lines, str(path)), robot)
-                   for i, m in enumerate(models_raw))
+    models = tuple(dataclasses.replace(_model(Section(m, f"models[{i}]", lines, str(path)), robot),
+                                       pose=predict == "pose") for i, m in enumerate(models_raw))
     names = [m.name for m in models]
     for i, m in enumerate(models):
         if names.index(m.name) != i:

@@ -55,7 +55,7 @@ def orientation_along_path(name: str, angles_mrad: dict[str, np.ndarray]) -> str
             ax.plot(idx, angle, color="grey", lw=0.9, label=text)
         else:
             ax.plot(idx, angle, color=COLOURS[(k - 1) % 4], lw=1.1, ls="--" if k > 1 else "-", label=text)
-    ax.set_ylim(bottom=0)
+    ax.set_ylim(0, 1.3 * max(max(float(a.max()) for a in angles_mrad.values()), 1e-9))   # room for the legend
     ax.set_xlabel("point along the data set")
     ax.set_ylabel("orientation error (mrad)")
     ax.set_title(f"{name}: angle of the orientation error, uncompensated and left")

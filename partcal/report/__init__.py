@@ -1,9 +1,10 @@
 """The HTML report of a batch run: one self-contained page, readable offline.
 
 ``render_report(result, folder)`` writes ``folder/index.html``: a summary, the
-comparison table in the layout of the paper's Table 2, errors along each data
-set, 3-D pictures of the partitions, swarm convergence, the fitted equations
-and the compensation check. Figures are embedded (SVG for 2-D, PNG for 3-D);
+comparison table in the layout of the paper's Table 2, for a run of pose errors
+the orientation left, errors along each data set, 3-D pictures of the
+partitions, swarm convergence, the fitted equations (and identified kinematics,
+per target) and the compensation check. Figures are embedded (SVG for 2-D, PNG for 3-D);
 the page requests nothing from any network. Every user-supplied string is
 escaped by the template engine.
 """
@@ -22,7 +23,8 @@ import numpy as np
 
 from .. import __version__
 from ..models.kinematic import BASE_PARAMETERS, ROW_PARAMETERS, TOOL_PARAMETERS
-from ..study.registry import ModelResult, RunResult, partitioned_part
+from ..models.targets import added_names
+from ..study.registry import ModelResult, Outputs, RunResult, errors_left, partitioned_part
 from . import figures
 from .scene import SceneRendering
 
@@ -58,6 +60,7 @@ def context(result: RunResult) -> dict:
     global_best = next((r for r in ranked if partitioned_part(r.model) is None), None)
     part_best = next((r for r in ranked if partitioned_part(r.model) is not None), None)
     shown = [r for r in (global_best, part_best) if r is not None]
+    outputs = Outputs.of(cfg)
     scenes, captions = scene_specs(result)
     rendering = SceneRendering(scenes)            # a child process draws them while the figures are made here
     out = {
@@ -66,6 +69,7 @@ def context(result: RunResult) -> dict:
         "folds": cfg.cv_folds, "models": result.models,
         "best": {"name": best.spec.name, "score": best.score(cfg.rank_by)},
         "best_reason": result.best_reason, "rank_by": cfg.rank_by,
+        "pose": outputs.pose, "rank_on": cfg.rank_on, "score_unit": outputs.unit,
         "datasets": [{"name": n, "n": len(m), "bounds": [f"{lo:.0f} to {hi:.0f}" for lo, hi in
                                                          zip(m.nominal_mm.min(0), m.nominal_mm.max(0))]}
                      for n, m in result.datasets.items()],
@@ -88,6 +92,8 @@ def context(result: RunResult) -> dict:
         "kinematic": kinematic_tables(result),
         **compensation_entries(result),
         "registration": registration_rows(result),
+        "registration_targets": registration_target_rows(result),
+        "orientation": orientation_section(result, shown) if outputs.pose else None,
         "design": design_summary(result),
     }
     out["scenes"] = scene_entries(rendering, captions)
@@ -104,12 +110,16 @@ def design_summary(result: RunResult) -> dict | None:
             "noise": ev.noise_mm, "position_rms": ev.position_rms_mm}
 
 
+def _registrations(result: RunResult) -> list[tuple[object, list[str]]]:
+    """Each tracker registration of the run once, with the data sets it carried into the base frame."""
+    regs = result.registrations
+    return [(reg, [name for name, r in regs.items() if r is reg]) for reg in {id(r): r for r in regs.values()}.values()]
+
+
 def registration_rows(result: RunResult) -> list[dict]:
     """One row per tracker registration of the run (none when the data were in the base frame)."""
-    regs = result.registrations
     rows = []
-    for reg in {id(r): r for r in regs.values()}.values():
-        sets = [name for name, r in regs.items() if r is reg]
+    for reg, sets in _registrations(result):
         rows.append({"sets": ", ".join(sets), "fitted_on": "identification" if "identification" in sets else sets[0],
                      "n": reg.n_poses, "rms": reg.rms_3d, "max": reg.max_3d, "condition": reg.condition,
                      "rotation": " ".join(f"{v:.4f}" for v in reg.rotation_deg),
@@ -117,6 +127,32 @@ def registration_rows(result: RunResult) -> list[dict]:
                      "tool": " ".join(f"{v:.3f}" for v in reg.tool_mm),
                      "tool_how": "fitted" if reg.fit_tool else "given"})
     return rows
+
+
+def registration_target_rows(result: RunResult) -> list[dict]:
+    """Per registration fitted on several targets or an orientation: each target's residual RMS (mm) and
+    offset in the flange frame, and the orientation's residual RMS angle with the probe's turn on the flange."""
+    out = []
+    for reg, sets in _registrations(result):
+        if not reg.target_rms_3d and reg.probe_rotation is None:
+            continue
+        doc = reg.to_dict()
+        out.append({"sets": ", ".join(sets),
+                    "targets": [{"name": name, "rms": rms, "primary": k == 0,
+                                 "tool": " ".join(f"{v:.3f}" for v in reg.tool_of(name))}
+                                for k, (name, rms) in enumerate(reg.target_rms_3d.items())],
+                    "orientation": None if reg.probe_rotation is None else {
+                        "rms_deg": reg.orientation_rms_deg, "rms_mrad": _mrad(reg.orientation_rms_deg),
+                        "probe": " ".join(f"{v:.4f}" for v in doc["probe_rotation_deg"])}})
+    return out
+
+
+def _mrad(deg: float) -> float:
+    return float(np.radians(deg) * 1000.0)
+
+
+def _deg(mrad: float) -> float:
+    return float(np.degrees(mrad / 1000.0))
 
 
 def granularity_rows(result: RunResult) -> list[dict]:
@@ -172,8 +208,13 @@ def comparison_rows(result: RunResult) -> list[dict]:
     rows.append({"name": "uncompensated", "uncompensated": True, "cells": cells_for(result.uncompensated, None)})
     for r in result.models:
         rows.append({"name": r.spec.name, "uncompensated": False, "cells": cells_for(r.metrics, r)})
-    for col in range(len(rows[0]["cells"])):       # best per column among the models
-        if rows[0]["cells"][col]["key"] in ("params", "regions", "fit_seconds", "pso_ratio"):
+    return _mark_best(rows, skip=("params", "regions", "fit_seconds", "pso_ratio"))
+
+
+def _mark_best(rows: list[dict], skip: tuple[str, ...] = ()) -> list[dict]:
+    """Mark the lowest value of each column among the models (``rows[1:]``; row 0 is the uncompensated)."""
+    for col in range(len(rows[0]["cells"])):
+        if rows[0]["cells"][col]["key"] in skip:
             continue
         values = [row["cells"][col]["value"] for row in rows[1:]]
         low = min(v for v in values if v is not None)
@@ -183,6 +224,48 @@ def comparison_rows(result: RunResult) -> list[dict]:
         for cell in row["cells"]:
             cell.setdefault("best", False)
     return rows
+
+
+ORIENTATION_COLUMNS = (("rx", "x", "{:.3f}"), ("ry", "y", "{:.3f}"), ("rz", "z", "{:.3f}"),
+                       ("angle", "angle", "{:.3f}"), ("angle_deg", "angle (deg)", "{:.4f}"),
+                       ("max_angle", "max", "{:.3f}"))
+
+
+def orientation_rows(result: RunResult) -> list[dict]:
+    """The orientation table of a run of pose errors: per data set the RMS of each component of the rotation
+    vector left, the RMS angle (mrad and degrees) and the largest angle (mrad); uncompensated, then every model."""
+    names = list(result.datasets)
+
+    def cells_for(stats: dict) -> list[dict]:
+        cells = []
+        for n in names:
+            o = stats[n]["orientation"]
+            values = [*o["rms"], o["rms_angle"], _deg(o["rms_angle"]), o["max_angle"]]
+            cells += [{"key": f"{n}.{key}", "value": float(v), "text": fmt.format(v)}
+                      for (key, _, fmt), v in zip(ORIENTATION_COLUMNS, values)]
+        return cells
+
+    rows = [{"name": "uncompensated", "uncompensated": True, "cells": cells_for(result.uncompensated)}]
+    rows += [{"name": r.spec.name, "uncompensated": False, "cells": cells_for(r.metrics)} for r in result.models]
+    return _mark_best(rows)
+
+
+def orientation_section(result: RunResult, shown: list[ModelResult]) -> dict:
+    """The Orientation section of a run of pose errors: its table and, per data set, the angle of the
+    orientation error left along the set, uncompensated and after the shown models."""
+    own = result.config.data_options.own_frame
+    figs = []
+    for n, m in result.datasets.items():
+        angles = {"uncompensated": _angle_left(m, np.zeros((len(m), 6)), n in own)}
+        angles.update({r.spec.name: _angle_left(m, r.predictions[n], n in own) for r in shown})
+        figs.append({"name": n, "svg": _b64(figures.orientation_along_path(n, angles))})
+    return {"columns": [label for _, label, _ in ORIENTATION_COLUMNS], "rows": orientation_rows(result),
+            "figures": figs}
+
+
+def _angle_left(m, predicted: np.ndarray, own_frame: bool) -> np.ndarray:
+    """The angle of the orientation error a prediction (n, 6) leaves at each pose, mrad, as the metrics count it."""
+    return np.linalg.norm(errors_left(m, predicted, own_frame)[1], axis=1)
 
 
 def family_sentences(result: RunResult) -> list[str]:
@@ -199,8 +282,20 @@ def family_sentences(result: RunResult) -> list[str]:
         changes = [100 * (best.metrics[n]["rms_3d"] / result.uncompensated[n]["rms_3d"] - 1) for n in tests]
         out.append(f"{family} ({len(members)}): the best by {'validation' if result.config.rank_by == 'validation' else 'CV'}, {best.spec.name}, brings the mean 3-D RMS on "
                    f"{'the test sets' if tests != ['identification'] else 'the identification set'} from "
-                   f"{before:.2f} to {after:.2f} mm ({_change_text(changes)}).")
+                   f"{before:.2f} to {after:.2f} mm ({_change_text(changes)})"
+                   f"{_orientation_gain(result, best, tests)}.")
     return out
+
+
+def _orientation_gain(result: RunResult, best: ModelResult, tests: list[str]) -> str:
+    """``" and the mean orientation RMS angle from 1.69 to 0.15 mrad (91% less)"`` in a run of pose errors."""
+    if result.config.predict != "pose":
+        return ""
+    before = [result.uncompensated[n]["orientation"]["rms_angle"] for n in tests]
+    after = [best.metrics[n]["orientation"]["rms_angle"] for n in tests]
+    changes = [100 * (a / b - 1) for a, b in zip(after, before)]
+    return (f", and the mean orientation RMS angle from {np.mean(before):.3f} to {np.mean(after):.3f} mrad "
+            f"({_change_text(changes)})")
 
 
 def _change_text(changes: list[float]) -> str:
@@ -250,14 +345,37 @@ def kinematic_tables(result: RunResult) -> list[dict]:
             continue
         cells = {row["name"]: _parameter_cell(row) for row in table.rows()}
         n_rows = r.model.robot_.alpha_deg.size
+        targets = identified_targets(r.model.run_summary()["kinematic"])
+        added = targets["added"] if targets else []
+        own = len(table.names) - len(added)         # a one-target model's parameters, then the added ones
+        if targets:
+            targets["own_identified"] = table.status[:own].count("identified")
         out.append({"name": r.spec.name, "same_as": None, "condition": table.condition, "n_poses": table.n_poses,
                     "identified": table.status.count("identified"), "parameters": len(table.names),
                     "rms": table.rms_mm, "unidentifiable": table.unidentifiable(),
                     "dh": [{"row": k + 1, "cells": [cells[f"{p}[{k + 1}]"] for p, _ in ROW_PARAMETERS]}
                            for k in range(n_rows)],
                     "extra": [cells[n] for n, _ in TOOL_PARAMETERS + BASE_PARAMETERS],
-                    "joint_errors": [cells[n] for n in table.names[4 * n_rows + 9:]]})
+                    "joint_errors": [cells[n] for n in table.names[4 * n_rows + 9:own]],
+                    "targets": targets, "added": [cells[n] for n in added]})
     return out
+
+
+def identified_targets(summary: dict) -> dict | None:
+    """A kinematic fit on several targets or an orientation, from its ``run_summary()["kinematic"]``: each
+    target's identification RMS (mm, the primary first), the orientation's RMS angle, how many parameters
+    the primary target alone would identify against all the data, and the names of the added parameters
+    (the further targets' offsets, the probe's turn). None for a fit on one target's positions."""
+    if "targets_rms_3d" not in summary:
+        return None
+    rms = summary["targets_rms_3d"]
+    angle = summary["orientation_rms_deg"]
+    added = [n for n, _ in added_names(dict.fromkeys(list(rms)[1:]), angle is not None)]
+    return {"rms": [{"name": name, "rms": v, "primary": k == 0} for k, (name, v) in enumerate(rms.items())],
+            "orientation": None if angle is None else {"rms_deg": angle, "rms_mrad": _mrad(angle)},
+            "identified": summary["identified"], "parameters": summary["parameters"],
+            "from_primary": summary["identifiable_from_primary"],
+            "one_target_parameters": summary["parameters"] - len(added), "added": added}
 
 
 def _parameter_cell(row: dict) -> dict:

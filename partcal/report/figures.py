@@ -1,4 +1,5 @@
-"""2-D report figures (matplotlib, SVG): errors along paths, residuals, convergence, compensation.
+"""2-D report figures (matplotlib, SVG): errors along paths (position, orientation), residuals, convergence,
+compensation.
 
 Every function returns the SVG text of one figure. Fonts stay text (not
 paths), which keeps the files small; the report embeds them as data URIs.
@@ -39,6 +40,26 @@ def errors_along_path(name: str, measured: np.ndarray, predictions: dict[str, np
     axes[0].set_title(f"{name}: measured and predicted error")
     axes[0].legend(loc="upper right", ncol=3, fontsize=8, frameon=False)
     axes[-1].set_xlabel("point along the data set")
+    return _svg(fig)
+
+
+def orientation_along_path(name: str, angles_mrad: dict[str, np.ndarray]) -> str:
+    """The angle of the orientation error at each point of a data set (mrad): uncompensated (the first entry,
+    grey, filled) and left by each model, with each series' RMS in the legend."""
+    fig, ax = plt.subplots(figsize=(8, 2.6))
+    for k, (label, angle) in enumerate(angles_mrad.items()):
+        idx = np.arange(len(angle))
+        text = f"{label} (RMS {np.sqrt(np.mean(angle**2)):.3f} mrad)"
+        if k == 0:
+            ax.fill_between(idx, angle, color="grey", alpha=0.3, lw=0)
+            ax.plot(idx, angle, color="grey", lw=0.9, label=text)
+        else:
+            ax.plot(idx, angle, color=COLOURS[(k - 1) % 4], lw=1.1, ls="--" if k > 1 else "-", label=text)
+    ax.set_ylim(0, 1.3 * max(max(float(a.max()) for a in angles_mrad.values()), 1e-9))   # room for the legend
+    ax.set_xlabel("point along the data set")
+    ax.set_ylabel("orientation error (mrad)")
+    ax.set_title(f"{name}: angle of the orientation error, uncompensated and left")
+    ax.legend(loc="upper right", ncol=2, fontsize=8, frameon=False)
     return _svg(fig)
 
 

@@ -1,0 +1,169 @@
+"""Full-pose compensation with pose models (6 outputs: mm, then a rotation vector in mrad): the Predictor and the
+``predict`` / ``compensate`` commands."""
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from partcal import DataError, ErrorModel, load_robot
+from partcal.robot.compensation import CompensationWarning
+from partcal.robot.kinematics import xyz_deg_from_matrices
+from partcal.study.persist import model_to_dict
+from partcal.study.predictor import Predictor
+
+UR10 = load_robot("universal_robots_ur10")
+NOMINAL = UR10.replace(tool_mm=np.array([30.0, -20.0, 150.0]))
+CENTRE = np.array([20.0, -70.0, 90.0, -100.0, -80.0, 10.0])      # the UR10 joints the data lie around, degrees
+
+
+def _true_robot():
+    """The nominal UR10 with other DH lengths (1 mm) and angles (0.05 degrees): the arm the data come from."""
+    rng = np.random.default_rng(5)
+    rows = NOMINAL.alpha_deg.size
+    return NOMINAL.replace(a_mm=NOMINAL.a_mm + rng.normal(0, 1.0, rows), d_mm=NOMINAL.d_mm + rng.normal(0, 1.0, rows),
+                           alpha_deg=NOMINAL.alpha_deg + rng.normal(0, 0.05, rows),
+                           theta_offset_deg=NOMINAL.theta_offset_deg + rng.normal(0, 0.05, rows))
+
+
+TRUE = _true_robot()
+
+
+def true_pose_errors(q):
+    """The true arm's pose errors at joints ``q``: position (mm), then the rotation vector (mrad) of
+    ``R_true R_nominal^T``, straight from both robots' forward kinematics."""
+    T, N = TRUE.forward(q), NOMINAL.forward(q)
+    turn = Rotation.from_matrix(T[:, :3, :3] @ N[:, :3, :3].transpose(0, 2, 1)).as_rotvec()
+    return np.hstack([T[:, :3, 3] - N[:, :3, 3], 1000.0 * turn])
+
+
+def predictor_of(model, robot=NOMINAL, name="pose"):
+    """A Predictor of an in-memory model, with the document its model file would hold."""
+    return Predictor(model, model_to_dict(model, name=name, robot=robot), robot)
+
+
+def euler_rotations(angles_deg):
+    """Intrinsic XYZ angles (degrees) to rotations, by scipy ('XYZ' upper case: intrinsic)."""
+    return Rotation.from_euler("XYZ", angles_deg, degrees=True).as_matrix()
+
+
+@pytest.fixture(scope="module")
+def joint_pose_model():
+    q = CENTRE + np.random.default_rng(0).uniform(-20, 20, (400, 6))
+    return ErrorModel(inputs="joint", degree=3, cross_terms=True, solver="lstsq").fit(q, true_pose_errors(q))
+
+
+def linear_pose_field(p):
+    """A Cartesian pose-error field: about a millimetre per metre, and turns of 5 to 10 mrad."""
+    return np.hstack([1e-3 * p[:, [1, 2, 0]], 5.0 + 2e-3 * p])
+
+
+@pytest.fixture(scope="module")
+def cartesian_pose_model():
+    q = CENTRE + np.random.default_rng(1).uniform(-40, 40, (300, 6))
+    p = NOMINAL.positions(q)
+    return ErrorModel(degree=1, solver="lstsq").fit(p, linear_pose_field(p))
+
+
+def test_joint_pose_model_puts_the_true_robot_on_the_target_pose(joint_pose_model):
+    """Commanding the compensated joints, the true arm reaches the target poses to the model's accuracy; commanding
+    the targets themselves, it misses by millimetres and hundredths of a degree."""
+    from partcal.robot.kinematics import pose_errors
+
+    p = predictor_of(joint_pose_model)
+    q = CENTRE + np.random.default_rng(2).uniform(-15, 15, (50, 6))
+    wanted = NOMINAL.forward(q)
+    result = p.compensate_pose(wanted[:, :3, 3], xyz_deg_from_matrices(wanted[:, :3, :3]), q, tol_mm=1e-6,
+                               tol_deg=1e-6)
+    assert result.converged.all()
+    assert (result.residual_mm <= 1e-6).all() and (result.residual_deg <= 1e-6).all()
+    np.testing.assert_allclose(NOMINAL.forward(result.joints_deg)[:, :3, 3], result.commanded_mm, atol=1e-9)
+    miss_mm, miss_deg = pose_errors(TRUE.forward(result.joints_deg), wanted)
+    before_mm, before_deg = pose_errors(TRUE.forward(q), wanted)
+    assert miss_mm.max() < 0.02 and miss_deg.max() < 0.002                 # 0.0075 mm, 0.00045 degrees
+    assert before_mm.min() > 2.0 and before_deg.min() > 0.02              # 2.9 to 3.3 mm, 0.029 to 0.093 degrees
+    assert miss_mm.max() < before_mm.min() / 100 and miss_deg.max() < before_deg.min() / 20
+
+
+def test_cartesian_pose_model_commands_the_turned_back_orientation(cartesian_pose_model):
+    """The position is the fixed point p' + e(p') = p; the orientation is exp(-r(p')) R_target, r in mrad."""
+    p = predictor_of(cartesian_pose_model)
+    q = CENTRE + np.random.default_rng(3).uniform(-30, 30, (20, 6))
+    targets = NOMINAL.positions(q)
+    angles = xyz_deg_from_matrices(NOMINAL.forward(q)[:, :3, :3]) + [1.0, -2.0, 3.0]
+    result = p.compensate_pose(targets, angles)
+    assert result.converged.all() and result.joints_deg is None
+    predicted = cartesian_pose_model.predict(result.commanded_mm)
+    np.testing.assert_allclose(result.commanded_mm + predicted[:, :3], targets, atol=1e-4)
+    expected = Rotation.from_rotvec(-1e-3 * predicted[:, 3:]).as_matrix() @ euler_rotations(angles)
+    np.testing.assert_allclose(result.commanded_rotation, expected, atol=1e-12)
+    turned = np.degrees(np.linalg.norm(Rotation.from_matrix(result.commanded_rotation @ euler_rotations(angles)
+                                                            .transpose(0, 2, 1)).as_rotvec(), axis=1))
+    np.testing.assert_allclose(turned, np.degrees(1e-3 * np.linalg.norm(predicted[:, 3:], axis=1)), rtol=1e-9)
+    assert turned.min() > 0.4                                             # the command does turn: 7 to 15 mrad
+    assert (result.residual_deg < 1e-9).all()
+
+
+def test_a_pose_the_robot_cannot_take_is_not_converged_and_warns(cartesian_pose_model):
+    p = predictor_of(cartesian_pose_model)
+    reachable = NOMINAL.forward(CENTRE[None])
+    positions = np.vstack([reachable[:, :3, 3], [[1480.0, 0.0, 0.0]]])             # the second is out of reach
+    angles = np.repeat(xyz_deg_from_matrices(reachable[:, :3, :3]), 2, axis=0)
+    with pytest.warns(CompensationWarning, match=r"1 of 2 targets did not converge to 0.0001 mm and 1e-05 deg: #1 "):
+        result = p.compensate_pose(positions, angles)
+    assert result.converged.tolist() == [True, False]
+    no_robot = Predictor(cartesian_pose_model, model_to_dict(cartesian_pose_model, name="pose"))
+    assert no_robot.compensate_pose(positions, angles).converged.all()    # without a robot, nothing says it is out
+
+
+def test_pose_models_predict_six_columns_and_position_models_three(joint_pose_model, cartesian_pose_model):
+    q = CENTRE[None] + [[0.0] * 6, [5.0] * 6]
+    pose = predictor_of(joint_pose_model)
+    assert pose.predicts_pose
+    np.testing.assert_array_equal(pose.predict(joints=q), joint_pose_model.predict(q))
+    assert pose.predict(joints=np.zeros((0, 6))).shape == (0, 6)
+    assert predictor_of(cartesian_pose_model).predict(positions=np.zeros((0, 3))).shape == (0, 6)
+    train = CENTRE + np.random.default_rng(0).uniform(-20, 20, (30, 6))
+    position = predictor_of(ErrorModel(inputs="joint", solver="lstsq").fit(train, true_pose_errors(train)[:, :3]))
+    assert not position.predicts_pose and position.predict(joints=q).shape == (2, 3)
+    assert position.predict(joints=np.zeros((0, 6))).shape == (0, 3)
+
+
+def test_a_pose_model_without_orientations_compensates_positions_as_a_position_model(cartesian_pose_model):
+    """compensate_full reads the position outputs: the same command as a model fitted on them alone."""
+    q = CENTRE + np.random.default_rng(1).uniform(-40, 40, (300, 6))
+    p = NOMINAL.positions(q)
+    position = ErrorModel(degree=1, solver="lstsq").fit(p, linear_pose_field(p)[:, :3])
+    targets = p[:10] + 5.0
+    np.testing.assert_allclose(predictor_of(cartesian_pose_model).compensate_full(targets).commanded_mm,
+                               predictor_of(position).compensate_full(targets).commanded_mm, atol=1e-9)
+
+
+def test_compensate_pose_refuses_a_position_model_and_bad_inputs(cartesian_pose_model):
+    position = predictor_of(ErrorModel(solver="lstsq").fit(np.random.default_rng(0).uniform(0, 900, (20, 3)),
+                                                            np.zeros((20, 3))), name="FDP(CI)")
+    with pytest.raises(DataError, match=r"model 'FDP\(CI\)' predicts position errors only \(3 outputs\), so it "
+                                        r"cannot compensate an orientation: fit a pose model \(6 outputs"):
+        position.compensate_pose([[900.0, 0.0, 500.0]], [[0.0, 0.0, 0.0]])
+    p = predictor_of(cartesian_pose_model)
+    cases = [(([[900.0, 0.0, 500.0]], [[0.0, 0.0]]), r"Expected orientations_deg with shape \(n, 3\), got array "
+                                                     r"with shape \(1, 2\)"),
+             (([[900.0, 0.0, 500.0]], [[0.0, np.nan, 0.0]]), r"orientations_deg holds a non-finite value \(nan\) at "
+                                                             r"index \(0, 1\)"),
+             (([[900.0, 0.0, 500.0]] * 2, [[0.0, 0.0, 0.0]]), "orientations_deg has 1 rows but positions_mm has 2")]
+    for args, message in cases:
+        with pytest.raises(DataError, match=message):
+            p.compensate_pose(*args)
+    with pytest.raises(DataError, match="tol_deg must be a finite number >= 0; got -1"):
+        p.compensate_pose([[900.0, 0.0, 500.0]], [[0.0, 0.0, 0.0]], tol_deg=-1)
+    empty = p.compensate_pose(np.zeros((0, 3)), np.zeros((0, 3)))
+    assert empty.commanded_rotation.shape == (0, 3, 3) and empty.residual_deg.shape == (0,)
+
+
+def test_a_predicted_turn_beyond_half_a_turn_is_refused_as_implausible(cartesian_pose_model):
+    p = predictor_of(cartesian_pose_model)
+    X = np.array([[900.0, 0.0, 500.0], [1e6, 0.0, 0.0]])
+    p.refuse_implausible(X[:1], np.array([[1.0, 2.0, 3.0, 3000.0, 0.0, 0.0]]))          # 172 degrees: accepted
+    with pytest.raises(DataError, match=r"in.csv: data row 2: the predicted error turns by 4000 mrad, more than "
+                                        r"half a turn \(3142 mrad\) \(1 of 2 rows\); the input \[1e\+06, 0, 0\]"):
+        p.refuse_implausible(X, np.array([[1.0, 2.0, 3.0, 0.0, 0.0, 0.0], [1.0, 2.0, 3.0, 0.0, 4000.0, 0.0]]),
+                             source="in.csv")

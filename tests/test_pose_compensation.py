@@ -298,3 +298,33 @@ def test_predict_command_writes_the_rotation_vector_of_a_pose_model(pose_files, 
     assert list(rows[0]) == ["q1", "q2", "q3", "q4", "q5", "q6", "dx", "dy", "dz", "drx", "dry", "drz"]
     np.testing.assert_allclose(columns(rows, ["dx", "dy", "dz", "drx", "dry", "drz"]), true_pose_errors(q),
                                atol=0.02)                                         # the true arm's, mm and mrad
+
+
+def test_each_target_row_is_compensated_at_its_own_payload():
+    """``compensate`` groups rows by their payload_kg: a row's command is that of compensate_pose at its payload."""
+    from partcal.cli import _compensated
+
+    class Sagging(ErrorModel):          # the joint pose model, sagging 0.01 mm per kg in z
+        @property
+        def reads_payload(self):
+            return True
+
+        def predict_validated(self, X, payload_kg=None):
+            out = super().predict_validated(X)
+            out[:, 2] -= 0.01 * (0.0 if payload_kg is None else payload_kg)
+            return out
+
+    train = CENTRE + np.random.default_rng(0).uniform(-20, 20, (400, 6))
+    p = predictor_of(Sagging(inputs="joint", degree=3, cross_terms=True, solver="lstsq").fit(train,
+                                                                                         true_pose_errors(train)))
+    q = CENTRE + np.random.default_rng(6).uniform(-10, 10, (4, 6))
+    wanted = NOMINAL.forward(q)
+    targets, angles = wanted[:, :3, 3], xyz_deg_from_matrices(wanted[:, :3, :3])
+    payload = np.array([0.0, 20.0, 0.0, 50.0])
+    result = _compensated(p, targets, q, payload, angles)
+    for k, kg in enumerate(payload):
+        alone = p.compensate_pose(targets[k:k + 1], angles[k:k + 1], q[k:k + 1], payload_kg=kg)
+        np.testing.assert_allclose(result.joints_deg[k], alone.joints_deg[0], atol=1e-9)
+        np.testing.assert_allclose(result.commanded_rotation[k], alone.commanded_rotation[0], atol=1e-12)
+    heavy = p.compensate_pose(targets[3:], angles[3:], q[3:], payload_kg=0.0).commanded_mm
+    assert result.commanded_mm[3, 2] - heavy[0, 2] == pytest.approx(0.5, abs=0.01)     # 50 kg: 0.5 mm higher

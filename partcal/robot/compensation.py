@@ -213,6 +213,18 @@ def false_target_cartesian_poses(predict: Callable[[NDArray[np.float64]], NDArra
     A target is converged when its position is; one without a finite
     prediction at its command keeps the target's orientation as its command,
     with an infinite residual.
+
+    Examples
+    --------
+    A robot that errs by +1 mm in x and turns 0.01 rad about z everywhere is
+    commanded 1 mm short, turned back by 0.01 rad:
+
+    >>> pose = np.eye(4); pose[:3, 3] = [1000.0, 0.0, 500.0]
+    >>> r = false_target_cartesian_poses(lambda p: np.tile([1.0, 0, 0, 0, 0, 0.01], (len(p), 1)), pose[None])
+    >>> r.commanded_mm, bool(r.converged[0])
+    (array([[999.,   0., 500.]]), True)
+    >>> np.degrees(np.arctan2(r.commanded_rotation[0, 1, 0], r.commanded_rotation[0, 0, 0])).round(4)
+    np.float64(-0.573)
     """
     from scipy.spatial.transform import Rotation
 

@@ -490,17 +490,19 @@ def build_parser() -> argparse.ArgumentParser:
     pred = sub.add_parser("predict", help="predict errors with a model file")
     pred.add_argument("model", help="model file (models/<name>.json of a run)")
     pred.add_argument("input", help="CSV with x,y,z (mm) for Cartesian models or q1..qN (deg) for joint models")
-    pred.add_argument("-o", "--output", required=True, help="CSV to write (inputs + dx,dy,dz)")
+    pred.add_argument("-o", "--output", required=True,
+                      help="CSV to write (inputs + dx,dy,dz in mm; pose models also drx,dry,drz in mrad)")
     pred.add_argument("--format", metavar="FILE.yaml", help="the input's format (delimiter, decimal, columns, "
                                                             "units), see docs/data.md")
     pred.set_defaults(func=_cmd_predict)
     comp = sub.add_parser("compensate", help="false targets that make the robot reach the given targets")
     comp.add_argument("model", help="model file (models/<name>.json of a run)")
     comp.add_argument("targets", help="CSV with x,y,z (or x_nom,y_nom,z_nom) in mm; joint models also read q1..qN "
-                                      "as IK seeds")
+                                      "as IK seeds; pose models also rx,ry,rz (or rx_nom,ry_nom,rz_nom), intrinsic "
+                                      "XYZ degrees")
     comp.add_argument("-o", "--output", required=True,
-                      help="CSV to write (targets + x_cmd,y_cmd,z_cmd[,qK_cmd],converged); exit code 3 when any "
-                           "target did not converge")
+                      help="CSV to write (targets + x_cmd,y_cmd,z_cmd[,rx_cmd,ry_cmd,rz_cmd][,qK_cmd],converged); "
+                           "exit code 3 when any target did not converge")
     comp.add_argument("--format", metavar="FILE.yaml", help="the targets' format (delimiter, decimal, columns, "
                                                             "units), see docs/data.md")
     comp.set_defaults(func=_cmd_compensate)

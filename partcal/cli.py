@@ -21,6 +21,10 @@ from . import __version__
 from .errors import PartcalError
 
 log = logging.getLogger("partcal")
+_POSITION_COLUMNS = [["x", "y", "z"], ["x_nom", "y_nom", "z_nom"]]       # predict/compensate: x,y,z or else x_nom..
+_ORIENTATION_COLUMNS = [["rx", "ry", "rz"], ["rx_nom", "ry_nom", "rz_nom"]]  # compensate: the same for orientations
+_TURN_COLUMNS = ("drx", "dry", "drz")       # predict: a pose model's predicted rotation vector, mrad
+
 
 def _cmd_simulate(args) -> int:
     from ._io import check_folder_writable
@@ -115,7 +119,7 @@ def _cmd_predict(args) -> int:
     predictor = load_predictor(args.model)
     fmt = _format(args)
     if predictor.inputs == "cartesian":
-        cols, X, _ = read_columns(args.input, [["x", "y", "z"], ["x_nom", "y_nom", "z_nom"]], fmt=fmt)
+        cols, X, _ = read_columns(args.input, _POSITION_COLUMNS, fmt=fmt)
         errors = predictor.predict(positions=X)
         payload = None
     else:     # a model with compliant joints reads the payload of each row too, when the file has it
@@ -124,8 +128,8 @@ def _cmd_predict(args) -> int:
         errors = predictor.predict(joints=X, payload_kg=payload)
     predictor.refuse_implausible(X, errors, source=args.input)     # nothing is written then
     given = [X] if payload is None else [X, payload[:, None]]
-    _write_table(args.output, cols + (["payload_kg"] if payload is not None else []) + ["dx", "dy", "dz"],
-                 np.hstack(given + [errors]), atomic_write)
+    _write_table(args.output, cols + (["payload_kg"] if payload is not None else []) + ["dx", "dy", "dz"]
+                 + (list(_TURN_COLUMNS) if predictor.predicts_pose else []), np.hstack(given + [errors]), atomic_write)
     _warn_if_far(predictor, X)
     print(f"predicted errors for {len(X)} points: {args.output}")
     return 0
@@ -157,6 +161,7 @@ def _cmd_compensate(args) -> int:
     from .metrics import ExtrapolationWarning
     from .robot.compensation import CompensationWarning
     from .robot.description import joint_columns
+    from .robot.kinematics import xyz_deg_from_matrices
     from .study.predictor import load_predictor
 
     _refuse_input_as_output(args.output, "compensate", [("model file", args.model), ("targets file", args.targets),
@@ -164,15 +169,23 @@ def _cmd_compensate(args) -> int:
     predictor = load_predictor(args.model)
     n_q = predictor.robot.n_joints if predictor.robot is not None else 0
     optional = joint_columns(n_q) if predictor.inputs == "joint" else []
-    cols, targets, seeds = read_columns(args.targets, [["x", "y", "z"], ["x_nom", "y_nom", "z_nom"]], optional,
-                                        fmt=_format(args))
+    cols, targets, seeds = read_columns(args.targets, _POSITION_COLUMNS, optional, fmt=_format(args))
+    turn_cols, angles = _target_orientations(args.targets, _format(args))
+    if angles is not None and not predictor.predicts_pose:
+        raise PartcalError(f"compensate: {args.targets} has the orientation columns {', '.join(turn_cols)}, but "
+                           f"{args.model} predicts position errors only ({predictor.model.n_outputs()} outputs): fit "
+                           "a pose model ('predict: pose' in the run config) to compensate orientations, or drop "
+                           "those columns to compensate the positions; nothing written")
     payload = read_payloads(args.targets, _format(args)) if predictor.model.reads_payload else None
     with warnings.catch_warnings():       # exit code 3 and one stderr line below say it instead
         warnings.simplefilter("ignore", CompensationWarning)
         warnings.simplefilter("ignore", ExtrapolationWarning)
-        result = _compensated(predictor, targets, seeds, payload)
+        result = _compensated(predictor, targets, seeds, payload, angles)
     far = _far_from_data(predictor, result.commanded_mm if predictor.inputs == "cartesian" else result.joints_deg)
     header, parts = list(cols), [targets]
+    if angles is not None:
+        header += turn_cols
+        parts.append(angles)
     if seeds is not None:
         header += optional
         parts.append(seeds)
@@ -181,6 +194,9 @@ def _cmd_compensate(args) -> int:
         parts.append(payload[:, None])
     header += ["x_cmd", "y_cmd", "z_cmd"]
     parts.append(result.commanded_mm)
+    if angles is not None:
+        header += ["rx_cmd", "ry_cmd", "rz_cmd"]
+        parts.append(xyz_deg_from_matrices(result.commanded_rotation))
     if result.joints_deg is not None:
         header += [f"{c}_cmd" for c in joint_columns(n_q)]
         parts.append(result.joints_deg)
@@ -189,10 +205,13 @@ def _cmd_compensate(args) -> int:
     bad = np.flatnonzero(~result.converged)
     if bad.size:
         first = int(bad[0])
+        target = f"{targets[first].round(3).tolist()} mm" + ("" if angles is None else
+                                                               f", {angles[first].round(3).tolist()} deg")
+        miss = f"{result.residual_mm[first]:.3g} mm" + ("" if angles is None else
+                                                        f", {result.residual_deg[first]:.3g} deg")
         print(f"partcal: {bad.size} of {len(targets)} targets did not converge or are unreachable (first: data "
-              f"row {first + 1} of {args.targets}, target {targets[first].round(3).tolist()} mm, predicted miss "
-              f"{result.residual_mm[first]:.3g} mm); {args.output} marks them converged=false"
-              + (f"; also, {far}" if far else ""), file=sys.stderr)
+              f"row {first + 1} of {args.targets}, target {target}, predicted miss {miss}); {args.output} marks "
+              f"them converged=false" + (f"; also, {far}" if far else ""), file=sys.stderr)
         return 3
     if far:
         print(f"partcal: warning: {far}", file=sys.stderr)
@@ -200,15 +219,46 @@ def _cmd_compensate(args) -> int:
     return 0
 
 
-def _compensated(predictor, targets, seeds, payload):
-    """``compensate_full`` of every target, each at its own payload when ``payload`` (kg per row) is given."""
+def _target_orientations(path, fmt) -> tuple[list[str], np.ndarray | None]:
+    """The targets' orientations (n, 3), intrinsic XYZ degrees, and their columns: ``rx, ry, rz``, or else
+    ``rx_nom, ry_nom, rz_nom``; ``([], None)`` when the file has neither. An incomplete triple is refused."""
+    from .data.formats import MeasurementFormat
+    from .data.measurements import read_columns
+    from .data.pose_columns import ORIENTATION_NOMINAL, orientation_problem
+
+    for names in _ORIENTATION_COLUMNS:
+        angles = read_columns(path, _POSITION_COLUMNS, names, fmt=fmt)[2]
+        if angles is not None:
+            break
+    else:
+        return [], None
+    if names[0] == "rx":        # read under their own names: the format's orientation unit applies as to rx_nom..
+        angles = (fmt or MeasurementFormat()).to_contract(list(ORIENTATION_NOMINAL), angles)
+    problem = orientation_problem(angles)
+    if problem is not None:
+        row, k, expected = problem
+        raise PartcalError(f"{path}: data row {row + 1}: column {names[k]!r}: expected an angle in {expected}, got "
+                           f"{angles[row, k]:g}")
+    return list(names), angles
+
+
+def _compensated(predictor, targets, seeds, payload, angles=None):
+    """``compensate_full`` of every target (``compensate_pose`` with ``angles``, (n, 3) degrees), each at its
+    own payload when ``payload`` (kg per row) is given."""
     from .robot.compensation import merged
 
+    def solve(rows, kg):
+        def some(v):
+            return v if rows is None or v is None else v[rows]
+
+        if angles is None:
+            return predictor.compensate_full(some(targets), some(seeds), payload_kg=kg)
+        return predictor.compensate_pose(some(targets), some(angles), some(seeds), payload_kg=kg)
+
     if payload is None:
-        return predictor.compensate_full(targets, seeds)
+        return solve(None, None)
     groups = [payload == kg for kg in np.unique(payload)]
-    return merged([(rows, predictor.compensate_full(targets[rows], None if seeds is None else seeds[rows],
-                                                    payload_kg=float(payload[rows][0]))) for rows in groups])
+    return merged([(rows, solve(rows, float(payload[rows][0]))) for rows in groups])
 
 
 def _refuse_input_as_output(output, command: str, inputs) -> None:
@@ -440,17 +490,19 @@ def build_parser() -> argparse.ArgumentParser:
     pred = sub.add_parser("predict", help="predict errors with a model file")
     pred.add_argument("model", help="model file (models/<name>.json of a run)")
     pred.add_argument("input", help="CSV with x,y,z (mm) for Cartesian models or q1..qN (deg) for joint models")
-    pred.add_argument("-o", "--output", required=True, help="CSV to write (inputs + dx,dy,dz)")
+    pred.add_argument("-o", "--output", required=True,
+                      help="CSV to write (inputs + dx,dy,dz in mm; pose models also drx,dry,drz in mrad)")
     pred.add_argument("--format", metavar="FILE.yaml", help="the input's format (delimiter, decimal, columns, "
                                                             "units), see docs/data.md")
     pred.set_defaults(func=_cmd_predict)
     comp = sub.add_parser("compensate", help="false targets that make the robot reach the given targets")
     comp.add_argument("model", help="model file (models/<name>.json of a run)")
     comp.add_argument("targets", help="CSV with x,y,z (or x_nom,y_nom,z_nom) in mm; joint models also read q1..qN "
-                                      "as IK seeds")
+                                      "as IK seeds; pose models also rx,ry,rz (or rx_nom,ry_nom,rz_nom), intrinsic "
+                                      "XYZ degrees")
     comp.add_argument("-o", "--output", required=True,
-                      help="CSV to write (targets + x_cmd,y_cmd,z_cmd[,qK_cmd],converged); exit code 3 when any "
-                           "target did not converge")
+                      help="CSV to write (targets + x_cmd,y_cmd,z_cmd[,rx_cmd,ry_cmd,rz_cmd][,qK_cmd],converged); "
+                           "exit code 3 when any target did not converge")
     comp.add_argument("--format", metavar="FILE.yaml", help="the targets' format (delimiter, decimal, columns, "
                                                             "units), see docs/data.md")
     comp.set_defaults(func=_cmd_compensate)

@@ -532,6 +532,17 @@ def test_compensate_reads_the_nominal_columns_of_a_measurement_csv(cartesian_mod
     np.testing.assert_allclose(cmd + load_predictor(cartesian_model).predict(positions=cmd), m.nominal_mm, atol=2e-4)
 
 
+def test_orientation_targets_with_a_position_model_are_refused_and_nothing_written(cartesian_model, tmp_path):
+    targets = tmp_path / "t.csv"
+    targets.write_text("x,y,z,rx,ry,rz\n1000,0,500,180,0,90\n")
+    out = tmp_path / "c.csv"
+    res = run("compensate", str(cartesian_model), str(targets), "-o", str(out))
+    assert res.returncode == 2 and res.stderr.count("\n") == 1, res.stderr
+    assert (f"compensate: {targets} has the orientation columns rx, ry, rz, but {cartesian_model} predicts position "
+            "errors only (3 outputs): fit a pose model ('predict: pose' in the run config)") in res.stderr
+    assert not out.exists()
+
+
 def test_screenshot_without_a_browser_is_refused_before_fitting(tmp_path):
     import subprocess
     import sys

@@ -8,11 +8,19 @@ silently returned. Joint models solve ``FK(q') + e(q') = p`` for the joints
 directly, by damped least squares on the whole equation (joints the model
 never saw move kept fixed).
 
+Full poses (a model of 6 outputs: the position error, then the rotation
+vector that turns the nominal orientation into the real one) are compensated
+the same ways: joint models solve the whole pose equation by damped least
+squares (:func:`false_target_poses`); Cartesian models, which read the
+position alone, take the position's fixed point and then the orientation
+that the predicted turn carries onto the target
+(:func:`false_target_cartesian_poses`).
+
 Either way the answer must be one the robot can take: joint solutions that
 break the robot's limits or coupled constraints (the SK120's ``q2 - q3`` in
 [10, 120]) are not converged, and a Cartesian command is converged only
 where the robot's inverse kinematics reaches it within those limits
-(:func:`reachable`).
+(:func:`reachable`, :func:`reachable_poses` for full poses).
 """
 
 from __future__ import annotations
@@ -49,12 +57,19 @@ class CompensationResult:
     commanded_rotation: NDArray[np.float64] | None = None    # full-pose compensation: (n, 3, 3)
     residual_deg: NDArray[np.float64] | None = None          # and its predicted orientation miss
 
-    def warn_unconverged(self, tol_mm: float) -> None:
+    def warn_unconverged(self, tol_mm: float, tol_deg: float | None = None) -> None:
+        """A :class:`CompensationWarning` naming the first unconverged targets (0-based) and their misses.
+
+        ``tol_deg`` (full-pose results) adds the orientation tolerance and misses.
+        """
         bad = np.flatnonzero(~self.converged)
         if bad.size:
-            listed = ", ".join(f"#{i} ({self.residual_mm[i]:.3g} mm)" for i in bad[:5])
+            pose = tol_deg is not None and self.residual_deg is not None
+            listed = ", ".join(f"#{i} ({self.residual_mm[i]:.3g} mm" + (f", {self.residual_deg[i]:.3g} deg)"
+                                                                         if pose else ")") for i in bad[:5])
             more = f" and {bad.size - 5} more" if bad.size > 5 else ""
-            warnings.warn(f"{bad.size} of {len(self.converged)} targets did not converge to {tol_mm:g} mm: "
+            tolerance = f"{tol_mm:g} mm" + (f" and {tol_deg:g} deg" if pose else "")
+            warnings.warn(f"{bad.size} of {len(self.converged)} targets did not converge to {tolerance}: "
                           f"{listed}{more}", CompensationWarning, stacklevel=3)
 
 
@@ -184,6 +199,58 @@ def false_target_poses(predict: Callable[[NDArray[np.float64]], NDArray[np.float
                               commanded_rotation=nominal[:, :3, :3], residual_deg=residual_deg)
 
 
+def false_target_cartesian_poses(predict: Callable[[NDArray[np.float64]], NDArray[np.float64]],
+                                 poses: NDArray[np.float64], *, tol_mm: float = 1e-4, tol_deg: float = 1e-5,
+                                 max_iter: int = 50) -> CompensationResult:
+    """Full-pose false targets for a Cartesian model ``predict(positions_mm) -> (n, 6)`` pose errors.
+
+    The pose error is that of :func:`false_target_poses` (position mm, then
+    the rotation vector ``r`` in radians, base frame, with ``R_real =
+    exp(r) R_commanded``), read at the commanded position alone. So the
+    position is the fixed point of :func:`false_target` on the first three
+    columns, and the commanded orientation is then exactly
+    ``exp(-r(p')) R_target``: its predicted miss ``residual_deg`` is rounding.
+    A target is converged when its position is; one without a finite
+    prediction at its command keeps the target's orientation as its command,
+    with an infinite residual.
+
+    Examples
+    --------
+    A robot that errs by +1 mm in x and turns 0.01 rad about z everywhere is
+    commanded 1 mm short, turned back by 0.01 rad:
+
+    >>> pose = np.eye(4); pose[:3, 3] = [1000.0, 0.0, 500.0]
+    >>> r = false_target_cartesian_poses(lambda p: np.tile([1.0, 0, 0, 0, 0, 0.01], (len(p), 1)), pose[None])
+    >>> r.commanded_mm, bool(r.converged[0])
+    (array([[999.,   0., 500.]]), True)
+    >>> np.degrees(np.arctan2(r.commanded_rotation[0, 1, 0], r.commanded_rotation[0, 0, 0])).round(4)
+    np.float64(-0.573)
+    """
+    from scipy.spatial.transform import Rotation
+
+    poses = checked_poses(poses)
+    rotations = poses[:, :3, :3]
+
+    def errors(X):
+        e = np.asarray(predict(X), dtype=float)
+        if e.shape != (len(X), 6):
+            raise DataError(f"predict must give pose errors of shape ({len(X)}, 6) (mm, then a rotation vector in "
+                            f"radians); got shape {e.shape}")
+        return e
+
+    position = false_target(lambda X: errors(X)[:, :3], poses[:, :3, 3], tol_mm=tol_mm, max_iter=max_iter)
+    with np.errstate(over="ignore", invalid="ignore"):
+        turn = errors(position.commanded_mm)[:, 3:]
+    ok = np.isfinite(turn).all(axis=1) & np.isfinite(position.residual_mm)
+    turn[~ok] = 0.0
+    commanded = Rotation.from_rotvec(-turn).as_matrix() @ rotations
+    real = Rotation.from_rotvec(turn).as_matrix() @ commanded            # what the model says the robot reaches
+    residual_deg = np.where(ok, np.degrees(np.linalg.norm(ik.rotation_vectors(rotations @ real.transpose(0, 2, 1)),
+                                                          axis=1)), np.inf)
+    return dataclasses.replace(position, converged=position.converged & ok & (residual_deg <= tol_deg),
+                               commanded_rotation=commanded, residual_deg=residual_deg)
+
+
 def reachable(robot: Robot, points_mm: NDArray[np.float64], seeds_deg: NDArray[np.float64] | None = None, *,
               tol_mm: float = 1e-6, tries: int = 40) -> NDArray[np.bool_]:
     """Which points ``(n, 3)`` mm the robot's tool reaches with joints inside its limits and constraints.
@@ -196,15 +263,37 @@ def reachable(robot: Robot, points_mm: NDArray[np.float64], seeds_deg: NDArray[n
     not from another.
     """
     points = np.asarray(points_mm, dtype=float)
-    ok = np.zeros(len(points), dtype=bool)
+    return _reached_from_seeds(robot, np.all(np.isfinite(points), axis=1), seeds_deg, tries,
+                               lambda todo, start: robot.inverse(points[todo], start, tol_mm=tol_mm).success)
+
+
+def reachable_poses(robot: Robot, poses: NDArray[np.float64], seeds_deg: NDArray[np.float64] | None = None, *,
+                    tol_mm: float = 1e-6, tol_deg: float = 1e-6, tries: int = 40) -> NDArray[np.bool_]:
+    """Which tool poses ``(n, 4, 4)`` (mm) the robot takes with joints inside its limits and constraints.
+
+    :func:`reachable` for position and orientation: full-pose IK
+    (:meth:`Robot.inverse_pose`, all joints free) from ``seeds_deg`` (default
+    the home pose), then from the same further seeds. A robot with fewer than
+    six joints takes only some orientations at a point.
+    """
+    poses = np.asarray(poses, dtype=float)
+    return _reached_from_seeds(robot, np.all(np.isfinite(poses), axis=(1, 2)), seeds_deg, tries,
+                               lambda todo, start: robot.inverse_pose(poses[todo], start, tol_mm=tol_mm,
+                                                                      tol_deg=tol_deg).success)
+
+
+def _reached_from_seeds(robot: Robot, finite: NDArray[np.bool_], seeds_deg, tries: int,
+                        solve: Callable[[NDArray[np.intp], NDArray[np.float64]], NDArray[np.bool_]]
+                        ) -> NDArray[np.bool_]:
+    """``solve(rows, seeds)`` from the given seeds, then from fixed seeds spread inside the limits, for the
+    finite rows it has not reached yet."""
+    ok = np.zeros(len(finite), dtype=bool)
     low, high = robot.limits_deg[:, 0], robot.limits_deg[:, 1]
     spread = np.random.default_rng(0).uniform(low, high, (64 * tries, len(low)))    # fixed: the same every call
     seeds = [robot.home_deg if seeds_deg is None else seeds_deg, *spread[robot.within_limits(spread)][:tries - 1]]
-    finite = np.all(np.isfinite(points), axis=1)
     for seed in seeds:
         todo = np.flatnonzero(~ok & finite)
         if todo.size == 0:
             break
-        start = seed if np.ndim(seed) == 1 else np.asarray(seed)[todo]
-        ok[todo] = robot.inverse(points[todo], start, tol_mm=tol_mm).success
+        ok[todo] = solve(todo, seed if np.ndim(seed) == 1 else np.asarray(seed)[todo])
     return ok

@@ -7,6 +7,15 @@ Usage, with a model file from ``partcal run``::
     p = load_predictor("reports/paper_sk120/models/sdp-ci.json")
     p.predict(positions=[[1100, 800, 600]])      # predicted error (measured - nominal), mm
     p.compensate([[1100, 800, 600]])             # the position to command instead, mm
+
+A model of pose errors (6 outputs: ``dx, dy, dz`` mm, then the rotation
+vector ``rx, ry, rz`` in mrad, base frame, that turns the nominal orientation
+into the real one) also compensates orientations::
+
+    from partcal.robot.kinematics import xyz_deg_from_matrices
+
+    r = p.compensate_pose([[1100, 800, 600]], [[180, 0, 90]])   # target orientation: intrinsic XYZ degrees
+    r.commanded_mm, xyz_deg_from_matrices(r.commanded_rotation)  # the pose to command
 """
 
 from __future__ import annotations
@@ -21,16 +30,19 @@ from .._validation import check_array
 from ..errors import DataError
 from ..metrics import warn_far
 from ..models.bases import varying_inputs
-from ..robot.compensation import CompensationResult, false_target, false_target_joints, reachable
+from ..robot.compensation import (CompensationResult, false_target, false_target_cartesian_poses,
+                                  false_target_joints, false_target_poses, reachable, reachable_poses)
 from ..robot.description import robot_from_dict
-from ..robot.kinematics import Robot
+from ..robot.kinematics import Robot, ik_settings, matrices_from_xyz_deg
 from .persist import load_model
 
 EXTRAPOLATION_LIMIT = 50.0    # mm (Cartesian models) or degrees (joint models) from the nearest training input
+POSE_OUTPUTS = 6              # a pose model: dx, dy, dz (mm), then the rotation vector rx, ry, rz (mrad)
+HALF_TURN_MRAD = 1000.0 * np.pi     # a predicted turn beyond this is no error, but a model beyond its data
 
 
 class Predictor:
-    """Predict position errors and compensate targets with a fitted model.
+    """Predict position (or pose) errors and compensate targets with a fitted model.
 
     Attributes
     ----------
@@ -52,9 +64,14 @@ class Predictor:
     def __repr__(self) -> str:
         return f"Predictor({self.name!r}, inputs={self.inputs!r}, kind={self.document['kind']!r})"
 
+    @property
+    def predicts_pose(self) -> bool:
+        """True for a model of pose errors (6 outputs: mm, then mrad), False for a position model (3)."""
+        return self.model.n_outputs() == POSE_OUTPUTS
+
     def _errors(self, X: NDArray[np.float64], payload_kg=None) -> NDArray[np.float64]:
         if len(X) == 0:                 # no points, no errors (scikit-learn refuses empty inputs)
-            return np.zeros((0, 3))
+            return np.zeros((0, self.model.n_outputs()))
         if payload_kg is None:
             return self.model.predict_validated(X)
         return self.model.predict_validated(X, payload_kg=payload_kg)
@@ -65,8 +82,12 @@ class Predictor:
                             f"nothing it predicts; got payload_kg={payload_kg!r}")
 
     def predict(self, positions=None, joints=None, payload_kg=None) -> NDArray[np.float64]:
-        """Predicted errors (measured - nominal), shape (n, 3) mm.
+        """Predicted errors (measured - nominal), shape (n, 3) mm, or (n, 6) for a pose model.
 
+        A pose model (:attr:`predicts_pose`) gives the position error in mm,
+        then the rotation vector in mrad (axis times angle, base frame) that
+        turns the nominal orientation into the real one: ``R_real = exp([r])
+        R_nominal``.
         Cartesian models take ``positions`` (n, 3) mm, or ``joints`` when the
         model file carries a robot; joint models take ``joints`` (n, N) degrees.
         ``payload_kg`` (one number, or one per row) is the payload at the tool
@@ -101,7 +122,8 @@ class Predictor:
         Targets that do not converge to ``tol_mm`` raise a ``CompensationWarning``
         naming them, and commanded inputs farther than ``EXTRAPOLATION_LIMIT``
         (50 mm or degrees) from the training data an ``ExtrapolationWarning``;
-        :meth:`compensate_full` returns the details.
+        :meth:`compensate_full` returns the details. A pose model compensates
+        the position here (:meth:`compensate_pose` does the orientation too).
         """
         result = self.compensate_full(targets_mm, joints, payload_kg=payload_kg, tol_mm=tol_mm, max_iter=max_iter)
         evaluated = result.commanded_mm if self.inputs == "cartesian" else result.joints_deg
@@ -120,16 +142,15 @@ class Predictor:
         converged only where the robot's IK reaches it within its joint limits
         and constraints. Unconverged targets warn as in
         :meth:`compensate`; the distance to the data is left to the caller
-        (:meth:`distance_to_data` of the commanded inputs).
+        (:meth:`distance_to_data` of the commanded inputs). A pose model
+        compensates the position here, from its position outputs; see
+        :meth:`compensate_pose` for the orientation too.
         """
         targets = check_array(targets_mm, "targets_mm", columns=3)
-        self._check_payload(payload_kg)
-        if payload_kg is not None and np.ndim(payload_kg) != 0:
-            raise DataError(f"compensate takes one payload_kg for all targets; got an array of shape "
-                            f"{np.shape(payload_kg)}")
+        predicted = self._errors_at(payload_kg)
 
         def errors(X):
-            return self._errors(X, payload_kg)
+            return predicted(X)[:, :3]
 
         if len(targets) == 0:
             joints_out = None if self.inputs == "cartesian" else np.zeros((0, self.n_inputs))
@@ -138,26 +159,127 @@ class Predictor:
         if self.inputs == "cartesian":
             result = false_target(errors, targets, tol_mm=tol_mm, max_iter=max_iter)
             if self.robot is not None:      # a command the arm cannot reach (IK within its limits) is no solution
-                seeds = None if joints is None else check_array(joints, "joints", columns=self.robot.n_joints)
+                seeds = self._given_seeds(joints, len(targets))
                 live = np.flatnonzero(result.converged)
                 ok = np.zeros(len(targets), dtype=bool)
                 ok[live] = reachable(self.robot, result.commanded_mm[live], None if seeds is None else seeds[live])
                 result = dataclasses.replace(result, converged=ok)
         else:
-            if self.robot is None:
-                raise DataError("compensating a joint model needs its robot, and this model file names none")
-            fixed, values = self._fixed_joints()
-            if joints is None:
-                seeds = np.tile(self.robot.home_deg, (len(targets), 1))
-                seeds[:, [j - 1 for j in fixed]] = values
-            else:
-                seeds = check_array(joints, "joints", columns=self.robot.n_joints)
-                if seeds.shape[0] != targets.shape[0]:
-                    raise DataError(f"joints has {seeds.shape[0]} rows but targets_mm has {targets.shape[0]}")
+            fixed, seeds = self._joint_seeds(joints, len(targets))
             result = false_target_joints(errors, self.robot, targets, seeds, fixed, tol_mm=tol_mm,
                                          max_iter=max_iter)
         result.warn_unconverged(tol_mm)
         return result
+
+    def compensate_pose(self, positions_mm, orientations_deg, joints=None, *, payload_kg: float | None = None,
+                        tol_mm: float = 1e-4, tol_deg: float = 1e-5, max_iter: int = 50) -> CompensationResult:
+        """Full-pose false targets: the tool pose to command so that the robot reaches each target pose.
+
+        Needs a pose model (:attr:`predicts_pose`).
+
+        Parameters
+        ----------
+        positions_mm : array-like, shape (n, 3)
+            Target positions of the tool point in the base frame, mm.
+        orientations_deg : array-like, shape (n, 3)
+            Target orientations of the tool, intrinsic XYZ angles in degrees
+            (``R = Rx(rx) Ry(ry) Rz(rz)``, as ``rx_meas..`` of a measurement CSV).
+        joints : array-like, shape (n, N), optional
+            Degrees: IK seeds, as for :meth:`compensate_full` (joint models:
+            the joints the model never saw move are held at their training
+            value; Cartesian models: the seeds of the reachability check).
+        payload_kg : float, optional
+            As for :meth:`compensate`.
+        tol_mm, tol_deg : float
+            A target is converged when the predicted miss of the commanded pose
+            is within ``tol_mm`` (position) and ``tol_deg`` (the angle of the
+            orientation miss), and the robot can take the command.
+        max_iter : int
+            Iterations of the solve.
+
+        Returns
+        -------
+        CompensationResult
+            ``commanded_mm`` (n, 3) and ``commanded_rotation`` (n, 3, 3): the
+            pose to command (:func:`~partcal.robot.kinematics.xyz_deg_from_matrices`
+            gives its angles); ``joints_deg`` (n, N) for joint models, else
+            None; ``residual_mm``, ``residual_deg`` and ``converged`` per target.
+
+        Joint models solve the whole pose equation for the joints
+        (:func:`~partcal.robot.compensation.false_target_poses`). A Cartesian
+        model reads the position only, so the commanded position is the fixed
+        point of :meth:`compensate_full`, and the commanded orientation is then
+        exactly ``exp(-[r(p')]) R_target``; with a robot in the file, a command
+        its full-pose IK does not reach within the limits (from ``joints`` or
+        the home pose, then from further seeds) is not converged. Unconverged
+        targets raise a ``CompensationWarning``.
+        """
+        if not self.predicts_pose:
+            raise DataError(f"model {self.name or '(unnamed)'!r} predicts position errors only "
+                            f"({self.model.n_outputs()} outputs), so it cannot compensate an orientation: fit a pose "
+                            f"model ({POSE_OUTPUTS} outputs; 'predict: pose' in a run config), or compensate the "
+                            "positions alone with compensate()")
+        ik_settings(tol_mm, max_iter, 10.0, 0.05, tol_deg=tol_deg)                # checks the tolerances
+        positions = check_array(positions_mm, "positions_mm", columns=3)
+        angles = check_array(orientations_deg, "orientations_deg", columns=3)
+        if len(angles) != len(positions):
+            raise DataError(f"orientations_deg has {len(angles)} rows but positions_mm has {len(positions)}")
+        predicted = self._errors_at(payload_kg)
+
+        def errors(X):          # radians for the solvers
+            return predicted(X) * _RADIANS_PER_OUTPUT
+
+        n = len(positions)
+        if n == 0:
+            return CompensationResult(np.zeros((0, 3)), None if self.inputs == "cartesian" else
+                                      np.zeros((0, self.n_inputs)), np.zeros(0, np.int64), np.zeros(0),
+                                      np.zeros(0, bool), np.zeros((0, 3, 3)), np.zeros(0))
+        poses = _homogeneous(positions, matrices_from_xyz_deg(angles))
+        if self.inputs == "cartesian":
+            result = false_target_cartesian_poses(errors, poses, tol_mm=tol_mm, tol_deg=tol_deg, max_iter=max_iter)
+            if self.robot is not None:      # a pose the arm cannot take (IK within its limits) is no solution
+                seeds = self._given_seeds(joints, n)
+                live = np.flatnonzero(result.converged)
+                ok = np.zeros(n, dtype=bool)
+                ok[live] = reachable_poses(self.robot, _homogeneous(result.commanded_mm[live],
+                                                                    result.commanded_rotation[live]),
+                                           None if seeds is None else seeds[live])
+                result = dataclasses.replace(result, converged=ok)
+        else:
+            fixed, seeds = self._joint_seeds(joints, n)
+            result = false_target_poses(errors, self.robot, poses, seeds, fixed, tol_mm=tol_mm, tol_deg=tol_deg,
+                                        max_iter=max_iter)
+        result.warn_unconverged(tol_mm, tol_deg)
+        return result
+
+    def _errors_at(self, payload_kg):
+        """The model's errors at one payload (checked here) as a function of its inputs."""
+        self._check_payload(payload_kg)
+        if payload_kg is not None and np.ndim(payload_kg) != 0:
+            raise DataError(f"compensate takes one payload_kg for all targets; got an array of shape "
+                            f"{np.shape(payload_kg)}")
+        return lambda X: self._errors(X, payload_kg)
+
+    def _given_seeds(self, joints, n: int) -> NDArray[np.float64] | None:
+        """The caller's joints (n, N) degrees, checked against the robot and the number of targets, or None."""
+        if joints is None:
+            return None
+        seeds = check_array(joints, "joints", columns=self.robot.n_joints)
+        if seeds.shape[0] != n:
+            raise DataError(f"joints has {seeds.shape[0]} rows but there are {n} targets")
+        return seeds
+
+    def _joint_seeds(self, joints, n: int) -> tuple[tuple[int, ...], NDArray[np.float64]]:
+        """A joint model's fixed joints and IK seeds (n, N) degrees: the caller's, or the home pose with the
+        fixed joints at their training value."""
+        if self.robot is None:
+            raise DataError("compensating a joint model needs its robot, and this model file names none")
+        fixed, values = self._fixed_joints()
+        seeds = self._given_seeds(joints, n)
+        if seeds is None:
+            seeds = np.tile(self.robot.home_deg, (n, 1))
+            seeds[:, [j - 1 for j in fixed]] = values
+        return fixed, seeds
 
     def _fixed_joints(self) -> tuple[tuple[int, ...], NDArray[np.float64]]:
         """Joints constant in the training data (the model cannot know what moving them does)."""
@@ -167,20 +289,24 @@ class Predictor:
         return fixed, low[[j - 1 for j in fixed]]
 
     def refuse_implausible(self, X, errors, source: str = "input") -> None:
-        """Refuse predicted errors ``(n, 3)`` mm that are not finite or longer than the robot's reach.
+        """Refuse predicted errors ``(n, 3)`` mm (or pose errors ``(n, 6)``) that are not finite, longer than
+        the robot's reach, or turn by more than half a turn.
 
         Such a number is the model extrapolated beyond meaning (a polynomial
         at 1e200 mm), not an error: a :class:`DataError` names the first such
         data row of ``source``, its input ``X`` and its distance from the data.
         """
-        size = np.linalg.norm(errors, axis=1)
+        size = np.linalg.norm(errors[:, :3], axis=1)
+        turn = np.linalg.norm(errors[:, 3:], axis=1)        # mrad (zeros for a position model)
         limit = self.robot.reach_mm if self.robot is not None else np.inf
-        bad = ~np.isfinite(size) | (size > limit)
+        finite = np.isfinite(size) & np.isfinite(turn)
+        bad = ~finite | (size > limit) | (turn > HALF_TURN_MRAD)
         if not bad.any():
             return
         k = int(np.flatnonzero(bad)[0])
-        what = "is not finite" if not np.isfinite(size[k]) else (f"is {size[k]:.4g} mm, more than robot "
-                                                                  f"{self.robot.name}'s reach ({limit:.0f} mm)")
+        what = ("is not finite" if not finite[k] else
+                f"is {size[k]:.4g} mm, more than robot {self.robot.name}'s reach ({limit:.0f} mm)" if size[k] > limit
+                else f"turns by {turn[k]:.4g} mrad, more than half a turn ({HALF_TURN_MRAD:.0f} mrad)")
         key = "positions" if self.inputs == "cartesian" else "joints"
         far = self.distance_to_data(**{key: X[k:k + 1]})[0]
         raise DataError(f"{source}: data row {k + 1}: the predicted error {what} ({int(bad.sum())} of {len(bad)} "
@@ -195,6 +321,16 @@ class Predictor:
         """
         X = self._inputs(positions, joints)
         return self.model.distance_to_data(X) if len(X) else np.zeros(0)
+
+
+_RADIANS_PER_OUTPUT = np.array([1.0, 1.0, 1.0, 1e-3, 1e-3, 1e-3])     # a pose model's outputs, mm and mrad
+
+
+def _homogeneous(positions: NDArray[np.float64], rotations: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Poses ``(n, 4, 4)`` from positions ``(n, 3)`` mm and rotations ``(n, 3, 3)``."""
+    out = np.zeros((len(positions), 4, 4))
+    out[:, :3, :3], out[:, :3, 3], out[:, 3, 3] = rotations, positions, 1.0
+    return out
 
 
 def load_predictor(path: str | Path) -> Predictor:

@@ -2,7 +2,6 @@
 ``predict`` / ``compensate`` commands."""
 
 import csv
-import tempfile
 import warnings
 from pathlib import Path
 
@@ -11,7 +10,7 @@ import pytest
 from conftest import partcal_cli as run
 from scipy.spatial.transform import Rotation
 
-from partcal import DataError, ErrorModel, ModelFileError, load_predictor, load_robot
+from partcal import DataError, ErrorModel, load_predictor, load_robot
 from partcal.robot.compensation import CompensationWarning
 from partcal.robot.kinematics import xyz_deg_from_matrices
 from partcal.study.persist import model_to_dict, save_model
@@ -176,22 +175,6 @@ def test_a_predicted_turn_beyond_half_a_turn_is_refused_as_implausible(cartesian
 
 
 # ---------------------------------------------------------------------------------------------- command line
-def _pose_files_load() -> bool:
-    """Whether model files of 6 outputs load (partcal.models.kinds accepts n_outputs up to 6)."""
-    model = ErrorModel(solver="lstsq").fit(np.random.default_rng(0).uniform(0, 900, (20, 3)), np.zeros((20, 6)))
-    with tempfile.TemporaryDirectory() as folder:
-        save_model(model, Path(folder) / "m.json")
-        try:
-            load_predictor(Path(folder) / "m.json")
-        except ModelFileError:
-            return False
-    return True
-
-
-needs_pose_files = pytest.mark.skipif(not _pose_files_load(), reason="model files of 6 outputs do not load yet "
-                                                                      "(n_outputs is checked in partcal.models.kinds)")
-
-
 @pytest.fixture(scope="module")
 def pose_files(tmp_path_factory, joint_pose_model, cartesian_pose_model):
     folder = tmp_path_factory.mktemp("pose")
@@ -214,7 +197,6 @@ def columns(rows, names):
     return np.array([[float(r[k]) for k in names] for r in rows])
 
 
-@needs_pose_files
 def test_compensate_command_round_trip_with_orientation(pose_files, tmp_path):
     q = CENTRE + np.random.default_rng(4).uniform(-15, 15, (6, 6))
     wanted = NOMINAL.forward(q)
@@ -239,7 +221,6 @@ def test_compensate_command_round_trip_with_orientation(pose_files, tmp_path):
     np.testing.assert_allclose(reached[:, :3, :3], wanted[:, :3, :3], atol=4e-5)
 
 
-@needs_pose_files
 def test_compensate_command_reads_the_nominal_orientation_and_exits_3_on_an_unreachable_pose(pose_files, tmp_path):
     wanted = NOMINAL.forward(CENTRE[None])
     rows = [np.hstack([wanted[0, :3, 3], xyz_deg_from_matrices(wanted[:, :3, :3])[0]]), [1480, 0, 0, 10, 20, 30]]
@@ -259,7 +240,6 @@ def test_compensate_command_reads_the_nominal_orientation_and_exits_3_on_an_unre
                                xyz_deg_from_matrices(result.commanded_rotation), atol=1e-6)
 
 
-@needs_pose_files
 def test_compensate_command_refuses_an_incomplete_triple_or_a_bad_angle(pose_files, tmp_path):
     out = tmp_path / "c.csv"
     targets = write_csv(tmp_path / "t.csv", ["x", "y", "z", "rx", "ry"], [[900, 0, 500, 0, 0]])
@@ -275,7 +255,6 @@ def test_compensate_command_refuses_an_incomplete_triple_or_a_bad_angle(pose_fil
     assert not out.exists()
 
 
-@needs_pose_files
 def test_a_pose_model_without_orientation_columns_compensates_positions(pose_files, tmp_path):
     targets = write_csv(tmp_path / "t.csv", ["x", "y", "z"], NOMINAL.positions(CENTRE[None] + [[0.0] * 6, [9.0] * 6]))
     out = tmp_path / "c.csv"
@@ -287,7 +266,6 @@ def test_a_pose_model_without_orientation_columns_compensates_positions(pose_fil
     np.testing.assert_allclose(columns(rows, ["x_cmd", "y_cmd", "z_cmd"]), expected, atol=1e-6)
 
 
-@needs_pose_files
 def test_predict_command_writes_the_rotation_vector_of_a_pose_model(pose_files, tmp_path):
     q = CENTRE[None] + [[0.0] * 6, [4.0, -3, 2, -1, 5, 6]]
     points = write_csv(tmp_path / "q.csv", [f"q{j}" for j in range(1, 7)], q)

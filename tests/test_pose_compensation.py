@@ -3,7 +3,6 @@
 
 import csv
 import warnings
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -219,6 +218,25 @@ def test_compensate_command_round_trip_with_orientation(pose_files, tmp_path):
     reached = TRUE.forward(q_cmd)                           # and takes the true arm to the targets
     assert np.linalg.norm(reached[:, :3, 3] - wanted[:, :3, 3], axis=1).max() < 0.02
     np.testing.assert_allclose(reached[:, :3, :3], wanted[:, :3, :3], atol=4e-5)
+
+
+def test_compensate_command_reads_target_orientations_through_a_format(pose_files, tmp_path):
+    """A format maps the target orientations (as rx_nom..: a file's own rx, ry, rz columns may hold a measured
+    orientation) and converts them from radians: the commands equal those of the same targets in degrees."""
+    q = CENTRE + np.random.default_rng(6).uniform(-10, 10, (3, 6))
+    wanted = NOMINAL.forward(q)
+    angles = xyz_deg_from_matrices(wanted[:, :3, :3])
+    plain = write_csv(tmp_path / "t.csv", ["x", "y", "z", "rx", "ry", "rz"], np.hstack([wanted[:, :3, 3], angles]))
+    foreign = write_csv(tmp_path / "f.csv", ["X", "Y", "Z", "A", "B", "C"],
+                        np.hstack([wanted[:, :3, 3], np.radians(angles)]))
+    (tmp_path / "fmt.yaml").write_text("columns: {x: X, y: Y, z: Z, rx_nom: A, ry_nom: B, rz_nom: C}\norientation_unit: rad\n")
+    assert run("compensate", str(pose_files[0]), str(plain), "-o", str(tmp_path / "a.csv")).returncode == 0
+    res = run("compensate", str(pose_files[0]), str(foreign), "--format", str(tmp_path / "fmt.yaml"), "-o",
+              str(tmp_path / "b.csv"))
+    assert res.returncode == 0, res.stderr
+    names = ["x_cmd", "y_cmd", "z_cmd", "rx_cmd", "ry_cmd", "rz_cmd"]
+    np.testing.assert_allclose(columns(read_csv(tmp_path / "b.csv"), names),
+                               columns(read_csv(tmp_path / "a.csv"), names), atol=1e-6)
 
 
 def test_compensate_command_reads_the_nominal_orientation_and_exits_3_on_an_unreachable_pose(pose_files, tmp_path):

@@ -2,6 +2,7 @@
 
 import dataclasses
 import json
+import re
 
 import numpy as np
 import pytest
@@ -298,10 +299,11 @@ models:
   - {name: FDP(CI) k-means, inputs: cartesian, degree: 1, solver: {method: lstsq}, partition: {method: kmeans, n_regions: 2}}
   - {name: DH (orientation) + GP(AI), kind: kinematic, use_orientation: true, residual: {kind: gaussian_process, inputs: joint, restarts: 0}}
 """
-    (tmp_path / "configs" / "pose.yaml").write_text("name: pose\n" + head)
+    (tmp_path / "configs" / "pose.yaml").write_text("name: pose\nverify: {virtual_robot: sim.yaml}\n" + head)
     (tmp_path / "configs" / "turn.yaml").write_text("name: turn\nrank_on: orientation\n" + head)
     result = run(load_config(tmp_path / "configs" / "pose.yaml"))
     test = result.datasets["test"]
+    noise = 1000 * np.radians(0.005) * np.sqrt(3)        # the tracker's orientation noise, 3-D, mrad
     measured = Rotation.from_rotvec(test.orientation_errors_deg, degrees=True)
     assert result.uncompensated["test"]["orientation"]["rms_angle"] == pytest.approx(
         1000 * np.sqrt(np.mean(measured.magnitude() ** 2)), rel=1e-12)
@@ -313,8 +315,22 @@ models:
         assert r.metrics["test"]["rms_3d"] == pytest.approx(np.sqrt(np.mean(np.sum(
             (test.errors_mm - predicted[:, :3]) ** 2, axis=1))))
     by = {r.spec.name: r for r in result.models}
+    # the full pose compensated and commanded on the virtual robot: what it reaches, as its tracker reads it
+    check = {name: r.compensation["test"] for name, r in by.items()}
+    assert all(c["converged"] >= 0.96 * len(test) for c in check.values())      # 387 to 392 of 400 random poses
+    turned = check["DH (orientation)"]["orientation"]
+    assert turned["before"]["rms_angle"] == pytest.approx(result.uncompensated["test"]["orientation"]["rms_angle"])
+    assert turned["after"]["rms_angle"] < 2.0 * noise < 0.2 * turned["before"]["rms_angle"]       # noise: below
+    assert check["DH (orientation)"]["after"]["rms_3d"] < 0.1 * check["DH (orientation)"]["before"]["rms_3d"]
+    assert turned["after"]["rms_angle"] == pytest.approx(turned["predicted_residual"]["rms_angle"], rel=0.2)
+    assert check["DH"]["orientation"]["after"]["rms_angle"] > 5 * turned["after"]["rms_angle"]    # left to chance
+    from partcal.report import render_report
+
+    html = render_report(result, tmp_path).read_text()                 # the report's Compensation table says it
+    table = html[html.index('id="compensation-table"'):]
+    values = [float(v) for v in re.findall(r'data-key="compensation.orientation.after" data-value="([^"]+)"', table)]
+    assert values == pytest.approx([c["orientation"]["after"]["rms_angle"] for c in check.values()], rel=1e-12)
     angle = {name: r.metrics["test"]["orientation"]["rms_angle"] for name, r in by.items()}
-    noise = 1000 * np.radians(0.005) * np.sqrt(3)        # the tracker's orientation noise, 3-D, mrad
     assert angle["DH (orientation)"] < 1.5 * noise < angle["FDP(AI)"] < result.uncompensated["test"]["orientation"][
         "rms_angle"]
     (tmp_path / "configs" / "position.yaml").write_text("name: position\n" + head.replace("predict: pose\n", ""))
@@ -341,7 +357,7 @@ models:
     config = load_config(tmp_path / "configs" / "pose.yaml")
     data, _, _ = load_datasets(config)
     plain = dataclasses.replace(data["test"], measured_orientation_deg=None, nominal_orientation_deg=None)
-    with pytest.raises(ConfigError, match=r"pose.yaml: predict .*line 4.*'pose' needs a measured orientation in "
+    with pytest.raises(ConfigError, match=r"pose.yaml: predict \(line 5\): 'pose' needs a measured orientation in "
                                           r"every data set; test \(.*test.csv\) has none"):
         check_run(config, {**data, "test": plain})
     (tmp_path / "configs" / "bad.yaml").write_text("name: bad\nrank_on: orientation\n" +

@@ -438,10 +438,20 @@ def scene_entries(rendering: SceneRendering, captions: dict[str, str]) -> list[d
 
 
 def compensation_entries(result: RunResult) -> dict:
-    rows = [(r.spec.name, n, c["before"]["rms_3d"], c["predicted_residual"]["rms_3d"], c["after"]["rms_3d"],
+    """The compensation check: per model and test set the 3-D RMS before, predicted and after (mm; after: the
+    converged targets, NaN when none converged) and, for pose models, the orientation's RMS angles (mrad)."""
+    def rms(stats, key):
+        return stats[key] if stats is not None else float("nan")
+
+    rows = [(r.spec.name, n, c["before"]["rms_3d"], c["predicted_residual"]["rms_3d"], rms(c["after"], "rms_3d"),
              f"{c['converged']}/{c['n']}") for r in result.models for n, c in r.compensation.items()]
     if not rows:
-        return {"compensation": [], "compensation_svg": None}
-    return {"compensation": [{"model": m, "dataset": d, "before": b, "predicted": p, "after": a, "converged": c}
-                             for m, d, b, p, a, c in rows],
+        return {"compensation": [], "compensation_svg": None, "compensation_pose": False}
+    turns = [c.get("orientation") for r in result.models for c in r.compensation.values()]
+    entries = [{"model": m, "dataset": d, "before": b, "predicted": p, "after": a, "converged": c,
+                "orientation": None if o is None else {"before": o["before"]["rms_angle"],
+                                                       "predicted": o["predicted_residual"]["rms_angle"],
+                                                       "after": rms(o["after"], "rms_angle")}}
+               for (m, d, b, p, a, c), o in zip(rows, turns)]
+    return {"compensation": entries, "compensation_pose": any(o is not None for o in turns),
             "compensation_svg": _b64(figures.compensation_bars([row[:5] for row in rows]))}

@@ -45,7 +45,7 @@ from ..metrics import (MRAD_PER_DEG, ORIENTATION, POSITION, choose_simplest, fol
 from ..models.bases import varying_inputs
 from ..models.partitioned import fold_regions
 from ..robot.description import load_robot
-from ..robot.kinematics import Robot, flange_offset
+from ..robot.kinematics import Robot, flange_offset, matrices_from_xyz_deg
 from .config import ModelSpec, RunConfig
 from .memory import check_memory
 from .predictor import Predictor
@@ -743,25 +743,54 @@ def verify_compensation(result: ModelResult, data: dict[str, Measurements], robo
 
     ``predicted_residual`` is the model's error on the measured test set (what
     compensation should leave); ``after`` is what the true robot, measured by
-    the simulated tracker, really misses by when given the false targets.
+    the simulated tracker, really misses by when given the false targets whose
+    compensation converged (``converged`` of ``n``: the others are no command a
+    controller would send). A
+    model of pose errors compensates the full pose (the test poses' nominal
+    position and orientation, :meth:`Predictor.compensate_pose`), and
+    ``orientation`` holds the same three figures of the orientation (mrad).
     """
     predictor = Predictor(result.model, {"name": result.spec.name, "inputs": result.spec.inputs,
                                          "n_inputs": result.model.n_features_in_, "kind": "run"}, robot)
+    pose = result.model.n_outputs() == 6
     out = {}
     for k, (name, m) in enumerate(data.items()):
         if name == "identification":
             continue
-        targets = m.nominal_mm
-        comp = predictor.compensate_full(targets, m.q_deg if result.spec.inputs == "joint" else None)
+        targets, seeds = m.nominal_mm, m.q_deg if result.spec.inputs == "joint" else None
+        if pose:
+            comp = predictor.compensate_pose(targets, m.nominal_orientation_deg, seeds)
+        else:
+            comp = predictor.compensate_full(targets, seeds)
         if result.spec.inputs == "joint":
             q_cmd = comp.joints_deg
         else:     # the controller turns the false target into joints with its nominal model
             fixed = tuple(int(j) + 1 for j in np.flatnonzero(~varying_inputs(m.q_deg)))
-            q_cmd = robot.inverse(comp.commanded_mm, m.q_deg, fixed=fixed).q_deg
+            if pose:
+                commanded = np.tile(np.eye(4), (len(m), 1, 1))
+                commanded[:, :3, :3], commanded[:, :3, 3] = comp.commanded_rotation, comp.commanded_mm
+                q_cmd = robot.inverse_pose(commanded, m.q_deg, fixed=fixed).q_deg
+            else:
+                q_cmd = robot.inverse(comp.commanded_mm, m.q_deg, fixed=fixed).q_deg
         rng = np.random.default_rng([seed, k])
-        reached = virtual.measure(q_cmd, rng)
+        reached, ok = virtual.measure(q_cmd, rng), comp.converged
         out[name] = {"before": summary(m.errors_mm),
                      "predicted_residual": summary(m.errors_mm - result.predictions[name][:, POSITION]),
-                     "after": summary(reached - targets),
-                     "converged": int(comp.converged.sum()), "n": len(targets)}
+                     "after": summary((reached - targets)[ok]) if ok.any() else None,
+                     "converged": int(ok.sum()), "n": len(targets)}
+        if pose:
+            turned = _turn_reached(virtual, q_cmd, m, rng)
+            out[name]["orientation"] = {"before": orientation_summary(m.orientation_errors_deg * MRAD_PER_DEG),
+                                        "predicted_residual": result.metrics[name]["orientation"],
+                                        "after": orientation_summary(turned[ok]) if ok.any() else None}
     return out
+
+
+def _turn_reached(virtual, q_deg: NDArray[np.float64], m: Measurements, rng: np.random.Generator
+                  ) -> NDArray[np.float64]:
+    """The turn from the test poses' nominal orientation to the one the virtual robot reaches at ``q_deg``, as its
+    tracker reads it (noise-free when it reads no orientation), rotation vectors in mrad."""
+    seen = virtual.measure_more(q_deg, rng)[1]
+    reached = matrices_from_xyz_deg(seen) if seen is not None else virtual.true_flange(q_deg)[1]
+    wanted = matrices_from_xyz_deg(m.nominal_orientation_deg)
+    return Rotation.from_matrix(reached @ wanted.transpose(0, 2, 1)).as_rotvec() * 1000.0

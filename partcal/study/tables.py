@@ -77,13 +77,22 @@ def results_table(result) -> str:
         lines.append(registration_line(reg, [n for n, r in regs.items() if r is reg]))
     comp = [r for r in result.models if r.compensation]
     if comp:
+        pose = any("orientation" in c for r in comp for c in r.compensation.values())
         lines.append("")
-        lines.append("compensation on the virtual robot, 3-D RMS (mm): before / predicted residual / after")
+        lines.append("compensation on the virtual robot, 3-D RMS (mm): before / predicted residual / after"
+                     + (" (orientation RMS angle, mrad, likewise)" if pose else ""))
         for r in comp:
-            cells = "  ".join(f"{n}: {c['before']['rms_3d']:.2f} / {c['predicted_residual']['rms_3d']:.2f} / "
-                              f"{c['after']['rms_3d']:.2f}" for n, c in r.compensation.items())
+            cells = "  ".join(f"{n}: {_before_after(c, 'rms_3d', 2)}" + (f" ({_before_after(c['orientation'], 'rms_angle', 3)})"
+                                                                         if "orientation" in c else "")
+                              for n, c in r.compensation.items())
             lines.append(f"  {r.spec.name:<22}{cells}")
     return "\n".join(lines)
+
+
+def _before_after(stats: dict, key: str, decimals: int) -> str:
+    """``'2.50 / 0.06 / 0.06'``: before, predicted residual and after compensation (nan when none converged)."""
+    after = stats["after"][key] if stats["after"] is not None else float("nan")
+    return " / ".join(f"{v:.{decimals}f}" for v in (stats["before"][key], stats["predicted_residual"][key], after))
 
 
 def orientation_table(result, names: list[str], width: int) -> list[str]:

@@ -335,6 +335,7 @@ models:
         "rms_angle"]
     (tmp_path / "configs" / "position.yaml").write_text("name: position\n" + head.replace("predict: pose\n", ""))
     position = run(load_config(tmp_path / "configs" / "position.yaml"))      # ranked on the same numbers
+    write_run(position)
     assert [r.cv_rms_3d for r in result.models] == pytest.approx([r.cv_rms_3d for r in position.models], rel=1e-9)
     assert result.best == position.best
     turned = run(load_config(tmp_path / "configs" / "turn.yaml"))
@@ -351,6 +352,18 @@ models:
         loaded, doc = load_model(tmp_path / "reports" / "turn" / "models" / f"{slug}.json")
         inputs = test.nominal_mm if by_turn[name].spec.inputs == "cartesian" else test.q_deg
         assert doc["n_outputs"] == 6 and np.array_equal(loaded.predict(inputs), by_turn[name].model.predict(inputs))
+    # a pose model predicts the other reflectors too: a rigid tool moves and turns them with the pose
+    from partcal import load_predictor
+
+    pose_model = load_predictor(tmp_path / "reports" / "turn" / "models" / "dh-orientation.json")
+    for name, offset in TOOLS.items():
+        measured = test.measured_of(name) - test.nominal_of(name)
+        left = np.sqrt(np.mean(np.sum((measured - pose_model.predict_point(test.q_deg, offset)) ** 2, axis=1)))
+        assert left < 0.1 < 0.05 * np.sqrt(np.mean(np.sum(measured**2, axis=1)))     # 2.5 mm -> tracker noise
+    np.testing.assert_allclose(pose_model.predict_point(test.q_deg, [0, 0, 120]), pose_model.predict(
+        joints=test.q_deg)[:, :3], atol=1e-12)                                        # the primary target itself
+    with pytest.raises(DataError, match=r"model 'DH' predicts position errors only"):
+        load_predictor(tmp_path / "reports" / "position" / "models" / "dh.json").predict_point(test.q_deg, [0, 0, 0])
     header = (tmp_path / "reports" / "turn" / "predictions" / "dh" / "test.csv").read_text().split("\n")[0]
     assert header.endswith("dx_pred,dy_pred,dz_pred,drx_pred,dry_pred,drz_pred")
     # refused: data without an orientation, and ranking on the orientation of position models

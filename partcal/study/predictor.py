@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.spatial.transform import Rotation
 
 from .._validation import check_array
 from ..errors import DataError
@@ -96,6 +97,31 @@ class Predictor:
         """
         self._check_payload(payload_kg)
         return self._errors(self._inputs(positions, joints), payload_kg)
+
+    def predict_point(self, joints, offset_mm, payload_kg=None) -> NDArray[np.float64]:
+        """Predicted position error of another point on the tool, shape (n, 3) mm, from a pose model.
+
+        ``offset_mm`` (3,) is the point's offset in the flange frame (a second
+        reflector, another tool centre point); ``joints`` (n, N) degrees. The
+        tool is taken as rigid: the point moves with the primary target's
+        error ``e`` and turns with the orientation error ``r`` about it,
+        ``e + (exp([r]) - I) R_flange (offset - tool)`` (``tool`` the model
+        file robot's tool offset, ``R_flange`` the nominal flange orientation
+        at the joints). Needs a model of pose errors and the robot of its file.
+        """
+        if not self.predicts_pose:
+            raise DataError(f"model {self.name!r} predicts position errors only, so the error of another point on "
+                            "the tool is unknown: fit it on pose errors (predict: pose in a run config)")
+        if self.robot is None:
+            raise DataError(f"model {self.name!r}: its file names no robot, so the flange orientation at the joints "
+                            "is unknown")
+        self._check_payload(payload_kg)
+        q = check_array(joints, "joints", columns=self.robot.n_joints)
+        offset = check_array(np.reshape(np.asarray(offset_mm, dtype=float), (1, -1)), "offset_mm", columns=3)[0]
+        errors = self._errors(q if self.inputs == "joint" else self.robot.positions(q), payload_kg)
+        lever = self.robot.flange(q)[:, :3, :3] @ (offset - self.robot.tool_mm)
+        turn = Rotation.from_rotvec(errors[:, 3:] / 1000.0).as_matrix() - np.eye(3)
+        return errors[:, :3] + np.einsum("nij,nj->ni", turn, lever)
 
     def _inputs(self, positions, joints) -> NDArray[np.float64]:
         if (positions is None) == (joints is None):

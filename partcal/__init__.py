@@ -29,6 +29,7 @@ _EXPORTS = {
     "models.swarm": ["SwarmConfig", "SwarmResult", "minimize", "minimize_batch"],
     "models.partition": ["KMeansPartition", "Octree"],
     "models.partitioned": ["PartitionedErrorModel", "select_granularity"],
+    "models.pose": ["PoseErrorModel"],
     "study.predictor": ["Predictor", "load_predictor"],
     "study.plan": ["evaluate_poses", "plan_poses"],
 }

@@ -246,7 +246,7 @@ class FieldReader:
             self.fail("", f"expected an object; got {type(doc).__name__}")
 
     def path(self, key: str) -> str:
-        return f"{self.where}.{key}" if self.where else key
+        return f"{self.where}.{key}" if self.where and key else self.where or key
 
     def fail(self, key: str, message: str):
         raise ModelFileError(f"{self.source}: field {self.path(key) or 'top level'!r}: {message}")

@@ -32,7 +32,8 @@ def summary(errors_mm: NDArray[np.float64]) -> dict:
     }
 
 
-MRAD_PER_DEG = 1000.0 * np.pi / 180.0
+MRAD_PER_RAD = 1000.0
+MRAD_PER_DEG = MRAD_PER_RAD * np.pi / 180.0
 POSITION, ORIENTATION = slice(0, 3), slice(3, 6)   # the columns of a pose error: mm, then a rotation vector, mrad
 
 
@@ -253,7 +254,8 @@ def cross_validated_rms(model, X, y, *, folds=5, random_state=0, fitted: list | 
 
 
 def select_by_cv(candidates, X, y, *, folds, fold_models: list | None = None, per_row: dict | None = None,
-                 score: Callable[[NDArray[np.float64]], float] | None = None) -> tuple[int, list[float], list, list[float]]:
+                 score: Callable[[NDArray[np.float64]], float] | None = None
+                 ) -> tuple[int, list[float], list, list[float]]:
     """Score unfitted ``candidates`` by CV on ``folds``, then fit each on all of ``X, y``.
 
     Returns ``(best, scores, fitted, seconds)``: the index of the lowest score

@@ -20,6 +20,7 @@ from partcal.models.gp import GaussianProcessErrorModel
 from partcal.models.kinematic import KinematicModel
 from partcal.models.partition import KMeansPartition, Octree
 from partcal.models.partitioned import PartitionedErrorModel
+from partcal.models.pose import PoseErrorModel
 from partcal.models.series import ErrorModel
 from partcal.robot.description import load_robot, robot_from_dict
 from partcal.study.persist import model_from_dict, model_to_dict
@@ -146,6 +147,18 @@ def joints():
     return IDENT.q_deg, IDENT.errors_mm
 
 
+def _pose(errors):
+    return np.hstack([errors, 0.3 * errors[:, ::-1]])        # six columns, the last three standing for mrad
+
+
+def cartesian_pose():
+    return IDENT.nominal_mm, _pose(IDENT.errors_mm)
+
+
+def joints_pose():
+    return IDENT.q_deg, _pose(IDENT.errors_mm)
+
+
 # (id, make the estimator, its data)
 PURE = [
     ("series-cartesian", lambda: ErrorModel(degree=2, solver="lstsq"), cartesian),
@@ -173,6 +186,11 @@ PURE = [
     ("hybrid-partitioned", lambda: KinematicModel(
         robot=SK120, residual=PartitionedErrorModel(partition=KMeansPartition(2), local=ErrorModel(solver="lstsq")),
         random_state=0), joints),
+    ("pose-gp", lambda: PoseErrorModel(GaussianProcessErrorModel(restarts=0, random_state=0)), cartesian_pose),
+    ("pose-kmeans", lambda: PoseErrorModel(PartitionedErrorModel(partition=KMeansPartition(3), random_state=0,
+                                                                 local=ErrorModel(solver="lstsq"))), cartesian_pose),
+    ("hybrid-pose", lambda: KinematicModel(robot=SK120, residual=ErrorModel(inputs="joint", solver="lstsq"),
+                                           random_state=0), joints_pose),
 ]
 
 

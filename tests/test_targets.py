@@ -194,10 +194,56 @@ def test_a_model_of_pose_errors_predicts_the_orientation_too(ur10, tmp_path):
     save_model(hybrid, tmp_path / "pose.json", name="pose", robot=ur10)
     loaded, doc = load_model(tmp_path / "pose.json")
     assert doc["n_outputs"] == 6 and np.array_equal(loaded.predict(q_new), hybrid.predict(q_new))
-    del doc["model"]["residual"]["model"]["orientation"], doc["checksum"]
-    (tmp_path / "bad.json").write_text(json.dumps(doc))
-    with pytest.raises(ModelFileError, match=r"bad.json: field 'model.residual.model.orientation': missing"):
-        load_model(tmp_path / "bad.json")
+    del doc["checksum"]
+
+    def refused(change, match):
+        bad = json.loads(json.dumps(doc))
+        change(bad)
+        (tmp_path / "bad.json").write_text(json.dumps(bad))
+        with pytest.raises(ModelFileError, match=match):
+            load_model(tmp_path / "bad.json")
+
+    refused(lambda d: d["model"]["residual"]["model"].pop("orientation"),
+            r"bad.json: field 'model.residual.model.orientation': missing")
+    refused(lambda d: d.update(n_outputs=5), r"field 'model': a kinematic model has 3 outputs \(n_outputs; position "
+                                             r"errors\) or 6 \(pose errors\); the file says 5")
+    refused(lambda d: d["model"].update(residual=d["model"]["residual"]["model"]["position"]),
+            r"field 'model.residual.kind': a residual of 6 outputs of kind 'pose' \(one model on the position, one "
+            r"on the orientation\); got kind 'global' of 3 outputs")
+    from partcal.models.pose import PoseErrorModel
+
+    series = PoseErrorModel(ErrorModel(inputs="joint", degree=1, solver="lstsq")).fit(q, _pose_errors(y, turns))
+    save_model(series, tmp_path / "series.json", name="series", robot=ur10)
+    loaded, doc = load_model(tmp_path / "series.json")
+    assert np.array_equal(loaded.predict(q_new), series.predict(q_new)) and doc["kind"] == "pose"
+    del doc["checksum"]
+    refused(lambda d: d.update(n_outputs=5), r"field 'model': a model of pose errors has 6 outputs \(n_outputs\); "
+                                             r"the file says 5")
+    refused(lambda d: d["model"]["orientation"].update(n_inputs=5),
+            r"field 'model.orientation.model.data_bounds': expected shape \(2, 5\); got shape \(2, 6\)")
+    refused(lambda d: d["model"]["orientation"].update(doc["model"]["orientation"] | {"n_outputs": 6}),
+            r"field 'model.orientation.model.coef': expected shape")
+
+
+def test_a_hybrid_of_pose_errors_freezes_each_part_of_its_residual(ur10):
+    """Nested CV freezes a hybrid's residual on the outer training rows: on pose errors each part keeps the
+    hyperparameters it learnt on its own columns, so the position is what a frozen position model predicts."""
+    from partcal import GaussianProcessErrorModel
+    from partcal.models.pose import PoseErrorModel
+
+    true = _true_robot(ur10)
+    rng = np.random.default_rng(9)
+    q, q_new = rng.uniform(-170, 170, (40, 6)), rng.uniform(-170, 170, (10, 6))
+    y, _, turns = _observed(ur10, true, q)
+    pose = _pose_errors(y + rng.normal(0, 0.05, y.shape), turns)
+    hybrid = KinematicModel(robot=ur10, residual=GaussianProcessErrorModel(inputs="joint", restarts=0),
+                            random_state=3)
+    frozen = hybrid.frozen(q, pose)
+    assert isinstance(frozen.residual, PoseErrorModel)
+    kernels = [part.fixed_kernel for part in (frozen.residual.model, frozen.residual.orientation)]
+    assert all(k is not None for k in kernels) and not np.allclose(kernels[0]["length_scale"], kernels[1]["length_scale"])
+    position = hybrid.frozen(q, pose[:, :3]).fit(q, pose[:, :3])
+    np.testing.assert_allclose(frozen.fit(q, pose).predict(q_new)[:, :3], position.predict(q_new), atol=1e-9)
 
 
 def test_the_probe_turn_is_part_of_the_predicted_orientation(ur10):
@@ -296,6 +342,7 @@ models:
   - {name: DH (orientation), kind: kinematic, use_orientation: true}
   - {name: FDP(AI), inputs: joint, degree: 1, solver: {method: lstsq}}
   - {name: GP(AI), kind: gaussian_process, inputs: joint, restarts: 0}
+  - {name: FDP(CI) pso, inputs: cartesian, degree: 1, solver: {method: pso, particles: 20, iterations: 20}}
   - {name: FDP(CI) k-means, inputs: cartesian, degree: 1, solver: {method: lstsq}, partition: {method: kmeans, n_regions: 2}}
   - {name: DH (orientation) + GP(AI), kind: kinematic, use_orientation: true, residual: {kind: gaussian_process, inputs: joint, restarts: 0}}
 """
@@ -340,6 +387,7 @@ models:
     assert result.best == position.best
     turned = run(load_config(tmp_path / "configs" / "turn.yaml"))
     assert turned.best == "DH (orientation)"
+    assert "cross-validated orientation RMS angle on the identification set" in turned.best_reason
     assert {r.spec.name: r.cv_rms_3d for r in turned.models}["DH (orientation)"] < 1.5 * noise
     write_run(turned)
     doc = json.loads((tmp_path / "reports" / "turn" / "metrics.json").read_text())
@@ -377,3 +425,8 @@ models:
                                                    head.replace("predict: pose\n", ""))
     with pytest.raises(ConfigError, match=r"rank_on.*'orientation' needs predict: pose"):
         load_config(tmp_path / "configs" / "bad.yaml")
+    (tmp_path / "configs" / "weight.yaml").write_text("name: weight\n" + head.replace(
+        "{name: DH, kind: kinematic}", "{name: DH, kind: kinematic, orientation_mm_per_rad: 50}"))
+    with pytest.raises(ConfigError, match=r"weight.yaml: models\[0\].orientation_mm_per_rad \(line 7\): must be 200 "
+                                          r"\(its default\) unless use_orientation is true.*; got 50.0"):
+        load_config(tmp_path / "configs" / "weight.yaml")

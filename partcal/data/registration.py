@@ -170,7 +170,7 @@ def register_tracker(robot: Robot, q_deg, measured_mm, *, tool_mm=None, fit_tool
                      source: str = "registration", max_condition: float = MAX_CONDITION,
                      plausibility: Plausibility | None = None, targets: dict | None = None,
                      target_tools_mm: dict | None = None, orientation_deg=None,
-                     orientation_mm_per_rad: float = ORIENTATION_MM_PER_RAD) -> Registration:
+                     orientation_mm_per_rad: float = ORIENTATION_MM_PER_RAD, probe_rotation=None) -> Registration:
     """Fit the tracker frame (and the tool offsets) to measured poses.
 
     Parameters
@@ -203,6 +203,9 @@ def register_tracker(robot: Robot, q_deg, measured_mm, *, tool_mm=None, fit_tool
         fits the probe's rotation on the flange too.
     orientation_mm_per_rad : float
         Weight of an orientation residual: one radian counts as this many mm.
+    probe_rotation : array-like, shape (3, 3), optional
+        The probe's rotation on the flange, given (another registration's, the
+        probe not remounted): then only the frame is fitted to the orientation.
 
     Returns
     -------
@@ -220,7 +223,7 @@ def register_tracker(robot: Robot, q_deg, measured_mm, *, tool_mm=None, fit_tool
         raise DataError(f"{source}: {meas.shape[0]} measured points but {q.shape[0]} poses")
     extra = {name: check_array(p, f"targets[{name!r}]", columns=3) for name, p in (targets or {}).items()}
     tool0 = robot.tool_mm if tool_mm is None else check_array(np.reshape(tool_mm, (1, -1)), "tool_mm", columns=3)[0]
-    n_params = (6 + 3 * (1 + len(extra)) * fit_tool) + 3 * (orientation_deg is not None)
+    n_params = (6 + 3 * (1 + len(extra)) * fit_tool) + 3 * (orientation_deg is not None and probe_rotation is None)
     need = 4 if fit_tool else 3            # the primary target's frame and offset alone need these
     if q.shape[0] < need:
         raise DataError(f"{source}: a tracker registration {'with' if fit_tool else 'without'} the tool needs at "
@@ -231,7 +234,8 @@ def register_tracker(robot: Robot, q_deg, measured_mm, *, tool_mm=None, fit_tool
     tools0 = np.vstack([tool0] + [_start_tool(name, extra[name], rot0, t0, flange, target_tools_mm, fit_tool, source)
                                   for name in extra])
     points = np.stack([meas, *extra.values()])                                     # (K, n, 3)
-    probe = None if orientation_deg is None else _Probe(q.shape[0], orientation_deg, rot0, r_fl, orientation_mm_per_rad)
+    probe = None if orientation_deg is None else _Probe(q.shape[0], orientation_deg, rot0, r_fl, orientation_mm_per_rad,
+                                                        probe_rotation)
     k_tools = 3 * len(tools0) if fit_tool else 0
 
     def unpack(x):
@@ -247,7 +251,7 @@ def register_tracker(robot: Robot, q_deg, measured_mm, *, tool_mm=None, fit_tool
         out = position_residuals(x).ravel()
         return out if probe is None else np.concatenate([out, probe.residuals(unpack(x)[0], x[6 + k_tools:])])
 
-    x0 = np.concatenate([np.zeros(3), t0, tools0.ravel() if fit_tool else [], np.zeros(3 if probe else 0)])
+    x0 = np.concatenate([np.zeros(3), t0, tools0.ravel() if fit_tool else [], np.zeros(probe.size if probe else 0)])
     sol = least_squares(residuals, x0, method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15, max_nfev=200 * n_params)
     rot, shift, tools = unpack(sol.x)
     resid = position_residuals(sol.x)
@@ -301,16 +305,19 @@ class _Probe:
     rotation vector in the base frame, radians) times ``mm_per_rad``.
     """
 
-    def __init__(self, n: int, orientation_deg, rot0, r_fl, mm_per_rad: float):
+    def __init__(self, n: int, orientation_deg, rot0, r_fl, mm_per_rad: float, given=None):
         angles = check_array(orientation_deg, "orientation_deg", columns=3)
         if angles.shape[0] != n:
             raise DataError(f"orientation_deg has {angles.shape[0]} rows but q_deg has {n}")
         self.measured, self.r_fl, self.weight = matrices_from_xyz_deg(angles), r_fl, float(mm_per_rad)
+        if given is not None:                  # fixed: no parameter of its own
+            self.start, self.size = np.asarray(given, dtype=float).reshape(3, 3), 0
+            return
         u, _, vt = np.linalg.svd(np.mean(r_fl.transpose(0, 2, 1) @ rot0 @ self.measured, axis=0))
-        self.start = u @ np.diag([1.0, 1.0, np.linalg.det(u @ vt)]) @ vt          # the mean rotation
+        self.start, self.size = u @ np.diag([1.0, 1.0, np.linalg.det(u @ vt)]) @ vt, 3     # the mean rotation
 
     def turns(self, rot, x) -> NDArray[np.float64]:
-        probe = Rotation.from_rotvec(x).as_matrix() @ self.start
+        probe = (Rotation.from_rotvec(x).as_matrix() if self.size else np.eye(3)) @ self.start
         return Rotation.from_matrix(rot @ self.measured @ probe.T @ self.r_fl.transpose(0, 2, 1)).as_rotvec()
 
     def residuals(self, rot, x) -> NDArray[np.float64]:
@@ -318,7 +325,7 @@ class _Probe:
 
     def result(self, rot, x) -> dict:
         angles = np.linalg.norm(self.turns(rot, x), axis=1)
-        return {"probe_rotation": Rotation.from_rotvec(x).as_matrix() @ self.start,
+        return {"probe_rotation": (Rotation.from_rotvec(x).as_matrix() if self.size else np.eye(3)) @ self.start,
                 "orientation_rms_deg": float(np.degrees(np.sqrt(np.mean(angles**2))))}
 
 

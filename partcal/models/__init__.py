@@ -2,16 +2,18 @@
 
 Every estimator here follows the scikit-learn contract: ``fit(X, y)`` with
 inputs in contract units (positions in mm or joint angles in degrees) and
-errors ``(n, 3)`` in mm, ``predict(X) -> (n, 3)`` mm.
+errors ``(n, 3)`` in mm, ``predict(X) -> (n, 3)`` mm; a kinematic model and a
+:class:`PoseErrorModel` also take pose errors ``(n, 6)``: mm, then mrad.
 """
 
 from .gp import GaussianProcessErrorModel
 from .kinematic import Identification, KinematicModel, identify
 from .partition import KMeansPartition, Octree
 from .partitioned import PartitionedErrorModel, select_granularity
+from .pose import PoseErrorModel
 from .series import ErrorModel
 from .swarm import SwarmConfig, SwarmResult, minimize, minimize_batch
 
 __all__ = ["ErrorModel", "GaussianProcessErrorModel", "Identification", "KMeansPartition", "KinematicModel", "Octree",
-           "PartitionedErrorModel", "SwarmConfig", "SwarmResult", "identify", "minimize", "minimize_batch",
-           "select_granularity"]
+           "PartitionedErrorModel", "PoseErrorModel", "SwarmConfig", "SwarmResult", "identify", "minimize",
+           "minimize_batch", "select_granularity"]

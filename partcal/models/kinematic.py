@@ -46,9 +46,9 @@ from scipy.spatial.transform import Rotation
 from sklearn.base import clone
 from sklearn.utils.validation import check_is_fitted, validate_data
 
-from .._validation import MAX_PAYLOAD_KG, FieldReader, boolean, check_array, param_error, real
+from .._validation import MAX_PAYLOAD_KG, FieldReader, Requirement, boolean, check_array, param_error, real
 from ..errors import DataError, ModelFileError
-from ..metrics import MRAD_PER_DEG, ORIENTATION, POSITION, distance_outside_boxes
+from ..metrics import MRAD_PER_DEG, MRAD_PER_RAD, ORIENTATION, POSITION, distance_outside_boxes
 from ..robot.description import load_robot, robot_from_dict, robot_to_dict
 from ..robot.kinematics import ORIENTATION_MM_PER_RAD, Robot, matrix_from_euler_deg
 from .base import ErrorModelBase, box_points, seed_from
@@ -399,7 +399,7 @@ def _uncertainty(jac: NDArray[np.float64], resid: NDArray[np.float64]) -> tuple[
 
 
 # ---------------------------------------------------------------------- the estimator
-RESIDUAL_MODELS = (ErrorModel, PartitionedErrorModel, GaussianProcessErrorModel)
+RESIDUAL_MODELS = (ErrorModel, PartitionedErrorModel, GaussianProcessErrorModel, PoseErrorModel)
 
 
 class KinematicModel(ErrorModelBase):
@@ -483,7 +483,11 @@ class KinematicModel(ErrorModelBase):
                         "payload_kg": real(0.0, MAX_PAYLOAD_KG, default=0.0),
                         "all_targets": boolean(False), "use_orientation": boolean(False),
                         "orientation_mm_per_rad": real(0.0, 1e6, default=ORIENTATION_MM_PER_RAD, low_open=True)}
+    _requirements = (Requirement("orientation_mm_per_rad", f"{ORIENTATION_MM_PER_RAD:g} (its default) unless "
+                                 "use_orientation is true: it weighs the orientation in the identification",
+                                 lambda p: p["use_orientation"] or p["orientation_mm_per_rad"] == ORIENTATION_MM_PER_RAD),)
     _from_fitted = ("all_targets", "use_orientation")     # a model file keeps what was fitted on instead
+    _OPTIONAL_IN_FILES = ("payload_kg", "orientation_mm_per_rad")   # files written before them: the default
     _joint_rules = {"compliance": ((), compliance_problem), "joint_harmonics": (0, harmonics_problem)}
 
     def _check_params(self) -> Robot:
@@ -551,8 +555,12 @@ class KinematicModel(ErrorModelBase):
         if self.residual is not None:
             seed = self._residual_seed()
             leftover = y - self._kinematic_errors(X, payload)
-            residual = clone(self.residual).set_params(random_state=seed)
-            self.residual_ = PoseErrorModel(residual) if self.n_outputs_ == 6 else residual    # one per part
+            residual = clone(self.residual)
+            if isinstance(residual, PoseErrorModel):      # frozen on pose errors (nested CV): its parts keep their seed
+                self.residual_ = residual
+            else:
+                residual.set_params(random_state=seed)
+                self.residual_ = PoseErrorModel(residual) if self.n_outputs_ == 6 else residual   # one per part
             self.residual_.fit(self._residual_inputs(X, nominal), leftover)
         return self._prepare()
 
@@ -615,7 +623,7 @@ class KinematicModel(ErrorModelBase):
             model[:, :3, :3] = model[:, :3, :3] @ Rotation.from_rotvec(self.identification_.value[-3:],
                                                                       degrees=True).as_matrix()
         turns = Rotation.from_matrix(model[:, :3, :3] @ nominal[:, :3, :3].transpose(0, 2, 1)).as_rotvec()
-        return np.hstack([model[:, :3, 3] - nominal[:, :3, 3], turns * 1000.0])
+        return np.hstack([model[:, :3, 3] - nominal[:, :3, 3], turns * MRAD_PER_RAD])
 
     def predict_target(self, X, target: str, payload_kg=None) -> NDArray[np.float64]:
         """The kinematic error of a target the model was fitted on, shape (n, 3) mm: ``FK(identified, its
@@ -708,16 +716,18 @@ class KinematicModel(ErrorModelBase):
             robot = robot_from_dict(r.get("robot", dict), source=f"{r.source}: field {r.path('robot')!r}")
         except Exception as exc:  # noqa: BLE001 - any damage in the robot section is a file error
             raise ModelFileError(str(exc)) from None
-        if robot.n_joints != n_in or n_out not in (3, 6):
-            r.fail("robot", f"a robot with {n_in} joints and 3 outputs (position errors) or 6 (pose errors); got "
-                            f"{robot.n_joints} joints, {n_out} outputs")
+        if robot.n_joints != n_in:
+            r.fail("robot", f"a robot with the file's {n_in} joints (n_inputs); got {robot.n_joints}")
+        if n_out not in (3, 6):
+            r.fail("", f"a kinematic model has 3 outputs (n_outputs; position errors) or 6 (pose errors); the file "
+                       f"says {n_out}")
         joint = {}
         for name, (default, problem) in cls._joint_rules.items():       # files before the joint errors: none
             joint[name] = r.doc.get(name, default)
             if problem(joint[name], robot.n_joints) is not None:
                 r.fail(name, f"expected {problem(joint[name], robot.n_joints)}; got {joint[name]!r}"[:200])
         rules = {key: rule for key, rule in cls._parameter_rules.items()
-                 if key not in cls._from_fitted and (key in r.doc or key not in ("payload_kg", "orientation_mm_per_rad"))}
+                 if key not in cls._from_fitted and (key in r.doc or key not in cls._OPTIONAL_IN_FILES)}
         tools, orientation = _targets_from(r)
         model = cls(robot=robot, **{key: r.rule(key, rule) for key, rule in rules.items()}, **joint,
                     all_targets=bool(tools), use_orientation=orientation)
@@ -736,9 +746,11 @@ class KinematicModel(ErrorModelBase):
             from .kinds import model_from_body      # the table of kinds knows this module
 
             model.residual_ = model_from_body(r.sub("residual"))
+            if model.residual_.n_outputs() != n_out or isinstance(model.residual_, PoseErrorModel) != (n_out == 6):
+                r.sub("residual").fail("kind", f"a residual of {n_out} outputs" + (" of kind 'pose' (one model on the "
+                                       "position, one on the orientation)" if n_out == 6 else "") + f"; got kind "
+                                       f"{r.sub('residual').doc.get('kind')!r} of {model.residual_.n_outputs()} outputs")
             model.residual = model.residual_ if n_out == 3 else model.residual_.model
-            if model.residual_.n_outputs() != n_out:
-                r.sub("residual").fail("n_outputs", f"the model's own, {n_out}; got {model.residual_.n_outputs()}")
         return model
 
     def check_file(self, r: FieldReader) -> None:
@@ -806,18 +818,19 @@ class KinematicModel(ErrorModelBase):
 
     def frozen(self, X, y, payload_kg=None, **measured) -> "KinematicModel":
         """With a residual model: the residual frozen on what the kinematics identified on ``X, y`` (and the
-        further targets and orientation of :meth:`fit`, ``measured``) leave. Pose errors: itself (the two
-        residuals search their own hyperparameters in every fold)."""
-        if self.residual is None or np.shape(y)[1:] == (6,):
+        further targets and orientation of :meth:`fit`, ``measured``) leave; on pose errors each part of the
+        residual frozen on its own columns (a :class:`PoseErrorModel`)."""
+        if self.residual is None:
             return self
         fitted = clone(self).set_params(residual=None).fit(X, y, payload_kg=payload_kg, **measured)
         X = np.asarray(X, dtype=float)
         nominal = fitted.robot_.positions(X)
         leftover = np.asarray(y, dtype=float) - fitted.predict(X, payload_kg=payload_kg)
         inputs = nominal if self.residual.inputs == "cartesian" else X
-        seed = self._residual_seed()
-        residual = clone(self.residual).set_params(random_state=seed).frozen(inputs, leftover)
-        return clone(self).set_params(residual=residual)
+        residual = clone(self.residual).set_params(random_state=self._residual_seed())
+        if leftover.shape[1] == 6:
+            residual = PoseErrorModel(residual)
+        return clone(self).set_params(residual=residual.frozen(inputs, leftover))
 
     def regions_model(self):
         return self.residual_.regions_model() if getattr(self, "residual_", None) is not None else None

@@ -83,6 +83,16 @@ class PoseErrorModel(ErrorModelBase):
     def _parts(self) -> tuple:
         return self.position_, self.orientation_
 
+    @property
+    def train_inputs_(self):
+        """The training inputs the parts share (a model file keeps them once, for :meth:`distance_to_data`)."""
+        return getattr(self.position_, "train_inputs_", None) if hasattr(self, "position_") else None
+
+    @train_inputs_.setter
+    def train_inputs_(self, value) -> None:
+        for part in self._parts():
+            part.train_inputs_ = value
+
     # ------------------------------------------------------------------ what the parts share
     @property
     def inputs(self) -> str:
@@ -172,7 +182,8 @@ class PoseErrorModel(ErrorModelBase):
             part = model_from_body(r.sub(name))
             if part.n_outputs() != 3 or part.inputs != inputs or part.n_features_in_ != n_in:
                 r.sub(name).fail("n_outputs", f"a model of 3 outputs on the {n_in} {inputs} inputs of the file; got "
-                                              f"{part.n_outputs()} outputs on {part.n_features_in_} {part.inputs} inputs")
+                                              f"{part.n_outputs()} outputs on {part.n_features_in_} {part.inputs} "
+                                              "inputs")
             parts.append(part)
         model = cls(model=parts[0], orientation=parts[1])
         model.position_, model.orientation_ = parts

@@ -22,6 +22,7 @@ import jinja2
 import numpy as np
 
 from .. import __version__
+from ..metrics import MRAD_PER_DEG
 from ..models.kinematic import BASE_PARAMETERS, ROW_PARAMETERS, TOOL_PARAMETERS
 from ..models.targets import added_names
 from ..study.registry import ModelResult, Outputs, RunResult, errors_left, partitioned_part
@@ -83,8 +84,8 @@ def context(result: RunResult) -> dict:
         "coarser_in_cv": coarser_in_cv(result),
         "shown_models": [r.spec.name for r in shown],
         "error_figures": [{"name": n,
-                           "path_svg": _b64(figures.errors_along_path(n, m.errors_mm, {r.spec.name: r.predictions[n][:, :3] for r in shown})),
-                           "hist_svg": _b64(figures.residual_histogram(n, m.errors_mm, {r.spec.name: r.predictions[n][:, :3] for r in shown}))}
+                           "path_svg": _b64(figures.errors_along_path(n, m.errors_mm, _positions(shown, n))),
+                           "hist_svg": _b64(figures.residual_histogram(n, m.errors_mm, _positions(shown, n)))}
                           for n, m in result.datasets.items()],
         "convergence_svg": _optional_b64(figures.convergence({r.spec.name: r.model for r in result.models})),
         "equations": [{"name": r.spec.name, "lines": lines} for r in result.models
@@ -98,6 +99,11 @@ def context(result: RunResult) -> dict:
     }
     out["scenes"] = scene_entries(rendering, captions)
     return out
+
+
+def _positions(models: list[ModelResult], name: str) -> dict:
+    """The predicted position errors of each model on a data set, (n, 3) mm (a pose model's first three)."""
+    return {r.spec.name: r.predictions[name][:, :3] for r in models}
 
 
 def design_summary(result: RunResult) -> dict | None:
@@ -148,11 +154,11 @@ def registration_target_rows(result: RunResult) -> list[dict]:
 
 
 def _mrad(deg: float) -> float:
-    return float(np.radians(deg) * 1000.0)
+    return float(deg * MRAD_PER_DEG)
 
 
 def _deg(mrad: float) -> float:
-    return float(np.degrees(mrad / 1000.0))
+    return float(mrad / MRAD_PER_DEG)
 
 
 def granularity_rows(result: RunResult) -> list[dict]:

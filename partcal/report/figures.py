@@ -19,6 +19,7 @@ import numpy as np  # noqa: E402
 plt.rcParams.update({"svg.fonttype": "none", "font.size": 9, "axes.grid": True, "grid.alpha": 0.3,
                      "axes.spines.top": False, "axes.spines.right": False, "svg.hashsalt": "partcal"})
 COLOURS = ["#1f77b4", "#d62728", "#2ca02c", "#9467bd"]
+OUTPUT_NAMES = ("x", "y", "z", "rx", "ry", "rz")    # a swarm per output: position, then a pose model's turn
 
 
 def _svg(fig) -> str:
@@ -104,7 +105,7 @@ def convergence(models: dict[str, object]) -> str | None:
             ax.fill_between(np.arange(length), *np.percentile(grid, [10, 90], axis=0), color=colour, alpha=0.2)
         else:
             for a, r in enumerate(runs):
-                ax.plot(r, color=colour, lw=1.1, ls=["-", "--", ":"][a % 3], label=f"{label} {'xyz'[a]}")
+                ax.plot(r, color=colour, lw=1.1, ls=["-", "--", ":"][a % 3], label=f"{label} {OUTPUT_NAMES[a]}")
     ax.axhline(1.0, color="black", lw=0.8)
     ax.set_yscale("log")
     ax.set_xlabel("iteration")

@@ -29,7 +29,7 @@ from scipy.spatial.transform import Rotation
 
 from .._validation import check_array
 from ..errors import DataError
-from ..metrics import warn_far
+from ..metrics import MRAD_PER_RAD, warn_far
 from ..models.bases import varying_inputs
 from ..robot.compensation import (CompensationResult, false_target, false_target_cartesian_poses,
                                   false_target_joints, false_target_poses, reachable, reachable_poses)
@@ -39,7 +39,7 @@ from .persist import load_model
 
 EXTRAPOLATION_LIMIT = 50.0    # mm (Cartesian models) or degrees (joint models) from the nearest training input
 POSE_OUTPUTS = 6              # a pose model: dx, dy, dz (mm), then the rotation vector rx, ry, rz (mrad)
-HALF_TURN_MRAD = 1000.0 * np.pi     # a predicted turn beyond this is no error, but a model beyond its data
+HALF_TURN_MRAD = MRAD_PER_RAD * np.pi    # a predicted turn beyond this is no error, but a model beyond its data
 
 
 class Predictor:
@@ -120,7 +120,7 @@ class Predictor:
         offset = check_array(np.reshape(np.asarray(offset_mm, dtype=float), (1, -1)), "offset_mm", columns=3)[0]
         errors = self._errors(q if self.inputs == "joint" else self.robot.positions(q), payload_kg)
         lever = self.robot.flange(q)[:, :3, :3] @ (offset - self.robot.tool_mm)
-        turn = Rotation.from_rotvec(errors[:, 3:] / 1000.0).as_matrix() - np.eye(3)
+        turn = Rotation.from_rotvec(errors[:, 3:] / MRAD_PER_RAD).as_matrix() - np.eye(3)
         return errors[:, :3] + np.einsum("nij,nj->ni", turn, lever)
 
     def _inputs(self, positions, joints) -> NDArray[np.float64]:
@@ -260,14 +260,14 @@ class Predictor:
             return CompensationResult(np.zeros((0, 3)), None if self.inputs == "cartesian" else
                                       np.zeros((0, self.n_inputs)), np.zeros(0, np.int64), np.zeros(0),
                                       np.zeros(0, bool), np.zeros((0, 3, 3)), np.zeros(0))
-        poses = _homogeneous(positions, matrices_from_xyz_deg(angles))
+        poses = pose_matrices(positions, matrices_from_xyz_deg(angles))
         if self.inputs == "cartesian":
             result = false_target_cartesian_poses(errors, poses, tol_mm=tol_mm, tol_deg=tol_deg, max_iter=max_iter)
             if self.robot is not None:      # a pose the arm cannot take (IK within its limits) is no solution
                 seeds = self._given_seeds(joints, n)
                 live = np.flatnonzero(result.converged)
                 ok = np.zeros(n, dtype=bool)
-                ok[live] = reachable_poses(self.robot, _homogeneous(result.commanded_mm[live],
+                ok[live] = reachable_poses(self.robot, pose_matrices(result.commanded_mm[live],
                                                                     result.commanded_rotation[live]),
                                            None if seeds is None else seeds[live])
                 result = dataclasses.replace(result, converged=ok)
@@ -349,10 +349,10 @@ class Predictor:
         return self.model.distance_to_data(X) if len(X) else np.zeros(0)
 
 
-_RADIANS_PER_OUTPUT = np.array([1.0, 1.0, 1.0, 1e-3, 1e-3, 1e-3])     # a pose model's outputs, mm and mrad
+_RADIANS_PER_OUTPUT = np.array([1.0, 1.0, 1.0, *[1.0 / MRAD_PER_RAD] * 3])     # a pose model's outputs: mm, mrad
 
 
-def _homogeneous(positions: NDArray[np.float64], rotations: NDArray[np.float64]) -> NDArray[np.float64]:
+def pose_matrices(positions: NDArray[np.float64], rotations: NDArray[np.float64]) -> NDArray[np.float64]:
     """Poses ``(n, 4, 4)`` from positions ``(n, 3)`` mm and rotations ``(n, 3, 3)``."""
     out = np.zeros((len(positions), 4, 4))
     out[:, :3, :3], out[:, :3, 3], out[:, 3, 3] = rotations, positions, 1.0

@@ -39,7 +39,7 @@ from scipy.spatial.transform import Rotation
 from ..data.measurements import Measurements, read_measurements
 from ..data.registration import Registration, kabsch, register_measurements, registered
 from ..errors import ConfigError, DataError
-from ..metrics import (MRAD_PER_DEG, ORIENTATION, POSITION, choose_simplest, fold_name, fold_rule, grouped_splits,
+from ..metrics import (MRAD_PER_DEG, MRAD_PER_RAD, ORIENTATION, POSITION, choose_simplest, fold_name, fold_rule, grouped_splits,
                        held_out_residuals, labels_as_groups, nested_residuals, orientation_summary, pooled_rms,
                        pose_groups, repeat_scatter_mm, rms_standard_error, select_by_cv, summary)
 from ..models.bases import varying_inputs
@@ -48,7 +48,7 @@ from ..robot.description import load_robot
 from ..robot.kinematics import Robot, flange_offset, matrices_from_xyz_deg
 from .config import ModelSpec, RunConfig
 from .memory import check_memory
-from .predictor import Predictor
+from .predictor import Predictor, pose_matrices
 
 log = logging.getLogger(__name__)
 
@@ -124,15 +124,17 @@ class RunResult:
 
 def rank_reason(config: RunConfig, cv: "CVPlan | None", physical: bool) -> str:
     """Why a run's best model won, in words: by the validation set, as the simplest physical model within one
-    standard error of the lowest CV score, or as the lowest CV score (no physical model within)."""
+    standard error of the lowest CV score, or as the lowest CV score (no physical model within). The score is
+    the 3-D RMS of the position, or with ``rank_on: orientation`` the orientation's RMS angle."""
+    part = "orientation RMS angle" if config.rank_on == "orientation" else "3-D RMS"
     if config.rank_by == "validation":
-        return f"lowest 3-D RMS on the validation set {config.validation.name} (held out, never fitted)"
+        return f"lowest {part} on the validation set {config.validation.name} (held out, never fitted)"
     folds = fold_name(cv.rule) if cv is not None else f"{config.cv_folds}-fold"
     how = ("(the same folds for every model, a pose's rows held out together; nested for granularity lists)")
     if physical:
         return (f"physical model (kinematic, no data-driven residual) with the fewest parameters whose {folds} "
-                f"cross-validated 3-D RMS on the identification set is within one standard error of the lowest {how}")
-    return (f"lowest {folds} cross-validated 3-D RMS on the identification set, no physical model (kinematic, no "
+                f"cross-validated {part} on the identification set is within one standard error of the lowest {how}")
+    return (f"lowest {folds} cross-validated {part} on the identification set, no physical model (kinematic, no "
             f"data-driven residual) being within one standard error of it {how}")
 
 
@@ -314,6 +316,7 @@ def _register(config: RunConfig, data: dict[str, Measurements], robot: Robot):
         if name in opts.own_frame:
             regs[name] = register_measurements(robot, m, tool_mm=shared.tool_mm, fit_tool=False,
                                                target_tools_mm=shared.target_tools_mm,
+                                               probe_rotation=shared.probe_rotation,
                                                source=f"{config.tests[name]} ({name}, own tracker frame)",
                                                plausibility=opts.plausibility)
         else:
@@ -611,8 +614,8 @@ def errors_left(m: Measurements, predicted: NDArray[np.float64], own_frame: bool
     if predicted.shape[1] < 6:
         return position, None
     measured = Rotation.from_rotvec(m.orientation_errors_deg, degrees=True)
-    model = Rotation.from_matrix(rot) * Rotation.from_rotvec(predicted[:, ORIENTATION] / 1000.0)
-    return position, (measured * model.inv()).as_rotvec() * 1000.0
+    model = Rotation.from_matrix(rot) * Rotation.from_rotvec(predicted[:, ORIENTATION] / MRAD_PER_RAD)
+    return position, (measured * model.inv()).as_rotvec() * MRAD_PER_RAD
 
 
 def choose_granularity(spec: ModelSpec, seed: int, X, y, folds: list, per_row: dict | None = None,
@@ -767,8 +770,7 @@ def verify_compensation(result: ModelResult, data: dict[str, Measurements], robo
         else:     # the controller turns the false target into joints with its nominal model
             fixed = tuple(int(j) + 1 for j in np.flatnonzero(~varying_inputs(m.q_deg)))
             if pose:
-                commanded = np.tile(np.eye(4), (len(m), 1, 1))
-                commanded[:, :3, :3], commanded[:, :3, 3] = comp.commanded_rotation, comp.commanded_mm
+                commanded = pose_matrices(comp.commanded_mm, comp.commanded_rotation)
                 q_cmd = robot.inverse_pose(commanded, m.q_deg, fixed=fixed).q_deg
             else:
                 q_cmd = robot.inverse(comp.commanded_mm, m.q_deg, fixed=fixed).q_deg
@@ -793,4 +795,4 @@ def _turn_reached(virtual, q_deg: NDArray[np.float64], m: Measurements, rng: np.
     seen = virtual.measure_more(q_deg, rng)[1]
     reached = matrices_from_xyz_deg(seen) if seen is not None else virtual.true_flange(q_deg)[1]
     wanted = matrices_from_xyz_deg(m.nominal_orientation_deg)
-    return Rotation.from_matrix(reached @ wanted.transpose(0, 2, 1)).as_rotvec() * 1000.0
+    return Rotation.from_matrix(reached @ wanted.transpose(0, 2, 1)).as_rotvec() * MRAD_PER_RAD

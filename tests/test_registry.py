@@ -526,7 +526,7 @@ def test_a_set_in_its_own_tracker_frame_is_scored_up_to_a_rigid_transform():
     from scipy.spatial.transform import Rotation
 
     from partcal import Measurements
-    from partcal.study.registry import errors_left
+    from partcal.study.scoring import errors_left
 
     rng = np.random.default_rng(5)
     nominal = rng.uniform(-1000, 1000, (60, 3))

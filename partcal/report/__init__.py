@@ -25,7 +25,8 @@ from .. import __version__
 from ..metrics import MRAD_PER_DEG
 from ..models.kinematic import BASE_PARAMETERS, ROW_PARAMETERS, TOOL_PARAMETERS
 from ..models.targets import added_names
-from ..study.registry import ModelResult, Outputs, RunResult, errors_left, partitioned_part
+from ..study.registry import ModelResult, RunResult, partitioned_part
+from ..study.scoring import Outputs, errors_left
 from . import figures
 from .scene import SceneRendering
 

@@ -34,21 +34,19 @@ from typing import Callable
 import numpy as np
 from joblib import Parallel, delayed, parallel_config
 from numpy.typing import NDArray
-from scipy.spatial.transform import Rotation
 
 from ..data.measurements import Measurements, read_measurements
-from ..data.registration import Registration, kabsch, register_measurements, registered
+from ..data.registration import Registration, register_measurements, registered
 from ..errors import ConfigError, DataError
-from ..metrics import (MRAD_PER_DEG, MRAD_PER_RAD, ORIENTATION, POSITION, choose_simplest, fold_name, fold_rule, grouped_splits,
-                       held_out_residuals, labels_as_groups, nested_residuals, orientation_summary, pooled_rms,
-                       pose_groups, repeat_scatter_mm, rms_standard_error, select_by_cv, summary)
+from ..metrics import (choose_simplest, fold_name, fold_rule, grouped_splits, held_out_residuals, labels_as_groups,
+                       nested_residuals, pooled_rms, pose_groups, repeat_scatter_mm, rms_standard_error, select_by_cv)
 from ..models.bases import varying_inputs
 from ..models.partitioned import fold_regions
 from ..robot.description import load_robot
-from ..robot.kinematics import Robot, flange_offset, matrices_from_xyz_deg
+from ..robot.kinematics import Robot, flange_offset
 from .config import ModelSpec, RunConfig
 from .memory import check_memory
-from .predictor import Predictor, pose_matrices
+from .scoring import Outputs, verify_compensation
 
 log = logging.getLogger(__name__)
 
@@ -136,56 +134,6 @@ def rank_reason(config: RunConfig, cv: "CVPlan | None", physical: bool) -> str:
                 f"cross-validated {part} on the identification set is within one standard error of the lowest {how}")
     return (f"lowest {folds} cross-validated {part} on the identification set, no physical model (kinematic, no "
             f"data-driven residual) being within one standard error of it {how}")
-
-
-@dataclass(frozen=True)
-class Outputs:
-    """What a run's models predict and the part of it the run ranks by (``predict:``, ``rank_on:``).
-
-    ``predict: position`` fits the primary target's errors, (n, 3) mm; ``pose``
-    fits the pose errors (``Measurements.pose_errors``, (n, 6): those, then the
-    orientation error as a rotation vector in mrad). The CV score and its
-    standard error read the ranked columns alone: the position's, or with
-    ``rank_on: orientation`` the orientation's (mrad), never a sum of mm and
-    mrad.
-    """
-
-    predict: str = "position"
-    rank_on: str = "position"
-
-    @classmethod
-    def of(cls, config: RunConfig) -> "Outputs":
-        return cls(config.predict, config.rank_on)
-
-    @property
-    def pose(self) -> bool:
-        return self.predict == "pose"
-
-    @property
-    def unit(self) -> str:
-        """The unit of the ranked score."""
-        return "mrad" if self.rank_on == "orientation" else "mm"
-
-    def errors(self, m: Measurements) -> NDArray[np.float64]:
-        """What the models fit and predict on a data set."""
-        return m.pose_errors if self.pose else m.errors_mm
-
-    def ranked(self, resid: NDArray[np.float64]) -> NDArray[np.float64]:
-        """The ranked columns of residuals of :meth:`errors`."""
-        return resid[:, ORIENTATION if self.rank_on == "orientation" else POSITION]
-
-    def score(self, resid: NDArray[np.float64]) -> float:
-        """The pooled RMS of the ranked columns (mm, or mrad)."""
-        return pooled_rms(self.ranked(resid))
-
-    def evaluate(self, m: Measurements, predicted: NDArray[np.float64], own_frame: bool = False) -> dict:
-        """The metrics of a prediction on a data set: :func:`summary` of the position errors it leaves (mm) and,
-        for pose errors, ``orientation``: :func:`orientation_summary` of the orientation errors left (mrad)."""
-        position, orientation = errors_left(m, predicted, own_frame)
-        out = summary(position)
-        if self.pose:
-            out["orientation"] = orientation_summary(orientation)
-        return out
 
 
 @dataclass(frozen=True)
@@ -589,35 +537,6 @@ def _regions_text(counts: list[int]) -> str:
     return (f"{low} to {high} regions" if low != high else f"{low} region{'s' if low != 1 else ''}")
 
 
-def errors_left(m: Measurements, predicted: NDArray[np.float64], own_frame: bool = False
-                ) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
-    """The errors a model leaves on a data set: the position's, (n, 3) mm, measured - nominal - predicted,
-    and for a prediction of pose errors (n, 6) the orientation's, (n, 3) mrad (else None): the turn from the
-    predicted orientation to the measured one, ``log(exp(e_measured) exp(-e_predicted))``.
-
-    A set registered in its own tracker frame (``registration: own``) is known
-    only up to a rigid transform: its registration on the nominal model has
-    already absorbed the rigid part of the robot's errors, and a model's
-    prediction would count it again. There the errors left are the measured
-    positions minus the model's positions (nominal + predicted) moved by their
-    best rigid fit to them; with ``predicted = 0`` the same gives the
-    uncompensated figure, so both sides are scored alike. The same rotation turns
-    the predicted orientation.
-    """
-    rot = np.eye(3)
-    if not own_frame:
-        position = m.errors_mm - predicted[:, POSITION]
-    else:
-        model_mm = m.nominal_mm + predicted[:, POSITION]
-        rot, shift = kabsch(model_mm, m.measured_mm)
-        position = m.measured_mm - (model_mm @ rot.T + shift)
-    if predicted.shape[1] < 6:
-        return position, None
-    measured = Rotation.from_rotvec(m.orientation_errors_deg, degrees=True)
-    model = Rotation.from_matrix(rot) * Rotation.from_rotvec(predicted[:, ORIENTATION] / MRAD_PER_RAD)
-    return position, (measured * model.inv()).as_rotvec() * MRAD_PER_RAD
-
-
 def choose_granularity(spec: ModelSpec, seed: int, X, y, folds: list, per_row: dict | None = None,
                        score: Callable[[NDArray[np.float64]], float] = pooled_rms) -> tuple[object, list[dict], float]:
     """Choose the partition granularity of an entry (or of its residual) by cross-validation on ``folds``.
@@ -738,61 +657,3 @@ def _virtual_robot(config: RunConfig, robot: Robot | None):
         raise ConfigError(f"{config.source}: verify.virtual_robot simulates {study.robot.nominal.name!r}, "
                           f"but the run's robot is {robot.name if robot else 'not set'!r}")
     return study.robot
-
-
-def verify_compensation(result: ModelResult, data: dict[str, Measurements], robot: Robot, virtual,
-                        seed: int) -> dict[str, dict]:
-    """Command the compensated test targets on the virtual robot; compare before, predicted and after.
-
-    ``predicted_residual`` is the model's error on the measured test set (what
-    compensation should leave); ``after`` is what the true robot, measured by
-    the simulated tracker, really misses by when given the false targets whose
-    compensation converged (``converged`` of ``n``: the others are no command a
-    controller would send). A
-    model of pose errors compensates the full pose (the test poses' nominal
-    position and orientation, :meth:`Predictor.compensate_pose`), and
-    ``orientation`` holds the same three figures of the orientation (mrad).
-    """
-    predictor = Predictor(result.model, {"name": result.spec.name, "inputs": result.spec.inputs,
-                                         "n_inputs": result.model.n_features_in_, "kind": "run"}, robot)
-    pose = result.model.n_outputs() == 6
-    out = {}
-    for k, (name, m) in enumerate(data.items()):
-        if name == "identification":
-            continue
-        targets, seeds = m.nominal_mm, m.q_deg if result.spec.inputs == "joint" else None
-        if pose:
-            comp = predictor.compensate_pose(targets, m.nominal_orientation_deg, seeds)
-        else:
-            comp = predictor.compensate_full(targets, seeds)
-        if result.spec.inputs == "joint":
-            q_cmd = comp.joints_deg
-        else:     # the controller turns the false target into joints with its nominal model
-            fixed = tuple(int(j) + 1 for j in np.flatnonzero(~varying_inputs(m.q_deg)))
-            if pose:
-                commanded = pose_matrices(comp.commanded_mm, comp.commanded_rotation)
-                q_cmd = robot.inverse_pose(commanded, m.q_deg, fixed=fixed).q_deg
-            else:
-                q_cmd = robot.inverse(comp.commanded_mm, m.q_deg, fixed=fixed).q_deg
-        rng = np.random.default_rng([seed, k])
-        reached, ok = virtual.measure(q_cmd, rng), comp.converged
-        out[name] = {"before": summary(m.errors_mm),
-                     "predicted_residual": summary(m.errors_mm - result.predictions[name][:, POSITION]),
-                     "after": summary((reached - targets)[ok]) if ok.any() else None,
-                     "converged": int(ok.sum()), "n": len(targets)}
-        if pose:
-            turned = _turn_reached(virtual, q_cmd, m, rng)
-            out[name]["orientation"] = {"before": orientation_summary(m.orientation_errors_deg * MRAD_PER_DEG),
-                                        "predicted_residual": result.metrics[name]["orientation"],
-                                        "after": orientation_summary(turned[ok]) if ok.any() else None}
-    return out
-
-
-def _turn_reached(virtual, q_deg: NDArray[np.float64], m: Measurements, rng: np.random.Generator
-                  ) -> NDArray[np.float64]:
-    """The turn from the test poses' nominal orientation to the one the virtual robot reaches at ``q_deg``, as its
-    tracker reads it (noise-free when it reads no orientation), rotation vectors in mrad."""
-    seen = virtual.measure_more(q_deg, rng)[1]
-    reached = matrices_from_xyz_deg(seen) if seen is not None else virtual.true_flange(q_deg)[1]
-    wanted = matrices_from_xyz_deg(m.nominal_orientation_deg)
-    return Rotation.from_matrix(reached @ wanted.transpose(0, 2, 1)).as_rotvec() * MRAD_PER_RAD

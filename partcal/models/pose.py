@@ -127,8 +127,8 @@ class PoseErrorModel(ErrorModelBase):
     def frozen(self, X, y) -> "PoseErrorModel":
         """Each part frozen on its own columns (a Gaussian process keeps the hyperparameters it learnt there)."""
         y = np.asarray(y, dtype=float)
-        return PoseErrorModel(self.model.frozen(X, y[:, POSITION]),
-                              (self.orientation or self.model).frozen(X, y[:, ORIENTATION]))
+        turn = self.orientation if self.orientation is not None else self.model
+        return PoseErrorModel(self.model.frozen(X, y[:, POSITION]), turn.frozen(X, y[:, ORIENTATION]))
 
     def effective_parameters(self) -> float:
         return float(sum(part.effective_parameters() for part in self._parts()))

@@ -118,10 +118,10 @@ def verify_compensation(result: "ModelResult", data: dict[str, Measurements], ro
     compensation should leave); ``after`` is what the true robot, measured by
     the simulated tracker, really misses by when given the false targets whose
     compensation converged (``converged`` of ``n``: the others are no command a
-    controller would send). A
-    model of pose errors compensates the full pose (the test poses' nominal
-    position and orientation, :meth:`Predictor.compensate_pose`), and
-    ``orientation`` holds the same three figures of the orientation (mrad).
+    controller would send). A model of pose errors compensates the full pose
+    (the test poses' nominal position and orientation,
+    :meth:`Predictor.compensate_pose`), and ``orientation`` holds the same three
+    figures of the orientation (mrad).
     """
     predictor = Predictor(result.model, {"name": result.spec.name, "inputs": result.spec.inputs,
                                          "n_inputs": result.model.n_features_in_, "kind": "run"}, robot)

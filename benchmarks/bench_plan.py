@@ -67,7 +67,7 @@ from _table import print_table  # noqa: E402
 
 from partcal.data.simulate import Tracker, VirtualRobot  # noqa: E402
 from partcal.models import design  # noqa: E402
-from partcal.models.kinematic import identify, robot_with  # noqa: E402
+from partcal.models.identification import identify, robot_with  # noqa: E402
 from partcal.robot import load_robot  # noqa: E402
 from partcal.robot.kinematics import matrix_from_euler_deg  # noqa: E402
 from partcal.study import plan  # noqa: E402

@@ -15,9 +15,9 @@ from test_kinematic import sk120_poses
 
 from partcal import KinematicModel, PartcalError
 from partcal.data.simulate import Compliance, Tracker, VirtualRobot
+from partcal.models.identification import (actual_joints, model_jacobian, model_positions, nominal_values,
+                                           parameter_names, robot_with)
 from partcal.models.joint_errors import JointErrors
-from partcal.models.kinematic import (actual_joints, model_jacobian, model_positions, nominal_values,
-                                      parameter_names, robot_with)
 from partcal.robot.kinematics import matrix_from_euler_deg
 
 @pytest.fixture(autouse=True, scope="module")

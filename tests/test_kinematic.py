@@ -6,7 +6,7 @@ from conftest import ROOT
 from sklearn.base import clone
 
 from partcal import ErrorModel, GaussianProcessErrorModel, KinematicModel, PartcalError, read_measurements
-from partcal.models.kinematic import identify, nominal_values, parameter_names, robot_with
+from partcal.models.identification import identify, nominal_values, parameter_names, robot_with
 from partcal.robot.description import robot_from_dict
 
 # A planar arm: two parallel joint axes (alpha = 0) and a tool on the last x axis. Worked out by hand,

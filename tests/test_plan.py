@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 from partcal.data.measurements import read_columns
 from partcal.models import design
-from partcal.models.kinematic import parameter_names
+from partcal.models.identification import parameter_names
 from partcal.robot import load_robot
 from partcal.robot.kinematics import Robot
 from partcal.study import plan

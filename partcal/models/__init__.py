@@ -7,7 +7,8 @@ errors ``(n, 3)`` in mm, ``predict(X) -> (n, 3)`` mm; a kinematic model and a
 """
 
 from .gp import GaussianProcessErrorModel
-from .kinematic import Identification, KinematicModel, identify
+from .identification import Identification, identify
+from .kinematic import KinematicModel
 from .partition import KMeansPartition, Octree
 from .partitioned import PartitionedErrorModel, select_granularity
 from .pose import PoseErrorModel

@@ -1,47 +1,19 @@
-"""Kinematic identification: the robot's geometric parameters from measured positions.
+"""``KinematicModel``: kinematic identification (:mod:`partcal.models.identification`) as an error model.
 
-The classic calibration the paper's introduction describes. Every DH row has
-four parameters (its theta offset, d, a and alpha); the tool offset adds three
-and the pose of the robot base in the measurement frame six (a shift and
-three small rotations). Rows whose theta follows several joints (the SK120's
-parallelogram) get their own offsets like any other row, so a joint zero
-offset that moves several coupled rows at once is one direction of this
-parameter space. ``identify`` finds the parameters that put the forward
-kinematics through the measured positions, by Levenberg-Marquardt with the
-analytic Jacobian of the chain.
-
-Positions alone cannot tell every parameter apart: two parallel joint axes
-share one ``d``, the first joint's offset is a turn of the base about its z
-axis, and a wrist that never moves hides its own offsets. Those directions
-are found before the fit from the rank of the identification Jacobian (its
-columns scaled to unit length; the rank from the singular values, the choice
-of which parameters to keep from a QR factorisation with column pivoting).
-They stay at their nominal values and are reported as unidentifiable.
-
-Joint errors the geometry cannot carry, gravity compliance and cyclic
-transmission errors (:mod:`partcal.models.joint_errors`), are identified with
-the geometry: their parameters follow the geometric ones in the same vector,
-the same rank analysis and the same fit; the forward kinematics then runs on
-the joint angles the arm actually takes.
-
-``KinematicModel`` wraps this as an error model: its predicted error is
-``FK(identified, q_actual) - FK(nominal, q)``. With ``residual=`` another error
-model is fitted to what the identified kinematics leave, and the two
-predictions add up (a hybrid model).
+Its predicted error is ``FK(identified, q_actual) - FK(nominal, q)``; fitted
+on pose errors, the orientation's too. With ``residual=`` another error model
+is fitted to what the identified kinematics leave, and the two predictions add
+up (a hybrid model).
 """
 
 from __future__ import annotations
 
-import functools
 import logging
 import math
-from dataclasses import dataclass, field
 from pathlib import PurePath
 
 import numpy as np
-import scipy.linalg
 from numpy.typing import NDArray
-from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 from sklearn.base import clone
 from sklearn.utils.validation import check_is_fitted, validate_data
@@ -50,355 +22,21 @@ from .._validation import MAX_PAYLOAD_KG, FieldReader, Requirement, boolean, che
 from ..errors import DataError, ModelFileError
 from ..metrics import MRAD_PER_DEG, MRAD_PER_RAD, ORIENTATION, POSITION, distance_outside_boxes
 from ..robot.description import load_robot, robot_from_dict, robot_to_dict
-from ..robot.kinematics import ORIENTATION_MM_PER_RAD, Robot, matrix_from_euler_deg
+from ..robot.kinematics import ORIENTATION_MM_PER_RAD, Robot
 from .base import ErrorModelBase, box_points, seed_from
 from .bases import varying_inputs
 from .gp import GaussianProcessErrorModel
+from .identification import (PRIMARY_TARGET, STATUSES, Identification, geometric_size, identify, nominal_values,
+                             own_geometry, parameter_names, robot_with)
 from .joint_errors import JointErrors, compliance_problem, harmonics_problem
 from .partitioned import PartitionedErrorModel
 from .pose import PoseErrorModel
 from .series import ErrorModel
-from .targets import Extra, added_names, added_nominal, extra_from, stacked
+from .targets import added_names, added_nominal, extra_from
 
 log = logging.getLogger(__name__)
-ROW_PARAMETERS = (("theta", "deg"), ("d", "mm"), ("a", "mm"), ("alpha", "deg"))
-TOOL_PARAMETERS = (("tool.x", "mm"), ("tool.y", "mm"), ("tool.z", "mm"))
-BASE_PARAMETERS = (("base.x", "mm"), ("base.y", "mm"), ("base.z", "mm"),
-                   ("base.rx", "deg"), ("base.ry", "deg"), ("base.rz", "deg"))
-STATUSES = ("identified", "unidentifiable", "fixed")
-PRIMARY_TARGET = "A"        # the data's unsuffixed target (partcal.data.measurements.PRIMARY)
 
 
-# ---------------------------------------------------------------------- the parameter vector
-def parameter_names(robot: Robot, errors: JointErrors | None = None) -> list[tuple[str, str]]:
-    """``(name, unit)`` of every parameter: ``theta[1], d[1], a[1], alpha[1], ..., tool.*, base.*``, then the
-    joint errors' (:meth:`JointErrors.names`).
-
-    >>> [n for n, _ in parameter_names(load_robot("motoman_sk120"))][:5]
-    ['theta[1]', 'd[1]', 'a[1]', 'alpha[1]', 'theta[2]']
-    """
-    rows = [(f"{p}[{r + 1}]", unit) for r in range(robot.alpha_deg.size) for p, unit in ROW_PARAMETERS]
-    return rows + list(TOOL_PARAMETERS) + list(BASE_PARAMETERS) + (errors.names() if errors is not None else [])
-
-
-def nominal_values(robot: Robot, errors: JointErrors | None = None) -> NDArray[np.float64]:
-    """The robot's own parameter values, shape ``(4 R + 9 [+ P],)``: rows, tool, a zero base correction, and
-    zero joint errors."""
-    rows = np.column_stack([robot.theta_offset_deg, robot.d_mm, robot.a_mm, robot.alpha_deg]).ravel()
-    return np.concatenate([rows, robot.tool_mm, np.zeros(6 + (errors.size if errors is not None else 0))])
-
-
-def geometric_size(robot: Robot) -> int:
-    """Number of geometric parameters, ``4 R + 9`` (the joint errors' follow them)."""
-    return 4 * robot.alpha_deg.size + 9
-
-
-def robot_with(nominal: Robot, values: NDArray[np.float64]) -> Robot:
-    """The robot with parameter ``values`` (``(4 R + 9,)``, as :func:`nominal_values`; joint errors ignored).
-
-    The base correction turns the nominal base by ``Rz Ry Rx`` about the
-    measurement frame's axes and then shifts it.
-    """
-    rows = nominal.alpha_deg.size
-    dh = values[:4 * rows].reshape(rows, 4)
-    turn = matrix_from_euler_deg(values[4 * rows + 6:4 * rows + 9])
-    return nominal.replace(theta_offset_deg=dh[:, 0].copy(), d_mm=dh[:, 1].copy(), a_mm=dh[:, 2].copy(),
-                           alpha_deg=dh[:, 3].copy(), tool_mm=values[4 * rows:4 * rows + 3].copy(),
-                           base_rotation=turn @ nominal.base_rotation,
-                           base_mm=turn @ nominal.base_mm + values[4 * rows + 3:4 * rows + 6])
-
-
-def identification_jacobian(nominal: Robot, q_deg: NDArray[np.float64], values: NDArray[np.float64]
-                            ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Positions ``(n, 3)`` mm of the robot with ``values``, and ``d p / d values``, shape ``(3 n, 4 R + 9)``.
-
-    Rows of the Jacobian run over poses then x, y, z (``positions.ravel()``).
-    """
-    robot = robot_with(nominal, values)
-    p, chain = robot.parameter_jacobian(q_deg)
-    rows = nominal.alpha_deg.size
-    lever = p - values[4 * rows + 3:4 * rows + 6]                # about the shifted base origin
-    base = np.empty((p.shape[0], 3, 6))
-    base[:, :, :3] = np.eye(3)
-    for k, axis in enumerate(base_axes(nominal, values)):
-        base[:, :, 3 + k] = np.cross(axis, lever) * (np.pi / 180.0)
-    return p, np.concatenate([chain, base], axis=2).reshape(-1, 4 * rows + 9)
-
-
-def base_axes(nominal: Robot, values: NDArray[np.float64]) -> list[NDArray[np.float64]]:
-    """The axes ``(3,)`` the base correction's ``rx, ry, rz`` turn about (``Rz Ry Rx``), in the measurement frame."""
-    rows = nominal.alpha_deg.size
-    _, ry, rz = values[4 * rows + 6:4 * rows + 9]
-    turn_z = matrix_from_euler_deg(np.array([0.0, 0.0, rz]))
-    return [turn_z @ matrix_from_euler_deg(np.array([0.0, ry, 0.0])) @ [1.0, 0, 0], turn_z @ [0, 1.0, 0],
-            np.array([0, 0, 1.0])]
-
-
-def actual_joints(nominal: Robot, errors: JointErrors | None, q_deg: NDArray[np.float64],
-                  values: NDArray[np.float64], payload_kg: NDArray[np.float64], derivatives: bool = False):
-    """The joint angles the arm takes, ``(n, N)`` deg, their design and the lever arms' moves (see
-    :meth:`JointErrors.design`; None without joint errors). Gravity acts in the robot's own base frame:
-    the base correction is left out."""
-    if errors is None or errors.empty:
-        return q_deg, None, None
-    size = geometric_size(nominal)
-    return errors.design(own_geometry(nominal, values), q_deg, values[size:size + errors.size], payload_kg,
-                         derivatives)
-
-
-def own_geometry(nominal: Robot, values: NDArray[np.float64]) -> Robot:
-    """The robot with ``values`` in its own base frame (the base correction left out): where gravity acts
-    along ``-z``, and the joint errors' lever arms are taken."""
-    own = values[:geometric_size(nominal)].copy()
-    own[-6:] = 0.0
-    return robot_with(nominal, own)
-
-
-def model_positions(nominal: Robot, errors: JointErrors | None, q_deg: NDArray[np.float64],
-                    values: NDArray[np.float64], payload_kg: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Tool positions ``(n, 3)`` mm of the model with ``values`` (geometry and joint errors)."""
-    q_actual = actual_joints(nominal, errors, q_deg, values, payload_kg)[0]
-    return robot_with(nominal, values).positions(q_actual)
-
-
-def model_jacobian(nominal: Robot, errors: JointErrors | None, q_deg: NDArray[np.float64],
-                   values: NDArray[np.float64], payload_kg: NDArray[np.float64]
-                   ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Positions ``(n, 3)`` mm and ``d p / d values``, shape ``(3 n, P)``, geometry and joint errors.
-
-    The geometric columns are those of :func:`identification_jacobian` at the actual joint angles, plus,
-    with compliant joints, how the DH rows and the tool move the lever arms; a joint error's column is
-    the joint's position Jacobian times its design column. All analytic.
-    """
-    q_actual, design, moves = actual_joints(nominal, errors, q_deg, values, payload_kg, derivatives=True)
-    size = geometric_size(nominal)
-    p, jac = identification_jacobian(nominal, q_actual, values[:size])
-    if design is None:
-        return p, jac
-    joints = robot_with(nominal, values).jacobian(q_actual)                       # (n, 3, N) mm/deg
-    if moves is not None:
-        jac[:, :size - 6] += np.einsum("nij,njp->nip", joints, moves).reshape(-1, size - 6)
-    extra = np.einsum("nij,njp->nip", joints, design).reshape(-1, design.shape[2])
-    return p, np.hstack([jac, extra])
-
-
-# ---------------------------------------------------------------------- identification
-@dataclass(frozen=True)
-class Identification:
-    """An identified parameter table.
-
-    Attributes
-    ----------
-    names, units : tuple of str, length P
-    nominal, value : ndarray, shape (P,)
-        The nominal and identified values (mm, degrees). Base entries are
-        corrections of the nominal base, nominally zero.
-    std_error : ndarray, shape (P,)
-        Standard errors of the identified values (NaN where not identified):
-        ``sigma^2 (J^T J)^-1`` with ``sigma^2`` the residual variance per
-        coordinate.
-    status : tuple of str
-        ``identified``, ``unidentifiable`` (positions cannot separate it from
-        the others; kept nominal) or ``fixed`` (not asked for).
-    rank, condition : int, float
-        Rank of the scaled identification Jacobian, and the condition number
-        of its identified columns (at the solution).
-    rms_mm : float
-        3-D RMS of the remaining position error on the identification data (the primary target's).
-    n_poses, evaluations : int
-    target_rms_mm : dict of str to float
-        With several targets or an orientation: each target's 3-D RMS, mm, the primary first.
-    orientation_rms_deg : float, optional
-        With an orientation: the RMS angle of the remaining orientation error, degrees.
-    primary_identifiable : int, optional
-        With several targets or an orientation: how many of the model's own parameters (those of a
-        one-target table) the primary target's positions alone would identify, to compare with
-        the count identified here.
-    """
-
-    names: tuple[str, ...]
-    units: tuple[str, ...]
-    nominal: NDArray[np.float64]
-    value: NDArray[np.float64]
-    std_error: NDArray[np.float64]
-    status: tuple[str, ...]
-    rank: int
-    condition: float
-    rms_mm: float
-    n_poses: int
-    evaluations: int
-    target_rms_mm: dict = field(default_factory=dict)
-    orientation_rms_deg: float | None = None
-    primary_identifiable: int | None = None
-
-    @property
-    def correction(self) -> NDArray[np.float64]:
-        """Identified minus nominal, shape (P,)."""
-        return self.value - self.nominal
-
-    def rows(self) -> list[dict]:
-        """One dict per parameter: ``name, unit, nominal, value, correction, std_error, status``."""
-        return [{"name": n, "unit": u, "nominal": float(a), "value": float(b), "correction": float(b - a),
-                 "std_error": None if np.isnan(s) else float(s), "status": st}
-                for n, u, a, b, s, st in zip(self.names, self.units, self.nominal, self.value, self.std_error,
-                                             self.status)]
-
-    def unidentifiable(self) -> list[str]:
-        """Names of the parameters positions cannot identify."""
-        return [n for n, s in zip(self.names, self.status) if s == "unidentifiable"]
-
-    def to_dict(self) -> dict:
-        return {"names": list(self.names), "units": list(self.units), "nominal": self.nominal.tolist(),
-                "value": self.value.tolist(),
-                "std_error": [None if np.isnan(v) else float(v) for v in self.std_error],
-                "status": list(self.status), "rank": int(self.rank), "condition": float(self.condition),
-                "rms_mm": float(self.rms_mm), "n_poses": int(self.n_poses), "evaluations": int(self.evaluations),
-                **({"target_rms_mm": dict(self.target_rms_mm), "orientation_rms_deg": self.orientation_rms_deg,
-                    "primary_identifiable": self.primary_identifiable} if self.target_rms_mm else {})}
-
-    @classmethod
-    def from_dict(cls, d: dict) -> "Identification":
-        return cls(tuple(d["names"]), tuple(d["units"]), np.asarray(d["nominal"], dtype=float),
-                   np.asarray(d["value"], dtype=float),
-                   np.array([np.nan if v is None else v for v in d["std_error"]], dtype=float),
-                   tuple(d["status"]), int(d["rank"]), float(d["condition"]), float(d["rms_mm"]),
-                   int(d["n_poses"]), int(d["evaluations"]), dict(d.get("target_rms_mm", {})),
-                   d.get("orientation_rms_deg"), d.get("primary_identifiable"))
-
-
-def identify(robot: Robot, q_deg: NDArray[np.float64], measured_mm: NDArray[np.float64], *, base: bool = True,
-             tool: bool = True, rcond: float = 1e-6, errors: JointErrors | None = None,
-             payload_kg=0.0, extra: Extra | None = None) -> Identification:
-    """Identify the parameters that bring the model's forward kinematics through measured positions.
-
-    Parameters
-    ----------
-    robot : Robot
-        The nominal robot (the starting point, and the values kept for what
-        cannot be identified).
-    q_deg : ndarray, shape (n, N)
-        Commanded joint angles, degrees.
-    measured_mm : ndarray, shape (n, 3)
-        Measured (primary) tool positions in the base (measurement) frame, mm.
-    base, tool : bool
-        Whether the base pose and the tool offsets are identified too.
-    rcond : float
-        Singular values of the unit-column Jacobian below ``rcond`` times the
-        largest count as zero: those directions are unidentifiable.
-    errors : JointErrors, optional
-        Joint compliance and transmission errors identified with the geometry
-        (their parameters follow the geometric ones).
-    payload_kg : float or ndarray, shape (n,)
-        Payload at the tool point, kg (only read by compliant joints).
-    extra : Extra, optional
-        Further targets and the measured orientation (:mod:`partcal.models.targets`):
-        their residuals are stacked with the primary's, one offset per target
-        and the probe's turn are identified too (their parameters come last).
-
-    Returns
-    -------
-    Identification
-    """
-    q_deg = robot.check_joints(q_deg)
-    measured_mm = check_array(measured_mm, "measured_mm", columns=3)
-    if len(measured_mm) != len(q_deg):
-        raise DataError(f"measured_mm has {len(measured_mm)} rows but q_deg has {len(q_deg)}")
-    payload = np.broadcast_to(np.asarray(payload_kg, dtype=float), (len(q_deg),))
-    v0 = nominal_values(robot, errors)
-    rows, own = robot.alpha_deg.size, v0.size
-    wanted = np.ones(v0.size + (extra.size if extra is not None else 0), dtype=bool)
-    wanted[4 * rows:4 * rows + 3] = tool
-    wanted[4 * rows + 3:4 * rows + 9] = base
-    if extra is None:
-        def jac_at(v, jacobian=True):
-            if not jacobian:
-                return (model_positions(robot, errors, q_deg, v, payload) - measured_mm).ravel(), None
-            p, jac = model_jacobian(robot, errors, q_deg, v, payload)
-            return (p - measured_mm).ravel(), jac
-    else:
-        v0 = np.concatenate([v0, extra.nominal()])
-        wanted[own:own + 3 * len(extra.tools_mm)] = tool
-        jac_at = functools.partial(stacked, robot, errors, q_deg, payload_kg=payload, measured_mm=measured_mm,
-                                   extra=extra)
-    jac0 = jac_at(v0)[1]
-    free, rank = _identifiable(jac0, wanted, rcond)
-
-    def values_of(x):
-        v = v0.copy()
-        v[free] = x
-        return v
-
-    v, evaluations = v0.copy(), 0
-    if free.size:
-        sol = least_squares(lambda x: jac_at(values_of(x), jacobian=False)[0], v0[free],
-                            jac=lambda x: jac_at(values_of(x))[1][:, free], method="lm",
-                            x_scale="jac", ftol=1e-15, xtol=1e-15, gtol=1e-15, max_nfev=200 * (free.size + 1))
-        v, evaluations = values_of(sol.x), int(sol.nfev)
-        log.debug("least squares: %s (%d evaluations)", sol.message, sol.nfev)
-    resid, jac = jac_at(v)
-    std, condition = _uncertainty(jac[:, free], resid)
-    std_full = np.full(v.size, np.nan)
-    std_full[free] = std
-    status = np.where(wanted, "unidentifiable", "fixed").astype(object)
-    status[free] = "identified"
-    names = parameter_names(robot, errors) + (extra.names() if extra is not None else [])
-    rms, angle = _target_rms(resid, len(q_deg), extra)
-    more = {} if extra is None else {
-        "target_rms_mm": dict(zip([PRIMARY_TARGET, *extra.tools_mm], rms)), "orientation_rms_deg": angle,
-        "primary_identifiable": _identifiable(jac0[:3 * len(q_deg), :own], wanted[:own], rcond)[1]}
-    result = Identification(tuple(n for n, _ in names), tuple(u for _, u in names), v0, v, std_full,
-                            tuple(str(s) for s in status), rank, condition, rms[0], q_deg.shape[0], evaluations,
-                            **more)
-    log.info("identified %d of %d parameters (condition %.3g): RMS %.4f mm", free.size, v.size, condition,
-             result.rms_mm)
-    return result
-
-
-def _target_rms(resid: NDArray[np.float64], n: int, extra: Extra | None) -> tuple[list[float], float | None]:
-    """3-D RMS of each target's position residuals (mm, the primary first) and the orientation's RMS angle
-    (degrees, None without one), from the stacked residuals of :func:`identify`."""
-    k = 1 + (len(extra.tools_mm) if extra is not None else 0)
-    blocks = resid[:3 * n * k].reshape(k, n, 3)
-    rms = [float(np.sqrt(np.mean(np.sum(b**2, axis=1)))) for b in blocks]
-    if extra is None or extra.rotations is None:
-        return rms, None
-    turns = resid[3 * n * k:].reshape(n, 3) / extra.mm_per_rad
-    return rms, float(np.degrees(np.sqrt(np.mean(np.sum(turns**2, axis=1)))))
-
-
-def _identifiable(jac0: NDArray[np.float64], wanted: NDArray[np.bool_], rcond: float
-                  ) -> tuple[NDArray[np.intp], int]:
-    """Indices of the parameters to identify, and the rank, from the Jacobian ``jac0`` at nominal.
-
-    The columns are scaled to unit length; the rank counts singular values
-    above ``rcond`` times the largest; a QR factorisation with column
-    pivoting picks that many columns (the most independent first). Columns
-    that do not move the tool at all never count.
-    """
-    norms = np.linalg.norm(jac0, axis=0)
-    candidates = np.flatnonzero(wanted & (norms > 1e-12 * max(norms.max(), 1e-300)))
-    if candidates.size == 0:
-        return candidates, 0
-    scaled = jac0[:, candidates] / norms[candidates]
-    singular = np.linalg.svd(scaled, compute_uv=False)
-    rank = int(np.sum(singular > rcond * singular[0]))
-    pivots = scipy.linalg.qr(scaled, mode="r", pivoting=True)[1]
-    return np.sort(candidates[pivots[:rank]]), rank
-
-
-def _uncertainty(jac: NDArray[np.float64], resid: NDArray[np.float64]) -> tuple[NDArray[np.float64], float]:
-    """Standard errors ``sqrt(diag(sigma^2 (J^T J)^-1))`` and the condition number of the unit-column ``J``."""
-    if jac.shape[1] == 0:
-        return np.zeros(0), 1.0
-    _, s, vt = np.linalg.svd(jac, full_matrices=False)
-    dof = resid.size - jac.shape[1]
-    sigma2 = float(np.sum(resid**2)) / dof if dof > 0 else np.nan
-    std = np.sqrt(sigma2 * np.sum((vt.T / s) ** 2, axis=1))
-    s_unit = np.linalg.svd(jac / np.linalg.norm(jac, axis=0), compute_uv=False)
-    return std, float(s_unit[0] / s_unit[-1]) if s_unit[-1] > 0 else np.inf
-
-
-# ---------------------------------------------------------------------- the estimator
 RESIDUAL_MODELS = (ErrorModel, PartitionedErrorModel, GaussianProcessErrorModel, PoseErrorModel)
 
 

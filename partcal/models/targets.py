@@ -138,8 +138,8 @@ def stacked(nominal: Robot, errors: JointErrors | None, q_deg: NDArray[np.float6
         mm (the orientation's: radians times ``extra.mm_per_rad``).
     jacobian : ndarray, shape (len(residuals), len(values)), or None
     """
-    # kinematic imports this module: its functions are imported where used
-    from .kinematic import actual_joints, geometric_size, identification_jacobian, robot_with
+    # identification imports this module: its functions are imported where used
+    from .identification import actual_joints, geometric_size, identification_jacobian, robot_with
 
     size = geometric_size(nominal)
     own = size + (errors.size if errors is not None else 0)
@@ -181,7 +181,7 @@ def _orientation(nominal: Robot, q_actual, design, moves, values, own: int, extr
     correction about its axes, a joint error through the joint's axes, the probe's turn about the
     model frame's axes. Lengths turn nothing.
     """
-    from .kinematic import base_axes, geometric_size, robot_with      # (see stacked)
+    from .identification import base_axes, geometric_size, robot_with      # (see stacked)
 
     size, rows, n = geometric_size(nominal), nominal.alpha_deg.size, q_actual.shape[0]
     robot = robot_with(nominal, values[:own])

@@ -23,7 +23,7 @@ import numpy as np
 
 from .. import __version__
 from ..metrics import MRAD_PER_DEG
-from ..models.kinematic import BASE_PARAMETERS, ROW_PARAMETERS, TOOL_PARAMETERS
+from ..models.identification import BASE_PARAMETERS, ROW_PARAMETERS, TOOL_PARAMETERS
 from ..models.targets import added_names
 from ..study.registry import ModelResult, RunResult, partitioned_part
 from ..study.scoring import Outputs, errors_left

@@ -21,9 +21,6 @@ from . import __version__
 from .errors import PartcalError
 
 log = logging.getLogger("partcal")
-_POSITION_COLUMNS = [["x", "y", "z"], ["x_nom", "y_nom", "z_nom"]]       # predict/compensate: x,y,z or else x_nom..
-_ORIENTATION_COLUMNS = [["rx", "ry", "rz"], ["rx_nom", "ry_nom", "rz_nom"]]  # compensate: the same for orientations
-_TURN_COLUMNS = ("drx", "dry", "drz")       # predict: a pose model's predicted rotation vector, mrad
 
 
 def _cmd_simulate(args) -> int:
@@ -110,26 +107,25 @@ def _check_browser() -> None:
 
 def _cmd_predict(args) -> int:
     from ._io import atomic_write
-    from .data.measurements import read_columns, read_payloads
-    from .robot.description import joint_columns
+    from .data.point_tables import TURN_COLUMNS, read_point_table
     from .study.predictor import load_predictor
 
     _refuse_input_as_output(args.output, "predict", [("model file", args.model), ("input file", args.input),
                                                      ("format file", args.format)])
     predictor = load_predictor(args.model)
-    fmt = _format(args)
-    if predictor.inputs == "cartesian":
-        cols, X, _ = read_columns(args.input, _POSITION_COLUMNS, fmt=fmt)
+    joints = predictor.n_inputs if predictor.inputs == "joint" else None
+    # a model with compliant joints reads the payload of each row too, when the file has it
+    table = read_point_table(args.input, _format(args), joints=joints, payload=predictor.model.reads_payload)
+    X, payload = table.values, table.payload_kg
+    if joints:
+        errors = predictor.predict(joints=X, payload_kg=payload)
+    else:
         errors = predictor.predict(positions=X)
         payload = None
-    else:     # a model with compliant joints reads the payload of each row too, when the file has it
-        cols, X, _ = read_columns(args.input, [joint_columns(predictor.n_inputs)], fmt=fmt)
-        payload = read_payloads(args.input, fmt) if predictor.model.reads_payload else None
-        errors = predictor.predict(joints=X, payload_kg=payload)
     predictor.refuse_implausible(X, errors, source=args.input)     # nothing is written then
     given = [X] if payload is None else [X, payload[:, None]]
-    _write_table(args.output, cols + (["payload_kg"] if payload is not None else []) + ["dx", "dy", "dz"]
-                 + (list(_TURN_COLUMNS) if predictor.predicts_pose else []), np.hstack(given + [errors]), atomic_write)
+    _write_table(args.output, table.columns + (["payload_kg"] if payload is not None else []) + ["dx", "dy", "dz"]
+                 + (TURN_COLUMNS if predictor.predicts_pose else []), np.hstack(given + [errors]), atomic_write)
     _warn_if_far(predictor, X)
     print(f"predicted errors for {len(X)} points: {args.output}")
     return 0
@@ -157,7 +153,7 @@ def _warn_if_far(predictor, X) -> None:
 
 def _cmd_compensate(args) -> int:
     from ._io import atomic_write
-    from .data.measurements import read_columns, read_payloads
+    from .data.point_tables import read_point_table
     from .metrics import ExtrapolationWarning
     from .robot.compensation import CompensationWarning
     from .robot.description import joint_columns
@@ -168,15 +164,15 @@ def _cmd_compensate(args) -> int:
                                                         ("format file", args.format)])
     predictor = load_predictor(args.model)
     n_q = predictor.robot.n_joints if predictor.robot is not None else 0
-    optional = joint_columns(n_q) if predictor.inputs == "joint" else []
-    cols, targets, seeds = read_columns(args.targets, _POSITION_COLUMNS, optional, fmt=_format(args))
-    turn_cols, angles = _target_orientations(args.targets, _format(args))
+    table = read_point_table(args.targets, _format(args), seeds=n_q if predictor.inputs == "joint" else 0,
+                             orientation=True, payload=predictor.model.reads_payload)
+    cols, targets, seeds, optional = table.columns, table.values, table.seeds, table.seed_columns
+    turn_cols, angles, payload = table.orientation_columns, table.orientation_deg, table.payload_kg
     if angles is not None and not predictor.predicts_pose:
         raise PartcalError(f"compensate: {args.targets} has the orientation columns {', '.join(turn_cols)}, but "
                            f"{args.model} predicts position errors only ({predictor.model.n_outputs()} outputs): fit "
                            "a pose model ('predict: pose' in the run config) to compensate orientations, or drop "
                            "those columns to compensate the positions; nothing written")
-    payload = read_payloads(args.targets, _format(args)) if predictor.model.reads_payload else None
     with warnings.catch_warnings():       # exit code 3 and one stderr line below say it instead
         warnings.simplefilter("ignore", CompensationWarning)
         warnings.simplefilter("ignore", ExtrapolationWarning)
@@ -217,29 +213,6 @@ def _cmd_compensate(args) -> int:
         print(f"partcal: warning: {far}", file=sys.stderr)
     print(f"compensated {len(targets)} targets (all converged): {args.output}")
     return 0
-
-
-def _target_orientations(path, fmt) -> tuple[list[str], np.ndarray | None]:
-    """The targets' orientations (n, 3), intrinsic XYZ degrees, and their columns: ``rx, ry, rz``, or else
-    ``rx_nom, ry_nom, rz_nom``; ``([], None)`` when the file has neither. An incomplete triple is refused."""
-    from .data.formats import MeasurementFormat
-    from .data.measurements import read_columns
-    from .data.pose_columns import ORIENTATION_NOMINAL, orientation_problem
-
-    for names in _ORIENTATION_COLUMNS:
-        angles = read_columns(path, _POSITION_COLUMNS, names, fmt=fmt)[2]
-        if angles is not None:
-            break
-    else:
-        return [], None
-    if names[0] == "rx":        # read under their own names: the format's orientation unit applies as to rx_nom..
-        angles = (fmt or MeasurementFormat()).to_contract(list(ORIENTATION_NOMINAL), angles)
-    problem = orientation_problem(angles)
-    if problem is not None:
-        row, k, expected = problem
-        raise PartcalError(f"{path}: data row {row + 1}: column {names[k]!r}: expected an angle in {expected}, got "
-                           f"{angles[row, k]:g}")
-    return list(names), angles
 
 
 def _compensated(predictor, targets, seeds, payload, angles=None):

@@ -417,3 +417,13 @@ def test_a_target_whose_compensation_diverges_is_reported_with_its_predicted_mis
     result = compensated(predictor, FIXTURES / "pallet.src")
     assert result.output is None and len(result.failures) == 2
     assert all(why.startswith("did not converge (predicted miss ") for _, why in result.failures)
+
+
+def test_a_partial_krl_motion_target_is_refused_and_an_offset_is_kept(tmp_path):
+    path = tmp_path / "partial.src"
+    path.write_bytes(b"DEF partial( )\r\n  LIN_REL {Z 50}\r\n  PTP {A1 10, A2 -120}\r\nEND\r\n")
+    with pytest.raises(ProgramSyntaxError, match=r"partial.src: line 3, column 7: PTP to a partial aggregate: "
+                                                 r"expected a whole target"):
+        read_program(path)
+    path.write_bytes(b"DEF partial( )\r\n  LIN_REL {Z 50}\r\n  XP1 = XP1 : {X 10}\r\nEND\r\n")
+    assert read_program(path).targets == []

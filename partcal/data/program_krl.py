@@ -9,8 +9,9 @@ in binary (``'B010'``); joint targets ``A1 .. A6`` in degrees. Targets are
 - assignments of a whole aggregate to a variable (``XP1 = {X ..}``, in ``.src`` files too), and inline
   aggregates of a motion (``PTP {A1 0, ..}``, ``LIN {X .., ..}``).
 
-An aggregate lacking some of ``X Y Z A B C`` (or ``A1 .. A6``) after a ``:`` or assigned to no declared
-target is an offset and stays as written. ``$BASE``, ``$TOOL``, ``BASE_DATA[n]`` and ``TOOL_DATA[n]``
+An aggregate lacking some of ``X Y Z A B C`` (or ``A1 .. A6``) after a ``:``, of ``PTP_REL`` or
+``LIN_REL``, or assigned to no declared target is an offset and stays as written; a partial aggregate as
+the target of ``PTP``, ``LIN`` or ``CIRC`` (the other coordinates: wherever the robot is) is refused. ``$BASE``, ``$TOOL``, ``BASE_DATA[n]`` and ``TOOL_DATA[n]``
 aggregates are frames, not targets: ``BASE_DATA[n]`` and ``TOOL_DATA[n]`` defined in the file are used
 for the targets that name them. A target ``XP1`` (or ``P1``) with an ``FDAT`` named ``FP1`` is in the frame
 ``BASE_DATA[BASE_NO]`` with the tool ``TOOL_DATA[TOOL_NO]`` (number 0: the robot base, the flange); without
@@ -36,6 +37,7 @@ MM_DECIMALS, DEG_DECIMALS = 6, 6
 _DECL = re.compile(r"\bDECL\s+(?:GLOBAL\s+)?([A-Za-z_]\w*)\s+([$A-Za-z_][\w\[\],]*)\s*=\s*$", re.IGNORECASE)
 _ASSIGN = re.compile(r"([$A-Za-z_][\w$]*(?:\[[\d, ]*\])?)\s*=\s*$")
 _MOTION = re.compile(r"\b(PTP|LIN|CIRC|SPTP|SLIN|SCIRC|PTP_REL|LIN_REL)\s+$", re.IGNORECASE)
+_ABSOLUTE_MOTIONS = {"PTP", "LIN", "CIRC", "SPTP", "SLIN", "SCIRC"}
 _ITEM = re.compile(r"\s*([A-Za-z_]\w*)\s+(\S(?:.*\S)?)\s*$", re.DOTALL)
 _INT = re.compile(r"[-+]?\d+|'[BbHh][0-9A-Fa-f]+'")
 
@@ -75,6 +77,10 @@ def parse(text: str, source: str) -> tuple[list[Target], dict]:
         if kind is None:
             kind = "pose" if all(k in items for k in POSE_KEYS) else \
                 "joints" if all(k in items for k in JOINT_KEYS) else None
+            if kind is None and upper in _ABSOLUTE_MOTIONS:     # the other coordinates: whatever the robot has
+                raise syntax_error(source, text, start, f"{upper} to a partial aggregate", "a whole target: all "
+                                   f"of {' '.join(POSE_KEYS)} or of {' '.join(JOINT_KEYS)} (a partial one cannot "
+                                   "be compensated)")
             if kind is None:
                 continue
         targets.append(_target(text, source, name, kind, items, start))

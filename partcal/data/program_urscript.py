@@ -4,8 +4,8 @@ Units of the language: positions in metres, orientations as rotation vectors (ax
 joints in radians. Targets are
 
 - a pose literal ``p[...]`` as the first argument of ``movel``, ``movej``, ``movep``, ``movec`` (both its
-  poses) or ``servoj``, or assigned to a variable (``wp1 = p[...]``): in the default frame (the robot
-  base, or the feature given as ``--frame``);
+  poses), ``servoj`` or ``get_inverse_kin``, or assigned to a variable (``wp1 = p[...]``): in the default
+  frame (the robot base, or the feature given as ``--frame``);
 - ``pose_trans(NAME, p[...])``: the pose is relative to the feature ``NAME``, which must be given
   (``--frame NAME=p[...]``);
 - a list of six numbers as the first argument of a move (joints), or assigned to a variable that some
@@ -48,8 +48,8 @@ def parse(text: str, source: str) -> tuple[list[Target], dict]:
         frame = None
         if re.search(r"\bset_tcp\s*\(\s*$", before):
             continue                                                    # a tool, not a target
-        if re.search(r"\b(" + "|".join(MOVES) + r")\s*\(\s*$", before) or _ASSIGN.search(before) or \
-                re.search(r"\bmovec\s*\([^()]*,\s*$", before):
+        if re.search(r"\b(" + "|".join(MOVES) + r"|get_inverse_kin)\s*\(\s*$", before) or \
+                _ASSIGN.search(before) or re.search(r"\bmovec\s*\([^()]*,\s*$", before):
             pass
         elif (trans := _POSE_TRANS.search(before)) is not None:
             frame = trans.group(1)

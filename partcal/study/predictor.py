@@ -257,18 +257,30 @@ class Predictor:
     def compensate_poses(self, poses, joints=None, *, payload_kg: float | None = None, tol_mm: float = 1e-4,
                          tol_deg: float = 1e-5, max_iter: int = 50, orientation_kept: bool = False
                          ) -> CompensationResult:
-        """:meth:`compensate_pose` of tool poses given as homogeneous transforms ``(n, 4, 4)`` (mm).
+        """:meth:`compensate_pose` of tool poses given as homogeneous transforms (no Euler angles on the way).
 
-        With ``orientation_kept`` the model's orientation outputs are not used (a position model has none):
-        the position is compensated and the commanded pose has the target's orientation (joint models: the
-        joints at which the nominal tool has the target orientation and the predicted position error brings
-        the tool onto the target position). Without it, a position model is refused.
+        Parameters
+        ----------
+        poses : array-like, shape (n, 4, 4)
+            Target poses of the tool point in the base frame, mm.
+        joints, payload_kg, tol_mm, tol_deg, max_iter
+            As for :meth:`compensate_pose`.
+        orientation_kept : bool
+            Do not use the model's orientation outputs (a position model has none): the position is
+            compensated and the commanded pose keeps the target's orientation (joint models: the joints at
+            which the nominal tool has the target orientation and the predicted position error brings the
+            tool point onto the target). Without it a position model is refused.
+
+        Returns
+        -------
+        CompensationResult
+            As for :meth:`compensate_pose`.
         """
         if not self.predicts_pose and not orientation_kept:
             raise DataError(f"model {self.name or '(unnamed)'!r} predicts position errors only "
                             f"({self.model.n_outputs()} outputs), so it cannot compensate an orientation: fit a pose "
                             f"model ({POSE_OUTPUTS} outputs; 'predict: pose' in a run config), or compensate the "
-                            "positions alone with compensate()")
+                            "positions alone with compensate() (or orientation_kept=True)")
         ik_settings(tol_mm, max_iter, 10.0, 0.05, tol_deg=tol_deg)                # checks the tolerances
         predicted = self._errors_at(payload_kg)
 

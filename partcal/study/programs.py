@@ -29,7 +29,7 @@ from numpy.typing import NDArray
 
 from ..data.program_text import Program, Target, UnknownFrameError
 from ..errors import DataError
-from ..robot.kinematics import pose_errors
+from ..robot.kinematics import checked_poses, pose_errors
 from ..robot.rotations import inverse_poses, poses_from
 from .predictor import Predictor
 
@@ -44,6 +44,17 @@ class ProgramFrames:
 
     frames: dict = field(default_factory=dict)
     tools: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        for what in ("frames", "tools"):
+            clean = {}
+            for name, pose in getattr(self, what).items():
+                try:
+                    clean[name] = checked_poses(np.asarray(pose, dtype=float)[None])[0]
+                except (DataError, ValueError, TypeError) as exc:
+                    raise DataError(f"ProgramFrames {what}[{name!r}]: expected a pose (4, 4) mm, a rotation and a "
+                                    f"position; {exc}") from None
+            object.__setattr__(self, what, clean)
 
 
 @dataclass(frozen=True)

@@ -8,6 +8,8 @@ import warnings
 import numpy as np
 import pytest
 from conftest import ROOT
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
 from partcal import ErrorModel, load_robot
@@ -114,6 +116,24 @@ def test_kuka_abc_is_z_then_y_then_x():
                                atol=1e-9)
     np.testing.assert_allclose(kuka_abc_from_matrices(half, near=[[-179.0, 0.0, 0.0]]), [[-180.0, 10.0, -20.0]],
                                atol=1e-9)
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.floats(-180, 180), st.floats(-89.9, 89.9), st.floats(-180, 180), st.floats(-0.01, 0.01))
+def test_every_writing_comes_back_near_the_old_one(a, b, c, nudge):
+    """A rotation turned by a hundredth of a degree or less reads back within that of its old writing, in all
+    three vendors' forms (KUKA angles, quaternions of either sign, rotation vectors of any angle)."""
+    old_abc = np.array([[a, b, c]])
+    R = matrices_from_kuka_abc(old_abc)
+    turned = Rotation.from_rotvec(np.radians([nudge, -nudge, nudge])).as_matrix() @ R
+    assert np.abs(kuka_abc_from_matrices(turned, near=old_abc) - old_abc).max() < 0.05 / np.cos(np.radians(b))
+    for sign in (1.0, -1.0):
+        old_q = sign * quaternions_from_matrices(R)
+        assert np.abs(quaternions_from_matrices(turned, near=old_q) - old_q).max() < 1e-3
+    old_r = rotation_vectors_from_matrices(R)
+    twin = old_r - 2 * np.pi * old_r / max(np.linalg.norm(old_r), 1e-12)
+    for old in (old_r, twin) if np.linalg.norm(old_r) > 3.0 else (old_r,):
+        assert np.abs(rotation_vectors_from_matrices(turned, near=old) - old).max() < 2e-3
 
 
 def test_a_krl_target_reads_as_the_hand_computed_rotation(tmp_path):
@@ -427,3 +447,22 @@ def test_a_partial_krl_motion_target_is_refused_and_an_offset_is_kept(tmp_path):
         read_program(path)
     path.write_bytes(b"DEF partial( )\r\n  LIN_REL {Z 50}\r\n  XP1 = XP1 : {X 10}\r\nEND\r\n")
     assert read_program(path).targets == []
+
+
+def test_frames_and_tools_are_given_in_the_vendors_own_syntax_on_the_command_line(tmp_path):
+    save_model(constant_model(SK120, np.zeros(3)).model, tmp_path / "m.json", name="zero", robot=SK120)
+    dat = tmp_path / "base.dat"
+    dat.write_bytes((FIXTURES / "pallet.dat").read_bytes().replace(b"TOOL_NO 0,BASE_NO 0", b"TOOL_NO 2,BASE_NO 3"))
+    out = tmp_path / "out.dat"
+    done = run("compensate", str(tmp_path / "m.json"), str(dat), "-o", str(out), "--frame",
+               "BASE_DATA[3]={X 0,Y 0,Z 0,A 0,B 0,C 0}", "--tool", "tool_data[2]={X 0, Y 0, Z 0, A 0, B 0, C 0}")
+    assert done.returncode == 0, done.stderr
+    assert out.read_bytes() == dat.read_bytes()
+    done = run("compensate", str(tmp_path / "m.json"), str(dat), "-o", str(out), "--frame", "BASE_DATA[3]={X 0,Y 0}")
+    assert done.returncode == 2 and "lacks Z, A, B, C" in done.stderr
+    mod = tmp_path / "w.mod"
+    mod.write_bytes((FIXTURES / "pallet.mod").read_bytes().replace(b"tGripper\\WObj:=wTable", b"tGripper\\WObj:=w2"))
+    done = run("compensate", str(tmp_path / "m.json"), str(mod), "-o", str(tmp_path / "o.mod"), "--frame",
+               "w2=[[1000, 0, 500], [1, 0, 0, 0]]")
+    assert done.returncode == 0, done.stderr
+    assert (tmp_path / "o.mod").read_bytes() == mod.read_bytes()

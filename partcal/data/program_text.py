@@ -110,8 +110,6 @@ class Dialect:
     pose_decimals: tuple[int, ...] = ()
     joint_unit_deg: float = 1.0
     joint_decimals: int = 6
-    default_frame: str = "base"
-    default_tool: str = "flange"
     configuration: Callable | None = None
     compare: tuple[int, ...] = ()
     seeds: Callable | None = None

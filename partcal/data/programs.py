@@ -39,7 +39,7 @@ def program_kind(path: str | Path) -> str | None:
     for name, dialect in DIALECTS.items():
         if suffix in dialect.extensions and name != "joints":
             return name
-    if suffix == ".csv" or suffix == ".txt":
+    if suffix == ".csv":
         try:
             with open(path, encoding="latin-1") as handle:
                 header = next((line for line in handle if line.strip() and not line.lstrip().startswith("#")), "")

@@ -127,64 +127,80 @@ def compensate_program(predictor: Predictor, program: Program, frames: ProgramFr
     UnknownFrameError
         A target names a frame or tool that is neither given nor defined in the program.
     """
+    robot, joints = _robot_for(predictor, program)
+    frame, tool = _frames(program, frames or ProgramFrames())
+    tool_model = poses_from(robot.tool_mm, np.eye(3))
+    wanted, q_given = _wanted(robot, program, joints, frame, tool, tool_model)
+    failures: dict[int, str] = {}
+    q0 = _intended_joints(robot, program, wanted, q_given, joints, failures)
+    orientation = "model" if predictor.predicts_pose else "kept"
+    q1, commanded, residual_mm, residual_deg = _solved(predictor, program, wanted, q0, failures, orientation,
+                                                       tol_mm, tol_deg)
+    return _result(program, program.targets, frame, tool, tool_model, wanted, commanded, q1, failures,
+                   residual_mm, residual_deg, orientation, keep_unconverged)
+
+
+def _robot_for(predictor: Predictor, program: Program):
+    """The model's robot, checked against the program's targets, and which targets are joint targets."""
     robot = predictor.robot
     if robot is None:
         raise DataError(f"model {predictor.name!r}: its file names no robot; compensating a program needs the "
                         "robot's kinematics (frames, joint targets, configurations)")
-    targets = program.targets
-    n = len(targets)
-    joints = np.array([t.kind == "joints" for t in targets], dtype=bool)
-    for t in targets:
-        count = len(t.joints_deg) if t.kind == "joints" else 6
-        if t.kind == "joints" and count != robot.n_joints:
-            raise DataError(f"{t.where(program.path)}: {count} joints, but robot {robot.name} has {robot.n_joints}")
+    joints = np.array([t.kind == "joints" for t in program.targets], dtype=bool)
+    for t in program.targets:
+        if t.kind == "joints" and len(t.joints_deg) != robot.n_joints:
+            raise DataError(f"{t.where(program.path)}: {len(t.joints_deg)} joints, but robot {robot.name} has "
+                            f"{robot.n_joints}")
     if robot.n_joints != 6 and not joints.all():
         raise DataError(f"{program.path}: pose targets need a six-joint robot; {robot.name} has {robot.n_joints}")
-    frame, tool = _frames(program, frames or ProgramFrames())
-    tool_model = poses_from(robot.tool_mm, np.eye(3))
-    wanted = np.zeros((n, 4, 4))
-    q_given = np.zeros((n, robot.n_joints))
+    return robot, joints
+
+
+def _wanted(robot, program: Program, joints, frame, tool, tool_model) -> tuple:
+    """The model's tool-point pose (n, 4, 4) mm each target wants, and the joint targets' joints (n, N) deg."""
+    n = len(joints)
+    wanted, q_given = np.zeros((n, 4, 4)), np.zeros((n, robot.n_joints))
     if joints.any():
-        q_given[joints] = np.array([t.joints_deg for t in targets if t.kind == "joints"])
+        q_given[joints] = np.array([t.joints_deg for t in program.targets if t.kind == "joints"])
         wanted[joints] = robot.forward(q_given[joints])
-    poses = ~joints
-    if poses.any():
-        P = poses_from([t.position_mm for t in targets if t.kind == "pose"],
-                       [t.rotation for t in targets if t.kind == "pose"])
-        wanted[poses] = frame[poses] @ P @ inverse_poses(tool[poses]) @ tool_model
-    failures: dict[int, str] = {}
-    q0 = _intended_joints(robot, program, wanted, q_given, joints, failures)
-    live = np.array([k not in failures for k in range(n)], dtype=bool)
-    q1 = q0.copy()
-    commanded = wanted.copy()
+    if (~joints).any():
+        P = poses_from([t.position_mm for t in program.targets if t.kind == "pose"],
+                       [t.rotation for t in program.targets if t.kind == "pose"])
+        wanted[~joints] = frame[~joints] @ P @ inverse_poses(tool[~joints]) @ tool_model
+    return wanted, q_given
+
+
+def _solved(predictor: Predictor, program: Program, wanted, q0, failures: dict, orientation: str, tol_mm: float,
+            tol_deg: float) -> tuple:
+    """The compensation of every target not failed yet: the joints (n, N) degrees, the commanded tool-point
+    poses (n, 4, 4) mm and the predicted misses (NaN where not solved); ``failures`` gets the new ones."""
+    robot, n = predictor.robot, len(wanted)
+    q1, commanded = q0.copy(), wanted.copy()
     residual_mm, residual_deg = np.full(n, np.nan), np.full(n, np.nan)
-    orientation = "model" if predictor.predicts_pose else "kept"
-    if live.any():
-        idx = np.flatnonzero(live)
-        r = predictor.compensate_poses(wanted[idx], q0[idx], tol_mm=tol_mm, tol_deg=tol_deg,
-                                       orientation_kept=orientation == "kept")
-        commanded[idx] = poses_from(r.commanded_mm, r.commanded_rotation)
-        residual_mm[idx], residual_deg[idx] = r.residual_mm, r.residual_deg
-        converged = r.converged.copy()
-        if r.joints_deg is not None:
-            q1[idx] = r.joints_deg
-        else:                        # the controller solves the command on the target's branch
-            ik = robot.inverse_pose(commanded[idx], q0[idx], tol_mm=min(tol_mm, 1e-6), tol_deg=min(tol_deg, 1e-6))
-            q1[idx] = ik.q_deg
-            converged &= ik.success
-        for k, ok, miss_mm, miss_deg in zip(idx, converged, r.residual_mm, r.residual_deg):
-            if ok:
-                continue
+    idx = np.array([k for k in range(n) if k not in failures], dtype=np.intp)
+    if idx.size == 0:
+        return q1, commanded, residual_mm, residual_deg
+    r = predictor.compensate_poses(wanted[idx], q0[idx], tol_mm=tol_mm, tol_deg=tol_deg,
+                                   orientation_kept=orientation == "kept")
+    commanded[idx] = poses_from(r.commanded_mm, r.commanded_rotation)
+    residual_mm[idx], residual_deg[idx] = r.residual_mm, r.residual_deg
+    converged = r.converged.copy()
+    if r.joints_deg is not None:
+        q1[idx] = r.joints_deg
+    else:                        # the controller solves the command on the target's branch
+        ik = robot.inverse_pose(commanded[idx], q0[idx], tol_mm=min(tol_mm, 1e-6), tol_deg=min(tol_deg, 1e-6))
+        q1[idx] = ik.q_deg
+        converged &= ik.success
+    for k, ok, miss_mm, miss_deg in zip(idx, converged, r.residual_mm, r.residual_deg):
+        if not ok:
             miss = f"predicted miss {miss_mm:.3g} mm, {miss_deg:.3g} deg"
             failures[k] = (f"did not converge ({miss})" if not (miss_mm <= tol_mm and miss_deg <= tol_deg) else
                            f"is unreachable: the robot cannot take its compensated command within its joint "
                            f"limits ({miss})")
-        kept = _configuration_kept(robot, program, q0[idx], q1[idx])
-        for k, same in zip(idx, kept):
-            if not same and k not in failures:
-                failures[k] = "leaves its configuration (" + _configurations(program, q0[k], q1[k]) + ")"
-    return _result(program, targets, frame, tool, tool_model, wanted, commanded, q1, failures, residual_mm,
-                   residual_deg, orientation, keep_unconverged)
+    for k, same in zip(idx, _configuration_kept(robot, program, q0[idx], q1[idx])):
+        if not same and k not in failures:
+            failures[k] = "leaves its configuration (" + _configurations(program, q0[k], q1[k]) + ")"
+    return q1, commanded, residual_mm, residual_deg
 
 
 def _result(program, targets, frame, tool, tool_model, wanted, commanded, q1, failures, residual_mm,

@@ -21,6 +21,7 @@ _EXPORTS = {
     "data.measurements": ["Measurements", "read_measurements", "write_measurements"],
     "data.formats": ["MeasurementFormat", "RowSelection", "load_format"],
     "data.registration": ["Registration", "register_tracker"],
+    "data.programs": ["read_program"],
     "metrics": ["ExtrapolationWarning", "cross_validated_rms", "rms_per_axis", "summary"],
     "models.series": ["ErrorModel"],
     "models.gp": ["GaussianProcessErrorModel"],
@@ -31,6 +32,7 @@ _EXPORTS = {
     "models.partitioned": ["PartitionedErrorModel", "select_granularity"],
     "models.pose": ["PoseErrorModel"],
     "study.predictor": ["Predictor", "load_predictor"],
+    "study.programs": ["ProgramFrames", "compensate_program"],
     "study.plan": ["evaluate_poses", "plan_poses"],
 }
 _WHERE = {name: module for module, names in _EXPORTS.items() for name in names}

@@ -466,3 +466,14 @@ def test_frames_and_tools_are_given_in_the_vendors_own_syntax_on_the_command_lin
                "w2=[[1000, 0, 500], [1, 0, 0, 0]]")
     assert done.returncode == 0, done.stderr
     assert (tmp_path / "o.mod").read_bytes() == mod.read_bytes()
+
+
+def test_a_position_model_moves_the_position_and_keeps_the_orientation_as_written():
+    # a constant error of (0.5, -0.3, 0.2) mm: every Cartesian target moves by the opposite, A B C stay as written
+    result = compensated(constant_model(SK120, [0.5, -0.3, 0.2]), FIXTURES / "pallet.dat")
+    assert result.orientation == "kept" and not result.failures
+    line = next(x for x in result.output.split(b"\r\n") if x.startswith(b"DECL E6POS XP1="))
+    assert line == (b"DECL E6POS XP1={X 1201.145000,Y 85.384000,Z 1049.831000,A -119.9242,B -54.3269,C -54.9937,"
+                    b"S 2,T 6,E1 0.0,E2 0.0,E3 0.0,E4 0.0,E5 0.0,E6 0.0}")
+    np.testing.assert_allclose(result.correction_mm[1:], np.linalg.norm([0.5, 0.3, 0.2]), rtol=1e-9)
+    assert result.correction_deg[1:].max() < 1e-12

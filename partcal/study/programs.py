@@ -197,7 +197,8 @@ def _solved(predictor: Predictor, program: Program, wanted, q0, failures: dict, 
             failures[k] = (f"did not converge ({miss})" if not (miss_mm <= tol_mm and miss_deg <= tol_deg) else
                            f"is unreachable: the robot cannot take its compensated command within its joint "
                            f"limits ({miss})")
-    for k, same in zip(idx, _configuration_kept(robot, program, q0[idx], q1[idx])):
+    chosen = [program.targets[k] for k in idx]
+    for k, same in zip(idx, _configuration_kept(robot, program, chosen, q0[idx], q1[idx])):
         if not same and k not in failures:
             failures[k] = "leaves its configuration (" + _configurations(program, q0[k], q1[k]) + ")"
     return q1, commanded, residual_mm, residual_deg
@@ -315,15 +316,11 @@ def _configuration_bounds(dialect, q) -> tuple[NDArray[np.int64], NDArray[np.int
     return dialect.configuration(q - BOUNDARY_DEG), dialect.configuration(q + BOUNDARY_DEG)
 
 
-def _configuration_kept(robot, program: Program, q0, q1) -> NDArray[np.bool_]:
-    """Same vendor configuration and no flip: the Jacobian's determinant keeps its sign (where not ~0)."""
-    ok = _branch(robot, q0) * _branch(robot, q1) >= 0
-    dialect = program.dialect
-    if dialect.configuration is not None and dialect.compare and len(q0):
-        cols = list(dialect.compare)
-        (a0, b0), (a1, b1) = [[c[:, cols] for c in _configuration_bounds(dialect, q)] for q in (q0, q1)]
-        ok &= np.all((a0 == a1) | (a0 == b1) | (b0 == a1) | (b0 == b1), axis=1)
-    return ok
+def _configuration_kept(robot, program: Program, targets: list[Target], q0, q1) -> NDArray[np.bool_]:
+    """No flip (the Jacobian's determinant keeps its sign, where not ~0), and the configuration written with a
+    target (KUKA ``T``, ABB ``cf1 cf4 cf6``) still that of the compensated joints. A target written without
+    one is the controller's to solve near where the robot is: only a flip changes it."""
+    return (_branch(robot, q0) * _branch(robot, q1) >= 0) & _matches(program, targets, q1)
 
 
 def _configurations(program: Program, q0, q1) -> str:

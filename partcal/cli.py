@@ -292,11 +292,11 @@ def _named_frames(values, dialect, option: str) -> dict:
 
 def _program_summary(summary: dict, output, summary_path) -> str:
     """The stderr summary of a compensated program."""
-    big, res = summary["largest_correction"], summary["predicted_residual"]
+    big, turn, res = summary["largest_correction"], summary["largest_turn"], summary["predicted_residual"]
     text = f"compensated {summary['compensated']} of {summary['targets']} targets ({summary['dialect']})"
     if big:
-        text += (f"; largest correction {big['mm']:.4g} mm (target {big['target']}, line {big['line']}), "
-                 f"{big['deg']:.4g} deg")
+        text += (f"; largest correction {big['mm']:.4g} mm (target {big['target']}, line {big['line']}) and "
+                 f"{turn['deg']:.4g} deg (target {turn['target']}, line {turn['line']})")
     if res:
         text += f"; predicted residual at most {res['max_mm']:.3g} mm, {res['max_deg']:.3g} deg"
     if summary["orientation"] == "kept":
@@ -593,7 +593,7 @@ def build_parser() -> argparse.ArgumentParser:
                                                             "units), see docs/data.md")
     comp.add_argument("--program", choices=("urscript", "krl", "rapid", "joints"),
                       help="TARGETS is a robot program in this language (default: from its name: .script, "
-                           ".src/.dat, .mod/.modx/.prg; a .csv with q1..qN and no x,y,z is a joint trajectory)")
+                           ".src/.dat, .mod/.prg; a .csv with q1..qN and no x,y,z is a joint trajectory)")
     comp.add_argument("--frame", action="append", metavar="[NAME=]FRAME",
                       help="a program's frame in its own syntax (UR feature p[...], KUKA base {X ..}, ABB work "
                            "object [[x,y,z],[q1,..]]); without NAME, the frame of targets that name none")

@@ -245,7 +245,8 @@ def test_the_virtual_ur10_lands_on_the_intended_poses_of_a_urscript_program(tmp_
     done = run("compensate", str(tmp_path / "model.json"), str(path), "-o", str(out), "--frame", feature_text)
     assert done.returncode == 0, done.stderr
     summary = json.loads((tmp_path / "out.script.json").read_text())
-    assert summary["compensated"] == 12 and summary["largest_correction"]["mm"] > 1.0
+    assert summary["compensated"] == 12 and summary["largest_correction"]["mm"] > 0.9
+    assert summary["largest_turn"]["deg"] > 0.1 and summary["predicted_residual"]["max_mm"] < 1e-4
     program = read_program(out)
     q_cmd = controller_joints(nominal, program, np.tile(F, (12, 1, 1)), np.tile(tcp, (12, 1, 1)), q)
     wanted = nominal.forward(q)
@@ -359,6 +360,12 @@ def test_a_target_in_an_unknown_frame_is_refused_not_guessed(tmp_path):
     script.write_text("movel(pose_trans(Plane_1, p[0.1, 0.0, 0.05, 0, 3.1416, 0]), a=1.2, v=0.25)\n")
     with pytest.raises(UnknownFrameError, match=r"line 1, column 29: target movel: it is given in the frame 'Plane_1'"):
         compensated(constant_model(UR10, np.zeros(3)), script)
+    script.write_text("set_tcp(gripper_tcp)\nmovel(p[-0.7446, -0.2977, 0.4299, 2.4066, 2.0194, 0.0])\n")
+    with pytest.raises(UnknownFrameError, match=r"line 2, column 9: target movel: it is given in the tool "
+                                                r"'gripper_tcp', which is unknown: give it with --tool"):
+        compensated(constant_model(UR10, np.zeros(3)), script)
+    given = ProgramFrames(tools={"gripper_tcp": np.eye(4)})
+    assert compensated(constant_model(UR10, np.zeros(3)), script, given).output == script.read_bytes()
 
 
 def test_a_robtarget_used_with_two_tools_is_refused(tmp_path):

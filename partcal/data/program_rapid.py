@@ -1,4 +1,4 @@
-"""ABB RAPID (``.mod``, ``.modx``): ``robtarget`` and ``jointtarget`` data.
+"""ABB RAPID (``.mod``, ``.prg``): ``robtarget`` and ``jointtarget`` data.
 
 Units of the language: ``robtarget`` ``[[x, y, z], [q1, q2, q3, q4], [cf1, cf4, cf6, cfx], [eax_a, ..]]``
 with the position in mm, the orientation a unit quaternion scalar first, and ``confdata`` the quarter
@@ -205,6 +205,6 @@ def seeds(configurations, reference_deg) -> np.ndarray:
     return q
 
 
-DIALECT = Dialect("rapid", (".mod", ".modx", ".prg"), parse, frame, "!", poses=poses, pose_values=pose_values,
+DIALECT = Dialect("rapid", (".mod", ".prg"), parse, frame, "!", poses=poses, pose_values=pose_values,
                   pose_decimals=(MM_DECIMALS,) * 3 + (QUATERNION_DECIMALS,) * 4, joint_decimals=DEG_DECIMALS,
                   configuration=configuration, compare=(0, 1, 2), seeds=seeds)

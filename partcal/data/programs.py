@@ -9,7 +9,7 @@ dialect    files                          targets
 ========== ============================== ==========================================================
 urscript   ``.script``                    ``p[x, y, z, rx, ry, rz]`` (m, rad), joint lists (rad)
 krl        ``.src``, ``.dat``             ``E6POS POS E3POS FRAME`` (mm, deg), ``E6AXIS AXIS`` (deg)
-rapid      ``.mod``, ``.modx``, ``.prg``  ``robtarget`` (mm, quaternion), ``jointtarget`` (deg)
+rapid      ``.mod``, ``.prg``             ``robtarget`` (mm, quaternion), ``jointtarget`` (deg)
 joints     ``.csv`` with ``q1..qN``       one row per time step (deg)
 ========== ============================== ==========================================================
 """

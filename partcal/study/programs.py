@@ -85,16 +85,23 @@ class ProgramResult:
     orientation: str
 
     def summary(self, model: str = "") -> dict:
-        """The summary written beside the output (JSON values)."""
+        """The summary written beside the output (JSON values): counts, the largest move and turn of a target
+        (with its name and line), the largest predicted residual, and the targets not compensated."""
         n, bad = len(self.program.targets), len(self.failures)
         ok = np.isfinite(self.residual_mm)
-        k = int(np.argmax(np.where(ok, self.correction_mm, -1.0))) if ok.any() else None
+
+        def largest(values, unit):
+            if not ok.any():
+                return None
+            k = int(np.argmax(np.where(ok, values, -1.0)))
+            return {unit: float(values[k]), "target": self.program.targets[k].name,
+                    "line": self.program.targets[k].line}
+
         return {
             "program": self.program.path, "dialect": self.program.dialect.name, "model": model,
             "targets": n, "compensated": n - bad, "orientation": self.orientation,
-            "largest_correction": None if k is None else {
-                "mm": float(self.correction_mm[k]), "deg": float(self.correction_deg[ok].max()),
-                "target": self.program.targets[k].name, "line": self.program.targets[k].line},
+            "largest_correction": largest(self.correction_mm, "mm"),
+            "largest_turn": largest(self.correction_deg, "deg"),
             "predicted_residual": None if not ok.any() else {
                 "max_mm": float(self.residual_mm[ok].max()), "max_deg": float(self.residual_deg[ok].max())},
             "not_compensated": [{"line": t.line, "column": t.column, "target": t.name, "reason": why}

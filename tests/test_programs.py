@@ -484,3 +484,26 @@ def test_a_position_model_moves_the_position_and_keeps_the_orientation_as_writte
                     b"S 2,T 6,E1 0.0,E2 0.0,E3 0.0,E4 0.0,E5 0.0,E6 0.0}")
     np.testing.assert_allclose(result.correction_mm[1:], np.linalg.norm([0.5, 0.3, 0.2]), rtol=1e-9)
     assert result.correction_deg[1:].max() < 1e-12
+
+
+def test_a_urscript_pose_variable_is_a_target_only_where_a_move_takes_it(tmp_path):
+    script = tmp_path / "vars.script"
+    script.write_text("def run():\n"
+                      "  lift = p[0, 0, -0.05, 0, 0, 0]          # relative to wp1: a target in the frame wp1\n"
+                      "  up = p[0, 0, 0.1, 0, 0, 0]              # an offset no move takes: no target\n"
+                      "  global wp1 = p[-0.7446, -0.2977, 0.4299, 2.4066, 2.0194, 0.0]\n"
+                      "  movel(pose_add(wp1, up))\n"
+                      "  wp2 = p[0.1, 0.0, 0.05, 0, 3.1416, 0]\n"
+                      "  movel(wp1, a=1.2, v=0.25)\n"
+                      "  movel(pose_trans(wp1, lift), a=1.2, v=0.25)\n"
+                      "  movel(pose_trans(Plane_1, wp2), a=1.2, v=0.25)\n"
+                      "end\n")
+    program = read_program(script)
+    assert [(t.name, t.line, t.frame) for t in program.targets] == [("lift", 2, "wp1"), ("wp1", 4, None),
+                                                                     ("wp2", 6, "Plane_1")]
+    with pytest.raises(UnknownFrameError, match=r"line 2, column 12: target lift: it is given in the frame 'wp1'"):
+        compensated(constant_model(UR10, np.zeros(3)), script)       # the frame wp1 is a target: not guessed
+    script.write_text(script.read_text().replace("end\n", "  movej(pose_trans(Plane_1, wp1))\nend\n"))
+    with pytest.raises(UnknownFrameError, match=r"line 4, column 18: target wp1: it is used in the base and "
+                                                r"pose_trans\(Plane_1, ..\): one pose cannot be compensated"):
+        read_program(script)

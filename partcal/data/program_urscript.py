@@ -4,8 +4,9 @@ Units of the language: positions in metres, orientations as rotation vectors (ax
 joints in radians. Targets are
 
 - a pose literal ``p[...]`` as the first argument of ``movel``, ``movej``, ``movep``, ``movec`` (both its
-  poses), ``servoj`` or ``get_inverse_kin``, or assigned to a variable (``wp1 = p[...]``): in the default
-  frame (the robot base, or the feature given as ``--frame``);
+  poses), ``servoj`` or ``get_inverse_kin``, or assigned to a variable (``wp1 = p[...]``) that a move
+  takes (``movel(wp1, ..)``; ``movel(pose_trans(Plane_1, wp1), ..)``: in the feature ``Plane_1``): in the
+  default frame (the robot base, or the feature given as ``--frame``);
 - ``pose_trans(NAME, p[...])``: the pose is relative to the feature ``NAME``, which must be given
   (``--frame NAME=p[...]``);
 - a list of six numbers as the first argument of a move (joints), or assigned to a variable that some
@@ -23,8 +24,8 @@ import re
 import numpy as np
 
 from ..robot.rotations import matrices_from_rotation_vectors, rotation_vectors_from_matrices
-from .program_text import (Dialect, ProgramSyntaxError, Target, closing, frame_pose, line_and_column, line_end,
-                           masked, numbers, syntax_error)
+from .program_text import (Dialect, ProgramSyntaxError, Target, UnknownFrameError, closing, frame_pose,
+                           line_and_column, line_end, masked, numbers, syntax_error)
 
 MOVES = ("movel", "movej", "movep", "movec", "servoj")
 _POSE = re.compile(r"\bp\s*\[")
@@ -41,6 +42,7 @@ def parse(text: str, source: str) -> tuple[list[Target], dict]:
     code = masked(text, "#")
     tools: dict = {}
     tcps = _tcps(text, code, source, tools)
+    uses = _pose_uses(code)
     targets = []
     for m in _POSE.finditer(code):
         start = m.end() - 1
@@ -48,13 +50,26 @@ def parse(text: str, source: str) -> tuple[list[Target], dict]:
         frame = None
         if re.search(r"\bset_tcp\s*\(\s*$", before):
             continue                                                    # a tool, not a target
+        assigned = _ASSIGN.search(before)
         if re.search(r"\b(" + "|".join(MOVES) + r"|get_inverse_kin)\s*\(\s*$", before) or \
-                _ASSIGN.search(before) or re.search(r"\bmovec\s*\([^()]*,\s*$", before):
+                re.search(r"\bmovec\s*\([^()]*,\s*$", before):
             pass
         elif (trans := _POSE_TRANS.search(before)) is not None:
             frame = trans.group(1)
+        elif assigned and assigned.group(1) in uses:                    # a pose variable that a move takes
+            frames = uses[assigned.group(1)]
+            if len(frames) > 1:
+                first = start + 1 + len(code[start + 1:_end_of(code, start)]) - \
+                    len(code[start + 1:_end_of(code, start)].lstrip())                # the first number
+                line, column = line_and_column(text, first)
+                named = " and ".join("the base" if f is None else f"pose_trans({f}, ..)" for f in
+                                     sorted(frames, key=str))
+                raise UnknownFrameError(f"{source}: line {line}, column {column}: target {assigned.group(1)}: it "
+                                        f"is used in {named}: one pose cannot be compensated for two frames; "
+                                        "nothing written")
+            frame = next(iter(frames))
         else:
-            continue                                                    # an offset or an argument: no target
+            continue                                        # an offset, an argument, a variable no move takes
         targets.append(_pose_target(text, code, source, start, frame, tcps))
     targets += _joint_targets(text, code, source)
     return sorted(targets, key=lambda t: t.fields[0].start), tools
@@ -68,6 +83,12 @@ def _pose_target(text, code, source, start, frame, tcps) -> Target:
     name = _name_before(code, start) or "p[...]"
     tool = next((t for at, t in reversed(tcps) if at < start), None)
     return Target(name, 0, 0, "pose", tuple(fields), frame=frame, tool=tool, line_end=line_end(text, start))
+
+
+def _end_of(code: str, start: int) -> int:
+    """The offset of the ``]`` closing the ``[`` at ``start`` (the end of the text if none)."""
+    end = closing(code, start, "[", "]")
+    return len(code) if end < 0 else end
 
 
 def _name_before(code: str, start: int) -> str | None:
@@ -97,6 +118,19 @@ def _tcps(text: str, code: str, source: str, tools: dict) -> list[tuple[int, str
         else:
             out.append((m.start(), arg or "set_tcp(...)"))
     return out
+
+
+def _pose_uses(code: str) -> dict:
+    """The variables that moves take as a pose (``movel(wp1, ..)``, ``movel(pose_trans(Plane_1, wp1), ..)``,
+    both poses of ``movec``), each with the frames it is used in (None: the default frame)."""
+    uses: dict = {}
+    moves = "|".join(MOVES) + "|get_inverse_kin"
+    for m in re.finditer(r"\b(?:" + moves + r")\s*\(\s*(?:pose_trans\s*\(\s*([A-Za-z_]\w*)\s*,\s*)?"
+                         r"([A-Za-z_]\w*)\s*[,)]", code):
+        uses.setdefault(m.group(2), set()).add(m.group(1))
+    for m in re.finditer(r"\bmovec\s*\([^(),]*,\s*([A-Za-z_]\w*)\s*[,)]", code):
+        uses.setdefault(m.group(1), set()).add(None)
+    return uses
 
 
 def _joint_targets(text: str, code: str, source: str) -> list[Target]:

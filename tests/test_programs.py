@@ -507,3 +507,13 @@ def test_a_urscript_pose_variable_is_a_target_only_where_a_move_takes_it(tmp_pat
     with pytest.raises(UnknownFrameError, match=r"line 4, column 18: target wp1: it is used in the base and "
                                                 r"pose_trans\(Plane_1, ..\): one pose cannot be compensated"):
         read_program(script)
+
+
+def test_a_joint_trajectory_keeps_an_unconverged_row_with_a_comment_line_before_it():
+    far = constant_model(UR10, [0.0, 0.0, 3000.0], inputs="joint")
+    result = compensated(far, FIXTURES / "trajectory.csv", keep_unconverged=True)
+    assert len(result.failures) == 3
+    lines = result.output.decode().split("\n")
+    original = (FIXTURES / "trajectory.csv").read_text().split("\n")
+    assert lines[2].startswith("# partcal: not compensated: ") and lines[3] == original[2]
+    assert [x for x in lines if not x.startswith("# partcal")] == original

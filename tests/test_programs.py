@@ -517,3 +517,17 @@ def test_a_joint_trajectory_keeps_an_unconverged_row_with_a_comment_line_before_
     original = (FIXTURES / "trajectory.csv").read_text().split("\n")
     assert lines[2].startswith("# partcal: not compensated: ") and lines[3] == original[2]
     assert [x for x in lines if not x.startswith("# partcal")] == original
+
+
+def test_rapid_arrays_of_robtargets_are_targets_element_by_element(tmp_path):
+    mod = tmp_path / "array.mod"
+    p10 = b"[[1201.645,85.084,1050.031],[0.212583,-0.556195,0.152896,-0.788719],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]]"
+    mod.write_bytes(b"MODULE A\r\n  CONST robtarget path{2} := [" + p10 + b",\r\n    " + p10 + b"];\r\n"
+                    b"  PROC main()\r\n    MoveL path{1}, v100, fine, tool0;\r\n  ENDPROC\r\nENDMODULE\r\n")
+    program = read_program(mod)
+    assert [(t.name, t.line, t.tool) for t in program.targets] == [("path{1}", 2, "tool0"), ("path{2}", 3, "tool0")]
+    assert compensated(constant_model(SK120, np.zeros(6)), mod).output == mod.read_bytes()
+    mod.write_bytes(mod.read_bytes().replace(b"path{2}", b"path{3}"))
+    with pytest.raises(ProgramSyntaxError, match=r"line 2, column 30: robtarget array path\{3\}: expected 3 "
+                                                 r"bracketed robtargets"):
+        read_program(mod)

@@ -4,7 +4,8 @@ Units of the language: ``robtarget`` ``[[x, y, z], [q1, q2, q3, q4], [cf1, cf4, 
 with the position in mm, the orientation a unit quaternion scalar first, and ``confdata`` the quarter
 revolutions of axes 1, 4 and 6 (``cf = floor(angle / 90)``; ``cfx`` depends on the robot type and is kept
 as written); ``jointtarget`` ``[[j1, .., j6], [eax_a, ..]]`` in degrees. Targets are declarations
-(``CONST``, ``PERS``, ``VAR``) with an initial value and inline values as a move's target.
+(``CONST``, ``PERS``, ``VAR``) with an initial value, each element of a declared array (``p{3}``), and
+inline values as a move's target.
 
 A robtarget is in the work object and with the tool of the moves that use it (``MoveL p10, v100, z10,
 tool1 \\WObj:=wobj1;``, also through ``Offs(p10, ..)`` and ``RelTool(p10, ..)``); ``wobj0`` (the world,
@@ -24,8 +25,8 @@ from .program_text import (Dialect, ProgramSyntaxError, Target, UnknownFrameErro
                            line_and_column, line_end, masked, numbers, syntax_error)
 
 MM_DECIMALS, QUATERNION_DECIMALS, DEG_DECIMALS = 6, 9, 6
-_DECL = re.compile(r"\b(?:CONST|PERS|VAR)\s+(robtarget|jointtarget|tooldata|wobjdata)\s+([A-Za-z_]\w*)\s*:=\s*\[",
-                   re.IGNORECASE)
+_DECL = re.compile(r"\b(?:CONST|PERS|VAR)\s+(robtarget|jointtarget|tooldata|wobjdata)\s+([A-Za-z_]\w*)"
+                   r"\s*(\{\s*\d+\s*\})?\s*:=\s*\[", re.IGNORECASE)
 _MOVE = re.compile(r"\b(Move\w*)\s+([^;]*);", re.IGNORECASE)
 _WOBJ = re.compile(r"\\WObj\s*:=\s*([A-Za-z_]\w*)", re.IGNORECASE)
 
@@ -38,10 +39,16 @@ def parse(text: str, source: str) -> tuple[list[Target], dict]:
     targets = []
     for m in _DECL.finditer(code):
         kind, name, start = m.group(1).lower(), m.group(2), m.end() - 1
-        if kind == "robtarget":
-            targets.append(_robtarget(text, code, source, start, name))
-        elif kind == "jointtarget":
-            targets.append(_jointtarget(text, code, source, start, name))
+        read = {"robtarget": _robtarget, "jointtarget": _jointtarget}.get(kind)
+        if read is not None and m.group(3):             # an array: one target per element, name{k}
+            elements = _elements(text, code, source, start, f"{kind} array {name}")
+            targets += [read(text, code, source, at, f"{name}{{{k}}}") for k, (at, end) in
+                        enumerate(elements, start=1) if end > 0]
+            if len(elements) != int(m.group(3).strip("{} ")) or any(end < 0 for _, end in elements):
+                raise syntax_error(source, text, start, f"{kind} array {name}{m.group(3)}",
+                                   f"{m.group(3).strip('{} ')} bracketed {kind}s")
+        elif read is not None:
+            targets.append(read(text, code, source, start, name))
         else:
             pose = _frame_data(text, code, source, start, name, kind)
             if pose is not None:
@@ -67,7 +74,7 @@ def parse(text: str, source: str) -> tuple[list[Target], dict]:
                 if used:
                     uses.setdefault(used.group(1).lower(), set()).add(where)
     for t in targets:
-        seen = uses.get(t.name.lower())
+        seen = uses.get(t.name.split("{")[0].lower())
         if t.kind == "pose" and seen and t.tool is None:
             if len(seen) > 1:
                 uses_text = " and ".join(f"{a}\\WObj:={b}" for a, b in sorted(seen))

@@ -13,9 +13,10 @@ An aggregate lacking some of ``X Y Z A B C`` (or ``A1 .. A6``) after a ``:``, of
 ``LIN_REL``, or assigned to no declared target is an offset and stays as written; a partial aggregate as
 the target of ``PTP``, ``LIN`` or ``CIRC`` (the other coordinates: wherever the robot is) is refused.
 ``$BASE``, ``$TOOL``, ``BASE_DATA[n]`` and ``TOOL_DATA[n]`` aggregates are frames, not targets:
-``BASE_DATA[n]`` and ``TOOL_DATA[n]`` defined in the file are used for the targets that name them. A target ``XP1`` (or ``P1``) with an ``FDAT`` named ``FP1`` is in the frame
-``BASE_DATA[BASE_NO]`` with the tool ``TOOL_DATA[TOOL_NO]`` (number 0: the robot base, the flange); without
-one, in the frames of the options ``--frame`` and ``--tool`` (default: the robot base, the flange).
+``BASE_DATA[n]`` and ``TOOL_DATA[n]`` defined in the file are used for the targets that name them.
+A target ``XP1`` (or ``P1``) with an ``FDAT`` named ``FP1`` is in the frame ``BASE_DATA[BASE_NO]`` with
+the tool ``TOOL_DATA[TOOL_NO]`` (number 0: the robot base, the flange); without one, in the frames of
+the options ``--frame`` and ``--tool`` (default: the robot base, the flange).
 """
 
 from __future__ import annotations

@@ -252,6 +252,9 @@ def _compensate_program(args, kind: str) -> int:
         warnings.simplefilter("ignore", ExtrapolationWarning)
         result = compensate_program(predictor, program, frames, keep_unconverged=args.keep_unconverged)
     summary = result.summary(predictor.name)
+    if not program.targets:
+        print(f"partcal: warning: {args.targets} holds no targets partcal reads ({dialect.name}); written as it "
+              "was (docs/predictor.md, 'Robot programs', says which targets are read)", file=sys.stderr)
     if result.failures:
         first, why = result.failures[0]
         more = len(result.failures) - 1

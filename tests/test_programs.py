@@ -531,3 +531,12 @@ def test_rapid_arrays_of_robtargets_are_targets_element_by_element(tmp_path):
     with pytest.raises(ProgramSyntaxError, match=r"line 2, column 30: robtarget array path\{3\}: expected 3 "
                                                  r"bracketed robtargets"):
         read_program(mod)
+
+
+def test_a_program_without_targets_is_written_as_it_was_with_a_warning(tmp_path):
+    save_model(constant_model(SK120, np.zeros(3)).model, tmp_path / "m.json", name="zero", robot=SK120)
+    src = tmp_path / "names.src"
+    src.write_bytes(b"DEF names( )\r\n  PTP XHOME\r\n  LIN XP1 C_DIS\r\nEND\r\n")
+    done = run("compensate", str(tmp_path / "m.json"), str(src), "-o", str(tmp_path / "out.src"))
+    assert done.returncode == 0 and "holds no targets partcal reads (krl)" in done.stderr
+    assert (tmp_path / "out.src").read_bytes() == src.read_bytes()

@@ -540,3 +540,13 @@ def test_a_program_without_targets_is_written_as_it_was_with_a_warning(tmp_path)
     done = run("compensate", str(tmp_path / "m.json"), str(src), "-o", str(tmp_path / "out.src"))
     assert done.returncode == 0 and "holds no targets partcal reads (krl)" in done.stderr
     assert (tmp_path / "out.src").read_bytes() == src.read_bytes()
+
+
+def test_numbers_keep_their_text_when_equal_and_get_enough_decimals_when_not():
+    from partcal.data.program_text import Field, number_text
+
+    old = Field(0, 6, "+85.08", 85.08)
+    assert number_text(85.08 + 1e-12, old, 6) == "+85.08"            # equal at the precision written
+    assert number_text(85.0805, old, 6) == "+85.080500"              # at least 6 decimals, the sign kept
+    assert number_text(-1e-12, Field(0, 3, "0.5", 0.5), 6) == "0.000000"       # never "-0.000000"
+    assert number_text(1.5, Field(0, 10, "0.12345678", 0.12345678), 6) == "1.50000000"   # as many as it had

@@ -227,6 +227,8 @@ def number_text(value: float, old: Field, min_decimals: int) -> str:
     decimals (at least ``min_decimals``, more if the old text had more)."""
     decimals = max(min_decimals, _decimals(old.text))
     new = f"{value + 0.0:.{decimals}f}"
+    if float(new) == 0.0:
+        new = new.lstrip("-")                       # no "-0.000000"
     if float(f"{old.value + 0.0:.{decimals}f}") == float(new):
         return old.text
     if old.text.startswith("+") and not new.startswith("-"):

@@ -12,8 +12,9 @@ tool point in the robot base: ``W = F P T^-1 Tm`` (``F`` the frame, ``P`` the ta
 2. the compensation (:meth:`Predictor.compensate_poses`, seeded with ``q0``): the full pose for a pose
    model, the position with the orientation kept for a position model; a Cartesian model's command is
    then solved by the robot's IK from ``q0``, as the controller would;
-3. the configuration kept: the compensated joints ``q1`` have the vendor's configuration of ``q0`` and the
-   same sign of the Jacobian's determinant (no shoulder, elbow or wrist flip; the UR's joint branch);
+3. the configuration kept: the compensated joints ``q1`` have the Jacobian's determinant of the sign of
+   ``q0``'s (no shoulder, elbow or wrist flip; the UR's joint branch) and the configuration written with
+   the target, if any;
 4. the commanded pose carried back, ``P' = F^-1 C Tm^-1 T``, written in the vendor's units (joints: ``q1``).
 
 A target that fails 1, 2 or 3 is not compensated: it is reported by file, line and name, and the

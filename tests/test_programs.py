@@ -397,6 +397,10 @@ def test_a_target_that_would_leave_its_configuration_is_not_compensated(tmp_path
                                                     b"partcal: not compensated: leaves its configuration ([0, 0, 0, -1]"
                                                     b" -> [0, 0, 1, -1] in rapid's terms)")
     assert compensated(constant_model(SK120, [0.0, 0.0, 0.0, *(-z)]), path).output is not None   # the other way
+    path.write_text(path.read_text().replace("[0,0,0,0],", "\n    [0,0,0,0],"))         # a statement on two lines
+    kept = compensated(model, path, keep_unconverged=True).output.decode().split("\n")
+    assert kept[1].endswith("],") and kept[2].endswith("]]; ! partcal: not compensated: leaves its configuration "
+                                                     "([0, 0, 0, -1] -> [0, 0, 1, -1] in rapid's terms)")
 
 
 def test_unconverged_targets_exit_3_and_write_nothing_unless_kept(tmp_path):

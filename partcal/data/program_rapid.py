@@ -214,4 +214,4 @@ def seeds(configurations, reference_deg) -> np.ndarray:
 
 DIALECT = Dialect("rapid", (".mod", ".prg"), parse, frame, "!", poses=poses, pose_values=pose_values,
                   pose_decimals=(MM_DECIMALS,) * 3 + (QUATERNION_DECIMALS,) * 4, joint_decimals=DEG_DECIMALS,
-                  configuration=configuration, compare=(0, 1, 2), seeds=seeds)
+                  configuration=configuration, compare=(0, 1, 2), seeds=seeds, statement_end=";")

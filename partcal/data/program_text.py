@@ -114,6 +114,7 @@ class Dialect:
     compare: tuple[int, ...] = ()
     seeds: Callable | None = None
     comment_line: bool = False          # a note goes on a line of its own before the target (CSV)
+    statement_end: str = ""             # a note goes after the statement's end (RAPID's ";"), not mid-statement
 
     def fill(self, text: str, targets: list[Target]) -> None:
         """Lines, columns, poses and joints of parsed targets, computed for all of them at once."""
@@ -153,7 +154,9 @@ class Dialect:
         """Where and how a note about ``target`` goes: ``(offset, offset, text)`` to insert, a comment at the
         end of the target's line, or a comment line before it (with the file's line ending)."""
         if not self.comment_line:
-            return target.line_end, target.line_end, f" {self.comment} {message}"
+            end = text.find(self.statement_end, target.fields[-1].end) if self.statement_end else -1
+            at = line_end(text, end) if end >= 0 else target.line_end
+            return at, at, f" {self.comment} {message}"
         start = text.rfind("\n", 0, target.fields[0].start) + 1
         ending = "\r\n" if text[target.line_end:target.line_end + 2] == "\r\n" else "\n"
         return start, start, f"{self.comment} {message}{ending}"

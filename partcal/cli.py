@@ -153,6 +153,15 @@ def _warn_if_far(predictor, X) -> None:
 
 def _cmd_compensate(args) -> int:
     from ._io import atomic_write
+    from .data.programs import program_kind
+
+    kind = args.program or program_kind(args.targets)
+    if kind is not None:
+        return _compensate_program(args, kind)
+    for flag, value in (("--frame", args.frame), ("--tool", args.tool), ("--keep-unconverged", args.keep_unconverged)):
+        if value:
+            raise PartcalError(f"compensate: {flag} is for robot programs (URScript, KRL, RAPID, joint "
+                               f"trajectories); {args.targets} is a targets CSV")
     from .data.point_tables import read_point_table
     from .metrics import ExtrapolationWarning
     from .robot.compensation import CompensationWarning
@@ -213,6 +222,85 @@ def _cmd_compensate(args) -> int:
         print(f"partcal: warning: {far}", file=sys.stderr)
     print(f"compensated {len(targets)} targets (all converged): {args.output}")
     return 0
+
+
+def _compensate_program(args, kind: str) -> int:
+    """``partcal compensate MODEL PROGRAM -o OUT``: the program with its targets rewritten; exit 3 (nothing
+    written) when a target is not compensated, unless ``--keep-unconverged``."""
+    import json
+
+    from ._io import atomic_write
+    from .data.programs import DIALECTS, read_program
+    from .metrics import ExtrapolationWarning
+    from .robot.compensation import CompensationWarning
+    from .study.predictor import load_predictor
+    from .study.programs import ProgramFrames, compensate_program
+
+    _refuse_input_as_output(args.output, "compensate", [("model file", args.model), ("program", args.targets)])
+    if args.format:
+        raise PartcalError("compensate: --format is for targets CSVs, not robot programs")
+    dialect = DIALECTS[kind]
+    frames = ProgramFrames(_named_frames(args.frame, dialect, "--frame"), _named_frames(args.tool, dialect, "--tool"))
+    predictor = load_predictor(args.model)
+    program = read_program(args.targets, kind)
+    with warnings.catch_warnings():       # exit code 3 and one stderr line below say it instead
+        warnings.simplefilter("ignore", CompensationWarning)
+        warnings.simplefilter("ignore", ExtrapolationWarning)
+        result = compensate_program(predictor, program, frames, keep_unconverged=args.keep_unconverged)
+    summary = result.summary(predictor.name)
+    if not program.targets:
+        print(f"partcal: warning: {args.targets} holds no targets partcal reads ({dialect.name}); written as it "
+              "was (docs/predictor.md, 'Robot programs', says which targets are read)", file=sys.stderr)
+    if result.failures:
+        first, why = result.failures[0]
+        more = len(result.failures) - 1
+        line = (f"partcal: {first.where(args.targets)} {why}" + (f" (and {more} more)" if more else "") +
+                f"; {len(result.failures)} of {len(program.targets)} targets not compensated")
+        if result.output is None:
+            print(line + f"; nothing written (--keep-unconverged writes them as they were, with a comment)",
+                  file=sys.stderr)
+            return 3
+    summary_path = Path(str(args.output) + ".json")
+    with atomic_write(args.output, "wb") as handle:
+        handle.write(result.output)
+    with atomic_write(summary_path) as handle:
+        json.dump(summary, handle, indent=2)
+        handle.write("\n")
+    print(_program_summary(summary, args.output, summary_path), file=sys.stderr)
+    if result.failures:
+        print(line + f"; {args.output} keeps them as they were, with a comment", file=sys.stderr)
+        return 3
+    return 0
+
+
+def _named_frames(values, dialect, option: str) -> dict:
+    """``--frame``/``--tool`` values, ``NAME=VALUE`` or ``VALUE`` (the default), VALUE in the dialect's syntax."""
+    import re
+
+    out = {}
+    for value in values or []:
+        m = re.match(r"\s*([$A-Za-z_][\w$]*(?:\[\s*\d+\s*\])?)\s*=(?!=)(.*)$", value, re.DOTALL)
+        name, text = (m.group(1).replace(" ", ""), m.group(2)) if m else (None, value)
+        if name is not None and name.upper().startswith(("BASE_DATA[", "TOOL_DATA[")):
+            name = name.upper()
+        if name in out:
+            raise PartcalError(f"compensate: {option} {name or '(the default)'} is given twice")
+        out[name] = dialect.frame(text, f"{option} {value!r}")
+    return out
+
+
+def _program_summary(summary: dict, output, summary_path) -> str:
+    """The stderr summary of a compensated program."""
+    big, turn, res = summary["largest_correction"], summary["largest_turn"], summary["predicted_residual"]
+    text = f"compensated {summary['compensated']} of {summary['targets']} targets ({summary['dialect']})"
+    if big:
+        text += (f"; largest correction {big['mm']:.4g} mm (target {big['target']}, line {big['line']}) and "
+                 f"{turn['deg']:.4g} deg (target {turn['target']}, line {turn['line']})")
+    if res:
+        text += f"; predicted residual at most {res['max_mm']:.3g} mm, {res['max_deg']:.3g} deg"
+    if summary["orientation"] == "kept":
+        text += " (a position model: orientations kept)"
+    return text + f": {output} (summary: {summary_path})"
 
 
 def _compensated(predictor, targets, seeds, payload, angles=None):
@@ -472,12 +560,24 @@ def build_parser() -> argparse.ArgumentParser:
     comp.add_argument("model", help="model file (models/<name>.json of a run)")
     comp.add_argument("targets", help="CSV with x,y,z (or x_nom,y_nom,z_nom) in mm; joint models also read q1..qN "
                                       "as IK seeds; pose models also rx,ry,rz (or rx_nom,ry_nom,rz_nom), intrinsic "
-                                      "XYZ degrees")
+                                      "XYZ degrees; or a robot program (URScript, KRL, RAPID, joint trajectory "
+                                      "CSV), see --program")
     comp.add_argument("-o", "--output", required=True,
                       help="CSV to write (targets + x_cmd,y_cmd,z_cmd[,rx_cmd,ry_cmd,rz_cmd][,qK_cmd],converged); "
                            "exit code 3 when any target did not converge")
     comp.add_argument("--format", metavar="FILE.yaml", help="the targets' format (delimiter, decimal, columns, "
                                                             "units), see docs/data.md")
+    comp.add_argument("--program", choices=("urscript", "krl", "rapid", "joints"),
+                      help="TARGETS is a robot program in this language (default: from its name: .script, "
+                           ".src/.dat, .mod/.prg; a .csv with q1..qN and no x,y,z is a joint trajectory)")
+    comp.add_argument("--frame", action="append", metavar="[NAME=]FRAME",
+                      help="a program's frame in its own syntax (UR feature p[...], KUKA base {X ..}, ABB work "
+                           "object [[x,y,z],[q1,..]]); without NAME, the frame of targets that name none")
+    comp.add_argument("--tool", action="append", metavar="[NAME=]TOOL",
+                      help="a program's tool (TCP) in its own syntax, as --frame")
+    comp.add_argument("--keep-unconverged", action="store_true",
+                      help="write the program even when targets are not compensated: they keep their numbers, "
+                           "with a comment (exit code 3 all the same)")
     comp.set_defaults(func=_cmd_compensate)
     eqs = sub.add_parser("equations", help="print a series model's fitted equations in mm and degrees")
     eqs.add_argument("model", help="model file (models/<name>.json of a run)")

@@ -30,7 +30,7 @@ from scipy.spatial.transform import Rotation
 from .._validation import check_array
 from ..errors import DataError
 from ..metrics import MRAD_PER_RAD, warn_far
-from ..models.bases import varying_inputs
+from ..models.features import varying_inputs
 from ..robot.compensation import (CompensationResult, false_target, false_target_cartesian_poses,
                                   false_target_joints, false_target_poses, reachable, reachable_poses)
 from ..robot.description import robot_from_dict

@@ -408,9 +408,9 @@ def _identifiable(jac0: NDArray[np.float64], wanted: NDArray[np.bool_], rcond: f
     if candidates.size == 0:
         return candidates, 0
     scaled = jac0[:, candidates] / norms[candidates]
-    singular = np.linalg.svd(scaled, compute_uv=False)
+    r, pivots = scipy.linalg.qr(scaled, mode="r", pivoting=True)       # R has the singular values of ``scaled``
+    singular = np.linalg.svd(r[:candidates.size], compute_uv=False)
     rank = int(np.sum(singular > rcond * singular[0]))
-    pivots = scipy.linalg.qr(scaled, mode="r", pivoting=True)[1]
     return np.sort(candidates[pivots[:rank]]), rank
 
 
@@ -446,11 +446,12 @@ def _uncertainty(jac: NDArray[np.float64], resid: NDArray[np.float64]) -> tuple[
     """Standard errors ``sqrt(diag(sigma^2 (J^T J)^-1))`` and the condition number of the unit-column ``J``."""
     if jac.shape[1] == 0:
         return np.zeros(0), 1.0
-    _, s, vt = np.linalg.svd(jac, full_matrices=False)
+    r = scipy.linalg.qr(jac, mode="r")[0][:jac.shape[1]]         # J = Q R: R has J's singular values, and J D's R D
+    _, s, vt = np.linalg.svd(r, full_matrices=False)
     dof = resid.size - jac.shape[1]
     sigma2 = float(np.sum(resid**2)) / dof if dof > 0 else np.nan
     std = np.sqrt(sigma2 * np.sum((vt.T / s) ** 2, axis=1))
-    s_unit = np.linalg.svd(jac / np.linalg.norm(jac, axis=0), compute_uv=False)
+    s_unit = np.linalg.svd(r / np.linalg.norm(jac, axis=0), compute_uv=False)
     return std, float(s_unit[0] / s_unit[-1]) if s_unit[-1] > 0 else np.inf
 
 

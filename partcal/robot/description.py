@@ -116,7 +116,7 @@ def robot_from_dict(spec: dict, source: str = "robot", lines: dict[str, int] | N
     """
     r = _Reader(source, lines or {})
     n = _joint_count(spec, r)
-    alpha, d, a, off, coupling = _links(spec["links"], n, r)
+    alpha, d, a, off, coupling, origins = _links(spec["links"], n, r)
     limits = r.numbers("limits_deg", spec["limits_deg"], (n, 2), f"{n} pairs [low, high] with low < high")
     if np.any(limits[:, 0] >= limits[:, 1]):
         r.fail("limits_deg", f"expected {n} pairs [low, high] with low < high; got {spec['limits_deg']!r}")
@@ -125,7 +125,7 @@ def robot_from_dict(spec: dict, source: str = "robot", lines: dict[str, int] | N
     constraints = _constraints(spec.get("constraints_deg") or [], n, r)
     return Robot(name=str(spec["name"]), n_joints=n, alpha_deg=alpha, d_mm=d, a_mm=a,
                  theta_offset_deg=off, coupling=coupling, tool_mm=tool, limits_deg=limits,
-                 home_deg=home, constraints=constraints)
+                 home_deg=home, constraints=constraints, origins=origins)
 
 
 class _Reader:
@@ -173,17 +173,19 @@ def _joint_count(spec, r: _Reader) -> int:
     return n
 
 
-def _links(links: list, n: int, r: _Reader) -> tuple[NDArray[np.float64], ...]:
-    """``alpha, d, a, theta offset`` (each ``(R,)``) and the coupling ``(R, N)`` of the DH rows."""
-    rows = []
+def _links(links: list, n: int, r: _Reader) -> tuple:
+    """``alpha, d, a, theta offset`` (each ``(R,)``), the coupling ``(R, N)`` of the rows, and their further
+    transforms ``(R, 6)`` (``origin:``; None when no row has one)."""
+    rows, origins = [], []
     for i, link in enumerate(links):
-        if not isinstance(link, dict) or set(link) != {"theta", "d", "a", "alpha"}:
-            r.fail(f"links[{i}]", f"expected a mapping with theta, d, a, alpha; got {link!r}")
+        if not isinstance(link, dict) or not {"theta", "d", "a", "alpha"} <= set(link) <= _LINK_KEYS:
+            r.fail(f"links[{i}]", f"expected a mapping with theta, d, a, alpha (and optionally origin); got {link!r}")
         try:
             off, coeffs = parse_theta(link["theta"], n)
         except ConfigError as exc:
             r.fail(f"links[{i}].theta", str(exc))
         rows.append((*(r.number(f"links[{i}].{key}", link[key]) for key in ("alpha", "d", "a")), off, coeffs))
+        origins.append(_origin(link.get("origin"), f"links[{i}].origin", r))
     if not rows:
         r.fail("links", "needs at least one DH row")
     coupling = np.array([row[4] for row in rows])
@@ -191,7 +193,20 @@ def _links(links: list, n: int, r: _Reader) -> tuple[NDArray[np.float64], ...]:
     if unused:
         r.fail("links", f"joint(s) {', '.join(unused)} appear in no theta expression")
     alpha, d, a, off = (np.array([row[k] for row in rows]) for k in range(4))
-    return alpha, d, a, off, coupling
+    return alpha, d, a, off, coupling, (np.array(origins) if np.any(origins) else None)
+
+
+_LINK_KEYS = {"theta", "d", "a", "alpha", "origin"}
+
+
+def _origin(value, where: str, r: _Reader) -> NDArray[np.float64]:
+    """A row's further transform ``{xyz_mm: [x, y, z], rpy_deg: [roll, pitch, yaw]}`` as ``(6,)`` (zeros if absent)."""
+    if value is None:
+        return np.zeros(6)
+    if not isinstance(value, dict) or not set(value) <= {"xyz_mm", "rpy_deg"}:
+        r.fail(where, f"expected {{xyz_mm: [x, y, z], rpy_deg: [roll, pitch, yaw]}}; got {value!r}"[:200])
+    return np.concatenate([r.numbers(f"{where}.{key}", value.get(key, [0, 0, 0]), (3,), "three numbers")
+                           for key in ("xyz_mm", "rpy_deg")])
 
 
 def _constraints(items: list, n: int, r: _Reader) -> tuple:
@@ -229,11 +244,13 @@ def _expression(offset: float, coeffs: NDArray[np.float64]) -> str | float:
 
 def robot_to_dict(robot: Robot) -> dict:
     """The robot as the mapping :func:`robot_from_dict` reads (exact round trip)."""
+    origins = robot.origins if robot.origins is not None else np.zeros((robot.alpha_deg.size, 6))
     return {
         "name": robot.name, "joints": robot.n_joints,
-        "links": [{"theta": _expression(off, c), "d": float(d), "a": float(a), "alpha": float(al)}
-                  for off, c, d, a, al in zip(robot.theta_offset_deg, robot.coupling, robot.d_mm, robot.a_mm,
-                                              robot.alpha_deg)],
+        "links": [{"theta": _expression(off, c), "d": float(d), "a": float(a), "alpha": float(al),
+                   **({"origin": {"xyz_mm": o[:3].tolist(), "rpy_deg": o[3:].tolist()}} if np.any(o) else {})}
+                  for off, c, d, a, al, o in zip(robot.theta_offset_deg, robot.coupling, robot.d_mm, robot.a_mm,
+                                                 robot.alpha_deg, origins)],
         "tool_mm": robot.tool_mm.tolist(), "limits_deg": robot.limits_deg.tolist(),
         "home_deg": robot.home_deg.tolist(),
         "constraints_deg": [{"expr": _expression(0.0, c), "range": [lo, hi]} for c, lo, hi in robot.constraints],

@@ -104,6 +104,8 @@ class JointErrors:
         """
         pivots, signs, frames = [], [], []
         moves = (robot.a_mm != 0) | (robot.d_mm != 0)          # row r moves frame r + 1 away from frame r
+        if robot.origins is not None:
+            moves |= np.any(robot.origins[:, :3] != 0, axis=1)
         for j in compliance:
             row = int(np.flatnonzero(robot.coupling[:, j - 1])[0])
             pivots.append(row)

@@ -18,7 +18,7 @@ from scipy.spatial.transform import Rotation
 from sklearn.base import clone
 from sklearn.utils.validation import check_is_fitted, validate_data
 
-from .._validation import MAX_PAYLOAD_KG, FieldReader, Requirement, boolean, check_array, param_error, real
+from .._validation import MAX_PAYLOAD_KG, FieldReader, Requirement, boolean, check_array, one_of, param_error, real
 from ..errors import DataError, ModelFileError
 from ..metrics import MRAD_PER_DEG, MRAD_PER_RAD, ORIENTATION, POSITION, distance_outside_boxes
 from ..robot.description import load_robot, robot_from_dict, robot_to_dict
@@ -26,8 +26,8 @@ from ..robot.kinematics import ORIENTATION_MM_PER_RAD, Robot
 from .base import ErrorModelBase, box_points, seed_from
 from .bases import varying_inputs
 from .gp import GaussianProcessErrorModel
-from .identification import (PRIMARY_TARGET, STATUSES, Identification, geometric_size, identify, nominal_values,
-                             own_geometry, parameter_names, robot_with)
+from .identification import (PARAMETRIZATIONS, PRIMARY_TARGET, STATUSES, Identification, geometric_size, identify,
+                             nominal_values, own_geometry, parameter_names, robot_with)
 from .joint_errors import JointErrors, compliance_problem, harmonics_problem
 from .partitioned import PartitionedErrorModel
 from .pose import PoseErrorModel
@@ -54,6 +54,12 @@ class KinematicModel(ErrorModelBase):
     rcond : float in (0, 1)
         Relative singular-value threshold below which a parameter direction
         counts as unidentifiable (see :func:`identify`).
+    parametrization : {"dh", "complete"}
+        The geometric parameters identified: the four DH parameters of every
+        row, or every row's joint offset and the six errors of its fixed
+        transform (tilts between parallel axes too), each reduced by the rank
+        rule to what the data identify (docs/models.md). ``complete`` takes
+        neither ``compliance`` nor ``all_targets`` or ``use_orientation`` yet.
     compliance : sequence of int
         1-based joints that yield under gravity (see :mod:`partcal.models.joint_errors`).
     joint_harmonics : int or sequence of int
@@ -96,10 +102,11 @@ class KinematicModel(ErrorModelBase):
 
     inputs = "joint"
 
-    def __init__(self, *, robot=None, base=True, tool=True, rcond=1e-6, compliance=(), joint_harmonics=0,
-                 payload_kg=0.0, all_targets=False, use_orientation=False,
+    def __init__(self, *, robot=None, base=True, tool=True, rcond=1e-6, parametrization="dh", compliance=(),
+                 joint_harmonics=0, payload_kg=0.0, all_targets=False, use_orientation=False,
                  orientation_mm_per_rad=ORIENTATION_MM_PER_RAD, residual=None, random_state=None):
         self.robot = robot
+        self.parametrization = parametrization
         self.all_targets = all_targets
         self.use_orientation = use_orientation
         self.orientation_mm_per_rad = orientation_mm_per_rad
@@ -118,14 +125,18 @@ class KinematicModel(ErrorModelBase):
     fits_pose_errors = True
     _parameter_rules = {"base": boolean(True), "tool": boolean(True),
                         "rcond": real(0.0, 1.0, default=1e-6, low_open=True),
+                        "parametrization": one_of(*PARAMETRIZATIONS, default="dh"),
                         "payload_kg": real(0.0, MAX_PAYLOAD_KG, default=0.0),
                         "all_targets": boolean(False), "use_orientation": boolean(False),
                         "orientation_mm_per_rad": real(0.0, 1e6, default=ORIENTATION_MM_PER_RAD, low_open=True)}
     _requirements = (Requirement("orientation_mm_per_rad", f"{ORIENTATION_MM_PER_RAD:g} (its default) unless "
                                  "use_orientation is true: it weighs the orientation in the identification",
-                                 lambda p: p["use_orientation"] or p["orientation_mm_per_rad"] == ORIENTATION_MM_PER_RAD),)
+                                 lambda p: p["use_orientation"] or p["orientation_mm_per_rad"] == ORIENTATION_MM_PER_RAD),
+                     Requirement("parametrization", "'dh' with all_targets or use_orientation (the complete "
+                                 "parametrization reads one target's positions)",
+                                 lambda p: p["parametrization"] == "dh" or not (p["all_targets"] or p["use_orientation"])))
     _from_fitted = ("all_targets", "use_orientation")     # a model file keeps what was fitted on instead
-    _OPTIONAL_IN_FILES = ("payload_kg", "orientation_mm_per_rad")   # files written before them: the default
+    _OPTIONAL_IN_FILES = ("payload_kg", "orientation_mm_per_rad", "parametrization")   # older files: the default
     _joint_rules = {"compliance": ((), compliance_problem), "joint_harmonics": (0, harmonics_problem)}
 
     def _check_params(self) -> Robot:
@@ -138,6 +149,9 @@ class KinematicModel(ErrorModelBase):
             expected = problem(getattr(self, name), robot.n_joints)
             if expected is not None:
                 raise param_error(own, name, expected, getattr(self, name))
+        if self.parametrization != "dh" and len(self.compliance):
+            raise param_error(own, "compliance", "empty with parametrization 'complete' (compliant joints need "
+                              "parametrization 'dh' yet)", self.compliance)
         if self.residual is not None and not isinstance(self.residual, RESIDUAL_MODELS):
             raise param_error(own, "residual", "None, an ErrorModel, a PartitionedErrorModel or a "
                               "GaussianProcessErrorModel", self.residual)
@@ -182,7 +196,7 @@ class KinematicModel(ErrorModelBase):
         extra = extra_from(robot, X, targets, orientation_deg, weight)
         self.identification_ = identify(robot, X, nominal + y[:, POSITION], base=bool(self.base), tool=bool(self.tool),
                                         rcond=float(self.rcond), errors=self.joint_errors_, payload_kg=payload,
-                                        extra=extra)
+                                        extra=extra, parametrization=self.parametrization)
         self.targets_ = dict(extra.tools_mm) if extra is not None else {}
         self.orientation_ = extra is not None and extra.rotations is not None
         self.robot_ = robot
@@ -234,15 +248,15 @@ class KinematicModel(ErrorModelBase):
     def _build_robots(self) -> None:
         """The identified robot, and its geometry in its own base frame (where the joint errors' lever arms
         are taken), from ``robot_`` and the identified table (after fitting or loading)."""
-        self.identified_robot_ = robot_with(self.robot_, self.identification_.value)
-        self._geometry = own_geometry(self.robot_, self.identification_.value)
+        self.identified_robot_ = robot_with(self.robot_, self.identification_.value, self.parametrization)
+        self._geometry = own_geometry(self.robot_, self.identification_.value, self.parametrization)
 
     def _actual(self, X: NDArray[np.float64], payload: NDArray[np.float64]) -> NDArray[np.float64]:
         """The joint angles the identified arm takes (its joint errors), (n, N) deg."""
         errors = self.joint_errors_
         if errors.empty:
             return X
-        size = geometric_size(self.robot_)
+        size = geometric_size(self.robot_, self.parametrization)
         return errors.design(self._geometry, X, self.identification_.value[size:size + errors.size], payload)[0]
 
     def _kinematic(self, X: NDArray[np.float64], payload: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -338,6 +352,7 @@ class KinematicModel(ErrorModelBase):
         errors = self.joint_errors_
         return {"robot": robot_to_dict(self.robot_), "base": bool(self.base), "tool": bool(self.tool),
                 "rcond": float(self.rcond), "payload_kg": float(self.payload_kg),
+                **({"parametrization": self.parametrization} if self.parametrization != "dh" else {}),
                 **({"orientation_mm_per_rad": float(self.orientation_mm_per_rad)} if self.orientation_ else {}),
                 "compliance": list(errors.compliance), "joint_harmonics": list(errors.harmonics),
                 "identification": self.identification_.to_dict(),
@@ -370,7 +385,8 @@ class KinematicModel(ErrorModelBase):
         model = cls(robot=robot, **{key: r.rule(key, rule) for key, rule in rules.items()}, **joint,
                     all_targets=bool(tools), use_orientation=orientation)
         errors = JointErrors.for_robot(robot, joint["compliance"], joint["joint_harmonics"])
-        table = _identification_from(r.sub("identification"), robot, errors, tools, orientation)
+        table = _identification_from(r.sub("identification"), robot, errors, tools, orientation,
+                                     model.parametrization)
         model.robot_, model.identification_, model.joint_errors_ = robot, table, errors
         model.targets_, model.orientation_ = tools, orientation
         model._build_robots()
@@ -521,10 +537,10 @@ def _targets_from(r: FieldReader) -> tuple[dict, bool]:
 
 
 def _identification_from(ident: FieldReader, robot: Robot, errors: JointErrors | None = None, tools=None,
-                         orientation: bool = False) -> Identification:
+                         orientation: bool = False, parametrization: str = "dh") -> Identification:
     """A model file's identified table, which must agree with its robot: the robot's parameter names and
     nominal values, unidentified parameters kept nominal, standard errors finite and >= 0 (or null)."""
-    names = [n for n, _ in parameter_names(robot, errors) + added_names(tools or {}, orientation)]
+    names = [n for n, _ in parameter_names(robot, errors, parametrization) + added_names(tools or {}, orientation)]
     if ident.get("names", list) != names:
         ident.fail("names", f"expected the {len(names)} parameters of {robot.name} ({names[0]} ... {names[-1]})")
     status = ident.get("status", list)
@@ -534,7 +550,7 @@ def _identification_from(ident: FieldReader, robot: Robot, errors: JointErrors |
     if len(std) != len(names) or not all(v is None or isinstance(v, (int, float)) for v in std):
         ident.fail("std_error", f"expected {len(names)} numbers or nulls")
     nominal, value = ident.array("nominal", (len(names),)), ident.array("value", (len(names),))
-    expected = np.concatenate([nominal_values(robot, errors), added_nominal(tools or {}, orientation)])
+    expected = np.concatenate([nominal_values(robot, errors, parametrization), added_nominal(tools or {}, orientation)])
     off = np.flatnonzero(~np.isclose(nominal, expected, rtol=1e-12, atol=1e-9))
     if off.size:
         k = off[0]

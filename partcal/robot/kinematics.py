@@ -64,6 +64,22 @@ def matrix_from_euler_deg(angles_deg) -> NDArray[np.float64]:
     return rot_z @ rot_y @ rot_x
 
 
+def rpy_deg_from_matrix(rotation) -> NDArray[np.float64]:
+    """Roll, pitch, yaw ``(3,)`` degrees of a rotation ``(3, 3)``: the inverse of :func:`matrix_from_euler_deg`
+    (a URDF origin's ``rpy``), pitch in [-90, 90]; at pitch +-90 the roll is taken as zero.
+
+    >>> rpy_deg_from_matrix(matrix_from_euler_deg([10.0, -20.0, 30.0])).round(12).tolist()
+    [10.0, -20.0, 30.0]
+    """
+    rot = np.asarray(rotation, dtype=float)
+    pitch = np.arcsin(np.clip(-rot[2, 0], -1.0, 1.0))
+    if np.hypot(rot[2, 1], rot[2, 2]) > 1e-12:
+        roll, yaw = np.arctan2(rot[2, 1], rot[2, 2]), np.arctan2(rot[1, 0], rot[0, 0])
+    else:                                       # gimbal lock: only roll -+ yaw is defined
+        roll, yaw = 0.0, np.arctan2(-rot[0, 1], rot[1, 1])
+    return np.degrees([roll, pitch, yaw])
+
+
 ORIENTATION_MM_PER_RAD = 200.0
 """How many mm an orientation residual of one radian counts as beside position residuals (registration,
 identification): the displacement a turn causes 200 mm from its axis, about a tool plate's size. For a

@@ -301,7 +301,7 @@ def _cmd_import(args) -> int:
     _refuse_input_as_output(args.output, "import", [("input file", args.input), ("format file", args.format),
                                                     ("robot file", args.robot)])
     if args.frame == "tracker" and not args.robot:
-        raise PartcalError("import: --frame tracker needs --robot (a built-in name or a robot YAML)")
+        raise PartcalError("import: --frame tracker needs --robot (a built-in name, a robot YAML or a URDF)")
     if args.tool_mm is not None and args.frame != "tracker":
         raise PartcalError("import: --tool-mm is the target offset of a tracker registration; it needs --frame "
                            "tracker (in the base frame the measured positions already include the tool)")
@@ -516,7 +516,8 @@ def build_parser() -> argparse.ArgumentParser:
     imp.add_argument("input", nargs="?", help="the file to convert (or use --config)")
     imp.add_argument("-o", "--output", help="CSV to write; with --config, the folder for <data set>.csv")
     imp.add_argument("--format", metavar="FILE.yaml", help="the input's format, see docs/data.md")
-    imp.add_argument("--robot", help="robot (built-in name or YAML) for nominal positions by forward kinematics")
+    imp.add_argument("--robot", help="robot (built-in name, robot YAML, or a URDF as FILE.urdf#base=LINK&tip=LINK) "
+                                     "for nominal positions by forward kinematics")
     imp.add_argument("--frame", choices=("base", "tracker"), default="base",
                      help="tracker: register the file's tracker frame (and tool offset) on its own poses")
     imp.add_argument("--tool-mm", nargs=3, type=float, metavar=("X", "Y", "Z"),
@@ -527,7 +528,7 @@ def build_parser() -> argparse.ArgumentParser:
                      help="convert the data of a run config (format, subsets, registration) without fitting")
     imp.set_defaults(func=_cmd_import)
     pln = sub.add_parser("plan", help="choose the poses to measure (D-optimal), or judge a pose set's observability")
-    pln.add_argument("robot", help="built-in robot name or robot YAML")
+    pln.add_argument("robot", help="built-in robot name, robot YAML, or a URDF as FILE.urdf#base=LINK&tip=LINK")
     pln.add_argument("-n", type=_positive_int, help="number of poses to plan")
     pln.add_argument("-o", "--output", help="pose list to write (q1..qN deg, x_nom,y_nom,z_nom mm)")
     pln.add_argument("--evaluate", metavar="DATA.csv", help="print the observability indices, unidentifiable "

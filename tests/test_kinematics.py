@@ -152,8 +152,10 @@ def test_robot_yaml_errors_name_the_field():
         robot_from_dict({**spec, "links": [{"theta": "q2", "d": 0, "a": 1, "alpha": 0}]})
     with pytest.raises(ConfigError, match="unknown key"):
         robot_from_dict({**spec, "colour": "red"})
-    with pytest.raises(ConfigError, match="base: unknown key"):      # not supported: refused, never ignored
+    with pytest.raises(ConfigError, match=r"base: expected \{xyz_mm: \[x, y, z\], rpy_deg"):   # refused, never ignored
         robot_from_dict({**spec, "base": {"xyz": [0, 0, 100]}})
+    lifted = robot_from_dict({**spec, "base": {"xyz_mm": [0, 0, 100], "rpy_deg": [0, 0, 90]}})
+    np.testing.assert_allclose(lifted.positions([[0.0]]), [[0.0, 1.0, 100.0]], atol=1e-12)  # a = 1 along y
     with pytest.raises(ConfigError, match="not a built-in robot"):
         load_robot("no_such_robot")
 

@@ -158,7 +158,13 @@ def load_study(path: str | Path) -> Study:
     path = Path(path)
     data, lines = load_yaml(path)
     top = Section(data, "", lines, str(path))
-    nominal, targets = _targets(top, load_robot(robot_reference(top.get("robot", "str"), path.parent)))
+    spec = top.get("robot", "any", check=lambda v: None if isinstance(v, (str, dict)) else
+                   "a built-in robot name, a robot YAML or URDF file, or {urdf: FILE.urdf, base: LINK, tip: LINK}")
+    try:
+        robot = load_robot(robot_reference(spec, path.parent))
+    except ConfigError as exc:
+        top.fail(top.path("robot"), str(exc))
+    nominal, targets = _targets(top, robot)
     seed = top.get("seed", "int", check=range_check(0, integer=True))
     output = Path(os.path.normpath(path.parent / top.get("output", "str")))
     seeds = np.random.SeedSequence(seed).spawn(2)

@@ -20,7 +20,8 @@ from numpy.typing import NDArray
 
 from .._yamlio import load_yaml
 from ..errors import ConfigError, DataError
-from .kinematics import Robot
+from .kinematics import Robot, matrix_from_euler_deg, rpy_deg_from_matrix
+from .urdf import UrdfReference, is_urdf, robot_from_urdf
 
 MAX_JOINTS = 12
 _BUILTIN_DIR = Path(__file__).parent / "builtin"
@@ -79,14 +80,23 @@ def available_robots() -> list[str]:
     return sorted(p.stem for p in _BUILTIN_DIR.glob("*.yaml"))
 
 
-def load_robot(name_or_path: str | Path | Robot) -> Robot:
-    """Load a built-in robot by name, or a robot YAML file by path.
+def load_robot(name_or_path: str | Path | Robot | dict) -> Robot:
+    """Load a built-in robot by name, a robot YAML file by path, or a URDF's chain.
+
+    A URDF is a mapping ``{urdf: PATH, base: LINK, tip: LINK}`` or the text
+    ``PATH.urdf#base=LINK&tip=LINK`` (``base``, ``tip`` optional: the root
+    link and the only leaf); see :func:`partcal.robot.urdf.robot_from_urdf`.
 
     >>> load_robot("motoman_sk120").n_joints
     6
     """
     if isinstance(name_or_path, Robot):
         return name_or_path
+    if isinstance(name_or_path, dict):
+        name_or_path = urdf_reference(name_or_path, Path("."), "robot")
+    if is_urdf(name_or_path):
+        ref = UrdfReference.parse(str(name_or_path))
+        return robot_from_urdf(ref.path, ref.base, ref.tip)
     text = str(name_or_path)
     path = Path(text)
     if not path.suffix and (_BUILTIN_DIR / f"{text}.yaml").exists():
@@ -98,14 +108,31 @@ def load_robot(name_or_path: str | Path | Robot) -> Robot:
     return robot_from_dict(spec, source=str(path), lines=lines)
 
 
-def robot_reference(name: str, base: Path) -> str:
-    """A robot named in a config: a ``.yaml`` path relative to the config's folder, or a built-in name."""
+def robot_reference(name: str | dict, base: Path, where: str = "robot") -> str:
+    """A robot named in a config: a ``.yaml`` or ``.urdf`` path relative to the config's folder, a built-in
+    name, or a URDF mapping ``{urdf: PATH, base: LINK, tip: LINK}`` (returned as the text :func:`load_robot`
+    reads, ``PATH.urdf#base=LINK&tip=LINK``, the path made relative to ``base``)."""
+    if isinstance(name, dict):
+        return urdf_reference(name, base, where)
+    if is_urdf(name):
+        ref = UrdfReference.parse(name)
+        return UrdfReference(base / ref.path, ref.base, ref.tip).text()
     candidate = base / name
     return str(candidate) if candidate.suffix in (".yaml", ".yml") else name
 
 
+def urdf_reference(spec: dict, base: Path, where: str = "robot") -> str:
+    """The text form of a URDF mapping ``{urdf: PATH, base: LINK, tip: LINK}`` (``base``, ``tip`` optional),
+    its path relative to the folder ``base``."""
+    keys = {"urdf", "base", "tip"}
+    if "urdf" not in spec or not set(spec) <= keys or not all(isinstance(v, str) and v for v in spec.values()):
+        raise ConfigError(f"{where}: expected a built-in name, a robot file, or {{urdf: FILE.urdf, base: LINK, "
+                          f"tip: LINK}} (texts); got {spec!r}"[:300])
+    return UrdfReference(base / spec["urdf"], spec.get("base"), spec.get("tip")).text()
+
+
 _ROBOT_KEYS = {"name", "description", "joints", "links", "tool_mm", "limits_deg", "home_deg",
-               "constraints_deg"}
+               "constraints_deg", "base"}
 
 
 def robot_from_dict(spec: dict, source: str = "robot", lines: dict[str, int] | None = None) -> Robot:
@@ -123,9 +150,11 @@ def robot_from_dict(spec: dict, source: str = "robot", lines: dict[str, int] | N
     home = r.numbers("home_deg", spec["home_deg"], (n,), f"{n} angles") if "home_deg" in spec else limits.mean(axis=1)
     tool = r.numbers("tool_mm", spec.get("tool_mm", [0, 0, 0]), (3,), "[x, y, z]")
     constraints = _constraints(spec.get("constraints_deg") or [], n, r)
+    base = _origin(spec.get("base"), "base", r)
     return Robot(name=str(spec["name"]), n_joints=n, alpha_deg=alpha, d_mm=d, a_mm=a,
                  theta_offset_deg=off, coupling=coupling, tool_mm=tool, limits_deg=limits,
-                 home_deg=home, constraints=constraints, origins=origins)
+                 home_deg=home, constraints=constraints, origins=origins,
+                 base_rotation=matrix_from_euler_deg(base[3:]), base_mm=base[:3])
 
 
 class _Reader:
@@ -254,4 +283,12 @@ def robot_to_dict(robot: Robot) -> dict:
         "tool_mm": robot.tool_mm.tolist(), "limits_deg": robot.limits_deg.tolist(),
         "home_deg": robot.home_deg.tolist(),
         "constraints_deg": [{"expr": _expression(0.0, c), "range": [lo, hi]} for c, lo, hi in robot.constraints],
+        **_base_entry(robot),
     }
+
+
+def _base_entry(robot: Robot) -> dict:
+    """``{"base": {xyz_mm, rpy_deg}}`` for a robot whose first frame is not the base frame (none otherwise)."""
+    if np.array_equal(robot.base_rotation, np.eye(3)) and not np.any(robot.base_mm):
+        return {}
+    return {"base": {"xyz_mm": robot.base_mm.tolist(), "rpy_deg": rpy_deg_from_matrix(robot.base_rotation).tolist()}}

@@ -66,17 +66,20 @@ def matrix_from_euler_deg(angles_deg) -> NDArray[np.float64]:
 
 def rpy_deg_from_matrix(rotation) -> NDArray[np.float64]:
     """Roll, pitch, yaw ``(3,)`` degrees of a rotation ``(3, 3)``: the inverse of :func:`matrix_from_euler_deg`
-    (a URDF origin's ``rpy``), pitch in [-90, 90]; at pitch +-90 the roll is taken as zero.
+    (a URDF origin's ``rpy``), pitch in [-90, 90].
+
+    Accurate near a pitch of +-90 degrees too: the yaw is taken first, then pitch and roll from what is
+    left after turning it back, ``Rz(-yaw) R = Ry(pitch) Rx(roll)``, whose entries are all of order one.
 
     >>> rpy_deg_from_matrix(matrix_from_euler_deg([10.0, -20.0, 30.0])).round(12).tolist()
     [10.0, -20.0, 30.0]
     """
     rot = np.asarray(rotation, dtype=float)
-    pitch = np.arcsin(np.clip(-rot[2, 0], -1.0, 1.0))
-    if np.hypot(rot[2, 1], rot[2, 2]) > 1e-12:
-        roll, yaw = np.arctan2(rot[2, 1], rot[2, 2]), np.arctan2(rot[1, 0], rot[0, 0])
-    else:                                       # gimbal lock: only roll -+ yaw is defined
-        roll, yaw = 0.0, np.arctan2(-rot[0, 1], rot[1, 1])
+    yaw = np.arctan2(rot[1, 0], rot[0, 0])
+    c, s = np.cos(yaw), np.sin(yaw)
+    left = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]]) @ rot
+    pitch = np.arctan2(-left[2, 0], left[0, 0])
+    roll = np.arctan2(-left[1, 2], left[1, 1])
     return np.degrees([roll, pitch, yaw])
 
 

@@ -440,6 +440,29 @@ def _cmd_plan(args) -> int:
     return 0
 
 
+def _cmd_export(args) -> int:
+    from .data.measurements import read_measurements
+    from .study.export import FORMATS, export_model
+    from .study.persist import load_model
+
+    formats = tuple(args.formats.split(",")) if args.formats else FORMATS
+    q = errors = None
+    if args.data:
+        robot = load_model(args.model)[0].robot_
+        data = read_measurements(args.data, robot, fmt=_format(args))
+        q, errors = data.q_deg, data.errors_mm
+    result = export_model(args.model, Path(args.output), formats, q, errors)
+    for fmt, path in result.files.items():
+        print(f"{fmt}: {path}")
+    for fmt, why in result.skipped.items():
+        print(f"{fmt}: not written: {why}")
+    if result.tcp_mm is not None:
+        print("ur: tool centre point in tool0 (mm): " + " ".join(f"{v:.6f}" for v in result.tcp_mm))
+    if result.not_carried:
+        print(result.not_carried)
+    return 0
+
+
 class _Parser(argparse.ArgumentParser):
     """argparse with the project's rule for bad input: one line on stderr, exit 2 (no usage block)."""
 
@@ -527,6 +550,15 @@ def build_parser() -> argparse.ArgumentParser:
     imp.add_argument("--config", metavar="RUN.yaml",
                      help="convert the data of a run config (format, subsets, registration) without fitting")
     imp.set_defaults(func=_cmd_import)
+    exp = sub.add_parser("export", help="write the calibrated robot of a kinematic model: URDF, UR kinematics YAML, "
+                                        "DH table, robot YAML")
+    exp.add_argument("model", help="model file of kind kinematic (models/<name>.json of a run)")
+    exp.add_argument("-o", "--output", required=True, help="folder to write into")
+    exp.add_argument("--formats", metavar="F,F", help="some of urdf,ur,dh,yaml (default: all the chain allows)")
+    exp.add_argument("--data", metavar="DATA.csv", help="a measurement CSV (base frame): the RMS the exported "
+                                                        "geometry and the full model leave on it")
+    exp.add_argument("--format", metavar="FILE.yaml", help="the data's format, see docs/data.md")
+    exp.set_defaults(func=_cmd_export)
     pln = sub.add_parser("plan", help="choose the poses to measure (D-optimal), or judge a pose set's observability")
     pln.add_argument("robot", help="built-in robot name, robot YAML, or a URDF as FILE.urdf#base=LINK&tip=LINK")
     pln.add_argument("-n", type=_positive_int, help="number of poses to plan")

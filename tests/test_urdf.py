@@ -170,3 +170,15 @@ def test_runs_and_simulations_take_a_urdf_beside_their_yaml(tmp_path):
                                        "out/identification.csv\nmodels:\n  - {name: dh, kind: kinematic}\n")
     with pytest.raises(ConfigError, match=r"bad.yaml: robot \(line 2\).*tip link 'hand': no <link>"):
         load_config(tmp_path / "bad.yaml")
+
+
+def test_the_default_parametrization_is_dh_for_dh_rows_and_complete_for_a_urdf_chain(tmp_path):
+    from partcal import KinematicModel
+
+    path = example_urdf("ur_description/urdf/ur10_robot.urdf")
+    urdf = load_robot({"urdf": str(path), "base": "base_link", "tip": "tool0"})
+    q = np.random.default_rng(33).uniform(-180, 180, (40, 6))
+    errors = np.random.default_rng(34).normal(0, 0.1, (40, 3))
+    assert KinematicModel(robot=urdf).fit(q, errors).parametrization_ == "complete"
+    assert KinematicModel(robot=urdf, compliance=[2]).fit(q, errors).parametrization_ == "dh"
+    assert KinematicModel(robot=load_robot("universal_robots_ur10")).fit(q, errors).parametrization_ == "dh"

@@ -54,12 +54,15 @@ class KinematicModel(ErrorModelBase):
     rcond : float in (0, 1)
         Relative singular-value threshold below which a parameter direction
         counts as unidentifiable (see :func:`identify`).
-    parametrization : {"dh", "complete"}
+    parametrization : {"auto", "dh", "complete"}
         The geometric parameters identified: the four DH parameters of every
         row, or every row's joint offset and the six errors of its fixed
         transform (tilts between parallel axes too), each reduced by the rank
         rule to what the data identify (docs/models.md). ``complete`` takes
         neither ``compliance`` nor ``all_targets`` or ``use_orientation`` yet.
+        ``auto`` (the default, chosen by measurement): ``dh`` for a robot of
+        DH rows, ``complete`` for a chain with general origins (a URDF's),
+        unless one of those three asks for ``dh``.
     compliance : sequence of int
         1-based joints that yield under gravity (see :mod:`partcal.models.joint_errors`).
     joint_harmonics : int or sequence of int
@@ -102,7 +105,7 @@ class KinematicModel(ErrorModelBase):
 
     inputs = "joint"
 
-    def __init__(self, *, robot=None, base=True, tool=True, rcond=1e-6, parametrization="dh", compliance=(),
+    def __init__(self, *, robot=None, base=True, tool=True, rcond=1e-6, parametrization="auto", compliance=(),
                  joint_harmonics=0, payload_kg=0.0, all_targets=False, use_orientation=False,
                  orientation_mm_per_rad=ORIENTATION_MM_PER_RAD, residual=None, random_state=None):
         self.robot = robot
@@ -125,7 +128,7 @@ class KinematicModel(ErrorModelBase):
     fits_pose_errors = True
     _parameter_rules = {"base": boolean(True), "tool": boolean(True),
                         "rcond": real(0.0, 1.0, default=1e-6, low_open=True),
-                        "parametrization": one_of(*PARAMETRIZATIONS, default="dh"),
+                        "parametrization": one_of("auto", *PARAMETRIZATIONS, default="auto"),
                         "payload_kg": real(0.0, MAX_PAYLOAD_KG, default=0.0),
                         "all_targets": boolean(False), "use_orientation": boolean(False),
                         "orientation_mm_per_rad": real(0.0, 1e6, default=ORIENTATION_MM_PER_RAD, low_open=True)}
@@ -134,7 +137,8 @@ class KinematicModel(ErrorModelBase):
                                  lambda p: p["use_orientation"] or p["orientation_mm_per_rad"] == ORIENTATION_MM_PER_RAD),
                      Requirement("parametrization", "'dh' with all_targets or use_orientation (the complete "
                                  "parametrization reads one target's positions)",
-                                 lambda p: p["parametrization"] == "dh" or not (p["all_targets"] or p["use_orientation"])))
+                                 lambda p: p["parametrization"] != "complete" or
+                                 not (p["all_targets"] or p["use_orientation"])))
     _from_fitted = ("all_targets", "use_orientation")     # a model file keeps what was fitted on instead
     _OPTIONAL_IN_FILES = ("payload_kg", "orientation_mm_per_rad", "parametrization")   # older files: the default
     _joint_rules = {"compliance": ((), compliance_problem), "joint_harmonics": (0, harmonics_problem)}
@@ -149,13 +153,22 @@ class KinematicModel(ErrorModelBase):
             expected = problem(getattr(self, name), robot.n_joints)
             if expected is not None:
                 raise param_error(own, name, expected, getattr(self, name))
-        if self.parametrization != "dh" and len(self.compliance):
+        if self.parametrization == "complete" and len(self.compliance):
             raise param_error(own, "compliance", "empty with parametrization 'complete' (compliant joints need "
                               "parametrization 'dh' yet)", self.compliance)
         if self.residual is not None and not isinstance(self.residual, RESIDUAL_MODELS):
             raise param_error(own, "residual", "None, an ErrorModel, a PartitionedErrorModel or a "
                               "GaussianProcessErrorModel", self.residual)
         return robot
+
+    def _resolved_parametrization(self, robot: Robot) -> str:
+        """``parametrization``, ``auto`` resolved: ``complete`` for a chain with general origins unless compliance,
+        several targets or the orientation need ``dh``; ``dh`` otherwise."""
+        if self.parametrization != "auto":
+            return self.parametrization
+        needs_dh = len(self.compliance) or self.all_targets or self.use_orientation
+        general = robot.origins is not None and bool(np.any(robot.origins))
+        return "complete" if general and not needs_dh else "dh"
 
     def fit(self, X, y, payload_kg=None, *, targets=None, orientation_deg=None, orientation_mm_per_rad=None):
         """Identify the parameters from joint angles ``X`` (n, N) deg and errors ``y`` (n, 3) mm. Returns self.
@@ -191,12 +204,13 @@ class KinematicModel(ErrorModelBase):
             orientation_deg = y[:, ORIENTATION] / MRAD_PER_DEG
         nominal = robot.positions(X)
         self.joint_errors_ = JointErrors.for_robot(robot, list(self.compliance), self.joint_harmonics)
+        self.parametrization_ = self._resolved_parametrization(robot)
         payload = self._payload(payload_kg, len(X))
         weight = self.orientation_mm_per_rad if orientation_mm_per_rad is None else orientation_mm_per_rad
         extra = extra_from(robot, X, targets, orientation_deg, weight)
         self.identification_ = identify(robot, X, nominal + y[:, POSITION], base=bool(self.base), tool=bool(self.tool),
                                         rcond=float(self.rcond), errors=self.joint_errors_, payload_kg=payload,
-                                        extra=extra, parametrization=self.parametrization)
+                                        extra=extra, parametrization=self.parametrization_)
         self.targets_ = dict(extra.tools_mm) if extra is not None else {}
         self.orientation_ = extra is not None and extra.rotations is not None
         self.robot_ = robot
@@ -248,15 +262,15 @@ class KinematicModel(ErrorModelBase):
     def _build_robots(self) -> None:
         """The identified robot, and its geometry in its own base frame (where the joint errors' lever arms
         are taken), from ``robot_`` and the identified table (after fitting or loading)."""
-        self.identified_robot_ = robot_with(self.robot_, self.identification_.value, self.parametrization)
-        self._geometry = own_geometry(self.robot_, self.identification_.value, self.parametrization)
+        self.identified_robot_ = robot_with(self.robot_, self.identification_.value, self.parametrization_)
+        self._geometry = own_geometry(self.robot_, self.identification_.value, self.parametrization_)
 
     def _actual(self, X: NDArray[np.float64], payload: NDArray[np.float64]) -> NDArray[np.float64]:
         """The joint angles the identified arm takes (its joint errors), (n, N) deg."""
         errors = self.joint_errors_
         if errors.empty:
             return X
-        size = geometric_size(self.robot_, self.parametrization)
+        size = geometric_size(self.robot_, self.parametrization_)
         return errors.design(self._geometry, X, self.identification_.value[size:size + errors.size], payload)[0]
 
     def _kinematic(self, X: NDArray[np.float64], payload: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -352,7 +366,7 @@ class KinematicModel(ErrorModelBase):
         errors = self.joint_errors_
         return {"robot": robot_to_dict(self.robot_), "base": bool(self.base), "tool": bool(self.tool),
                 "rcond": float(self.rcond), "payload_kg": float(self.payload_kg),
-                **({"parametrization": self.parametrization} if self.parametrization != "dh" else {}),
+                **({"parametrization": self.parametrization_} if self.parametrization_ != "dh" else {}),
                 **({"orientation_mm_per_rad": float(self.orientation_mm_per_rad)} if self.orientation_ else {}),
                 "compliance": list(errors.compliance), "joint_harmonics": list(errors.harmonics),
                 "identification": self.identification_.to_dict(),
@@ -385,8 +399,13 @@ class KinematicModel(ErrorModelBase):
         model = cls(robot=robot, **{key: r.rule(key, rule) for key, rule in rules.items()}, **joint,
                     all_targets=bool(tools), use_orientation=orientation)
         errors = JointErrors.for_robot(robot, joint["compliance"], joint["joint_harmonics"])
+        if model.parametrization == "auto":     # a file holds what was fitted: written when not dh
+            if "parametrization" in r.doc:
+                r.fail("parametrization", f"one of {', '.join(PARAMETRIZATIONS)} (what was fitted); got 'auto'")
+            model.parametrization = "dh"
+        model.parametrization_ = model.parametrization
         table = _identification_from(r.sub("identification"), robot, errors, tools, orientation,
-                                     model.parametrization)
+                                     model.parametrization_)
         model.robot_, model.identification_, model.joint_errors_ = robot, table, errors
         model.targets_, model.orientation_ = tools, orientation
         model._build_robots()

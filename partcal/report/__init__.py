@@ -352,7 +352,7 @@ def kinematic_tables(result: RunResult) -> list[dict]:
             continue
         cells = {row["name"]: _parameter_cell(row) for row in table.rows()}
         n_rows = r.model.robot_.alpha_deg.size
-        row_parameters = PARAMETRIZATIONS[getattr(r.model, "parametrization", "dh")]
+        row_parameters = PARAMETRIZATIONS[getattr(r.model, "parametrization_", "dh")]
         targets = identified_targets(r.model.run_summary()["kinematic"])
         added = targets["added"] if targets else []
         own = len(table.names) - len(added)         # a one-target model's parameters, then the added ones

@@ -56,8 +56,8 @@ def calibrated_geometry(model: KinematicModel) -> tuple[Robot, NDArray[np.float6
     """The identified chain in the robot's own base frame, and its base pose ``(4, 4)`` (mm) in the measurement
     frame (the identified base correction: ``Rz Ry Rx`` turn, then the shift)."""
     values = model.identification_.value
-    size = geometric_size(model.robot_, model.parametrization)
-    robot = own_geometry(model.robot_, values, model.parametrization)
+    size = geometric_size(model.robot_, model.parametrization_)
+    robot = own_geometry(model.robot_, values, model.parametrization_)
     return robot, transform(matrix_from_euler_deg(values[size - 3:size]), values[size - 6:size - 3])
 
 
@@ -101,7 +101,7 @@ def export_model(model_path, output: Path, formats=FORMATS, q_deg=None, errors_m
     name = Path(model_path).stem
     output = Path(output)
     output.mkdir(parents=True, exist_ok=True)
-    stamp = f"Calibrated {model.robot_.name} from {Path(model_path).name} ({model.parametrization} parametrization), " \
+    stamp = f"Calibrated {model.robot_.name} from {Path(model_path).name} ({model.parametrization_} parametrization), " \
             f"written by partcal export."
     files, skipped, tcp = {}, {}, None
     writers = {"urdf": lambda: (f"{name}.urdf", urdf_from_robot(robot, base_pose, comment=stamp)),

@@ -438,3 +438,24 @@ def test_origins_round_trip_through_the_robot_yaml(tmp_path):
     spec["links"][1]["origin"] = {"xyz_mm": [1, 2]}
     with pytest.raises(ConfigError, match=r"links\[1\]\.origin\.xyz_mm.*three numbers"):
         robot_from_dict(spec)
+
+
+def test_a_row_slides_when_its_d_names_a_joint():
+    """``d: q1 + 100`` makes row 1 a prismatic joint (mm): FK by hand, the Jacobian's column is the axis
+    (mm per mm), the YAML round trip keeps it; a row that turns and slides is refused."""
+    from partcal.robot.description import robot_to_dict
+
+    spec = {"name": "gantry", "joints": 2, "limits_deg": [[0, 1000], [-180, 180]],
+            "links": [{"theta": 0, "d": "q1 + 100", "a": 0, "alpha": 90}, {"theta": "q2", "d": 0, "a": 300, "alpha": 0}]}
+    robot = robot_from_dict(spec)
+    q = np.array([[250.0, 30.0], [0.0, -90.0]])
+    # row 1: up z by q1 + 100, then x stays, z turns to -y; row 2: turn q2 about the new z (-y), 300 along x'
+    t = np.radians(q[:, 1])
+    expected = np.column_stack([300 * np.cos(t), 0 * t, q[:, 0] + 100 + 300 * np.sin(t)])
+    np.testing.assert_allclose(robot.positions(q), expected, atol=1e-9)
+    np.testing.assert_allclose(robot.jacobian(q)[:, :, 0], [[0.0, 0.0, 1.0]] * 2, atol=1e-12)
+    assert robot_to_dict(robot)["links"][0]["d"] == "100.0 + q1"
+    np.testing.assert_allclose(robot_from_dict(robot_to_dict(robot)).positions(q), expected, atol=1e-9)
+    spec["links"][0]["theta"] = "q2"
+    with pytest.raises(ConfigError, match=r"links\[0\].*turns .* or slides .*not both"):
+        robot_from_dict(spec)

@@ -110,8 +110,9 @@ def test_mimic_joints_tilted_axes_and_fixed_joints_fold_into_coupled_rows(tmp_pa
     (('type="continuous"', 'type="hinge"'), r"line 9: <joint name='j2'>: expected type one of revolute"),
     (('<parent link="b"/>', ''), r"<joint name='j2'>: expected <parent link"),
     (('<axis xyz="-1 0 0"/>', '<axis xyz="0 0 0"/>'), r"expected a non-zero axis"),
-    (('type="continuous"', 'type="prismatic"'), r"<joint name='j2' type='prismatic'>: expected revolute, "
-                                                r"continuous or fixed"),
+    (('type="continuous"', 'type="planar"'), r"<joint name='j2' type='planar'>: expected revolute, "
+                                             r"continuous, prismatic or fixed"),
+    (('type="continuous"', 'type="prismatic"'), r"<joint name='j2'> <limit>: expected lower < upper \(metres\)"),
     (('lower="-2" upper="2"', 'lower="2" upper="-2"'), r"<joint name='j1'> <limit>: expected lower < upper"),
     (('<robot name="mimic_arm">', '<robt name="mimic_arm">'), r"not well-formed XML"),
 ])
@@ -182,3 +183,70 @@ def test_the_default_parametrization_is_dh_for_dh_rows_and_complete_for_a_urdf_c
     assert KinematicModel(robot=urdf).fit(q, errors).parametrization_ == "complete"
     assert KinematicModel(robot=urdf, compliance=[2]).fit(q, errors).parametrization_ == "dh"
     assert KinematicModel(robot=load_robot("universal_robots_ur10")).fit(q, errors).parametrization_ == "dh"
+
+
+TRACK = """<?xml version="1.0"?>
+<robot name="track_arm">
+  <link name="floor"/><link name="carriage"/><link name="lift"/><link name="arm"/><link name="hand"/>
+  <link name="finger"/>
+  <joint name="track" type="prismatic"><parent link="floor"/><child link="carriage"/>
+    <origin xyz="0.2 0.1 0" rpy="0 0 0.3"/><axis xyz="0.6 0 0.8"/>
+    <limit lower="-0.5" upper="1.5" effort="1" velocity="1"/></joint>
+  <joint name="turn" type="revolute"><parent link="carriage"/><child link="lift"/>
+    <origin xyz="0 0 0.3" rpy="0.2 0 0"/><axis xyz="0 1 0"/>
+    <limit lower="-2" upper="2" effort="1" velocity="1"/></joint>
+  <joint name="reach" type="prismatic"><parent link="lift"/><child link="arm"/>
+    <origin xyz="0.4 0 0" rpy="0 0.1 0"/><axis xyz="-1 0 0"/>
+    <limit lower="0" upper="0.6" effort="1" velocity="1"/></joint>
+  <joint name="wrist" type="continuous"><parent link="arm"/><child link="hand"/>
+    <origin xyz="0 0 0.1" rpy="0 0 0"/><axis xyz="0 0 1"/></joint>
+  <joint name="follow" type="prismatic"><parent link="hand"/><child link="finger"/>
+    <origin xyz="0 0.05 0.1" rpy="0 0 0"/><axis xyz="0 1 0"/>
+    <limit lower="-1" upper="1" effort="1" velocity="1"/><mimic joint="track" multiplier="0.5" offset="0.01"/></joint>
+</robot>
+"""
+
+
+def test_prismatic_joints_slide_in_mm_and_equal_yourdfpy(tmp_path):
+    """Two prismatic joints (one on a tilted axis) and a prismatic mimic between revolute ones: limits in mm,
+    FK equal to yourdfpy's (metres there) on 300 sets, the Jacobian's slide columns in mm per mm, IK, the robot
+    YAML round trip (d as an expression) and the exported URDF reloaded by yourdfpy."""
+    from partcal.robot.export import urdf_from_robot
+
+    path = tmp_path / "track.urdf"
+    path.write_text(TRACK)
+    robot = robot_from_urdf(path, "floor", "finger")
+    assert robot.n_joints == 4 and robot.prismatic.tolist() == [True, False, True, False, True]
+    np.testing.assert_allclose(robot.limits_deg[[0, 2]], [[-500.0, 1500.0], [0.0, 600.0]])
+    q = np.random.default_rng(35).uniform(robot.limits_deg[:, 0], robot.limits_deg[:, 1], (300, 4))
+    urdf = yourdfpy.URDF.load(str(path), load_meshes=False)
+    expected = []
+    for row in q:
+        urdf.update_cfg({"track": row[0] / 1000, "turn": np.radians(row[1]), "reach": row[2] / 1000,
+                         "wrist": np.radians(row[3])})
+        expected.append(urdf.get_transform("finger", "floor"))
+    expected = np.array(expected)
+    expected[:, :3, 3] *= 1000.0
+    np.testing.assert_allclose(robot.forward(q), expected, rtol=0, atol=1e-9)
+    h = 1e-6
+    for j in range(4):
+        step = np.zeros(4)
+        step[j] = h
+        numeric = (robot.positions(q[:5] + step) - robot.positions(q[:5] - step)) / (2 * h)
+        np.testing.assert_allclose(robot.jacobian(q[:5])[:, :, j], numeric, atol=1e-6)
+    start = np.clip(q[:20] + [20.0, 3.0, 10.0, 3.0], robot.limits_deg[:, 0], robot.limits_deg[:, 1])
+    result = robot.inverse(robot.positions(q[:20]), start)
+    assert result.error_mm.max() < 1e-8
+    again = robot_from_dict(robot_to_dict(robot))
+    np.testing.assert_allclose(again.forward(q), robot.forward(q), rtol=0, atol=1e-9)
+    exported = tmp_path / "out.urdf"
+    exported.write_text(urdf_from_robot(robot))
+    back = yourdfpy.URDF.load(str(exported), load_meshes=False)
+    assert [back.joint_map[n].type for n in back.actuated_joint_names] == ["prismatic", "revolute", "prismatic",
+                                                                           "revolute"]
+    got = []
+    for row in q[:100]:
+        back.update_cfg({"joint1": row[0] / 1000, "joint2": np.radians(row[1]), "joint3": row[2] / 1000,
+                         "joint4": np.radians(row[3])})
+        got.append(back.get_transform("tcp", "base_link")[:3, 3] * 1000.0)
+    np.testing.assert_allclose(np.array(got), robot.positions(q[:100]), rtol=0, atol=1e-9)

@@ -143,7 +143,7 @@ def robot_from_dict(spec: dict, source: str = "robot", lines: dict[str, int] | N
     """
     r = _Reader(source, lines or {})
     n = _joint_count(spec, r)
-    alpha, d, a, off, coupling, origins = _links(spec["links"], n, r)
+    alpha, d, a, off, coupling, origins, prismatic = _links(spec["links"], n, r)
     limits = r.numbers("limits_deg", spec["limits_deg"], (n, 2), f"{n} pairs [low, high] with low < high")
     if np.any(limits[:, 0] >= limits[:, 1]):
         r.fail("limits_deg", f"expected {n} pairs [low, high] with low < high; got {spec['limits_deg']!r}")
@@ -153,7 +153,7 @@ def robot_from_dict(spec: dict, source: str = "robot", lines: dict[str, int] | N
     base = _origin(spec.get("base"), "base", r)
     return Robot(name=str(spec["name"]), n_joints=n, alpha_deg=alpha, d_mm=d, a_mm=a,
                  theta_offset_deg=off, coupling=coupling, tool_mm=tool, limits_deg=limits,
-                 home_deg=home, constraints=constraints, origins=origins,
+                 home_deg=home, constraints=constraints, origins=origins, prismatic=prismatic,
                  base_rotation=matrix_from_euler_deg(base[3:]), base_mm=base[:3])
 
 
@@ -203,9 +203,10 @@ def _joint_count(spec, r: _Reader) -> int:
 
 
 def _links(links: list, n: int, r: _Reader) -> tuple:
-    """``alpha, d, a, theta offset`` (each ``(R,)``), the coupling ``(R, N)`` of the rows, and their further
-    transforms ``(R, 6)`` (``origin:``; None when no row has one)."""
-    rows, origins = [], []
+    """``alpha, d, a, theta offset`` (each ``(R,)``), the coupling ``(R, N)`` of the rows, their further
+    transforms ``(R, 6)`` (``origin:``; None when no row has one) and which rows slide (``d`` an expression of
+    the joints, mm; None when none does)."""
+    rows, origins, slides = [], [], []
     for i, link in enumerate(links):
         if not isinstance(link, dict) or not {"theta", "d", "a", "alpha"} <= set(link) <= _LINK_KEYS:
             r.fail(f"links[{i}]", f"expected a mapping with theta, d, a, alpha (and optionally origin); got {link!r}")
@@ -213,16 +214,33 @@ def _links(links: list, n: int, r: _Reader) -> tuple:
             off, coeffs = parse_theta(link["theta"], n)
         except ConfigError as exc:
             r.fail(f"links[{i}].theta", str(exc))
-        rows.append((*(r.number(f"links[{i}].{key}", link[key]) for key in ("alpha", "d", "a")), off, coeffs))
+        slide = False
+        if isinstance(link["d"], str):         # a prismatic row: d = offset + sum(c qK) mm
+            try:
+                d_mm, d_coeffs = parse_theta(link["d"], n)
+            except ConfigError as exc:
+                r.fail(f"links[{i}].d", f"must be a finite number; got {link['d']!r} (or, for a row that slides, "
+                                        f"an expression of the joints such as 'q1 + 100', mm: {exc})")
+            slide = bool(d_coeffs.any())
+            if slide and coeffs.any():
+                r.fail(f"links[{i}]", f"a row turns (theta names a joint) or slides (d names one), not both; got "
+                                      f"theta {link['theta']!r}, d {link['d']!r}")
+            coeffs = d_coeffs if slide else coeffs
+        else:
+            d_mm = r.number(f"links[{i}].d", link["d"])
+        rows.append((r.number(f"links[{i}].alpha", link["alpha"]), d_mm, r.number(f"links[{i}].a", link["a"]), off,
+                     coeffs))
         origins.append(_origin(link.get("origin"), f"links[{i}].origin", r))
+        slides.append(slide)
     if not rows:
         r.fail("links", "needs at least one DH row")
     coupling = np.array([row[4] for row in rows])
     unused = [f"q{j + 1}" for j in range(n) if not coupling[:, j].any()]
     if unused:
-        r.fail("links", f"joint(s) {', '.join(unused)} appear in no theta expression")
+        r.fail("links", f"joint(s) {', '.join(unused)} appear in no theta or d expression")
     alpha, d, a, off = (np.array([row[k] for row in rows]) for k in range(4))
-    return alpha, d, a, off, coupling, (np.array(origins) if np.any(origins) else None)
+    return (alpha, d, a, off, coupling, (np.array(origins) if np.any(origins) else None),
+            np.array(slides) if any(slides) else None)
 
 
 _LINK_KEYS = {"theta", "d", "a", "alpha", "origin"}
@@ -274,12 +292,14 @@ def _expression(offset: float, coeffs: NDArray[np.float64]) -> str | float:
 def robot_to_dict(robot: Robot) -> dict:
     """The robot as the mapping :func:`robot_from_dict` reads (exact round trip)."""
     origins = robot.origins if robot.origins is not None else np.zeros((robot.alpha_deg.size, 6))
+    slides = robot.prismatic if robot.prismatic is not None else np.zeros(robot.alpha_deg.size, dtype=bool)
     return {
         "name": robot.name, "joints": robot.n_joints,
-        "links": [{"theta": _expression(off, c), "d": float(d), "a": float(a), "alpha": float(al),
+        "links": [{"theta": float(off) if slide else _expression(off, c),
+                   "d": _expression(d, c) if slide else float(d), "a": float(a), "alpha": float(al),
                    **({"origin": {"xyz_mm": o[:3].tolist(), "rpy_deg": o[3:].tolist()}} if np.any(o) else {})}
-                  for off, c, d, a, al, o in zip(robot.theta_offset_deg, robot.coupling, robot.d_mm, robot.a_mm,
-                                                 robot.alpha_deg, origins)],
+                  for off, c, d, a, al, o, slide in zip(robot.theta_offset_deg, robot.coupling, robot.d_mm,
+                                                        robot.a_mm, robot.alpha_deg, origins, slides)],
         "tool_mm": robot.tool_mm.tolist(), "limits_deg": robot.limits_deg.tolist(),
         "home_deg": robot.home_deg.tolist(),
         "constraints_deg": [{"expr": _expression(0.0, c), "range": [lo, hi]} for c, lo, hi in robot.constraints],

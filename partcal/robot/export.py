@@ -44,12 +44,14 @@ class ExportError(PartcalError):
 
 
 def fixed_transforms(robot: Robot) -> NDArray[np.float64]:
-    """Every row's fixed transform ``G = Tz(d) Tx(a) Rx(alpha) E``, shape ``(R, 4, 4)`` (mm)."""
+    """Every row's fixed transform ``G = Tz(d) Tx(a) Rx(alpha) E``, shape ``(R, 4, 4)`` (mm); a sliding row's
+    constant ``d`` is left out (it slides with the joint: the URDF's joint origin holds it)."""
     rows = robot.alpha_deg.size
     out = np.tile(np.eye(4), (rows, 1, 1))
     for r in range(rows):
         out[r, :3, :3] = matrix_from_euler_deg([robot.alpha_deg[r], 0.0, 0.0])
-        out[r, :3, 3] = [robot.a_mm[r], 0.0, robot.d_mm[r]]
+        slide = robot.prismatic is not None and robot.prismatic[r]
+        out[r, :3, 3] = [robot.a_mm[r], 0.0, 0.0 if slide else robot.d_mm[r]]
         if robot.origins is not None:
             extra = np.eye(4)
             extra[:3, :3] = matrix_from_euler_deg(robot.origins[r, 3:])
@@ -96,7 +98,7 @@ class UrdfJoint:
     child: str
     origin: NDArray[np.float64]
     mimic: tuple[str, float] | None = None
-    limits_deg: tuple[float, float] | None = None
+    limits_deg: tuple[float, float] | None = None      # mm for a prismatic joint
 
 
 def urdf_joints(robot: Robot, base_pose: NDArray[np.float64] | None = None) -> list[UrdfJoint]:
@@ -107,8 +109,12 @@ def urdf_joints(robot: Robot, base_pose: NDArray[np.float64] | None = None) -> l
     first = {}
     previous = transform(robot.base_rotation, robot.base_mm)
     parent = "base_link"
+    slides = robot.prismatic if robot.prismatic is not None else np.zeros(len(rows), dtype=bool)
     for r, row in enumerate(rows):
         origin = previous @ rz(robot.theta_offset_deg[r])
+        if slides[r]:                       # the slide's constant part: into the origin, before the joint
+            origin = origin @ transform(None, [0.0, 0.0, robot.d_mm[r]])
+        kind = "prismatic" if slides[r] else "revolute"
         child = f"link{r + 1}"
         if row is None:
             joints.append(UrdfJoint(f"row{r + 1}_fixed", "fixed", parent, child, origin))
@@ -116,14 +122,14 @@ def urdf_joints(robot: Robot, base_pose: NDArray[np.float64] | None = None) -> l
             j, c = row
             if j not in first and c == 1.0:
                 first[j] = f"joint{j + 1}"
-                joints.append(UrdfJoint(first[j], "revolute", parent, child, origin,
+                joints.append(UrdfJoint(first[j], kind, parent, child, origin,
                                         limits_deg=tuple(float(v) for v in robot.limits_deg[j])))
             else:
                 master = first.get(j)
                 if master is None:
                     raise ExportError(f"{robot.name}: row {r + 1} turns by {c:g} q{j + 1} before any row turns by "
                                       f"q{j + 1} itself; a URDF mimic joint needs that one first")
-                joints.append(UrdfJoint(f"row{r + 1}_mimic", "revolute", parent, child, origin, mimic=(master, c),
+                joints.append(UrdfJoint(f"row{r + 1}_mimic", kind, parent, child, origin, mimic=(master, c),
                                         limits_deg=(-360.0 * abs(c) - 360.0, 360.0 * abs(c) + 360.0)))
         previous, parent = fixed[r], child
     joints.append(UrdfJoint("flange_joint", "fixed", parent, "flange", previous))
@@ -156,8 +162,8 @@ def urdf_from_robot(robot: Robot, base_pose: NDArray[np.float64] | None = None, 
         lines.append(f'  <joint name="{j.name}" type="{j.kind}">')
         lines.append(f'    <parent link="{j.parent}"/>\n    <child link="{j.child}"/>')
         lines.append(f'    <origin xyz="{xyz}" rpy="{rpy}"/>')
-        if j.kind == "revolute":
-            low, high = (math.radians(v) for v in j.limits_deg)
+        if j.kind in ("revolute", "prismatic"):
+            low, high = (v * _MM_TO_M if j.kind == "prismatic" else math.radians(v) for v in j.limits_deg)
             lines.append('    <axis xyz="0 0 1"/>')
             lines.append(f'    <limit lower="{low!r}" upper="{high!r}" effort="0" velocity="0"/>')
         if j.mimic is not None:
@@ -197,7 +203,8 @@ def ur_kinematics_from_robot(robot: Robot) -> UrKinematics:
         For any other chain.
     """
     rows = robot.alpha_deg.size
-    if robot.n_joints != 6 or rows != 6 or not np.array_equal(robot.coupling, np.eye(6)):
+    if robot.n_joints != 6 or rows != 6 or not np.array_equal(robot.coupling, np.eye(6)) or \
+            (robot.prismatic is not None and robot.prismatic.any()):
         raise ExportError(f"{robot.name}: the UR kinematics file needs six rows turned by q1..q6 in order; the robot "
                           f"has {robot.n_joints} joints in {rows} rows")
     fixed = fixed_transforms(robot)

@@ -149,6 +149,10 @@ class Robot:
     constraints : tuple of (coefficients, low, high)
         Extra limits on linear joint combinations (e.g. the parallelogram's
         inner angle ``q2 - q3``), as ``low <= coefficients @ q <= high``.
+    prismatic : ndarray of bool, shape (R,), or None
+        Rows that slide instead of turning: their ``theta`` is the constant
+        ``theta_offset_deg`` and ``d = d_mm + coupling @ q`` (mm; a prismatic
+        joint's column holds millimetres). None: every row turns.
     origins : ndarray, shape (R, 6), or None
         A rigid transform ``E`` ending each row after its DH part:
         ``x, y, z`` (mm) then ``roll, pitch, yaw`` (degrees, the rotation
@@ -170,6 +174,7 @@ class Robot:
     base_mm: NDArray[np.float64] = dataclasses.field(default_factory=lambda: np.zeros(3))
     constraints: tuple = ()
     origins: NDArray[np.float64] | None = None
+    prismatic: NDArray[np.bool_] | None = None
 
     def replace(self, **changes) -> "Robot":
         """Return a copy with some fields changed (used to build perturbed robots)."""
@@ -191,6 +196,9 @@ class Robot:
         4413.19
         """
         extra = 0.0 if self.origins is None else float(np.linalg.norm(self.origins[:, :3], axis=1).sum())
+        if self.prismatic is not None:        # a slide adds its longest travel
+            travel = np.abs(self.coupling[self.prismatic]) @ np.abs(self.limits_deg).max(axis=1)
+            extra += float(travel.sum())
         return float(np.hypot(self.a_mm, self.d_mm).sum() + extra + np.linalg.norm(self.tool_mm))
 
     def within_limits(self, q_deg: NDArray[np.float64]) -> NDArray[np.bool_]:
@@ -207,7 +215,8 @@ class Robot:
         """The DH rows compiled for the walk (built once per robot)."""
         ca, sa = _cos_sin_deg(self.alpha_deg)
         return tuple(_Row(float(off), tuple((int(j), float(c)) for j, c in enumerate(coef) if c),
-                          float(ca[r]), float(sa[r]), float(self.a_mm[r]), float(self.d_mm[r]), self._origin(r))
+                          float(ca[r]), float(sa[r]), float(self.a_mm[r]), float(self.d_mm[r]), self._origin(r),
+                          bool(self.prismatic is not None and self.prismatic[r]))
                      for r, (off, coef) in enumerate(zip(self.theta_offset_deg, self.coupling)))
 
     def _origin(self, row: int) -> tuple | None:
@@ -220,20 +229,23 @@ class Robot:
     def _trig(self, qT: NDArray[np.float64], rows=None) -> list:
         """The rotor ``exp(-i theta)`` of each DH row (all, or those in ``rows``), for joints ``qT`` (N, n).
 
-        Constant rows give a Python complex, rows not asked for ``None``. Every
-        operation is elementwise in the poses, so a pose gets the same bits
-        alone or in any batch.
+        Constant rows give a Python complex, rows not asked for ``None``, a
+        sliding row the pair ``(rotor, slide (n,) mm)``. Every operation is
+        elementwise in the poses, so a pose gets the same bits alone or in any
+        batch.
         """
         out: list = [None] * len(self._rows)
         varying = []
         for r, row in enumerate(self._rows):
             if rows is not None and r not in rows:
                 continue
-            if row.terms:
+            if row.terms and not row.slide:
                 varying.append(r)
             else:
                 rad = np.radians(row.offset)
                 out[r] = complex(np.cos(rad), -np.sin(rad))
+                if row.slide:
+                    out[r] = (out[r], _linear(row.terms, 0.0, qT, np.empty(qT.shape[1])))
         if varying:
             theta = np.empty((len(varying), qT.shape[1]))
             for k, r in enumerate(varying):
@@ -253,7 +265,8 @@ class Robot:
         and, for each row in ``record``, the axis ``z`` and origin ``o`` (3, n)
         it turns about.
         """
-        n = next((e.shape[-1] for e in trig if isinstance(e, np.ndarray)), 1)
+        n = next((e.shape[-1] for e in (t[1] if isinstance(t, tuple) else t for t in trig)
+                  if isinstance(e, np.ndarray)), 1)
         base = self.base_rotation
         w = (base[:, 0] + 1j * base[:, 1])[:, None]                      # (3, 1): broadcast at first
         z = base[:, 2][:, None]
@@ -262,11 +275,16 @@ class Robot:
         for r, (row, e) in enumerate(zip(self._rows, trig)):
             if r in record:
                 frames[r] = (z if z.shape == p.shape else np.repeat(z, n, axis=1), p.copy())
+            slide = None
+            if isinstance(e, tuple):
+                e, slide = e
             w = w * e                                  # x' = c x + s y, y' = c y - s x
             if row.a:
                 p += row.a * w.real
             if row.d:
                 p += row.d * z
+            if slide is not None:
+                p += slide * z
             # then alpha about x': (y, z) -> (ca y + sa z, ca z - sa y); exact shortcuts for 0, 180, +-90
             if row.sa == 0.0:
                 if row.ca != 1.0:
@@ -302,7 +320,9 @@ class Robot:
         fast as ``(n, 3)``).
         """
         n = q_deg.shape[0]
-        theta = np.radians(self.theta_offset_deg[:, None] + self.coupling @ q_deg.T)  # (R, n)
+        moved = self.coupling @ q_deg.T                                                  # (R, n): deg, or mm
+        slides = np.zeros(moved.shape[0], dtype=bool) if self.prismatic is None else self.prismatic
+        theta = np.radians(self.theta_offset_deg[:, None] + np.where(slides[:, None], 0.0, moved))  # (R, n)
         cos_t, sin_t = np.cos(theta), np.sin(theta)
         ca, sa = _cos_sin_deg(self.alpha_deg)
         r0, r1, r2 = (np.repeat(self.base_rotation[:, k, None], n, axis=1) for k in range(3))
@@ -319,6 +339,8 @@ class Robot:
             p += self.a_mm[row] * x_new
             if self.d_mm[row]:
                 p += self.d_mm[row] * r2
+            if slides[row]:
+                p += moved[row] * r2
             if sa[row] == 0.0:  # alpha = 0 or 180: exact, and saves half the work of this row
                 r0, r1, r2 = x_new, ca[row] * y_rot, ca[row] * r2
             elif ca[row] == 0.0:  # alpha = +-90
@@ -434,6 +456,9 @@ class Robot:
             cross = z[:, _I1] * lever[:, _I2]
             cross -= z[:, _I2] * lever[:, _I1]
             cross *= np.pi / 180.0
+        for k, r in enumerate(moving):              # a sliding row moves the tool along its axis (mm per mm)
+            if self._rows[r].slide:
+                cross[k] = 0.0 if angular else z[k]
         for k, f, c in plan:                                       # column f += c * (row k's contribution)
             if c == 1.0:
                 jac[f] += cross[k]
@@ -615,6 +640,7 @@ class _Row:
     a: float
     d: float
     origin: tuple | None = None       # E: (rotation rows, translation mm), None for the identity
+    slide: bool = False               # a prismatic row: d = d + sum(c * q[j]) mm, theta = offset
 
 
 def _apply_origin(origin: tuple, w, z, p):
@@ -632,17 +658,22 @@ def _apply_origin(origin: tuple, w, z, p):
 
 def _theta(row: _Row, qT: NDArray[np.float64], out: NDArray[np.float64]) -> NDArray[np.float64]:
     """The row's joint angle in degrees for joints ``qT`` (N, n), into ``out`` (n,), summed in a fixed order."""
-    j, c = row.terms[0]
+    return _linear(row.terms, row.offset, qT, out)
+
+
+def _linear(terms: tuple, constant: float, qT: NDArray[np.float64], out: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``constant + sum(c * q[j])`` over ``terms`` for joints ``qT`` (N, n), into ``out`` (n,), in a fixed order."""
+    j, c = terms[0]
     np.multiply(qT[j], c, out=out)
-    for j, c in row.terms[1:]:
+    for j, c in terms[1:]:
         if c == 1.0:
             out += qT[j]
         elif c == -1.0:
             out -= qT[j]
         else:
             out += c * qT[j]
-    if row.offset:
-        out += row.offset
+    if constant:
+        out += constant
     return out
 
 

@@ -12,9 +12,10 @@ the robot's base pose is ``F1 A1``, row ``k`` turns by ``qk`` about ``z`` and
 ends in the origin ``Ak^T F(k+1) A(k+1)`` (the last one in ``AN^T F_tip``, the
 fixed joints up to the tip). Rows have no DH part. Units change at this
 boundary: metres to mm, radians to degrees. Limits come from the URDF
-(continuous joints: +-360 degrees); a mimic joint is a row whose angle is
-``multiplier * q_master + offset``, a coupled row like the SK120's
-parallelogram. Prismatic joints are refused (not supported yet).
+(continuous joints: +-360 degrees); a prismatic joint is a row that slides
+along its axis (``Tz(q)`` between ``A`` and ``A^T``; its column is in mm); a
+mimic joint is a row whose angle (or slide) is ``multiplier * q_master +
+offset``, a coupled row like the SK120's parallelogram.
 
 A malformed file, or a chain that is not there, is refused with one line
 naming the file, the line and element, and what was expected.
@@ -33,7 +34,7 @@ from numpy.typing import NDArray
 from ..errors import RobotFileError
 from .kinematics import Robot, rpy_deg_from_matrix
 
-MOVING = ("revolute", "continuous")
+MOVING = ("revolute", "continuous", "prismatic")
 JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed", "floating", "planar")
 CONTINUOUS_LIMIT_DEG = 360.0
 _M_TO_MM = 1000.0
@@ -143,9 +144,9 @@ def _robot(path: Path, urdf, joints: list, name: str) -> Robot:
     moving = [j for j in joints if j.type != "fixed"]
     for j in moving:
         if j.type not in MOVING:
-            raise RobotFileError(f"{path}: <joint name={j.name!r} type={j.type!r}>: expected revolute, continuous or "
-                                 "fixed joints between base and tip (prismatic, planar and floating joints are not "
-                                 "supported yet)")
+            raise RobotFileError(f"{path}: <joint name={j.name!r} type={j.type!r}>: expected revolute, continuous, "
+                                 "prismatic or fixed joints between base and tip (planar and floating joints are not "
+                                 "supported)")
     if not moving:
         raise RobotFileError(f"{path}: no revolute or continuous joint between the base and the tip link")
     actuated = [j.name for j in moving if j.mimic is None]
@@ -155,6 +156,7 @@ def _robot(path: Path, urdf, joints: list, name: str) -> Robot:
             actuated.append(master)
     n = len(actuated)
     offsets, coupling = np.zeros(len(moving)), np.zeros((len(moving), n))
+    slides, slide_mm = np.array([j.type == "prismatic" for j in moving]), np.zeros(len(moving))
     fixed, axes, before = np.eye(4), [], []
     for r, j in enumerate(moving):
         while joints[0] is not j:          # fixed joints before this one fold into its origin
@@ -164,8 +166,14 @@ def _robot(path: Path, urdf, joints: list, name: str) -> Robot:
         fixed = np.eye(4)
         axes.append(_turn_to(path, j))
         master, multiplier, offset = _master(path, j, by_name)
+        if slides[r] != (by_name[master].type == "prismatic"):
+            raise RobotFileError(f"{path}: <joint name={j.name!r}> <mimic joint={master!r}>: expected a master of the "
+                                 "same kind (a slide follows a slide, a turn a turn)")
         coupling[r, actuated.index(master)] = multiplier
-        offsets[r] = math.degrees(offset)
+        if slides[r]:
+            slide_mm[r] = offset * _M_TO_MM
+        else:
+            offsets[r] = math.degrees(offset)
     for j in joints:                       # fixed joints after the last one: the tip
         fixed = fixed @ _origin(j)
     after = before[1:] + [fixed]
@@ -177,9 +185,10 @@ def _robot(path: Path, urdf, joints: list, name: str) -> Robot:
     limits = np.array([_limits(path, by_name[a]) for a in actuated])
     home = np.clip(np.zeros(n), limits[:, 0], limits[:, 1])
     zeros = np.zeros(len(moving))
-    return Robot(name=name, n_joints=n, alpha_deg=zeros, d_mm=zeros.copy(), a_mm=zeros.copy(),
+    return Robot(name=name, n_joints=n, alpha_deg=zeros, d_mm=slide_mm, a_mm=zeros.copy(),
                  theta_offset_deg=offsets, coupling=coupling, tool_mm=np.zeros(3), limits_deg=limits, home_deg=home,
-                 base_rotation=before[0][:3, :3] @ axes[0], base_mm=before[0][:3, 3] * _M_TO_MM, origins=origins)
+                 base_rotation=before[0][:3, :3] @ axes[0], base_mm=before[0][:3, 3] * _M_TO_MM, origins=origins,
+                 prismatic=slides if slides.any() else None)
 
 
 def _origin(joint) -> NDArray[np.float64]:
@@ -217,13 +226,16 @@ def _turn_to(path: Path, joint) -> NDArray[np.float64]:
 
 
 def _limits(path: Path, joint) -> tuple[float, float]:
-    """The joint's ``[low, high]`` degrees (continuous: +-360)."""
+    """The joint's ``[low, high]``, degrees (continuous: +-360), or mm for a prismatic joint."""
     if joint.type == "continuous":
         return -CONTINUOUS_LIMIT_DEG, CONTINUOUS_LIMIT_DEG
     limit = joint.limit
+    unit = "metres" if joint.type == "prismatic" else "radians"
     if limit is None or limit.lower is None or limit.upper is None or not limit.lower < limit.upper:
-        raise RobotFileError(f"{path}: <joint name={joint.name!r}> <limit>: expected lower < upper (radians) for a "
-                             f"revolute joint; got {None if limit is None else (limit.lower, limit.upper)}")
+        raise RobotFileError(f"{path}: <joint name={joint.name!r}> <limit>: expected lower < upper ({unit}) for a "
+                             f"{joint.type} joint; got {None if limit is None else (limit.lower, limit.upper)}")
+    if joint.type == "prismatic":
+        return limit.lower * _M_TO_MM, limit.upper * _M_TO_MM
     return math.degrees(limit.lower), math.degrees(limit.upper)
 
 

@@ -364,8 +364,7 @@ def identify(robot: Robot, q_deg: NDArray[np.float64], measured_mm: NDArray[np.f
     parametrization : {"dh", "complete"}
         The geometric parameters: four DH parameters per row, or each row's
         theta offset and the six errors of its fixed transform (see the module
-        notes). The complete one takes neither compliant joints nor further
-        targets or the orientation yet.
+        notes). The complete one does not take compliant joints yet.
 
     Returns
     -------
@@ -378,9 +377,9 @@ def identify(robot: Robot, q_deg: NDArray[np.float64], measured_mm: NDArray[np.f
     payload = np.broadcast_to(np.asarray(payload_kg, dtype=float), (len(q_deg),))
     if parametrization not in PARAMETRIZATIONS:
         raise DataError(f"parametrization must be one of {', '.join(PARAMETRIZATIONS)}; got {parametrization!r}")
-    if parametrization != "dh" and (extra is not None or (errors is not None and errors.compliance)):
-        raise DataError("the complete parametrization takes neither compliant joints nor further targets or the "
-                        "orientation yet; use parametrization 'dh' for them")
+    if parametrization != "dh" and errors is not None and errors.compliance:
+        raise DataError("the complete parametrization does not take compliant joints yet; use parametrization 'dh' "
+                        "for them")
     v0 = nominal_values(robot, errors, parametrization)
     size, own = geometric_size(robot, parametrization), v0.size
     wanted = np.ones(v0.size + (extra.size if extra is not None else 0), dtype=bool)
@@ -396,7 +395,7 @@ def identify(robot: Robot, q_deg: NDArray[np.float64], measured_mm: NDArray[np.f
         v0 = np.concatenate([v0, extra.nominal()])
         wanted[own:own + 3 * len(extra.tools_mm)] = tool
         jac_at = functools.partial(stacked, robot, errors, q_deg, payload_kg=payload, measured_mm=measured_mm,
-                                   extra=extra)
+                                   extra=extra, parametrization=parametrization)
     jac0 = jac_at(v0)[1]
     free, rank = _identifiable(jac0, wanted, rcond)
 

@@ -58,11 +58,10 @@ class KinematicModel(ErrorModelBase):
         The geometric parameters identified: the four DH parameters of every
         row, or every row's joint offset and the six errors of its fixed
         transform (tilts between parallel axes too), each reduced by the rank
-        rule to what the data identify (docs/models.md). ``complete`` takes
-        neither ``compliance`` nor ``all_targets`` or ``use_orientation`` yet.
-        ``auto`` (the default, chosen by measurement): ``dh`` for a robot of
-        DH rows, ``complete`` for a chain with general origins (a URDF's),
-        unless one of those three asks for ``dh``.
+        rule to what the data identify (docs/models.md). ``complete`` does not
+        take ``compliance`` yet. ``auto`` (the default, chosen by
+        measurement): ``dh`` for a robot of DH rows, ``complete`` for a chain
+        with general origins (a URDF's) unless compliant joints ask for ``dh``.
     compliance : sequence of int
         1-based joints that yield under gravity (see :mod:`partcal.models.joint_errors`).
     joint_harmonics : int or sequence of int
@@ -134,11 +133,7 @@ class KinematicModel(ErrorModelBase):
                         "orientation_mm_per_rad": real(0.0, 1e6, default=ORIENTATION_MM_PER_RAD, low_open=True)}
     _requirements = (Requirement("orientation_mm_per_rad", f"{ORIENTATION_MM_PER_RAD:g} (its default) unless "
                                  "use_orientation is true: it weighs the orientation in the identification",
-                                 lambda p: p["use_orientation"] or p["orientation_mm_per_rad"] == ORIENTATION_MM_PER_RAD),
-                     Requirement("parametrization", "'dh' with all_targets or use_orientation (the complete "
-                                 "parametrization reads one target's positions)",
-                                 lambda p: p["parametrization"] != "complete" or
-                                 not (p["all_targets"] or p["use_orientation"])))
+                                 lambda p: p["use_orientation"] or p["orientation_mm_per_rad"] == ORIENTATION_MM_PER_RAD),)
     _from_fitted = ("all_targets", "use_orientation")     # a model file keeps what was fitted on instead
     _OPTIONAL_IN_FILES = ("payload_kg", "orientation_mm_per_rad", "parametrization")   # older files: the default
     _joint_rules = {"compliance": ((), compliance_problem), "joint_harmonics": (0, harmonics_problem)}
@@ -162,11 +157,11 @@ class KinematicModel(ErrorModelBase):
         return robot
 
     def _resolved_parametrization(self, robot: Robot) -> str:
-        """``parametrization``, ``auto`` resolved: ``complete`` for a chain with general origins unless compliance,
-        several targets or the orientation need ``dh``; ``dh`` otherwise."""
+        """``parametrization``, ``auto`` resolved: ``complete`` for a chain with general origins unless compliant
+        joints need ``dh``; ``dh`` otherwise."""
         if self.parametrization != "auto":
             return self.parametrization
-        needs_dh = len(self.compliance) or self.all_targets or self.use_orientation
+        needs_dh = len(self.compliance)
         general = robot.origins is not None and bool(np.any(robot.origins))
         return "complete" if general and not needs_dh else "dh"
 

@@ -122,7 +122,7 @@ def extra_from(robot: Robot, q_deg: NDArray[np.float64], targets: dict | None, o
 
 def stacked(nominal: Robot, errors: JointErrors | None, q_deg: NDArray[np.float64], values: NDArray[np.float64],
             payload_kg: NDArray[np.float64], measured_mm: NDArray[np.float64], extra: Extra,
-            jacobian: bool = True) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
+            jacobian: bool = True, parametrization: str = "dh") -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
     """The stacked residuals (model - measured) of every target and the orientation, and their Jacobian.
 
     Parameters
@@ -131,6 +131,8 @@ def stacked(nominal: Robot, errors: JointErrors | None, q_deg: NDArray[np.float6
         The model's parameters (geometry, joint errors), then the extra ones.
     measured_mm : ndarray, shape (n, 3)
         The primary target, base frame, mm.
+    parametrization : {"dh", "complete"}
+        The geometry's parameters (:mod:`partcal.models.identification`).
 
     Returns
     -------
@@ -141,50 +143,53 @@ def stacked(nominal: Robot, errors: JointErrors | None, q_deg: NDArray[np.float6
     # identification imports this module: its functions are imported where used
     from .identification import actual_joints, geometric_size, identification_jacobian, robot_with
 
-    size = geometric_size(nominal)
+    par = parametrization
+    size = geometric_size(nominal, par)
     own = size + (errors.size if errors is not None else 0)
-    rows, n = nominal.alpha_deg.size, q_deg.shape[0]
-    q_actual, design, moves = actual_joints(nominal, errors, q_deg, values[:own], payload_kg, derivatives=jacobian)
-    tools = [values[4 * rows:4 * rows + 3]] + [values[own + 3 * k:own + 3 * k + 3] for k in range(len(extra.tools_mm))]
+    tool_at, n = slice(size - 9, size - 6), q_deg.shape[0]
+    q_actual, design, moves = actual_joints(nominal, errors, q_deg, values[:own], payload_kg, derivatives=jacobian,
+                                            parametrization=par)
+    tools = [values[tool_at]] + [values[own + 3 * k:own + 3 * k + 3] for k in range(len(extra.tools_mm))]
     residuals, blocks = [], []
     for k, (tool, meas) in enumerate(zip(tools, [measured_mm, *extra.measured_mm.values()])):
         v_k = values[:own].copy()
-        v_k[4 * rows:4 * rows + 3] = tool
+        v_k[tool_at] = tool
         if not jacobian:
-            residuals.append((robot_with(nominal, v_k).positions(q_actual) - meas).ravel())
+            residuals.append((robot_with(nominal, v_k, par).positions(q_actual) - meas).ravel())
             continue
-        p, jac = identification_jacobian(nominal, q_actual, v_k[:size])
+        p, jac = identification_jacobian(nominal, q_actual, v_k[:size], par)
         residuals.append((p - meas).ravel())
         block = np.zeros((3 * n, values.size))
         if k:
-            block[:, own + 3 * (k - 1):own + 3 * k] = jac[:, 4 * rows:4 * rows + 3]
-            jac[:, 4 * rows:4 * rows + 3] = 0.0
+            block[:, own + 3 * (k - 1):own + 3 * k] = jac[:, tool_at]
+            jac[:, tool_at] = 0.0
         if design is not None:
-            joints = robot_with(nominal, v_k).jacobian(q_actual)
+            joints = robot_with(nominal, v_k, par).jacobian(q_actual)
             if moves is not None:
                 jac[:, :size - 6] += np.einsum("nij,njp->nip", joints, moves).reshape(-1, size - 6)
             block[:, size:own] = np.einsum("nij,njp->nip", joints, design).reshape(-1, design.shape[2])
         block[:, :size] = jac
         blocks.append(block)
     if extra.rotations is not None:
-        r, j = _orientation(nominal, q_actual, design, moves, values, own, extra, jacobian)
+        r, j = _orientation(nominal, q_actual, design, moves, values, own, extra, jacobian, par)
         residuals.append(r)
         blocks.append(j)
     return np.concatenate(residuals), (np.vstack(blocks) if jacobian else None)
 
 
-def _orientation(nominal: Robot, q_actual, design, moves, values, own: int, extra: Extra, jacobian: bool):
+def _orientation(nominal: Robot, q_actual, design, moves, values, own: int, extra: Extra, jacobian: bool,
+                 parametrization: str = "dh"):
     """The orientation's residuals ``mm_per_rad * log(R_model R_meas^T)`` and their Jacobian rows.
 
     A parameter's column is the angular velocity it gives the flange (base frame, per unit): a
-    row's theta turns about the row's z axis, its alpha about the next frame's x axis, the base
-    correction about its axes, a joint error through the joint's axes, the probe's turn about the
-    model frame's axes. Lengths turn nothing.
+    row's theta turns about the row's z axis, its alpha about the next frame's x axis (a complete
+    row's turns about their axes), the base correction about its axes, a joint error through the
+    joint's axes, the probe's turn about the model frame's axes. Lengths turn nothing.
     """
-    from .identification import base_axes, geometric_size, robot_with      # (see stacked)
+    from .identification import base_axes, complete_axes, geometric_size, robot_with      # (see stacked)
 
-    size, rows, n = geometric_size(nominal), nominal.alpha_deg.size, q_actual.shape[0]
-    robot = robot_with(nominal, values[:own])
+    size, rows, n = geometric_size(nominal, parametrization), nominal.alpha_deg.size, q_actual.shape[0]
+    robot = robot_with(nominal, values[:own], parametrization)
     model = robot.forward(q_actual)[:, :3, :3] @ Rotation.from_rotvec(values[-3:], degrees=True).as_matrix()
     weight = extra.mm_per_rad
     turns = Rotation.from_matrix(model @ extra.rotations.transpose(0, 2, 1)).as_rotvec()
@@ -193,9 +198,15 @@ def _orientation(nominal: Robot, q_actual, design, moves, values, own: int, extr
         return residuals, None
     _, xs, zs = robot.frame_axes(q_actual)                                # (n, R + 1, 3)
     omega = np.zeros((n, 3, values.size))
-    omega[:, :, 0:4 * rows:4] = zs[:, :rows].transpose(0, 2, 1) * _DEG     # theta of each row
-    omega[:, :, 3:4 * rows:4] = xs[:, 1:].transpose(0, 2, 1) * _DEG        # alpha of each row
-    for k, axis in enumerate(base_axes(nominal, values)):
+    if parametrization == "complete":
+        omega[:, :, 0:7 * rows:7] = zs[:, :rows].transpose(0, 2, 1) * _DEG     # theta of each row
+        axes = complete_axes(robot, q_actual, values)[2]                      # (n, R, 3, 3)
+        for r in range(rows):
+            omega[:, :, 7 * r + 4:7 * r + 7] = axes[:, r] * _DEG
+    else:
+        omega[:, :, 0:4 * rows:4] = zs[:, :rows].transpose(0, 2, 1) * _DEG     # theta of each row
+        omega[:, :, 3:4 * rows:4] = xs[:, 1:].transpose(0, 2, 1) * _DEG        # alpha of each row
+    for k, axis in enumerate(base_axes(nominal, values, parametrization)):
         omega[:, :, size - 3 + k] = axis * _DEG
     if design is not None:
         per_joint = np.einsum("nri,rj->nij", zs[:, :rows], nominal.coupling) * _DEG      # (n, 3, N)

@@ -393,7 +393,7 @@ def _cmd_plan(args) -> int:
     start = time.perf_counter()
     model = design.PlannedModel(base=not args.no_base, tool=not args.no_tool, compliance=args.compliance or (),
                                 joint_harmonics=_one_or_many(args.joint_harmonics or (0,)),
-                                payload_kg=args.payload_kg).check(robot)
+                                payload_kg=args.payload_kg, parametrization=args.parametrization).check(robot)
     options = {"model": model}
     evaluated = read_columns(args.evaluate, [joint_columns(robot.n_joints)], fmt=_format(args))[1] \
         if args.evaluate else None
@@ -585,6 +585,8 @@ def build_parser() -> argparse.ArgumentParser:
                      help="plan for K transmission harmonics of every joint, or one K per joint")
     pln.add_argument("--payload-kg", type=float, default=0.0,
                      help="the payload the measurement carries at the tool (kg, default 0; with --compliance)")
+    pln.add_argument("--parametrization", choices=("auto", "dh", "complete"), default="auto",
+                     help="the geometric parameters planned for (auto: dh for DH rows, complete for a URDF's chain)")
     pln.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
     pln.set_defaults(func=_cmd_plan)
     return parser

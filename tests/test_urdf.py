@@ -250,3 +250,16 @@ def test_prismatic_joints_slide_in_mm_and_equal_yourdfpy(tmp_path):
                          "joint4": np.radians(row[3])})
         got.append(back.get_transform("tcp", "base_link")[:3, 3] * 1000.0)
     np.testing.assert_allclose(np.array(got), robot.positions(q[:100]), rtol=0, atol=1e-9)
+
+
+def test_plan_takes_a_urdf_and_plans_for_the_complete_parametrization(tmp_path):
+    """``partcal plan FILE.urdf#base=..&tip=..``: a pose list for the complete model (25 identifiable
+    parameters of the UR10, the two tilts between parallel axes beyond DH's 23)."""
+    from conftest import partcal_cli
+
+    path = example_urdf("ur_description/urdf/ur10_robot.urdf")
+    out = tmp_path / "poses.csv"
+    done = partcal_cli("plan", f"{path}#base=base_link&tip=tool0", "-n", "30", "-o", str(out), "-q")
+    assert done.returncode == 0, done.stderr
+    header = out.read_text().splitlines()[:3]
+    assert "(complete with base and tool)" in header[0] and "(25 parameters, 30 poses)" in header[2]

@@ -64,6 +64,15 @@ PRIMARY_TARGET = "A"        # the data's unsuffixed target (partcal.data.measure
 
 
 # ---------------------------------------------------------------------- the parameter vector
+def resolved_parametrization(parametrization: str, robot: Robot, compliant: bool = False) -> str:
+    """``parametrization`` with ``auto`` resolved: ``complete`` for a chain with general origins (a URDF's)
+    unless compliant joints need ``dh``; ``dh`` for a robot of DH rows (docs/models.md says why)."""
+    if parametrization != "auto":
+        return parametrization
+    general = robot.origins is not None and bool(np.any(robot.origins))
+    return "complete" if general and not compliant else "dh"
+
+
 def parameter_names(robot: Robot, errors: JointErrors | None = None, parametrization: str = "dh"
                     ) -> list[tuple[str, str]]:
     """``(name, unit)`` of every parameter: ``theta[1], d[1], a[1], alpha[1], ..., tool.*, base.*`` (``dh``) or

@@ -27,7 +27,7 @@ from .base import ErrorModelBase, box_points, seed_from
 from .bases import varying_inputs
 from .gp import GaussianProcessErrorModel
 from .identification import (PARAMETRIZATIONS, PRIMARY_TARGET, STATUSES, Identification, geometric_size, identify,
-                             nominal_values, own_geometry, parameter_names, robot_with)
+                             nominal_values, own_geometry, parameter_names, resolved_parametrization, robot_with)
 from .joint_errors import JointErrors, compliance_problem, harmonics_problem
 from .partitioned import PartitionedErrorModel
 from .pose import PoseErrorModel
@@ -159,11 +159,7 @@ class KinematicModel(ErrorModelBase):
     def _resolved_parametrization(self, robot: Robot) -> str:
         """``parametrization``, ``auto`` resolved: ``complete`` for a chain with general origins unless compliant
         joints need ``dh``; ``dh`` otherwise."""
-        if self.parametrization != "auto":
-            return self.parametrization
-        needs_dh = len(self.compliance)
-        general = robot.origins is not None and bool(np.any(robot.origins))
-        return "complete" if general and not needs_dh else "dh"
+        return resolved_parametrization(self.parametrization, robot, bool(len(self.compliance)))
 
     def fit(self, X, y, payload_kg=None, *, targets=None, orientation_deg=None, orientation_mm_per_rad=None):
         """Identify the parameters from joint angles ``X`` (n, N) deg and errors ``y`` (n, 3) mm. Returns self.

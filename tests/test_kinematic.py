@@ -245,5 +245,3 @@ def test_complete_model_files_round_trip_and_refuse_what_it_cannot_fit(tmp_path)
     assert np.array_equal(loaded.predict(q), model.predict(q))
     with pytest.raises(PartcalError, match="parametrization.*one of"):
         KinematicModel(robot=nominal, parametrization="hayati").fit(q, truth(q))
-    with pytest.raises(PartcalError, match="compliance"):
-        KinematicModel(robot=nominal, parametrization="complete", compliance=[2]).fit(q, truth(q))

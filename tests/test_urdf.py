@@ -181,7 +181,7 @@ def test_the_default_parametrization_is_dh_for_dh_rows_and_complete_for_a_urdf_c
     q = np.random.default_rng(33).uniform(-180, 180, (40, 6))
     errors = np.random.default_rng(34).normal(0, 0.1, (40, 3))
     assert KinematicModel(robot=urdf).fit(q, errors).parametrization_ == "complete"
-    assert KinematicModel(robot=urdf, compliance=[2]).fit(q, errors).parametrization_ == "dh"
+    assert KinematicModel(robot=urdf, compliance=[2]).fit(q, errors).parametrization_ == "complete"
     assert KinematicModel(robot=load_robot("universal_robots_ur10")).fit(q, errors).parametrization_ == "dh"
 
 

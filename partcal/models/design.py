@@ -99,15 +99,14 @@ class PlannedModel:
                 raise PartcalError(f"the planned model's {name} must be {expected} for {robot.name}; got {value!r}")
         if not (math.isfinite(self.payload_kg) and self.payload_kg >= 0):
             raise PartcalError(f"the planned model's payload_kg must be a number >= 0 (kg); got {self.payload_kg!r}")
-        if self.parametrization not in ("auto", *PARAMETRIZATIONS) or \
-                (self.parametrization == "complete" and self.compliance):
-            raise PartcalError(f"the planned model's parametrization must be auto, dh or complete (complete without "
-                               f"compliance); got {self.parametrization!r}")
+        if self.parametrization not in ("auto", *PARAMETRIZATIONS):
+            raise PartcalError(f"the planned model's parametrization must be auto, dh or complete; got "
+                               f"{self.parametrization!r}")
         return self
 
     def parametrization_for(self, robot: Robot) -> str:
         """The parametrization planned for on ``robot`` (``auto`` resolved)."""
-        return resolved_parametrization(self.parametrization, robot, bool(self.compliance))
+        return resolved_parametrization(self.parametrization, robot)
 
     def joint_errors(self, robot: Robot) -> JointErrors | None:
         """The joint errors planned for (None without)."""

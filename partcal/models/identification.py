@@ -64,13 +64,13 @@ PRIMARY_TARGET = "A"        # the data's unsuffixed target (partcal.data.measure
 
 
 # ---------------------------------------------------------------------- the parameter vector
-def resolved_parametrization(parametrization: str, robot: Robot, compliant: bool = False) -> str:
-    """``parametrization`` with ``auto`` resolved: ``complete`` for a chain with general origins (a URDF's)
-    unless compliant joints need ``dh``; ``dh`` for a robot of DH rows (docs/models.md says why)."""
+def resolved_parametrization(parametrization: str, robot: Robot) -> str:
+    """``parametrization`` with ``auto`` resolved: ``complete`` for a chain with general origins (a URDF's),
+    ``dh`` for a robot of DH rows (docs/models.md says why)."""
     if parametrization != "auto":
         return parametrization
     general = robot.origins is not None and bool(np.any(robot.origins))
-    return "complete" if general and not compliant else "dh"
+    return "complete" if general else "dh"
 
 
 def parameter_names(robot: Robot, errors: JointErrors | None = None, parametrization: str = "dh"
@@ -216,8 +216,25 @@ def actual_joints(nominal: Robot, errors: JointErrors | None, q_deg: NDArray[np.
     if errors is None or errors.empty:
         return q_deg, None, None
     size = geometric_size(nominal, parametrization)
+    motions = complete_motions(values) if parametrization == "complete" else None
     return errors.design(own_geometry(nominal, values, parametrization), q_deg, values[size:size + errors.size],
-                         payload_kg, derivatives)
+                         payload_kg, derivatives, motions)
+
+
+def complete_motions(values: NDArray[np.float64]):
+    """For the lever arms of compliant joints: how each complete row parameter at ``values`` moves the frames
+    after its row (as :func:`partcal.models.joint_errors.dh_motions`): theta turns about the row's z axis,
+    the shifts and turns of :func:`complete_axes` (turns about the origin of the frame the row ends in)."""
+    def motions(geometry: Robot, q_deg: NDArray[np.float64]) -> list:
+        origins, shifts, axes = complete_axes(geometry, q_deg, values)
+        zs = geometry.frame_axes(q_deg)[2]
+        out = []
+        for r in range(geometry.alpha_deg.size):
+            out.append(("turn", zs[:, r], origins[:, r], r))
+            out += [("shift", shifts[:, r, :, k], None, r) for k in range(3)]
+            out += [("turn", axes[:, r, :, k], origins[:, r + 1], r) for k in range(3)]
+        return out
+    return motions
 
 
 def own_geometry(nominal: Robot, values: NDArray[np.float64], parametrization: str = "dh") -> Robot:
@@ -373,7 +390,7 @@ def identify(robot: Robot, q_deg: NDArray[np.float64], measured_mm: NDArray[np.f
     parametrization : {"dh", "complete"}
         The geometric parameters: four DH parameters per row, or each row's
         theta offset and the six errors of its fixed transform (see the module
-        notes). The complete one does not take compliant joints yet.
+        notes).
 
     Returns
     -------
@@ -386,9 +403,6 @@ def identify(robot: Robot, q_deg: NDArray[np.float64], measured_mm: NDArray[np.f
     payload = np.broadcast_to(np.asarray(payload_kg, dtype=float), (len(q_deg),))
     if parametrization not in PARAMETRIZATIONS:
         raise DataError(f"parametrization must be one of {', '.join(PARAMETRIZATIONS)}; got {parametrization!r}")
-    if parametrization != "dh" and errors is not None and errors.compliance:
-        raise DataError("the complete parametrization does not take compliant joints yet; use parametrization 'dh' "
-                        "for them")
     v0 = nominal_values(robot, errors, parametrization)
     size, own = geometric_size(robot, parametrization), v0.size
     wanted = np.ones(v0.size + (extra.size if extra is not None else 0), dtype=bool)

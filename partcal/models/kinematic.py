@@ -58,10 +58,9 @@ class KinematicModel(ErrorModelBase):
         The geometric parameters identified: the four DH parameters of every
         row, or every row's joint offset and the six errors of its fixed
         transform (tilts between parallel axes too), each reduced by the rank
-        rule to what the data identify (docs/models.md). ``complete`` does not
-        take ``compliance`` yet. ``auto`` (the default, chosen by
-        measurement): ``dh`` for a robot of DH rows, ``complete`` for a chain
-        with general origins (a URDF's) unless compliant joints ask for ``dh``.
+        rule to what the data identify (docs/models.md). ``auto`` (the
+        default, chosen by measurement): ``dh`` for a robot of DH rows,
+        ``complete`` for a chain with general origins (a URDF's).
     compliance : sequence of int
         1-based joints that yield under gravity (see :mod:`partcal.models.joint_errors`).
     joint_harmonics : int or sequence of int
@@ -148,18 +147,14 @@ class KinematicModel(ErrorModelBase):
             expected = problem(getattr(self, name), robot.n_joints)
             if expected is not None:
                 raise param_error(own, name, expected, getattr(self, name))
-        if self.parametrization == "complete" and len(self.compliance):
-            raise param_error(own, "compliance", "empty with parametrization 'complete' (compliant joints need "
-                              "parametrization 'dh' yet)", self.compliance)
         if self.residual is not None and not isinstance(self.residual, RESIDUAL_MODELS):
             raise param_error(own, "residual", "None, an ErrorModel, a PartitionedErrorModel or a "
                               "GaussianProcessErrorModel", self.residual)
         return robot
 
     def _resolved_parametrization(self, robot: Robot) -> str:
-        """``parametrization``, ``auto`` resolved: ``complete`` for a chain with general origins unless compliant
-        joints need ``dh``; ``dh`` otherwise."""
-        return resolved_parametrization(self.parametrization, robot, bool(len(self.compliance)))
+        """``parametrization``, ``auto`` resolved: ``complete`` for a chain with general origins, ``dh`` otherwise."""
+        return resolved_parametrization(self.parametrization, robot)
 
     def fit(self, X, y, payload_kg=None, *, targets=None, orientation_deg=None, orientation_mm_per_rad=None):
         """Identify the parameters from joint angles ``X`` (n, N) deg and errors ``y`` (n, 3) mm. Returns self.

@@ -198,13 +198,16 @@ def test_a_bad_payload_per_pose_is_refused(sk120, exact_fit):
         exact_fit[2].predict(q, payload_kg=1e9)
 
 
-@pytest.mark.parametrize("parametrization", ["dh", "complete"])
-def test_the_analytic_jacobian_matches_central_differences(sk120, parametrization):
+@pytest.mark.parametrize("parametrization, origins", [("dh", False), ("complete", False), ("dh", True)])
+def test_the_analytic_jacobian_matches_central_differences(sk120, parametrization, origins):
     """Every column, at a point where every parameter (harmonics of all joints, sags, compliances, a payload
-    per pose) is off zero: the lever arms move with the rows (DH or complete), the tool and the harmonics."""
+    per pose) is off zero: the lever arms move with the rows (DH or complete; DH rows with further origins,
+    as a URDF's chain has), the tool and the harmonics."""
     from partcal.models.identification import geometric_size
 
     q = sk120_poses(sk120, 30, 19)
+    if origins:
+        sk120 = sk120.replace(origins=np.random.default_rng(21).normal(0, [20, 20, 20, 5, 5, 5], (8, 6)))
     errors = JointErrors.for_robot(sk120, [2, 3], [1, 2, 2, 1, 1, 1])
     rng = np.random.default_rng(20)
     names = [n for n, _ in parameter_names(sk120, errors, parametrization)]

@@ -77,8 +77,11 @@ def test_one_target_fits_exactly_as_before(ur10):
     assert plain.identification_.target_rms_mm == {} and "targets_rms_3d" not in plain.run_summary()["kinematic"]
 
 
-@pytest.mark.parametrize("compliance, parametrization", [((), "dh"), ((2, 3), "dh"), ((), "complete")])
-def test_stacked_jacobian_matches_finite_differences(ur10, compliance, parametrization):
+@pytest.mark.parametrize("compliance, parametrization, origins", [((), "dh", False), ((2, 3), "dh", False),
+                                                                  ((), "complete", False), ((2, 3), "dh", True)])
+def test_stacked_jacobian_matches_finite_differences(ur10, compliance, parametrization, origins):
+    if origins:          # DH parameters of rows with further origins, as on a URDF's chain
+        ur10 = ur10.replace(origins=np.random.default_rng(8).normal(0, [20, 20, 20, 5, 5, 5], (6, 6)))
     rng = np.random.default_rng(6)
     q = rng.uniform(-170, 170, (12, 6))
     errors = JointErrors.for_robot(ur10, list(compliance), 1) if compliance else None

@@ -284,10 +284,12 @@ class _Frames:
 def dh_motions(geometry: Robot, q_deg: NDArray[np.float64]) -> list:
     """How each DH row parameter moves the frames after its row, ``(kind, vector (n, 3), centre (n, 3), row)``
     in the order theta, d, a, alpha of every row: theta turns about the row's z axis at its origin, d
-    shifts along it, a shifts along the next frame's x axis and alpha turns about it at the next origin."""
-    origins, xs, zs = geometry.frame_axes(q_deg)
+    shifts along it, a shifts along the x axis after the row's DH part and alpha turns about it there (the
+    next frame's, for a row without a further origin)."""
+    origins, _, zs = geometry.frame_axes(q_deg)
+    mid_origins, mid_xs = geometry.dh_axes(q_deg)
     out = []
     for r in range(origins.shape[1] - 1):
         out += [("turn", zs[:, r], origins[:, r], r), ("shift", zs[:, r], None, r),
-                ("shift", xs[:, r + 1], None, r), ("turn", xs[:, r + 1], origins[:, r + 1], r)]
+                ("shift", mid_xs[:, r], None, r), ("turn", mid_xs[:, r], mid_origins[:, r], r)]
     return out

@@ -205,7 +205,7 @@ def _orientation(nominal: Robot, q_actual, design, moves, values, own: int, extr
             omega[:, :, 7 * r + 4:7 * r + 7] = axes[:, r] * _DEG
     else:
         omega[:, :, 0:4 * rows:4] = zs[:, :rows].transpose(0, 2, 1) * _DEG     # theta of each row
-        omega[:, :, 3:4 * rows:4] = xs[:, 1:].transpose(0, 2, 1) * _DEG        # alpha of each row
+        omega[:, :, 3:4 * rows:4] = robot.dh_axes(q_actual)[1].transpose(0, 2, 1) * _DEG   # alpha of each row
     for k, axis in enumerate(base_axes(nominal, values, parametrization)):
         omega[:, :, size - 3 + k] = axis * _DEG
     if design is not None:

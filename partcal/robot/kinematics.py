@@ -380,6 +380,12 @@ class Robot:
         _, _, (origins, xs, zs, _) = self._chain(self.check_joints(q_deg), keep_axes=True)
         return np.stack(origins, axis=1), np.stack(xs, axis=1), np.stack(zs, axis=1)
 
+    def dh_axes(self, q_deg) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Origins and x axes after each row's DH part (before its origin ``E``), each ``(n, R, 3)``: where a
+        row's ``alpha`` turns and along which its ``a`` shifts (frame ``r + 1`` for a row without ``E``)."""
+        _, _, (_, _, _, mids) = self._chain(self.check_joints(q_deg), keep_axes=True)
+        return np.stack([m[0] for m in mids], axis=1), np.stack([m[1] for m in mids], axis=1)
+
     def positions(self, q_deg) -> NDArray[np.float64]:
         """Tool positions, shape ``(n, 3)`` mm, for joint angles ``(n, N)`` degrees.
 

@@ -263,3 +263,22 @@ def test_plan_takes_a_urdf_and_plans_for_the_complete_parametrization(tmp_path):
     assert done.returncode == 0, done.stderr
     header = out.read_text().splitlines()[:3]
     assert "(complete with base and tool)" in header[0] and "(25 parameters, 30 poses)" in header[2]
+
+
+def test_import_computes_nominal_positions_from_a_urdf(tmp_path):
+    """``partcal import DATA.csv --robot FILE.urdf#base=..&tip=..``: the nominal columns come from the URDF's
+    forward kinematics (mm)."""
+    from conftest import partcal_cli
+
+    from partcal import read_measurements
+
+    path = example_urdf("ur_description/urdf/ur10_robot.urdf")
+    robot = load_robot(f"{path}#base=base_link&tip=tool0")
+    q = np.random.default_rng(36).uniform(-170, 170, (5, 6))
+    p = robot.positions(q) + 0.1
+    rows = ["q1,q2,q3,q4,q5,q6,x_meas,y_meas,z_meas"] + [",".join(repr(float(v)) for v in (*a, *b)) for a, b in zip(q, p)]
+    (tmp_path / "in.csv").write_text("\n".join(rows) + "\n")
+    done = partcal_cli("import", str(tmp_path / "in.csv"), "-o", str(tmp_path / "out.csv"), "--robot",
+                       f"{path}#base=base_link&tip=tool0")
+    assert done.returncode == 0, done.stderr
+    np.testing.assert_allclose(read_measurements(tmp_path / "out.csv").nominal_mm, robot.positions(q), atol=1e-6)

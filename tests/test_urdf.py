@@ -159,8 +159,9 @@ def test_runs_and_simulations_take_a_urdf_beside_their_yaml(tmp_path):
     model = KinematicModel(robot=study.robot.nominal, parametrization="complete").fit(ident.q_deg, ident.errors_mm)
     left = test.measured_mm - test.nominal_mm - model.predict(test.q_deg)
     assert np.sqrt(np.mean(np.sum(left**2, axis=1))) < 0.06      # the tracker's 0.02 mm per axis at ~2 m
-    (tmp_path / "run.yaml").write_text(f"name: urdf_run\n{robot_line}\ndata:\n  identification: out/identification.csv\n"
-                                       "models:\n  - {name: complete, kind: kinematic, parametrization: complete}\n")
+    (tmp_path / "run.yaml").write_text(f"name: urdf_run\n{robot_line}\ndata:\n  identification: "
+                                       "out/identification.csv\nmodels:\n  - {name: complete, kind: kinematic, "
+                                       "parametrization: complete}\n")
     (tmp_path / "out").mkdir()
     from partcal import write_measurements
     write_measurements(ident, tmp_path / "out" / "identification.csv")
@@ -276,7 +277,8 @@ def test_import_computes_nominal_positions_from_a_urdf(tmp_path):
     robot = load_robot(f"{path}#base=base_link&tip=tool0")
     q = np.random.default_rng(36).uniform(-170, 170, (5, 6))
     p = robot.positions(q) + 0.1
-    rows = ["q1,q2,q3,q4,q5,q6,x_meas,y_meas,z_meas"] + [",".join(repr(float(v)) for v in (*a, *b)) for a, b in zip(q, p)]
+    rows = ["q1,q2,q3,q4,q5,q6,x_meas,y_meas,z_meas"] + [",".join(repr(float(v)) for v in (*a, *b))
+                                                         for a, b in zip(q, p)]
     (tmp_path / "in.csv").write_text("\n".join(rows) + "\n")
     done = partcal_cli("import", str(tmp_path / "in.csv"), "-o", str(tmp_path / "out.csv"), "--robot",
                        f"{path}#base=base_link&tip=tool0")

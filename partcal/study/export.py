@@ -101,8 +101,8 @@ def export_model(model_path, output: Path, formats=FORMATS, q_deg=None, errors_m
     name = Path(model_path).stem
     output = Path(output)
     output.mkdir(parents=True, exist_ok=True)
-    stamp = f"Calibrated {model.robot_.name} from {Path(model_path).name} ({model.parametrization_} parametrization), " \
-            f"written by partcal export."
+    stamp = (f"Calibrated {model.robot_.name} from {Path(model_path).name} ({model.parametrization_} "
+             "parametrization), written by partcal export.")
     files, skipped, tcp = {}, {}, None
     writers = {"urdf": lambda: (f"{name}.urdf", urdf_from_robot(robot, base_pose, comment=stamp)),
                "yaml": lambda: (f"{name}_robot.yaml", _robot_yaml(robot, stamp)),

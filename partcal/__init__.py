@@ -15,8 +15,9 @@ except PackageNotFoundError:  # running from a source tree without installing
     __version__ = "0.1.0"
 
 _EXPORTS = {
-    "errors": ["ConfigError", "DataError", "ModelFileError", "PartcalError", "UnreachableError"],
+    "errors": ["ConfigError", "DataError", "ModelFileError", "PartcalError", "RobotFileError", "UnreachableError"],
     "robot.kinematics": ["Robot"],
+    "robot.urdf": ["robot_from_urdf"],
     "robot.description": ["available_robots", "load_robot"],
     "data.measurements": ["Measurements", "read_measurements", "write_measurements"],
     "data.formats": ["MeasurementFormat", "RowSelection", "load_format"],

@@ -362,7 +362,7 @@ def _cmd_import(args) -> int:
     _refuse_input_as_output(args.output, "import", [("input file", args.input), ("format file", args.format),
                                                     ("robot file", args.robot)])
     if args.frame == "tracker" and not args.robot:
-        raise PartcalError("import: --frame tracker needs --robot (a built-in name or a robot YAML)")
+        raise PartcalError("import: --frame tracker needs --robot (a built-in name, a robot YAML or a URDF)")
     if args.tool_mm is not None and args.frame != "tracker":
         raise PartcalError("import: --tool-mm is the target offset of a tracker registration; it needs --frame "
                            "tracker (in the base frame the measured positions already include the tool)")
@@ -454,7 +454,7 @@ def _cmd_plan(args) -> int:
     start = time.perf_counter()
     model = design.PlannedModel(base=not args.no_base, tool=not args.no_tool, compliance=args.compliance or (),
                                 joint_harmonics=_one_or_many(args.joint_harmonics or (0,)),
-                                payload_kg=args.payload_kg).check(robot)
+                                payload_kg=args.payload_kg, parametrization=args.parametrization).check(robot)
     options = {"model": model}
     evaluated = read_columns(args.evaluate, [joint_columns(robot.n_joints)], fmt=_format(args))[1] \
         if args.evaluate else None
@@ -498,6 +498,29 @@ def _cmd_plan(args) -> int:
         rows = plan.pose_curve(robot, counts, space=space, noise_mm=args.noise_mm, random_state=args.seed,
                                callback=lambda k, total, row: say(f"curve [{k}/{total}] {row['n']} poses"))
         print("\n".join(plan.curve_lines(rows, args.noise_mm)))
+    return 0
+
+
+def _cmd_export(args) -> int:
+    from .data.measurements import read_measurements
+    from .study.export import FORMATS, export_model
+    from .study.persist import load_model
+
+    formats = tuple(args.formats.split(",")) if args.formats else FORMATS
+    q = errors = None
+    if args.data:
+        robot = load_model(args.model)[0].robot_
+        data = read_measurements(args.data, robot, fmt=_format(args))
+        q, errors = data.q_deg, data.errors_mm
+    result = export_model(args.model, Path(args.output), formats, q, errors)
+    for fmt, path in result.files.items():
+        print(f"{fmt}: {path}")
+    for fmt, why in result.skipped.items():
+        print(f"{fmt}: not written: {why}")
+    if result.tcp_mm is not None:
+        print("ur: tool centre point in tool0 (mm): " + " ".join(f"{v:.6f}" for v in result.tcp_mm))
+    if result.not_carried:
+        print(result.not_carried)
     return 0
 
 
@@ -589,7 +612,8 @@ def build_parser() -> argparse.ArgumentParser:
     imp.add_argument("input", nargs="?", help="the file to convert (or use --config)")
     imp.add_argument("-o", "--output", help="CSV to write; with --config, the folder for <data set>.csv")
     imp.add_argument("--format", metavar="FILE.yaml", help="the input's format, see docs/data.md")
-    imp.add_argument("--robot", help="robot (built-in name or YAML) for nominal positions by forward kinematics")
+    imp.add_argument("--robot", help="robot (built-in name, robot YAML, or a URDF as FILE.urdf#base=LINK&tip=LINK) "
+                                     "for nominal positions by forward kinematics")
     imp.add_argument("--frame", choices=("base", "tracker"), default="base",
                      help="tracker: register the file's tracker frame (and tool offset) on its own poses")
     imp.add_argument("--tool-mm", nargs=3, type=float, metavar=("X", "Y", "Z"),
@@ -599,8 +623,17 @@ def build_parser() -> argparse.ArgumentParser:
     imp.add_argument("--config", metavar="RUN.yaml",
                      help="convert the data of a run config (format, subsets, registration) without fitting")
     imp.set_defaults(func=_cmd_import)
+    exp = sub.add_parser("export", help="write the calibrated robot of a kinematic model: URDF, UR kinematics YAML, "
+                                        "DH table, robot YAML")
+    exp.add_argument("model", help="model file of kind kinematic (models/<name>.json of a run)")
+    exp.add_argument("-o", "--output", required=True, help="folder to write into")
+    exp.add_argument("--formats", metavar="F,F", help="some of urdf,ur,dh,yaml (default: all the chain allows)")
+    exp.add_argument("--data", metavar="DATA.csv", help="a measurement CSV (base frame): the RMS the exported "
+                                                        "geometry and the full model leave on it")
+    exp.add_argument("--format", metavar="FILE.yaml", help="the data's format, see docs/data.md")
+    exp.set_defaults(func=_cmd_export)
     pln = sub.add_parser("plan", help="choose the poses to measure (D-optimal), or judge a pose set's observability")
-    pln.add_argument("robot", help="built-in robot name or robot YAML")
+    pln.add_argument("robot", help="built-in robot name, robot YAML, or a URDF as FILE.urdf#base=LINK&tip=LINK")
     pln.add_argument("-n", type=_positive_int, help="number of poses to plan")
     pln.add_argument("-o", "--output", help="pose list to write (q1..qN deg, x_nom,y_nom,z_nom mm)")
     pln.add_argument("--evaluate", metavar="DATA.csv", help="print the observability indices, unidentifiable "
@@ -625,6 +658,8 @@ def build_parser() -> argparse.ArgumentParser:
                      help="plan for K transmission harmonics of every joint, or one K per joint")
     pln.add_argument("--payload-kg", type=float, default=0.0,
                      help="the payload the measurement carries at the tool (kg, default 0; with --compliance)")
+    pln.add_argument("--parametrization", choices=("auto", "dh", "complete"), default="auto",
+                     help="the geometric parameters planned for (auto: dh for DH rows, complete for a URDF's chain)")
     pln.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
     pln.set_defaults(func=_cmd_plan)
     return parser

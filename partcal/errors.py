@@ -20,6 +20,11 @@ class ConfigError(PartcalError):
     """A YAML file (run config, robot, virtual robot) is malformed."""
 
 
+class RobotFileError(ConfigError):
+    """A robot description (a URDF) is malformed or does not hold the chain asked for (names the file, the
+    element and its line, and what was expected)."""
+
+
 class UnreachableError(PartcalError):
     """Inverse kinematics found no joint angles for one or more targets.
 

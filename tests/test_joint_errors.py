@@ -198,25 +198,32 @@ def test_a_bad_payload_per_pose_is_refused(sk120, exact_fit):
         exact_fit[2].predict(q, payload_kg=1e9)
 
 
-def test_the_analytic_jacobian_matches_central_differences(sk120):
+@pytest.mark.parametrize("parametrization, origins", [("dh", False), ("complete", False), ("dh", True)])
+def test_the_analytic_jacobian_matches_central_differences(sk120, parametrization, origins):
     """Every column, at a point where every parameter (harmonics of all joints, sags, compliances, a payload
-    per pose) is off zero: the lever arms move with the DH rows, the tool and the harmonics."""
+    per pose) is off zero: the lever arms move with the rows (DH or complete; DH rows with further origins,
+    as a URDF's chain has), the tool and the harmonics."""
+    from partcal.models.identification import geometric_size
+
     q = sk120_poses(sk120, 30, 19)
+    if origins:
+        sk120 = sk120.replace(origins=np.random.default_rng(21).normal(0, [20, 20, 20, 5, 5, 5], (8, 6)))
     errors = JointErrors.for_robot(sk120, [2, 3], [1, 2, 2, 1, 1, 1])
     rng = np.random.default_rng(20)
-    names = [n for n, _ in parameter_names(sk120, errors)]
-    values = nominal_values(sk120, errors) + rng.normal(size=len(names)) * 0.05
-    values[41:] = rng.normal(size=errors.size) * 0.3
+    names = [n for n, _ in parameter_names(sk120, errors, parametrization)]
+    values = nominal_values(sk120, errors, parametrization) + rng.normal(size=len(names)) * 0.05
+    size = geometric_size(sk120, parametrization)
+    values[size:] = rng.normal(size=errors.size) * 0.3
     values[[k for k, n in enumerate(names) if n.startswith("compliance")]] = 1e-4
     payload = rng.uniform(0, 100, len(q))
-    jac = model_jacobian(sk120, errors, q, values, payload)[1]
+    jac = model_jacobian(sk120, errors, q, values, payload, parametrization)[1]
     for k in range(values.size):
         step = 1e-5 * max(1.0, abs(values[k]))
         up, down = values.copy(), values.copy()
         up[k] += step
         down[k] -= step
-        central = (model_positions(sk120, errors, q, up, payload)
-                   - model_positions(sk120, errors, q, down, payload)).ravel() / (2 * step)
+        central = (model_positions(sk120, errors, q, up, payload, parametrization)
+                   - model_positions(sk120, errors, q, down, payload, parametrization)).ravel() / (2 * step)
         assert np.linalg.norm(jac[:, k] - central) <= 1e-6 * np.linalg.norm(central), names[k]
 
 

@@ -162,3 +162,31 @@ def test_the_targets_key_is_checked(tmp_path):
     bad.write_text(TARGETS_CONFIG.read_text().replace("  C: [-40, 90, 90]", "  C D: [-40, 90, 0]"))
     with pytest.raises(ConfigError, match=r"targets.C D \(line \d+\): a target name is letters, digits and '_'"):
         load_study(bad)
+
+
+def test_tilts_between_parallel_axes_turn_the_true_rows_about_y(tmp_path):
+    """``errors.tilt_deg: {q2: 0.03, q3: -0.02}`` on the UR10: the true robot's FK is the DH matrix product
+    with ``Ry(0.03)`` after row 2 and ``Ry(-0.02)`` after row 3; a joint beyond the robot is refused."""
+    from scipy.spatial.transform import Rotation
+
+    study = load_study(ROOT / "configs" / "ur10_tilts_virtual.yaml")
+    true = study.robot.true
+    untilted = true.replace(origins=None)
+    q = np.random.default_rng(8).uniform(-180, 180, (50, 6))
+    poses = untilted.forward(q)
+    # frames after rows 2 and 3, then the rest of the chain, by hand: T = T_0..2 Ry(a) T_3 Ry(b) T_4..6
+    partial = [untilted.replace(alpha_deg=true.alpha_deg[:k], d_mm=true.d_mm[:k], a_mm=true.a_mm[:k],
+                                theta_offset_deg=true.theta_offset_deg[:k], coupling=true.coupling[:k],
+                                tool_mm=np.zeros(3)).forward(q) for k in (2, 3)]
+    ry = [np.eye(4), np.eye(4)]
+    ry[0][:3, :3] = Rotation.from_euler("y", 0.03, degrees=True).as_matrix()
+    ry[1][:3, :3] = Rotation.from_euler("y", -0.02, degrees=True).as_matrix()
+    row3 = np.linalg.inv(partial[0]) @ partial[1]
+    rest = np.linalg.inv(partial[1]) @ poses
+    expected = partial[0] @ ry[0] @ row3 @ ry[1] @ rest
+    np.testing.assert_allclose(true.forward(q), expected, rtol=0, atol=1e-9)
+    bad = tmp_path / "bad.yaml"
+    bad.write_text((ROOT / "configs" / "ur10_tilts_virtual.yaml").read_text().replace("{q2: 0.03,", "{q7: 0.03,")
+                   .replace("output: ../data/ur10_tilts", f"output: {tmp_path}"))
+    with pytest.raises(ConfigError, match="tilt_deg.*q7"):
+        load_study(bad)

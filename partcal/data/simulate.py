@@ -27,7 +27,7 @@ from .._validation import one_of, safe_name
 from .._yamlio import Section, load_yaml, range_check
 from ..errors import ConfigError
 from ..robot.description import joint_columns, load_robot, robot_reference
-from ..robot.kinematics import Robot, matrix_from_euler_deg, xyz_deg_from_matrices
+from ..robot.kinematics import Robot, matrix_from_euler_deg, rpy_deg_from_matrix, xyz_deg_from_matrices
 from ..robot.trajectories import PATHS, paper_path
 from .formats import TARGET_NAME
 from .measurements import Measurements, write_measurements
@@ -158,7 +158,13 @@ def load_study(path: str | Path) -> Study:
     path = Path(path)
     data, lines = load_yaml(path)
     top = Section(data, "", lines, str(path))
-    nominal, targets = _targets(top, load_robot(robot_reference(top.get("robot", "str"), path.parent)))
+    spec = top.get("robot", "any", check=lambda v: None if isinstance(v, (str, dict)) else
+                   "a built-in robot name, a robot YAML or URDF file, or {urdf: FILE.urdf, base: LINK, tip: LINK}")
+    try:
+        robot = load_robot(robot_reference(spec, path.parent))
+    except ConfigError as exc:
+        top.fail(top.path("robot"), str(exc))
+    nominal, targets = _targets(top, robot)
     seed = top.get("seed", "int", check=range_check(0, integer=True))
     output = Path(os.path.normpath(path.parent / top.get("output", "str")))
     seeds = np.random.SeedSequence(seed).spawn(2)
@@ -226,8 +232,23 @@ def _true_robot(nominal: Robot, errors: Section, rng: np.random.Generator):
     true = nominal.replace(a_mm=nominal.a_mm + deviations[0], d_mm=nominal.d_mm + deviations[1],
                            alpha_deg=nominal.alpha_deg + deviations[2],
                            theta_offset_deg=nominal.theta_offset_deg + deviations[3],
-                           tool_mm=nominal.tool_mm + tool)
+                           tool_mm=nominal.tool_mm + tool, origins=_tilted(nominal, errors))
     return true, rot, shift
+
+
+def _tilted(nominal: Robot, errors: Section):
+    """The true rows' origins ``(R, 6)`` with ``errors.tilt_deg`` (``{qK: degrees}``): the row that joint K
+    turns ends turned by that much about its frame's y axis, so that the next axis leans out of the plane
+    a DH row keeps it in (a tilt between parallel axes: Hayati's beta). None without tilts."""
+    tilts = _joint_map(errors, "tilt_deg", nominal, pairs=False)
+    if not tilts:
+        return nominal.origins
+    out = np.zeros((nominal.alpha_deg.size, 6)) if nominal.origins is None else nominal.origins.copy()
+    for joint, angle in tilts.items():
+        row = int(np.flatnonzero(nominal.coupling[:, joint - 1])[0])
+        turned = matrix_from_euler_deg(out[row, 3:]) @ matrix_from_euler_deg([0.0, angle, 0.0])
+        out[row, 3:] = rpy_deg_from_matrix(turned)
+    return out
 
 
 def _compliance(errors: Section, robot: Robot) -> tuple[Compliance, ...]:

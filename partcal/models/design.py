@@ -44,7 +44,8 @@ from ..errors import PartcalError
 from ..robot.kinematics import Robot
 from .base import seed_from
 from .joint_errors import GRAVITY_M_S2, JointErrors, compliance_problem, harmonics_problem
-from .identification import identification_jacobian, nominal_values, parameter_names, stacked
+from .identification import (PARAMETRIZATIONS, identification_jacobian, nominal_values, parameter_names,
+                             resolved_parametrization, stacked)
 from .identification import model_jacobian as kinematic_jacobian
 from .targets import Extra
 
@@ -70,6 +71,10 @@ class PlannedModel:
         are planned for); at one payload it is the tool point's share of the
         sags, and only data at a second payload separate it from the masses.
 
+    parametrization : {"auto", "dh", "complete"}
+        The geometric parameters (:class:`~partcal.models.kinematic.KinematicModel`'s;
+        ``auto``: ``dh`` for DH rows, ``complete`` for a URDF's chain).
+
     Several targets (one tool offset per target) will be one more field here.
     """
 
@@ -78,6 +83,7 @@ class PlannedModel:
     compliance: tuple[int, ...] = ()
     joint_harmonics: int | tuple[int, ...] = 0
     payload_kg: float = 0.0
+    parametrization: str = "auto"
 
     def __post_init__(self):
         for name in ("compliance", "joint_harmonics"):          # lists as tuples: the model is a value
@@ -93,7 +99,14 @@ class PlannedModel:
                 raise PartcalError(f"the planned model's {name} must be {expected} for {robot.name}; got {value!r}")
         if not (math.isfinite(self.payload_kg) and self.payload_kg >= 0):
             raise PartcalError(f"the planned model's payload_kg must be a number >= 0 (kg); got {self.payload_kg!r}")
+        if self.parametrization not in ("auto", *PARAMETRIZATIONS):
+            raise PartcalError(f"the planned model's parametrization must be auto, dh or complete; got "
+                               f"{self.parametrization!r}")
         return self
+
+    def parametrization_for(self, robot: Robot) -> str:
+        """The parametrization planned for on ``robot`` (``auto`` resolved)."""
+        return resolved_parametrization(self.parametrization, robot)
 
     def joint_errors(self, robot: Robot) -> JointErrors | None:
         """The joint errors planned for (None without)."""
@@ -103,7 +116,8 @@ class PlannedModel:
     def describe(self, robot: Robot) -> str:
         """``DH with base and tool; compliance of joints 2, 3 (payload 0 kg); 2 harmonics per joint``."""
         flags = [name for name, flag in (("base", self.base), ("tool", self.tool)) if flag]
-        parts = ["DH" + (" with " + " and ".join(flags) if flags else "")]
+        kind = "DH" if self.parametrization_for(robot) == "dh" else "complete"
+        parts = [kind + (" with " + " and ".join(flags) if flags else "")]
         if self.compliance:
             parts.append(f"compliance of joints {', '.join(map(str, self.compliance))} "
                          f"(payload {self.payload_kg:g} kg)")
@@ -122,8 +136,8 @@ def model_parameters(robot: Robot, model: PlannedModel = DH) -> tuple[list[tuple
     The one place that says which kinematic model is planned for (DH rows, tool, base, then the joint
     errors of ``model``); :func:`model_jacobian` and :func:`parameter_scales` read it.
     """
-    errors = model.joint_errors(robot)
-    return parameter_names(robot, errors), nominal_values(robot, errors)
+    errors, par = model.joint_errors(robot), model.parametrization_for(robot)
+    return parameter_names(robot, errors, par), nominal_values(robot, errors, par)
 
 
 def model_jacobian(robot: Robot, q_deg: NDArray[np.float64], model: PlannedModel = DH
@@ -146,11 +160,11 @@ def model_jacobian(robot: Robot, q_deg: NDArray[np.float64], model: PlannedModel
     wanted : ndarray of bool, shape (P,)
     """
     names, values = model_parameters(robot, model)
-    errors = model.joint_errors(robot)
+    errors, par = model.joint_errors(robot), model.parametrization_for(robot)
     if errors is None:
-        jac = identification_jacobian(robot, q_deg, values)[1]
+        jac = identification_jacobian(robot, q_deg, values, par)[1]
     else:
-        jac = kinematic_jacobian(robot, errors, q_deg, values, np.full(len(q_deg), float(model.payload_kg)))[1]
+        jac = kinematic_jacobian(robot, errors, q_deg, values, np.full(len(q_deg), float(model.payload_kg)), par)[1]
     wanted = np.array([(model.tool or not n.startswith("tool.")) and (model.base or not n.startswith("base."))
                        for n, _ in names])
     return jac, wanted

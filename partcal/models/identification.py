@@ -10,6 +10,13 @@ parameter space. ``identify`` finds the parameters that put the forward
 kinematics through the measured positions, by Levenberg-Marquardt with the
 analytic Jacobian of the chain.
 
+Two parametrizations of the geometry: ``dh``, the four DH parameters of
+every row (its theta offset, d, a and alpha), and ``complete``, every row's
+theta offset and the six errors of its fixed transform (a shift along and a
+turn about each axis of the frame the row ends in). The complete one holds
+what DH rows cannot, such as a tilt between parallel axes; the rank rule
+below keeps of it what the data identify.
+
 Positions alone cannot tell every parameter apart: two parallel joint axes
 share one ``d``, the first joint's offset is a turn of the base about its z
 axis, and a wrist that never moves hides its own offsets. Those directions
@@ -41,14 +48,17 @@ from scipy.spatial.transform import Rotation
 
 from .._validation import check_array
 from ..errors import DataError
-from ..robot.kinematics import Robot, matrix_from_euler_deg
+from ..robot.kinematics import Robot, matrix_from_euler_deg, rpy_deg_from_matrix
 from .joint_errors import JointErrors
 from .targets import Extra
 
 log = logging.getLogger(__name__)
 
-_DEG_RAD = np.pi / 180.0
+_DEG = np.pi / 180.0
 ROW_PARAMETERS = (("theta", "deg"), ("d", "mm"), ("a", "mm"), ("alpha", "deg"))
+COMPLETE_ROW_PARAMETERS = (("theta", "deg"), ("x", "mm"), ("y", "mm"), ("z", "mm"), ("rx", "deg"), ("ry", "deg"),
+                           ("rz", "deg"))
+PARAMETRIZATIONS = {"dh": ROW_PARAMETERS, "complete": COMPLETE_ROW_PARAMETERS}
 TOOL_PARAMETERS = (("tool.x", "mm"), ("tool.y", "mm"), ("tool.z", "mm"))
 BASE_PARAMETERS = (("base.x", "mm"), ("base.y", "mm"), ("base.z", "mm"),
                    ("base.rx", "deg"), ("base.ry", "deg"), ("base.rz", "deg"))
@@ -57,100 +67,197 @@ PRIMARY_TARGET = "A"        # the data's unsuffixed target (partcal.data.measure
 
 
 # ---------------------------------------------------------------------- the parameter vector
-def parameter_names(robot: Robot, errors: JointErrors | None = None) -> list[tuple[str, str]]:
-    """``(name, unit)`` of every parameter: ``theta[1], d[1], a[1], alpha[1], ..., tool.*, base.*``, then the
-    joint errors' (:meth:`JointErrors.names`).
+def resolved_parametrization(parametrization: str, robot: Robot) -> str:
+    """``parametrization`` with ``auto`` resolved: ``complete`` for a chain with general origins (a URDF's),
+    ``dh`` for a robot of DH rows (docs/models.md says why)."""
+    if parametrization != "auto":
+        return parametrization
+    general = robot.origins is not None and bool(np.any(robot.origins))
+    return "complete" if general else "dh"
+
+
+def parameter_names(robot: Robot, errors: JointErrors | None = None, parametrization: str = "dh"
+                    ) -> list[tuple[str, str]]:
+    """``(name, unit)`` of every parameter: ``theta[1], d[1], a[1], alpha[1], ..., tool.*, base.*`` (``dh``) or
+    ``theta[1], x[1], y[1], z[1], rx[1], ry[1], rz[1], ...`` (``complete``), then the joint errors'
+    (:meth:`JointErrors.names`).
 
     >>> from partcal import load_robot
     >>> [n for n, _ in parameter_names(load_robot("motoman_sk120"))][:5]
     ['theta[1]', 'd[1]', 'a[1]', 'alpha[1]', 'theta[2]']
+    >>> [n for n, _ in parameter_names(load_robot("motoman_sk120"), parametrization="complete")][:8]
+    ['theta[1]', 'x[1]', 'y[1]', 'z[1]', 'rx[1]', 'ry[1]', 'rz[1]', 'theta[2]']
     """
-    rows = [(f"{p}[{r + 1}]", unit) for r in range(robot.alpha_deg.size) for p, unit in ROW_PARAMETERS]
+    rows = [(f"{p}[{r + 1}]", unit) for r in range(robot.alpha_deg.size)
+            for p, unit in PARAMETRIZATIONS[parametrization]]
     return rows + list(TOOL_PARAMETERS) + list(BASE_PARAMETERS) + (errors.names() if errors is not None else [])
 
 
-def nominal_values(robot: Robot, errors: JointErrors | None = None) -> NDArray[np.float64]:
-    """The robot's own parameter values, shape ``(4 R + 9 [+ P],)``: rows, tool, a zero base correction, and
-    zero joint errors."""
-    rows = np.column_stack([robot.theta_offset_deg, robot.d_mm, robot.a_mm, robot.alpha_deg]).ravel()
+def nominal_values(robot: Robot, errors: JointErrors | None = None, parametrization: str = "dh"
+                   ) -> NDArray[np.float64]:
+    """The robot's own parameter values, shape ``(G [+ P],)`` (:func:`geometric_size`): rows, tool, a zero base
+    correction, and zero joint errors. A complete row's six errors are nominally zero."""
+    if parametrization == "complete":
+        zeros = np.zeros((robot.alpha_deg.size, 6))
+        rows = np.column_stack([robot.theta_offset_deg, zeros]).ravel()
+    else:
+        rows = np.column_stack([robot.theta_offset_deg, robot.d_mm, robot.a_mm, robot.alpha_deg]).ravel()
     return np.concatenate([rows, robot.tool_mm, np.zeros(6 + (errors.size if errors is not None else 0))])
 
 
-def geometric_size(robot: Robot) -> int:
-    """Number of geometric parameters, ``4 R + 9`` (the joint errors' follow them)."""
-    return 4 * robot.alpha_deg.size + 9
+def geometric_size(robot: Robot, parametrization: str = "dh") -> int:
+    """Number of geometric parameters ``G``: ``4 R + 9`` (``dh``) or ``7 R + 9`` (``complete``); the joint
+    errors' follow them. The tool's three and the base's six are the last nine."""
+    return len(PARAMETRIZATIONS[parametrization]) * robot.alpha_deg.size + 9
 
 
-def robot_with(nominal: Robot, values: NDArray[np.float64]) -> Robot:
-    """The robot with parameter ``values`` (``(4 R + 9,)``, as :func:`nominal_values`; joint errors ignored).
+def robot_with(nominal: Robot, values: NDArray[np.float64], parametrization: str = "dh") -> Robot:
+    """The robot with parameter ``values`` (``(G,)``, as :func:`nominal_values`; joint errors ignored).
 
     The base correction turns the nominal base by ``Rz Ry Rx`` about the
-    measurement frame's axes and then shifts it.
+    measurement frame's axes and then shifts it. A complete row's errors
+    follow its fixed transform: ``E' = E Tr(x, y, z) Rz(rz) Ry(ry) Rx(rx)``.
     """
-    rows = nominal.alpha_deg.size
+    rows, size = nominal.alpha_deg.size, geometric_size(nominal, parametrization)
+    turn = matrix_from_euler_deg(values[size - 3:size])
+    moved = dict(tool_mm=values[size - 9:size - 6].copy(), base_rotation=turn @ nominal.base_rotation,
+                 base_mm=turn @ nominal.base_mm + values[size - 6:size - 3])
+    if parametrization == "complete":
+        table = values[:7 * rows].reshape(rows, 7)
+        return nominal.replace(theta_offset_deg=table[:, 0].copy(), origins=_corrected_origins(nominal, table[:, 1:]),
+                               **moved)
     dh = values[:4 * rows].reshape(rows, 4)
-    turn = matrix_from_euler_deg(values[4 * rows + 6:4 * rows + 9])
     return nominal.replace(theta_offset_deg=dh[:, 0].copy(), d_mm=dh[:, 1].copy(), a_mm=dh[:, 2].copy(),
-                           alpha_deg=dh[:, 3].copy(), tool_mm=values[4 * rows:4 * rows + 3].copy(),
-                           base_rotation=turn @ nominal.base_rotation,
-                           base_mm=turn @ nominal.base_mm + values[4 * rows + 3:4 * rows + 6])
+                           alpha_deg=dh[:, 3].copy(), **moved)
 
 
-def identification_jacobian(nominal: Robot, q_deg: NDArray[np.float64], values: NDArray[np.float64]
-                            ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Positions ``(n, 3)`` mm of the robot with ``values``, and ``d p / d values``, shape ``(3 n, 4 R + 9)``.
+def _corrected_origins(nominal: Robot, errors: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Every row's transform ``E`` followed by its errors ``(R, 6)`` (x, y, z mm, rx, ry, rz deg), as origins
+    ``(R, 6)`` (xyz mm, rpy deg)."""
+    out = np.zeros((errors.shape[0], 6)) if nominal.origins is None else nominal.origins.copy()
+    for r in np.flatnonzero(np.any(errors != 0, axis=1)):
+        rot = matrix_from_euler_deg(out[r, 3:])
+        out[r, :3] = out[r, :3] + rot @ errors[r, :3]
+        out[r, 3:] = rpy_deg_from_matrix(rot @ matrix_from_euler_deg(errors[r, 3:]))
+    return out
+
+
+def identification_jacobian(nominal: Robot, q_deg: NDArray[np.float64], values: NDArray[np.float64],
+                            parametrization: str = "dh") -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Positions ``(n, 3)`` mm of the robot with ``values``, and ``d p / d values``, shape ``(3 n, G)``.
 
     Rows of the Jacobian run over poses then x, y, z (``positions.ravel()``).
     """
-    robot = robot_with(nominal, values)
+    robot = robot_with(nominal, values, parametrization)
     p, chain = robot.parameter_jacobian(q_deg)
-    rows = nominal.alpha_deg.size
-    lever = p - values[4 * rows + 3:4 * rows + 6]                # about the shifted base origin
+    size = geometric_size(nominal, parametrization)
+    if parametrization == "complete":
+        chain = _complete_columns(robot, q_deg, p, chain, values)
+    lever = p - values[size - 6:size - 3]                # about the shifted base origin
     base = np.empty((p.shape[0], 3, 6))
     base[:, :, :3] = np.eye(3)
-    for k, axis in enumerate(base_axes(nominal, values)):
+    for k, axis in enumerate(base_axes(nominal, values, parametrization)):
         base[:, :, 3 + k] = np.cross(axis, lever) * (np.pi / 180.0)
-    return p, np.concatenate([chain, base], axis=2).reshape(-1, 4 * rows + 9)
+    return p, np.concatenate([chain, base], axis=2).reshape(-1, size)
 
 
-def base_axes(nominal: Robot, values: NDArray[np.float64]) -> list[NDArray[np.float64]]:
+def complete_axes(robot: Robot, q_deg: NDArray[np.float64], values: NDArray[np.float64]
+                  ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """For the complete parametrization at ``values``: the frame origins ``(n, R + 1, 3)`` and, per row, the
+    directions its shifts ``x, y, z`` move along and the axes its turns ``rx, ry, rz`` turn about (about the
+    origin of the frame the row ends in), each ``(n, R, 3, 3)`` (last axis: the parameter).
+
+    The errors follow the row's transform, ``E Tr(x, y, z) Rz Ry Rx``: the shifts move along the axes of
+    ``F``, the frame before the turn; ``rz`` turns about ``F``'s z, ``ry`` about ``F Rz`` y, ``rx`` about
+    ``F Rz Ry`` x.
+    """
+    rows = robot.alpha_deg.size
+    origins, xs, zs = robot.frame_axes(q_deg)
+    frames = np.stack([xs[:, 1:], np.cross(zs[:, 1:], xs[:, 1:]), zs[:, 1:]], axis=-1)     # (n, R, 3, 3)
+    turns = values[:7 * rows].reshape(rows, 7)[:, 4:]
+    shifts, axes = np.empty_like(frames), np.empty_like(frames)
+    for r in range(rows):
+        rx, ry, rz = turns[r]
+        f = frames[:, r] @ matrix_from_euler_deg(turns[r]).T
+        local = np.column_stack([matrix_from_euler_deg([0.0, 0.0, rz]) @ matrix_from_euler_deg([0.0, ry, 0.0])
+                                 @ [1.0, 0, 0], matrix_from_euler_deg([0.0, 0.0, rz]) @ [0, 1.0, 0], [0, 0, 1.0]])
+        shifts[:, r], axes[:, r] = f, f @ local
+    return origins, shifts, axes
+
+
+def _complete_columns(robot: Robot, q_deg, p, chain, values) -> NDArray[np.float64]:
+    """``d p / d`` the complete rows' parameters and the tool ``(n, 3, 7 R + 3)``, from the DH columns
+    ``chain`` of :meth:`Robot.parameter_jacobian` (their theta columns are the same)."""
+    rows = robot.alpha_deg.size
+    origins, shifts, axes = complete_axes(robot, q_deg, values)
+    out = np.empty((p.shape[0], 3, 7 * rows + 3))
+    out[:, :, 0:7 * rows:7] = chain[:, :, 0:4 * rows:4]
+    for r in range(rows):
+        out[:, :, 7 * r + 1:7 * r + 4] = shifts[:, r]
+        lever = p - origins[:, r + 1]
+        out[:, :, 7 * r + 4:7 * r + 7] = np.cross(axes[:, r], lever[:, :, None], axis=1) * (np.pi / 180.0)
+    out[:, :, 7 * rows:] = chain[:, :, 4 * rows:]
+    return out
+
+
+def base_axes(nominal: Robot, values: NDArray[np.float64], parametrization: str = "dh"
+              ) -> list[NDArray[np.float64]]:
     """The axes ``(3,)`` the base correction's ``rx, ry, rz`` turn about (``Rz Ry Rx``), in the measurement frame."""
-    rows = nominal.alpha_deg.size
-    _, ry, rz = values[4 * rows + 6:4 * rows + 9]
+    size = geometric_size(nominal, parametrization)
+    _, ry, rz = values[size - 3:size]
     turn_z = matrix_from_euler_deg(np.array([0.0, 0.0, rz]))
     return [turn_z @ matrix_from_euler_deg(np.array([0.0, ry, 0.0])) @ [1.0, 0, 0], turn_z @ [0, 1.0, 0],
             np.array([0, 0, 1.0])]
 
 
 def actual_joints(nominal: Robot, errors: JointErrors | None, q_deg: NDArray[np.float64],
-                  values: NDArray[np.float64], payload_kg: NDArray[np.float64], derivatives: bool = False):
+                  values: NDArray[np.float64], payload_kg: NDArray[np.float64], derivatives: bool = False,
+                  parametrization: str = "dh"):
     """The joint angles the arm takes, ``(n, N)`` deg, their design and the lever arms' moves (see
     :meth:`JointErrors.design`; None without joint errors). Gravity acts in the robot's own base frame:
     the base correction is left out."""
     if errors is None or errors.empty:
         return q_deg, None, None
-    size = geometric_size(nominal)
-    return errors.design(own_geometry(nominal, values), q_deg, values[size:size + errors.size], payload_kg,
-                         derivatives)
+    size = geometric_size(nominal, parametrization)
+    motions = complete_motions(values) if parametrization == "complete" else None
+    return errors.design(own_geometry(nominal, values, parametrization), q_deg, values[size:size + errors.size],
+                         payload_kg, derivatives, motions)
 
 
-def own_geometry(nominal: Robot, values: NDArray[np.float64]) -> Robot:
+def complete_motions(values: NDArray[np.float64]):
+    """For the lever arms of compliant joints: how each complete row parameter at ``values`` moves the frames
+    after its row (as :func:`partcal.models.joint_errors.dh_motions`): theta turns about the row's z axis,
+    the shifts and turns of :func:`complete_axes` (turns about the origin of the frame the row ends in)."""
+    def motions(geometry: Robot, q_deg: NDArray[np.float64]) -> list:
+        origins, shifts, axes = complete_axes(geometry, q_deg, values)
+        zs = geometry.frame_axes(q_deg)[2]
+        out = []
+        for r in range(geometry.alpha_deg.size):
+            out.append(("turn", zs[:, r], origins[:, r], r))
+            out += [("shift", shifts[:, r, :, k], None, r) for k in range(3)]
+            out += [("turn", axes[:, r, :, k], origins[:, r + 1], r) for k in range(3)]
+        return out
+    return motions
+
+
+def own_geometry(nominal: Robot, values: NDArray[np.float64], parametrization: str = "dh") -> Robot:
     """The robot with ``values`` in its own base frame (the base correction left out): where gravity acts
     along ``-z``, and the joint errors' lever arms are taken."""
-    own = values[:geometric_size(nominal)].copy()
+    own = values[:geometric_size(nominal, parametrization)].copy()
     own[-6:] = 0.0
-    return robot_with(nominal, own)
+    return robot_with(nominal, own, parametrization)
 
 
 def model_positions(nominal: Robot, errors: JointErrors | None, q_deg: NDArray[np.float64],
-                    values: NDArray[np.float64], payload_kg: NDArray[np.float64]) -> NDArray[np.float64]:
+                    values: NDArray[np.float64], payload_kg: NDArray[np.float64], parametrization: str = "dh"
+                    ) -> NDArray[np.float64]:
     """Tool positions ``(n, 3)`` mm of the model with ``values`` (geometry and joint errors)."""
-    q_actual = actual_joints(nominal, errors, q_deg, values, payload_kg)[0]
-    return robot_with(nominal, values).positions(q_actual)
+    q_actual = actual_joints(nominal, errors, q_deg, values, payload_kg, parametrization=parametrization)[0]
+    return robot_with(nominal, values, parametrization).positions(q_actual)
 
 
 def model_jacobian(nominal: Robot, errors: JointErrors | None, q_deg: NDArray[np.float64],
-                   values: NDArray[np.float64], payload_kg: NDArray[np.float64]
+                   values: NDArray[np.float64], payload_kg: NDArray[np.float64], parametrization: str = "dh"
                    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Positions ``(n, 3)`` mm and ``d p / d values``, shape ``(3 n, P)``, geometry and joint errors.
 
@@ -158,12 +265,13 @@ def model_jacobian(nominal: Robot, errors: JointErrors | None, q_deg: NDArray[np
     with compliant joints, how the DH rows and the tool move the lever arms; a joint error's column is
     the joint's position Jacobian times its design column. All analytic.
     """
-    q_actual, design, moves = actual_joints(nominal, errors, q_deg, values, payload_kg, derivatives=True)
-    size = geometric_size(nominal)
-    p, jac = identification_jacobian(nominal, q_actual, values[:size])
+    q_actual, design, moves = actual_joints(nominal, errors, q_deg, values, payload_kg, derivatives=True,
+                                            parametrization=parametrization)
+    size = geometric_size(nominal, parametrization)
+    p, jac = identification_jacobian(nominal, q_actual, values[:size], parametrization)
     if design is None:
         return p, jac
-    joints = robot_with(nominal, values).jacobian(q_actual)                       # (n, 3, N) mm/deg
+    joints = robot_with(nominal, values, parametrization).jacobian(q_actual)      # (n, 3, N) mm/deg
     if moves is not None:
         jac[:, :size - 6] += np.einsum("nij,njp->nip", joints, moves).reshape(-1, size - 6)
     extra = np.einsum("nij,njp->nip", joints, design).reshape(-1, design.shape[2])
@@ -256,7 +364,7 @@ class Identification:
 
 def identify(robot: Robot, q_deg: NDArray[np.float64], measured_mm: NDArray[np.float64], *, base: bool = True,
              tool: bool = True, rcond: float = 1e-6, errors: JointErrors | None = None,
-             payload_kg=0.0, extra: Extra | None = None) -> Identification:
+             payload_kg=0.0, extra: Extra | None = None, parametrization: str = "dh") -> Identification:
     """Identify the parameters that bring the model's forward kinematics through measured positions.
 
     Parameters
@@ -282,6 +390,10 @@ def identify(robot: Robot, q_deg: NDArray[np.float64], measured_mm: NDArray[np.f
         Further targets and the measured orientation (:mod:`partcal.models.targets`):
         their residuals are stacked with the primary's, one offset per target
         and the probe's turn are identified too (their parameters come last).
+    parametrization : {"dh", "complete"}
+        The geometric parameters: four DH parameters per row, or each row's
+        theta offset and the six errors of its fixed transform (see the module
+        notes).
 
     Returns
     -------
@@ -292,29 +404,31 @@ def identify(robot: Robot, q_deg: NDArray[np.float64], measured_mm: NDArray[np.f
     if len(measured_mm) != len(q_deg):
         raise DataError(f"measured_mm has {len(measured_mm)} rows but q_deg has {len(q_deg)}")
     payload = np.broadcast_to(np.asarray(payload_kg, dtype=float), (len(q_deg),))
-    v0 = nominal_values(robot, errors)
-    rows, own = robot.alpha_deg.size, v0.size
+    if parametrization not in PARAMETRIZATIONS:
+        raise DataError(f"parametrization must be one of {', '.join(PARAMETRIZATIONS)}; got {parametrization!r}")
+    v0 = nominal_values(robot, errors, parametrization)
+    size, own = geometric_size(robot, parametrization), v0.size
     wanted = np.ones(v0.size + (extra.size if extra is not None else 0), dtype=bool)
-    wanted[4 * rows:4 * rows + 3] = tool
-    wanted[4 * rows + 3:4 * rows + 9] = base
+    wanted[size - 9:size - 6] = tool
+    wanted[size - 6:size] = base
     if extra is None:
         def jac_at(v, jacobian=True):
             if not jacobian:
-                return (model_positions(robot, errors, q_deg, v, payload) - measured_mm).ravel(), None
-            p, jac = model_jacobian(robot, errors, q_deg, v, payload)
+                return (model_positions(robot, errors, q_deg, v, payload, parametrization) - measured_mm).ravel(), None
+            p, jac = model_jacobian(robot, errors, q_deg, v, payload, parametrization)
             return (p - measured_mm).ravel(), jac
     else:
         v0 = np.concatenate([v0, extra.nominal()])
         wanted[own:own + 3 * len(extra.tools_mm)] = tool
         jac_at = functools.partial(stacked, robot, errors, q_deg, payload_kg=payload, measured_mm=measured_mm,
-                                   extra=extra)
+                                   extra=extra, parametrization=parametrization)
     jac0 = jac_at(v0)[1]
-    names = parameter_names(robot, errors) + (extra.names() if extra is not None else [])
+    names = parameter_names(robot, errors, parametrization) + (extra.names() if extra is not None else [])
     units = [unit for _, unit in names]
     free, rank = _identifiable(jac0, wanted, rcond, units)
 
     limits = np.full(v0.size, np.nan)
-    limits[:4 * rows] = [PLAUSIBLE_ERROR[unit] * IMPLAUSIBLE for unit in units[:4 * rows]]
+    limits[:size - 9] = [PLAUSIBLE_ERROR[unit] * IMPLAUSIBLE for unit in units[:size - 9]]     # the rows' parameters
     v, evaluations = v0.copy(), 0
     resid0 = jac_at(v0, jacobian=False)[0]
     while free.size:
@@ -461,7 +575,7 @@ def _uncertainty(jac: NDArray[np.float64], resid: NDArray[np.float64]) -> tuple[
 # ---------------------------------------------------------------------- several targets and the orientation
 def stacked(nominal: Robot, errors: JointErrors | None, q_deg: NDArray[np.float64], values: NDArray[np.float64],
             payload_kg: NDArray[np.float64], measured_mm: NDArray[np.float64], extra: Extra,
-            jacobian: bool = True) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
+            jacobian: bool = True, parametrization: str = "dh") -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
     """The stacked residuals (model - measured) of every target and the orientation, and their Jacobian.
 
     Parameters
@@ -470,6 +584,8 @@ def stacked(nominal: Robot, errors: JointErrors | None, q_deg: NDArray[np.float6
         The model's parameters (geometry, joint errors), then the extra ones.
     measured_mm : ndarray, shape (n, 3)
         The primary target, base frame, mm.
+    parametrization : {"dh", "complete"}
+        The geometry's parameters (:mod:`partcal.models.identification`).
 
     Returns
     -------
@@ -477,48 +593,51 @@ def stacked(nominal: Robot, errors: JointErrors | None, q_deg: NDArray[np.float6
         mm (the orientation's: radians times ``extra.mm_per_rad``).
     jacobian : ndarray, shape (len(residuals), len(values)), or None
     """
-    size = geometric_size(nominal)
+    par = parametrization
+    size = geometric_size(nominal, par)
     own = size + (errors.size if errors is not None else 0)
-    rows, n = nominal.alpha_deg.size, q_deg.shape[0]
-    q_actual, design, moves = actual_joints(nominal, errors, q_deg, values[:own], payload_kg, derivatives=jacobian)
-    tools = [values[4 * rows:4 * rows + 3]] + [values[own + 3 * k:own + 3 * k + 3] for k in range(len(extra.tools_mm))]
+    tool_at, n = slice(size - 9, size - 6), q_deg.shape[0]
+    q_actual, design, moves = actual_joints(nominal, errors, q_deg, values[:own], payload_kg, derivatives=jacobian,
+                                            parametrization=par)
+    tools = [values[tool_at]] + [values[own + 3 * k:own + 3 * k + 3] for k in range(len(extra.tools_mm))]
     residuals, blocks = [], []
     for k, (tool, meas) in enumerate(zip(tools, [measured_mm, *extra.measured_mm.values()])):
         v_k = values[:own].copy()
-        v_k[4 * rows:4 * rows + 3] = tool
+        v_k[tool_at] = tool
         if not jacobian:
-            residuals.append((robot_with(nominal, v_k).positions(q_actual) - meas).ravel())
+            residuals.append((robot_with(nominal, v_k, par).positions(q_actual) - meas).ravel())
             continue
-        p, jac = identification_jacobian(nominal, q_actual, v_k[:size])
+        p, jac = identification_jacobian(nominal, q_actual, v_k[:size], par)
         residuals.append((p - meas).ravel())
         block = np.zeros((3 * n, values.size))
         if k:
-            block[:, own + 3 * (k - 1):own + 3 * k] = jac[:, 4 * rows:4 * rows + 3]
-            jac[:, 4 * rows:4 * rows + 3] = 0.0
+            block[:, own + 3 * (k - 1):own + 3 * k] = jac[:, tool_at]
+            jac[:, tool_at] = 0.0
         if design is not None:
-            joints = robot_with(nominal, v_k).jacobian(q_actual)
+            joints = robot_with(nominal, v_k, par).jacobian(q_actual)
             if moves is not None:
                 jac[:, :size - 6] += np.einsum("nij,njp->nip", joints, moves).reshape(-1, size - 6)
             block[:, size:own] = np.einsum("nij,njp->nip", joints, design).reshape(-1, design.shape[2])
         block[:, :size] = jac
         blocks.append(block)
     if extra.rotations is not None:
-        r, j = _orientation(nominal, q_actual, design, moves, values, own, extra, jacobian)
+        r, j = _orientation(nominal, q_actual, design, moves, values, own, extra, jacobian, par)
         residuals.append(r)
         blocks.append(j)
     return np.concatenate(residuals), (np.vstack(blocks) if jacobian else None)
 
 
-def _orientation(nominal: Robot, q_actual, design, moves, values, own: int, extra: Extra, jacobian: bool):
+def _orientation(nominal: Robot, q_actual, design, moves, values, own: int, extra: Extra, jacobian: bool,
+                 parametrization: str = "dh"):
     """The orientation's residuals ``mm_per_rad * log(R_model R_meas^T)`` and their Jacobian rows.
 
     A parameter's column is the angular velocity it gives the flange (base frame, per unit): a
-    row's theta turns about the row's z axis, its alpha about the next frame's x axis, the base
-    correction about its axes, a joint error through the joint's axes, the probe's turn about the
-    model frame's axes. Lengths turn nothing.
+    row's theta turns about the row's z axis, its alpha about the next frame's x axis (a complete
+    row's turns about their axes), the base correction about its axes, a joint error through the
+    joint's axes, the probe's turn about the model frame's axes. Lengths turn nothing.
     """
-    size, rows, n = geometric_size(nominal), nominal.alpha_deg.size, q_actual.shape[0]
-    robot = robot_with(nominal, values[:own])
+    size, rows, n = geometric_size(nominal, parametrization), nominal.alpha_deg.size, q_actual.shape[0]
+    robot = robot_with(nominal, values[:own], parametrization)
     model = robot.forward(q_actual)[:, :3, :3] @ Rotation.from_rotvec(values[-3:], degrees=True).as_matrix()
     weight = extra.mm_per_rad
     turns = Rotation.from_matrix(model @ extra.rotations.transpose(0, 2, 1)).as_rotvec()
@@ -527,16 +646,22 @@ def _orientation(nominal: Robot, q_actual, design, moves, values, own: int, extr
         return residuals, None
     _, xs, zs = robot.frame_axes(q_actual)                                # (n, R + 1, 3)
     omega = np.zeros((n, 3, values.size))
-    omega[:, :, 0:4 * rows:4] = zs[:, :rows].transpose(0, 2, 1) * _DEG_RAD     # theta of each row
-    omega[:, :, 3:4 * rows:4] = xs[:, 1:].transpose(0, 2, 1) * _DEG_RAD        # alpha of each row
-    for k, axis in enumerate(base_axes(nominal, values)):
-        omega[:, :, size - 3 + k] = axis * _DEG_RAD
+    if parametrization == "complete":
+        omega[:, :, 0:7 * rows:7] = zs[:, :rows].transpose(0, 2, 1) * _DEG     # theta of each row
+        axes = complete_axes(robot, q_actual, values)[2]                      # (n, R, 3, 3)
+        for r in range(rows):
+            omega[:, :, 7 * r + 4:7 * r + 7] = axes[:, r] * _DEG
+    else:
+        omega[:, :, 0:4 * rows:4] = zs[:, :rows].transpose(0, 2, 1) * _DEG     # theta of each row
+        omega[:, :, 3:4 * rows:4] = robot.dh_axes(q_actual)[1].transpose(0, 2, 1) * _DEG   # alpha of each row
+    for k, axis in enumerate(base_axes(nominal, values, parametrization)):
+        omega[:, :, size - 3 + k] = axis * _DEG
     if design is not None:
-        per_joint = np.einsum("nri,rj->nij", zs[:, :rows], nominal.coupling) * _DEG_RAD      # (n, 3, N)
+        per_joint = np.einsum("nri,rj->nij", zs[:, :rows], nominal.coupling) * _DEG      # (n, 3, N)
         if moves is not None:
             omega[:, :, :size - 6] += np.einsum("nij,njp->nip", per_joint, moves)
         omega[:, :, size:own] = np.einsum("nij,njp->nip", per_joint, design)
-    omega[:, :, -3:] = model * _DEG_RAD                                        # columns: the model frame's axes
+    omega[:, :, -3:] = model * _DEG                                        # columns: the model frame's axes
     return residuals, weight * np.einsum("nij,njp->nip", _log_derivative(turns), omega).reshape(-1, values.size)
 
 

@@ -104,6 +104,8 @@ class JointErrors:
         """
         pivots, signs, frames = [], [], []
         moves = (robot.a_mm != 0) | (robot.d_mm != 0)          # row r moves frame r + 1 away from frame r
+        if robot.origins is not None:
+            moves |= np.any(robot.origins[:, :3] != 0, axis=1)
         for j in compliance:
             row = int(np.flatnonzero(robot.coupling[:, j - 1])[0])
             pivots.append(row)
@@ -131,7 +133,7 @@ class JointErrors:
         return 2 * sum(self.harmonics) + sum(len(f) + 1 for f in self.frames)
 
     def design(self, geometry: Robot, q_deg: NDArray[np.float64], values: NDArray[np.float64],
-               payload_kg: NDArray[np.float64], derivatives: bool = False):
+               payload_kg: NDArray[np.float64], derivatives: bool = False, motions=None):
         """The actual joint angles and ``d q_actual / d values``.
 
         Parameters
@@ -147,6 +149,10 @@ class JointErrors:
         derivatives : bool
             Also the lever arms' dependence on the geometry and on the
             transmission errors (see Returns).
+        motions : callable, optional
+            ``motions(geometry, q_deg)``: how each geometric row parameter moves
+            the frames (:func:`dh_motions`, the default, for DH rows; the
+            complete parametrization gives its own).
 
         Returns
         -------
@@ -156,20 +162,21 @@ class JointErrors:
             ``d q_actual / d values``. Without ``derivatives`` a harmonic's
             column leaves out how its turn moves the lever arms (the
             deflection is still linear in the other parameters).
-        moves : ndarray, shape (n, N, 4 R + 3), or None
-            With ``derivatives``: ``d q_actual / d`` every DH row parameter
-            (theta, d, a, alpha per row) and the tool's x, y, z, through the
-            lever arms.
+        moves : ndarray, shape (n, N, K R + 3), or None
+            With ``derivatives``: ``d q_actual / d`` every row parameter (the
+            ``K`` of each row in the order of ``motions``: theta, d, a, alpha
+            for DH rows) and the tool's x, y, z, through the lever arms.
         """
         out = np.zeros((*q_deg.shape, values.size))
         turned = self._harmonic_columns(q_deg, out)
         col = len(turned)
         q_h = q_deg + out[:, :, :col] @ values[:col]
-        moves = self._sag_columns(geometry, q_h, values, payload_kg, out, col, derivatives) \
+        moves = self._sag_columns(geometry, q_h, values, payload_kg, out, col, derivatives, motions or dh_motions) \
             if self.compliance else None
         q_actual = q_deg + out @ values
         if moves is not None and turned:    # a harmonic turns its joint, and so the rows it drives (per degree)
-            per_joint = moves[:, :, 0:moves.shape[2] - 3:4] @ geometry.coupling      # (n, N, N)
+            stride = (moves.shape[2] - 3) // geometry.alpha_deg.size           # each row's theta comes first
+            per_joint = moves[:, :, 0:moves.shape[2] - 3:stride] @ geometry.coupling      # (n, N, N)
             for c, j in enumerate(turned):
                 out[:, :, c] += per_joint[:, :, j] * out[:, j, c, None]
         return q_actual, out, moves
@@ -186,17 +193,17 @@ class JointErrors:
                 col += 2
         return turned
 
-    def _sag_columns(self, geometry: Robot, q_h, values, payload_kg, out, col: int, derivatives: bool):
+    def _sag_columns(self, geometry: Robot, q_h, values, payload_kg, out, col: int, derivatives: bool, motions):
         """Write the lever arms of every compliant joint (sags, then the payload's) into ``out`` from column
-        ``col`` on, for the joint angles ``q_h``; with ``derivatives`` return how the DH rows and the tool
-        move them, ``(n, N, 4 R + 3)`` (None otherwise)."""
+        ``col`` on, for the joint angles ``q_h``; with ``derivatives`` return how the row parameters
+        (``motions``) and the tool move them, ``(n, N, K R + 3)`` (None otherwise)."""
         origins, xs, zs = geometry.frame_axes(q_h)
         ys = np.cross(zs[:, -1], xs[:, -1])
         tool_mm = geometry.tool_mm
         tool = origins[:, -1] + tool_mm[0] * xs[:, -1] + tool_mm[1] * ys + tool_mm[2] * zs[:, -1]
         weight = GRAVITY_M_S2 * payload_kg
-        frames_of = _Frames(origins, xs, zs, ys, tool)
-        moves = np.zeros((*q_h.shape, 4 * (origins.shape[1] - 1) + 3)) if derivatives else None
+        frames_of = _Frames(origins, xs, zs, ys, tool, motions(geometry, q_h) if derivatives else [])
+        moves = np.zeros((*q_h.shape, len(frames_of.motions) + 3)) if derivatives else None
         for j, pivot, sign, frames in zip(self.compliance, self.pivots, self.signs, self.frames):
             z = sign * zs[:, pivot]
             arm = np.concatenate([origins[:, list(frames)], tool[:, None]], axis=1) - origins[:, pivot, None]
@@ -221,16 +228,18 @@ def _cross_z(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float
 @dataclass(frozen=True)
 class _Frames:
     """The DH frames of a batch of poses, for the lever arms' derivatives: origins, x and z axes
-    ``(n, R + 1, 3)``, the last frame's y axis and the tool point ``(n, 3)``."""
+    ``(n, R + 1, 3)``, the last frame's y axis and the tool point ``(n, 3)``, and how each row parameter
+    moves the frames after its row (``motions``: ``(kind, vector, centre, row)``, see :func:`dh_motions`)."""
 
     origins: NDArray[np.float64]
     xs: NDArray[np.float64]
     zs: NDArray[np.float64]
     y_last: NDArray[np.float64]
     tool: NDArray[np.float64]
+    motions: list
 
     def lever_moves(self, pivot: int, z, arm, index: tuple, w) -> NDArray[np.float64]:
-        """``d (sum_k w_k lever_k) / d`` every DH row parameter and the tool, shape (n, 4 R + 3).
+        """``d (sum_k w_k lever_k) / d`` every row parameter and the tool, shape (n, K R + 3).
 
         ``arm`` (n, K, 3) mm runs from the pivot to the points, ``index`` (K,) is each point's frame
         (the tool's is ``R + 1``), ``w`` (n, K) their weights (deg/m). A row before the pivot turns the
@@ -238,7 +247,8 @@ class _Frames:
         gravity), never by a shift. A row after it moves the points beyond it, the axis staying put.
         """
         n, rows = arm.shape[0], self.origins.shape[1] - 1
-        out = np.zeros((n, 4 * rows + 3))
+        size = len(self.motions)
+        out = np.zeros((n, size + 3))
         index = np.asarray(index)
         rad = np.pi / 180.0
 
@@ -248,27 +258,38 @@ class _Frames:
                 value = value + _cross_z(arm, dz[:, None])
             return np.sum(w * value, axis=1) / 1000.0
 
-        for r in range(rows):
-            turns = ((self.zs[:, r], self.origins[:, r], 0), (self.xs[:, r + 1], self.origins[:, r + 1], 3))
-            shifts = ((self.zs[:, r], 1), (self.xs[:, r + 1], 2))
+        for c, (kind, u, centre, r) in enumerate(self.motions):
             if pivot >= r + 1:                                  # the whole lever turns (shifts change nothing)
-                for u, _, k in turns:
-                    out[:, 4 * r + k] = change(np.cross(u, z), np.cross(u[:, None], arm)) * rad
+                if kind == "turn":
+                    out[:, c] = change(np.cross(u, z), np.cross(u[:, None], arm)) * rad
                 continue
             beyond = index >= r + 1
             if not beyond.any():
                 continue
-            points = arm[:, beyond] + self.origins[:, pivot, None]
-            for u, centre, k in turns:
-                moved = np.zeros_like(arm)
+            moved = np.zeros_like(arm)
+            if kind == "turn":
+                points = arm[:, beyond] + self.origins[:, pivot, None]
                 moved[:, beyond] = np.cross(u[:, None], points - centre[:, None])
-                out[:, 4 * r + k] = change(None, moved) * rad
-            for t, k in shifts:
-                moved = np.zeros_like(arm)
-                moved[:, beyond] = t[:, None]
-                out[:, 4 * r + k] = change(None, moved)
+                out[:, c] = change(None, moved) * rad
+            else:
+                moved[:, beyond] = u[:, None]
+                out[:, c] = change(None, moved)
         for k, axis in enumerate((self.xs[:, -1], self.y_last, self.zs[:, -1])):
             moved = np.zeros_like(arm)
             moved[:, -1] = axis
-            out[:, 4 * rows + k] = change(None, moved)
+            out[:, size + k] = change(None, moved)
         return out
+
+
+def dh_motions(geometry: Robot, q_deg: NDArray[np.float64]) -> list:
+    """How each DH row parameter moves the frames after its row, ``(kind, vector (n, 3), centre (n, 3), row)``
+    in the order theta, d, a, alpha of every row: theta turns about the row's z axis at its origin, d
+    shifts along it, a shifts along the x axis after the row's DH part and alpha turns about it there (the
+    next frame's, for a row without a further origin)."""
+    origins, _, zs = geometry.frame_axes(q_deg)
+    mid_origins, mid_xs = geometry.dh_axes(q_deg)
+    out = []
+    for r in range(origins.shape[1] - 1):
+        out += [("turn", zs[:, r], origins[:, r], r), ("shift", zs[:, r], None, r),
+                ("shift", mid_xs[:, r], None, r), ("turn", mid_xs[:, r], mid_origins[:, r], r)]
+    return out

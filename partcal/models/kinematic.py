@@ -18,15 +18,15 @@ from scipy.spatial.transform import Rotation
 from sklearn.base import clone
 from sklearn.utils.validation import check_is_fitted, validate_data
 
-from .._validation import MAX_PAYLOAD_KG, FieldReader, Requirement, boolean, check_array, param_error, real
+from .._validation import MAX_PAYLOAD_KG, FieldReader, Requirement, boolean, check_array, one_of, param_error, real
 from ..errors import DataError, ModelFileError
 from ..metrics import MRAD_PER_DEG, MRAD_PER_RAD, ORIENTATION, POSITION, distance_outside_boxes
 from ..robot.description import load_robot, robot_from_dict, robot_to_dict
 from ..robot.kinematics import ORIENTATION_MM_PER_RAD, Robot
 from .base import ErrorModelBase, box_points, seed_from
 from .features import varying_inputs
-from .identification import (PRIMARY_TARGET, STATUSES, Identification, geometric_size, identify, nominal_values,
-                             own_geometry, parameter_names, robot_with)
+from .identification import (PARAMETRIZATIONS, PRIMARY_TARGET, STATUSES, Identification, geometric_size, identify,
+                             nominal_values, own_geometry, parameter_names, resolved_parametrization, robot_with)
 from .joint_errors import JointErrors, compliance_problem, harmonics_problem
 from .kindtable import body_of, may_be_residual, model_from_body, residual_kinds
 from .pose import PoseErrorModel
@@ -49,6 +49,13 @@ class KinematicModel(ErrorModelBase):
     rcond : float in (0, 1)
         Relative singular-value threshold below which a parameter direction
         counts as unidentifiable (see :func:`identify`).
+    parametrization : {"auto", "dh", "complete"}
+        The geometric parameters identified: the four DH parameters of every
+        row, or every row's joint offset and the six errors of its fixed
+        transform (tilts between parallel axes too), each reduced by the rank
+        rule to what the data identify (docs/models.md). ``auto`` (the
+        default, chosen by measurement): ``dh`` for a robot of DH rows,
+        ``complete`` for a chain with general origins (a URDF's).
     compliance : sequence of int
         1-based joints that yield under gravity (see :mod:`partcal.models.joint_errors`).
     joint_harmonics : int or sequence of int
@@ -91,10 +98,11 @@ class KinematicModel(ErrorModelBase):
 
     inputs = "joint"
 
-    def __init__(self, *, robot=None, base=True, tool=True, rcond=1e-6, compliance=(), joint_harmonics=0,
-                 payload_kg=0.0, all_targets=False, use_orientation=False,
+    def __init__(self, *, robot=None, base=True, tool=True, rcond=1e-6, parametrization="auto", compliance=(),
+                 joint_harmonics=0, payload_kg=0.0, all_targets=False, use_orientation=False,
                  orientation_mm_per_rad=ORIENTATION_MM_PER_RAD, residual=None, random_state=None):
         self.robot = robot
+        self.parametrization = parametrization
         self.all_targets = all_targets
         self.use_orientation = use_orientation
         self.orientation_mm_per_rad = orientation_mm_per_rad
@@ -113,6 +121,7 @@ class KinematicModel(ErrorModelBase):
     fits_pose_errors = True
     _parameter_rules = {"base": boolean(True), "tool": boolean(True),
                         "rcond": real(0.0, 1.0, default=1e-6, low_open=True),
+                        "parametrization": one_of("auto", *PARAMETRIZATIONS, default="auto"),
                         "payload_kg": real(0.0, MAX_PAYLOAD_KG, default=0.0),
                         "all_targets": boolean(False), "use_orientation": boolean(False),
                         "orientation_mm_per_rad": real(0.0, 1e6, default=ORIENTATION_MM_PER_RAD, low_open=True)}
@@ -120,7 +129,7 @@ class KinematicModel(ErrorModelBase):
                                  "use_orientation is true: it weighs the orientation in the identification",
                                  lambda p: p["use_orientation"] or p["orientation_mm_per_rad"] == ORIENTATION_MM_PER_RAD),)
     _from_fitted = ("all_targets", "use_orientation")     # a model file keeps what was fitted on instead
-    _OPTIONAL_IN_FILES = ("payload_kg", "orientation_mm_per_rad")   # files written before them: the default
+    _OPTIONAL_IN_FILES = ("payload_kg", "orientation_mm_per_rad", "parametrization")   # older files: the default
     _joint_rules = {"compliance": ((), compliance_problem), "joint_harmonics": (0, harmonics_problem)}
 
     def _check_params(self) -> Robot:
@@ -137,6 +146,10 @@ class KinematicModel(ErrorModelBase):
             raise param_error(own, "residual", f"None or a model of a kind that may be a residual "
                               f"({', '.join(residual_kinds())})", self.residual)
         return robot
+
+    def _resolved_parametrization(self, robot: Robot) -> str:
+        """``parametrization``, ``auto`` resolved: ``complete`` for a chain with general origins, ``dh`` otherwise."""
+        return resolved_parametrization(self.parametrization, robot)
 
     def fit(self, X, y, payload_kg=None, *, targets=None, orientation_deg=None, orientation_mm_per_rad=None):
         """Identify the parameters from joint angles ``X`` (n, N) deg and errors ``y`` (n, 3) mm. Returns self.
@@ -172,12 +185,13 @@ class KinematicModel(ErrorModelBase):
             orientation_deg = y[:, ORIENTATION] / MRAD_PER_DEG
         nominal = robot.positions(X)
         self.joint_errors_ = JointErrors.for_robot(robot, list(self.compliance), self.joint_harmonics)
+        self.parametrization_ = self._resolved_parametrization(robot)
         payload = self._payload(payload_kg, len(X))
         weight = self.orientation_mm_per_rad if orientation_mm_per_rad is None else orientation_mm_per_rad
         extra = extra_from(robot, X, targets, orientation_deg, weight)
         self.identification_ = identify(robot, X, nominal + y[:, POSITION], base=bool(self.base), tool=bool(self.tool),
                                         rcond=float(self.rcond), errors=self.joint_errors_, payload_kg=payload,
-                                        extra=extra)
+                                        extra=extra, parametrization=self.parametrization_)
         self.targets_ = dict(extra.tools_mm) if extra is not None else {}
         self.orientation_ = extra is not None and extra.rotations is not None
         self.robot_ = robot
@@ -229,15 +243,15 @@ class KinematicModel(ErrorModelBase):
     def _build_robots(self) -> None:
         """The identified robot, and its geometry in its own base frame (where the joint errors' lever arms
         are taken), from ``robot_`` and the identified table (after fitting or loading)."""
-        self.identified_robot_ = robot_with(self.robot_, self.identification_.value)
-        self._geometry = own_geometry(self.robot_, self.identification_.value)
+        self.identified_robot_ = robot_with(self.robot_, self.identification_.value, self.parametrization_)
+        self._geometry = own_geometry(self.robot_, self.identification_.value, self.parametrization_)
 
     def _actual(self, X: NDArray[np.float64], payload: NDArray[np.float64]) -> NDArray[np.float64]:
         """The joint angles the identified arm takes (its joint errors), (n, N) deg."""
         errors = self.joint_errors_
         if errors.empty:
             return X
-        size = geometric_size(self.robot_)
+        size = geometric_size(self.robot_, self.parametrization_)
         return errors.design(self._geometry, X, self.identification_.value[size:size + errors.size], payload)[0]
 
     def _kinematic(self, X: NDArray[np.float64], payload: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -331,6 +345,7 @@ class KinematicModel(ErrorModelBase):
         errors = self.joint_errors_
         return {"robot": robot_to_dict(self.robot_), "base": bool(self.base), "tool": bool(self.tool),
                 "rcond": float(self.rcond), "payload_kg": float(self.payload_kg),
+                **({"parametrization": self.parametrization_} if self.parametrization_ != "dh" else {}),
                 **({"orientation_mm_per_rad": float(self.orientation_mm_per_rad)} if self.orientation_ else {}),
                 "compliance": list(errors.compliance), "joint_harmonics": list(errors.harmonics),
                 "identification": self.identification_.to_dict(),
@@ -363,7 +378,13 @@ class KinematicModel(ErrorModelBase):
         model = cls(robot=robot, **{key: r.rule(key, rule) for key, rule in rules.items()}, **joint,
                     all_targets=bool(tools), use_orientation=orientation)
         errors = JointErrors.for_robot(robot, joint["compliance"], joint["joint_harmonics"])
-        table = _identification_from(r.sub("identification"), robot, errors, tools, orientation)
+        if model.parametrization == "auto":     # a file holds what was fitted: written when not dh
+            if "parametrization" in r.doc:
+                r.fail("parametrization", f"one of {', '.join(PARAMETRIZATIONS)} (what was fitted); got 'auto'")
+            model.parametrization = "dh"
+        model.parametrization_ = model.parametrization
+        table = _identification_from(r.sub("identification"), robot, errors, tools, orientation,
+                                     model.parametrization_)
         model.robot_, model.identification_, model.joint_errors_ = robot, table, errors
         model.targets_, model.orientation_ = tools, orientation
         model._build_robots()
@@ -512,10 +533,10 @@ def _targets_from(r: FieldReader) -> tuple[dict, bool]:
 
 
 def _identification_from(ident: FieldReader, robot: Robot, errors: JointErrors | None = None, tools=None,
-                         orientation: bool = False) -> Identification:
+                         orientation: bool = False, parametrization: str = "dh") -> Identification:
     """A model file's identified table, which must agree with its robot: the robot's parameter names and
     nominal values, unidentified parameters kept nominal, standard errors finite and >= 0 (or null)."""
-    names = [n for n, _ in parameter_names(robot, errors) + added_names(tools or {}, orientation)]
+    names = [n for n, _ in parameter_names(robot, errors, parametrization) + added_names(tools or {}, orientation)]
     if ident.get("names", list) != names:
         ident.fail("names", f"expected the {len(names)} parameters of {robot.name} ({names[0]} ... {names[-1]})")
     status = ident.get("status", list)
@@ -525,7 +546,7 @@ def _identification_from(ident: FieldReader, robot: Robot, errors: JointErrors |
     if len(std) != len(names) or not all(v is None or isinstance(v, (int, float)) for v in std):
         ident.fail("std_error", f"expected {len(names)} numbers or nulls")
     nominal, value = ident.array("nominal", (len(names),)), ident.array("value", (len(names),))
-    expected = np.concatenate([nominal_values(robot, errors), added_nominal(tools or {}, orientation)])
+    expected = np.concatenate([nominal_values(robot, errors, parametrization), added_nominal(tools or {}, orientation)])
     off = np.flatnonzero(~np.isclose(nominal, expected, rtol=1e-12, atol=1e-9))
     if off.size:
         k = off[0]

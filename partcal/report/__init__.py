@@ -23,7 +23,7 @@ import numpy as np
 
 from .. import __version__
 from ..metrics import MRAD_PER_DEG
-from ..models.identification import BASE_PARAMETERS, ROW_PARAMETERS, TOOL_PARAMETERS
+from ..models.identification import BASE_PARAMETERS, PARAMETRIZATIONS, TOOL_PARAMETERS
 from ..models.targets import added_names
 from ..study.results import ModelResult, RunResult
 from ..study.scoring import Outputs, errors_left
@@ -352,6 +352,7 @@ def kinematic_tables(result: RunResult) -> list[dict]:
             continue
         cells = {row["name"]: _parameter_cell(row) for row in table.rows()}
         n_rows = r.model.robot_.alpha_deg.size
+        row_parameters = PARAMETRIZATIONS[getattr(r.model, "parametrization_", "dh")]
         targets = identified_targets(r.model.run_summary()["kinematic"])
         added = targets["added"] if targets else []
         own = len(table.names) - len(added)         # a one-target model's parameters, then the added ones
@@ -360,10 +361,11 @@ def kinematic_tables(result: RunResult) -> list[dict]:
         out.append({"name": r.spec.name, "same_as": None, "condition": table.condition, "n_poses": table.n_poses,
                     "identified": table.status.count("identified"), "parameters": len(table.names),
                     "rms": table.rms_mm, "unidentifiable": table.unidentifiable(),
-                    "dh": [{"row": k + 1, "cells": [cells[f"{p}[{k + 1}]"] for p, _ in ROW_PARAMETERS]}
+                    "columns": [f"{'theta offset' if p == 'theta' else p} ({u})" for p, u in row_parameters],
+                    "dh": [{"row": k + 1, "cells": [cells[f"{p}[{k + 1}]"] for p, _ in row_parameters]}
                            for k in range(n_rows)],
                     "extra": [cells[n] for n, _ in TOOL_PARAMETERS + BASE_PARAMETERS],
-                    "joint_errors": [cells[n] for n in table.names[4 * n_rows + 9:own]],
+                    "joint_errors": [cells[n] for n in table.names[len(row_parameters) * n_rows + 9:own]],
                     "targets": targets, "added": [cells[n] for n in added]})
     return out
 

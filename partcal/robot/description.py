@@ -20,7 +20,8 @@ from numpy.typing import NDArray
 
 from .._yamlio import load_yaml
 from ..errors import ConfigError, DataError
-from .kinematics import Robot
+from .kinematics import Robot, matrix_from_euler_deg, rpy_deg_from_matrix
+from .urdf import UrdfReference, is_urdf, robot_from_urdf
 
 MAX_JOINTS = 12
 _BUILTIN_DIR = Path(__file__).parent / "builtin"
@@ -79,14 +80,23 @@ def available_robots() -> list[str]:
     return sorted(p.stem for p in _BUILTIN_DIR.glob("*.yaml"))
 
 
-def load_robot(name_or_path: str | Path | Robot) -> Robot:
-    """Load a built-in robot by name, or a robot YAML file by path.
+def load_robot(name_or_path: str | Path | Robot | dict) -> Robot:
+    """Load a built-in robot by name, a robot YAML file by path, or a URDF's chain.
+
+    A URDF is a mapping ``{urdf: PATH, base: LINK, tip: LINK}`` or the text
+    ``PATH.urdf#base=LINK&tip=LINK`` (``base``, ``tip`` optional: the root
+    link and the only leaf); see :func:`partcal.robot.urdf.robot_from_urdf`.
 
     >>> load_robot("motoman_sk120").n_joints
     6
     """
     if isinstance(name_or_path, Robot):
         return name_or_path
+    if isinstance(name_or_path, dict):
+        name_or_path = urdf_reference(name_or_path, Path("."), "robot")
+    if is_urdf(name_or_path):
+        ref = UrdfReference.parse(str(name_or_path))
+        return robot_from_urdf(ref.path, ref.base, ref.tip)
     text = str(name_or_path)
     path = Path(text)
     if not path.suffix and (_BUILTIN_DIR / f"{text}.yaml").exists():
@@ -98,14 +108,31 @@ def load_robot(name_or_path: str | Path | Robot) -> Robot:
     return robot_from_dict(spec, source=str(path), lines=lines)
 
 
-def robot_reference(name: str, base: Path) -> str:
-    """A robot named in a config: a ``.yaml`` path relative to the config's folder, or a built-in name."""
+def robot_reference(name: str | dict, base: Path, where: str = "robot") -> str:
+    """A robot named in a config: a ``.yaml`` or ``.urdf`` path relative to the config's folder, a built-in
+    name, or a URDF mapping ``{urdf: PATH, base: LINK, tip: LINK}`` (returned as the text :func:`load_robot`
+    reads, ``PATH.urdf#base=LINK&tip=LINK``, the path made relative to ``base``)."""
+    if isinstance(name, dict):
+        return urdf_reference(name, base, where)
+    if is_urdf(name):
+        ref = UrdfReference.parse(name)
+        return UrdfReference(base / ref.path, ref.base, ref.tip).text()
     candidate = base / name
     return str(candidate) if candidate.suffix in (".yaml", ".yml") else name
 
 
+def urdf_reference(spec: dict, base: Path, where: str = "robot") -> str:
+    """The text form of a URDF mapping ``{urdf: PATH, base: LINK, tip: LINK}`` (``base``, ``tip`` optional),
+    its path relative to the folder ``base``."""
+    keys = {"urdf", "base", "tip"}
+    if "urdf" not in spec or not set(spec) <= keys or not all(isinstance(v, str) and v for v in spec.values()):
+        raise ConfigError(f"{where}: expected a built-in name, a robot file, or {{urdf: FILE.urdf, base: LINK, "
+                          f"tip: LINK}} (texts); got {spec!r}"[:300])
+    return UrdfReference(base / spec["urdf"], spec.get("base"), spec.get("tip")).text()
+
+
 _ROBOT_KEYS = {"name", "description", "joints", "links", "tool_mm", "limits_deg", "home_deg",
-               "constraints_deg"}
+               "constraints_deg", "base"}
 
 
 def robot_from_dict(spec: dict, source: str = "robot", lines: dict[str, int] | None = None) -> Robot:
@@ -116,16 +143,18 @@ def robot_from_dict(spec: dict, source: str = "robot", lines: dict[str, int] | N
     """
     r = _Reader(source, lines or {})
     n = _joint_count(spec, r)
-    alpha, d, a, off, coupling = _links(spec["links"], n, r)
+    alpha, d, a, off, coupling, origins, prismatic = _links(spec["links"], n, r)
     limits = r.numbers("limits_deg", spec["limits_deg"], (n, 2), f"{n} pairs [low, high] with low < high")
     if np.any(limits[:, 0] >= limits[:, 1]):
         r.fail("limits_deg", f"expected {n} pairs [low, high] with low < high; got {spec['limits_deg']!r}")
     home = r.numbers("home_deg", spec["home_deg"], (n,), f"{n} angles") if "home_deg" in spec else limits.mean(axis=1)
     tool = r.numbers("tool_mm", spec.get("tool_mm", [0, 0, 0]), (3,), "[x, y, z]")
     constraints = _constraints(spec.get("constraints_deg") or [], n, r)
+    base = _origin(spec.get("base"), "base", r)
     return Robot(name=str(spec["name"]), n_joints=n, alpha_deg=alpha, d_mm=d, a_mm=a,
                  theta_offset_deg=off, coupling=coupling, tool_mm=tool, limits_deg=limits,
-                 home_deg=home, constraints=constraints)
+                 home_deg=home, constraints=constraints, origins=origins, prismatic=prismatic,
+                 base_rotation=matrix_from_euler_deg(base[3:]), base_mm=base[:3])
 
 
 class _Reader:
@@ -173,25 +202,58 @@ def _joint_count(spec, r: _Reader) -> int:
     return n
 
 
-def _links(links: list, n: int, r: _Reader) -> tuple[NDArray[np.float64], ...]:
-    """``alpha, d, a, theta offset`` (each ``(R,)``) and the coupling ``(R, N)`` of the DH rows."""
-    rows = []
+def _links(links: list, n: int, r: _Reader) -> tuple:
+    """``alpha, d, a, theta offset`` (each ``(R,)``), the coupling ``(R, N)`` of the rows, their further
+    transforms ``(R, 6)`` (``origin:``; None when no row has one) and which rows slide (``d`` an expression of
+    the joints, mm; None when none does)."""
+    rows, origins, slides = [], [], []
     for i, link in enumerate(links):
-        if not isinstance(link, dict) or set(link) != {"theta", "d", "a", "alpha"}:
-            r.fail(f"links[{i}]", f"expected a mapping with theta, d, a, alpha; got {link!r}")
+        if not isinstance(link, dict) or not {"theta", "d", "a", "alpha"} <= set(link) <= _LINK_KEYS:
+            r.fail(f"links[{i}]", f"expected a mapping with theta, d, a, alpha (and optionally origin); got {link!r}")
         try:
             off, coeffs = parse_theta(link["theta"], n)
         except ConfigError as exc:
             r.fail(f"links[{i}].theta", str(exc))
-        rows.append((*(r.number(f"links[{i}].{key}", link[key]) for key in ("alpha", "d", "a")), off, coeffs))
+        slide = False
+        if isinstance(link["d"], str):         # a prismatic row: d = offset + sum(c qK) mm
+            try:
+                d_mm, d_coeffs = parse_theta(link["d"], n)
+            except ConfigError as exc:
+                r.fail(f"links[{i}].d", f"must be a finite number; got {link['d']!r} (or, for a row that slides, "
+                                        f"an expression of the joints such as 'q1 + 100', mm: {exc})")
+            slide = bool(d_coeffs.any())
+            if slide and coeffs.any():
+                r.fail(f"links[{i}]", f"a row turns (theta names a joint) or slides (d names one), not both; got "
+                                      f"theta {link['theta']!r}, d {link['d']!r}")
+            coeffs = d_coeffs if slide else coeffs
+        else:
+            d_mm = r.number(f"links[{i}].d", link["d"])
+        rows.append((r.number(f"links[{i}].alpha", link["alpha"]), d_mm, r.number(f"links[{i}].a", link["a"]), off,
+                     coeffs))
+        origins.append(_origin(link.get("origin"), f"links[{i}].origin", r))
+        slides.append(slide)
     if not rows:
         r.fail("links", "needs at least one DH row")
     coupling = np.array([row[4] for row in rows])
     unused = [f"q{j + 1}" for j in range(n) if not coupling[:, j].any()]
     if unused:
-        r.fail("links", f"joint(s) {', '.join(unused)} appear in no theta expression")
+        r.fail("links", f"joint(s) {', '.join(unused)} appear in no theta or d expression")
     alpha, d, a, off = (np.array([row[k] for row in rows]) for k in range(4))
-    return alpha, d, a, off, coupling
+    return (alpha, d, a, off, coupling, (np.array(origins) if np.any(origins) else None),
+            np.array(slides) if any(slides) else None)
+
+
+_LINK_KEYS = {"theta", "d", "a", "alpha", "origin"}
+
+
+def _origin(value, where: str, r: _Reader) -> NDArray[np.float64]:
+    """A row's further transform ``{xyz_mm: [x, y, z], rpy_deg: [roll, pitch, yaw]}`` as ``(6,)`` (zeros if absent)."""
+    if value is None:
+        return np.zeros(6)
+    if not isinstance(value, dict) or not set(value) <= {"xyz_mm", "rpy_deg"}:
+        r.fail(where, f"expected {{xyz_mm: [x, y, z], rpy_deg: [roll, pitch, yaw]}}; got {value!r}"[:200])
+    return np.concatenate([r.numbers(f"{where}.{key}", value.get(key, [0, 0, 0]), (3,), "three numbers")
+                           for key in ("xyz_mm", "rpy_deg")])
 
 
 def _constraints(items: list, n: int, r: _Reader) -> tuple:
@@ -229,12 +291,24 @@ def _expression(offset: float, coeffs: NDArray[np.float64]) -> str | float:
 
 def robot_to_dict(robot: Robot) -> dict:
     """The robot as the mapping :func:`robot_from_dict` reads (exact round trip)."""
+    origins = robot.origins if robot.origins is not None else np.zeros((robot.alpha_deg.size, 6))
+    slides = robot.prismatic if robot.prismatic is not None else np.zeros(robot.alpha_deg.size, dtype=bool)
     return {
         "name": robot.name, "joints": robot.n_joints,
-        "links": [{"theta": _expression(off, c), "d": float(d), "a": float(a), "alpha": float(al)}
-                  for off, c, d, a, al in zip(robot.theta_offset_deg, robot.coupling, robot.d_mm, robot.a_mm,
-                                              robot.alpha_deg)],
+        "links": [{"theta": float(off) if slide else _expression(off, c),
+                   "d": _expression(d, c) if slide else float(d), "a": float(a), "alpha": float(al),
+                   **({"origin": {"xyz_mm": o[:3].tolist(), "rpy_deg": o[3:].tolist()}} if np.any(o) else {})}
+                  for off, c, d, a, al, o, slide in zip(robot.theta_offset_deg, robot.coupling, robot.d_mm,
+                                                        robot.a_mm, robot.alpha_deg, origins, slides)],
         "tool_mm": robot.tool_mm.tolist(), "limits_deg": robot.limits_deg.tolist(),
         "home_deg": robot.home_deg.tolist(),
         "constraints_deg": [{"expr": _expression(0.0, c), "range": [lo, hi]} for c, lo, hi in robot.constraints],
+        **_base_entry(robot),
     }
+
+
+def _base_entry(robot: Robot) -> dict:
+    """``{"base": {xyz_mm, rpy_deg}}`` for a robot whose first frame is not the base frame (none otherwise)."""
+    if np.array_equal(robot.base_rotation, np.eye(3)) and not np.any(robot.base_mm):
+        return {}
+    return {"base": {"xyz_mm": robot.base_mm.tolist(), "rpy_deg": rpy_deg_from_matrix(robot.base_rotation).tolist()}}

@@ -127,7 +127,8 @@ def _solve_block(robot, targets, qT, free, settings: Settings, bias, tol, seed_j
         if going < keep.size:                          # drop the converged targets
             done_q[:, idx[~keep]] = qT[:, ~keep]
             idx, qT, targets, err, jac = idx[keep], qT[:, keep], targets[:, keep], err[:, keep], jac[:, :, keep]
-            fixed_trig = [t[keep] if isinstance(t, np.ndarray) else t for t in fixed_trig]
+            fixed_trig = [t[keep] if isinstance(t, np.ndarray) else (t[0], t[1][keep]) if isinstance(t, tuple) else t
+                          for t in fixed_trig]
         _take_step(qT, free, _dls_step(jac, err, settings.damping), settings, lo, hi)
         iterations[idx] += 1
     done_q[:, idx] = qT

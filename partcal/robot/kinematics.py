@@ -1,10 +1,18 @@
-"""Robot kinematics: Denavit-Hartenberg chains with coupled (parallelogram) joints.
+"""Robot kinematics: one generic chain of joint motions and fixed transforms, with coupled joints.
 
-A robot is a chain of standard DH rows, ``T = Rz(theta) Tz(d) Tx(a) Rx(alpha)``,
-followed by a tool offset. Each row's ``theta`` is a *linear expression* of the
-joint angles, such as ``q1`` or ``180 - q2 + q3``; that is enough to describe
-closed-chain mechanisms whose passive angles follow the actuated ones, like the
-parallelogram (five-bar) of the Motoman SK120 in the paper's Table 1.
+A robot is a chain of rows, each a joint's turn about its frame's ``z`` axis
+followed by a fixed transform to the next joint's frame:
+``T = Rz(theta) F``, ``F = Tz(d) Tx(a) Rx(alpha) E``. ``d, a, alpha`` are the
+standard DH part of the fixed transform (exact shortcuts for right angles,
+and the rows of partcal's robot YAML); ``E`` is any further rigid transform
+(``origins``: translation and roll-pitch-yaw, as a URDF joint's origin), the
+identity for a DH robot. A URDF chain is a chain of rows with ``d = a = alpha = 0``
+and ``E`` its joints' origins, turned so that each joint axis is ``z``
+(:mod:`partcal.robot.urdf`). The tool offset follows the last row. Each row's
+``theta`` is a *linear expression* of the joint angles, such as ``q1`` or
+``180 - q2 + q3``; that is enough to describe closed-chain mechanisms whose
+passive angles follow the actuated ones, like the parallelogram (five-bar) of
+the Motoman SK120 in the paper's Table 1, and a URDF's mimic joints.
 
 Everything is batched: joint angles come in as ``(n, N)`` arrays in degrees,
 positions go out as ``(n, 3)`` arrays in mm. Radians live only inside.
@@ -56,6 +64,25 @@ def matrix_from_euler_deg(angles_deg) -> NDArray[np.float64]:
     return rot_z @ rot_y @ rot_x
 
 
+def rpy_deg_from_matrix(rotation) -> NDArray[np.float64]:
+    """Roll, pitch, yaw ``(3,)`` degrees of a rotation ``(3, 3)``: the inverse of :func:`matrix_from_euler_deg`
+    (a URDF origin's ``rpy``), pitch in [-90, 90].
+
+    Accurate near a pitch of +-90 degrees too: the yaw is taken first, then pitch and roll from what is
+    left after turning it back, ``Rz(-yaw) R = Ry(pitch) Rx(roll)``, whose entries are all of order one.
+
+    >>> rpy_deg_from_matrix(matrix_from_euler_deg([10.0, -20.0, 30.0])).round(12).tolist()
+    [10.0, -20.0, 30.0]
+    """
+    rot = np.asarray(rotation, dtype=float)
+    yaw = np.arctan2(rot[1, 0], rot[0, 0])
+    c, s = np.cos(yaw), np.sin(yaw)
+    left = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]]) @ rot
+    pitch = np.arctan2(-left[2, 0], left[0, 0])
+    roll = np.arctan2(-left[1, 2], left[1, 1])
+    return np.degrees([roll, pitch, yaw])
+
+
 ORIENTATION_MM_PER_RAD = 200.0
 """How many mm an orientation residual of one radian counts as beside position residuals (registration,
 identification): the displacement a turn causes 200 mm from its axis, about a tool plate's size. For a
@@ -99,7 +126,8 @@ def xyz_deg_from_matrices(rotations) -> NDArray[np.float64]:
 
 @dataclass(frozen=True, eq=False)
 class Robot:
-    """A serial chain of standard DH rows, possibly with coupled joints.
+    """A serial chain of joint turns and fixed transforms (DH rows, possibly with a general origin), possibly
+    with coupled joints.
 
     Attributes
     ----------
@@ -121,6 +149,15 @@ class Robot:
     constraints : tuple of (coefficients, low, high)
         Extra limits on linear joint combinations (e.g. the parallelogram's
         inner angle ``q2 - q3``), as ``low <= coefficients @ q <= high``.
+    prismatic : ndarray of bool, shape (R,), or None
+        Rows that slide instead of turning: their ``theta`` is the constant
+        ``theta_offset_deg`` and ``d = d_mm + coupling @ q`` (mm; a prismatic
+        joint's column holds millimetres). None: every row turns.
+    origins : ndarray, shape (R, 6), or None
+        A rigid transform ``E`` ending each row after its DH part:
+        ``x, y, z`` (mm) then ``roll, pitch, yaw`` (degrees, the rotation
+        ``Rz(yaw) Ry(pitch) Rx(roll)``, a URDF origin's convention). None: the
+        identity for every row (a plain DH chain).
     """
 
     name: str
@@ -136,6 +173,8 @@ class Robot:
     base_rotation: NDArray[np.float64] = dataclasses.field(default_factory=lambda: np.eye(3))
     base_mm: NDArray[np.float64] = dataclasses.field(default_factory=lambda: np.zeros(3))
     constraints: tuple = ()
+    origins: NDArray[np.float64] | None = None
+    prismatic: NDArray[np.bool_] | None = None
 
     def replace(self, **changes) -> "Robot":
         """Return a copy with some fields changed (used to build perturbed robots)."""
@@ -156,7 +195,11 @@ class Robot:
         >>> round(load_robot("motoman_sk120").reach_mm, 2)
         4413.19
         """
-        return float(np.hypot(self.a_mm, self.d_mm).sum() + np.linalg.norm(self.tool_mm))
+        extra = 0.0 if self.origins is None else float(np.linalg.norm(self.origins[:, :3], axis=1).sum())
+        if self.prismatic is not None:        # a slide adds its longest travel
+            travel = np.abs(self.coupling[self.prismatic]) @ np.abs(self.limits_deg).max(axis=1)
+            extra += float(travel.sum())
+        return float(np.hypot(self.a_mm, self.d_mm).sum() + extra + np.linalg.norm(self.tool_mm))
 
     def within_limits(self, q_deg: NDArray[np.float64]) -> NDArray[np.bool_]:
         """Which poses respect the joint limits and the coupled constraints, shape (n,)."""
@@ -172,26 +215,37 @@ class Robot:
         """The DH rows compiled for the walk (built once per robot)."""
         ca, sa = _cos_sin_deg(self.alpha_deg)
         return tuple(_Row(float(off), tuple((int(j), float(c)) for j, c in enumerate(coef) if c),
-                          float(ca[r]), float(sa[r]), float(self.a_mm[r]), float(self.d_mm[r]))
+                          float(ca[r]), float(sa[r]), float(self.a_mm[r]), float(self.d_mm[r]), self._origin(r),
+                          bool(self.prismatic is not None and self.prismatic[r]))
                      for r, (off, coef) in enumerate(zip(self.theta_offset_deg, self.coupling)))
+
+    def _origin(self, row: int) -> tuple | None:
+        """Row ``row``'s transform ``E`` as ``(rotation (3, 3), translation (3,) mm)`` of floats, None if identity."""
+        if self.origins is None or not np.any(self.origins[row]):
+            return None
+        rot = matrix_from_euler_deg(self.origins[row, 3:])
+        return tuple(tuple(float(v) for v in line) for line in rot), tuple(float(v) for v in self.origins[row, :3])
 
     def _trig(self, qT: NDArray[np.float64], rows=None) -> list:
         """The rotor ``exp(-i theta)`` of each DH row (all, or those in ``rows``), for joints ``qT`` (N, n).
 
-        Constant rows give a Python complex, rows not asked for ``None``. Every
-        operation is elementwise in the poses, so a pose gets the same bits
-        alone or in any batch.
+        Constant rows give a Python complex, rows not asked for ``None``, a
+        sliding row the pair ``(rotor, slide (n,) mm)``. Every operation is
+        elementwise in the poses, so a pose gets the same bits alone or in any
+        batch.
         """
         out: list = [None] * len(self._rows)
         varying = []
         for r, row in enumerate(self._rows):
             if rows is not None and r not in rows:
                 continue
-            if row.terms:
+            if row.terms and not row.slide:
                 varying.append(r)
             else:
                 rad = np.radians(row.offset)
                 out[r] = complex(np.cos(rad), -np.sin(rad))
+                if row.slide:
+                    out[r] = (out[r], _linear(row.terms, 0.0, qT, np.empty(qT.shape[1])))
         if varying:
             theta = np.empty((len(varying), qT.shape[1]))
             for k, r in enumerate(varying):
@@ -211,7 +265,8 @@ class Robot:
         and, for each row in ``record``, the axis ``z`` and origin ``o`` (3, n)
         it turns about.
         """
-        n = next((e.shape[-1] for e in trig if isinstance(e, np.ndarray)), 1)
+        n = next((e.shape[-1] for e in (t[1] if isinstance(t, tuple) else t for t in trig)
+                  if isinstance(e, np.ndarray)), 1)
         base = self.base_rotation
         w = (base[:, 0] + 1j * base[:, 1])[:, None]                      # (3, 1): broadcast at first
         z = base[:, 2][:, None]
@@ -220,11 +275,16 @@ class Robot:
         for r, (row, e) in enumerate(zip(self._rows, trig)):
             if r in record:
                 frames[r] = (z if z.shape == p.shape else np.repeat(z, n, axis=1), p.copy())
+            slide = None
+            if isinstance(e, tuple):
+                e, slide = e
             w = w * e                                  # x' = c x + s y, y' = c y - s x
             if row.a:
                 p += row.a * w.real
             if row.d:
                 p += row.d * z
+            if slide is not None:
+                p += slide * z
             # then alpha about x': (y, z) -> (ca y + sa z, ca z - sa y); exact shortcuts for 0, 180, +-90
             if row.sa == 0.0:
                 if row.ca != 1.0:
@@ -239,6 +299,8 @@ class Robot:
                     turned.imag = row.ca * y + row.sa * z
                     z = row.ca * z - row.sa * y
                 w = turned
+            if row.origin is not None:
+                w, z = _apply_origin(row.origin, w, z, p)
         if len(self._rows) in record:
             frames[len(self._rows)] = (z if z.shape == p.shape else np.repeat(z, n, axis=1), p.copy())
         p += self.tool_mm[0] * w.real + self.tool_mm[1] * w.imag + self.tool_mm[2] * z
@@ -249,18 +311,23 @@ class Robot:
 
         Returns tool positions, orientations and optionally the frames.
 
-        With ``keep_axes`` the third value is ``(origins, x_axes, z_axes)``,
-        three lists of ``R + 1`` arrays ``(n, 3)`` (frame 0 is the base);
-        otherwise None. Internally vectors are ``(3, n)`` so every operation
-        runs over contiguous runs of ``n`` values (about twice as fast as ``(n, 3)``).
+        With ``keep_axes`` the third value is ``(origins, x_axes, z_axes, mids)``:
+        three lists of ``R + 1`` arrays ``(n, 3)`` (frame 0 is the base; frame
+        ``r + 1`` ends row ``r``), and per row the origin and x axis after its
+        DH part, before its transform ``E`` (the frame itself for a row without
+        one); otherwise None. Internally vectors are ``(3, n)`` so every
+        operation runs over contiguous runs of ``n`` values (about twice as
+        fast as ``(n, 3)``).
         """
         n = q_deg.shape[0]
-        theta = np.radians(self.theta_offset_deg[:, None] + self.coupling @ q_deg.T)  # (R, n)
+        moved = self.coupling @ q_deg.T                                                  # (R, n): deg, or mm
+        slides = np.zeros(moved.shape[0], dtype=bool) if self.prismatic is None else self.prismatic
+        theta = np.radians(self.theta_offset_deg[:, None] + np.where(slides[:, None], 0.0, moved))  # (R, n)
         cos_t, sin_t = np.cos(theta), np.sin(theta)
         ca, sa = _cos_sin_deg(self.alpha_deg)
         r0, r1, r2 = (np.repeat(self.base_rotation[:, k, None], n, axis=1) for k in range(3))
         p = np.repeat(self.base_mm[:, None], n, axis=1)
-        origins, xs, zs = [], [], []
+        origins, xs, zs, mids = [], [], [], []
         for row in range(theta.shape[0]):
             if keep_axes:
                 origins.append(p.T.copy())
@@ -272,18 +339,27 @@ class Robot:
             p += self.a_mm[row] * x_new
             if self.d_mm[row]:
                 p += self.d_mm[row] * r2
+            if slides[row]:
+                p += moved[row] * r2
             if sa[row] == 0.0:  # alpha = 0 or 180: exact, and saves half the work of this row
                 r0, r1, r2 = x_new, ca[row] * y_rot, ca[row] * r2
             elif ca[row] == 0.0:  # alpha = +-90
                 r0, r1, r2 = x_new, sa[row] * r2, -sa[row] * y_rot
             else:
                 r0, r1, r2 = x_new, ca[row] * y_rot + sa[row] * r2, ca[row] * r2 - sa[row] * y_rot
+            origin = self._rows[row].origin
+            if keep_axes:
+                mids.append((p.T.copy(), r0.T))
+            if origin is not None:
+                (e0, e1, e2), t = origin
+                p += t[0] * r0 + t[1] * r1 + t[2] * r2
+                r0, r1, r2 = [e0[k] * r0 + e1[k] * r1 + e2[k] * r2 for k in range(3)]
         if keep_axes:
             origins.append(p.T.copy())
             xs.append(r0.T)
             zs.append(r2.T)
         p += self.tool_mm[0] * r0 + self.tool_mm[1] * r1 + self.tool_mm[2] * r2
-        frames = (origins, xs, zs) if keep_axes else None
+        frames = (origins, xs, zs, mids) if keep_axes else None
         return p.T, np.stack([r0.T, r1.T, r2.T], axis=-1), frames
 
     def frames(self, q_deg) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -301,8 +377,14 @@ class Robot:
 
         Frame 0 is the first DH frame (the base); frame ``k`` follows row ``k``.
         """
-        _, _, (origins, xs, zs) = self._chain(self.check_joints(q_deg), keep_axes=True)
+        _, _, (origins, xs, zs, _) = self._chain(self.check_joints(q_deg), keep_axes=True)
         return np.stack(origins, axis=1), np.stack(xs, axis=1), np.stack(zs, axis=1)
+
+    def dh_axes(self, q_deg) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Origins and x axes after each row's DH part (before its origin ``E``), each ``(n, R, 3)``: where a
+        row's ``alpha`` turns and along which its ``a`` shifts (frame ``r + 1`` for a row without ``E``)."""
+        _, _, (_, _, _, mids) = self._chain(self.check_joints(q_deg), keep_axes=True)
+        return np.stack([m[0] for m in mids], axis=1), np.stack([m[1] for m in mids], axis=1)
 
     def positions(self, q_deg) -> NDArray[np.float64]:
         """Tool positions, shape ``(n, 3)`` mm, for joint angles ``(n, N)`` degrees.
@@ -380,6 +462,9 @@ class Robot:
             cross = z[:, _I1] * lever[:, _I2]
             cross -= z[:, _I2] * lever[:, _I1]
             cross *= np.pi / 180.0
+        for k, r in enumerate(moving):              # a sliding row moves the tool along its axis (mm per mm)
+            if self._rows[r].slide:
+                cross[k] = 0.0 if angular else z[k]
         for k, f, c in plan:                                       # column f += c * (row k's contribution)
             if c == 1.0:
                 jac[f] += cross[k]
@@ -415,17 +500,19 @@ class Robot:
             columns per row, in that order; mm per degree for the angles, mm
             per mm for the lengths), then ``d p / d tool_mm`` (three columns).
             A row's theta offset turns everything after it about the row's z
-            axis; its alpha turns about the row's new x axis at the row's end.
+            axis; its alpha turns about the row's new x axis at the end of its
+            DH part (before its transform ``E``, if any).
         """
-        p, rot, (origins, xs, zs) = self._chain(self.check_joints(q_deg), keep_axes=True)
+        p, rot, (origins, xs, zs, mids) = self._chain(self.check_joints(q_deg), keep_axes=True)
         rows = self.alpha_deg.size
         out = np.empty((p.shape[0], 3, 4 * rows + 3))
         to_rad = np.pi / 180.0
         for r in range(rows):
+            mid_origin, mid_x = mids[r]
             out[:, :, 4 * r] = np.cross(zs[r], p - origins[r]) * to_rad
             out[:, :, 4 * r + 1] = zs[r]
-            out[:, :, 4 * r + 2] = xs[r + 1]
-            out[:, :, 4 * r + 3] = np.cross(xs[r + 1], p - origins[r + 1]) * to_rad
+            out[:, :, 4 * r + 2] = mid_x
+            out[:, :, 4 * r + 3] = np.cross(mid_x, p - mid_origin) * to_rad
         out[:, :, 4 * rows:] = rot
         return p, out
 
@@ -558,21 +645,41 @@ class _Row:
     sa: float
     a: float
     d: float
+    origin: tuple | None = None       # E: (rotation rows, translation mm), None for the identity
+    slide: bool = False               # a prismatic row: d = d + sum(c * q[j]) mm, theta = offset
+
+
+def _apply_origin(origin: tuple, w, z, p):
+    """A row's transform ``E`` on a frame kept as ``w = x + i y`` and ``z`` (3, n or 1): shifts ``p`` (3, n) in
+    place by ``E``'s translation along the frame's axes and returns the turned ``(w, z)``."""
+    (r0, r1, r2), t = origin
+    x, y = w.real, w.imag
+    if any(t):
+        p += t[0] * x + t[1] * y + t[2] * z
+    out = np.empty(np.broadcast_shapes(x.shape, np.shape(z)), dtype=complex)
+    out.real = r0[0] * x + r1[0] * y + r2[0] * z         # the new axis k is sum_j R[j, k] * axis_j
+    out.imag = r0[1] * x + r1[1] * y + r2[1] * z
+    return out, r0[2] * x + r1[2] * y + r2[2] * z
 
 
 def _theta(row: _Row, qT: NDArray[np.float64], out: NDArray[np.float64]) -> NDArray[np.float64]:
     """The row's joint angle in degrees for joints ``qT`` (N, n), into ``out`` (n,), summed in a fixed order."""
-    j, c = row.terms[0]
+    return _linear(row.terms, row.offset, qT, out)
+
+
+def _linear(terms: tuple, constant: float, qT: NDArray[np.float64], out: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``constant + sum(c * q[j])`` over ``terms`` for joints ``qT`` (N, n), into ``out`` (n,), in a fixed order."""
+    j, c = terms[0]
     np.multiply(qT[j], c, out=out)
-    for j, c in row.terms[1:]:
+    for j, c in terms[1:]:
         if c == 1.0:
             out += qT[j]
         elif c == -1.0:
             out -= qT[j]
         else:
             out += c * qT[j]
-    if row.offset:
-        out += row.offset
+    if constant:
+        out += constant
     return out
 
 

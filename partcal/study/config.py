@@ -25,6 +25,7 @@ from ..models.partitioned import PartitionedErrorModel
 from ..models.pose import PoseErrorModel
 from ..robot.description import load_robot, robot_reference
 from ..robot.kinematics import Robot
+from ..robot.urdf import UrdfReference, is_urdf
 
 RESERVED_NAMES = {"identification", "validation", "file", "fit_seconds", "cv_seconds", "cv", "inputs", "solver",
                   "regions", "pso_rms_ratio", "granularity", "compensation", "kind", "kinematic"}
@@ -187,6 +188,8 @@ class RunConfig:
         files = [self.source, self.identification, *self.tests.values(), self.validation, self.virtual_robot]
         if self.robot is not None and Path(self.robot).suffix in (".yaml", ".yml"):
             files.append(Path(self.robot))
+        elif self.robot is not None and is_urdf(self.robot):
+            files.append(UrdfReference.parse(self.robot).path)
         return [Path(f) for f in files if f is not None]
 
     def resolved(self) -> dict:
@@ -215,10 +218,10 @@ def load_config(path: str | Path) -> RunConfig:
     top = Section(data, "", lines, str(path))
     base = path.parent
     name = top.get("name", "str", check=safe_name)
-    robot, nominal = top.get("robot", "str", default=None), None
+    robot, nominal = top.get("robot", "any", default=None, check=_robot_problem), None
     if robot is not None:
-        robot = robot_reference(robot, base)
         try:
+            robot = robot_reference(robot, base)
             nominal = load_robot(robot)
         except PartcalError as exc:
             top.fail("robot", str(exc))
@@ -407,3 +410,10 @@ def _partition(sec: Section, inputs: str) -> PartitionSpec | None:
     method_b, width = blend.rule("method", rules["blend"]), blend.rule("width", rules["blend_width"])
     blend.done()
     return PartitionSpec(method, tuple(sizes), min_samples, method_b, width)
+
+
+def _robot_problem(value) -> str | None:
+    """``robot:`` is a built-in name, a robot YAML or URDF path, or ``{urdf: FILE, base: LINK, tip: LINK}``."""
+    if isinstance(value, str) or (isinstance(value, dict) and "urdf" in value):
+        return None
+    return "a built-in robot name, a robot YAML or URDF file, or {urdf: FILE.urdf, base: LINK, tip: LINK}"

@@ -1,0 +1,164 @@
+"""``partcal export``: the calibrated robot of a kinematic model file, in the forms a cell reads.
+
+From a model file of kind ``kinematic`` (hybrids too) it writes the
+identified geometry (:mod:`partcal.robot.export` does the writing):
+
+- ``<name>.urdf``: the calibrated chain, joint offsets folded into the joint
+  origins, the identified base pose as the fixed joint ``world -> base_link``
+  and the tool point as ``flange -> tcp``;
+- ``<name>_ur_kinematics.yaml``: ur_description's ``default_kinematics.yaml``
+  (six-joint chains turned by q1..q6), with the TCP it needs in ``tool0``;
+- ``<name>_dh.csv``: the DH table, when the identified chain is one (DH
+  parametrization of a DH robot);
+- ``<name>_robot.yaml``: partcal's own robot YAML of the calibrated chain.
+
+What geometry cannot carry (compliance, transmission harmonics, a residual
+model) is named in one line, with the RMS of the exported geometry beside the
+full model's on a data set when one is given.
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import io
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .._io import atomic_write
+from ..errors import PartcalError
+from ..metrics import pooled_rms
+from ..models.identification import geometric_size, own_geometry
+from ..models.kinematic import KinematicModel
+from ..robot.description import robot_to_dict
+from ..robot.export import ExportError, dh_rows, transform, ur_kinematics_from_robot, urdf_from_robot
+from ..robot.kinematics import Robot, matrix_from_euler_deg
+from .persist import load_model
+
+FORMATS = ("urdf", "ur", "dh", "yaml")
+
+
+@dataclass(frozen=True)
+class Exported:
+    """What :func:`export_model` wrote (``files``: format -> path), what it could not (``skipped``: format ->
+    why), and what the geometry leaves out (``not_carried``: one line, empty when nothing)."""
+
+    files: dict = field(default_factory=dict)
+    skipped: dict = field(default_factory=dict)
+    not_carried: str = ""
+    tcp_mm: NDArray[np.float64] | None = None
+
+
+def calibrated_geometry(model: KinematicModel) -> tuple[Robot, NDArray[np.float64]]:
+    """The identified chain in the robot's own base frame, and its base pose ``(4, 4)`` (mm) in the measurement
+    frame (the identified base correction: ``Rz Ry Rx`` turn, then the shift)."""
+    values = model.identification_.value
+    size = geometric_size(model.robot_, model.parametrization_)
+    robot = own_geometry(model.robot_, values, model.parametrization_)
+    return robot, transform(matrix_from_euler_deg(values[size - 3:size]), values[size - 6:size - 3])
+
+
+def left_out(model: KinematicModel) -> str:
+    """The one line naming what a geometric file cannot carry of ``model`` (empty when nothing)."""
+    parts = []
+    errors = model.joint_errors_
+    if errors.compliance:
+        parts.append("the gravity compliance of joint" + ("s " if len(errors.compliance) > 1 else " ")
+                     + ", ".join(map(str, errors.compliance)))
+    if any(errors.harmonics):
+        parts.append(f"transmission harmonics (up to {max(errors.harmonics)} per joint)")
+    if model.residual_ is not None:
+        parts.append(f"the residual model ({model.residual_.describe()})")
+    return "not carried by the geometric files: " + "; ".join(parts) if parts else ""
+
+
+def export_model(model_path, output: Path, formats=FORMATS, q_deg=None, errors_mm=None) -> Exported:
+    """Write the calibrated robot of a kinematic model file into the folder ``output``.
+
+    Parameters
+    ----------
+    model_path : str or Path
+        A model file of kind ``kinematic``.
+    output : Path
+        The folder (created if missing).
+    formats : sequence of {"urdf", "ur", "dh", "yaml"}
+    q_deg, errors_mm : ndarray, shapes (n, N) and (n, 3), optional
+        A data set (joints, measured errors in the base frame, mm): the line on
+        what is not carried then gives the RMS the exported geometry and the
+        full model leave on it.
+    """
+    model, doc = load_model(model_path)
+    if not isinstance(model, KinematicModel):
+        raise PartcalError(f"{model_path}: a model of kind {doc.get('kind')!r} has no robot geometry to export; "
+                           "export reads models of kind 'kinematic'")
+    unknown = [f for f in formats if f not in FORMATS]
+    if unknown:
+        raise PartcalError(f"export format {unknown[0]!r}: expected one of {', '.join(FORMATS)}")
+    robot, base_pose = calibrated_geometry(model)
+    name = Path(model_path).stem
+    output = Path(output)
+    output.mkdir(parents=True, exist_ok=True)
+    stamp = (f"Calibrated {model.robot_.name} from {Path(model_path).name} ({model.parametrization_} "
+             "parametrization), written by partcal export.")
+    files, skipped, tcp = {}, {}, None
+    writers = {"urdf": lambda: (f"{name}.urdf", urdf_from_robot(robot, base_pose, comment=stamp)),
+               "yaml": lambda: (f"{name}_robot.yaml", _robot_yaml(robot, stamp)),
+               "dh": lambda: (f"{name}_dh.csv", _dh_csv(robot))}
+    for fmt in formats:
+        try:
+            if fmt == "ur":
+                ur = ur_kinematics_from_robot(robot)
+                tcp = ur.tcp_mm
+                text = ur.yaml_text(_hash(ur.joints), _ur_comment(stamp, ur))
+                filename = f"{name}_ur_kinematics.yaml"
+            else:
+                filename, text = writers[fmt]()
+        except ExportError as exc:
+            skipped[fmt] = str(exc)
+            continue
+        with atomic_write(output / filename) as handle:
+            handle.write(text)
+        files[fmt] = output / filename
+    note = left_out(model)
+    if note and q_deg is not None:
+        geometry = model.identified_robot_.positions(q_deg) - model.robot_.positions(q_deg)
+        full = model.predict(q_deg)[:, :3]
+        note += (f" (on the {len(q_deg)} poses given: 3-D RMS left {pooled_rms(errors_mm - geometry):.3f} mm by the "
+                 f"exported geometry, {pooled_rms(errors_mm - full):.3f} mm by the full model)")
+    return Exported(files, skipped, note, tcp)
+
+
+def _robot_yaml(robot: Robot, stamp: str) -> str:
+    import yaml
+
+    spec = robot_to_dict(robot)
+    spec["description"] = stamp
+    return yaml.safe_dump(spec, sort_keys=False)
+
+
+def _dh_csv(robot: Robot) -> str:
+    rows = dh_rows(robot)
+    out = io.StringIO()
+    writer = csv.DictWriter(out, fieldnames=list(rows[0]), lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(rows)
+    out.write(f"# tool_mm,{','.join(repr(float(v)) for v in robot.tool_mm)}\n")
+    return out.getvalue()
+
+
+def _hash(joints: dict) -> str:
+    """A tag for the file's ``hash`` field: ``calib_partcal_`` and 16 hex digits of its numbers."""
+    text = repr(sorted((k, sorted(v.items())) for k, v in joints.items()))
+    return "calib_partcal_" + hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def _ur_comment(stamp: str, ur) -> str:
+    x, y, z = ur.tcp_mm
+    return (f"{stamp}\nur_description's kinematics parameters: per joint the origin from the parent link, "
+            "translation x, y, z (metres) then\nrotation Rz(yaw) Ry(pitch) Rx(roll) (radians, fixed axes), then the "
+            "joint's turn about z. The chain starts in\nbase_link_inertia (partcal's robot base frame; base_link is "
+            "turned by 180 degrees about z from it).\nThe hash is partcal's own tag, not the controller's calibration "
+            f"checksum.\nTool centre point in tool0 (set it on the controller): x {x:.6f} y {y:.6f} z {z:.6f} mm.")

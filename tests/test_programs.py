@@ -192,15 +192,35 @@ def pose_errors_of(virtual, q):
 
 
 def fitted(config, centre, spread, tmp_path, **kwargs):
-    """A kinematic pose model fitted on 48 noise-free poses of a virtual robot, saved and loaded back."""
+    """A kinematic pose model fitted by a run (``partcal run``'s stages) on 48 noise-free poses of a virtual
+    robot, its model file loaded back. ``kwargs``: the entry's keys."""
+    import yaml
+
     from partcal import load_predictor
+    from partcal.data.measurements import Measurements, write_measurements
+    from partcal.robot.description import robot_to_dict
+    from partcal.robot.kinematics import xyz_deg_from_matrices
+    from partcal.study.config import load_config
+    from partcal.study.outputs import write_run
+    from partcal.study.runner import run as run_study
 
     virtual = load_study(ROOT / "configs" / config).robot
     rng = np.random.default_rng(1)
     q = np.array(centre) + rng.uniform(-spread, spread, (400, 6))
     q = q[virtual.nominal.within_limits(q)][:48]
-    model = KinematicModel(robot=virtual.nominal, use_orientation=True, **kwargs).fit(q, pose_errors_of(virtual, q))
-    save_model(model, tmp_path / "model.json", name="DH pose", robot=virtual.nominal)
+    nominal = virtual.nominal.forward(q)
+    m = Measurements(q_deg=q, nominal_mm=nominal[:, :3, 3], measured_mm=virtual.true_positions(q),
+                     name="identification", nominal_orientation_deg=xyz_deg_from_matrices(nominal[:, :3, :3]),
+                     measured_orientation_deg=xyz_deg_from_matrices(virtual.true_flange(q)[1]))
+    write_measurements(m, tmp_path / "identification.csv")
+    (tmp_path / "robot.yaml").write_text(yaml.safe_dump(robot_to_dict(virtual.nominal)))
+    entry = {"name": "DH pose", "kind": "kinematic", "use_orientation": True,
+             **{k: list(v) for k, v in kwargs.items()}}
+    (tmp_path / "run.yaml").write_text(yaml.safe_dump({
+        "name": "virtual", "robot": "robot.yaml", "predict": "pose", "cv_folds": 3,
+        "data": {"identification": "identification.csv"}, "models": [entry], "output": "out"}))
+    write_run(run_study(load_config(tmp_path / "run.yaml")))
+    (tmp_path / "model.json").write_bytes((tmp_path / "out" / "models" / "dh-pose.json").read_bytes())
     return virtual, load_predictor(tmp_path / "model.json")
 
 

@@ -375,6 +375,10 @@ def _cmd_plan(args) -> int:
     from .study import plan
 
     planning = args.n is not None
+    if args.iso9283:
+        return _plan_iso9283(args)
+    if args.cube is not None or args.cycles is not None:
+        raise PartcalError("plan: --cube and --cycles go with --iso9283")
     if not (planning or args.evaluate or args.curve):
         raise PartcalError("plan: give -n N -o POSES.csv (plan poses), --evaluate DATA.csv (judge a pose set) or "
                            "--curve (predicted uncertainty against the number of poses)")
@@ -437,6 +441,61 @@ def _cmd_plan(args) -> int:
         rows = plan.pose_curve(robot, counts, space=space, noise_mm=args.noise_mm, random_state=args.seed,
                                callback=lambda k, total, row: say(f"curve [{k}/{total}] {row['n']} poses"))
         print("\n".join(plan.curve_lines(rows, args.noise_mm)))
+    return 0
+
+
+def _cmd_iso9283(args) -> int:
+    import json
+
+    from ._io import atomic_write
+    from .robot.description import load_robot
+    from .study.iso_figures import describe, iso_figures, pose_lines, read_iso_data
+
+    _refuse_input_as_output(args.output, "iso9283", [("data file", args.data), ("format file", args.format),
+                                                    ("model file", args.model)])
+    robot = load_robot(args.robot) if args.robot else None
+    data = read_iso_data(args.data, robot, fmt=_format(args), tol_deg=args.tol_deg)
+    predicted, name = None, None
+    if args.model:
+        from .study.predictor import load_predictor
+
+        predictor = load_predictor(args.model)
+        q = data.measurements.q_deg
+        predicted = (predictor.predict(joints=q) if predictor.inputs == "joint"
+                     else predictor.predict(positions=data.measurements.nominal_mm))
+        name = predictor.name or Path(args.model).stem
+    figures = iso_figures(data, predicted, own_frame=args.own_frame, distance=args.distance, path=args.path,
+                          repeatability=args.repeatability)
+    print(describe(data) + (f"; after model {name!r}" if name else ""))
+    print("\n".join(figures.lines()))
+    if args.output:
+        doc = {"partcal_version": __version__, "data": str(args.data), "model": args.model,
+               "tolerance_deg": args.tol_deg, "cycles_from": "column" if data.by_column else "joints",
+               **figures.to_dict(pose_lines(data))}
+        with atomic_write(args.output) as handle:
+            json.dump(doc, handle, indent=1)
+            handle.write("\n")
+        print(f"wrote {args.output}")
+    return 0
+
+
+def _plan_iso9283(args) -> int:
+    from .robot.description import load_robot
+    from .study import plan
+
+    if args.output is None or args.n is not None or args.evaluate or args.curve:
+        raise PartcalError("plan --iso9283: give -o POSES.csv (and optionally --cube CX CY CZ EDGE, --cycles N), "
+                           "without -n, --evaluate or --curve")
+    _refuse_input_as_output(args.output, "plan", [("robot file", args.robot)])
+    robot = load_robot(args.robot)
+    cycles = 30 if args.cycles is None else args.cycles
+    cube = plan.iso_cube_plan(robot, args.output, cube=args.cube, cycles=cycles, random_state=args.seed,
+                              comment=f"ISO 9283 test poses planned by partcal {__version__} for {robot.name}. "
+                                      "Joint angles in degrees, nominal tool positions in mm.")
+    for k, (p, q) in enumerate(zip(cube.points_mm, cube.q_deg)):
+        print(f"P{k + 1}: {np.round(p, 3).tolist()} mm, joints {np.round(q, 3).tolist()} deg")
+    print(f"wrote {len(cube.q_deg) * cycles} poses ({cycles} cycles of P1..P5; cube centre "
+          f"{np.round(cube.centre_mm, 3).tolist()} mm, edge {cube.edge_mm:g} mm) to {args.output}")
     return 0
 
 
@@ -526,6 +585,26 @@ def build_parser() -> argparse.ArgumentParser:
     imp.add_argument("--config", metavar="RUN.yaml",
                      help="convert the data of a run config (format, subsets, registration) without fitting")
     imp.set_defaults(func=_cmd_import)
+    iso = sub.add_parser("iso9283", help="ISO 9283 figures of measured cycles: pose accuracy and repeatability (AP, "
+                                         "RP), distance (AD, RD), path (AT, RT)")
+    iso.add_argument("data", help="measurement CSV (commanded joints, nominal and measured positions; optional "
+                                  "'cycle' column)")
+    iso.add_argument("--format", metavar="FILE.yaml", help="the file's format, see docs/data.md")
+    iso.add_argument("--robot", help="robot (built-in name or YAML) for nominal positions and orientations by "
+                                     "forward kinematics")
+    iso.add_argument("--model", metavar="MODEL.json", help="the figures after this model's correction (measured "
+                                                           "minus predicted error)")
+    iso.add_argument("--own-frame", action="store_true",
+                     help="the data were registered in their own tracker frame: score up to a rigid transform")
+    iso.add_argument("--tol-deg", type=float, default=0.01,
+                     help="commanded joints this close are one pose (default 0.01 deg)")
+    iso.add_argument("--distance", nargs=2, type=_positive_int, metavar=("A", "B"),
+                     help="distance accuracy and repeatability between poses A and B (1-based, e.g. 2 4)")
+    iso.add_argument("--path", action="store_true", help="the poses, in order, are the points of a path: AT, RT")
+    iso.add_argument("--repeatability", action="store_true",
+                     help="refuse a pose measured in a single cycle (its RP is otherwise left out)")
+    iso.add_argument("-o", "--output", metavar="REPORT.json", help="write the figures of every pose as JSON")
+    iso.set_defaults(func=_cmd_iso9283)
     pln = sub.add_parser("plan", help="choose the poses to measure (D-optimal), or judge a pose set's observability")
     pln.add_argument("robot", help="built-in robot name or robot YAML")
     pln.add_argument("-n", type=_positive_int, help="number of poses to plan")
@@ -552,6 +631,12 @@ def build_parser() -> argparse.ArgumentParser:
                      help="plan for K transmission harmonics of every joint, or one K per joint")
     pln.add_argument("--payload-kg", type=float, default=0.0,
                      help="the payload the measurement carries at the tool (kg, default 0; with --compliance)")
+    pln.add_argument("--iso9283", action="store_true",
+                     help="write the ISO 9283 test poses P1..P5 of a cube, in cycles (with -o POSES.csv)")
+    pln.add_argument("--cube", nargs=4, type=float, metavar=("CX", "CY", "CZ", "EDGE"),
+                     help="with --iso9283: the cube's centre and edge (mm, base frame; default the largest cube "
+                          "found in the workspace)")
+    pln.add_argument("--cycles", type=_positive_int, help="with --iso9283: cycles of P1..P5 (default 30)")
     pln.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
     pln.set_defaults(func=_cmd_plan)
     return parser

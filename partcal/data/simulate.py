@@ -86,6 +86,7 @@ class VirtualRobot:
     tracker: Tracker
     tracker_scale: float
     targets: dict = field(default_factory=dict)     # extra targets: name -> nominal offset (3,) mm
+    repeatability_mm: float = 0.0   # standard deviation per axis of the tool position between visits of one pose
 
     def actual_joints(self, q_deg: NDArray[np.float64]) -> NDArray[np.float64]:
         """Joint angles the arm really takes when ``q_deg`` is commanded."""
@@ -113,8 +114,17 @@ class VirtualRobot:
         return self.targets[target] + (self.true.tool_mm - self.nominal.tool_mm)
 
     def measure(self, q_deg, rng: np.random.Generator) -> NDArray[np.float64]:
-        """What the tracker reports of the primary target: the mean of ``readings`` noisy readings per pose."""
-        return self._read(self.true_positions(q_deg), rng)
+        """What the tracker reports of the primary target: the mean of ``readings`` noisy readings per pose.
+
+        With a ``repeatability_mm`` the arm itself stops each time a little
+        elsewhere: every visit adds independent normal noise of that standard
+        deviation per axis to the true position (drawn only when it is set, so
+        data sets without it are unchanged).
+        """
+        p = self.true_positions(q_deg)
+        if self.repeatability_mm > 0:
+            p = p + rng.normal(0.0, self.repeatability_mm, size=p.shape)
+        return self._read(p, rng)
 
     def _read(self, p: NDArray[np.float64], rng: np.random.Generator) -> NDArray[np.float64]:
         """The tracker's reading of true points ``(n, 3)`` mm: its scale error and averaged noise."""
@@ -167,6 +177,7 @@ def load_study(path: str | Path) -> Study:
     true, base_rot, base_mm = _true_robot(nominal, errors, rng)
     compliance = _compliance(errors, nominal)
     gear = _gear(errors, nominal)
+    repeatability = errors.get("repeatability_mm", "float", default=0.0, check=range_check(0))
     tr = top.section("tracker", required=True)
     tracker = Tracker(
         position_mm=np.asarray(tr.get("position_mm", "list", check=_vector3), dtype=float),
@@ -183,7 +194,7 @@ def load_study(path: str | Path) -> Study:
     sampling.done()
     datasets = _datasets(top.section("datasets", required=True))
     top.done()
-    robot = VirtualRobot(nominal, true, base_rot, base_mm, compliance, gear, tracker, scale, targets)
+    robot = VirtualRobot(nominal, true, base_rot, base_mm, compliance, gear, tracker, scale, targets, repeatability)
     return Study(robot, seed, output, datasets, ranges, fixed, path)
 
 

@@ -1,0 +1,132 @@
+"""ISO 9283 figures of a measured data set, as measured and after a model's correction (``partcal iso9283``).
+
+A data set's rows are grouped into poses and cycles (:mod:`partcal.data.iso9283`):
+by a ``cycle`` column when the file has one, else by repeated commanded
+joints. The commanded position of a row is its nominal position, the attained
+one the measured position; after a model, the attained position is what the
+model leaves: the measured position minus the predicted error (what a
+compensated robot reaches, to first order), scored as a run scores the set
+(a set registered in its own tracker frame up to a rigid transform).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..data import iso9283
+from ..data.measurements import Measurements, read_measurements, read_text_column
+from ..errors import DataError
+from ..robot.description import joint_columns
+from .scoring import errors_left
+
+CYCLE_COLUMN = "cycle"
+
+
+@dataclass(frozen=True)
+class IsoData:
+    """A data set with its cycles, and the line of every row (for messages).
+
+    Attributes
+    ----------
+    measurements : Measurements
+    cycles : Cycles
+    lines : ndarray of int, shape (n,)
+        The line (as an editor shows it) of each data row.
+    source : str
+    by_column : bool
+        Whether the cycles came from a ``cycle`` column (else from repeated commanded joints).
+    """
+
+    measurements: Measurements
+    cycles: iso9283.Cycles
+    lines: NDArray[np.intp]
+    source: str
+    by_column: bool
+
+
+def read_iso_data(path, robot=None, *, fmt=None, tol_deg: float = iso9283.DEFAULT_TOLERANCE_DEG) -> IsoData:
+    """Read a measurement CSV (or a foreign file with ``fmt``) and recognise its poses and cycles."""
+    if not (np.isfinite(tol_deg) and tol_deg >= 0):
+        raise DataError(f"the pose tolerance must be a non-negative number of degrees; got {tol_deg!r}")
+    m = read_measurements(path, robot, fmt=fmt)
+    lines, labels = read_text_column(path, CYCLE_COLUMN, fmt)
+    if labels is None:
+        cycles = iso9283.cycles_from_joints(m.q_deg, tol_deg)
+    else:
+        cycles = iso9283.cycles_from_column(labels, m.q_deg, tol_deg, source=str(path), lines=lines,
+                                            columns=[fmt.file_column(c) if fmt else c
+                                                     for c in joint_columns(m.n_joints)])
+    return IsoData(m, cycles, lines, str(path), labels is not None)
+
+
+@dataclass(frozen=True)
+class IsoFigures:
+    """The figures of one data set: pose, and optionally distance and path."""
+
+    pose: iso9283.PoseFigures
+    distance: iso9283.DistanceFigures | None
+    path: iso9283.PathFigures | None
+
+    def to_dict(self, lines=None) -> dict:
+        return iso9283.to_dict(self.pose, self.distance, self.path, lines)
+
+    def lines(self) -> list[str]:
+        return iso9283.table_lines(self.pose, self.distance, self.path)
+
+
+def iso_figures(data: IsoData, predicted: NDArray[np.float64] | None = None, *, own_frame: bool = False,
+                distance: tuple[int, int] | None = None, path: bool = False,
+                repeatability: bool = False) -> IsoFigures:
+    """The ISO 9283 figures of ``data``, as measured or after a model predicting ``predicted`` (n, 3) mm.
+
+    Parameters
+    ----------
+    predicted : ndarray, shape (n, 3) or (n, 6), optional
+        A model's predicted errors at the rows (mm; a pose model's rotation
+        vectors in mrad): the figures of what it leaves.
+    own_frame : bool
+        The set was registered in its own tracker frame: score up to a rigid transform.
+    distance : (int, int), optional
+        Two poses (1-based) for the distance figures AD, RD.
+    path : bool
+        The poses, in order, are the points of a path: also AT, RT.
+    repeatability : bool
+        Refuse a pose measured in a single cycle.
+    """
+    m, cycles = data.measurements, data.cycles
+    if repeatability or path:
+        iso9283.require_repeats(cycles, source=data.source, lines=data.lines,
+                                what="path repeatability" if path else "repeatability")
+    zeros = np.zeros((len(m), 3 if predicted is None else predicted.shape[1]))
+    left, _ = errors_left(m, zeros if predicted is None else predicted, own_frame)
+    attained = m.nominal_mm + left
+    turn = None
+    if m.has_orientation:
+        turn = m.orientation_errors_deg
+        if predicted is not None and predicted.shape[1] == 6:
+            turn = np.degrees(errors_left(m, predicted, own_frame)[1] / 1000.0)
+    dist = None
+    if distance is not None:
+        bad = [p for p in distance if not 1 <= p <= cycles.n_poses]
+        if bad:
+            raise DataError(f"{data.source}: --distance names pose {bad[0]}, but the data have poses 1..{cycles.n_poses}")
+        dist = iso9283.distance_figures(m.nominal_mm, attained, cycles, (distance[0] - 1, distance[1] - 1))
+    trace = iso9283.path_figures(m.nominal_mm, attained, cycles) if path else None
+    return IsoFigures(iso9283.pose_figures(m.nominal_mm, attained, cycles, turn), dist, trace)
+
+
+def pose_lines(data: IsoData) -> NDArray[np.intp]:
+    """The line of each pose's first row, shape (P,)."""
+    return data.lines[data.cycles.first_rows()]
+
+
+def describe(data: IsoData) -> str:
+    """One line: rows, poses, cycles and where they came from."""
+    counts = data.cycles.counts
+    how = "a 'cycle' column" if data.by_column else "repeated commanded joints"
+    return (f"{Path(data.source).name}: {len(data.measurements)} rows, {data.cycles.n_poses} poses, "
+            f"{counts.min()} to {counts.max()} cycles per pose (from {how})")

@@ -118,18 +118,26 @@ def _cmd_predict(args) -> int:
                                                      ("format file", args.format)])
     predictor = load_predictor(args.model)
     fmt = _format(args)
+    std = None
     if predictor.inputs == "cartesian":
         cols, X, _ = read_columns(args.input, _POSITION_COLUMNS, fmt=fmt)
-        errors = predictor.predict(positions=X)
+        errors = predictor.predict(positions=X, return_std=args.std)
         payload = None
     else:     # a model with compliant joints reads the payload of each row too, when the file has it
         cols, X, _ = read_columns(args.input, [joint_columns(predictor.n_inputs)], fmt=fmt)
         payload = read_payloads(args.input, fmt) if predictor.model.reads_payload else None
-        errors = predictor.predict(joints=X, payload_kg=payload)
+        errors = predictor.predict(joints=X, payload_kg=payload, return_std=args.std)
+    if args.std:
+        errors, std = errors
     predictor.refuse_implausible(X, errors, source=args.input)     # nothing is written then
     given = [X] if payload is None else [X, payload[:, None]]
-    _write_table(args.output, cols + (["payload_kg"] if payload is not None else []) + ["dx", "dy", "dz"]
-                 + (list(_TURN_COLUMNS) if predictor.predicts_pose else []), np.hstack(given + [errors]), atomic_write)
+    header = cols + (["payload_kg"] if payload is not None else []) + ["dx", "dy", "dz"] + (
+        list(_TURN_COLUMNS) if predictor.predicts_pose else [])
+    if std is not None:
+        header += ["sdx", "sdy", "sdz"] + (["sd" + c[1:] for c in _TURN_COLUMNS] if predictor.predicts_pose else [])
+        given.append(errors)
+        errors = std
+    _write_table(args.output, header, np.hstack(given + [errors]), atomic_write)
     _warn_if_far(predictor, X)
     print(f"predicted errors for {len(X)} points: {args.output}")
     return 0
@@ -200,6 +208,9 @@ def _cmd_compensate(args) -> int:
     if result.joints_deg is not None:
         header += [f"{c}_cmd" for c in joint_columns(n_q)]
         parts.append(result.joints_deg)
+    if args.std:          # the position expected to be left at each target, and its spread
+        header += ["dx_left", "dy_left", "dz_left", "sdx", "sdy", "sdz"]
+        parts += list(predictor.residual_of(result, targets, payload))
     _write_table(args.output, header + ["converged"], np.hstack(parts), atomic_write,
                  flags=result.converged)
     bad = np.flatnonzero(~result.converged)
@@ -553,6 +564,8 @@ def build_parser() -> argparse.ArgumentParser:
                       help="CSV to write (inputs + dx,dy,dz in mm; pose models also drx,dry,drz in mrad)")
     pred.add_argument("--format", metavar="FILE.yaml", help="the input's format (delimiter, decimal, columns, "
                                                             "units), see docs/data.md")
+    pred.add_argument("--std", action="store_true", help="also the standard deviation of each predicted error: "
+                                                         "sdx,sdy,sdz (mm; pose models also sdrx,sdry,sdrz, mrad)")
     pred.set_defaults(func=_cmd_predict)
     comp = sub.add_parser("compensate", help="false targets that make the robot reach the given targets")
     comp.add_argument("model", help="model file (models/<name>.json of a run)")
@@ -564,6 +577,9 @@ def build_parser() -> argparse.ArgumentParser:
                            "exit code 3 when any target did not converge")
     comp.add_argument("--format", metavar="FILE.yaml", help="the targets' format (delimiter, decimal, columns, "
                                                             "units), see docs/data.md")
+    comp.add_argument("--std", action="store_true",
+                      help="also the position expected to be left at each target (dx_left,dy_left,dz_left: target "
+                           "minus where the model says the command lands) and its standard deviation sdx,sdy,sdz (mm)")
     comp.set_defaults(func=_cmd_compensate)
     eqs = sub.add_parser("equations", help="print a series model's fitted equations in mm and degrees")
     eqs.add_argument("model", help="model file (models/<name>.json of a run)")

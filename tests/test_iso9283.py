@@ -178,3 +178,14 @@ def test_iso9283_refuses_single_cycles_when_repeatability_is_asked(tmp_path):
     res = partcal_cli("iso9283", str(ROOT / "data" / "sk120" / "identification.csv"), "--repeatability")
     assert res.returncode == 2 and res.stderr.count("\n") == 1
     assert "identification.csv:4: column 'cycle': pose 1 was measured in 1 cycle" in res.stderr
+
+
+def test_the_virtual_robots_repeatability_is_read_from_its_yaml(tmp_path):
+    from conftest import ROOT
+
+    from partcal.data.simulate import load_study
+
+    text = (ROOT / "configs" / "sk120_virtual.yaml").read_text()
+    (tmp_path / "v.yaml").write_text(text.replace("errors:\n", "errors:\n  repeatability_mm: 0.02\n", 1))
+    assert load_study(tmp_path / "v.yaml").robot.repeatability_mm == 0.02
+    assert load_study(ROOT / "configs" / "sk120_virtual.yaml").robot.repeatability_mm == 0.0

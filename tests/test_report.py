@@ -367,3 +367,20 @@ data: {frame: tracker, identification: ../data/tracker_identification.csv,
         shared, own = stats["test"]["orientation"]["rms_angle"], stats["own"]["orientation"]["rms_angle"]
         # FDP(AI) leaves 2 mm: the rigid fit of its positions to the set turns its orientation too (1.40 / 1.58)
         assert own == pytest.approx(shared, rel=0.05 if r is None or r.spec.kind == "kinematic" else 0.2)
+
+
+def test_scattered_poses_are_drawn_as_points_with_the_share_inside_each_models_interval():
+    from partcal.report import figures
+
+    rng = np.random.default_rng(0)
+    measured = rng.normal(0, 1, size=(200, 3))
+    predicted = np.zeros((200, 3))
+    spread = np.full((200, 3), 0.5)
+    inside = np.abs(measured[:, 0]) <= 1.959963984540054 * 0.5          # x: the legend's share
+    svg = figures.errors_scattered("C", measured, {"GP": predicted}, {"GP": spread})
+    assert f"GP ({100 * inside.mean():.0f}% within its 95% interval)" in svg
+    assert "one point per pose" in svg and "<path" in svg
+    band = figures.errors_along_path("rect", measured, {"GP": predicted}, {"GP": spread})
+    assert "GP: 95% band" in band
+    assert not figures.is_path(rng.uniform(0, 1000, (300, 3)))
+    assert figures.is_path(np.c_[np.linspace(0, 1000, 300), np.zeros(300), np.ones(300)])

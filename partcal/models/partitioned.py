@@ -284,19 +284,21 @@ class PartitionedErrorModel(ErrorModelBase):
                 mean[rows], std[rows] = self.models_[region].std_validated(X[rows])
             return mean, std
         weights, _ = self._blend_caches(False)
-        plan, Ss, blocks = weights.blocks(S)
-        Xs = Ss if S is X else np.take(X, plan.order, axis=0)
-        first, second = np.zeros((X.shape[0], n_out)), np.zeros((X.shape[0], n_out))
+        plan, _, blocks = weights.blocks(S)
+        parts: dict[int, list] = {}                     # region -> (rows, weights) of every block
         for block in blocks:
             rows = plan.order[block.positions]
             regions, W = region_weights(self.partition_.kernel_region[block.kernels], block.weights)
-            xb = Xs[block.positions]
             for region, w in zip(regions.tolist(), W):
                 keep = np.flatnonzero(w)
-                if keep.size:
-                    m, sd = self.models_[region].std_validated(xb[keep])
-                    first[rows[keep]] += w[keep, None] * m
-                    second[rows[keep]] += w[keep, None] * (sd**2 + m**2)
+                parts.setdefault(region, []).append((rows[keep], w[keep]))
+        first, second = np.zeros((X.shape[0], n_out)), np.zeros((X.shape[0], n_out))
+        for region, pieces in parts.items():           # one call per region (a GP factorises its data once)
+            rows, w = np.concatenate([r for r, _ in pieces]), np.concatenate([v for _, v in pieces])
+            if rows.size:
+                m, sd = self.models_[region].std_validated(X[rows])
+                np.add.at(first, rows, w[:, None] * m)
+                np.add.at(second, rows, w[:, None] * (sd**2 + m**2))
         return first, np.sqrt(np.maximum(second - first**2, 0.0))
 
     def spread_problem(self) -> str | None:

@@ -189,3 +189,17 @@ def test_the_virtual_robots_repeatability_is_read_from_its_yaml(tmp_path):
     (tmp_path / "v.yaml").write_text(text.replace("errors:\n", "errors:\n  repeatability_mm: 0.02\n", 1))
     assert load_study(tmp_path / "v.yaml").robot.repeatability_mm == 0.02
     assert load_study(ROOT / "configs" / "sk120_virtual.yaml").robot.repeatability_mm == 0.0
+
+
+def test_a_runs_figures_are_those_of_each_test_set_uncompensated_and_left_by_each_model():
+    from partcal.data.measurements import Measurements
+    from partcal.study.iso_figures import run_figures
+
+    m = Measurements(Q, COMMANDED, ATTAINED, name="cubes")
+    perfect = ATTAINED - COMMANDED                              # a model that predicts every error exactly
+    out = run_figures({"identification": m, "cubes": m}, {"perfect": {"cubes": perfect}, "none": {}})
+    assert list(out) == ["cubes"] and out["cubes"]["poses"] == 2 and out["cubes"]["cycles_max"] == 3
+    assert out["cubes"]["uncompensated"]["AP_max_mm"] == pytest.approx(math.sqrt(17))
+    assert out["cubes"]["uncompensated"]["RP_max_mm"] == pytest.approx(4 / 3 + math.sqrt(3))
+    assert out["cubes"]["models"]["perfect"]["AP_max_mm"] == pytest.approx(0.0, abs=1e-12)
+    assert "none" not in out["cubes"]["models"]

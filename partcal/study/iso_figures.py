@@ -130,3 +130,57 @@ def describe(data: IsoData) -> str:
     how = "a 'cycle' column" if data.by_column else "repeated commanded joints"
     return (f"{Path(data.source).name}: {len(data.measurements)} rows, {data.cycles.n_poses} poses, "
             f"{counts.min()} to {counts.max()} cycles per pose (from {how})")
+
+
+def of_measurements(m: Measurements, tol_deg: float = iso9283.DEFAULT_TOLERANCE_DEG) -> IsoData:
+    """A data set already read (a run's), its poses recognised from repeated commanded joints; no lines."""
+    return IsoData(m, iso9283.cycles_from_joints(m.q_deg, tol_deg), np.arange(1, len(m) + 1), m.name, False)
+
+
+def run_figures(datasets: dict[str, Measurements], predictions: dict[str, dict[str, NDArray[np.float64]]],
+                own_frame: dict[str, bool] | None = None) -> dict[str, dict]:
+    """The ISO 9283 pose figures of every test set of a run, uncompensated and after each model.
+
+    Parameters
+    ----------
+    datasets : dict of str to Measurements
+        The run's data sets by name (the identification set is left out).
+    predictions : dict of str to dict of str to ndarray
+        Each model's predicted errors on each data set, ``{model: {data set: (n, 3 or 6)}}``.
+    own_frame : dict of str to bool, optional
+        The data sets registered in their own tracker frame (scored up to a rigid transform).
+
+    Returns
+    -------
+    dict
+        ``{data set: {"poses", "cycles_max", "uncompensated": summary, "models": {model: summary}}}``
+        with the summaries of :func:`partcal.data.iso9283.summary` (``AP_mean_mm``, ``AP_max_mm``,
+        ``RP_mean_mm``, ``RP_max_mm``; RP None without repeated poses).
+    """
+    own_frame = own_frame or {}
+    out = {}
+    for name, m in datasets.items():
+        if name == "identification":
+            continue
+        data = of_measurements(m)
+        entry = {"poses": data.cycles.n_poses, "cycles_max": int(data.cycles.counts.max()),
+                 "uncompensated": iso9283.summary(iso_figures(data, own_frame=own_frame.get(name, False)).pose),
+                 "models": {}}
+        for model, by_set in predictions.items():
+            if name in by_set:
+                figures = iso_figures(data, by_set[name], own_frame=own_frame.get(name, False))
+                entry["models"][model] = iso9283.summary(figures.pose)
+        out[name] = entry
+    return out
+
+
+def run_lines(figures: dict[str, dict]) -> list[str]:
+    """The printed summary of :func:`run_figures`: per test set, AP mean / max (mm) uncompensated and per model."""
+    lines = ["ISO 9283 pose accuracy AP, mean / max over the poses (mm)"]
+    for name, entry in figures.items():
+        cells = [f"uncompensated {entry['uncompensated']['AP_mean_mm']:.3f} / {entry['uncompensated']['AP_max_mm']:.3f}"]
+        cells += [f"{model} {s['AP_mean_mm']:.3f} / {s['AP_max_mm']:.3f}" for model, s in entry["models"].items()]
+        rp = entry["uncompensated"]["RP_max_mm"]
+        lines.append(f"  {name} ({entry['poses']} poses" + (f", RP max {rp:.3f} mm" if rp is not None else "")
+                     + "): " + "; ".join(cells))
+    return lines

@@ -203,3 +203,21 @@ def test_a_runs_figures_are_those_of_each_test_set_uncompensated_and_left_by_eac
     assert out["cubes"]["uncompensated"]["RP_max_mm"] == pytest.approx(4 / 3 + math.sqrt(3))
     assert out["cubes"]["models"]["perfect"]["AP_max_mm"] == pytest.approx(0.0, abs=1e-12)
     assert "none" not in out["cubes"]["models"]
+
+
+def test_the_virtual_robot_measures_the_iso_cube_in_cycles(tmp_path):
+    from conftest import ROOT
+
+    from partcal.data.simulate import load_study, simulate
+    from partcal.robot.iso_cube import cube_points
+
+    text = (ROOT / "configs" / "sk120_virtual.yaml").read_text()
+    text = text.replace("errors:\n", "errors:\n  repeatability_mm: 0.05\n", 1)
+    text = text[:text.index("datasets:")] + "datasets:\n  cube: {iso9283: 30, cube: [1500, 0, 1000, 400]}\n"
+    (tmp_path / "v.yaml").write_text(text)
+    m = simulate(load_study(tmp_path / "v.yaml"))["cube"]
+    assert len(m) == 150 and m.labels[:6] == ("P1", "P2", "P3", "P4", "P5", "P1")
+    np.testing.assert_allclose(m.nominal_mm[:5], cube_points([1500, 0, 1000], 400.0), atol=1e-6)
+    f = pose_figures(m.nominal_mm, m.measured_mm, cycles_from_joints(m.q_deg))
+    known = 0.05 * math.sqrt(1 - 1 / 30) * (2 * math.sqrt(2 / math.pi) + 3 * math.sqrt(3 - 8 / math.pi))
+    assert f.n_cycles.tolist() == [30] * 5 and abs(f.rp_mm.mean() / known - 1) < 0.10

@@ -27,6 +27,7 @@ from .._validation import one_of, safe_name
 from .._yamlio import Section, load_yaml, range_check
 from ..errors import ConfigError
 from ..robot.description import joint_columns, load_robot, robot_reference
+from ..robot.iso_cube import largest_cube, solve_cube
 from ..robot.kinematics import Robot, matrix_from_euler_deg, xyz_deg_from_matrices
 from ..robot.trajectories import PATHS, paper_path
 from .formats import TARGET_NAME
@@ -297,11 +298,14 @@ def _datasets(sec: Section) -> dict[str, dict]:
         if problem:
             sec.fail(sec.path(str(name)), f"the data-set name {str(name)!r} must be {problem}")
         item = sec.section(name)
-        if item.has("sample") == item.has("path"):
-            item.fail(item.where, "give exactly one of 'sample: N' (sampled configurations) or "
-                                  f"'path: NAME' ({', '.join(PATHS)})")
+        if item.has("sample") + item.has("path") + item.has("iso9283") != 1:
+            item.fail(item.where, "give exactly one of 'sample: N' (sampled configurations), "
+                                  f"'path: NAME' ({', '.join(PATHS)}) or 'iso9283: CYCLES' (the ISO 9283 cube's P1..P5)")
         if item.has("sample"):
             spec = {"sample": item.get("sample", "int", check=range_check(1, 10**7, integer=True))}
+        elif item.has("iso9283"):
+            spec = {"iso9283": item.get("iso9283", "int", check=range_check(1, 10_000, integer=True)),
+                    "cube": item.get("cube", "list", default=None, check=_cube)}
         else:
             spec = {"path": item.get("path", "str", check=one_of(*PATHS).problem),
                     "start_mm": item.get("start_mm", "list", default=None, check=_vector3)}
@@ -310,6 +314,12 @@ def _datasets(sec: Section) -> dict[str, dict]:
     if not out:
         sec.fail(sec.where, "lists no data set")
     return out
+
+
+def _cube(value) -> str | None:
+    ok = isinstance(value, list) and len(value) == 4 and all(
+        isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v) for v in value)
+    return None if ok and value[3] > 0 else "[cx, cy, cz, edge] in mm (the cube's centre and a positive edge)"
 
 
 def sample_configurations(robot: Robot, n: int, ranges_deg: dict, fixed_deg: dict,
@@ -349,8 +359,14 @@ def simulate(study: Study) -> dict[str, Measurements]:
     children = np.random.SeedSequence(study.seed).spawn(2 + len(study.datasets))[2:]
     for (name, spec), child in zip(study.datasets.items(), children):
         rng = np.random.default_rng(child)
+        labels = (name,)
         if "sample" in spec:
             q = sample_configurations(vr.nominal, spec["sample"], study.ranges_deg, study.fixed_deg, rng)
+        elif "iso9283" in spec:            # P1..P5 of the cube, once per cycle: the cycles are the repeats
+            c = spec["cube"]
+            cube = largest_cube(vr.nominal, random_state=rng) if c is None else solve_cube(vr.nominal, c[:3], c[3])
+            q = np.tile(cube.q_deg, (spec["iso9283"], 1))
+            labels = tuple(f"P{k + 1}" for k in range(len(cube.q_deg)))
         else:
             targets = paper_path(spec["path"], spec["start_mm"])
             seed = vr.nominal.home_deg.copy()
@@ -361,7 +377,8 @@ def simulate(study: Study) -> dict[str, Measurements]:
         measured = vr.measure(q, rng)
         extra, orientation = vr.measure_more(q, rng)
         flange = vr.nominal.flange(q)
-        out[name] = Measurements(q, nominal, measured, name=name, labels=(name,) * len(q), extra_measured_mm=extra,
+        out[name] = Measurements(q, nominal, measured, name=name, labels=labels * (len(q) // len(labels)),
+                                 extra_measured_mm=extra,
                                  extra_nominal_mm={t: flange[:, :3, 3] + flange[:, :3, :3] @ vr.targets[t]
                                                    for t in extra},
                                  measured_orientation_deg=orientation,

@@ -221,3 +221,15 @@ def test_the_virtual_robot_measures_the_iso_cube_in_cycles(tmp_path):
     f = pose_figures(m.nominal_mm, m.measured_mm, cycles_from_joints(m.q_deg))
     known = 0.05 * math.sqrt(1 - 1 / 30) * (2 * math.sqrt(2 / math.pi) + 3 * math.sqrt(3 - 8 / math.pi))
     assert f.n_cycles.tolist() == [30] * 5 and abs(f.rp_mm.mean() / known - 1) < 0.10
+
+
+def test_the_cubes_points_keep_p1s_tool_orientation_where_the_robot_can():
+    from partcal.robot.description import load_robot
+    from partcal.robot.iso_cube import cube_points, solve_cube
+
+    ur10 = load_robot("universal_robots_ur10")
+    cube = solve_cube(ur10, [300.0, -500.0, 500.0], 300.0)
+    pose = ur10.forward(cube.q_deg)
+    assert cube.held_orientation
+    np.testing.assert_allclose(pose[:, :3, 3], cube_points([300.0, -500.0, 500.0], 300.0), atol=1e-5)
+    np.testing.assert_allclose(pose[:, :3, :3], np.repeat(pose[:1, :3, :3], 5, axis=0), atol=1e-7)

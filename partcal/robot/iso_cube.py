@@ -56,12 +56,17 @@ class Cube:
         P1..P5, mm (the nominal positions of the tool).
     q_deg : ndarray, shape (5, N)
         Joint angles reaching them, degrees: P2..P5 solved from P1's joints.
+    held_orientation : bool
+        Whether the tool keeps P1's orientation at every point (as the standard
+        asks); False when the robot cannot (its wrist limits), and P2..P5 are then
+        solved for the position alone.
     """
 
     centre_mm: NDArray[np.float64]
     edge_mm: float
     points_mm: NDArray[np.float64]
     q_deg: NDArray[np.float64]
+    held_orientation: bool = False
 
 
 def _reach(robot: Robot, targets: NDArray[np.float64], seeds: NDArray[np.float64]):
@@ -75,7 +80,9 @@ def solve_cube(robot: Robot, centre_mm, edge_mm: float, seed_deg=None) -> Cube:
 
     The centre is solved from ``seed_deg`` (default the home pose), every
     corner and P2..P5 from the centre's joints, so that all poses lie on one
-    branch of the inverse kinematics; a corner the robot cannot reach within
+    branch of the inverse kinematics; P2..P5 keep P1's tool orientation where
+    the robot can hold it at all four (full-pose IK), else they are solved for
+    the position alone (``held_orientation`` says which); a corner the robot cannot reach within
     its joint limits and constraints leaves the workspace, and so does a cube
     with a point of its 4 x 4 x 4 grid out of reach (a hole in the workspace,
     such as the column about a first joint's axis).
@@ -103,12 +110,18 @@ def solve_cube(robot: Robot, centre_mm, edge_mm: float, seed_deg=None) -> Cube:
                         f"workspace of {robot.name} inside: the point {np.round(inside[k], 3).tolist()} mm of its "
                         "4 x 4 x 4 grid is out of reach within the joint limits")
     points = cube_points(centre, edge_mm)
+    poses = np.repeat(robot.forward(q0), len(points), axis=0)       # P1's tool orientation at every point
+    poses[:, :3, 3] = points
+    held = robot.inverse_pose(poses, np.repeat(q0, len(points), axis=0), tol_mm=_IK_TOL_MM, tol_deg=1e-6,
+                              max_iter=300)
+    if held.success.all():
+        return Cube(centre, float(edge_mm), points, held.q_deg, True)
     q, ok = _reach(robot, points, np.repeat(q0, 5, axis=0))
     if not ok.all():
         k = int(np.flatnonzero(~ok)[0])
         raise DataError(f"the cube's test point P{k + 1} {np.round(points[k], 3).tolist()} mm is out of reach of "
                         f"{robot.name} within its joint limits")
-    return Cube(centre, float(edge_mm), points, q)
+    return Cube(centre, float(edge_mm), points, q, False)
 
 
 def largest_cube(robot: Robot, *, random_state=0, n_centres: int = 40, steps: int = 14) -> Cube:

@@ -389,7 +389,9 @@ def iso_cube_plan(robot: Robot, path: str | Path, *, cube=None, cycles: int = 30
     text = (comment + "\n" if comment else "") + (
         f"ISO 9283 test cube: centre {np.round(solved.centre_mm, 3).tolist()} mm, edge {solved.edge_mm:g} mm; "
         f"corners C1..C8 {np.round(corners, 3).tolist()}; plane C1-C2-C7-C8; P1 the centre, P2..P5 at "
-        f"{iso_cube.POINT_FRACTION:g} of the diagonal from C1, C2, C7, C8; {cycles} cycles")
+        f"{iso_cube.POINT_FRACTION:g} of the diagonal from C1, C2, C7, C8; {cycles} cycles; "
+        + ("the tool keeps P1's orientation at every point" if solved.held_orientation else
+           f"{robot.name} cannot hold P1's tool orientation at every point: P2..P5 are solved for the position"))
     n = len(solved.q_deg)
     write_plan(robot, np.tile(solved.q_deg, (cycles, 1)), path, comment=text,
                labels=[f"P{k + 1}" for k in range(n)] * cycles, cycles=np.repeat(np.arange(1, cycles + 1), n))

@@ -5,9 +5,10 @@ import math
 import numpy as np
 import pytest
 
-from partcal.errors import DataError
 from partcal.data.iso9283 import (Cycles, cycles_from_column, cycles_from_joints, distance_figures, path_figures,
-                             pose_figures, require_repeats, summary)
+                                  pose_figures, require_repeats)
+from partcal.errors import DataError
+from partcal.study.iso_figures import summary
 
 # Two poses, A commanded at (10, 0, 0) and B at (0, 10, 0), three cycles, rows interleaved A1 B1 A2 B2 A3 B3.
 Q = np.array([[0.0, 0.0], [5.0, 5.0], [0.004, 0.0], [5.0, 5.003], [0.0, -0.002], [5.0, 5.0]])

@@ -1,6 +1,7 @@
 """ISO 9283 figures of a measured data set, as measured and after a model's correction (``partcal iso9283``).
 
-A data set's rows are grouped into poses and cycles (:mod:`partcal.data.iso9283`):
+The figures' summaries, JSON and text table are here too. A data set's rows are grouped into
+poses and cycles (:mod:`partcal.data.iso9283`):
 by a ``cycle`` column when the file has one, else by repeated commanded
 joints. The commanded position of a row is its nominal position, the attained
 one the measured position; after a model, the attained position is what the
@@ -72,10 +73,10 @@ class IsoFigures:
     path: iso9283.PathFigures | None
 
     def to_dict(self, lines=None) -> dict:
-        return iso9283.to_dict(self.pose, self.distance, self.path, lines)
+        return to_dict(self.pose, self.distance, self.path, lines)
 
     def lines(self) -> list[str]:
-        return iso9283.table_lines(self.pose, self.distance, self.path)
+        return table_lines(self.pose, self.distance, self.path)
 
 
 def iso_figures(data: IsoData, predicted: NDArray[np.float64] | None = None, *, own_frame: bool = False,
@@ -164,12 +165,12 @@ def run_figures(datasets: dict[str, Measurements], predictions: dict[str, dict[s
             continue
         data = of_measurements(m)
         entry = {"poses": data.cycles.n_poses, "cycles_max": int(data.cycles.counts.max()),
-                 "uncompensated": iso9283.summary(iso_figures(data, own_frame=own_frame.get(name, False)).pose),
+                 "uncompensated": summary(iso_figures(data, own_frame=own_frame.get(name, False)).pose),
                  "models": {}}
         for model, by_set in predictions.items():
             if name in by_set:
                 figures = iso_figures(data, by_set[name], own_frame=own_frame.get(name, False))
-                entry["models"][model] = iso9283.summary(figures.pose)
+                entry["models"][model] = summary(figures.pose)
         out[name] = entry
     return out
 
@@ -184,3 +185,89 @@ def run_lines(figures: dict[str, dict]) -> list[str]:
         lines.append(f"  {name} ({entry['poses']} poses" + (f", RP max {rp:.3f} mm" if rp is not None else "")
                      + "): " + "; ".join(cells))
     return lines
+
+
+# ---------------------------------------------------------------------- summaries
+def _floats(values) -> list:
+    return [None if not np.isfinite(v) else float(v) for v in np.ravel(values)]
+
+
+def summary(figures: iso9283.PoseFigures) -> dict:
+    """The figures over all poses: ``AP_mean_mm``, ``AP_max_mm`` and, with repeats, ``RP_max_mm``, ``RP_mean_mm``
+    (over the poses measured more than once); with orientation ``AP_abc_max_deg``, ``RP_abc_max_deg``.
+
+    >>> cyc = iso9283.Cycles(np.array([0, 1]), np.array([0, 0]))
+    >>> summary(iso9283.pose_figures(np.zeros((2, 3)), np.array([[3.0, 4, 0], [1.0, 0, 0]]), cyc))
+    {'poses': 2, 'AP_mean_mm': 3.0, 'AP_max_mm': 5.0, 'RP_mean_mm': None, 'RP_max_mm': None}
+    """
+    rp = figures.rp_mm[np.isfinite(figures.rp_mm)]
+    out = {"poses": int(len(figures.ap_mm)), "AP_mean_mm": float(figures.ap_mm.mean()),
+           "AP_max_mm": float(figures.ap_mm.max()),
+           "RP_mean_mm": float(rp.mean()) if rp.size else None, "RP_max_mm": float(rp.max()) if rp.size else None}
+    if figures.ap_abc_deg is not None:
+        out["AP_abc_max_deg"] = _floats(np.abs(figures.ap_abc_deg).max(axis=0))
+        rp_abc = figures.rp_abc_deg[np.isfinite(figures.rp_abc_deg[:, 0])]
+        out["RP_abc_max_deg"] = _floats(rp_abc.max(axis=0)) if len(rp_abc) else None
+    return out
+
+
+def to_dict(figures: iso9283.PoseFigures, distance: iso9283.DistanceFigures | None = None,
+            path: iso9283.PathFigures | None = None,
+            lines=None) -> dict:
+    """Plain JSON values of the figures: ``summary``, one entry per pose, and the distance and path figures."""
+    poses = []
+    for k in range(len(figures.ap_mm)):
+        entry = {"pose": k + 1, "cycles": int(figures.n_cycles[k]),
+                 "commanded_mm": _floats(figures.commanded_mm[k]), "AP_mm": float(figures.ap_mm[k]),
+                 "APx_mm": float(figures.ap_xyz_mm[k, 0]), "APy_mm": float(figures.ap_xyz_mm[k, 1]),
+                 "APz_mm": float(figures.ap_xyz_mm[k, 2]), "RP_mm": _floats([figures.rp_mm[k]])[0]}
+        if lines is not None:
+            entry["line"] = int(lines[k])
+        if figures.ap_abc_deg is not None:
+            entry.update({f"AP_{a}_deg": float(v) for a, v in zip("abc", figures.ap_abc_deg[k])})
+            entry.update({f"RP_{a}_deg": f for a, f in zip("abc", _floats(figures.rp_abc_deg[k]))})
+        poses.append(entry)
+    out = {"summary": summary(figures), "poses": poses}
+    if distance is not None:
+        out["distance"] = {"poses": [distance.poses[0] + 1, distance.poses[1] + 1], "cycles": distance.n_cycles,
+                           "Dc_mm": distance.commanded_mm, "AD_mm": distance.ad_mm,
+                           "RD_mm": _floats([distance.rd_mm])[0], "AD_xyz_mm": _floats(distance.ad_xyz_mm),
+                           "RD_xyz_mm": _floats(distance.rd_xyz_mm)}
+    if path is not None:
+        out["path"] = {"AT_mm": path.at_mm, "AT_point": path.at_point + 1,
+                       "RT_mm": _floats([path.rt_mm])[0], "RT_point": path.rt_point + 1}
+    return out
+
+
+def _cell(value, width: int = 9, digits: int = 4) -> str:
+    return f"{'-':>{width}}" if value is None or not np.isfinite(value) else f"{value:>{width}.{digits}f}"
+
+
+def table_lines(figures: iso9283.PoseFigures, distance: iso9283.DistanceFigures | None = None,
+                path: iso9283.PathFigures | None = None,
+                max_rows: int = 40) -> list[str]:
+    """The text table ``partcal iso9283`` prints: one row per pose (the first ``max_rows``), then the summary."""
+    orient = figures.ap_abc_deg is not None
+    head = f"{'pose':>5}{'cycles':>7}{'AP':>9}{'APx':>9}{'APy':>9}{'APz':>9}{'RP':>9}"
+    head += f"{'AP_a':>9}{'AP_b':>9}{'AP_c':>9}{'RP_a':>9}{'RP_b':>9}{'RP_c':>9}" if orient else ""
+    out = ["ISO 9283 pose figures (mm" + (", degrees" if orient else "") + ")", head]
+    for k in range(min(len(figures.ap_mm), max_rows)):
+        row = (f"{k + 1:>5}{int(figures.n_cycles[k]):>7}{_cell(figures.ap_mm[k])}"
+               + "".join(_cell(v) for v in figures.ap_xyz_mm[k]) + _cell(figures.rp_mm[k]))
+        if orient:
+            row += "".join(_cell(v) for v in figures.ap_abc_deg[k]) + "".join(_cell(v) for v in figures.rp_abc_deg[k])
+        out.append(row)
+    if len(figures.ap_mm) > max_rows:
+        out.append(f"  ... {len(figures.ap_mm) - max_rows} more poses (all of them with -o report.json)")
+    s = summary(figures)
+    out.append(f"{s['poses']} poses: AP mean {s['AP_mean_mm']:.4f} mm, max {s['AP_max_mm']:.4f} mm; "
+               + (f"RP mean {s['RP_mean_mm']:.4f} mm, max {s['RP_max_mm']:.4f} mm" if s["RP_max_mm"] is not None
+                  else "RP: no pose measured in more than one cycle"))
+    if distance is not None:
+        out.append(f"distance P{distance.poses[0] + 1}-P{distance.poses[1] + 1} over {distance.n_cycles} cycles: "
+                   f"Dc {distance.commanded_mm:.3f} mm, AD {distance.ad_mm:.4f} mm, RD"
+                   f" {_cell(distance.rd_mm, 0)} mm")
+    if path is not None:
+        out.append(f"path: AT {path.at_mm:.4f} mm (point {path.at_point + 1}), RT {_cell(path.rt_mm, 0)} mm "
+                   f"(point {path.rt_point + 1})")
+    return out

@@ -42,7 +42,8 @@ from partcal.data.measurements import Measurements, read_measurements, write_mea
 from partcal.metrics import pose_groups  # noqa: E402
 from partcal.robot.description import robot_to_dict  # noqa: E402
 from partcal.study.config import load_config  # noqa: E402
-from partcal.study.registry import load_datasets, run  # noqa: E402
+from partcal.study.prepare import load_datasets  # noqa: E402
+from partcal.study.runner import run  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 SHARED = ROOT.parent / "shared" / "datasets" / "ipa_ur10"
@@ -101,7 +102,7 @@ def run_rule(folder: Path, robot: str, tests: list[str], rule):
     path.write_text(yaml.safe_dump(doc, sort_keys=False))
     config = load_config(path)
     if rule is None:          # the old rule: every row its own group
-        from partcal.study import registry
+        from partcal.study import selection as registry
 
         original = registry.pose_groups
         registry.pose_groups = lambda q: np.arange(len(q))

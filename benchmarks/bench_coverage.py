@@ -35,10 +35,10 @@ from partcal.models.kinematic import KinematicModel  # noqa: E402
 from partcal.models.partition import KMeansPartition  # noqa: E402
 from partcal.models.partitioned import PartitionedErrorModel  # noqa: E402
 from partcal.models.series import ErrorModel  # noqa: E402
-from partcal.models.spread import calibrate_spread  # noqa: E402
+from partcal.study.spread import calibrate_spread  # noqa: E402
 from partcal.robot.description import load_robot  # noqa: E402
 from partcal.study.config import load_config  # noqa: E402
-from partcal.study.registry import load_datasets  # noqa: E402
+from partcal.study.prepare import load_datasets  # noqa: E402
 from partcal.study.scoring import errors_left  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -31,7 +31,7 @@ from _table import print_table  # noqa: E402
 from partcal.models.identification import identify, nominal_values, robot_with  # noqa: E402
 from partcal.study import plan  # noqa: E402
 from partcal.study.config import load_config  # noqa: E402
-from partcal.study.registry import load_datasets  # noqa: E402
+from partcal.study.prepare import load_datasets  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = next((p / "shared" for p in ROOT.parents if (p / "shared" / "datasets").is_dir()), ROOT.parent / "shared")

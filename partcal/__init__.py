@@ -21,17 +21,18 @@ _EXPORTS = {
     "data.measurements": ["Measurements", "read_measurements", "write_measurements"],
     "data.formats": ["MeasurementFormat", "RowSelection", "load_format"],
     "data.registration": ["Registration", "register_tracker"],
-    "metrics": ["ExtrapolationWarning", "cross_validated_rms", "rms_per_axis", "summary"],
+    "metrics": ["ExtrapolationWarning", "rms_per_axis", "summary"],
     "models.series": ["ErrorModel"],
     "models.gp": ["GaussianProcessErrorModel"],
     "models.kinematic": ["KinematicModel"],
     "models.design": ["PlannedModel"],
     "models.swarm": ["SwarmConfig", "SwarmResult", "minimize", "minimize_batch"],
     "models.partition": ["KMeansPartition", "Octree"],
-    "models.partitioned": ["PartitionedErrorModel", "select_granularity"],
+    "models.partitioned": ["PartitionedErrorModel"],
     "models.pose": ["PoseErrorModel"],
     "study.predictor": ["Predictor", "load_predictor"],
     "study.plan": ["evaluate_poses", "plan_poses"],
+    "study.selection": ["cross_validated_rms", "select_granularity"],
 }
 _WHERE = {name: module for module, names in _EXPORTS.items() for name in names}
 __all__ = ["__version__", *_WHERE]

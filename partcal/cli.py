@@ -61,15 +61,15 @@ class Progress:
 def _cmd_run(args) -> int:
     from .study.config import load_config
     from .study.outputs import check_writable, write_run
-    from .study.registry import run
+    from .study.runner import run
     from .study.tables import results_table
 
     config = load_config(args.config)
     if args.check:
-        from .study.registry import check_run, load_datasets
+        from .study.prepare import prepare
 
-        data, _, _ = load_datasets(config)
-        plan = check_run(config, data)
+        prepared = prepare(config)
+        data, plan = prepared.datasets, prepared.plan
         check_writable(config.output, config.inputs(), create=False)
         sizes = ", ".join(f"{name} {len(m)}" for name, m in data.items())
         print(f"{args.config}: OK: {len(plan.models)} models; data sets (rows): {sizes}; cross-validation: "
@@ -338,7 +338,7 @@ def _cmd_import(args) -> int:
 def _import_run(args) -> int:
     from .study.config import load_config
     from .study.outputs import check_writable, replace_folder, write_datasets
-    from .study.registry import load_datasets
+    from .study.prepare import load_datasets
     from .study.tables import registration_line
 
     if args.output is None:

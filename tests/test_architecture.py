@@ -86,6 +86,66 @@ def test_no_module_imports_from_a_higher_layer_or_a_sibling_folder():
     assert problems == []
 
 
+def import_graph(sources: dict[str, str]) -> dict[str, set[str]]:
+    """``{file: files it imports}`` over ``sources`` (``{repo-relative path: source}``), every import counted."""
+    graph = {}
+    for me, source in sources.items():
+        targets = {_file_of(dotted) for _, dotted in imported_modules(me, source)}
+        graph[me] = {t for t in targets if t is not None and t != me}
+    return graph
+
+
+def import_circles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The circles of an import graph: each group of files that reach each other (Tarjan's strongly
+    connected components of more than one file), sorted."""
+    index, low, stack, on, out = {}, {}, [], set(), []
+
+    def visit(v):
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on.add(v)
+        for w in sorted(graph.get(v, ())):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            group = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                group.append(w)
+                if w == v:
+                    break
+            if len(group) > 1:
+                out.append(sorted(group))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return sorted(out)
+
+
+def package_sources() -> dict[str, str]:
+    return {p.relative_to(ROOT).as_posix(): p.read_text() for p in sorted(PACKAGE.rglob("*.py"))}
+
+
+def test_no_circle_of_imports():
+    """No module reaches itself through what it imports (function-local and type-checking imports count:
+    they hide a circle, they do not remove it)."""
+    assert import_circles(import_graph(package_sources())) == []
+
+
+def test_the_checker_finds_a_circle():
+    sources = package_sources()
+    sources["partcal/metrics.py"] += "\ndef later():\n    from .study import runner\n"
+    circles = import_circles(import_graph(sources))
+    assert any({"partcal/metrics.py", "partcal/study/runner.py"} <= set(c) for c in circles), circles
+    sources = {"partcal/models/base.py": "from .bases import x\n", "partcal/models/bases.py": "def f():\n    from . import base\n"}
+    assert import_circles(import_graph(sources)) == [["partcal/models/base.py", "partcal/models/bases.py"]]
+
+
 def test_the_checker_refuses_upward_and_sideways_imports():
     table = layer_table()
     code = textwrap.dedent("""
@@ -149,7 +209,7 @@ def test_readme_python_example_runs(tmp_path):
     from partcal.robot.trajectories import paper_path
     from partcal.study.config import load_config
     from partcal.study.outputs import write_run
-    from partcal.study.registry import run
+    from partcal.study.runner import run
 
     work = tmp_path / "work"
     (work / "data").mkdir(parents=True)

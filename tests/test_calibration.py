@@ -13,7 +13,7 @@ from partcal.models.identification import robot_with
 from partcal.report import render_report
 from partcal.study.config import load_config
 from partcal.study.outputs import write_run
-from partcal.study.registry import run
+from partcal.study.runner import run
 
 DATA = ROOT / "data" / "sk120"
 CONFIG = f"""name: kinds

@@ -118,7 +118,7 @@ def data_file(tmp_path, rows, name="few.csv"):
     ("too few for folds", r"models\[1\]\.degree \(line 12\): 'SDP octree' needs one region of 21 samples \(7 terms per output \(3 varying cartesian inputs\)\), but the smallest cross-validation training fold \(leave-one-pose-out over 20 poses\) holds 19 samples"),
 ])
 def test_data_problems_are_found_before_any_fit(tmp_path, case, message):
-    from partcal.study.registry import check_run, load_datasets
+    from partcal.study.prepare import check_run, load_datasets
 
     rng = np.random.default_rng(0)
     if case == "one row":
@@ -218,8 +218,9 @@ KINDS = BASE.replace("models:\n", """models:
 def test_model_kinds(tmp_path):
     cfg = load_config(write(tmp_path, KINDS))
     hybrid, gp, series = cfg.models[0], cfg.models[1], cfg.models[2]
-    assert (hybrid.kind, hybrid.inputs, hybrid.params["rcond"], hybrid.params["robot"]) == (
+    assert (hybrid.kind, hybrid.inputs, hybrid.params["rcond"], hybrid.params["robot"].name) == (
         "kinematic", "joint", 1e-8, "motoman_sk120")
+    assert hybrid.params["robot"] is cfg.nominal_robot         # the robot is loaded once, by the config
     assert hybrid.residual.kind == "gaussian_process" and hybrid.residual.name == "DH + GP residual"
     assert hybrid.sizes == (2, 4) and series.kind == "series" and series.sizes == ()
     assert (gp.params["kernel"], gp.params["nu"], gp.params["restarts"]) == ("matern", 1.5, 0)

@@ -13,11 +13,14 @@ from sklearn.gaussian_process.kernels import RBF, ConstantKernel, Matern, WhiteK
 
 from partcal import ConfigError, GaussianProcessErrorModel, read_measurements
 from partcal.data.measurements import Measurements, write_measurements
-from partcal.metrics import (choose_simplest, fold_rule, grouped_splits, held_out_residuals, pooled_rms, pose_groups,
-                             repeat_scatter_mm, rms_standard_error)
+from partcal.metrics import pooled_rms, pose_groups, repeat_scatter_mm, rms_standard_error
+from partcal.study.selection import choose_simplest, fold_rule, grouped_splits, held_out_residuals
 from partcal.models import likelihood
 from partcal.study.config import load_config
-from partcal.study.registry import CVPlan, check_run, load_datasets, model_seed, run
+from partcal.study.fitting import model_seed
+from partcal.study.prepare import check_run, load_datasets
+from partcal.study.runner import run
+from partcal.study.selection import CVPlan
 
 DATA = ROOT / "data" / "sk120"
 IDENT = read_measurements(DATA / "identification.csv")
@@ -92,7 +95,7 @@ def test_standard_error_and_the_choice_against_a_hand_computation():
 
 
 def test_a_configuration_measured_at_two_payloads_is_two_poses():
-    from partcal.study.registry import measured_poses
+    from partcal.study.selection import measured_poses
 
     q = np.repeat(IDENT.q_deg[:3], 2, axis=0)               # each configuration twice
     twice = Measurements(q, IDENT.nominal_mm[[0, 0, 1, 1, 2, 2]], IDENT.measured_mm[[0, 0, 1, 1, 2, 2]])

@@ -245,7 +245,7 @@ def physics_run(tmp_path_factory):
     from partcal.report import render_report
     from partcal.study.config import load_config
     from partcal.study.outputs import write_run
-    from partcal.study.registry import run
+    from partcal.study.runner import run
 
     tmp = tmp_path_factory.mktemp("physics")
     (tmp / "run.yaml").write_text(RUN.format(data=ROOT / "data" / "sk120", root=ROOT))
@@ -395,7 +395,7 @@ def test_a_run_reads_the_payload_of_each_pose_from_its_file(payload_files, capsy
     0 kg) are not."""
     from partcal.data.measurements import read_measurements
     from partcal.study.config import load_config
-    from partcal.study.registry import run
+    from partcal.study.runner import run
 
     loads = read_measurements(payload_files / "identification.csv").payload_kg
     assert loads.tolist() == [0.0] * 120 + [100.0] * 120

@@ -154,3 +154,23 @@ def test_the_table_refuses_a_name_taken_and_a_class_that_disagrees(offset_kind):
     with pytest.raises(PartcalError, match="'series' is built in"):
         unregister_kind("series")
     assert set(KINDS) >= {"series", "gaussian_process", "kinematic", "partitioned", "constant_offset"}
+
+
+def test_a_kind_registered_as_a_residual_runs_as_a_hybrids_residual(offset_kind, tmp_path):
+    """The table's ``residual`` flag is the only statement of who may be a residual: the toy kind (registered
+    with the default ``residual=True``) is a kinematic entry's residual in a run and in its model file."""
+    from partcal import KinematicModel, load_robot
+
+    config = run_config(tmp_path, "  - {name: DH + offset, kind: kinematic, "
+                                  "residual: {kind: constant_offset, inputs: joint, gain: 1.0}}\n")
+    assert main(["run", str(config), "-q"]) == 0
+    ident = read_measurements(DATA / "identification.csv")
+    rect = read_measurements(DATA / "test_rectangle.csv")
+    dh = KinematicModel(robot=load_robot("motoman_sk120")).fit(ident.q_deg, ident.errors_mm)
+    left = ident.errors_mm - dh.predict(ident.q_deg)
+    expected = dh.predict(rect.q_deg) + left.mean(axis=0)                  # the toy residual, computed here
+    predictor = load_predictor(tmp_path / "out" / "models" / "dh-offset.json")
+    np.testing.assert_allclose(predictor.predict(joints=rect.q_deg), expected, atol=1e-9)
+    with pytest.raises(ValueError, match="may be a residual"):
+        KinematicModel(robot="motoman_sk120", residual=KinematicModel(robot="motoman_sk120")).fit(
+            ident.q_deg, ident.errors_mm)

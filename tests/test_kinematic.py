@@ -129,8 +129,8 @@ def test_bad_parameters_and_inputs_are_refused(sk120, paper_data):
     with pytest.raises(PartcalError, match=r"The 'rcond' parameter of KinematicModel must be a real number in "
                                            r"\(0\.0, 1\.0\]\. Got 0 instead\."):
         KinematicModel(robot=sk120, rcond=0).fit(q, y)
-    with pytest.raises(PartcalError, match=r"The 'residual' parameter of KinematicModel must be None, an "
-                                           r"ErrorModel, .*Got KinematicModel"):
+    with pytest.raises(PartcalError, match=r"The 'residual' parameter of KinematicModel must be None or a model "
+                                           r"of a kind that may be a residual \(series, .*Got KinematicModel"):
         KinematicModel(robot=sk120, residual=KinematicModel(robot=sk120)).fit(q, y)
     with pytest.raises(PartcalError, match=r"KinematicModel for motoman_sk120 takes 6 joint angles \(degrees\) "
                                            r"per sample; got X with 5 columns"):

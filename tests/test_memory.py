@@ -6,7 +6,7 @@ from conftest import partcal_cli
 
 from partcal.study import memory
 from partcal.study.config import load_config
-from partcal.study.registry import check_run, load_datasets
+from partcal.study.prepare import check_run, load_datasets
 
 
 @pytest.fixture(scope="module")

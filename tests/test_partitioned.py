@@ -13,7 +13,8 @@ from partcal import PartcalError, read_measurements
 from partcal.data.simulate import load_study, simulate
 from partcal.metrics import ExtrapolationWarning
 from partcal.models.partition import KMeansPartition, Octree
-from partcal.models.partitioned import PartitionedErrorModel, select_granularity
+from partcal.models.partitioned import PartitionedErrorModel
+from partcal.study.selection import select_granularity
 from partcal.models.series import ErrorModel
 from partcal.models.swarm import SwarmConfig
 
@@ -231,7 +232,7 @@ def test_select_granularity_reports_every_candidate():
 def test_select_granularity_tells_how_many_regions_the_fold_fits_kept():
     """On the 85 shipped poses an octree of FDP cells keeps 3 regions, but on each 68-pose CV fold only 1:
     its CV score is the global model's. The table says so (and a run warns, and its report notes it)."""
-    from partcal.metrics import kfold_splits
+    from partcal.study.selection import kfold_splits
 
     m = read_measurements(ROOT / "data" / "sk120" / "identification.csv")
     template = PartitionedErrorModel(partition=Octree(), local=ErrorModel(solver="lstsq"), random_state=0)

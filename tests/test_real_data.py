@@ -12,7 +12,7 @@ from conftest import ROOT, SHARED
 
 from partcal.study.config import load_config
 from partcal.study.outputs import write_run
-from partcal.study.registry import run
+from partcal.study.runner import run
 
 UR10 = SHARED / "datasets" / "ipa_ur10"
 pytestmark = pytest.mark.skipif(not (UR10 / "PROVENANCE.md").is_file(),

@@ -5,7 +5,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from partcal import DataError, Measurements, load_robot
-from partcal.data.registration import kabsch, register_tracker, registered
+from partcal.data.registration import register_tracker, registered
+from partcal.robot.frames import kabsch
 from partcal.robot.description import robot_from_dict
 
 

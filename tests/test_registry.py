@@ -13,7 +13,7 @@ from partcal import ConfigError, load_predictor, read_measurements
 from partcal.metrics import summary
 from partcal.study.config import load_config
 from partcal.study.outputs import metrics_document, write_run
-from partcal.study.registry import run
+from partcal.study.runner import run
 
 DATA = ROOT / "data" / "sk120"
 CONFIG = f"""name: small
@@ -345,7 +345,7 @@ def test_rank_by_validation(tmp_path):
     from partcal.study.outputs import metrics_document
     doc = metrics_document(result)
     assert doc["rank_by"] == "validation" and "validation set test_spiral_xy.csv" in doc["best_reason"]
-    from partcal.study.registry import choose_best
+    from partcal.study.selection import choose_best
     assert choose_best(result.models, "cv") != result.best       # on this data the two rules disagree: the rule matters
     with pytest.raises(ConfigError, match=r"rank_by \(line 4\): 'validation' needs data.validation"):
         ranking_config(tmp_path, "rank_by: validation")

@@ -12,7 +12,7 @@ from conftest import ROOT
 from partcal.report import render_report
 from partcal.study.config import load_config
 from partcal.study.outputs import write_run
-from partcal.study.registry import run
+from partcal.study.runner import run
 
 DATA = ROOT / "data" / "sk120"
 EVIL = 'FDP <script>alert("x")</script> & co'
@@ -328,7 +328,9 @@ def test_the_registration_and_the_kinematic_fit_show_each_target_and_the_orienta
     summary = json.loads((out / "metrics.json").read_text())["models"]["DH (all targets)"]["kinematic"]
     assert fitted["kinematic.identifiable.primary"] == summary["identifiable_from_primary"]
     assert fitted["kinematic.identifiable.all"] == summary["identified"]
-    assert 0 < fitted["kinematic.identifiable.primary"] < fitted["kinematic.identifiable.all_of_one"]
+    # with the registered targets (0.4 mm off the flange axis here) the primary's rank already reaches the
+    # one-target table's 25 of 33; the further targets change which ones (and how well), not how many
+    assert 0 < fitted["kinematic.identifiable.primary"] <= fitted["kinematic.identifiable.all_of_one"]
     # the further targets' offsets and the probe's turn are tabled apart, not among the joint errors
     assert re.search(r'<table class="dh added" data-model="DH \(all targets\)">.*data-name="tool@B.x".*'
                      r'data-name="probe.rz"', text, re.S)

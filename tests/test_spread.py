@@ -14,7 +14,7 @@ from partcal.models.kinematic import KinematicModel
 from partcal.models.partition import KMeansPartition
 from partcal.models.partitioned import PartitionedErrorModel
 from partcal.models.series import ErrorModel
-from partcal.models.spread import calibrate_spread, contiguous_folds
+from partcal.study.spread import calibrate_spread, contiguous_folds
 from partcal.study.persist import save_model
 from partcal.study.predictor import load_predictor
 

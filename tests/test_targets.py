@@ -14,7 +14,8 @@ from partcal.data.simulate import load_study, simulate, write_study
 from partcal.models.design import target_identifiability
 from partcal.models.identification import nominal_values
 from partcal.models.joint_errors import JointErrors
-from partcal.models.targets import Extra, stacked
+from partcal.models.identification import stacked
+from partcal.models.targets import Extra
 
 TOOLS = {"B": np.array([100.0, 0.0, 90.0]), "C": np.array([-40.0, 90.0, 90.0])}
 CONFIG = ROOT / "configs" / "ur10_targets_virtual.yaml"
@@ -270,7 +271,8 @@ def test_a_run_identifies_from_every_target_and_the_orientation(ur10, tmp_path):
 
     from partcal.robot.description import robot_to_dict
     from partcal.study.config import load_config
-    from partcal.study.registry import check_run, load_datasets, run
+    from partcal.study.prepare import check_run, load_datasets
+    from partcal.study.runner import run
 
     (tmp_path / "configs").mkdir()
     (tmp_path / "configs" / "sim.yaml").write_text(CONFIG.read_text().replace("output: ../data/ur10_targets",
@@ -326,7 +328,8 @@ def test_a_run_of_pose_errors_scores_and_ranks_the_orientation(ur10, tmp_path):
     from partcal.robot.description import robot_to_dict
     from partcal.study.config import load_config
     from partcal.study.outputs import write_run
-    from partcal.study.registry import check_run, load_datasets, run
+    from partcal.study.prepare import check_run, load_datasets
+    from partcal.study.runner import run
 
     (tmp_path / "configs").mkdir()
     (tmp_path / "configs" / "sim.yaml").write_text(CONFIG.read_text().replace("output: ../data/ur10_targets",

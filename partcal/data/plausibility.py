@@ -34,6 +34,7 @@ from numpy.typing import NDArray
 
 from .._validation import check_params, real
 from ..errors import DataError
+from ..robot.frames import kabsch
 
 _AXES = ("x", "y", "z")
 MIN_POSES = 5                 # fewer poses are no evidence of radians, nor (without a robot) of a workspace
@@ -197,8 +198,6 @@ def _spread(p: NDArray[np.float64]) -> float:
 def _mismatch(expected: NDArray[np.float64], got: NDArray[np.float64], rigid: bool) -> float:
     """3-D RMS of ``got - expected``, after the best rigid motion of ``got`` with ``rigid``."""
     if rigid and len(got) >= 3:
-        from .registration import kabsch          # registration imports this module
-
         rot, shift = kabsch(got, expected)
         got = got @ rot.T + shift
     return float(np.sqrt(np.mean(np.sum((got - expected) ** 2, axis=1))))

@@ -10,11 +10,12 @@ from .gp import GaussianProcessErrorModel
 from .identification import Identification, identify
 from .kinematic import KinematicModel
 from .partition import KMeansPartition, Octree
-from .partitioned import PartitionedErrorModel, select_granularity
+from .partitioned import PartitionedErrorModel
 from .pose import PoseErrorModel
 from .series import ErrorModel
 from .swarm import SwarmConfig, SwarmResult, minimize, minimize_batch
+from . import kinds  # noqa: E402,F401  (the built-in rows of the table of kinds, before any model is read)
 
 __all__ = ["ErrorModel", "GaussianProcessErrorModel", "Identification", "KMeansPartition", "KinematicModel", "Octree",
            "PartitionedErrorModel", "PoseErrorModel", "SwarmConfig", "SwarmResult", "identify", "minimize",
-           "minimize_batch", "select_granularity"]
+           "minimize_batch"]

@@ -228,7 +228,7 @@ class ErrorModelBase(RegressorMixin, BaseEstimator):
 
     def std_scaled(self, X: NDArray[np.float64], **per_row) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """:meth:`std_validated` times the calibrated scales ``spread_scale_`` (one per output) when the model
-        has them (:func:`partcal.models.spread.calibrate_spread`)."""
+        has them (:func:`partcal.study.spread.calibrate_spread`)."""
         mean, std = self.std_validated(X, **per_row)
         scale = getattr(self, "spread_scale_", None)
         return mean, std if scale is None else std * scale

@@ -44,9 +44,9 @@ from ..errors import PartcalError
 from ..robot.kinematics import Robot
 from .base import seed_from
 from .joint_errors import GRAVITY_M_S2, JointErrors, compliance_problem, harmonics_problem
-from .identification import identification_jacobian, nominal_values, parameter_names
+from .identification import identification_jacobian, nominal_values, parameter_names, stacked
 from .identification import model_jacobian as kinematic_jacobian
-from .targets import Extra, stacked
+from .targets import Extra
 
 log = logging.getLogger(__name__)
 

@@ -37,14 +37,17 @@ import numpy as np
 import scipy.linalg
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
+from scipy.spatial.transform import Rotation
 
 from .._validation import check_array
 from ..errors import DataError
 from ..robot.kinematics import Robot, matrix_from_euler_deg
 from .joint_errors import JointErrors
-from .targets import Extra, stacked
+from .targets import Extra
 
 log = logging.getLogger(__name__)
+
+_DEG_RAD = np.pi / 180.0
 ROW_PARAMETERS = (("theta", "deg"), ("d", "mm"), ("a", "mm"), ("alpha", "deg"))
 TOOL_PARAMETERS = (("tool.x", "mm"), ("tool.y", "mm"), ("tool.z", "mm"))
 BASE_PARAMETERS = (("base.x", "mm"), ("base.y", "mm"), ("base.z", "mm"),
@@ -318,31 +321,41 @@ def identify(robot: Robot, q_deg: NDArray[np.float64], measured_mm: NDArray[np.f
         jac_at = functools.partial(stacked, robot, errors, q_deg, payload_kg=payload, measured_mm=measured_mm,
                                    extra=extra)
     jac0 = jac_at(v0)[1]
-    free, rank = _identifiable(jac0, wanted, rcond)
+    names = parameter_names(robot, errors) + (extra.names() if extra is not None else [])
+    units = [unit for _, unit in names]
+    free, rank = _identifiable(jac0, wanted, rcond, units)
 
-    def values_of(x):
-        v = v0.copy()
-        v[free] = x
-        return v
-
+    limits = np.full(v0.size, np.nan)
+    limits[:4 * rows] = [PLAUSIBLE_ERROR[unit] * IMPLAUSIBLE for unit in units[:4 * rows]]
     v, evaluations = v0.copy(), 0
-    if free.size:
-        sol = least_squares(lambda x: jac_at(values_of(x), jacobian=False)[0], v0[free],
-                            jac=lambda x: jac_at(values_of(x))[1][:, free], method="lm",
-                            x_scale="jac", ftol=1e-15, xtol=1e-15, gtol=1e-15, max_nfev=200 * (free.size + 1))
-        v, evaluations = values_of(sol.x), int(sol.nfev)
-        log.debug("least squares: %s (%d evaluations)", sol.message, sol.nfev)
+    resid0 = jac_at(v0, jacobian=False)[0]
+    while free.size:
+        v = v0.copy()
+        v[free] += np.linalg.lstsq(jac0[:, free], -resid0, rcond=None)[0]     # Gauss-Newton from nominal: cheap
+        worst = _implausible(jac_at, v, v0, free, limits)
+        if worst is None:
+            v, nfev = _solve(jac_at, v0, free)
+            evaluations += nfev
+            worst = _implausible(jac_at, v, v0, free, limits)
+            if worst is None:
+                break
+        k = free[worst]
+        log.warning("%s comes out %+.4g %s from nominal, beyond %g %s (%g times a plausible manufacturing error), "
+                    "and the data do not fix it (nominal is within %g standard errors): kept nominal and the rest "
+                    "refitted", names[k][0], v[k] - v0[k], units[k], limits[k], units[k], IMPLAUSIBLE, UNFIXED)
+        free = np.delete(free, worst)
+    if free.size == 0:
+        v = v0.copy()
     resid, jac = jac_at(v)
     std, condition, covariance, sigma = _uncertainty(jac[:, free], resid)
     std_full = np.full(v.size, np.nan)
     std_full[free] = std
     status = np.where(wanted, "unidentifiable", "fixed").astype(object)
     status[free] = "identified"
-    names = parameter_names(robot, errors) + (extra.names() if extra is not None else [])
     rms, angle = _target_rms(resid, len(q_deg), extra)
     more = {} if extra is None else {
         "target_rms_mm": dict(zip([PRIMARY_TARGET, *extra.tools_mm], rms)), "orientation_rms_deg": angle,
-        "primary_identifiable": _identifiable(jac0[:3 * len(q_deg), :own], wanted[:own], rcond)[1]}
+        "primary_identifiable": _identifiable(jac0[:3 * len(q_deg), :own], wanted[:own], rcond, units[:own])[1]}
     result = Identification(tuple(n for n, _ in names), tuple(u for _, u in names), v0, v, std_full,
                             tuple(str(s) for s in status), rank, condition, rms[0], q_deg.shape[0], evaluations,
                             **more, covariance=covariance, sigma_mm=sigma)
@@ -363,17 +376,47 @@ def _target_rms(resid: NDArray[np.float64], n: int, extra: Extra | None) -> tupl
     return rms, float(np.degrees(np.sqrt(np.mean(np.sum(turns**2, axis=1)))))
 
 
-def _identifiable(jac0: NDArray[np.float64], wanted: NDArray[np.bool_], rcond: float
+PLAUSIBLE_ERROR = {"mm": 1.0, "deg": 0.1}
+"""A plausible error of a geometric parameter of each unit, about a manufacturing tolerance (mm, degrees)."""
+
+IMPLAUSIBLE = 10.0
+"""A DH parameter identified more than this many plausible errors (:data:`PLAUSIBLE_ERROR`: 10 mm, 1 degree)
+from nominal, and not fixed by the data (:data:`UNFIXED`), is a trade-off of nearly equivalent parameters under
+unmodelled errors: :func:`identify` keeps it nominal and refits the rest. A large value the data do fix is kept:
+a DH model absorbs unmodelled errors that way (on the virtual SK120, a[5] at -21 mm, 46 standard errors out,
+stands for part of the unmodelled compliance)."""
+
+UNFIXED = 3.0
+"""... and within this many standard errors of nominal (the data do not fix it: on the real UR10, the second wrist's
+offset and twist wandered 4 to 60 degrees at 0.05 to 0.3 of their standard errors)."""
+
+WEAK_LEVER = 0.01
+"""A geometric parameter whose plausible error moves the tool by less than this fraction of what the median
+geometric parameter's does is not identified (see :func:`_identifiable`)."""
+
+
+def _identifiable(jac0: NDArray[np.float64], wanted: NDArray[np.bool_], rcond: float, units: list[str]
                   ) -> tuple[NDArray[np.intp], int]:
     """Indices of the parameters to identify, and the rank, from the Jacobian ``jac0`` at nominal.
 
     The columns are scaled to unit length; the rank counts singular values
     above ``rcond`` times the largest; a QR factorisation with column
     pivoting picks that many columns (the most independent first). Columns
-    that do not move the tool at all never count.
+    that do not move the tool at all never count, and neither does a
+    geometric parameter (mm, degrees) whose plausible error
+    (:data:`PLAUSIBLE_ERROR`) moves the tool by less than :data:`WEAK_LEVER`
+    of the median one's: a joint offset whose lever is a millimetre (a target
+    on the last joint's axis) would mimic a tool offset, which unit columns
+    cannot tell apart from it, and would then need a turn of degrees for a
+    tenth of a millimetre, far outside the range where the fit converges.
     """
     norms = np.linalg.norm(jac0, axis=0)
-    candidates = np.flatnonzero(wanted & (norms > 1e-12 * max(norms.max(), 1e-300)))
+    moving = wanted & (norms > 1e-12 * max(norms.max(), 1e-300))
+    plausible = np.array([PLAUSIBLE_ERROR.get(unit, np.nan) for unit in units]) * norms
+    geometric = moving & np.isfinite(plausible)
+    if geometric.any():
+        moving &= ~geometric | (plausible >= WEAK_LEVER * np.median(plausible[geometric]))
+    candidates = np.flatnonzero(moving)
     if candidates.size == 0:
         return candidates, 0
     scaled = jac0[:, candidates] / norms[candidates]
@@ -381,6 +424,34 @@ def _identifiable(jac0: NDArray[np.float64], wanted: NDArray[np.bool_], rcond: f
     rank = int(np.sum(singular > rcond * singular[0]))
     pivots = scipy.linalg.qr(scaled, mode="r", pivoting=True)[1]
     return np.sort(candidates[pivots[:rank]]), rank
+
+
+def _implausible(jac_at, v: NDArray[np.float64], v0: NDArray[np.float64], free: NDArray[np.intp],
+                 limits: NDArray[np.float64]) -> int | None:
+    """The position in ``free`` of the parameter farthest beyond its plausible range (``limits``, NaN: none)
+    among those the data do not fix (nominal within :data:`UNFIXED` standard errors of ``v``); None if none."""
+    beyond = np.abs(v - v0)[free] / limits[free]
+    if not np.nanmax(beyond, initial=0.0) > 1.0:
+        return None
+    resid, jac = jac_at(v)
+    std = _uncertainty(jac[:, free], resid)[0]
+    loose = (beyond > 1.0) & (np.abs(v - v0)[free] < UNFIXED * std)
+    return int(np.flatnonzero(loose)[np.argmax(beyond[loose])]) if loose.any() else None
+
+
+def _solve(jac_at, v0: NDArray[np.float64], free: NDArray[np.intp]) -> tuple[NDArray[np.float64], int]:
+    """The values that minimise the residuals of ``jac_at`` over the parameters ``free`` (the others kept at
+    ``v0``), by Levenberg-Marquardt from ``v0``; and the number of evaluations."""
+    def values_of(x):
+        v = v0.copy()
+        v[free] = x
+        return v
+
+    sol = least_squares(lambda x: jac_at(values_of(x), jacobian=False)[0], v0[free],
+                        jac=lambda x: jac_at(values_of(x))[1][:, free], method="lm",
+                        x_scale="jac", ftol=1e-15, xtol=1e-15, gtol=1e-15, max_nfev=200 * (free.size + 1))
+    log.debug("least squares: %s (%d evaluations)", sol.message, sol.nfev)
+    return values_of(sol.x), int(sol.nfev)
 
 
 def _uncertainty(jac: NDArray[np.float64], resid: NDArray[np.float64]
@@ -400,3 +471,99 @@ def _uncertainty(jac: NDArray[np.float64], resid: NDArray[np.float64]
 
 
 # ---------------------------------------------------------------------- the estimator
+
+
+# ---------------------------------------------------------------------- several targets and the orientation
+def stacked(nominal: Robot, errors: JointErrors | None, q_deg: NDArray[np.float64], values: NDArray[np.float64],
+            payload_kg: NDArray[np.float64], measured_mm: NDArray[np.float64], extra: Extra,
+            jacobian: bool = True) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
+    """The stacked residuals (model - measured) of every target and the orientation, and their Jacobian.
+
+    Parameters
+    ----------
+    values : ndarray, shape (P + extra.size,)
+        The model's parameters (geometry, joint errors), then the extra ones.
+    measured_mm : ndarray, shape (n, 3)
+        The primary target, base frame, mm.
+
+    Returns
+    -------
+    residuals : ndarray, shape (3 n (K + 1) [+ 3 n],)
+        mm (the orientation's: radians times ``extra.mm_per_rad``).
+    jacobian : ndarray, shape (len(residuals), len(values)), or None
+    """
+    size = geometric_size(nominal)
+    own = size + (errors.size if errors is not None else 0)
+    rows, n = nominal.alpha_deg.size, q_deg.shape[0]
+    q_actual, design, moves = actual_joints(nominal, errors, q_deg, values[:own], payload_kg, derivatives=jacobian)
+    tools = [values[4 * rows:4 * rows + 3]] + [values[own + 3 * k:own + 3 * k + 3] for k in range(len(extra.tools_mm))]
+    residuals, blocks = [], []
+    for k, (tool, meas) in enumerate(zip(tools, [measured_mm, *extra.measured_mm.values()])):
+        v_k = values[:own].copy()
+        v_k[4 * rows:4 * rows + 3] = tool
+        if not jacobian:
+            residuals.append((robot_with(nominal, v_k).positions(q_actual) - meas).ravel())
+            continue
+        p, jac = identification_jacobian(nominal, q_actual, v_k[:size])
+        residuals.append((p - meas).ravel())
+        block = np.zeros((3 * n, values.size))
+        if k:
+            block[:, own + 3 * (k - 1):own + 3 * k] = jac[:, 4 * rows:4 * rows + 3]
+            jac[:, 4 * rows:4 * rows + 3] = 0.0
+        if design is not None:
+            joints = robot_with(nominal, v_k).jacobian(q_actual)
+            if moves is not None:
+                jac[:, :size - 6] += np.einsum("nij,njp->nip", joints, moves).reshape(-1, size - 6)
+            block[:, size:own] = np.einsum("nij,njp->nip", joints, design).reshape(-1, design.shape[2])
+        block[:, :size] = jac
+        blocks.append(block)
+    if extra.rotations is not None:
+        r, j = _orientation(nominal, q_actual, design, moves, values, own, extra, jacobian)
+        residuals.append(r)
+        blocks.append(j)
+    return np.concatenate(residuals), (np.vstack(blocks) if jacobian else None)
+
+
+def _orientation(nominal: Robot, q_actual, design, moves, values, own: int, extra: Extra, jacobian: bool):
+    """The orientation's residuals ``mm_per_rad * log(R_model R_meas^T)`` and their Jacobian rows.
+
+    A parameter's column is the angular velocity it gives the flange (base frame, per unit): a
+    row's theta turns about the row's z axis, its alpha about the next frame's x axis, the base
+    correction about its axes, a joint error through the joint's axes, the probe's turn about the
+    model frame's axes. Lengths turn nothing.
+    """
+    size, rows, n = geometric_size(nominal), nominal.alpha_deg.size, q_actual.shape[0]
+    robot = robot_with(nominal, values[:own])
+    model = robot.forward(q_actual)[:, :3, :3] @ Rotation.from_rotvec(values[-3:], degrees=True).as_matrix()
+    weight = extra.mm_per_rad
+    turns = Rotation.from_matrix(model @ extra.rotations.transpose(0, 2, 1)).as_rotvec()
+    residuals = weight * turns.ravel()
+    if not jacobian:
+        return residuals, None
+    _, xs, zs = robot.frame_axes(q_actual)                                # (n, R + 1, 3)
+    omega = np.zeros((n, 3, values.size))
+    omega[:, :, 0:4 * rows:4] = zs[:, :rows].transpose(0, 2, 1) * _DEG_RAD     # theta of each row
+    omega[:, :, 3:4 * rows:4] = xs[:, 1:].transpose(0, 2, 1) * _DEG_RAD        # alpha of each row
+    for k, axis in enumerate(base_axes(nominal, values)):
+        omega[:, :, size - 3 + k] = axis * _DEG_RAD
+    if design is not None:
+        per_joint = np.einsum("nri,rj->nij", zs[:, :rows], nominal.coupling) * _DEG_RAD      # (n, 3, N)
+        if moves is not None:
+            omega[:, :, :size - 6] += np.einsum("nij,njp->nip", per_joint, moves)
+        omega[:, :, size:own] = np.einsum("nij,njp->nip", per_joint, design)
+    omega[:, :, -3:] = model * _DEG_RAD                                        # columns: the model frame's axes
+    return residuals, weight * np.einsum("nij,njp->nip", _log_derivative(turns), omega).reshape(-1, values.size)
+
+
+def _log_derivative(turns: NDArray[np.float64]) -> NDArray[np.float64]:
+    """How ``log(exp(w) exp(phi))`` moves with a small turn ``w`` at rotation vectors ``phi`` (n, 3): the
+    inverse left Jacobian of SO(3), ``I - [phi]/2 + c [phi]^2`` with ``c = 1/t^2 - (1 + cos t)/(2 t sin t)``,
+    ``t = |phi|`` (``c -> 1/12`` as ``t -> 0``), shape (n, 3, 3)."""
+    t = np.linalg.norm(turns, axis=1)
+    small = t < 1e-6
+    safe = np.where(small, 1.0, t)
+    c = np.where(small, 1.0 / 12.0, 1.0 / safe**2 - (1.0 + np.cos(safe)) / (2.0 * safe * np.sin(safe)))
+    skew = np.zeros((len(turns), 3, 3))
+    skew[:, 0, 1], skew[:, 0, 2], skew[:, 1, 2] = -turns[:, 2], turns[:, 1], -turns[:, 0]
+    skew -= skew.transpose(0, 2, 1)
+    return np.eye(3) - 0.5 * skew + c[:, None, None] * skew @ skew

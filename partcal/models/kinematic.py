@@ -25,19 +25,14 @@ from ..robot.description import load_robot, robot_from_dict, robot_to_dict
 from ..robot.kinematics import ORIENTATION_MM_PER_RAD, Robot
 from .base import ErrorModelBase, box_points, seed_from
 from .bases import varying_inputs
-from .gp import GaussianProcessErrorModel
 from .identification import (PRIMARY_TARGET, STATUSES, Identification, geometric_size, identify, model_jacobian,
                              nominal_values, own_geometry, parameter_names, robot_with)
 from .joint_errors import JointErrors, compliance_problem, harmonics_problem
-from .partitioned import PartitionedErrorModel
+from .kindtable import body_of, may_be_residual, model_from_body, residual_kinds
 from .pose import PoseErrorModel
-from .series import ErrorModel
 from .targets import added_names, added_nominal, extra_from
 
 log = logging.getLogger(__name__)
-
-
-RESIDUAL_MODELS = (ErrorModel, PartitionedErrorModel, GaussianProcessErrorModel, PoseErrorModel)
 
 
 class KinematicModel(ErrorModelBase):
@@ -62,7 +57,7 @@ class KinematicModel(ErrorModelBase):
     payload_kg : float >= 0
         The payload at the tool point, kg, of data given without one per
         pose (``fit``, ``predict``: ``payload_kg=`` per pose overrides it).
-    residual : ErrorModel, PartitionedErrorModel or GaussianProcessErrorModel, optional
+    residual : estimator of a kind that may be a residual (the table of kinds), optional
         Fitted to the errors the identified kinematics leave; its prediction
         is added (a hybrid model). A Cartesian residual reads the nominal
         positions ``FK(nominal, q)``.
@@ -138,9 +133,9 @@ class KinematicModel(ErrorModelBase):
             expected = problem(getattr(self, name), robot.n_joints)
             if expected is not None:
                 raise param_error(own, name, expected, getattr(self, name))
-        if self.residual is not None and not isinstance(self.residual, RESIDUAL_MODELS):
-            raise param_error(own, "residual", "None, an ErrorModel, a PartitionedErrorModel or a "
-                              "GaussianProcessErrorModel", self.residual)
+        if self.residual is not None and not may_be_residual(self.residual):
+            raise param_error(own, "residual", f"None or a model of a kind that may be a residual "
+                              f"({', '.join(residual_kinds())})", self.residual)
         return robot
 
     def fit(self, X, y, payload_kg=None, *, targets=None, orientation_deg=None, orientation_mm_per_rad=None):
@@ -368,7 +363,7 @@ class KinematicModel(ErrorModelBase):
         run's (top-level key ``robot``)."""
         if context.get("robot") is None:
             sec.fail(sec.path("kind"), "kind: kinematic needs the run's robot (top-level key 'robot')")
-        n_joints = load_robot(context["robot"]).n_joints
+        n_joints = context["robot"].n_joints
         joint = {name: sec.get(name, "any", default=default, check=lambda v, p=problem: p(v, n_joints))
                  for name, (default, problem) in cls._joint_rules.items()}
         return {"robot": context["robot"], **super().params_from_config(sec, context), **joint}
@@ -386,8 +381,6 @@ class KinematicModel(ErrorModelBase):
         return "joint"
 
     def file_section(self) -> dict:
-        from .kinds import body_of      # the table of kinds knows this module
-
         errors = self.joint_errors_
         return {"robot": robot_to_dict(self.robot_), "base": bool(self.base), "tool": bool(self.tool),
                 "rcond": float(self.rcond), "payload_kg": float(self.payload_kg),
@@ -434,8 +427,6 @@ class KinematicModel(ErrorModelBase):
         model.n_features_in_, model.n_outputs_, model._y_1d = n_in, n_out, False
         model.residual_ = None
         if r.doc.get("residual") is not None:
-            from .kinds import model_from_body      # the table of kinds knows this module
-
             model.residual_ = model_from_body(r.sub("residual"))
             if model.residual_.n_outputs() != n_out or isinstance(model.residual_, PoseErrorModel) != (n_out == 6):
                 r.sub("residual").fail("kind", f"a residual of {n_out} outputs" + (" of kind 'pose' (one model on the "

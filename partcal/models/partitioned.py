@@ -21,9 +21,9 @@ from numpy.typing import NDArray
 from sklearn.base import clone
 from sklearn.utils.validation import check_is_fitted, validate_data
 
-from .._validation import FieldReader, check_int, one_of, param_error
+from .._validation import FieldReader, one_of, param_error
 from ..errors import DataError, PartcalError
-from ..metrics import distance_outside_boxes, kfold_splits, select_by_cv
+from ..metrics import distance_outside_boxes
 from .angles import InputMap
 from .base import ErrorModelBase, seed_from
 from .bases import varying_inputs
@@ -462,6 +462,13 @@ class PartitionedErrorModel(ErrorModelBase):
     def regions_model(self) -> "PartitionedErrorModel":
         return self
 
+    def with_granularity(self, value: int) -> "PartitionedErrorModel":
+        """An unfitted copy with octree depth or k-means region count ``value`` (a candidate of a granularity
+        choice, :func:`partcal.study.selection.select_granularity`)."""
+        _, spec = self._resolved()
+        key = "max_depth" if isinstance(spec, Octree) else "n_regions"
+        return clone(self).set_params(partition=type(spec)(**{**spec.__dict__, key: value}))
+
     def n_outputs(self) -> int:
         return int(self.n_outputs_)
 
@@ -512,58 +519,7 @@ def _fit_batch(models: list[ErrorModel], data: list[tuple]) -> list[ErrorModel]:
     return [m._complete(p, r) for m, p, r in zip(models, problems, results)]
 
 
-def select_granularity(model: PartitionedErrorModel, X, y, grid, *, folds=5, random_state=0
-                       ) -> tuple[PartitionedErrorModel, list[dict]]:
-    """Choose octree depth or k-means region count by k-fold cross-validation.
-
-    Parameters
-    ----------
-    model : PartitionedErrorModel
-        The template; its partition's ``max_depth`` / ``n_regions`` is varied.
-    grid : iterable of int
-        Candidate depths (octree) or region counts (k-means).
-    folds : int or list of (train, test) index arrays
-        Shuffled folds drawn with ``random_state``, or the folds themselves.
-
-    Returns
-    -------
-    best : PartitionedErrorModel
-        The candidate of lowest CV 3-D RMS (the first of equals), fitted on all of ``X, y``.
-    table : list of dict
-        ``{"granularity", "cv_rms_3d", "regions", "cv_regions", "fit_seconds"}``
-        per candidate (regions and the fit time from the fit on all data;
-        ``cv_regions``: the fewest and most regions of the fold fits, which
-        can be fewer: a partition merges regions that lack samples).
-
-    Notes
-    -----
-    The CV score of the chosen candidate is optimistic: the same folds chose
-    it. :func:`partcal.metrics.nested_cross_validated_rms` gives an honest score.
-    """
-    X, y = np.asarray(X, dtype=float), np.asarray(y, dtype=float)
-    if isinstance(folds, int):
-        check_int("select_granularity", "folds", folds, 2)
-        folds = kfold_splits(len(X), folds, random_state)
-    values = [int(v) for v in grid]
-    fold_models: list = []
-    best, scores, fitted, seconds = select_by_cv([_candidate(model, v) for v in values], X, y, folds=folds,
-                                                 fold_models=fold_models)
-    table = [{"granularity": v, "cv_rms_3d": s, "regions": int(f.partition_.n_regions),
-              "cv_regions": fold_regions(folded), "fit_seconds": t}
-             for v, s, f, folded, t in zip(values, scores, fitted, fold_models, seconds)]
-    for row in table:
-        log.info("granularity %s: CV RMS %.4f over %d regions", row["granularity"], row["cv_rms_3d"], row["regions"])
-    return fitted[best], table
-
-
 def fold_regions(models: list[PartitionedErrorModel]) -> list[int]:
     """``[fewest, most]`` regions among fitted partitioned ``models`` (the fits on the CV folds)."""
     counts = [int(m.partition_.n_regions) for m in models]
     return [min(counts), max(counts)]
-
-
-def _candidate(model: PartitionedErrorModel, value: int) -> PartitionedErrorModel:
-    """An unfitted copy of ``model`` with octree depth or k-means region count ``value``."""
-    _, spec = model._resolved()
-    key = "max_depth" if isinstance(spec, Octree) else "n_regions"
-    return clone(model).set_params(partition=type(spec)(**{**spec.__dict__, key: value}))

@@ -22,6 +22,7 @@ from sklearn.utils.validation import check_is_fitted
 from ..errors import DataError
 from ..metrics import ORIENTATION, POSITION
 from .base import ErrorModelBase
+from .kindtable import body_of, model_from_body
 
 if TYPE_CHECKING:
     from .._validation import FieldReader
@@ -174,15 +175,11 @@ class PoseErrorModel(ErrorModelBase):
 
     # ------------------------------------------------------------------ model files
     def file_section(self) -> dict[str, Any]:
-        from .kinds import body_of      # the table of kinds knows this module
-
         return {name: body_of(part) for name, part in zip(PARTS, self._parts())}
 
     @classmethod
     def from_file_section(cls, r: "FieldReader", inputs: str, n_in: int, n_out: int) -> "PoseErrorModel":
         """Both parts, each a model of 3 outputs on the same inputs as the file says."""
-        from .kinds import model_from_body      # (see file_section)
-
         if n_out != 6:
             r.fail("", f"a model of pose errors has 6 outputs (n_outputs); the file says {n_out}")
         parts = []

@@ -25,7 +25,7 @@ from .. import __version__
 from ..metrics import MRAD_PER_DEG
 from ..models.identification import BASE_PARAMETERS, ROW_PARAMETERS, TOOL_PARAMETERS
 from ..models.targets import added_names
-from ..study.registry import ModelResult, RunResult, partitioned_part
+from ..study.results import ModelResult, RunResult
 from ..study.scoring import Outputs, errors_left
 from . import figures
 from .scene import SceneRendering
@@ -59,8 +59,8 @@ def context(result: RunResult) -> dict:
     by_name = {r.spec.name: r for r in result.models}
     best = by_name[result.best]
     ranked = sorted(result.models, key=lambda r: r.score(cfg.rank_by))
-    global_best = next((r for r in ranked if partitioned_part(r.model) is None), None)
-    part_best = next((r for r in ranked if partitioned_part(r.model) is not None), None)
+    global_best = next((r for r in ranked if r.model.regions_model() is None), None)
+    part_best = next((r for r in ranked if r.model.regions_model() is not None), None)
     shown = [r for r in (global_best, part_best) if r is not None]
     outputs = Outputs.of(cfg)
     scenes, captions = scene_specs(result)
@@ -409,7 +409,7 @@ def scene_specs(result: RunResult) -> tuple[dict[str, dict], dict[str, str]]:
     tests = {n: m for n, m in result.datasets.items() if n != "identification"}
     specs, captions = {}, {}
     for r in result.models:
-        model = partitioned_part(r.model)
+        model = r.model.regions_model()
         if model is None:
             continue
         part = model.partition_

@@ -1,4 +1,4 @@
-"""Studies: run configs, the model registry, run outputs, model files and the downstream predictor.
+"""Studies: run configs, a run's stages (prepare, fit, rank) and its results, run outputs, model files and the downstream predictor.
 
 Above ``partcal.data`` and ``partcal.models``: a study reads data sets, fits
 models, writes what it found, and serves fitted models to downstream code.

@@ -24,6 +24,7 @@ from ..models.partition import PARTITIONS
 from ..models.partitioned import PartitionedErrorModel
 from ..models.pose import PoseErrorModel
 from ..robot.description import load_robot, robot_reference
+from ..robot.kinematics import Robot
 
 RESERVED_NAMES = {"identification", "validation", "file", "fit_seconds", "cv_seconds", "cv", "inputs", "solver",
                   "regions", "pso_rms_ratio", "granularity", "compensation", "kind", "kinematic"}
@@ -53,7 +54,7 @@ class PartitionSpec:
 
 @dataclass(frozen=True)
 class ModelSpec:
-    """One entry of the registry: its kind, the kind's parameters, and how to partition.
+    """One entry of a run's models: its kind, the kind's parameters, and how to partition.
 
     ``kind`` names a row of the table of kinds (``partcal.models.kinds``);
     ``params`` are that kind's estimator parameters as the config gave them
@@ -100,6 +101,13 @@ class ModelSpec:
             model = PartitionedErrorModel(partition=p.build(size if size is not None else p.sizes[0]), local=model,
                                           blend=p.blend, blend_width=p.blend_width, random_state=random_state)
         return PoseErrorModel(model) if self.pose and not model.fits_pose_errors else model
+
+    def with_robot(self, robot: Robot) -> "ModelSpec":
+        """This entry (and its residual) with ``robot`` as the robot of every kind that takes one (a ``robot``
+        parameter): the run's robot, registered, replaces the nominal one the config named."""
+        params = {**self.params, "robot": robot} if "robot" in self.params else self.params
+        residual = self.residual.with_robot(robot) if self.residual is not None else None
+        return dataclasses.replace(self, params=params, residual=residual)
 
 
 @dataclass(frozen=True)
@@ -156,7 +164,7 @@ class RunConfig:
     tests: dict[str, Path]
     models: tuple[ModelSpec, ...]
     output: Path
-    robot: str | None = None
+    robot: str | None = None           # the robot as the config names it (a built-in name or a YAML path)
     seed: int = 0
     n_jobs: int = 1
     cv_folds: int | str = "auto"        # an int k, "leave_one_out", or "auto" (metrics.fold_rule)
@@ -167,6 +175,7 @@ class RunConfig:
     predict: str = "position"           # position: (n, 3) mm; pose: and the orientation error, mrad (n, 6)
     rank_on: str = "position"           # the part of the errors the ranking reads (orientation: pose runs)
     lines: dict = field(default_factory=dict, compare=False, repr=False)   # key path -> line, for messages
+    nominal_robot: Robot | None = field(default=None, compare=False, repr=False)   # ``robot``, loaded once
 
     def fail(self, where: str, message: str):
         """Raise a :class:`ConfigError` naming this file, the key path ``where`` and its line."""
@@ -182,8 +191,9 @@ class RunConfig:
 
     def resolved(self) -> dict:
         """The configuration with every default filled in (written beside the results)."""
-        out = asdict(self)
-        del out["lines"]
+        out = asdict(dataclasses.replace(self, nominal_robot=None, models=tuple(
+            m.with_robot(self.robot) for m in self.models) if self.robot is not None else self.models))
+        del out["lines"], out["nominal_robot"]
         out["source"] = str(self.source)
         out["validation"] = str(self.validation) if self.validation else None
         out["identification"] = str(self.identification)
@@ -205,14 +215,13 @@ def load_config(path: str | Path) -> RunConfig:
     top = Section(data, "", lines, str(path))
     base = path.parent
     name = top.get("name", "str", check=safe_name)
-    robot = top.get("robot", "str", default=None)
+    robot, nominal = top.get("robot", "str", default=None), None
     if robot is not None:
-        robot_ref = robot_reference(robot, base)
+        robot = robot_reference(robot, base)
         try:
-            load_robot(robot_ref)
+            nominal = load_robot(robot)
         except PartcalError as exc:
             top.fail("robot", str(exc))
-        robot = robot_ref
     seed = top.get("seed", "int", default=0, check=integer(0, 2**32 - 1).problem)
     n_jobs = top.get("n_jobs", "int", default=1, check=lambda v: None if v == -1 or v >= 1 else "-1 or >= 1")
     cv_folds = top.get("cv_folds", "any", default="auto", check=_fold_problem)
@@ -229,7 +238,7 @@ def load_config(path: str | Path) -> RunConfig:
     if rank_by == "validation" and validation is None:
         top.fail("rank_by", "'validation' needs data.validation: FILE, a held-out set measured near the task")
     models_raw = top.get("models", "list", check=lambda v: None if v else "a non-empty list")
-    models = tuple(dataclasses.replace(_model(Section(m, f"models[{i}]", lines, str(path)), robot),
+    models = tuple(dataclasses.replace(_model(Section(m, f"models[{i}]", lines, str(path)), nominal),
                                        pose=predict == "pose") for i, m in enumerate(models_raw))
     names = [m.name for m in models]
     for i, m in enumerate(models):
@@ -249,7 +258,7 @@ def load_config(path: str | Path) -> RunConfig:
                      output=Path(os.path.normpath(output)), robot=robot, seed=seed, n_jobs=n_jobs,
                      cv_folds=cv_folds, dask_address=address, virtual_robot=virtual, rank_by=rank_by,
                      validation=validation, lines=lines, data_options=data_options, predict=predict,
-                     rank_on=rank_on)
+                     rank_on=rank_on, nominal_robot=nominal)
 
 
 def _fold_problem(value) -> str | None:
@@ -327,7 +336,7 @@ def _data_file(sec: Section, key: str, base: Path, *, tracker: bool | None
     return path, None if selection.is_all else selection, own
 
 
-def _model(sec: Section, robot: str | None, parent: str | None = None) -> ModelSpec:
+def _model(sec: Section, robot: Robot | None, parent: str | None = None) -> ModelSpec:
     """One entry of ``models`` (or the ``residual`` of a kinematic entry, named after its ``parent``).
 
     The kind's estimator reads its own keys (``params_from_config``, by its declared rules); this

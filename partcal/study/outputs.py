@@ -24,7 +24,7 @@ from ..errors import PartcalError
 from ..robot.description import joint_columns
 from .config import RunConfig
 from .persist import save_model
-from .registry import RunResult
+from .results import RunResult
 
 log = logging.getLogger(__name__)
 

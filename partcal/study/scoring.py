@@ -12,22 +12,19 @@ simulated true robot.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
 from ..data.measurements import Measurements
-from ..data.registration import kabsch
 from ..metrics import MRAD_PER_DEG, MRAD_PER_RAD, ORIENTATION, POSITION, orientation_summary, pooled_rms, summary
 from ..models.bases import varying_inputs
+from ..robot.frames import kabsch
 from ..robot.kinematics import Robot, matrices_from_xyz_deg
 from .config import RunConfig
 from .predictor import Predictor, pose_matrices
-
-if TYPE_CHECKING:
-    from .registry import ModelResult
+from .results import ModelResult
 
 
 @dataclass(frozen=True)
@@ -110,7 +107,7 @@ def errors_left(m: Measurements, predicted: NDArray[np.float64], own_frame: bool
     return position, (measured * model.inv()).as_rotvec() * MRAD_PER_RAD
 
 
-def verify_compensation(result: "ModelResult", data: dict[str, Measurements], robot: Robot, virtual,
+def verify_compensation(result: ModelResult, data: dict[str, Measurements], robot: Robot, virtual,
                         seed: int) -> dict[str, dict]:
     """Command the compensated test targets on the virtual robot; compare before, predicted and after.
 

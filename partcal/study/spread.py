@@ -20,7 +20,7 @@ from scipy.stats import norm
 from sklearn.base import clone
 
 from ..errors import DataError
-from ..metrics import rows_of
+from .selection import rows_of
 
 
 def contiguous_folds(n: int, folds: int) -> list[tuple[NDArray[np.intp], NDArray[np.intp]]]:

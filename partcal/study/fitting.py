@@ -1,0 +1,245 @@
+"""The second stage of a run: fit every planned entry, score it on the shared folds and on every data set.
+
+Each entry's estimator is built once (one per granularity for a list of
+them) and cloned for every fold and for the final fit. Entries run in
+parallel with joblib (``n_jobs``; a Dask cluster when the config gives its
+address); each entry's seed comes from the run seed and its name
+(:func:`model_seed`), so results depend neither on ``n_jobs``, nor on the
+order in which jobs finish, nor on the entry's place in the list. A fit's
+warnings are collected in whichever process fits it and said by the run,
+prefixed with the model's name.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import logging
+import sys
+import time
+import warnings
+from contextlib import contextmanager
+from typing import Callable
+
+import numpy as np
+from joblib import Parallel, delayed, parallel_config
+from sklearn.base import clone
+
+from ..data.measurements import Measurements
+from ..errors import ConfigError
+from ..metrics import rms_standard_error
+from ..models.partitioned import fold_regions
+from ..robot.kinematics import Robot, flange_offset
+from .config import ModelSpec
+from .prepare import PreparedRun, model_inputs
+from .results import ModelResult
+from .scoring import Outputs
+from .selection import CVPlan, choose_granularity, held_out_residuals, nested_residuals
+
+log = logging.getLogger(__name__)
+
+SLOW_SECONDS = 5.0          # a model still cross-validating after this long reports each fold
+
+
+def model_seed(run_seed: int, name: str) -> int:
+    """A model's seed: from the run's seed and the model's name, never from its place in the list.
+
+    >>> model_seed(0, "GP(AI)") == model_seed(0, "GP(AI)") != model_seed(1, "GP(AI)")
+    True
+    """
+    digest = int.from_bytes(hashlib.sha256(name.encode("utf-8")).digest()[:8], "little")
+    return int(np.random.SeedSequence([run_seed, digest]).generate_state(1)[0])
+
+
+def per_row_arguments(model, m: Measurements, robot: Robot | None = None, *, fitting: bool = True) -> dict:
+    """Per-pose arguments of the model's ``fit`` (or, not ``fitting``, ``predict``) from a data set: the
+    payload of each pose (``payload_kg`` column) for a model that reads one (none otherwise: the model's own
+    ``payload_kg``); for a fit on every target and the orientation, those too
+    (:data:`partcal.study.selection.FIT_ONLY`: a prediction reads neither, so a test set need not have them).
+    ``robot`` (the run's, registered) places each further target on the flange."""
+    args = {"payload_kg": m.payload_kg} if m.payload_kg is not None and model.reads_payload else {}
+    if not (fitting and model.reads_targets):
+        return args
+    if model.all_targets:              # each target's offset in the flange frame, from its nominal columns
+        flange = robot.flange(m.q_deg)
+        args["targets"] = {t: (flange_offset(flange, m.nominal_of(t)), m.measured_of(t) - m.nominal_of(t))
+                           for t in m.target_names[1:] if m.nominal_of(t) is not None}
+    if model.use_orientation:
+        args["orientation_deg"] = m.orientation_errors_deg
+    return args
+
+
+class FoldLines:
+    """Progress lines of a model's slow cross-validation, written to stderr by whichever process fits it
+    (a joblib worker shares the terminal): ``partcal: GP(AI): cross-validation fold 3/5 (12 s)``."""
+
+    def __call__(self, text: str) -> None:
+        sys.stderr.write(f"partcal: {text}\n")
+        sys.stderr.flush()
+
+
+def fit_all(prepared: PreparedRun, outputs: Outputs,
+            progress: Callable[[int, int, str], None] | None = None) -> list[ModelResult]:
+    """Fit and score every entry of the plan, in the plan's order.
+
+    ``progress(done, total, text)`` hears of each finished model; per-fold
+    lines of slow models go to stderr unless ``progress`` is None.
+    """
+    config, plan = prepared.config, prepared.plan
+    specs = plan.models
+    own = config.data_options.own_frame
+    lines = FoldLines() if progress else None
+    order = _costliest_first(specs, prepared.datasets["identification"])
+    jobs = [delayed(fit_model)(specs[i], model_seed(config.seed, specs[i].name), prepared.datasets, plan.cv,
+                               prepared.robot, own, lines, outputs) for i in order]
+    results: list[ModelResult] = []
+    with _backend(config):
+        for result in Parallel(n_jobs=config.n_jobs, return_as="generator")(jobs):
+            results.append(result)
+            for note in result.notes:
+                log.warning("%s: %s", result.spec.name, note)
+            if progress:
+                progress(len(results), len(jobs), f"{result.spec.name}: CV RMS {result.cv_rms_3d:.3f} "
+                                                  f"+- {result.cv_se:.3f} {outputs.unit}, fitted in "
+                                                  f"{result.fit_seconds:.2f} s, cross-validated in "
+                                                  f"{result.cv_seconds:.2f} s")
+    return [results[order.index(i)] for i in range(len(specs))]        # back in the config's order
+
+
+def fit_model(spec: ModelSpec, seed: int, data: dict[str, Measurements], cv: CVPlan, robot: Robot | None = None,
+              own_frame: tuple[str, ...] = (), lines: Callable[[str], None] | None = None,
+              outputs: Outputs = Outputs()) -> ModelResult:
+    """Fit one planned entry and evaluate it (runs in a joblib worker).
+
+    ``cv`` holds the run's shared folds on the identification set (and the
+    inner folds of nested CV); ``robot`` is the run's (registered). Data sets
+    in ``own_frame`` are scored by :func:`~partcal.study.scoring.errors_left`.
+    Warnings of the fit are collected, not printed, so that the run says them
+    once, in one format, whichever process fitted
+    (:attr:`ModelResult.notes`). ``lines`` receives per-fold progress once
+    the cross-validation has taken :data:`SLOW_SECONDS`. ``outputs``: what the
+    model fits and what its CV score reads.
+    """
+    with _collected() as said:
+        result = _fit_model(spec, seed, data, cv, robot, own_frame, lines, outputs)
+    result.notes = list(dict.fromkeys(said + result.model.fit_notes()))      # the run names the model in front
+    return result
+
+
+def _fit_model(spec, seed, data, cv, robot, own_frame, lines, outputs) -> ModelResult:
+    ident = data["identification"]
+    X, y = model_inputs(spec.inputs, ident), outputs.errors(ident)
+    candidates = [spec.build(seed, size) for size in spec.sizes] or [spec.build(seed)]   # built once, then cloned
+    rows = per_row_arguments(candidates[0], ident, robot)
+    granularity, nested, cv_regions = None, False, None
+    start = time.perf_counter()
+
+    def fold_done(done: int, total: int) -> None:
+        elapsed = time.perf_counter() - start
+        if lines is not None and elapsed > SLOW_SECONDS:
+            lines(f"{spec.name}: cross-validation fold {done}/{total} ({elapsed:.0f} s)")
+
+    if len(candidates) > 1:
+        resid = nested_residuals(candidates, X, y, folds=cv.folds, inner=cv.inner, progress=fold_done, per_row=rows,
+                                 score=outputs.score)
+        estimator, granularity = choose_granularity(candidates, spec.sizes, X, y, cv.folds, per_row=rows,
+                                                    score=outputs.score)                  # returned fitted
+        for row in granularity:
+            log.info("%s, granularity %s: CV RMS %.4f over %d regions", spec.name, row["granularity"],
+                     row["cv_rms_3d"], row["regions"])
+        chosen = min(range(len(granularity)), key=lambda i: granularity[i]["cv_rms_3d"])
+        fit_seconds = granularity[chosen].pop("fit_seconds")
+        for row in granularity:
+            row.pop("fit_seconds", None)
+        cv_seconds, nested = time.perf_counter() - start - fit_seconds, True
+        cv_regions = granularity[chosen]["cv_regions"]
+    else:
+        fold_fits: list = []
+        resid = held_out_residuals(candidates[0], X, y, cv.folds, fitted=fold_fits, progress=fold_done,
+                                   per_row=rows)
+        cv_seconds = time.perf_counter() - start
+        start = time.perf_counter()
+        estimator = clone(candidates[0]).fit(X, y, **rows)
+        fit_seconds = time.perf_counter() - start
+        if estimator.regions_model() is not None:
+            cv_regions = fold_regions([m.regions_model() for m in fold_fits])
+    part = estimator.regions_model()
+    if cv_regions is not None and cv_regions[0] < part.partition_.n_regions:
+        log.warning("fitted on all the identification data it has %d regions, but on the cross-validation "
+                    "folds %s, so its CV score is that of a coarser model", part.partition_.n_regions,
+                    _regions_text(cv_regions))
+    predictions = {name: estimator.predict(model_inputs(spec.inputs, m),
+                                           **per_row_arguments(estimator, m, robot, fitting=False))
+                   for name, m in data.items()}
+    for name, m in data.items():
+        if "payload_kg" in rows and m.payload_kg is None:
+            log.warning("%s has no payload_kg column: predicted at the entry's payload_kg (%g kg)", name,
+                        estimator.payload_kg)
+    metrics = {name: outputs.evaluate(m, predictions[name], name in own_frame) for name, m in data.items()}
+    return ModelResult(spec, estimator, fit_seconds, outputs.score(resid), metrics, predictions,
+                       estimator.pso_rms_ratio(), granularity, cv_seconds=cv_seconds, nested=nested,
+                       cv_regions=cv_regions, cv_se=rms_standard_error(outputs.ranked(resid), cv.groups),
+                       effective_parameters=estimator.effective_parameters(), rank_on=outputs.rank_on)
+
+
+@contextmanager
+def _collected():
+    """Collect partcal's log warnings and Python warnings of a block (a list of texts), printing none."""
+    said: list[str] = []
+
+    class Collect(logging.Handler):
+        def emit(self, record: logging.LogRecord) -> None:
+            said.append(record.getMessage())
+
+    logger, handler = logging.getLogger("partcal"), Collect(logging.WARNING)
+    propagate = logger.propagate
+    logger.addHandler(handler)
+    logger.propagate = False
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            warnings.simplefilter("ignore", RuntimeWarning)      # numbers are checked, never warned about
+            yield said
+        said += [str(w.message) for w in caught]
+    finally:
+        logger.removeHandler(handler)
+        logger.propagate = propagate
+
+
+def _regions_text(counts: list[int]) -> str:
+    """``[1, 1]`` -> ``'1 region'``, ``[1, 3]`` -> ``'1 to 3 regions'``."""
+    low, high = counts
+    return (f"{low} to {high} regions" if low != high else f"{low} region{'s' if low != 1 else ''}")
+
+
+@contextmanager
+def _backend(config):
+    """joblib's default backend, or Dask when the config gives a scheduler address."""
+    if not config.dask_address:
+        yield
+        return
+    try:
+        from distributed import Client
+    except ImportError:
+        raise ConfigError(f"{config.source}: dask.address is set but the 'distributed' package is not "
+                          "installed (pip install 'partcal[dask]')") from None
+    try:
+        client = Client(config.dask_address, timeout=10)
+    except (OSError, TimeoutError) as exc:
+        raise ConfigError(f"{config.source}: dask.address: cannot reach the scheduler at "
+                          f"{config.dask_address}: {exc}") from None
+    try:
+        with parallel_config(backend="dask"):
+            yield
+    finally:
+        client.close()
+
+
+def _costliest_first(specs, ident: Measurements) -> list[int]:
+    """The order to start the fits in: nested cross-validation first, then by the memory a fit holds (a
+    Gaussian process's matrices), so that the longest fits do not start last on a busy pool."""
+    def cost(spec: ModelSpec) -> tuple:
+        model = spec.build(None)
+        return (len(spec.sizes) > 1, model.peak_fit_bytes(len(ident), ident.n_joints)[0])
+
+    costs = [cost(spec) for spec in specs]
+    return sorted(range(len(specs)), key=lambda i: costs[i], reverse=True)

@@ -1,0 +1,99 @@
+"""What a run produced: each model's result, the run's plan and the finished run.
+
+These are plain records: the stages of a run (:mod:`partcal.study.prepare`,
+:mod:`partcal.study.fitting`, :mod:`partcal.study.runner`) fill them, and the
+outputs, the printed tables and the report read them. They import no stage,
+so nothing imports back.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..data.measurements import Measurements
+from ..data.registration import Registration
+from ..robot.kinematics import Robot
+from .config import ModelSpec, RunConfig
+from .plan import run_indices
+from .selection import CVPlan, rank_reason
+
+
+@dataclass
+class ModelResult:
+    """One fitted model of a run with everything measured about it."""
+
+    spec: ModelSpec
+    model: object                       # any partcal error model (series, partitioned, GP, kinematic)
+    fit_seconds: float                  # the final fit on the identification set, nothing else
+    cv_rms_3d: float                    # on the run's shared folds; nested for granularity lists
+    metrics: dict[str, dict]
+    predictions: dict[str, NDArray[np.float64]]
+    rms_ratio: float | None = None
+    granularity: list[dict] | None = None
+    compensation: dict[str, dict] = field(default_factory=dict)
+    cv_seconds: float = 0.0             # cross-validation (and the granularity choice)
+    nested: bool = False
+    cv_regions: list[int] | None = None  # partitioned: [fewest, most] regions of the CV fold fits
+    cv_se: float = float("nan")         # standard error of cv_rms_3d, over the identification poses
+    effective_parameters: float = float("nan")   # what "simpler" means when two CV scores are close
+    notes: list[str] = field(default_factory=list)   # fits on a bound and the like: warned, and in the report
+    rank_on: str = "position"           # cv_rms_3d and cv_se are of the position (mm) or the orientation (mrad)
+
+    def score(self, rank_by: str) -> float:
+        """The number the run ranks by: the CV score, or the RMS on the validation set (3-D, mm; with ``rank_on:
+        orientation`` the orientation's RMS angle, mrad)."""
+        if rank_by == "cv":
+            return self.cv_rms_3d
+        validation = self.metrics["validation"]
+        return validation["orientation"]["rms_angle"] if self.rank_on == "orientation" else validation["rms_3d"]
+
+    @property
+    def n_regions(self) -> int:
+        part = self.model.regions_model()
+        return part.partition_.n_regions if part is not None else 1
+
+
+@dataclass(frozen=True)
+class RunPlan:
+    """What a run will fit: its cross-validation, the entries it can fit (granularities that no fold
+    supports left out; every kind that takes a robot given the run's, registered), the notes about what was
+    left out, and the repeat scatter of the data (mm)."""
+
+    cv: CVPlan
+    models: tuple[ModelSpec, ...]
+    notes: tuple[str, ...] = ()
+    repeat_scatter_mm: float | None = None
+
+
+@dataclass
+class RunResult:
+    """A finished run: its config, data sets (in the base frame), the robot (with the registered tool), the
+    figures of doing nothing, every model's result and the best model's name."""
+
+    config: RunConfig
+    datasets: dict[str, Measurements]
+    robot: Robot | None
+    uncompensated: dict[str, dict]
+    models: list[ModelResult]
+    best: str
+    seconds: float
+    registrations: dict[str, Registration] = field(default_factory=dict)
+    plan: RunPlan | None = None
+
+    @functools.cached_property
+    def design(self):
+        """The observability of the identification set (:func:`partcal.study.plan.run_indices`; None without a
+        robot), computed once for what ``partcal run`` prints and the report shows."""
+        if self.robot is None:
+            return None
+        return run_indices(self.robot, self.datasets["identification"].q_deg)
+
+    @property
+    def best_reason(self) -> str:
+        """Which rule chose ``best``, in words (metrics.json, the report and the printed table say it)."""
+        best = next(r for r in self.models if r.spec.name == self.best)
+        return rank_reason(self.config, self.plan.cv if self.plan else None, best.model.is_physical())

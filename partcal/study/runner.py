@@ -1,0 +1,57 @@
+"""A batch run from end to end: prepare, fit, verify, rank. Writing is :mod:`partcal.study.outputs`.
+
+Every model is fitted on the identification set, evaluated on every data set
+and by cross-validation on the identification set, and ranked by its
+cross-validated 3-D RMS (``rank_by: cv``: the physical model with the fewest
+parameters within one standard error of the lowest, else the lowest) or by
+its 3-D RMS on a held-out validation set (``rank_by: validation``); never by
+a test set. The stages, each in its module:
+
+1. **prepare** (:mod:`~partcal.study.prepare`): the data read once, the robot
+   registered once, the folds drawn, the feasible entries kept
+   (``partcal run --check`` stops here);
+2. **fit** (:mod:`~partcal.study.fitting`): every entry fitted, cross-validated
+   on the shared folds (nested for granularity lists) and scored;
+3. **verify** (:func:`~partcal.study.scoring.verify_compensation`): with a
+   virtual robot, the compensated test targets commanded on the simulated
+   true robot;
+4. **rank** (:func:`~partcal.study.selection.choose_best`).
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Callable
+
+import numpy as np
+
+from .config import RunConfig
+from .fitting import fit_all
+from .prepare import prepare
+from .results import RunResult
+from .scoring import Outputs, verify_compensation
+from .selection import choose_best
+
+
+def run(config: RunConfig, progress: Callable[[int, int, str], None] | None = None) -> RunResult:
+    """Fit and evaluate every model of ``config``; verify compensation when a virtual robot is given.
+
+    ``progress(done, total, text)`` hears of each finished model (and, with
+    ``done = 0``, of the plan); per-fold lines of slow models go to stderr
+    unless ``progress`` is None.
+    """
+    start = time.perf_counter()
+    prepared = prepare(config)
+    if progress:
+        progress(0, len(prepared.plan.models), f"cross-validation: {prepared.plan.cv.describe()}")
+    outputs = Outputs.of(config)
+    results = fit_all(prepared, outputs, progress)
+    data, robot = prepared.datasets, prepared.robot
+    if prepared.virtual is not None:
+        for result in results:
+            result.compensation = verify_compensation(result, data, robot, prepared.virtual, config.seed)
+    own = config.data_options.own_frame
+    uncompensated = {name: outputs.evaluate(m, np.zeros_like(outputs.errors(m)), name in own)
+                     for name, m in data.items()}
+    return RunResult(config, data, robot, uncompensated, results, choose_best(results, config.rank_by),
+                     time.perf_counter() - start, registrations=prepared.registrations, plan=prepared.plan)

@@ -386,3 +386,29 @@ def test_scattered_poses_are_drawn_as_points_with_the_share_inside_each_models_i
     assert "GP: 95% band" in band
     assert not figures.is_path(rng.uniform(0, 1000, (300, 3)))
     assert figures.is_path(np.c_[np.linspace(0, 1000, 300), np.zeros(300), np.ones(300)])
+
+
+def test_a_run_gives_the_iso_figures_and_each_models_spread(report):
+    from partcal.data.iso9283 import cycles_from_joints, pose_figures
+    from partcal.study.scoring import errors_left
+
+    result, out = report
+    metrics = json.loads((out / "metrics.json").read_text())
+    iso = metrics["iso9283"]
+    assert list(iso) == ["rectangle"] and iso["rectangle"]["poses"] == 200
+    m = result.datasets["rectangle"]
+    cycles = cycles_from_joints(m.q_deg)
+    expected = pose_figures(m.nominal_mm, m.measured_mm, cycles).ap_mm         # one cycle: AP is each |error|
+    assert iso["rectangle"]["uncompensated"]["AP_max_mm"] == pytest.approx(np.linalg.norm(m.errors_mm, axis=1).max())
+    assert iso["rectangle"]["uncompensated"]["AP_mean_mm"] == pytest.approx(expected.mean())
+    for r in result.models:
+        left = errors_left(m, r.predictions["rectangle"])[0]
+        assert iso["rectangle"]["models"][r.spec.name]["AP_mean_mm"] == pytest.approx(
+            np.linalg.norm(left, axis=1).mean())
+        spread = metrics["models"][r.spec.name]["rectangle"]["spread"]
+        std = r.spreads["rectangle"]
+        assert spread["coverage_95"] == pytest.approx(np.mean(np.abs(left) <= 1.959963984540054 * std))
+    header = (out / "predictions" / result.models[1].spec.slug / "rectangle.csv").read_text().splitlines()[0]
+    assert header.endswith("dx_pred,dy_pred,dz_pred,dx_sd,dy_sd,dz_sd")
+    page = (out / "index.html").read_text()
+    assert 'id="iso9283"' in page and 'id="spread"' in page and "95% band" in page

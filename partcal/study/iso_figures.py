@@ -175,15 +175,34 @@ def run_figures(datasets: dict[str, Measurements], predictions: dict[str, dict[s
     return out
 
 
-def run_lines(figures: dict[str, dict]) -> list[str]:
-    """The printed summary of :func:`run_figures`: per test set, AP mean / max (mm) uncompensated and per model."""
-    lines = ["ISO 9283 pose accuracy AP, mean / max over the poses (mm)"]
-    for name, entry in figures.items():
-        cells = [f"uncompensated {entry['uncompensated']['AP_mean_mm']:.3f} / {entry['uncompensated']['AP_max_mm']:.3f}"]
-        cells += [f"{model} {s['AP_mean_mm']:.3f} / {s['AP_max_mm']:.3f}" for model, s in entry["models"].items()]
-        rp = entry["uncompensated"]["RP_max_mm"]
-        lines.append(f"  {name} ({entry['poses']} poses" + (f", RP max {rp:.3f} mm" if rp is not None else "")
-                     + "): " + "; ".join(cells))
+def run_lines(figures: dict[str, dict], width: int = 24) -> list[str]:
+    """The printed table of :func:`run_figures`: AP mean / max (mm) per model and test set, and each set's RP.
+
+    >>> print("\\n".join(run_lines({"cubes": {"poses": 2, "cycles_max": 3, "uncompensated": {
+    ...     "AP_mean_mm": 1.0, "AP_max_mm": 2.0, "RP_max_mm": 0.1}, "models": {"DH": {
+    ...     "AP_mean_mm": 0.5, "AP_max_mm": 0.75, "RP_max_mm": 0.1}}}})))
+    ISO 9283 pose accuracy AP (mm), mean / max over the poses of each test set
+    model                                cubes
+    uncompensated                1.000 / 2.000
+    DH                           0.500 / 0.750
+    poses (cycles, RP max)        2 (3, 0.100)
+    """
+    names = list(figures)
+    models = list(dict.fromkeys(m for entry in figures.values() for m in entry["models"]))
+    lines = ["ISO 9283 pose accuracy AP (mm), mean / max over the poses of each test set",
+             f"{'model':<{width}}" + "".join(f"{n[:17]:>18}" for n in names)]
+
+    def cell(stats: dict | None) -> str:
+        return f"{'-':>18}" if stats is None else f"{stats['AP_mean_mm']:>9.3f} / {stats['AP_max_mm']:.3f}".rjust(18)
+
+    lines.append(f"{'uncompensated':<{width}}" + "".join(cell(figures[n]["uncompensated"]) for n in names))
+    for model in models:
+        lines.append(f"{model[:width - 1]:<{width}}" + "".join(cell(figures[n]["models"].get(model)) for n in names))
+    tail = []
+    for n in names:
+        rp = figures[n]["uncompensated"]["RP_max_mm"]
+        tail.append(f"{figures[n]['poses']} ({figures[n]['cycles_max']}" + (f", {rp:.3f})" if rp is not None else ")"))
+    lines.append(f"{'poses (cycles, RP max)':<{width}}" + "".join(f"{t:>18}" for t in tail))
     return lines
 
 

@@ -21,6 +21,7 @@ _EXPORTS = {
     "data.measurements": ["Measurements", "read_measurements", "write_measurements"],
     "data.formats": ["MeasurementFormat", "RowSelection", "load_format"],
     "data.registration": ["Registration", "register_tracker"],
+    "data.programs": ["read_program"],
     "metrics": ["ExtrapolationWarning", "rms_per_axis", "summary"],
     "models.series": ["ErrorModel"],
     "models.gp": ["GaussianProcessErrorModel"],
@@ -31,6 +32,7 @@ _EXPORTS = {
     "models.partitioned": ["PartitionedErrorModel"],
     "models.pose": ["PoseErrorModel"],
     "study.predictor": ["Predictor", "load_predictor"],
+    "study.programs": ["ProgramFrames", "compensate_program"],
     "study.plan": ["evaluate_poses", "plan_poses"],
     "study.selection": ["cross_validated_rms", "select_granularity"],
 }

@@ -21,9 +21,6 @@ from . import __version__
 from .errors import PartcalError
 
 log = logging.getLogger("partcal")
-_POSITION_COLUMNS = [["x", "y", "z"], ["x_nom", "y_nom", "z_nom"]]       # predict/compensate: x,y,z or else x_nom..
-_ORIENTATION_COLUMNS = [["rx", "ry", "rz"], ["rx_nom", "ry_nom", "rz_nom"]]  # compensate: the same for orientations
-_TURN_COLUMNS = ("drx", "dry", "drz")       # predict: a pose model's predicted rotation vector, mrad
 
 
 def _cmd_simulate(args) -> int:
@@ -110,31 +107,30 @@ def _check_browser() -> None:
 
 def _cmd_predict(args) -> int:
     from ._io import atomic_write
-    from .data.measurements import read_columns, read_payloads
-    from .robot.description import joint_columns
+    from .data.point_tables import TURN_COLUMNS, read_point_table
     from .study.predictor import load_predictor
 
     _refuse_input_as_output(args.output, "predict", [("model file", args.model), ("input file", args.input),
                                                      ("format file", args.format)])
     predictor = load_predictor(args.model)
-    fmt = _format(args)
-    std = None
-    if predictor.inputs == "cartesian":
-        cols, X, _ = read_columns(args.input, _POSITION_COLUMNS, fmt=fmt)
+    joints = predictor.n_inputs if predictor.inputs == "joint" else None
+    # a model with compliant joints reads the payload of each row too, when the file has it
+    table = read_point_table(args.input, _format(args), joints=joints, payload=predictor.model.reads_payload)
+    X, payload = table.values, table.payload_kg
+    if joints:
+        errors = predictor.predict(joints=X, payload_kg=payload, return_std=args.std)
+    else:
         errors = predictor.predict(positions=X, return_std=args.std)
         payload = None
-    else:     # a model with compliant joints reads the payload of each row too, when the file has it
-        cols, X, _ = read_columns(args.input, [joint_columns(predictor.n_inputs)], fmt=fmt)
-        payload = read_payloads(args.input, fmt) if predictor.model.reads_payload else None
-        errors = predictor.predict(joints=X, payload_kg=payload, return_std=args.std)
+    std = None
     if args.std:
         errors, std = errors
     predictor.refuse_implausible(X, errors, source=args.input)     # nothing is written then
     given = [X] if payload is None else [X, payload[:, None]]
-    header = cols + (["payload_kg"] if payload is not None else []) + ["dx", "dy", "dz"] + (
-        list(_TURN_COLUMNS) if predictor.predicts_pose else [])
+    header = table.columns + (["payload_kg"] if payload is not None else []) + ["dx", "dy", "dz"] + (
+        TURN_COLUMNS if predictor.predicts_pose else [])
     if std is not None:
-        header += ["sdx", "sdy", "sdz"] + (["sd" + c[1:] for c in _TURN_COLUMNS] if predictor.predicts_pose else [])
+        header += ["sdx", "sdy", "sdz"] + (["sd" + c[1:] for c in TURN_COLUMNS] if predictor.predicts_pose else [])
         given.append(errors)
         errors = std
     _write_table(args.output, header, np.hstack(given + [errors]), atomic_write)
@@ -165,7 +161,18 @@ def _warn_if_far(predictor, X) -> None:
 
 def _cmd_compensate(args) -> int:
     from ._io import atomic_write
-    from .data.measurements import read_columns, read_payloads
+    from .data.programs import program_kind
+
+    kind = args.program or program_kind(args.targets)
+    if kind is not None:
+        if args.std:
+            raise PartcalError(f"compensate: --std writes columns of a targets CSV; {args.targets} is a robot program")
+        return _compensate_program(args, kind)
+    for flag, value in (("--frame", args.frame), ("--tool", args.tool), ("--keep-unconverged", args.keep_unconverged)):
+        if value:
+            raise PartcalError(f"compensate: {flag} is for robot programs (URScript, KRL, RAPID, joint "
+                               f"trajectories); {args.targets} is a targets CSV")
+    from .data.point_tables import read_point_table
     from .metrics import ExtrapolationWarning
     from .robot.compensation import CompensationWarning
     from .robot.description import joint_columns
@@ -176,15 +183,15 @@ def _cmd_compensate(args) -> int:
                                                         ("format file", args.format)])
     predictor = load_predictor(args.model)
     n_q = predictor.robot.n_joints if predictor.robot is not None else 0
-    optional = joint_columns(n_q) if predictor.inputs == "joint" else []
-    cols, targets, seeds = read_columns(args.targets, _POSITION_COLUMNS, optional, fmt=_format(args))
-    turn_cols, angles = _target_orientations(args.targets, _format(args))
+    table = read_point_table(args.targets, _format(args), seeds=n_q if predictor.inputs == "joint" else 0,
+                             orientation=True, payload=predictor.model.reads_payload)
+    cols, targets, seeds, optional = table.columns, table.values, table.seeds, table.seed_columns
+    turn_cols, angles, payload = table.orientation_columns, table.orientation_deg, table.payload_kg
     if angles is not None and not predictor.predicts_pose:
         raise PartcalError(f"compensate: {args.targets} has the orientation columns {', '.join(turn_cols)}, but "
                            f"{args.model} predicts position errors only ({predictor.model.n_outputs()} outputs): fit "
                            "a pose model ('predict: pose' in the run config) to compensate orientations, or drop "
                            "those columns to compensate the positions; nothing written")
-    payload = read_payloads(args.targets, _format(args)) if predictor.model.reads_payload else None
     with warnings.catch_warnings():       # exit code 3 and one stderr line below say it instead
         warnings.simplefilter("ignore", CompensationWarning)
         warnings.simplefilter("ignore", ExtrapolationWarning)
@@ -230,27 +237,83 @@ def _cmd_compensate(args) -> int:
     return 0
 
 
-def _target_orientations(path, fmt) -> tuple[list[str], np.ndarray | None]:
-    """The targets' orientations (n, 3), intrinsic XYZ degrees, and their columns: ``rx, ry, rz``, or else
-    ``rx_nom, ry_nom, rz_nom``; ``([], None)`` when the file has neither. An incomplete triple is refused."""
-    from .data.formats import MeasurementFormat
-    from .data.measurements import read_columns
-    from .data.pose_columns import ORIENTATION_NOMINAL, orientation_problem
+def _compensate_program(args, kind: str) -> int:
+    """``partcal compensate MODEL PROGRAM -o OUT``: the program with its targets rewritten; exit 3 (nothing
+    written) when a target is not compensated, unless ``--keep-unconverged``."""
+    import json
 
-    for names in _ORIENTATION_COLUMNS:
-        angles = read_columns(path, _POSITION_COLUMNS, names, fmt=fmt)[2]
-        if angles is not None:
-            break
-    else:
-        return [], None
-    if names[0] == "rx":        # read under their own names: the format's orientation unit applies as to rx_nom..
-        angles = (fmt or MeasurementFormat()).to_contract(list(ORIENTATION_NOMINAL), angles)
-    problem = orientation_problem(angles)
-    if problem is not None:
-        row, k, expected = problem
-        raise PartcalError(f"{path}: data row {row + 1}: column {names[k]!r}: expected an angle in {expected}, got "
-                           f"{angles[row, k]:g}")
-    return list(names), angles
+    from ._io import atomic_write
+    from .data.programs import DIALECTS, read_program
+    from .metrics import ExtrapolationWarning
+    from .robot.compensation import CompensationWarning
+    from .study.predictor import load_predictor
+    from .study.programs import ProgramFrames, compensate_program
+
+    _refuse_input_as_output(args.output, "compensate", [("model file", args.model), ("program", args.targets)])
+    if args.format:
+        raise PartcalError("compensate: --format is for targets CSVs, not robot programs")
+    dialect = DIALECTS[kind]
+    frames = ProgramFrames(_named_frames(args.frame, dialect, "--frame"), _named_frames(args.tool, dialect, "--tool"))
+    predictor = load_predictor(args.model)
+    program = read_program(args.targets, kind)
+    with warnings.catch_warnings():       # exit code 3 and one stderr line below say it instead
+        warnings.simplefilter("ignore", CompensationWarning)
+        warnings.simplefilter("ignore", ExtrapolationWarning)
+        result = compensate_program(predictor, program, frames, keep_unconverged=args.keep_unconverged)
+    summary = result.summary(predictor.name)
+    if not program.targets:
+        print(f"partcal: warning: {args.targets} holds no targets partcal reads ({dialect.name}); written as it "
+              "was (docs/predictor.md, 'Robot programs', says which targets are read)", file=sys.stderr)
+    if result.failures:
+        first, why = result.failures[0]
+        more = len(result.failures) - 1
+        line = (f"partcal: {first.where(args.targets)} {why}" + (f" (and {more} more)" if more else "") +
+                f"; {len(result.failures)} of {len(program.targets)} targets not compensated")
+        if result.output is None:
+            print(line + f"; nothing written (--keep-unconverged writes them as they were, with a comment)",
+                  file=sys.stderr)
+            return 3
+    summary_path = Path(str(args.output) + ".json")
+    with atomic_write(args.output, "wb") as handle:
+        handle.write(result.output)
+    with atomic_write(summary_path) as handle:
+        json.dump(summary, handle, indent=2)
+        handle.write("\n")
+    print(_program_summary(summary, args.output, summary_path), file=sys.stderr)
+    if result.failures:
+        print(line + f"; {args.output} keeps them as they were, with a comment", file=sys.stderr)
+        return 3
+    return 0
+
+
+def _named_frames(values, dialect, option: str) -> dict:
+    """``--frame``/``--tool`` values, ``NAME=VALUE`` or ``VALUE`` (the default), VALUE in the dialect's syntax."""
+    import re
+
+    out = {}
+    for value in values or []:
+        m = re.match(r"\s*([$A-Za-z_][\w$]*(?:\[\s*\d+\s*\])?)\s*=(?!=)(.*)$", value, re.DOTALL)
+        name, text = (m.group(1).replace(" ", ""), m.group(2)) if m else (None, value)
+        if name is not None and name.upper().startswith(("BASE_DATA[", "TOOL_DATA[")):
+            name = name.upper()
+        if name in out:
+            raise PartcalError(f"compensate: {option} {name or '(the default)'} is given twice")
+        out[name] = dialect.frame(text, f"{option} {value!r}")
+    return out
+
+
+def _program_summary(summary: dict, output, summary_path) -> str:
+    """The stderr summary of a compensated program."""
+    big, turn, res = summary["largest_correction"], summary["largest_turn"], summary["predicted_residual"]
+    text = f"compensated {summary['compensated']} of {summary['targets']} targets ({summary['dialect']})"
+    if big:
+        text += (f"; largest correction {big['mm']:.4g} mm (target {big['target']}, line {big['line']}) and "
+                 f"{turn['deg']:.4g} deg (target {turn['target']}, line {turn['line']})")
+    if res:
+        text += f"; predicted residual at most {res['max_mm']:.3g} mm, {res['max_deg']:.3g} deg"
+    if summary["orientation"] == "kept":
+        text += " (a position model: orientations kept)"
+    return text + f": {output} (summary: {summary_path})"
 
 
 def _compensated(predictor, targets, seeds, payload, angles=None):
@@ -571,7 +634,8 @@ def build_parser() -> argparse.ArgumentParser:
     comp.add_argument("model", help="model file (models/<name>.json of a run)")
     comp.add_argument("targets", help="CSV with x,y,z (or x_nom,y_nom,z_nom) in mm; joint models also read q1..qN "
                                       "as IK seeds; pose models also rx,ry,rz (or rx_nom,ry_nom,rz_nom), intrinsic "
-                                      "XYZ degrees")
+                                      "XYZ degrees; or a robot program (URScript, KRL, RAPID, joint trajectory "
+                                      "CSV), see --program")
     comp.add_argument("-o", "--output", required=True,
                       help="CSV to write (targets + x_cmd,y_cmd,z_cmd[,rx_cmd,ry_cmd,rz_cmd][,qK_cmd],converged); "
                            "exit code 3 when any target did not converge")
@@ -580,6 +644,17 @@ def build_parser() -> argparse.ArgumentParser:
     comp.add_argument("--std", action="store_true",
                       help="also the position expected to be left at each target (dx_left,dy_left,dz_left: target "
                            "minus where the model says the command lands) and its standard deviation sdx,sdy,sdz (mm)")
+    comp.add_argument("--program", choices=("urscript", "krl", "rapid", "joints"),
+                      help="TARGETS is a robot program in this language (default: from its name: .script, "
+                           ".src/.dat, .mod/.prg; a .csv with q1..qN and no x,y,z is a joint trajectory)")
+    comp.add_argument("--frame", action="append", metavar="[NAME=]FRAME",
+                      help="a program's frame in its own syntax (UR feature p[...], KUKA base {X ..}, ABB work "
+                           "object [[x,y,z],[q1,..]]); without NAME, the frame of targets that name none")
+    comp.add_argument("--tool", action="append", metavar="[NAME=]TOOL",
+                      help="a program's tool (TCP) in its own syntax, as --frame")
+    comp.add_argument("--keep-unconverged", action="store_true",
+                      help="write the program even when targets are not compensated: they keep their numbers, "
+                           "with a comment (exit code 3 all the same)")
     comp.set_defaults(func=_cmd_compensate)
     eqs = sub.add_parser("equations", help="print a series model's fitted equations in mm and degrees")
     eqs.add_argument("model", help="model file (models/<name>.json of a run)")

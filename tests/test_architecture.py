@@ -142,8 +142,8 @@ def test_the_checker_finds_a_circle():
     sources["partcal/metrics.py"] += "\ndef later():\n    from .study import runner\n"
     circles = import_circles(import_graph(sources))
     assert any({"partcal/metrics.py", "partcal/study/runner.py"} <= set(c) for c in circles), circles
-    sources = {"partcal/models/base.py": "from .bases import x\n", "partcal/models/bases.py": "def f():\n    from . import base\n"}
-    assert import_circles(import_graph(sources)) == [["partcal/models/base.py", "partcal/models/bases.py"]]
+    sources = {"partcal/models/base.py": "from .features import x\n", "partcal/models/features.py": "def f():\n    from . import base\n"}
+    assert import_circles(import_graph(sources)) == [["partcal/models/base.py", "partcal/models/features.py"]]
 
 
 def test_the_checker_refuses_upward_and_sideways_imports():
@@ -158,8 +158,8 @@ def test_the_checker_refuses_upward_and_sideways_imports():
         "partcal/robot/kinematics.py:4 (layer 1) imports partcal.study.config (layer 3)",
         "partcal/robot/kinematics.py:5 (layer 1) imports partcal.models.series (layer 2)",
     ]
-    sideways = violations("partcal/data/measurements.py", "from ..models.bases import varying_inputs\n", table)
-    assert sideways == ["partcal/data/measurements.py:1 (layer 2) imports partcal.models.bases (layer 2)"]
+    sideways = violations("partcal/data/measurements.py", "from ..models.features import varying_inputs\n", table)
+    assert sideways == ["partcal/data/measurements.py:1 (layer 2) imports partcal.models.features (layer 2)"]
     assert violations("partcal/study/config.py", "from ..models import series\nfrom . import persist\n", table) == []
 
 

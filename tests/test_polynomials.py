@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from numpy.polynomial import polynomial as P
 
-from partcal.models.bases import Basis, Scaling, lift_coefficients
+from partcal.models.features import Basis, Scaling, lift_coefficients
 from partcal.models.polynomials import coef_centred, coef_from_scaled, expansion_size, lowered_terms, monomials
 
 

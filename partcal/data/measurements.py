@@ -314,9 +314,58 @@ def first_bad_payload(values: NDArray[np.float64]) -> int | None:
 def read_payloads(path: str | Path, fmt: MeasurementFormat | None = None) -> NDArray[np.float64] | None:
     """The ``payload_kg`` column of a CSV, kg per data row, or None when the file has none (``partcal predict``
     and ``compensate`` read it for models with compliant joints). Refusals name the file, line and column."""
+    return read_table(path, f"...,{PAYLOAD}", fmt).payloads()
+
+
+@dataclass(frozen=True)
+class CsvTable:
+    """A CSV parsed once (header checked, rows split), whose numeric columns are read on demand: what
+    :func:`read_columns` and :func:`read_payloads` read, for a reader that takes several groups of one file."""
+
+    path: Path
+    line: int                    # the header's line
+    header: list[str]            # column labels for messages
+    seen: dict[str, int]         # contract name -> position
+    data: list
+    fmt: MeasurementFormat
+
+    def has(self, columns) -> bool:
+        """Whether every one of the contract ``columns`` is in the file."""
+        return all(c in self.seen for c in columns)
+
+    def columns(self, alternatives: list[list[str]], optional: list[str] = ()
+                ) -> tuple[list[str], NDArray[np.float64], NDArray[np.float64] | None]:
+        """See :func:`read_columns`."""
+        fmt, path, line, seen = self.fmt, self.path, self.line, self.seen
+        chosen = next((group for group in alternatives if all(c in seen for c in group)), None)
+        if chosen is None:
+            wanted = " or ".join(",".join(fmt.file_column(c) for c in g) for g in alternatives)
+            missing = next(c for c in alternatives[0] if c not in seen)
+            raise DataError(f"{path}:{line}: column {fmt.file_column(missing)!r} is missing (expected columns "
+                            f"{wanted})")
+        present = [c for c in optional if c in seen]
+        if present and len(present) < len(optional):
+            missing = next(c for c in optional if c not in seen)
+            raise DataError(f"{path}:{line}: column {fmt.file_column(missing)!r} is missing (give all of "
+                            f"{', '.join(fmt.file_column(c) for c in optional)} or none)")
+        extra = list(optional) if present else []
+        values = _numbers(path, line, self.header, self.data, [seen[c] for c in chosen + extra], fmt.decimal)
+        values = fmt.to_contract(chosen + extra, values)
+        k = len(chosen)
+        return chosen, values[:, :k], (values[:, k:] if extra else None)
+
+    def payloads(self) -> NDArray[np.float64] | None:
+        """See :func:`read_payloads`."""
+        if PAYLOAD not in self.seen:
+            return None
+        return _payloads(self.path, self.line, self.header, self.data, self.seen[PAYLOAD], self.fmt.decimal)
+
+
+def read_table(path: str | Path, expected: str, fmt: MeasurementFormat | None = None) -> CsvTable:
+    """Parse a CSV once (``expected``: a header to suggest when the file is empty); errors name file, line and
+    column."""
     path, fmt = Path(path), fmt or _CONTRACT
-    line, header, seen, data = _table(path, f"...,{PAYLOAD}", fmt)
-    return _payloads(path, line, header, data, seen[PAYLOAD], fmt.decimal) if PAYLOAD in seen else None
+    return CsvTable(path, *_table(path, expected, fmt), fmt)
 
 
 def _payloads(path: Path, line: int, header: list[str], data: list, column: int, decimal: str
@@ -525,24 +574,7 @@ def read_columns(path: str | Path, alternatives: list[list[str]], optional: list
     ``fmt`` describes a foreign file as for :func:`read_measurements`. Errors
     name file, line and column.
     """
-    path = Path(path)
-    fmt = fmt or _CONTRACT
-    line, header, seen, data = _table(path, ",".join(alternatives[0]), fmt)
-    chosen = next((group for group in alternatives if all(c in seen for c in group)), None)
-    if chosen is None:
-        wanted = " or ".join(",".join(fmt.file_column(c) for c in g) for g in alternatives)
-        missing = next(c for c in alternatives[0] if c not in seen)
-        raise DataError(f"{path}:{line}: column {fmt.file_column(missing)!r} is missing (expected columns {wanted})")
-    present = [c for c in optional if c in seen]
-    if present and len(present) < len(optional):
-        missing = next(c for c in optional if c not in seen)
-        raise DataError(f"{path}:{line}: column {fmt.file_column(missing)!r} is missing (give all of "
-                        f"{', '.join(fmt.file_column(c) for c in optional)} or none)")
-    extra = list(optional) if present else []
-    values = _numbers(path, line, header, data, [seen[c] for c in chosen + extra], fmt.decimal)
-    values = fmt.to_contract(chosen + extra, values)
-    k = len(chosen)
-    return chosen, values[:, :k], (values[:, k:] if extra else None)
+    return read_table(path, ",".join(alternatives[0]), fmt).columns(alternatives, optional)
 
 
 def read_text_column(path: str | Path, column: str, fmt: MeasurementFormat | None = None

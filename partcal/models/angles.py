@@ -24,7 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .._validation import FieldReader
-from .bases import varying_inputs
+from .features import varying_inputs
 
 
 def _window_start(x: NDArray[np.float64]) -> float:

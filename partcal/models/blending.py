@@ -2,7 +2,7 @@
 
 Each region owns one or more *kernels*: a centre ``c`` and per-axis widths
 ``sigma``, over the inputs that vary in the training data (constant inputs
-are left out, see ``bases.varying_inputs``). With ``r_k = |(x - c_k) / sigma_k|``
+are left out, see ``features.varying_inputs``). With ``r_k = |(x - c_k) / sigma_k|``
 the raw weight of kernel ``k`` at ``x`` is
 
     g_k(x) = exp(-(r_k^2 - r_min^2) / 2) * S(r_k - s(x)),   s(x) = max(0, r_min(x) - RS),

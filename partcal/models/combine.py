@@ -26,7 +26,7 @@ from typing import Iterator
 import numpy as np
 from numpy.typing import NDArray
 
-from .bases import Basis, Scaling, lift_coefficients
+from .features import Basis, Scaling, lift_coefficients
 from .blending import cell_distance_matrix, cell_features, normalised_weights, sq_distances
 from .lookup import BlockPlan
 from .partition import Partition

@@ -24,7 +24,7 @@ from ..metrics import MRAD_PER_DEG, MRAD_PER_RAD, ORIENTATION, POSITION, distanc
 from ..robot.description import load_robot, robot_from_dict, robot_to_dict
 from ..robot.kinematics import ORIENTATION_MM_PER_RAD, Robot
 from .base import ErrorModelBase, box_points, seed_from
-from .bases import varying_inputs
+from .features import varying_inputs
 from .identification import (PRIMARY_TARGET, STATUSES, Identification, geometric_size, identify, model_jacobian,
                              nominal_values, own_geometry, parameter_names, robot_with)
 from .joint_errors import JointErrors, compliance_problem, harmonics_problem

@@ -7,7 +7,7 @@ data's bounding box), and which kernels may weigh on it (its ``lookup``, see
 ``lookup`` and ``blending``). ``Partition.to_dict`` turns it into JSON-ready
 data for model files (read back, with every field checked, by ``partcal.study.persist``).
 
-Inputs that never vary in the training data (``bases.varying_inputs``) are
+Inputs that never vary in the training data (``features.varying_inputs``) are
 left out: an octree splits, and kernels blend, along the varying axes only,
 so a joint held at -90 or at 30 degrees gives the same partition as one held
 at 0, and planar data make a quadtree.
@@ -30,7 +30,7 @@ from sklearn.cluster import KMeans
 
 from .._validation import FieldReader, check_int, integer, param_error, real
 from ..errors import PartcalError
-from .bases import varying_inputs
+from .features import varying_inputs
 from .lookup import BlockPlan, Lookup, grid_lookup, octree_lookup
 from .threads import one_openmp_thread
 

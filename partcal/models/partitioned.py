@@ -26,7 +26,7 @@ from ..errors import DataError, PartcalError
 from ..metrics import distance_outside_boxes
 from .angles import InputMap
 from .base import ErrorModelBase, seed_from
-from .bases import varying_inputs
+from .features import varying_inputs
 from .combine import BlendWeights, FrameCombiner, combine_generic, region_weights
 from .gp import GaussianProcessErrorModel
 from .partition import BLEND_WIDTH, KMeansPartition, Octree, Partition, partition_from_file

@@ -29,7 +29,7 @@ def lowered_terms(terms: list[tuple]) -> list[tuple]:
 
     A monomial ``u^e`` in ``u = (v - shift) / scale`` expands into every
     ``v^f`` with ``f <= e`` (per input); a term list closed under lowering
-    exponents (both lists of ``bases.Basis``) comes back unchanged.
+    exponents (both lists of ``features.Basis``) comes back unchanged.
 
     >>> lowered_terms([(0, 0), (1, 1)])
     [(0, 0), (1, 1), (0, 1), (1, 0)]
@@ -79,7 +79,7 @@ def coef_from_scaled(terms: list[tuple], coef: NDArray[np.float64], scale: NDArr
     The one change of variables for polynomials: ``sum_t coef_t prod_i
     u_i^e_ti`` is expanded binomially, ``u^e = sum_{f <= e} C(e, f) v^f
     (-shift)^(e - f) / scale^e``, into coefficients of :func:`lowered_terms`
-    of ``terms``. With ``(scale, shift)`` the model's ``bases.Scaling``,
+    of ``terms``. With ``(scale, shift)`` the model's ``features.Scaling``,
     ``v`` is the raw input (mm, degrees); with ``shift = 0``, the centred
     input ``x - centre``; with a lookup cell's frame ``v = (x - o) / h``,
     ``scale = s / h`` and ``shift = (m - o) / h``.

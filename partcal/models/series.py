@@ -29,7 +29,7 @@ from .._validation import FieldReader, Requirement, boolean, integer, is_int, on
 from ..errors import DataError, PartcalError
 from ..metrics import distance_outside_boxes
 from .base import ErrorModelBase, seed_from
-from .bases import Basis, Scaling, SeriesPlan, column_bounds
+from .features import Basis, Scaling, SeriesPlan, column_bounds
 from .polynomials import coef_centred, coef_from_scaled, lowered_terms
 from .swarm import RULES, TOPOLOGIES, SwarmConfig, SwarmResult, minimize_batch
 

@@ -30,11 +30,11 @@ from scipy.spatial.transform import Rotation
 from .._validation import check_array
 from ..errors import DataError
 from ..metrics import MRAD_PER_RAD, warn_far
-from ..models.bases import varying_inputs
+from ..models.features import varying_inputs
 from ..robot.compensation import (CompensationResult, false_target, false_target_cartesian_poses,
                                   false_target_joints, false_target_poses, reachable, reachable_poses)
 from ..robot.description import robot_from_dict
-from ..robot.kinematics import Robot, ik_settings, matrices_from_xyz_deg
+from ..robot.kinematics import Robot, checked_poses, ik_settings, matrices_from_xyz_deg
 from .persist import load_model
 
 EXTRAPOLATION_LIMIT = 50.0    # mm (Cartesian models) or degrees (joint models) from the nearest training input
@@ -298,17 +298,52 @@ class Predictor:
         angles = check_array(orientations_deg, "orientations_deg", columns=3)
         if len(angles) != len(positions):
             raise DataError(f"orientations_deg has {len(angles)} rows but positions_mm has {len(positions)}")
+        poses = pose_matrices(positions, matrices_from_xyz_deg(angles)) if len(positions) else np.zeros((0, 4, 4))
+        return self.compensate_poses(poses, joints, payload_kg=payload_kg, tol_mm=tol_mm, tol_deg=tol_deg,
+                                     max_iter=max_iter)
+
+    def compensate_poses(self, poses, joints=None, *, payload_kg: float | None = None, tol_mm: float = 1e-4,
+                         tol_deg: float = 1e-5, max_iter: int = 50, orientation_kept: bool = False
+                         ) -> CompensationResult:
+        """:meth:`compensate_pose` of tool poses given as homogeneous transforms (no Euler angles on the way).
+
+        Parameters
+        ----------
+        poses : array-like, shape (n, 4, 4)
+            Target poses of the tool point in the base frame, mm.
+        joints, payload_kg, tol_mm, tol_deg, max_iter
+            As for :meth:`compensate_pose`.
+        orientation_kept : bool
+            Do not use the model's orientation outputs (a position model has none): the position is
+            compensated and the commanded pose keeps the target's orientation (joint models: the joints at
+            which the nominal tool has the target orientation and the predicted position error brings the
+            tool point onto the target). Without it a position model is refused.
+
+        Returns
+        -------
+        CompensationResult
+            As for :meth:`compensate_pose`.
+        """
+        if not self.predicts_pose and not orientation_kept:
+            raise DataError(f"model {self.name or '(unnamed)'!r} predicts position errors only "
+                            f"({self.model.n_outputs()} outputs), so it cannot compensate an orientation: fit a pose "
+                            f"model ({POSE_OUTPUTS} outputs; 'predict: pose' in a run config), or compensate the "
+                            "positions alone with compensate() (or orientation_kept=True)")
+        ik_settings(tol_mm, max_iter, 10.0, 0.05, tol_deg=tol_deg)                # checks the tolerances
         predicted = self._errors_at(payload_kg)
 
         def errors(X):          # radians for the solvers
-            return predicted(X) * _RADIANS_PER_OUTPUT
+            e = predicted(X)
+            if orientation_kept:
+                return np.hstack([e[:, :3], np.zeros((len(e), 3))])
+            return e * _RADIANS_PER_OUTPUT
 
-        n = len(positions)
+        n = len(poses)
         if n == 0:
             return CompensationResult(np.zeros((0, 3)), None if self.inputs == "cartesian" else
                                       np.zeros((0, self.n_inputs)), np.zeros(0, np.int64), np.zeros(0),
                                       np.zeros(0, bool), np.zeros((0, 3, 3)), np.zeros(0))
-        poses = pose_matrices(positions, matrices_from_xyz_deg(angles))
+        poses = checked_poses(poses)
         if self.inputs == "cartesian":
             result = false_target_cartesian_poses(errors, poses, tol_mm=tol_mm, tol_deg=tol_deg, max_iter=max_iter)
             if self.robot is not None:      # a pose the arm cannot take (IK within its limits) is no solution

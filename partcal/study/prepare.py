@@ -26,7 +26,7 @@ from ..data.registration import Registration, register_measurements, registered
 from ..data.simulate import load_study
 from ..errors import ConfigError, DataError
 from ..metrics import repeat_scatter_mm
-from ..models.bases import varying_inputs
+from ..models.features import varying_inputs
 from ..robot.kinematics import Robot
 from .config import ModelSpec, RunConfig
 from .memory import check_memory

@@ -19,7 +19,7 @@ from scipy.spatial.transform import Rotation
 
 from ..data.measurements import Measurements
 from ..metrics import MRAD_PER_DEG, MRAD_PER_RAD, ORIENTATION, POSITION, orientation_summary, pooled_rms, summary
-from ..models.bases import varying_inputs
+from ..models.features import varying_inputs
 from ..robot.frames import kabsch
 from ..robot.kinematics import Robot, matrices_from_xyz_deg
 from .config import RunConfig

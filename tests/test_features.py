@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from partcal.models.bases import Basis, Scaling, SeriesPlan
+from partcal.models.features import Basis, Scaling, SeriesPlan
 
 
 def test_scaling_maps_training_range_to_unit_and_drops_constant_inputs():

@@ -1,0 +1,272 @@
+"""What every robot program dialect shares: targets with the byte spans of their numbers, and rewriting them.
+
+A program is read as bytes and decoded as latin-1, one character per byte, so a character offset is a byte
+offset and any encoding (UTF-8, cp1252, latin-1) comes back byte for byte: the dialects look only at ASCII
+syntax, and only the numbers of targets are ever replaced.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..errors import DataError
+
+NUMBER = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
+NUMBER_RE = re.compile(NUMBER)
+
+
+class ProgramSyntaxError(DataError):
+    """A target of a robot program cannot be read (names the file, line and column)."""
+
+
+class UnknownFrameError(DataError):
+    """A target is given relative to a frame (work object, base, feature, tool) that was not given."""
+
+
+@dataclass(frozen=True)
+class Field:
+    """One number of a target in the file: its character span, its text and its value (file units)."""
+
+    start: int
+    end: int
+    text: str
+    value: float
+
+
+@dataclass
+class Target:
+    """One target of a program.
+
+    Attributes
+    ----------
+    name : str
+        The variable's name (``p10``, ``XP1``), or ``movel`` / ``row 3`` for an inline target.
+    line, column : int
+        1-based position of the target's first number, as an editor shows it.
+    kind : "pose" or "joints"
+    fields : tuple of Field
+        The numbers rewritten by compensation: a pose's position then rotation, or the joints.
+    position_mm : ndarray, shape (3,)
+        A pose's position, mm (None for joints).
+    rotation : ndarray, shape (3, 3)
+        A pose's orientation (None for joints).
+    joints_deg : ndarray, shape (N,)
+        A joint target's angles, degrees (None for poses).
+    configuration : tuple of int or None
+        The configuration written with a pose (KUKA ``(S, T)``, ABB ``(cf1, cf4, cf6, cfx)``), if any.
+    frame, tool : str or None
+        The names of the frame and the tool the target is given in, when the program names them (None: the
+        dialect's default, the robot base and the flange unless options say otherwise).
+    line_end : int
+        Offset of the end of the target's line (before its line ending): where a comment goes.
+    """
+
+    name: str
+    line: int
+    column: int
+    kind: str
+    fields: tuple
+    position_mm: NDArray[np.float64] | None = None
+    rotation: NDArray[np.float64] | None = None
+    joints_deg: NDArray[np.float64] | None = None
+    configuration: tuple | None = None
+    frame: str | None = None
+    tool: str | None = None
+    line_end: int = 0
+
+    def where(self, source: str) -> str:
+        return f"{source}: line {self.line}, column {self.column}: target {self.name}"
+
+
+@dataclass(frozen=True)
+class Dialect:
+    """A program language: how to find its targets, and its units and rotations.
+
+    ``parse(text, source)`` -> the targets (list of Target, their fields only) and the frames and tools the
+    program defines itself (name -> pose (4, 4) mm). A pose target's fields are its position, then its
+    rotation: ``poses(values (n, k))`` -> positions (n, 3) mm and rotations (n, 3, 3), and
+    ``pose_values(positions, rotations, old (n, k))`` -> the fields' values, the rotation written nearest the
+    old one; ``pose_decimals``: the fewest decimals of each field. A joint target's fields are its joints,
+    ``joint_unit_deg`` degrees each, written with at least ``joint_decimals`` decimals.
+    ``frame(text, source)`` -> a pose (4, 4) mm from an option's value in the vendor's syntax.
+    ``configuration(q_deg (n, N))`` -> the configuration each joint solution has (n, k) ints, compared
+    with a target's written one at the indices ``compare``; ``seeds(configurations (n, k), reference (n, N)
+    deg)`` -> IK seeds that have the written configurations (-1: not written), near the reference joints.
+    ``comment``: the line-comment mark.
+    """
+
+    name: str
+    extensions: tuple[str, ...]
+    parse: Callable
+    frame: Callable
+    comment: str
+    poses: Callable | None = None
+    pose_values: Callable | None = None
+    pose_decimals: tuple[int, ...] = ()
+    joint_unit_deg: float = 1.0
+    joint_decimals: int = 6
+    configuration: Callable | None = None
+    compare: tuple[int, ...] = ()
+    seeds: Callable | None = None
+    comment_line: bool = False          # a note goes on a line of its own before the target (CSV)
+    statement_end: str = ""             # a note goes after the statement's end (RAPID's ";"), not mid-statement
+
+    def fill(self, text: str, targets: list[Target]) -> None:
+        """Lines, columns, poses and joints of parsed targets, computed for all of them at once."""
+        if not targets:
+            return
+        newlines = np.flatnonzero(np.frombuffer(text.encode("latin-1"), dtype=np.uint8) == 10)
+        offsets = np.array([t.fields[0].start for t in targets])
+        lines = np.searchsorted(newlines, offsets)                  # newlines before each target
+        starts = np.where(lines > 0, newlines[np.maximum(lines - 1, 0)] + 1, 0)
+        for t, line, column in zip(targets, lines + 1, offsets - starts + 1):
+            t.line, t.column = int(line), int(column)
+        poses = [t for t in targets if t.kind == "pose"]
+        if poses:
+            positions, rotations = self.poses(np.array([[f.value for f in t.fields] for t in poses]))
+            for t, p, r in zip(poses, positions, rotations):
+                t.position_mm, t.rotation = p, r
+        for t in targets:
+            if t.kind == "joints":
+                t.joints_deg = np.array([f.value for f in t.fields]) * self.joint_unit_deg
+
+    def texts(self, targets: list[Target], positions=None, rotations=None, joints_deg=None) -> list[list[str]]:
+        """The new text of every field of ``targets`` (all poses, or all joints): positions (n, 3) mm and
+        rotations (n, 3, 3), or joints (n, N) degrees. A number equal to the old one at the precision
+        written keeps its text; a rotation equal to the old one keeps its numbers (a quaternion written a
+        little off unit, a rotation vector of either sign)."""
+        old = np.array([[f.value for f in t.fields] for t in targets])
+        if joints_deg is not None:
+            values, decimals = np.asarray(joints_deg) / self.joint_unit_deg, [self.joint_decimals] * old.shape[1]
+        else:
+            values, decimals = self.pose_values(positions, rotations, old), self.pose_decimals
+            before = np.stack([t.rotation for t in targets])
+            same = np.abs(np.einsum("nij,nij->n", before, rotations) - 3.0) < 1e-15      # trace: angle ~0
+            values[same, 3:] = old[same, 3:]
+        return [[number_text(v, f, d) for v, f, d in zip(row, t.fields, decimals)] for row, t in zip(values, targets)]
+
+    def note(self, text: str, target: Target, message: str) -> tuple[int, int, str]:
+        """Where and how a note about ``target`` goes: ``(offset, offset, text)`` to insert, a comment at the
+        end of the target's line, or a comment line before it (with the file's line ending)."""
+        if not self.comment_line:
+            end = text.find(self.statement_end, target.fields[-1].end) if self.statement_end else -1
+            at = line_end(text, end) if end >= 0 else target.line_end
+            return at, at, f" {self.comment} {message}"
+        start = text.rfind("\n", 0, target.fields[0].start) + 1
+        ending = "\r\n" if text[target.line_end:target.line_end + 2] == "\r\n" else "\n"
+        return start, start, f"{self.comment} {message}{ending}"
+
+
+@dataclass
+class Program:
+    """A program read from a file: its text (latin-1 decoded bytes), dialect and targets."""
+
+    path: str
+    text: str
+    dialect: Dialect
+    targets: list[Target] = field(default_factory=list)
+    frames: dict = field(default_factory=dict)      # frames and tools defined in the program: name -> (4, 4) mm
+
+    def rewritten(self, replacements: list[tuple[int, int, str]]) -> bytes:
+        """The program's bytes with ``(start, end, new text)`` spans replaced (spans do not overlap)."""
+        out, at = [], 0
+        for start, end, new in sorted(replacements):
+            out.append(self.text[at:start])
+            out.append(new)
+            at = end
+        out.append(self.text[at:])
+        return "".join(out).encode("latin-1")
+
+
+def line_and_column(text: str, offset: int) -> tuple[int, int]:
+    """1-based line and column of a character offset (a CR LF or LF ends a line)."""
+    line = text.count("\n", 0, offset) + 1
+    return line, offset - (text.rfind("\n", 0, offset) + 1) + 1
+
+
+def line_end(text: str, offset: int) -> int:
+    """Offset of the end of the line holding ``offset``, before its ``\\r\\n`` or ``\\n``."""
+    end = text.find("\n", offset)
+    end = len(text) if end < 0 else end
+    return end - 1 if end > 0 and text[end - 1] == "\r" else end
+
+
+def syntax_error(source: str, text: str, offset: int, what: str, expected: str,
+                 found: str | None = None) -> ProgramSyntaxError:
+    """One error naming the file, line and column, what was found (default: the text there) and what was
+    expected; nothing is written."""
+    line, column = line_and_column(text, offset)
+    found = text[offset:offset + 40].split("\n")[0].rstrip("\r") if found is None else found
+    return ProgramSyntaxError(f"{source}: line {line}, column {column}: {what}: expected {expected}, got "
+                              f"{found!r}; nothing written")
+
+
+def numbers(source: str, text: str, start: int, end: int, count: int | tuple, what: str) -> list[Field]:
+    """The comma-separated numbers between ``start`` and ``end`` (a list body), exactly ``count`` of them."""
+    out, at = [], start
+    body = text[start:end]
+    parts = body.split(",")
+    for k, part in enumerate(parts):
+        stripped = part.strip()
+        offset = at + (len(part) - len(part.lstrip()))
+        m = NUMBER_RE.fullmatch(stripped)
+        if not m:
+            raise syntax_error(source, text, offset, f"{what}, item {k + 1}", "a number", stripped)
+        out.append(Field(offset, offset + len(stripped), stripped, float(stripped)))
+        at += len(part) + 1
+    counts = count if isinstance(count, tuple) else (count,)
+    if len(out) not in counts:
+        raise syntax_error(source, text, start, what, f"{' or '.join(map(str, counts))} numbers (got {len(out)})")
+    return out
+
+
+def number_text(value: float, old: Field, min_decimals: int) -> str:
+    """``value`` written as the number ``old`` was: its own text when equal at the precision written, else fixed
+    decimals (at least ``min_decimals``, more if the old text had more)."""
+    decimals = max(min_decimals, _decimals(old.text))
+    new = f"{value + 0.0:.{decimals}f}"
+    if float(new) == 0.0:
+        new = new.lstrip("-")                       # no "-0.000000"
+    if float(f"{old.value + 0.0:.{decimals}f}") == float(new):
+        return old.text
+    if old.text.startswith("+") and not new.startswith("-"):
+        new = "+" + new
+    return new
+
+
+def _decimals(text: str) -> int:
+    mantissa = re.split("[eE]", text)[0]
+    return len(mantissa.split(".")[1]) if "." in mantissa else 0
+
+
+def frame_pose(positions_mm, rotations) -> NDArray[np.float64]:
+    """One pose (4, 4) mm from a position (3,) mm and a rotation (3, 3)."""
+    out = np.eye(4)
+    out[:3, :3], out[:3, 3] = rotations, positions_mm
+    return out
+
+
+def masked(text: str, comment: str) -> str:
+    """``text`` with comments (from ``comment`` to the end of the line) and double-quoted strings blanked out
+    (each character a space, line endings kept): offsets stay those of ``text``, and no number or bracket in a
+    comment or a string is mistaken for a target."""
+    pattern = re.compile('"[^"\\r\\n]*"|' + re.escape(comment) + "[^\\r\\n]*")
+    return pattern.sub(lambda m: " " * len(m.group()), text)
+
+
+def closing(text: str, start: int, open_: str, close: str) -> int:
+    """Offset of the bracket that closes the one at ``start``; -1 if none."""
+    depth = 0
+    for k in range(start, len(text)):
+        if text[k] == open_:
+            depth += 1
+        elif text[k] == close:
+            depth -= 1
+            if depth == 0:
+                return k
+    return -1

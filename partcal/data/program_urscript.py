@@ -1,0 +1,182 @@
+"""URScript (Universal Robots, ``.script``): pose literals ``p[x, y, z, rx, ry, rz]`` and joint lists.
+
+Units of the language: positions in metres, orientations as rotation vectors (axis times angle) in radians,
+joints in radians. Targets are
+
+- a pose literal ``p[...]`` as the first argument of ``movel``, ``movej``, ``movep``, ``movec`` (both its
+  poses), ``servoj`` or ``get_inverse_kin``, or assigned to a variable (``wp1 = p[...]``) that a move
+  takes (``movel(wp1, ..)``; ``movel(pose_trans(Plane_1, wp1), ..)``: in the feature ``Plane_1``): in the
+  default frame (the robot base, or the feature given as ``--frame``);
+- ``pose_trans(NAME, p[...])``: the pose is relative to the feature ``NAME``, which must be given
+  (``--frame NAME=p[...]``);
+- a list of six numbers as the first argument of a move (joints), or assigned to a variable that some
+  move takes as its first argument.
+
+``set_tcp(p[...])`` sets the tool of the targets after it (in file order); ``set_tcp`` of anything else
+names a tool that must be given (``--tool``). Relative motions (``pose_add``, ``pose_trans`` of a
+variable) are no targets and stay as written.
+"""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+
+from ..robot.rotations import matrices_from_rotation_vectors, rotation_vectors_from_matrices
+from .program_text import (Dialect, ProgramSyntaxError, Target, UnknownFrameError, closing, frame_pose,
+                           line_and_column, line_end, masked, numbers, syntax_error)
+
+MOVES = ("movel", "movej", "movep", "movec", "servoj")
+_POSE = re.compile(r"\bp\s*\[")
+_MOVE = re.compile(r"\b(" + "|".join(MOVES) + r")\s*\(\s*")
+_ASSIGN = re.compile(r"(?:^|[\n;])[ \t]*(?:global[ \t]+|local[ \t]+)?([A-Za-z_]\w*)[ \t]*=[ \t]*$")
+_POSE_TRANS = re.compile(r"\bpose_trans\s*\(\s*([A-Za-z_]\w*)\s*,\s*$")
+_SET_TCP = re.compile(r"\bset_tcp\s*\(\s*")
+M_DECIMALS, RAD_DECIMALS = 8, 9        # 1e-8 m = 1e-5 mm; 1e-9 rad
+
+
+def parse(text: str, source: str) -> tuple[list[Target], dict]:
+    """The targets of a URScript program (``text``: the file decoded as latin-1), and the tools it sets
+    (name -> pose (4, 4) mm)."""
+    code = masked(text, "#")
+    tools: dict = {}
+    tcps = _tcps(text, code, source, tools)
+    uses = _pose_uses(code)
+    targets = []
+    for m in _POSE.finditer(code):
+        start = m.end() - 1
+        before = code[max(0, m.start() - 200):m.start()]
+        frame = None
+        if re.search(r"\bset_tcp\s*\(\s*$", before):
+            continue                                                    # a tool, not a target
+        assigned = _ASSIGN.search(before)
+        if re.search(r"\b(" + "|".join(MOVES) + r"|get_inverse_kin)\s*\(\s*$", before) or \
+                re.search(r"\bmovec\s*\([^()]*,\s*$", before):
+            pass
+        elif (trans := _POSE_TRANS.search(before)) is not None:
+            frame = trans.group(1)
+        elif assigned and assigned.group(1) in uses:                    # a pose variable that a move takes
+            frames = uses[assigned.group(1)]
+            if len(frames) > 1:
+                first = start + 1 + len(code[start + 1:_end_of(code, start)]) - \
+                    len(code[start + 1:_end_of(code, start)].lstrip())                # the first number
+                line, column = line_and_column(text, first)
+                named = " and ".join("the base" if f is None else f"pose_trans({f}, ..)" for f in
+                                     sorted(frames, key=str))
+                raise UnknownFrameError(f"{source}: line {line}, column {column}: target {assigned.group(1)}: it "
+                                        f"is used in {named}: one pose cannot be compensated for two frames; "
+                                        "nothing written")
+            frame = next(iter(frames))
+        else:
+            continue                                        # an offset, an argument, a variable no move takes
+        targets.append(_pose_target(text, code, source, start, frame, tcps))
+    targets += _joint_targets(text, code, source)
+    return sorted(targets, key=lambda t: t.fields[0].start), tools
+
+
+def _pose_target(text, code, source, start, frame, tcps) -> Target:
+    end = closing(code, start, "[", "]")
+    if end < 0:
+        raise syntax_error(source, text, start, "pose literal", "a closing ']'")
+    fields = numbers(source, text, start + 1, end, 6, "pose p[x, y, z, rx, ry, rz] (m, rad)")
+    name = _name_before(code, start) or "p[...]"
+    tool = next((t for at, t in reversed(tcps) if at < start), None)
+    return Target(name, 0, 0, "pose", tuple(fields), frame=frame, tool=tool, line_end=line_end(text, start))
+
+
+def _end_of(code: str, start: int) -> int:
+    """The offset of the ``]`` closing the ``[`` at ``start`` (the end of the text if none)."""
+    end = closing(code, start, "[", "]")
+    return len(code) if end < 0 else end
+
+
+def _name_before(code: str, start: int) -> str | None:
+    """The variable a pose literal at ``start`` is assigned to, or the move that takes it."""
+    head = code[max(0, start - 200):start]
+    m = re.search(r"([A-Za-z_]\w*)[ \t]*=[ \t]*p\s*$", head)
+    if m:
+        return m.group(1)
+    move = re.search(r"\b(" + "|".join(MOVES) + r")\s*\((?:\s*pose_trans\s*\()?[^()]*$", head)
+    return move.group(1) if move else None
+
+
+def _tcps(text: str, code: str, source: str, tools: dict) -> list[tuple[int, str]]:
+    """Each ``set_tcp`` (its offset, and the tool's name: ``set_tcp, line N`` for a pose literal, whose pose
+    goes into ``tools``, or the argument named)."""
+    out = []
+    for m in _SET_TCP.finditer(code):
+        end = closing(code, code.rfind("(", 0, m.end()), "(", ")")
+        arg = code[m.end():end].strip() if end > 0 else ""
+        if re.match(r"p\s*\[", arg):
+            inner = code.index("[", m.end())
+            fields = numbers(source, text, inner + 1, closing(code, inner, "[", "]"), 6, "set_tcp pose")
+            v = np.array([f.value for f in fields])
+            name = f"set_tcp at line {line_and_column(text, m.start())[0]}"
+            tools[name] = frame_pose(v[:3] * 1000.0, matrices_from_rotation_vectors(v[3:])[0])
+            out.append((m.start(), name))
+        else:
+            out.append((m.start(), arg or "set_tcp(...)"))
+    return out
+
+
+def _pose_uses(code: str) -> dict:
+    """The variables that moves take as a pose (``movel(wp1, ..)``, ``movel(pose_trans(Plane_1, wp1), ..)``,
+    both poses of ``movec``), each with the frames it is used in (None: the default frame)."""
+    uses: dict = {}
+    moves = "|".join(MOVES) + "|get_inverse_kin"
+    for m in re.finditer(r"\b(?:" + moves + r")\s*\(\s*(?:pose_trans\s*\(\s*([A-Za-z_]\w*)\s*,\s*)?"
+                         r"([A-Za-z_]\w*)\s*[,)]", code):
+        uses.setdefault(m.group(2), set()).add(m.group(1))
+    for m in re.finditer(r"\bmovec\s*\([^(),]*,\s*([A-Za-z_]\w*)\s*[,)]", code):
+        uses.setdefault(m.group(1), set()).add(None)
+    return uses
+
+
+def _joint_targets(text: str, code: str, source: str) -> list[Target]:
+    """Lists of six numbers taken by a move: inline, or through a variable."""
+    out, moved = [], set()
+    for m in _MOVE.finditer(code):
+        at = m.end()
+        if code.startswith("[", at):
+            out.append(_joints(text, code, source, at, m.group(1)))
+        elif (name := re.match(r"[A-Za-z_]\w*", code[at:])) is not None:
+            moved.add(name.group())
+    for name in moved:
+        for m in re.finditer(r"(?:^|[\n;])[ \t]*(?:global[ \t]+|local[ \t]+)?" + re.escape(name) +
+                             r"[ \t]*=[ \t]*\[", code):
+            out.append(_joints(text, code, source, m.end() - 1, name))
+    return out
+
+
+def _joints(text, code, source, start, name) -> Target:
+    end = closing(code, start, "[", "]")
+    if end < 0:
+        raise syntax_error(source, text, start, "joint list", "a closing ']'")
+    fields = numbers(source, text, start + 1, end, 6, "joint list [q1, ..., q6] (rad)")
+    return Target(name, 0, 0, "joints", tuple(fields), line_end=line_end(text, start))
+
+
+def poses(values):
+    """Positions (n, 3) mm and rotations (n, 3, 3) of pose fields (n, 6): metres, then a rotation vector."""
+    return values[:, :3] * 1000.0, matrices_from_rotation_vectors(values[:, 3:])
+
+
+def pose_values(positions_mm, rotations, old):
+    """Pose fields (n, 6): metres, then the rotation vector (radians) nearest the one written."""
+    return np.hstack([np.asarray(positions_mm) / 1000.0, rotation_vectors_from_matrices(rotations, near=old[:, 3:])])
+
+
+def frame(value: str, source: str) -> np.ndarray:
+    """A feature or a TCP given as ``p[x, y, z, rx, ry, rz]`` (m, rad): the pose (4, 4) in mm."""
+    m = re.fullmatch(r"\s*p\s*\[(.*)\]\s*", value)
+    if not m:
+        raise ProgramSyntaxError(f"{source}: expected a URScript pose p[x, y, z, rx, ry, rz] (m, rad), got {value!r}")
+    fields = numbers(source, value, m.start(1), m.end(1), 6, "pose p[x, y, z, rx, ry, rz] (m, rad)")
+    v = np.array([f.value for f in fields])
+    return frame_pose(v[:3] * 1000.0, matrices_from_rotation_vectors(v[3:])[0])
+
+
+DIALECT = Dialect("urscript", (".script",), parse, frame, "#", poses=poses, pose_values=pose_values,
+                  pose_decimals=(M_DECIMALS,) * 3 + (RAD_DECIMALS,) * 3, joint_unit_deg=180.0 / np.pi,
+                  joint_decimals=RAD_DECIMALS)

@@ -1,0 +1,77 @@
+"""Robot programs: the table of dialects, reading a program, and telling a program from a targets CSV.
+
+The dialects (one module each) find the targets of a program with the byte spans of their numbers and
+write new numbers in their place; everything else in the file stays byte for byte (see
+:mod:`partcal.data.program_text`).
+
+========== ============================== ==========================================================
+dialect    files                          targets
+========== ============================== ==========================================================
+urscript   ``.script``                    ``p[x, y, z, rx, ry, rz]`` (m, rad), joint lists (rad)
+krl        ``.src``, ``.dat``             ``E6POS POS E3POS FRAME`` (mm, deg), ``E6AXIS AXIS`` (deg)
+rapid      ``.mod``, ``.prg``             ``robtarget`` (mm, quaternion), ``jointtarget`` (deg)
+joints     ``.csv`` with ``q1..qN``       one row per time step (deg)
+========== ============================== ==========================================================
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from ..errors import DataError
+from . import program_joints, program_krl, program_rapid, program_urscript
+from .program_text import Dialect, Program, ProgramSyntaxError, Target, UnknownFrameError
+
+DIALECTS: dict[str, Dialect] = {d.name: d for d in (program_urscript.DIALECT, program_krl.DIALECT,
+                                                     program_rapid.DIALECT, program_joints.DIALECT)}
+
+__all__ = ["DIALECTS", "Program", "ProgramSyntaxError", "Target", "UnknownFrameError", "program_kind",
+           "read_program"]
+
+
+def program_kind(path: str | Path) -> str | None:
+    """The dialect a file's name (and, for CSV, its header) says it is in; None for a targets CSV.
+
+    A ``.csv`` is a joint trajectory when its header has ``q1`` and no position columns (``x`` or
+    ``x_nom``): a targets CSV (``x,y,z``, optionally ``q1..qN`` as seeds) is compensated as before.
+    """
+    suffix = Path(path).suffix.lower()
+    for name, dialect in DIALECTS.items():
+        if suffix in dialect.extensions and name != "joints":
+            return name
+    if suffix == ".csv":
+        try:
+            with open(path, encoding="latin-1") as handle:
+                header = next((line for line in handle if line.strip() and not line.lstrip().startswith("#")), "")
+        except OSError:
+            return None
+        names = {c.strip() for c in header.rstrip("\r\n").split(",")}
+        if "q1" in names and not names & {"x", "x_nom"}:
+            return "joints"
+    return None
+
+
+def read_program(path: str | Path, dialect: str | None = None) -> Program:
+    """Read a robot program: its bytes (kept exactly), dialect and targets.
+
+    Parameters
+    ----------
+    path : str or Path
+    dialect : {"urscript", "krl", "rapid", "joints"}, optional
+        Default: from the file name (:func:`program_kind`).
+
+    Raises
+    ------
+    ProgramSyntaxError
+        A target that cannot be read, naming the file, line and column.
+    """
+    name = dialect or program_kind(path)
+    if name not in DIALECTS:
+        raise DataError(f"{path}: cannot tell which robot program language this is (expected a file ending in "
+                        f"{', '.join(e for d in DIALECTS.values() for e in d.extensions)}, or a dialect in "
+                        f"{', '.join(DIALECTS)}); got {name if dialect else Path(path).suffix or 'no extension'!r}")
+    with open(path, "rb") as handle:
+        text = handle.read().decode("latin-1")          # one character per byte: offsets are byte offsets
+    targets, frames = DIALECTS[name].parse(text, str(path))
+    DIALECTS[name].fill(text, targets)
+    return Program(str(path), text, DIALECTS[name], targets, frames)

@@ -1,0 +1,360 @@
+"""Compensated robot programs: every target of a program rewritten so that the real robot lands on it.
+
+A program's pose targets are the tool centre point (TCP) in a frame (UR feature, KUKA base, ABB work
+object) with a tool (UR TCP, KUKA tool, ABB tooldata). Each is carried to the pose of the model's own
+tool point in the robot base: ``W = F P T^-1 Tm`` (``F`` the frame, ``P`` the target, ``T`` the tool,
+``Tm`` the model robot's tool offset); a joint target ``q`` is the pose the nominal robot has there,
+``W = FK(q)``. Then, for all targets at once:
+
+1. the intended joints ``q0``: the joints themselves, or the pose IK of ``W`` on the branch the target names
+   (KUKA ``T``, ABB ``cf1 cf4 cf6``), from the joint target before it in the file (else the home pose),
+   then from further seeds until the branch matches;
+2. the compensation (:meth:`Predictor.compensate_poses`, seeded with ``q0``): the full pose for a pose
+   model, the position with the orientation kept for a position model; a Cartesian model's command is
+   then solved by the robot's IK from ``q0``, as the controller would;
+3. the configuration kept: the compensated joints ``q1`` have the Jacobian's determinant of the sign of
+   ``q0``'s (no shoulder, elbow or wrist flip; the UR's joint branch) and the configuration written with
+   the target, if any;
+4. the commanded pose carried back, ``P' = F^-1 C Tm^-1 T``, written in the vendor's units (joints: ``q1``).
+
+A target that fails 1, 2 or 3 is not compensated: it is reported by file, line and name, and the
+program is not written unless ``keep_unconverged`` (then it keeps its original numbers and a comment).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..data.program_text import Program, Target, UnknownFrameError
+from ..errors import DataError
+from ..robot.kinematics import checked_poses, pose_errors
+from ..robot.rotations import inverse_poses, poses_from
+from .predictor import Predictor
+
+BOUNDARY_DEG = 1e-6       # a joint this close to a configuration's boundary is in both
+SEED_TRIES = 40            # seeds for a pose target's intended joints: the one before it, then spread ones
+
+
+@dataclass(frozen=True)
+class ProgramFrames:
+    """Frames and tools given by the user: name -> pose (4, 4) mm; the name None is the default (targets
+    that name none). Frames and tools the program defines itself are used where these name none."""
+
+    frames: dict = field(default_factory=dict)
+    tools: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        for what in ("frames", "tools"):
+            clean = {}
+            for name, pose in getattr(self, what).items():
+                try:
+                    clean[name] = checked_poses(np.asarray(pose, dtype=float)[None])[0]
+                except (DataError, ValueError, TypeError) as exc:
+                    raise DataError(f"ProgramFrames {what}[{name!r}]: expected a pose (4, 4) mm, a rotation and a "
+                                    f"position; {exc}") from None
+            object.__setattr__(self, what, clean)
+
+
+@dataclass(frozen=True)
+class ProgramResult:
+    """A compensated program.
+
+    Attributes
+    ----------
+    program : Program
+    output : bytes or None
+        The rewritten program; None when a target failed and ``keep_unconverged`` was not asked.
+    failures : list of (Target, str)
+        The targets not compensated and why.
+    correction_mm, correction_deg : ndarray, shape (n,)
+        How far each target moved (its TCP; a joint target's tool point), mm and degrees (0 where failed).
+    residual_mm, residual_deg : ndarray, shape (n,)
+        The model's predicted miss after compensation (NaN where failed).
+    orientation : "model" or "kept"
+    """
+
+    program: Program
+    output: bytes | None
+    failures: list
+    correction_mm: NDArray[np.float64]
+    correction_deg: NDArray[np.float64]
+    residual_mm: NDArray[np.float64]
+    residual_deg: NDArray[np.float64]
+    orientation: str
+
+    def summary(self, model: str = "") -> dict:
+        """The summary written beside the output (JSON values): counts, the largest move and turn of a target
+        (with its name and line), the largest predicted residual, and the targets not compensated."""
+        n, bad = len(self.program.targets), len(self.failures)
+        ok = np.isfinite(self.residual_mm)
+
+        def largest(values, unit):
+            if not ok.any():
+                return None
+            k = int(np.argmax(np.where(ok, values, -1.0)))
+            return {unit: float(values[k]), "target": self.program.targets[k].name,
+                    "line": self.program.targets[k].line}
+
+        return {
+            "program": self.program.path, "dialect": self.program.dialect.name, "model": model,
+            "targets": n, "compensated": n - bad, "orientation": self.orientation,
+            "largest_correction": largest(self.correction_mm, "mm"),
+            "largest_turn": largest(self.correction_deg, "deg"),
+            "predicted_residual": None if not ok.any() else {
+                "max_mm": float(self.residual_mm[ok].max()), "max_deg": float(self.residual_deg[ok].max())},
+            "not_compensated": [{"line": t.line, "column": t.column, "target": t.name, "reason": why}
+                                for t, why in self.failures],
+            "written": self.output is not None,
+        }
+
+
+def compensate_program(predictor: Predictor, program: Program, frames: ProgramFrames | None = None, *,
+                       keep_unconverged: bool = False, tol_mm: float = 1e-4, tol_deg: float = 1e-5
+                       ) -> ProgramResult:
+    """Rewrite every target of ``program`` to the false target that makes the robot reach it.
+
+    Parameters
+    ----------
+    predictor : Predictor
+        A model whose file carries its robot (the frames, the joint targets and the configuration check
+        need the kinematics).
+    program : Program
+        From :func:`partcal.data.programs.read_program`.
+    frames : ProgramFrames, optional
+        Frames and tools the targets name (or the defaults), beyond those the program defines.
+    keep_unconverged : bool
+        Write the program even when targets failed: they keep their numbers, with a comment.
+    tol_mm, tol_deg : float
+        Convergence of the compensation (predicted miss).
+
+    Raises
+    ------
+    UnknownFrameError
+        A target names a frame or tool that is neither given nor defined in the program.
+    """
+    robot, joints = _robot_for(predictor, program)
+    frame, tool = _frames(program, frames or ProgramFrames())
+    tool_model = poses_from(robot.tool_mm, np.eye(3))
+    wanted, q_given = _wanted(robot, program, joints, frame, tool, tool_model)
+    failures: dict[int, str] = {}
+    q0 = _intended_joints(robot, program, wanted, q_given, joints, failures)
+    orientation = "model" if predictor.predicts_pose else "kept"
+    q1, commanded, residual_mm, residual_deg = _solved(predictor, program, wanted, q0, failures, orientation,
+                                                       tol_mm, tol_deg)
+    return _result(program, program.targets, frame, tool, tool_model, wanted, commanded, q1, failures,
+                   residual_mm, residual_deg, orientation, keep_unconverged)
+
+
+def _robot_for(predictor: Predictor, program: Program):
+    """The model's robot, checked against the program's targets, and which targets are joint targets."""
+    robot = predictor.robot
+    if robot is None:
+        raise DataError(f"model {predictor.name!r}: its file names no robot; compensating a program needs the "
+                        "robot's kinematics (frames, joint targets, configurations)")
+    joints = np.array([t.kind == "joints" for t in program.targets], dtype=bool)
+    for t in program.targets:
+        if t.kind == "joints" and len(t.joints_deg) != robot.n_joints:
+            raise DataError(f"{t.where(program.path)}: {len(t.joints_deg)} joints, but robot {robot.name} has "
+                            f"{robot.n_joints}")
+    if robot.n_joints != 6 and not joints.all():
+        raise DataError(f"{program.path}: pose targets need a six-joint robot; {robot.name} has {robot.n_joints}")
+    return robot, joints
+
+
+def _wanted(robot, program: Program, joints, frame, tool, tool_model) -> tuple:
+    """The model's tool-point pose (n, 4, 4) mm each target wants, and the joint targets' joints (n, N) deg."""
+    n = len(joints)
+    wanted, q_given = np.zeros((n, 4, 4)), np.zeros((n, robot.n_joints))
+    if joints.any():
+        q_given[joints] = np.array([t.joints_deg for t in program.targets if t.kind == "joints"])
+        wanted[joints] = robot.forward(q_given[joints])
+    if (~joints).any():
+        P = poses_from([t.position_mm for t in program.targets if t.kind == "pose"],
+                       [t.rotation for t in program.targets if t.kind == "pose"])
+        wanted[~joints] = frame[~joints] @ P @ inverse_poses(tool[~joints]) @ tool_model
+    return wanted, q_given
+
+
+def _solved(predictor: Predictor, program: Program, wanted, q0, failures: dict, orientation: str, tol_mm: float,
+            tol_deg: float) -> tuple:
+    """The compensation of every target not failed yet: the joints (n, N) degrees, the commanded tool-point
+    poses (n, 4, 4) mm and the predicted misses (NaN where not solved); ``failures`` gets the new ones."""
+    robot, n = predictor.robot, len(wanted)
+    q1, commanded = q0.copy(), wanted.copy()
+    residual_mm, residual_deg = np.full(n, np.nan), np.full(n, np.nan)
+    idx = np.array([k for k in range(n) if k not in failures], dtype=np.intp)
+    if idx.size == 0:
+        return q1, commanded, residual_mm, residual_deg
+    r = predictor.compensate_poses(wanted[idx], q0[idx], tol_mm=tol_mm, tol_deg=tol_deg,
+                                   orientation_kept=orientation == "kept")
+    commanded[idx] = poses_from(r.commanded_mm, r.commanded_rotation)
+    residual_mm[idx], residual_deg[idx] = r.residual_mm, r.residual_deg
+    converged = r.converged.copy()
+    if r.joints_deg is not None:
+        q1[idx] = r.joints_deg
+    else:                        # the controller solves the command on the target's branch
+        ik = robot.inverse_pose(commanded[idx], q0[idx], tol_mm=min(tol_mm, 1e-6), tol_deg=min(tol_deg, 1e-6))
+        q1[idx] = ik.q_deg
+        converged &= ik.success
+    for k, ok, miss_mm, miss_deg in zip(idx, converged, r.residual_mm, r.residual_deg):
+        if not ok:
+            miss = f"predicted miss {miss_mm:.3g} mm, {miss_deg:.3g} deg"
+            failures[k] = (f"did not converge ({miss})" if not (miss_mm <= tol_mm and miss_deg <= tol_deg) else
+                           f"is unreachable: the robot cannot take its compensated command within its joint "
+                           f"limits ({miss})")
+    chosen = [program.targets[k] for k in idx]
+    for k, same in zip(idx, _configuration_kept(robot, program, chosen, q0[idx], q1[idx])):
+        if not same and k not in failures:
+            failures[k] = "leaves its configuration (" + _configurations(program, q0[k], q1[k]) + ")"
+    return q1, commanded, residual_mm, residual_deg
+
+
+def _result(program, targets, frame, tool, tool_model, wanted, commanded, q1, failures, residual_mm,
+            residual_deg, orientation, keep_unconverged) -> ProgramResult:
+    """The rewritten text, the corrections and the failures."""
+    n = len(targets)
+    out_pose = inverse_poses(frame) @ commanded @ inverse_poses(tool_model) @ tool
+    original = inverse_poses(frame) @ wanted @ inverse_poses(tool_model) @ tool
+    correction_mm, correction_deg = pose_errors(out_pose, original) if n else (np.zeros(0), np.zeros(0))
+    dialect, replacements = program.dialect, []
+    for k in failures:
+        correction_mm[k] = correction_deg[k] = 0.0
+        residual_mm[k] = residual_deg[k] = np.nan
+        replacements.append(dialect.note(program.text, targets[k], f"partcal: not compensated: {failures[k]}"))
+    for kind in ("pose", "joints"):
+        rows = [k for k, t in enumerate(targets) if t.kind == kind and k not in failures]
+        if not rows:
+            continue
+        chosen = [targets[k] for k in rows]
+        texts = dialect.texts(chosen, joints_deg=q1[rows]) if kind == "joints" else \
+            dialect.texts(chosen, out_pose[rows, :3, 3], out_pose[rows, :3, :3])
+        replacements += [(f.start, f.end, new) for t, row in zip(chosen, texts) for f, new in zip(t.fields, row)
+                         if new != f.text]
+    listed = [(targets[k], why) for k, why in sorted(failures.items())]
+    output = program.rewritten(replacements) if not listed or keep_unconverged else None
+    return ProgramResult(program, output, listed, correction_mm, correction_deg, residual_mm, residual_deg,
+                         orientation)
+
+
+def _frames(program: Program, given: ProgramFrames) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The frame and the tool (n, 4, 4) mm of every target (identity for joint targets)."""
+    n = len(program.targets)
+    frame, tool = np.tile(np.eye(4), (n, 1, 1)), np.tile(np.eye(4), (n, 1, 1))
+    for k, t in enumerate(program.targets):
+        if t.kind == "pose":
+            frame[k] = _lookup(program, t, t.frame, given.frames, "frame")
+            tool[k] = _lookup(program, t, t.tool, given.tools, "tool")
+    return frame, tool
+
+
+def _lookup(program: Program, target: Target, name: str | None, given: dict, what: str) -> NDArray[np.float64]:
+    if name is None:
+        return given.get(None, np.eye(4))
+    if name in given:
+        return given[name]
+    if name in program.frames:
+        return program.frames[name]
+    option = "--frame" if what == "frame" else "--tool"
+    raise UnknownFrameError(f"{target.where(program.path)}: it is given in the {what} {name!r}, which is unknown: "
+                            f"give it with {option} '{name}=VALUE' (VALUE in the program's own syntax, "
+                            "docs/predictor.md); nothing written")
+
+
+def _intended_joints(robot, program: Program, wanted, q_given, joints, failures: dict) -> NDArray[np.float64]:
+    """Joints (n, N) degrees at which the nominal robot has each wanted pose, on the branch the target names.
+
+    Pose targets are solved from the joint target before them in the file (else the home pose), then from
+    further seeds spread inside the limits (the same every time) until the branch matches.
+    """
+    n = len(joints)
+    q0 = q_given.copy()
+    todo = np.flatnonzero(~joints)
+    if todo.size == 0:
+        return q0
+    previous = np.where(joints, np.arange(n), -1)
+    previous = np.maximum.accumulate(previous)
+    seeds = np.where((previous >= 0)[:, None], q_given[np.maximum(previous, 0)], robot.home_deg)
+    spread = np.random.default_rng(0).uniform(robot.limits_deg[:, 0], robot.limits_deg[:, 1],
+                                              (64 * SEED_TRIES, robot.n_joints))
+    tries = [seeds[todo]]
+    written = np.array([program.targets[k].configuration is not None for k in todo])
+    if program.dialect.seeds is not None and written.any():      # seeds in the written configurations
+        named = seeds[todo].copy()
+        config = np.array([[-1 if c is None else c for c in program.targets[k].configuration]
+                           for k in todo[written]])
+        named[written] = program.dialect.seeds(config, named[written])
+        tries.append(named)
+    tries += list(spread[robot.within_limits(spread)][:SEED_TRIES - len(tries)])
+    found = np.zeros(n, dtype=bool)
+    for seed in tries:
+        rows = todo[~found[todo]]
+        if rows.size == 0:
+            break
+        start = seed if np.ndim(seed) == 1 else seed[~found[todo]]
+        ik = robot.inverse_pose(wanted[rows], start, tol_mm=1e-6, tol_deg=1e-6)
+        ok = ik.success & _matches(program, [program.targets[k] for k in rows], ik.q_deg)
+        q0[rows[ok]] = ik.q_deg[ok]
+        found[rows[ok]] = True
+    for k in todo[~found[todo]]:
+        conf = program.targets[k].configuration
+        failures[k] = "unreachable by the robot's kinematics" + (f" in its configuration {conf}" if conf else "")
+    return q0
+
+
+def _matches(program: Program, targets: list[Target], q: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """Whether joint solutions have the configuration their targets name (the parts the dialect compares)."""
+    dialect = program.dialect
+    ok = np.ones(len(q), dtype=bool)
+    if dialect.configuration is None or not dialect.compare:
+        return ok
+    low, high = _configuration_bounds(dialect, q)
+    for j, t in enumerate(targets):
+        if t.configuration is not None:
+            ok[j] = all(t.configuration[i] is None or t.configuration[i] in (low[j, i], high[j, i])
+                        for i in dialect.compare)
+    return ok
+
+
+def _configuration_bounds(dialect, q) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """The configuration of joints ``q`` (n, N) moved by -/+ 1e-6 degrees: a joint on a boundary (a KUKA
+    axis at 0, an ABB axis at 90) is in both configurations."""
+    return dialect.configuration(q - BOUNDARY_DEG), dialect.configuration(q + BOUNDARY_DEG)
+
+
+def _configuration_kept(robot, program: Program, targets: list[Target], q0, q1) -> NDArray[np.bool_]:
+    """No flip (the Jacobian's determinant keeps its sign, where not ~0), and the configuration written with a
+    target (KUKA ``T``, ABB ``cf1 cf4 cf6``) still that of the compensated joints. A target written without
+    one is the controller's to solve near where the robot is: only a flip changes it."""
+    return (_branch(robot, q0) * _branch(robot, q1) >= 0) & _matches(program, targets, q1)
+
+
+def _configurations(program: Program, q0, q1) -> str:
+    dialect = program.dialect
+    if dialect.configuration is not None and dialect.compare:
+        a, b = dialect.configuration(q0[None])[0], dialect.configuration(q1[None])[0]
+        if not np.array_equal(a[list(dialect.compare)], b[list(dialect.compare)]):
+            return f"{a.tolist()} -> {b.tolist()} in {dialect.name}'s terms"
+    return "the arm flips: the Jacobian's determinant changes sign"
+
+
+def _branch(robot, q: NDArray[np.float64], step_deg: float = 1e-4) -> NDArray[np.float64]:
+    """Sign of the 6 x 6 Jacobian's determinant (position mm, rotation vector rad; by central differences),
+    0 within 1e-9 of a singularity (relative to the arm's reach)."""
+    n, N = q.shape
+    if n == 0 or N != 6:
+        return np.zeros(n)
+    shifted = np.repeat(q[:, None], 2 * N, axis=1)
+    for k in range(N):
+        shifted[:, 2 * k, k] += step_deg
+        shifted[:, 2 * k + 1, k] -= step_deg
+    T = robot.forward(shifted.reshape(-1, N)).reshape(n, 2 * N, 4, 4)
+    dp = (T[:, 0::2, :3, 3] - T[:, 1::2, :3, 3]) / robot.reach_mm
+    dR = np.einsum("nkij,nklj->nkil", T[:, 0::2, :3, :3], T[:, 1::2, :3, :3])
+    dr = np.stack([dR[..., 2, 1] - dR[..., 1, 2], dR[..., 0, 2] - dR[..., 2, 0], dR[..., 1, 0] - dR[..., 0, 1]],
+                  axis=-1) / 2.0
+    J = np.concatenate([dp, dr], axis=2) / (2 * np.radians(step_deg))       # (n, 6 joints, 6)
+    det = np.linalg.det(J)
+    return np.where(np.abs(det) > 1e-9, np.sign(det), 0.0)

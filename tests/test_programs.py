@@ -1,0 +1,556 @@
+"""Compensated robot programs (URScript, KRL, RAPID, joint trajectories): byte-exact rewriting, the vendors'
+conventions, the true robot on the intended poses, and the refusals."""
+
+import json
+import re
+import warnings
+
+import numpy as np
+import pytest
+from conftest import ROOT
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.spatial.transform import Rotation
+
+from partcal import ErrorModel, load_robot
+from partcal.data.programs import ProgramSyntaxError, UnknownFrameError, program_kind, read_program
+from partcal.data.simulate import load_study
+from partcal.models.kinematic import KinematicModel
+from partcal.robot.rotations import (kuka_abc_from_matrices, matrices_from_kuka_abc, matrices_from_quaternions,
+                                     quaternions_from_matrices, rotation_vectors_from_matrices)
+from partcal.study.persist import model_to_dict, save_model
+from partcal.study.predictor import Predictor
+from partcal.study.programs import ProgramFrames, compensate_program
+
+FIXTURES = ROOT / "tests" / "fixtures" / "programs"
+UR10, SK120 = load_robot("universal_robots_ur10"), load_robot("motoman_sk120")
+PROGRAMS = [("pick_place.script", UR10, 6), ("pallet.dat", SK120, 5), ("pallet.src", SK120, 2),
+            ("pallet.mod", SK120, 6), ("trajectory.csv", UR10, 3)]
+
+
+def constant_model(robot, error, inputs="cartesian", name="const"):
+    """A model predicting the same error everywhere (zeros: the zero model), with its robot."""
+    rng = np.random.default_rng(0)
+    X = rng.uniform(-1000, 1000, (40, 3)) if inputs == "cartesian" else rng.uniform(-90, 90, (40, 6))
+    model = ErrorModel(inputs=inputs, degree=1, solver="lstsq").fit(X, np.tile(error, (len(X), 1)))
+    return Predictor(model, model_to_dict(model, name=name, robot=robot), robot)
+
+
+def run(*args):
+    """``partcal ARGS`` in this process: its exit code and stderr (as ``partcal_cli`` gives them)."""
+    import contextlib
+    import io
+    import types
+
+    from partcal.cli import main
+
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        code = main(list(args))
+    return types.SimpleNamespace(returncode=code, stdout=out.getvalue(), stderr=err.getvalue())
+
+
+def compensated(predictor, path, frames=None, **kwargs):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return compensate_program(predictor, read_program(path), frames, **kwargs)
+
+
+# ---------------------------------------------------------------------- byte for byte
+@pytest.mark.parametrize("inputs", ["cartesian", "joint"])
+@pytest.mark.parametrize("outputs", [3, 6])
+@pytest.mark.parametrize("name, robot, count", PROGRAMS)
+def test_a_zero_model_writes_the_program_back_byte_for_byte(name, robot, count, inputs, outputs):
+    result = compensated(constant_model(robot, np.zeros(outputs), inputs), FIXTURES / name)
+    assert len(result.program.targets) == count and not result.failures
+    assert result.output == (FIXTURES / name).read_bytes()
+
+
+def test_a_crlf_urscript_program_keeps_its_line_endings(tmp_path):
+    path = tmp_path / "crlf.script"
+    path.write_bytes((FIXTURES / "pick_place.script").read_bytes().replace(b"\n", b"\r\n"))
+    result = compensated(constant_model(UR10, [0.3, -0.2, 0.1]), path)
+    out = result.output
+    assert out != path.read_bytes() and out.count(b"\r\n") == out.count(b"\n") == path.read_bytes().count(b"\n")
+
+
+def test_targets_are_found_where_the_vendors_syntax_puts_them():
+    ur = read_program(FIXTURES / "pick_place.script")
+    assert [(t.name, t.line, t.kind) for t in ur.targets] == [
+        ("home", 6, "joints"), ("approach", 7, "pose"), ("movel", 10, "pose"), ("movep", 11, "pose"),
+        ("movej", 14, "joints"), ("movel", 15, "pose")]          # not the comment, the string nor pose_add's offset
+    np.testing.assert_allclose(ur.targets[1].position_mm, [-744.6, -297.7, 429.9])
+    assert ur.targets[1].tool == "set_tcp at line 4"
+    np.testing.assert_allclose(ur.frames["set_tcp at line 4"][:3, 3], [0, 0, 100])
+    krl = read_program(FIXTURES / "pallet.dat")
+    assert [(t.name, t.configuration) for t in krl.targets] == [
+        ("XHOME", None), ("XP1", (2, 6)), ("XP2", (2, 47)), ("XP3", (2, 22)), ("XP4", None)]
+    assert (krl.targets[1].frame, krl.targets[1].tool) == ("$NULLFRAME", "$NULLFRAME")     # FDAT FP1: 0 and 0
+    rapid = read_program(FIXTURES / "pallet.mod")
+    assert [(t.name, t.tool, t.frame) for t in rapid.targets if t.kind == "pose"] == [
+        ("p10", "tool0", "wobj0"), ("p20", "tool0", "wobj0"), ("p30", "tGripper", "wTable"),
+        ("MoveL", "tool0", "wobj0")]
+    np.testing.assert_allclose(rapid.frames["wTable"][:3, 3], [1000, 0, 500])
+    np.testing.assert_allclose(rapid.frames["tGripper"][:3, 3], [0, 0, 100])
+
+
+def test_program_kinds_come_from_the_file_name_and_a_csv_header(tmp_path):
+    assert [program_kind(FIXTURES / n) for n, _, _ in PROGRAMS] == ["urscript", "krl", "krl", "rapid", "joints"]
+    targets = tmp_path / "targets.csv"
+    targets.write_text("x,y,z,q1,q2,q3,q4,q5,q6\n1,2,3,0,0,0,0,0,0\n")
+    assert program_kind(targets) is None          # a targets CSV with IK seeds stays a targets CSV
+
+
+# ---------------------------------------------------------------------- conventions, by hand
+def test_kuka_abc_is_z_then_y_then_x():
+    # A 90, C 90: x -> y (the turn about z), y -> z (about x, then z), z -> x
+    np.testing.assert_allclose(matrices_from_kuka_abc([[90.0, 0.0, 90.0]])[0],
+                               [[0, 0, 1], [1, 0, 0], [0, 1, 0]], atol=1e-15)
+    np.testing.assert_allclose(matrices_from_kuka_abc([[0.0, 90.0, 0.0]])[0] @ [1, 0, 0], [0, 0, -1], atol=1e-15)
+    c, s = np.cos(np.radians(30)), np.sin(np.radians(30))
+    np.testing.assert_allclose(matrices_from_kuka_abc([[0.0, 0.0, 30.0]])[0], [[1, 0, 0], [0, c, -s], [0, s, c]],
+                               atol=1e-15)
+    # A = 180 stays 180 beside an old 180 (not -180); without it, atan2's -180 or 180
+    half = matrices_from_kuka_abc([[180.0, 10.0, -20.0]])
+    np.testing.assert_allclose(kuka_abc_from_matrices(half, near=[[179.0, 0.0, 0.0]]), [[180.0, 10.0, -20.0]],
+                               atol=1e-9)
+    np.testing.assert_allclose(kuka_abc_from_matrices(half, near=[[-179.0, 0.0, 0.0]]), [[-180.0, 10.0, -20.0]],
+                               atol=1e-9)
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.floats(-180, 180), st.floats(-89.9, 89.9), st.floats(-180, 180), st.floats(-0.01, 0.01))
+def test_every_writing_comes_back_near_the_old_one(a, b, c, nudge):
+    """A rotation turned by a hundredth of a degree or less reads back within that of its old writing, in all
+    three vendors' forms (KUKA angles, quaternions of either sign, rotation vectors of any angle)."""
+    old_abc = np.array([[a, b, c]])
+    R = matrices_from_kuka_abc(old_abc)
+    turned = Rotation.from_rotvec(np.radians([nudge, -nudge, nudge])).as_matrix() @ R
+    assert np.abs(kuka_abc_from_matrices(turned, near=old_abc) - old_abc).max() < 0.05 / np.cos(np.radians(b))
+    for sign in (1.0, -1.0):
+        old_q = sign * quaternions_from_matrices(R)
+        assert np.abs(quaternions_from_matrices(turned, near=old_q) - old_q).max() < 1e-3
+    old_r = rotation_vectors_from_matrices(R)
+    twin = old_r - 2 * np.pi * old_r / max(np.linalg.norm(old_r), 1e-12)
+    for old in (old_r, twin) if np.linalg.norm(old_r) > 3.0 else (old_r,):
+        assert np.abs(rotation_vectors_from_matrices(turned, near=old) - old).max() < 2e-3
+
+
+def test_a_krl_target_reads_as_the_hand_computed_rotation(tmp_path):
+    path = tmp_path / "one.dat"
+    path.write_bytes(b"DEFDAT ONE\r\nDECL E6POS XP1={X 1000,Y 0,Z 1500,A 90,B 0,C 90,S 6,T 0}\r\nENDDAT\r\n")
+    t = read_program(path).targets[0]
+    np.testing.assert_allclose(t.rotation, [[0, 0, 1], [1, 0, 0], [0, 1, 0]], atol=1e-15)
+    np.testing.assert_allclose(t.position_mm, [1000, 0, 1500])
+
+
+def test_abb_quaternions_are_scalar_first_and_keep_the_sign_they_were_written_with():
+    r = np.sqrt(0.5)
+    np.testing.assert_allclose(matrices_from_quaternions([[r, 0, 0, r]])[0], [[0, -1, 0], [1, 0, 0], [0, 0, 1]],
+                               atol=1e-15)                          # 90 degrees about z
+    turn = matrices_from_quaternions([[r, 0, 0, r]])
+    np.testing.assert_allclose(quaternions_from_matrices(turn, near=[[-r, 0, 0, -r]]), [[-r, 0, 0, -r]], atol=1e-15)
+    np.testing.assert_allclose(quaternions_from_matrices(turn), [[r, 0, 0, r]], atol=1e-15)
+
+
+def test_a_compensated_robtarget_keeps_its_quaternion_hemisphere():
+    result = compensated(constant_model(SK120, [0.2, 0.1, -0.3, 2.0, -1.0, 0.5]), FIXTURES / "pallet.mod")
+    p20 = re.search(rb"p20 := \[ \[[^\]]*\], \[([^\]]*)\]", result.output).group(1)
+    q = np.array([float(v) for v in p20.split(b",")])
+    assert q[0] < 0 and abs(np.linalg.norm(q) - 1) < 1e-8           # written as -q, as the original
+    assert np.dot(q, [-0.388956, -0.519826, -0.170439, -0.741245]) > 0.9999
+
+
+def test_ur_rotation_vectors_near_half_a_turn_stay_on_the_written_side():
+    beyond = Rotation.from_rotvec([0.0, np.pi + 0.001, 0.0]).as_matrix()[None]      # half a turn and a bit about y
+    np.testing.assert_allclose(rotation_vectors_from_matrices(beyond, near=[[0.0, 3.1415, 0.0]]),
+                               [[0.0, np.pi + 0.001, 0.0]], atol=1e-12)
+    np.testing.assert_allclose(rotation_vectors_from_matrices(beyond), [[0.0, -(np.pi - 0.001), 0.0]], atol=1e-12)
+
+
+def test_a_ur_target_at_half_a_turn_is_written_near_its_old_vector(tmp_path):
+    q = np.array([[10.0, -80.0, 90.0, -100.0, -90.0, 20.0]])
+    pose = UR10.flange(q)[0]
+    r = rotation_vectors_from_matrices(pose[None, :3, :3])[0]
+    flipped = r - 2 * np.pi * r / np.linalg.norm(r)            # the same rotation, the other way round
+    path = tmp_path / "half.script"
+    text = "movel(p[{:.6f}, {:.6f}, {:.6f}, {:.9f}, {:.9f}, {:.9f}])\n".format(*(pose[:3, 3] / 1000), *flipped)
+    path.write_text(text)
+    result = compensated(constant_model(UR10, [0.0, 0.0, 0.0, 0.0, 0.0, 1.0]), path)       # a 1 mrad turn about z
+    new = np.array([float(v) for v in re.search(r"p\[([^\]]*)\]", result.output.decode()).group(1).split(",")])
+    assert np.linalg.norm(new[3:] - flipped) < 0.01                  # moved by about a mrad, not by 2 pi
+    angle = np.degrees(Rotation.from_matrix(Rotation.from_rotvec(new[3:]).as_matrix() @ pose[:3, :3].T).magnitude())
+    assert 0.05 < angle < 0.06                                       # 1 mrad = 0.0573 degrees turned back
+
+
+# ---------------------------------------------------------------------- the true robot on the intended poses
+def pose_errors_of(virtual, q):
+    """The virtual robot's true pose errors at commanded joints: position mm, rotation vector mrad."""
+    N = virtual.nominal.forward(q)
+    turn = Rotation.from_matrix(virtual.true_flange(q)[1] @ N[:, :3, :3].transpose(0, 2, 1)).as_rotvec()
+    return np.hstack([virtual.true_positions(q) - N[:, :3, 3], 1000.0 * turn])
+
+
+def fitted(config, centre, spread, tmp_path, **kwargs):
+    """A kinematic pose model fitted on 48 noise-free poses of a virtual robot, saved and loaded back."""
+    from partcal import load_predictor
+
+    virtual = load_study(ROOT / "configs" / config).robot
+    rng = np.random.default_rng(1)
+    q = np.array(centre) + rng.uniform(-spread, spread, (400, 6))
+    q = q[virtual.nominal.within_limits(q)][:48]
+    model = KinematicModel(robot=virtual.nominal, use_orientation=True, **kwargs).fit(q, pose_errors_of(virtual, q))
+    save_model(model, tmp_path / "model.json", name="DH pose", robot=virtual.nominal)
+    return virtual, load_predictor(tmp_path / "model.json")
+
+
+def reached_misses(virtual, predictor, q_cmd, wanted_tool_point):
+    """What the true robot misses the intended poses of the model's tool point by, mm and degrees, and the part
+    of it that is the model's own prediction error."""
+    real = virtual.true_positions(q_cmd), virtual.true_flange(q_cmd)[1]
+    miss_mm = np.linalg.norm(real[0] - wanted_tool_point[:, :3, 3], axis=1)
+    miss_deg = Rotation.from_matrix(real[1] @ wanted_tool_point[:, :3, :3].transpose(0, 2, 1)).magnitude()
+    own = pose_errors_of(virtual, q_cmd) - predictor.predict(joints=q_cmd)
+    return miss_mm, np.degrees(miss_deg), np.linalg.norm(own[:, :3], axis=1), np.degrees(
+        np.linalg.norm(own[:, 3:], axis=1) / 1000)
+
+
+def controller_joints(robot, program, frames, tools, seeds):
+    """The nominal controller: each rewritten pose target's TCP in its frame, solved on the seeds' branch."""
+    from partcal.robot.rotations import inverse_poses, poses_from
+
+    P = poses_from([t.position_mm for t in program.targets], [t.rotation for t in program.targets])
+    tool_point = frames @ P @ inverse_poses(tools) @ poses_from(robot.tool_mm, np.eye(3))
+    ik = robot.inverse_pose(tool_point, seeds, tol_mm=1e-9, tol_deg=1e-9)
+    assert ik.success.all()
+    return ik.q_deg
+
+
+def test_the_virtual_ur10_lands_on_the_intended_poses_of_a_urscript_program(tmp_path):
+    virtual, predictor = fitted("ur10_targets_virtual.yaml", [20, -70, 90, -100, -80, 10], 40, tmp_path)
+    nominal = virtual.nominal
+    q = np.array([20, -70, 90, -100, -80, 10]) + np.random.default_rng(2).uniform(-25, 25, (12, 6))
+    feature = np.array([400.0, -100.0, 50.0, 0.1, -0.2, 0.3])                   # mm, then a rotation vector
+    from partcal.robot.rotations import inverse_poses, poses_from
+    F = poses_from(feature[:3], Rotation.from_rotvec(feature[3:]).as_matrix())[0]
+    tcp = poses_from(nominal.tool_mm, np.eye(3))[0]                              # the TCP is the model's tool point
+    P = inverse_poses(F) @ nominal.forward(q)                                    # the intended TCP in the feature
+    values = np.hstack([P[:, :3, 3] / 1000, Rotation.from_matrix(P[:, :3, :3]).as_rotvec()])     # m, rad
+    lines = [f"  movel(pose_trans(table, p[{', '.join(f'{v:.9f}' for v in row)}]), a=1.2, v=0.25)  # {k}"
+             for k, row in enumerate(values)]
+    path = tmp_path / "virtual.script"
+    path.write_text("def run():\n  set_tcp(p[0, 0, 0.12, 0, 0, 0])\n" + "\n".join(lines) + "\nend\n")
+    feature_text = f"table=p[{', '.join(f'{v:.12g}' for v in (*feature[:3] / 1000, *feature[3:]))}]"
+    out = tmp_path / "out.script"
+    done = run("compensate", str(tmp_path / "model.json"), str(path), "-o", str(out), "--frame", feature_text)
+    assert done.returncode == 0, done.stderr
+    summary = json.loads((tmp_path / "out.script.json").read_text())
+    assert summary["compensated"] == 12 and summary["largest_correction"]["mm"] > 0.9
+    assert summary["largest_turn"]["deg"] > 0.1 and summary["predicted_residual"]["max_mm"] < 1e-4
+    program = read_program(out)
+    q_cmd = controller_joints(nominal, program, np.tile(F, (12, 1, 1)), np.tile(tcp, (12, 1, 1)), q)
+    wanted = nominal.forward(q)
+    miss_mm, miss_deg, own_mm, own_deg = reached_misses(virtual, predictor, q_cmd, wanted)
+    assert miss_mm.max() < 1e-3 and miss_deg.max() < 1e-4
+    assert np.all(miss_mm <= own_mm + 1e-3) and np.all(miss_deg <= own_deg + 1e-4)
+    before_mm = np.linalg.norm(virtual.true_positions(q) - wanted[:, :3, 3], axis=1)
+    assert before_mm.min() > 0.9                                                # uncompensated: 0.96 to 1.63 mm
+
+
+@pytest.mark.parametrize("dialect", ["krl", "rapid"])
+def test_the_virtual_sk120_lands_on_the_intended_poses_of_krl_and_rapid_programs(tmp_path, dialect):
+    virtual, predictor = fitted("sk120_virtual.yaml", [0, -120, -170, 0, 30, 0], 20, tmp_path,
+                                compliance=(2, 3), joint_harmonics=[1, 2, 2, 0, 0, 1])
+    nominal = virtual.nominal
+    q = np.array([0, -120, -170, 0, 30, 0]) + np.random.default_rng(3).uniform(-12, 12, (10, 6))
+    q = q[nominal.within_limits(q)]
+    from partcal.robot.rotations import inverse_poses, poses_from
+    base = poses_from([800.0, -200.0, 100.0], matrices_from_kuka_abc([[30.0, 0.0, 0.0]]))[0]
+    tool = poses_from(nominal.tool_mm, matrices_from_kuka_abc([[0.0, 90.0, 0.0]]))[0]     # the TCP turned 90 degrees
+    P = inverse_poses(base) @ nominal.forward(q) @ inverse_poses(poses_from(nominal.tool_mm, np.eye(3))) @ tool
+    if dialect == "krl":
+        abc = kuka_abc_from_matrices(P[:, :3, :3])
+        T = ((q < 0) * (1 << np.arange(6))).sum(axis=1)
+        body = "".join(f"DECL E6POS XP{k}={{X {P[k, 0, 3]:.6f},Y {P[k, 1, 3]:.6f},Z {P[k, 2, 3]:.6f},A {abc[k, 0]:.7f},"
+                       f"B {abc[k, 1]:.7f},C {abc[k, 2]:.7f},S 2,T {T[k]}}}\r\n"
+                       f"DECL FDAT FP{k}={{TOOL_NO 1,BASE_NO 1,IPO_FRAME #BASE}}\r\n" for k in range(len(q)))
+        text = "DEFDAT VIRTUAL\r\nBASE_DATA[1]={X 800,Y -200,Z 100,A 30,B 0,C 0}\r\n" + body + "ENDDAT\r\n"
+        frames = ProgramFrames(tools={"TOOL_DATA[1]": tool})
+        path = tmp_path / "virtual.dat"
+    else:
+        quat = quaternions_from_matrices(P[:, :3, :3])
+        cf = np.floor(q[:, [0, 3, 5]] / 90).astype(int)
+        body = "".join(f"  CONST robtarget p{k}:=[[{P[k, 0, 3]:.6f},{P[k, 1, 3]:.6f},{P[k, 2, 3]:.6f}],"
+                       f"[{quat[k, 0]:.9f},{quat[k, 1]:.9f},{quat[k, 2]:.9f},{quat[k, 3]:.9f}],"
+                       f"[{cf[k, 0]},{cf[k, 1]},{cf[k, 2]},0],[9E9,9E9,9E9,9E9,9E9,9E9]];\r\n" for k in range(len(q)))
+        moves = "".join(f"    MoveL p{k}, v100, fine, tProbe\\WObj:=wFixture;\r\n" for k in range(len(q)))
+        text = ("MODULE Virtual\r\n  TASK PERS wobjdata wFixture:=[FALSE,TRUE,\"\",[[800,-200,100],"
+                f"[{np.cos(np.radians(15)):.12f},0,0,{np.sin(np.radians(15)):.12f}]],[[0,0,0],[1,0,0,0]]];\r\n" + body +
+                "  PROC main()\r\n" + moves + "  ENDPROC\r\nENDMODULE\r\n")
+        frames = ProgramFrames(tools={"tProbe": tool})
+        path = tmp_path / "virtual.mod"
+    path.write_bytes(text.encode("latin-1"))
+    result = compensated(predictor, path, frames)
+    assert not result.failures and result.correction_mm.min() > 1.0
+    out = tmp_path / ("out" + path.suffix)
+    out.write_bytes(result.output)
+    program = read_program(out)
+    n = len(q)
+    q_cmd = controller_joints(nominal, program, np.tile(base, (n, 1, 1)), np.tile(tool, (n, 1, 1)), q)
+    miss_mm, miss_deg, own_mm, own_deg = reached_misses(virtual, predictor, q_cmd, nominal.forward(q))
+    assert np.all(miss_mm <= own_mm + 1e-3) and np.all(miss_deg <= own_deg + 1e-4)
+    assert miss_mm.max() < 2e-3 and miss_deg.max() < 2e-4          # the model's own error: 2e-4 mm, 2.5e-5 deg
+    before_mm = np.linalg.norm(virtual.true_positions(q) - nominal.forward(q)[:, :3, 3], axis=1)
+    assert before_mm.min() > 10.0                                   # uncompensated: 13.2 to 16.2 mm
+
+
+def test_a_joint_trajectory_gets_the_joints_that_reach_its_nominal_poses(tmp_path):
+    model = constant_model(UR10, [0.4, -0.3, 0.2, 1.0, 0.5, -0.5], inputs="joint")
+    result = compensated(model, FIXTURES / "trajectory.csv")
+    out = tmp_path / "out.csv"
+    out.write_bytes(result.output)
+    rows = [line.split(",") for line in out.read_text().splitlines()[2:]]
+    q_new = np.array([[float(c) for c in r[1:7]] for r in rows])
+    q_old = np.array([[10.0, -80.0, 90.0, -100.0, -90.0, 20.0], [10.5, -80.2, 90.1, -100.0, -90.0, 20.0],
+                      [11.0, -80.4, 90.2, -100.1, -89.9, 20.1]])
+    assert [r[0] for r in rows] == ["0.000", "0.008", "0.016"] and [r[7] for r in rows] == ["0.5"] * 3
+    reached = UR10.forward(q_new)                # the nominal pose at the new joints, moved by the constant error
+    turn = Rotation.from_rotvec([1e-3, 0.5e-3, -0.5e-3]).as_matrix()
+    np.testing.assert_allclose(reached[:, :3, 3] + [0.4, -0.3, 0.2], UR10.forward(q_old)[:, :3, 3], atol=2e-4)
+    np.testing.assert_allclose(turn @ reached[:, :3, :3], UR10.forward(q_old)[:, :3, :3], atol=1e-7)  # 6 decimals
+
+
+# ---------------------------------------------------------------------- refusals
+@pytest.mark.parametrize("name, old, new, where", [
+    ("pick_place.script", b"0.4299, 2.4066", b"0.4299, z_up", "line 7, column 41"),
+    ("pallet.dat", b"Y 85.084", b"Y 85,084", "line 10, column"),
+    ("pallet.mod", b"[0.212583,-0.556195,0.152896,-0.788719]", b"[0.212583,-0.556195,0.152896]",
+     "line 7, column"),
+    ("trajectory.csv", b" 10.5 ", b" ten ", "line 4, column 8")])
+def test_bad_syntax_in_a_target_exits_2_naming_file_line_and_column(tmp_path, name, old, new, where):
+    path = tmp_path / name
+    data = (FIXTURES / name).read_bytes()
+    assert old in data
+    path.write_bytes(data.replace(old, new, 1))
+    out = tmp_path / ("out_" + name)
+    robot = "universal_robots_ur10" if name.endswith((".script", ".csv")) else "motoman_sk120"
+    save_model(constant_model(load_robot(robot), np.zeros(3)).model, tmp_path / "m.json", name="zero",
+               robot=load_robot(robot))
+    done = run("compensate", str(tmp_path / "m.json"), str(path), "-o", str(out))
+    assert done.returncode == 2 and f"{path}: {where}" in done.stderr and "nothing written" in done.stderr
+    assert len(done.stderr.strip().splitlines()) == 1 and not out.exists()
+
+
+def test_a_target_in_an_unknown_frame_is_refused_not_guessed(tmp_path):
+    model = constant_model(SK120, np.zeros(3))
+    mod = tmp_path / "wobj.mod"
+    mod.write_bytes((FIXTURES / "pallet.mod").read_bytes().replace(b"tGripper\\WObj:=wTable",
+                                                                   b"tGripper\\WObj:=wOther"))
+    with pytest.raises(UnknownFrameError, match=r"line 9, column 25: target p30: it is given in the frame 'wOther', "
+                                                r"which is unknown: give it with --frame 'wOther=VALUE'"):
+        compensated(model, mod)
+    dat = tmp_path / "base.dat"
+    dat.write_bytes((FIXTURES / "pallet.dat").read_bytes().replace(b"BASE_NO 0", b"BASE_NO 3"))
+    with pytest.raises(UnknownFrameError, match=r"target XP1: it is given in the frame 'BASE_DATA\[3\]'"):
+        compensated(model, dat)
+    given = ProgramFrames(frames={"BASE_DATA[3]": np.eye(4)})
+    assert compensated(model, dat, given).output == (FIXTURES / "pallet.dat").read_bytes().replace(b"BASE_NO 0",
+                                                                                                  b"BASE_NO 3")
+    script = tmp_path / "feature.script"
+    script.write_text("movel(pose_trans(Plane_1, p[0.1, 0.0, 0.05, 0, 3.1416, 0]), a=1.2, v=0.25)\n")
+    with pytest.raises(UnknownFrameError, match=r"line 1, column 29: target movel: it is given in the frame 'Plane_1'"):
+        compensated(constant_model(UR10, np.zeros(3)), script)
+    script.write_text("set_tcp(gripper_tcp)\nmovel(p[-0.7446, -0.2977, 0.4299, 2.4066, 2.0194, 0.0])\n")
+    with pytest.raises(UnknownFrameError, match=r"line 2, column 9: target movel: it is given in the tool "
+                                                r"'gripper_tcp', which is unknown: give it with --tool"):
+        compensated(constant_model(UR10, np.zeros(3)), script)
+    given = ProgramFrames(tools={"gripper_tcp": np.eye(4)})
+    assert compensated(constant_model(UR10, np.zeros(3)), script, given).output == script.read_bytes()
+
+
+def test_a_robtarget_used_with_two_tools_is_refused(tmp_path):
+    mod = tmp_path / "two.mod"
+    twice = b"MoveJ p10, v1000, z50, tool0; MoveL p10, v10, fine, tGripper;"
+    mod.write_bytes((FIXTURES / "pallet.mod").read_bytes().replace(b"MoveJ p10, v1000, z50, tool0;", twice))
+    with pytest.raises(UnknownFrameError, match=r"line 7, column 26: target p10: it is used with "
+                                                r"tGripper\\WObj:=wobj0 and tool0\\WObj:=wobj0: one robtarget cannot"):
+        compensated(constant_model(SK120, np.zeros(3)), mod)
+
+
+def test_a_target_that_would_leave_its_configuration_is_not_compensated(tmp_path):
+    # axis 6 at 89.99 degrees (cf6 = 0); a model that turns the tool by -0.02 degrees about its axis wants axis 6
+    # beyond 90 degrees (cf6 = 1): that is another configuration for the controller
+    q = np.array([[10.0, -120.0, -170.0, 10.0, 30.0, 89.99]])
+    pose = SK120.flange(q)[0]
+    quat = quaternions_from_matrices(pose[None, :3, :3])[0]
+    path = tmp_path / "edge.mod"
+    path.write_text("MODULE Edge\n  CONST robtarget pEdge:=[[{:.6f},{:.6f},{:.6f}],[{:.9f},{:.9f},{:.9f},{:.9f}],"
+                    "[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];\nENDMODULE\n".format(*pose[:3, 3], *quat))
+    z = pose[:3, 2] * np.radians(-0.02) * 1000                  # the turn about the tool's axis, mrad
+    model = constant_model(SK120, [0.0, 0.0, 0.0, *z])
+    result = compensated(model, path)
+    assert result.output is None
+    assert [(t.name, why) for t, why in result.failures] == [
+        ("pEdge", "leaves its configuration ([0, 0, 0, -1] -> [0, 0, 1, -1] in rapid's terms)")]
+    kept = compensated(model, path, keep_unconverged=True)
+    assert kept.output == path.read_bytes().replace(b"[9E9,9E9,9E9,9E9,9E9,9E9]];", b"[9E9,9E9,9E9,9E9,9E9,9E9]]; ! "
+                                                    b"partcal: not compensated: leaves its configuration ([0, 0, 0, -1]"
+                                                    b" -> [0, 0, 1, -1] in rapid's terms)")
+    assert compensated(constant_model(SK120, [0.0, 0.0, 0.0, *(-z)]), path).output is not None   # the other way
+    path.write_text(path.read_text().replace("[0,0,0,0],", "\n    [0,0,0,0],"))         # a statement on two lines
+    kept = compensated(model, path, keep_unconverged=True).output.decode().split("\n")
+    assert kept[1].endswith("],") and kept[2].endswith("]]; ! partcal: not compensated: leaves its configuration "
+                                                     "([0, 0, 0, -1] -> [0, 0, 1, -1] in rapid's terms)")
+
+
+def test_unconverged_targets_exit_3_and_write_nothing_unless_kept(tmp_path):
+    robot = SK120
+    save_model(constant_model(robot, [0.0, 0.0, 2500.0]).model, tmp_path / "far.json", name="far", robot=robot)
+    out = tmp_path / "out.src"
+    done = run("compensate", str(tmp_path / "far.json"), str(FIXTURES / "pallet.src"), "-o", str(out))
+    assert done.returncode == 3 and not out.exists() and not (tmp_path / "out.src.json").exists()
+    assert re.fullmatch(r"partcal: \S*pallet.src: line 15, column 11: target PTP is unreachable: the robot cannot "
+                        r"take its compensated command within its joint limits \(predicted miss \S+ mm, \S+ deg\) "
+                        r"\(and 1 more\); 2 of 2 targets not compensated; nothing written \(--keep-unconverged "
+                        r"writes them as they were, with a comment\)\n", done.stderr), done.stderr
+    done = run("compensate", str(tmp_path / "far.json"), str(FIXTURES / "pallet.src"), "-o", str(out),
+               "--keep-unconverged")
+    assert done.returncode == 3
+    lines = out.read_bytes().split(b"\r\n")
+    original = (FIXTURES / "pallet.src").read_bytes().split(b"\r\n")
+    assert lines[14].startswith(original[14] + b" ; partcal: not compensated: is unreachable: the robot cannot take "
+                                b"its compensated command within its joint limits (predicted miss ")
+    assert lines[15].startswith(original[15] + b" ; partcal: not compensated: ")      # after its own comment
+    assert [a for k, a in enumerate(lines) if k not in (14, 15)] == [a for k, a in enumerate(original)
+                                                                      if k not in (14, 15)]
+    assert json.loads((tmp_path / "out.src.json").read_text())["compensated"] == 0
+
+
+def test_compensate_refuses_program_options_for_a_targets_csv_and_an_output_that_is_an_input(tmp_path):
+    save_model(constant_model(UR10, np.zeros(3)).model, tmp_path / "m.json", name="zero", robot=UR10)
+    targets = tmp_path / "targets.csv"
+    targets.write_text("x,y,z\n-700,-300,430\n")
+    done = run("compensate", str(tmp_path / "m.json"), str(targets), "-o", str(tmp_path / "o.csv"),
+               "--frame", "p[0,0,0,0,0,0]")
+    assert done.returncode == 2 and "--frame is for robot programs" in done.stderr
+    copy = tmp_path / "p.script"
+    copy.write_bytes((FIXTURES / "pick_place.script").read_bytes())
+    done = run("compensate", str(tmp_path / "m.json"), str(copy), "-o", str(copy))
+    assert done.returncode == 2 and "is the program" in done.stderr
+
+
+def test_a_target_whose_compensation_diverges_is_reported_with_its_predicted_miss():
+    # an "error" that grows twice as fast as the position: the fixed point p' = p - e(p') runs away
+    rng = np.random.default_rng(0)
+    X = rng.uniform(-1000, 1000, (40, 3))
+    model = ErrorModel(degree=1, solver="lstsq").fit(X, 2.0 * (X - [1000.0, 0.0, 1000.0]))
+    predictor = Predictor(model, model_to_dict(model, name="wild", robot=SK120), SK120)
+    result = compensated(predictor, FIXTURES / "pallet.src")
+    assert result.output is None and len(result.failures) == 2
+    assert all(why.startswith("did not converge (predicted miss ") for _, why in result.failures)
+
+
+def test_a_partial_krl_motion_target_is_refused_and_an_offset_is_kept(tmp_path):
+    path = tmp_path / "partial.src"
+    path.write_bytes(b"DEF partial( )\r\n  LIN_REL {Z 50}\r\n  PTP {A1 10, A2 -120}\r\nEND\r\n")
+    with pytest.raises(ProgramSyntaxError, match=r"partial.src: line 3, column 7: PTP to a partial aggregate: "
+                                                 r"expected a whole target"):
+        read_program(path)
+    path.write_bytes(b"DEF partial( )\r\n  LIN_REL {Z 50}\r\n  XP1 = XP1 : {X 10}\r\nEND\r\n")
+    assert read_program(path).targets == []
+
+
+def test_frames_and_tools_are_given_in_the_vendors_own_syntax_on_the_command_line(tmp_path):
+    save_model(constant_model(SK120, np.zeros(3)).model, tmp_path / "m.json", name="zero", robot=SK120)
+    dat = tmp_path / "base.dat"
+    dat.write_bytes((FIXTURES / "pallet.dat").read_bytes().replace(b"TOOL_NO 0,BASE_NO 0", b"TOOL_NO 2,BASE_NO 3"))
+    out = tmp_path / "out.dat"
+    done = run("compensate", str(tmp_path / "m.json"), str(dat), "-o", str(out), "--frame",
+               "BASE_DATA[3]={X 0,Y 0,Z 0,A 0,B 0,C 0}", "--tool", "tool_data[2]={X 0, Y 0, Z 0, A 0, B 0, C 0}")
+    assert done.returncode == 0, done.stderr
+    assert out.read_bytes() == dat.read_bytes()
+    done = run("compensate", str(tmp_path / "m.json"), str(dat), "-o", str(out), "--frame", "BASE_DATA[3]={X 0,Y 0}")
+    assert done.returncode == 2 and "lacks Z, A, B, C" in done.stderr
+    mod = tmp_path / "w.mod"
+    mod.write_bytes((FIXTURES / "pallet.mod").read_bytes().replace(b"tGripper\\WObj:=wTable", b"tGripper\\WObj:=w2"))
+    done = run("compensate", str(tmp_path / "m.json"), str(mod), "-o", str(tmp_path / "o.mod"), "--frame",
+               "w2=[[1000, 0, 500], [1, 0, 0, 0]]")
+    assert done.returncode == 0, done.stderr
+    assert (tmp_path / "o.mod").read_bytes() == mod.read_bytes()
+
+
+def test_a_position_model_moves_the_position_and_keeps_the_orientation_as_written():
+    # a constant error of (0.5, -0.3, 0.2) mm: every Cartesian target moves by the opposite, A B C stay as written
+    result = compensated(constant_model(SK120, [0.5, -0.3, 0.2]), FIXTURES / "pallet.dat")
+    assert result.orientation == "kept" and not result.failures
+    line = next(x for x in result.output.split(b"\r\n") if x.startswith(b"DECL E6POS XP1="))
+    assert line == (b"DECL E6POS XP1={X 1201.145000,Y 85.384000,Z 1049.831000,A -119.9242,B -54.3269,C -54.9937,"
+                    b"S 2,T 6,E1 0.0,E2 0.0,E3 0.0,E4 0.0,E5 0.0,E6 0.0}")
+    np.testing.assert_allclose(result.correction_mm[1:], np.linalg.norm([0.5, 0.3, 0.2]), rtol=1e-9)
+    assert result.correction_deg[1:].max() < 1e-12
+
+
+def test_a_urscript_pose_variable_is_a_target_only_where_a_move_takes_it(tmp_path):
+    script = tmp_path / "vars.script"
+    script.write_text("def run():\n"
+                      "  lift = p[0, 0, -0.05, 0, 0, 0]          # relative to wp1: a target in the frame wp1\n"
+                      "  up = p[0, 0, 0.1, 0, 0, 0]              # an offset no move takes: no target\n"
+                      "  global wp1 = p[-0.7446, -0.2977, 0.4299, 2.4066, 2.0194, 0.0]\n"
+                      "  movel(pose_add(wp1, up))\n"
+                      "  wp2 = p[0.1, 0.0, 0.05, 0, 3.1416, 0]\n"
+                      "  movel(wp1, a=1.2, v=0.25)\n"
+                      "  movel(pose_trans(wp1, lift), a=1.2, v=0.25)\n"
+                      "  movel(pose_trans(Plane_1, wp2), a=1.2, v=0.25)\n"
+                      "end\n")
+    program = read_program(script)
+    assert [(t.name, t.line, t.frame) for t in program.targets] == [("lift", 2, "wp1"), ("wp1", 4, None),
+                                                                     ("wp2", 6, "Plane_1")]
+    with pytest.raises(UnknownFrameError, match=r"line 2, column 12: target lift: it is given in the frame 'wp1'"):
+        compensated(constant_model(UR10, np.zeros(3)), script)       # the frame wp1 is a target: not guessed
+    script.write_text(script.read_text().replace("end\n", "  movej(pose_trans(Plane_1, wp1))\nend\n"))
+    with pytest.raises(UnknownFrameError, match=r"line 4, column 18: target wp1: it is used in the base and "
+                                                r"pose_trans\(Plane_1, ..\): one pose cannot be compensated"):
+        read_program(script)
+
+
+def test_a_joint_trajectory_keeps_an_unconverged_row_with_a_comment_line_before_it():
+    far = constant_model(UR10, [0.0, 0.0, 3000.0], inputs="joint")
+    result = compensated(far, FIXTURES / "trajectory.csv", keep_unconverged=True)
+    assert len(result.failures) == 3
+    lines = result.output.decode().split("\n")
+    original = (FIXTURES / "trajectory.csv").read_text().split("\n")
+    assert lines[2].startswith("# partcal: not compensated: ") and lines[3] == original[2]
+    assert [x for x in lines if not x.startswith("# partcal")] == original
+
+
+def test_rapid_arrays_of_robtargets_are_targets_element_by_element(tmp_path):
+    mod = tmp_path / "array.mod"
+    p10 = b"[[1201.645,85.084,1050.031],[0.212583,-0.556195,0.152896,-0.788719],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]]"
+    mod.write_bytes(b"MODULE A\r\n  CONST robtarget path{2} := [" + p10 + b",\r\n    " + p10 + b"];\r\n"
+                    b"  PROC main()\r\n    MoveL path{1}, v100, fine, tool0;\r\n  ENDPROC\r\nENDMODULE\r\n")
+    program = read_program(mod)
+    assert [(t.name, t.line, t.tool) for t in program.targets] == [("path{1}", 2, "tool0"), ("path{2}", 3, "tool0")]
+    assert compensated(constant_model(SK120, np.zeros(6)), mod).output == mod.read_bytes()
+    mod.write_bytes(mod.read_bytes().replace(b"path{2}", b"path{3}"))
+    with pytest.raises(ProgramSyntaxError, match=r"line 2, column 30: robtarget array path\{3\}: expected 3 "
+                                                 r"bracketed robtargets"):
+        read_program(mod)
+
+
+def test_a_program_without_targets_is_written_as_it_was_with_a_warning(tmp_path):
+    save_model(constant_model(SK120, np.zeros(3)).model, tmp_path / "m.json", name="zero", robot=SK120)
+    src = tmp_path / "names.src"
+    src.write_bytes(b"DEF names( )\r\n  PTP XHOME\r\n  LIN XP1 C_DIS\r\nEND\r\n")
+    done = run("compensate", str(tmp_path / "m.json"), str(src), "-o", str(tmp_path / "out.src"))
+    assert done.returncode == 0 and "holds no targets partcal reads (krl)" in done.stderr
+    assert (tmp_path / "out.src").read_bytes() == src.read_bytes()
+
+
+def test_numbers_keep_their_text_when_equal_and_get_enough_decimals_when_not():
+    from partcal.data.program_text import Field, number_text
+
+    old = Field(0, 6, "+85.08", 85.08)
+    assert number_text(85.08 + 1e-12, old, 6) == "+85.08"            # equal at the precision written
+    assert number_text(85.0805, old, 6) == "+85.080500"              # at least 6 decimals, the sign kept
+    assert number_text(-1e-12, Field(0, 3, "0.5", 0.5), 6) == "0.000000"       # never "-0.000000"
+    assert number_text(1.5, Field(0, 10, "0.12345678", 0.12345678), 6) == "1.50000000"   # as many as it had

@@ -118,14 +118,22 @@ def _cmd_predict(args) -> int:
     table = read_point_table(args.input, _format(args), joints=joints, payload=predictor.model.reads_payload)
     X, payload = table.values, table.payload_kg
     if joints:
-        errors = predictor.predict(joints=X, payload_kg=payload)
+        errors = predictor.predict(joints=X, payload_kg=payload, return_std=args.std)
     else:
-        errors = predictor.predict(positions=X)
+        errors = predictor.predict(positions=X, return_std=args.std)
         payload = None
+    std = None
+    if args.std:
+        errors, std = errors
     predictor.refuse_implausible(X, errors, source=args.input)     # nothing is written then
     given = [X] if payload is None else [X, payload[:, None]]
-    _write_table(args.output, table.columns + (["payload_kg"] if payload is not None else []) + ["dx", "dy", "dz"]
-                 + (TURN_COLUMNS if predictor.predicts_pose else []), np.hstack(given + [errors]), atomic_write)
+    header = table.columns + (["payload_kg"] if payload is not None else []) + ["dx", "dy", "dz"] + (
+        TURN_COLUMNS if predictor.predicts_pose else [])
+    if std is not None:
+        header += ["sdx", "sdy", "sdz"] + (["sd" + c[1:] for c in TURN_COLUMNS] if predictor.predicts_pose else [])
+        given.append(errors)
+        errors = std
+    _write_table(args.output, header, np.hstack(given + [errors]), atomic_write)
     _warn_if_far(predictor, X)
     print(f"predicted errors for {len(X)} points: {args.output}")
     return 0
@@ -157,6 +165,8 @@ def _cmd_compensate(args) -> int:
 
     kind = args.program or program_kind(args.targets)
     if kind is not None:
+        if args.std:
+            raise PartcalError(f"compensate: --std writes columns of a targets CSV; {args.targets} is a robot program")
         return _compensate_program(args, kind)
     for flag, value in (("--frame", args.frame), ("--tool", args.tool), ("--keep-unconverged", args.keep_unconverged)):
         if value:
@@ -205,6 +215,9 @@ def _cmd_compensate(args) -> int:
     if result.joints_deg is not None:
         header += [f"{c}_cmd" for c in joint_columns(n_q)]
         parts.append(result.joints_deg)
+    if args.std:          # the position expected to be left at each target, and its spread
+        header += ["dx_left", "dy_left", "dz_left", "sdx", "sdy", "sdz"]
+        parts += list(predictor.residual_of(result, targets, payload))
     _write_table(args.output, header + ["converged"], np.hstack(parts), atomic_write,
                  flags=result.converged)
     bad = np.flatnonzero(~result.converged)
@@ -436,6 +449,10 @@ def _cmd_plan(args) -> int:
     from .study import plan
 
     planning = args.n is not None
+    if args.iso9283:
+        return _plan_iso9283(args)
+    if args.cube is not None or args.cycles is not None:
+        raise PartcalError("plan: --cube and --cycles go with --iso9283")
     if not (planning or args.evaluate or args.curve):
         raise PartcalError("plan: give -n N -o POSES.csv (plan poses), --evaluate DATA.csv (judge a pose set) or "
                            "--curve (predicted uncertainty against the number of poses)")
@@ -524,6 +541,61 @@ def _cmd_export(args) -> int:
     return 0
 
 
+def _cmd_iso9283(args) -> int:
+    import json
+
+    from ._io import atomic_write
+    from .robot.description import load_robot
+    from .study.iso_figures import describe, iso_figures, pose_lines, read_iso_data
+
+    _refuse_input_as_output(args.output, "iso9283", [("data file", args.data), ("format file", args.format),
+                                                    ("model file", args.model)])
+    robot = load_robot(args.robot) if args.robot else None
+    data = read_iso_data(args.data, robot, fmt=_format(args), tol_deg=args.tol_deg)
+    predicted, name = None, None
+    if args.model:
+        from .study.predictor import load_predictor
+
+        predictor = load_predictor(args.model)
+        q = data.measurements.q_deg
+        predicted = (predictor.predict(joints=q) if predictor.inputs == "joint"
+                     else predictor.predict(positions=data.measurements.nominal_mm))
+        name = predictor.name or Path(args.model).stem
+    figures = iso_figures(data, predicted, own_frame=args.own_frame, distance=args.distance, path=args.path,
+                          repeatability=args.repeatability)
+    print(describe(data) + (f"; after model {name!r}" if name else ""))
+    print("\n".join(figures.lines()))
+    if args.output:
+        doc = {"partcal_version": __version__, "data": str(args.data), "model": args.model,
+               "tolerance_deg": args.tol_deg, "cycles_from": "column" if data.by_column else "joints",
+               **figures.to_dict(pose_lines(data))}
+        with atomic_write(args.output) as handle:
+            json.dump(doc, handle, indent=1)
+            handle.write("\n")
+        print(f"wrote {args.output}")
+    return 0
+
+
+def _plan_iso9283(args) -> int:
+    from .robot.description import load_robot
+    from .study import plan
+
+    if args.output is None or args.n is not None or args.evaluate or args.curve:
+        raise PartcalError("plan --iso9283: give -o POSES.csv (and optionally --cube CX CY CZ EDGE, --cycles N), "
+                           "without -n, --evaluate or --curve")
+    _refuse_input_as_output(args.output, "plan", [("robot file", args.robot)])
+    robot = load_robot(args.robot)
+    cycles = 30 if args.cycles is None else args.cycles
+    cube = plan.iso_cube_plan(robot, args.output, cube=args.cube, cycles=cycles, random_state=args.seed,
+                              comment=f"ISO 9283 test poses planned by partcal {__version__} for {robot.name}. "
+                                      "Joint angles in degrees, nominal tool positions in mm.")
+    for k, (p, q) in enumerate(zip(cube.points_mm, cube.q_deg)):
+        print(f"P{k + 1}: {np.round(p, 3).tolist()} mm, joints {np.round(q, 3).tolist()} deg")
+    print(f"wrote {len(cube.q_deg) * cycles} poses ({cycles} cycles of P1..P5; cube centre "
+          f"{np.round(cube.centre_mm, 3).tolist()} mm, edge {cube.edge_mm:g} mm) to {args.output}")
+    return 0
+
+
 class _Parser(argparse.ArgumentParser):
     """argparse with the project's rule for bad input: one line on stderr, exit 2 (no usage block)."""
 
@@ -578,6 +650,8 @@ def build_parser() -> argparse.ArgumentParser:
                       help="CSV to write (inputs + dx,dy,dz in mm; pose models also drx,dry,drz in mrad)")
     pred.add_argument("--format", metavar="FILE.yaml", help="the input's format (delimiter, decimal, columns, "
                                                             "units), see docs/data.md")
+    pred.add_argument("--std", action="store_true", help="also the standard deviation of each predicted error: "
+                                                         "sdx,sdy,sdz (mm; pose models also sdrx,sdry,sdrz, mrad)")
     pred.set_defaults(func=_cmd_predict)
     comp = sub.add_parser("compensate", help="false targets that make the robot reach the given targets")
     comp.add_argument("model", help="model file (models/<name>.json of a run)")
@@ -590,6 +664,9 @@ def build_parser() -> argparse.ArgumentParser:
                            "exit code 3 when any target did not converge")
     comp.add_argument("--format", metavar="FILE.yaml", help="the targets' format (delimiter, decimal, columns, "
                                                             "units), see docs/data.md")
+    comp.add_argument("--std", action="store_true",
+                      help="also the position expected to be left at each target (dx_left,dy_left,dz_left: target "
+                           "minus where the model says the command lands) and its standard deviation sdx,sdy,sdz (mm)")
     comp.add_argument("--program", choices=("urscript", "krl", "rapid", "joints"),
                       help="TARGETS is a robot program in this language (default: from its name: .script, "
                            ".src/.dat, .mod/.prg; a .csv with q1..qN and no x,y,z is a joint trajectory)")
@@ -632,6 +709,26 @@ def build_parser() -> argparse.ArgumentParser:
                                                         "geometry and the full model leave on it")
     exp.add_argument("--format", metavar="FILE.yaml", help="the data's format, see docs/data.md")
     exp.set_defaults(func=_cmd_export)
+    iso = sub.add_parser("iso9283", help="ISO 9283 figures of measured cycles: pose accuracy and repeatability (AP, "
+                                         "RP), distance (AD, RD), path (AT, RT)")
+    iso.add_argument("data", help="measurement CSV (commanded joints, nominal and measured positions; optional "
+                                  "'cycle' column)")
+    iso.add_argument("--format", metavar="FILE.yaml", help="the file's format, see docs/data.md")
+    iso.add_argument("--robot", help="robot (built-in name or YAML) for nominal positions and orientations by "
+                                     "forward kinematics")
+    iso.add_argument("--model", metavar="MODEL.json", help="the figures after this model's correction (measured "
+                                                           "minus predicted error)")
+    iso.add_argument("--own-frame", action="store_true",
+                     help="the data were registered in their own tracker frame: score up to a rigid transform")
+    iso.add_argument("--tol-deg", type=float, default=0.01,
+                     help="commanded joints this close are one pose (default 0.01 deg)")
+    iso.add_argument("--distance", nargs=2, type=_positive_int, metavar=("A", "B"),
+                     help="distance accuracy and repeatability between poses A and B (1-based, e.g. 2 4)")
+    iso.add_argument("--path", action="store_true", help="the poses, in order, are the points of a path: AT, RT")
+    iso.add_argument("--repeatability", action="store_true",
+                     help="refuse a pose measured in a single cycle (its RP is otherwise left out)")
+    iso.add_argument("-o", "--output", metavar="REPORT.json", help="write the figures of every pose as JSON")
+    iso.set_defaults(func=_cmd_iso9283)
     pln = sub.add_parser("plan", help="choose the poses to measure (D-optimal), or judge a pose set's observability")
     pln.add_argument("robot", help="built-in robot name, robot YAML, or a URDF as FILE.urdf#base=LINK&tip=LINK")
     pln.add_argument("-n", type=_positive_int, help="number of poses to plan")
@@ -660,6 +757,12 @@ def build_parser() -> argparse.ArgumentParser:
                      help="the payload the measurement carries at the tool (kg, default 0; with --compliance)")
     pln.add_argument("--parametrization", choices=("auto", "dh", "complete"), default="auto",
                      help="the geometric parameters planned for (auto: dh for DH rows, complete for a URDF's chain)")
+    pln.add_argument("--iso9283", action="store_true",
+                     help="write the ISO 9283 test poses P1..P5 of a cube, in cycles (with -o POSES.csv)")
+    pln.add_argument("--cube", nargs=4, type=float, metavar=("CX", "CY", "CZ", "EDGE"),
+                     help="with --iso9283: the cube's centre and edge (mm, base frame; default the largest cube "
+                          "found in the workspace)")
+    pln.add_argument("--cycles", type=_positive_int, help="with --iso9283: cycles of P1..P5 (default 30)")
     pln.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
     pln.set_defaults(func=_cmd_plan)
     return parser

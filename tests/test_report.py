@@ -369,3 +369,46 @@ data: {frame: tracker, identification: ../data/tracker_identification.csv,
         shared, own = stats["test"]["orientation"]["rms_angle"], stats["own"]["orientation"]["rms_angle"]
         # FDP(AI) leaves 2 mm: the rigid fit of its positions to the set turns its orientation too (1.40 / 1.58)
         assert own == pytest.approx(shared, rel=0.05 if r is None or r.spec.kind == "kinematic" else 0.2)
+
+
+def test_scattered_poses_are_drawn_as_points_with_the_share_inside_each_models_interval():
+    from partcal.report import figures
+
+    rng = np.random.default_rng(0)
+    measured = rng.normal(0, 1, size=(200, 3))
+    predicted = np.zeros((200, 3))
+    spread = np.full((200, 3), 0.5)
+    inside = np.abs(measured[:, 0]) <= 1.959963984540054 * 0.5          # x: the legend's share
+    svg = figures.errors_scattered("C", measured, {"GP": predicted}, {"GP": spread})
+    assert f"GP ({100 * inside.mean():.0f}% within its 95% interval)" in svg
+    assert "one point per pose" in svg and "<path" in svg
+    band = figures.errors_along_path("rect", measured, {"GP": predicted}, {"GP": spread})
+    assert "GP: 95% band" in band
+    assert not figures.is_path(rng.uniform(0, 1000, (300, 3)))
+    assert figures.is_path(np.c_[np.linspace(0, 1000, 300), np.zeros(300), np.ones(300)])
+
+
+def test_a_run_gives_the_iso_figures_and_each_models_spread(report):
+    from partcal.data.iso9283 import cycles_from_joints, pose_figures
+    from partcal.study.scoring import errors_left
+
+    result, out = report
+    metrics = json.loads((out / "metrics.json").read_text())
+    iso = metrics["iso9283"]
+    assert list(iso) == ["rectangle"] and iso["rectangle"]["poses"] == 200
+    m = result.datasets["rectangle"]
+    cycles = cycles_from_joints(m.q_deg)
+    expected = pose_figures(m.nominal_mm, m.measured_mm, cycles).ap_mm         # one cycle: AP is each |error|
+    assert iso["rectangle"]["uncompensated"]["AP_max_mm"] == pytest.approx(np.linalg.norm(m.errors_mm, axis=1).max())
+    assert iso["rectangle"]["uncompensated"]["AP_mean_mm"] == pytest.approx(expected.mean())
+    for r in result.models:
+        left = errors_left(m, r.predictions["rectangle"])[0]
+        assert iso["rectangle"]["models"][r.spec.name]["AP_mean_mm"] == pytest.approx(
+            np.linalg.norm(left, axis=1).mean())
+        spread = metrics["models"][r.spec.name]["rectangle"]["spread"]
+        std = r.spreads["rectangle"]
+        assert spread["coverage_95"] == pytest.approx(np.mean(np.abs(left) <= 1.959963984540054 * std))
+    header = (out / "predictions" / result.models[1].spec.slug / "rectangle.csv").read_text().splitlines()[0]
+    assert header.endswith("dx_pred,dy_pred,dz_pred,dx_sd,dy_sd,dz_sd")
+    page = (out / "index.html").read_text()
+    assert 'id="iso9283"' in page and 'id="spread"' in page and "95% band" in page

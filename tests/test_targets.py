@@ -420,7 +420,8 @@ models:
     with pytest.raises(DataError, match=r"model 'DH' predicts position errors only"):
         load_predictor(tmp_path / "reports" / "position" / "models" / "dh.json").predict_point(test.q_deg, [0, 0, 0])
     header = (tmp_path / "reports" / "turn" / "predictions" / "dh" / "test.csv").read_text().split("\n")[0]
-    assert header.endswith("dx_pred,dy_pred,dz_pred,drx_pred,dry_pred,drz_pred")
+    assert "dx_pred,dy_pred,dz_pred,drx_pred,dry_pred,drz_pred" in header      # then each prediction's spread
+    assert header.endswith("dx_sd,dy_sd,dz_sd,drx_sd,dry_sd,drz_sd")
     # refused: data without an orientation, and ranking on the orientation of position models
     config = load_config(tmp_path / "configs" / "pose.yaml")
     data, _, _ = load_datasets(config)

@@ -575,3 +575,19 @@ def read_columns(path: str | Path, alternatives: list[list[str]], optional: list
     name file, line and column.
     """
     return read_table(path, ",".join(alternatives[0]), fmt).columns(alternatives, optional)
+
+
+def read_text_column(path: str | Path, column: str, fmt: MeasurementFormat | None = None
+                     ) -> tuple[NDArray[np.intp], tuple[str, ...] | None]:
+    """The line number (as an editor shows it) of every data row, and the cells of ``column`` (None when absent).
+
+    For labels a reader keeps as text (a ``cycle`` column), and for messages
+    that name a data row's line.
+    """
+    path = Path(path)
+    fmt = fmt or _CONTRACT
+    _, _, seen, data = _table(path, column, fmt)
+    lines = np.array([number for number, _ in data], dtype=np.intp)
+    if column not in seen:
+        return lines, None
+    return lines, tuple(cells[seen[column]].strip() for _, cells in data)

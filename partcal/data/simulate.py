@@ -27,6 +27,7 @@ from .._validation import one_of, safe_name
 from .._yamlio import Section, load_yaml, range_check
 from ..errors import ConfigError
 from ..robot.description import joint_columns, load_robot, robot_reference
+from ..robot.iso_cube import largest_cube, solve_cube
 from ..robot.kinematics import Robot, matrix_from_euler_deg, rpy_deg_from_matrix, xyz_deg_from_matrices
 from ..robot.trajectories import PATHS, paper_path
 from .formats import TARGET_NAME
@@ -86,6 +87,7 @@ class VirtualRobot:
     tracker: Tracker
     tracker_scale: float
     targets: dict = field(default_factory=dict)     # extra targets: name -> nominal offset (3,) mm
+    repeatability_mm: float = 0.0   # standard deviation per axis of the tool position between visits of one pose
 
     def actual_joints(self, q_deg: NDArray[np.float64]) -> NDArray[np.float64]:
         """Joint angles the arm really takes when ``q_deg`` is commanded."""
@@ -113,8 +115,17 @@ class VirtualRobot:
         return self.targets[target] + (self.true.tool_mm - self.nominal.tool_mm)
 
     def measure(self, q_deg, rng: np.random.Generator) -> NDArray[np.float64]:
-        """What the tracker reports of the primary target: the mean of ``readings`` noisy readings per pose."""
-        return self._read(self.true_positions(q_deg), rng)
+        """What the tracker reports of the primary target: the mean of ``readings`` noisy readings per pose.
+
+        With a ``repeatability_mm`` the arm itself stops each time a little
+        elsewhere: every visit adds independent normal noise of that standard
+        deviation per axis to the true position (drawn only when it is set, so
+        data sets without it are unchanged).
+        """
+        p = self.true_positions(q_deg)
+        if self.repeatability_mm > 0:
+            p = p + rng.normal(0.0, self.repeatability_mm, size=p.shape)
+        return self._read(p, rng)
 
     def _read(self, p: NDArray[np.float64], rng: np.random.Generator) -> NDArray[np.float64]:
         """The tracker's reading of true points ``(n, 3)`` mm: its scale error and averaged noise."""
@@ -173,6 +184,7 @@ def load_study(path: str | Path) -> Study:
     true, base_rot, base_mm = _true_robot(nominal, errors, rng)
     compliance = _compliance(errors, nominal)
     gear = _gear(errors, nominal)
+    repeatability = errors.get("repeatability_mm", "float", default=0.0, check=range_check(0))
     tr = top.section("tracker", required=True)
     tracker = Tracker(
         position_mm=np.asarray(tr.get("position_mm", "list", check=_vector3), dtype=float),
@@ -189,7 +201,7 @@ def load_study(path: str | Path) -> Study:
     sampling.done()
     datasets = _datasets(top.section("datasets", required=True))
     top.done()
-    robot = VirtualRobot(nominal, true, base_rot, base_mm, compliance, gear, tracker, scale, targets)
+    robot = VirtualRobot(nominal, true, base_rot, base_mm, compliance, gear, tracker, scale, targets, repeatability)
     return Study(robot, seed, output, datasets, ranges, fixed, path)
 
 
@@ -307,11 +319,14 @@ def _datasets(sec: Section) -> dict[str, dict]:
         if problem:
             sec.fail(sec.path(str(name)), f"the data-set name {str(name)!r} must be {problem}")
         item = sec.section(name)
-        if item.has("sample") == item.has("path"):
-            item.fail(item.where, "give exactly one of 'sample: N' (sampled configurations) or "
-                                  f"'path: NAME' ({', '.join(PATHS)})")
+        if item.has("sample") + item.has("path") + item.has("iso9283") != 1:
+            item.fail(item.where, "give exactly one of 'sample: N' (sampled configurations), "
+                                  f"'path: NAME' ({', '.join(PATHS)}) or 'iso9283: CYCLES' (the ISO 9283 cube's P1..P5)")
         if item.has("sample"):
             spec = {"sample": item.get("sample", "int", check=range_check(1, 10**7, integer=True))}
+        elif item.has("iso9283"):
+            spec = {"iso9283": item.get("iso9283", "int", check=range_check(1, 10_000, integer=True)),
+                    "cube": item.get("cube", "list", default=None, check=_cube)}
         else:
             spec = {"path": item.get("path", "str", check=one_of(*PATHS).problem),
                     "start_mm": item.get("start_mm", "list", default=None, check=_vector3)}
@@ -320,6 +335,12 @@ def _datasets(sec: Section) -> dict[str, dict]:
     if not out:
         sec.fail(sec.where, "lists no data set")
     return out
+
+
+def _cube(value) -> str | None:
+    ok = isinstance(value, list) and len(value) == 4 and all(
+        isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v) for v in value)
+    return None if ok and value[3] > 0 else "[cx, cy, cz, edge] in mm (the cube's centre and a positive edge)"
 
 
 FARTHEST_POINT_UP_TO = 2000
@@ -388,8 +409,14 @@ def simulate(study: Study) -> dict[str, Measurements]:
     children = np.random.SeedSequence(study.seed).spawn(2 + len(study.datasets))[2:]
     for (name, spec), child in zip(study.datasets.items(), children):
         rng = np.random.default_rng(child)
+        labels = (name,)
         if "sample" in spec:
             q = sample_configurations(vr.nominal, spec["sample"], study.ranges_deg, study.fixed_deg, rng)
+        elif "iso9283" in spec:            # P1..P5 of the cube, once per cycle: the cycles are the repeats
+            c = spec["cube"]
+            cube = largest_cube(vr.nominal, random_state=rng) if c is None else solve_cube(vr.nominal, c[:3], c[3])
+            q = np.tile(cube.q_deg, (spec["iso9283"], 1))
+            labels = tuple(f"P{k + 1}" for k in range(len(cube.q_deg)))
         else:
             targets = paper_path(spec["path"], spec["start_mm"])
             seed = vr.nominal.home_deg.copy()
@@ -400,7 +427,8 @@ def simulate(study: Study) -> dict[str, Measurements]:
         measured = vr.measure(q, rng)
         extra, orientation = vr.measure_more(q, rng)
         flange = vr.nominal.flange(q)
-        out[name] = Measurements(q, nominal, measured, name=name, labels=(name,) * len(q), extra_measured_mm=extra,
+        out[name] = Measurements(q, nominal, measured, name=name, labels=labels * (len(q) // len(labels)),
+                                 extra_measured_mm=extra,
                                  extra_nominal_mm={t: flange[:, :3, 3] + flange[:, :3, :3] @ vr.targets[t]
                                                    for t in extra},
                                  measured_orientation_deg=orientation,

@@ -208,6 +208,43 @@ class ErrorModelBase(RegressorMixin, BaseEstimator):
         """:meth:`predict` of inputs already checked as a finite ``(n, d)`` float array, ``(n, outputs)``."""
         return np.asarray(self.predict(X)).reshape(len(X), -1)
 
+    # ------------------------------------------------------------------ spread
+    def predict_with_std(self, X, **per_row) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Predicted errors and the standard deviation of each, both ``(n, outputs)`` (mm; mrad for a pose
+        model's orientation).
+
+        The standard deviation is that of the error a measurement at ``X``
+        would show: the model's own uncertainty at ``X`` (its fitted numbers
+        from data of limited size and noise) and the scatter the model does not
+        explain (the noise and what it cannot describe, from its fit). It
+        grows where the model extrapolates. ``per_row``: as for ``predict``
+        (a payload per pose).
+        """
+        from sklearn.utils.validation import check_is_fitted, validate_data
+
+        check_is_fitted(self)
+        X = validate_data(self, X, reset=False, dtype=np.float64)
+        return self.std_scaled(X, **per_row)
+
+    def std_scaled(self, X: NDArray[np.float64], **per_row) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """:meth:`std_validated` times the calibrated scales ``spread_scale_`` (one per output) when the model
+        has them (:func:`partcal.study.spread.calibrate_spread`)."""
+        mean, std = self.std_validated(X, **per_row)
+        scale = getattr(self, "spread_scale_", None)
+        return mean, std if scale is None else std * scale
+
+    def std_validated(self, X: NDArray[np.float64], **per_row) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """:meth:`predict_with_std` of inputs already checked as a finite ``(n, d)`` float array."""
+        from ..errors import DataError
+
+        raise DataError(self.spread_problem() or f"a {self.kind or type(self).__name__} model gives no standard "
+                                                 "deviation of its predictions")
+
+    def spread_problem(self) -> str | None:
+        """Why this fitted model cannot give a standard deviation (a model file written before partcal kept what
+        it needs); None when it can."""
+        return f"a {self.kind or type(self).__name__} model gives no standard deviation of its predictions"
+
     def warn_if_extrapolating(self, X, limit: float = 50.0) -> NDArray[np.bool_]:
         """Warn (one ``ExtrapolationWarning``) about inputs farther than ``limit`` (mm or degrees) from the
         training data (see ``distance_to_data``); return their mask."""

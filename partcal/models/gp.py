@@ -401,6 +401,32 @@ class GaussianProcessErrorModel(ErrorModelBase):
             out[start:start + _BLOCK] = self._shape(a @ augmented) @ coef      # exponent -d^2/2, (m, n)
         return out * self.y_std_ + self.y_mean_
 
+    def std_validated(self, X: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Posterior mean and the standard deviation of a measurement at ``X``, both (n, outputs) mm.
+
+        ``var = amplitude + noise - k(X)^T (K + noise I)^-1 k(X)`` in the
+        normalised outputs (``k`` the kernel without its white noise, ``K`` the
+        training inputs' kernel matrix, factorised here by Cholesky, not kept),
+        times each output's scale squared: the posterior variance plus the
+        noise the fit learnt. Far from the data it tends to ``amplitude +
+        noise``, the prior's.
+        """
+        from scipy.linalg import cho_factor, cho_solve
+
+        kernel = self.sklearn_kernel()
+        Z, Ztrain = self.input_map_.transform(X), self.X_train_
+        factor = cho_factor(kernel(Ztrain), lower=True)
+        var = np.empty(len(Z))
+        for start in range(0, len(Z), _BLOCK):
+            cross = kernel.k1(Ztrain, Z[start:start + _BLOCK])                   # (n_train, m), no white noise
+            var[start:start + _BLOCK] = self.amplitude_ + self.noise_ - np.einsum(
+                "ij,ij->j", cross, cho_solve(factor, cross))
+        std = np.sqrt(np.maximum(var, 0.0))[:, None] * self.y_std_[None, :]
+        return self._predict_trusted(X), std
+
+    def spread_problem(self) -> str | None:
+        return None
+
     def _shape(self, exponent: NDArray[np.float64]) -> NDArray[np.float64]:
         """Kernel values from ``-d^2 / 2`` of scaled distances ``d`` (in place where possible)."""
         if self.kernel == "rbf":

@@ -310,6 +310,11 @@ class Identification:
         With several targets or an orientation: how many of the model's own parameters (those of a
         one-target table) the primary target's positions alone would identify, to compare with
         the count identified here.
+    covariance : ndarray, shape (K, K), optional
+        The covariance ``sigma^2 (J^T J)^-1`` of the ``K`` identified parameters (in table order; mm and
+        degrees): what a prediction's standard deviation needs. None in tables written before it was kept.
+    sigma_mm : float, optional
+        ``sigma``: the residual standard deviation per coordinate of the fit (mm).
     """
 
     names: tuple[str, ...]
@@ -326,6 +331,8 @@ class Identification:
     target_rms_mm: dict = field(default_factory=dict)
     orientation_rms_deg: float | None = None
     primary_identifiable: int | None = None
+    covariance: NDArray[np.float64] | None = None
+    sigma_mm: float | None = None
 
     @property
     def correction(self) -> NDArray[np.float64]:
@@ -350,7 +357,9 @@ class Identification:
                 "status": list(self.status), "rank": int(self.rank), "condition": float(self.condition),
                 "rms_mm": float(self.rms_mm), "n_poses": int(self.n_poses), "evaluations": int(self.evaluations),
                 **({"target_rms_mm": dict(self.target_rms_mm), "orientation_rms_deg": self.orientation_rms_deg,
-                    "primary_identifiable": self.primary_identifiable} if self.target_rms_mm else {})}
+                    "primary_identifiable": self.primary_identifiable} if self.target_rms_mm else {}),
+                **({"covariance": self.covariance.tolist(), "sigma_mm": float(self.sigma_mm)}
+                   if self.covariance is not None else {})}
 
     @classmethod
     def from_dict(cls, d: dict) -> "Identification":
@@ -359,7 +368,10 @@ class Identification:
                    np.array([np.nan if v is None else v for v in d["std_error"]], dtype=float),
                    tuple(d["status"]), int(d["rank"]), float(d["condition"]), float(d["rms_mm"]),
                    int(d["n_poses"]), int(d["evaluations"]), dict(d.get("target_rms_mm", {})),
-                   d.get("orientation_rms_deg"), d.get("primary_identifiable"))
+                   d.get("orientation_rms_deg"), d.get("primary_identifiable"),
+                   None if d.get("covariance") is None else np.asarray(d["covariance"], dtype=float).reshape(
+                       len(d["covariance"]), -1),
+                   None if d.get("sigma_mm") is None else float(d["sigma_mm"]))
 
 
 def identify(robot: Robot, q_deg: NDArray[np.float64], measured_mm: NDArray[np.float64], *, base: bool = True,
@@ -449,7 +461,7 @@ def identify(robot: Robot, q_deg: NDArray[np.float64], measured_mm: NDArray[np.f
     if free.size == 0:
         v = v0.copy()
     resid, jac = jac_at(v)
-    std, condition = _uncertainty(jac[:, free], resid)
+    std, condition, covariance, sigma = _uncertainty(jac[:, free], resid)
     std_full = np.full(v.size, np.nan)
     std_full[free] = std
     status = np.where(wanted, "unidentifiable", "fixed").astype(object)
@@ -460,7 +472,7 @@ def identify(robot: Robot, q_deg: NDArray[np.float64], measured_mm: NDArray[np.f
         "primary_identifiable": _identifiable(jac0[:3 * len(q_deg), :own], wanted[:own], rcond, units[:own])[1]}
     result = Identification(tuple(n for n, _ in names), tuple(u for _, u in names), v0, v, std_full,
                             tuple(str(s) for s in status), rank, condition, rms[0], q_deg.shape[0], evaluations,
-                            **more)
+                            **more, covariance=covariance, sigma_mm=sigma)
     log.info("identified %d of %d parameters (condition %.3g): RMS %.4f mm", free.size, v.size, condition,
              result.rms_mm)
     return result
@@ -556,17 +568,21 @@ def _solve(jac_at, v0: NDArray[np.float64], free: NDArray[np.intp]) -> tuple[NDA
     return values_of(sol.x), int(sol.nfev)
 
 
-def _uncertainty(jac: NDArray[np.float64], resid: NDArray[np.float64]) -> tuple[NDArray[np.float64], float]:
-    """Standard errors ``sqrt(diag(sigma^2 (J^T J)^-1))`` and the condition number of the unit-column ``J``."""
-    if jac.shape[1] == 0:
-        return np.zeros(0), 1.0
-    r = scipy.linalg.qr(jac, mode="r")[0][:jac.shape[1]]         # J = Q R: R has J's singular values, and J D's R D
-    _, s, vt = np.linalg.svd(r, full_matrices=False)
+def _uncertainty(jac: NDArray[np.float64], resid: NDArray[np.float64]
+                 ) -> tuple[NDArray[np.float64], float, NDArray[np.float64], float]:
+    """Standard errors ``sqrt(diag(sigma^2 (J^T J)^-1))``, the condition number of the unit-column ``J``, the
+    covariance ``sigma^2 (J^T J)^-1`` itself and ``sigma`` (the residual standard deviation per coordinate)."""
     dof = resid.size - jac.shape[1]
     sigma2 = float(np.sum(resid**2)) / dof if dof > 0 else np.nan
-    std = np.sqrt(sigma2 * np.sum((vt.T / s) ** 2, axis=1))
+    if jac.shape[1] == 0:
+        return np.zeros(0), 1.0, np.zeros((0, 0)), float(np.sqrt(sigma2))
+    r = scipy.linalg.qr(jac, mode="r")[0][:jac.shape[1]]         # J = Q R: R has J's singular values, and J D's R D
+    _, s, vt = np.linalg.svd(r, full_matrices=False)
+    scaled = vt.T / s
+    covariance = sigma2 * scaled @ scaled.T
+    std = np.sqrt(np.diagonal(covariance))
     s_unit = np.linalg.svd(r / np.linalg.norm(jac, axis=0), compute_uv=False)
-    return std, float(s_unit[0] / s_unit[-1]) if s_unit[-1] > 0 else np.inf
+    return std, float(s_unit[0] / s_unit[-1]) if s_unit[-1] > 0 else np.inf, covariance, float(np.sqrt(sigma2))
 
 
 # ---------------------------------------------------------------------- the estimator

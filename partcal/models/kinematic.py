@@ -26,7 +26,8 @@ from ..robot.kinematics import ORIENTATION_MM_PER_RAD, Robot
 from .base import ErrorModelBase, box_points, seed_from
 from .features import varying_inputs
 from .identification import (PARAMETRIZATIONS, PRIMARY_TARGET, STATUSES, Identification, geometric_size, identify,
-                             nominal_values, own_geometry, parameter_names, resolved_parametrization, robot_with)
+                             model_jacobian, nominal_values, own_geometry, parameter_names, resolved_parametrization,
+                             robot_with)
 from .joint_errors import JointErrors, compliance_problem, harmonics_problem
 from .kindtable import body_of, may_be_residual, model_from_body, residual_kinds
 from .pose import PoseErrorModel
@@ -311,6 +312,59 @@ class KinematicModel(ErrorModelBase):
             out += self.residual_.predict(self._residual_inputs(X, nominal))
         return out
 
+    def std_validated(self, X: NDArray[np.float64], payload_kg=None
+                      ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Prediction and its standard deviation, both (n, outputs): mm (and mrad for a pose model's turn).
+
+        The kinematic part's position variance is ``J(q) C J(q)^T`` per axis
+        (``J`` the model's Jacobian at the commanded joints over the identified
+        parameters, ``C`` their covariance ``sigma^2 (J^T J)^-1`` from the
+        fit), which grows where the joints leave the ranges of the data; to it
+        is added the residual model's variance (its own noise included), or,
+        without one, the fit's residual variance per coordinate. A pose
+        model's turn gets the fit's orientation residual (or its residual
+        model's spread); fitted from positions alone without a residual model,
+        it has none (NaN).
+        """
+        problem = self.spread_problem()
+        if problem is not None:
+            raise DataError(problem)
+        payload = self._payload(payload_kg, len(X))
+        table = self.identification_
+        own = geometric_size(self.robot_, self.parametrization_) + self.joint_errors_.size
+        free = np.flatnonzero(np.array(table.status) == "identified")
+        keep = free < own
+        _, jac = model_jacobian(self.robot_, self.joint_errors_, X, table.value[:own], payload, self.parametrization_)
+        var = _quadratic(jac[:, free[keep]], table.covariance[np.ix_(keep, keep)]).reshape(len(X), 3)
+        mean = self._predict_trusted(X, payload_kg)
+        std = np.full(mean.shape, np.nan)
+        if self.residual_ is not None:
+            nominal = self.robot_.positions(X) if self.residual_.inputs == "cartesian" else None
+            resid = self.residual_.std_validated(self._residual_inputs(X, nominal))[1]
+            std[:, POSITION] = np.sqrt(var + resid[:, POSITION] ** 2)
+            std[:, 3:] = resid[:, 3:]
+            return mean, std
+        std[:, POSITION] = np.sqrt(var + self._noise_mm() ** 2)
+        if self.n_outputs() == 6 and table.orientation_rms_deg is not None:
+            std[:, ORIENTATION] = table.orientation_rms_deg * MRAD_PER_DEG / np.sqrt(3.0)
+        return mean, std
+
+    def _noise_mm(self) -> float:
+        """The fit's residual standard deviation of one coordinate of the primary target, mm."""
+        table = self.identification_
+        if not table.target_rms_mm:
+            return float(table.sigma_mm)
+        n, k = 3 * table.n_poses, table.status.count("identified")
+        return float(table.rms_mm / np.sqrt(3.0) * np.sqrt(n / max(n - k, 1)))
+
+    def spread_problem(self) -> str | None:
+        if getattr(self.identification_, "covariance", None) is None:
+            return ("this kinematic model's file was written before partcal kept the identification's covariance, "
+                    "so its predictions have no standard deviation: fit it again (partcal run)")
+        if self.residual_ is not None:
+            return self.residual_.spread_problem()
+        return None
+
     def distance_to_data(self, X) -> NDArray[np.float64]:
         """Distance (degrees) of each pose outside the box of the training joint angles, shape (n,)."""
         check_is_fitted(self, "identification_")
@@ -509,6 +563,14 @@ class KinematicModel(ErrorModelBase):
         return bool(self.all_targets or self.use_orientation)
 
 
+def _quadratic(J: NDArray[np.float64], C: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``diag(J C J^T)``, shape (m,), for a covariance ``C`` (k, k), never negative: through ``C``'s eigenvectors
+    (eigenvalues clipped at 0), so that nearly dependent parameters (sags of one joint) cancel without
+    rounding below zero."""
+    values, vectors = np.linalg.eigh(C)
+    return np.sum((J @ vectors) ** 2 * np.maximum(values, 0.0), axis=1)
+
+
 def _targets_summary(table: Identification) -> dict:
     """metrics.json fields of a fit on several targets or an orientation (none for one target)."""
     if not table.target_rms_mm:
@@ -560,4 +622,11 @@ def _identification_from(ident: FieldReader, robot: Robot, errors: JointErrors |
                             f"{float(nominal[k])!r}; got {float(value[k])!r}")
     if any(v is not None and not (math.isfinite(v) and v >= 0) for v in std):
         ident.fail("std_error", "standard errors must be finite and >= 0 (or null)")
+    if "covariance" in ident.doc:           # files before the spread have none
+        k = status.count("identified")
+        cov = ident.array("covariance", (k, k))
+        if np.any(np.diagonal(cov) < 0) or not np.allclose(cov, cov.T, rtol=1e-9, atol=1e-15):
+            ident.fail("covariance", "a symmetric matrix with a diagonal >= 0")
+        if ident.number("sigma_mm", 0.0) < 0:
+            ident.fail("sigma_mm", "a standard deviation >= 0")
     return Identification.from_dict(ident.doc)

@@ -22,7 +22,7 @@ from sklearn.base import clone
 from sklearn.utils.validation import check_is_fitted, validate_data
 
 from .._validation import FieldReader, one_of, param_error
-from ..errors import PartcalError
+from ..errors import DataError, PartcalError
 from ..metrics import distance_outside_boxes
 from .angles import InputMap
 from .base import ErrorModelBase, seed_from
@@ -261,6 +261,48 @@ class PartitionedErrorModel(ErrorModelBase):
                                                                  block.weights, n_out).T
         out[plan.order] = sorted_out.T
         return out
+
+    def std_validated(self, X: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Blended prediction and its standard deviation, both (n, outputs) mm.
+
+        A point's prediction is the mixture of its regions' predictive
+        distributions with the blend weights ``w_r``: mean ``sum w_r m_r`` and
+        variance ``sum w_r (s_r^2 + m_r^2) - mean^2``, so where regions
+        disagree (near their borders) the spread grows too. A hard blend takes
+        its region's.
+        """
+        problem = self.spread_problem()
+        if problem is not None:
+            raise DataError(problem)
+        X, S = self._coordinates(X)
+        n_out = self.n_outputs_
+        if self.blend == "hard":
+            mean, std = np.empty((X.shape[0], n_out)), np.empty((X.shape[0], n_out))
+            labels = self.partition_.assign(S)
+            for region in np.unique(labels).tolist():
+                rows = np.flatnonzero(labels == region)
+                mean[rows], std[rows] = self.models_[region].std_validated(X[rows])
+            return mean, std
+        weights, _ = self._blend_caches(False)
+        plan, _, blocks = weights.blocks(S)
+        parts: dict[int, list] = {}                     # region -> (rows, weights) of every block
+        for block in blocks:
+            rows = plan.order[block.positions]
+            regions, W = region_weights(self.partition_.kernel_region[block.kernels], block.weights)
+            for region, w in zip(regions.tolist(), W):
+                keep = np.flatnonzero(w)
+                parts.setdefault(region, []).append((rows[keep], w[keep]))
+        first, second = np.zeros((X.shape[0], n_out)), np.zeros((X.shape[0], n_out))
+        for region, pieces in parts.items():           # one call per region (a GP factorises its data once)
+            rows, w = np.concatenate([r for r, _ in pieces]), np.concatenate([v for _, v in pieces])
+            if rows.size:
+                m, sd = self.models_[region].std_validated(X[rows])
+                np.add.at(first, rows, w[:, None] * m)
+                np.add.at(second, rows, w[:, None] * (sd**2 + m**2))
+        return first, np.sqrt(np.maximum(second - first**2, 0.0))
+
+    def spread_problem(self) -> str | None:
+        return next((p for p in (m.spread_problem() for m in self.models_) if p is not None), None)
 
     def _blend_caches(self, frames: bool) -> tuple[BlendWeights, FrameCombiner | None]:
         """The blend weights and frame combiner of :meth:`_prepare` (the combiner only if ``frames``);

@@ -76,6 +76,14 @@ class PoseErrorModel(ErrorModelBase):
         return np.hstack([self.position_.predict_validated(X, **per_row),
                           self.orientation_.predict_validated(X, **per_row)])
 
+    def std_validated(self, X: NDArray[np.float64], **per_row) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Each part's prediction and standard deviation, side by side: (n, 6) mm then mrad, twice."""
+        position, orientation = (part.std_validated(X, **per_row) for part in self._parts())
+        return np.hstack([position[0], orientation[0]]), np.hstack([position[1], orientation[1]])
+
+    def spread_problem(self) -> str | None:
+        return next((p for p in (part.spread_problem() for part in self._parts()) if p is not None), None)
+
     def _prepare(self) -> "PoseErrorModel":
         for part in self._parts():
             part._prepare()

@@ -26,7 +26,7 @@ from numpy.typing import NDArray
 from sklearn.utils.validation import check_is_fitted, validate_data
 
 from .._validation import FieldReader, Requirement, boolean, integer, is_int, one_of, param_error
-from ..errors import PartcalError
+from ..errors import DataError, PartcalError
 from ..metrics import distance_outside_boxes
 from .base import ErrorModelBase, seed_from
 from .features import Basis, Scaling, SeriesPlan, column_bounds
@@ -202,6 +202,7 @@ class ErrorModel(ErrorModelBase):
         self.lstsq_rms_ = np.sqrt(problem.lstsq_sse / total_w)
         best = np.sqrt(problem.lstsq_sse.sum() / total_w)
         self.rms_ratio_ = float(np.sqrt((self.train_rms_**2).sum()) / best) if best > 0 else 1.0
+        self.coef_covariance_, self.noise_var_ = spread_of(problem.to_coef, w, resid)
         return self
 
     # ------------------------------------------------------------------ prediction
@@ -218,6 +219,27 @@ class ErrorModel(ErrorModelBase):
         equals ``basis_.transform(X) @ coef_`` to rounding (tested).
         """
         return self._series_plan().evaluate(X)
+
+    def std_validated(self, X: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Prediction and its standard deviation, both (n, outputs) mm: ``sigma_k sqrt(1 + h(x))``.
+
+        ``h(x) = phi(x)^T (Phi^T W Phi)^-1 phi(x)`` is the leverage of the inputs
+        (the coefficients' least-squares covariance over the noise, grown fast
+        outside the data) and ``sigma_k^2`` the residual variance of output ``k``.
+        """
+        problem = self.spread_problem()
+        if problem is not None:
+            raise DataError(problem)
+        phi = self.basis_.transform(X, self.scaling_, self.terms_)
+        leverage = np.einsum("ij,jk,ik->i", phi, self.coef_covariance_, phi)
+        std = np.sqrt(np.maximum(1.0 + leverage, 0.0)[:, None] * self.noise_var_[None, :])
+        return self._predict_trusted(X), std
+
+    def spread_problem(self) -> str | None:
+        if getattr(self, "coef_covariance_", None) is None:
+            return ("this series model's file was written before partcal kept the least-squares covariance of the "
+                    "coefficients, so its predictions have no standard deviation: fit it again (partcal run)")
+        return None
 
     def _prepare(self) -> "ErrorModel":
         """The compiled series (kept if it is that of the current coefficients) and the base's KD-tree;
@@ -362,7 +384,9 @@ class ErrorModel(ErrorModelBase):
                 "solver": self.solver, "fitness": self.fitness, "scaling": self.scaling_.to_dict(),
                 "terms": [list(t) for t in self.terms_], "coef": self.coef_.tolist(),
                 "data_bounds": self.data_bounds_.tolist(), "train_rms": self.train_rms_.tolist(),
-                "lstsq_rms": self.lstsq_rms_.tolist(), "rms_ratio": self.rms_ratio_}
+                "lstsq_rms": self.lstsq_rms_.tolist(), "rms_ratio": self.rms_ratio_,
+                **({"coef_covariance": self.coef_covariance_.tolist(), "noise_var": self.noise_var_.tolist()}
+                   if getattr(self, "coef_covariance_", None) is not None else {})}
 
     @classmethod
     def from_file_section(cls, r: FieldReader, inputs: str, n_in: int, n_out: int) -> "ErrorModel":
@@ -393,6 +417,12 @@ class ErrorModel(ErrorModelBase):
         if np.any(model.train_rms_ < 0) or np.any(model.lstsq_rms_ < 0):
             r.fail("train_rms", "RMS values must be >= 0")
         model.swarm_results_ = []
+        model.coef_covariance_ = model.noise_var_ = None          # files before the spread: none
+        if "coef_covariance" in r.doc:
+            model.coef_covariance_ = r.array("coef_covariance", (len(terms), len(terms)))
+            model.noise_var_ = r.array("noise_var", (n_out,))
+            if np.any(model.noise_var_ < 0) or np.any(np.diagonal(model.coef_covariance_) < 0):
+                r.fail("noise_var", "variances must be >= 0")
         return model
 
     _damage_field = "coef"
@@ -481,6 +511,20 @@ def _number(value: float, precision: int | None, sign: bool = True) -> str:
 
 
 # ---------------------------------------------------------------------- swarms of many fits
+def spread_of(to_coef: NDArray[np.float64], weights: NDArray[np.float64], resid: NDArray[np.float64]
+              ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The coefficients' covariance over the noise, ``(Phi^T W Phi)^+ = V S^-2 V^T`` (terms, terms), and each
+    output's residual variance (outputs,), from the weighted residuals ``resid`` (n, outputs).
+
+    The variance is the weighted mean square times ``n_eff / (n_eff - r)`` (``n_eff = (sum w)^2 / sum w^2``,
+    ``r`` the rank), the unbiased estimate for unit weights.
+    """
+    rank = to_coef.shape[1]
+    n_eff = weights.sum() ** 2 / np.sum(weights**2)
+    mean_square = (weights[:, None] * resid**2).sum(axis=0) / weights.sum()
+    return to_coef @ to_coef.T, mean_square * n_eff / max(n_eff - rank, 1.0)
+
+
 @dataclass(frozen=True, eq=False)
 class _Problem:
     """The weighted least-squares problem of one fit, in the orthonormal coordinates ``z``.

@@ -84,10 +84,9 @@ def context(result: RunResult) -> dict:
         "granularity": granularity_rows(result),
         "coarser_in_cv": coarser_in_cv(result),
         "shown_models": [r.spec.name for r in shown],
-        "error_figures": [{"name": n,
-                           "path_svg": _b64(figures.errors_along_path(n, m.errors_mm, _positions(shown, n))),
-                           "hist_svg": _b64(figures.residual_histogram(n, m.errors_mm, _positions(shown, n)))}
-                          for n, m in result.datasets.items()],
+        "error_figures": error_figures(result, shown),
+        "iso9283": iso_rows(result),
+        "spread": spread_rows(result),
         "convergence_svg": _optional_b64(figures.convergence({r.spec.name: r.model for r in result.models})),
         "equations": [{"name": r.spec.name, "lines": lines} for r in result.models
                       if (lines := r.model.equations()) is not None],
@@ -100,6 +99,50 @@ def context(result: RunResult) -> dict:
     }
     out["scenes"] = scene_entries(rendering, captions)
     return out
+
+
+def error_figures(result: RunResult, shown: list[ModelResult]) -> list[dict]:
+    """Per data set: a path's errors along it with each shown model's 95% band, or, for poses scattered over
+    the workspace, predicted against measured errors as points; and the residual histogram."""
+    out = []
+    for n, m in result.datasets.items():
+        predicted = _positions(shown, n)
+        spreads = {r.spec.name: r.spreads[n][:, :3] for r in shown if n in r.spreads}
+        path = figures.is_path(m.nominal_mm)
+        draw = figures.errors_along_path if path else figures.errors_scattered
+        out.append({"name": n, "path": path, "path_svg": _b64(draw(n, m.errors_mm, predicted, spreads)),
+                    "hist_svg": _b64(figures.residual_histogram(n, m.errors_mm, predicted))})
+    return out
+
+
+def iso_rows(result: RunResult) -> list[dict]:
+    """The ISO 9283 section: per test set, AP mean and max (mm) uncompensated and after each model, and RP."""
+    out = []
+    for name, entry in result.iso9283.items():
+        rows = [{"name": "uncompensated", "uncompensated": True, **entry["uncompensated"]}]
+        rows += [{"name": model, "uncompensated": False, **stats} for model, stats in entry["models"].items()]
+        best = min(rows[1:], key=lambda r: r["AP_mean_mm"], default=None)
+        for row in rows:
+            row["best"] = row is best
+        out.append({"name": name, "poses": entry["poses"], "cycles": entry["cycles_max"],
+                    "rp": entry["uncompensated"]["RP_max_mm"], "rows": rows})
+    return out
+
+
+def spread_rows(result: RunResult) -> dict | None:
+    """The coverage of each model's 95% intervals on each data set and their mean width (None if no model
+    has a spread)."""
+    names = list(result.datasets)
+    rows = []
+    for r in result.models:
+        if not r.spreads:
+            continue
+        cells = []
+        for n in names:
+            s = r.metrics[n].get("spread")
+            cells.append("-" if s is None else f"{100 * s['coverage_95']:.1f}% ({np.mean(s['std_mean']):.3f})")
+        rows.append({"name": r.spec.name, "cells": cells})
+    return {"datasets": names, "rows": rows} if rows else None
 
 
 def _positions(models: list[ModelResult], name: str) -> dict:
@@ -422,6 +465,7 @@ def scene_specs(result: RunResult) -> tuple[dict[str, dict], dict[str, str]]:
         residuals = [np.linalg.norm(m.errors_mm - r.predictions[n][:, :3], axis=1) for n, m in tests.items()]
         for k, (m, res) in enumerate(zip(tests.values(), residuals)):
             spec[f"path{k}"], spec[f"residual{k}"] = m.nominal_mm, res
+            spec[f"joined{k}"] = np.asarray(figures.is_path(m.nominal_mm))    # scattered poses: points, not a line
         spec["residual_max"] = max([float(x.max()) for x in residuals] + [1e-9])
         boxes = part.region_boxes() if cartesian else None
         if boxes is not None:
@@ -431,8 +475,9 @@ def scene_specs(result: RunResult) -> tuple[dict[str, dict], dict[str, str]]:
         unit = part.region_noun + ("s" if part.n_regions != 1 else "")
         captions[r.spec.name] = (f"{part.n_regions} {unit} "
                                  f"in {space}; identification points coloured by region"
-                                 f"{f', {part.region_noun}s as boxes' if boxes is not None else ''}; test paths "
-                                 "coloured by the residual error after the model's prediction.")
+                                 f"{f', {part.region_noun}s as boxes' if boxes is not None else ''}; test sets (paths as "
+                                 "lines, scattered poses as points) coloured by the residual error after the model's "
+                                 "prediction.")
     return specs, captions
 
 

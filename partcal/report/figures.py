@@ -29,18 +29,80 @@ def _svg(fig) -> str:
     return buf.getvalue()
 
 
-def errors_along_path(name: str, measured: np.ndarray, predictions: dict[str, np.ndarray]) -> str:
-    """Measured and predicted error per axis against the point index (the paper's Figs. 4, 6, 7, 10, 11)."""
+Z95 = 1.959963984540054          # a 95% band is mean +- Z95 std
+PATH_STEP = 0.05                 # a data set is a path when its median step is below this share of its extent
+
+
+def is_path(positions_mm: np.ndarray) -> bool:
+    """Whether consecutive points of a data set follow a path (median step under :data:`PATH_STEP` of the
+    diagonal of their box) rather than scatter over the workspace.
+
+    >>> line = np.c_[np.arange(100.0), np.zeros(100), np.zeros(100)]
+    >>> is_path(line), is_path(np.random.default_rng(0).uniform(0, 100, (100, 3)))
+    (True, False)
+    """
+    p = np.asarray(positions_mm, dtype=float)
+    if len(p) < 3:
+        return False
+    extent = float(np.linalg.norm(p.max(axis=0) - p.min(axis=0)))
+    return extent > 0 and float(np.median(np.linalg.norm(np.diff(p, axis=0), axis=1))) < PATH_STEP * extent
+
+
+def errors_along_path(name: str, measured: np.ndarray, predictions: dict[str, np.ndarray],
+                      spreads: dict[str, np.ndarray] | None = None) -> str:
+    """Measured and predicted error per axis against the point index (the paper's Figs. 4, 6, 7, 10, 11).
+
+    ``spreads`` (per model, (n, 3) mm standard deviations) draws each model's 95% band around its line.
+    """
     fig, axes = plt.subplots(3, 1, figsize=(8, 5.4), sharex=True)
     idx = np.arange(len(measured))
     for a, ax in enumerate(axes):
         ax.plot(idx, measured[:, a], color="black", lw=1.4, label="measured")
         for k, (label, pred) in enumerate(predictions.items()):
-            ax.plot(idx, pred[:, a], color=COLOURS[k % 4], lw=1.1, ls="--" if k else "-", label=label)
+            colour = COLOURS[k % 4]
+            ax.plot(idx, pred[:, a], color=colour, lw=1.1, ls="--" if k else "-", label=label)
+            if spreads and label in spreads:
+                half = Z95 * spreads[label][:, a]
+                ax.fill_between(idx, pred[:, a] - half, pred[:, a] + half, color=colour, alpha=0.15, lw=0,
+                                label=f"{label}: 95% band" if a == 0 else None)
         ax.set_ylabel(f"d{'xyz'[a]} (mm)")
     axes[0].set_title(f"{name}: measured and predicted error")
     axes[0].legend(loc="upper right", ncol=3, fontsize=8, frameon=False)
     axes[-1].set_xlabel("point along the data set")
+    return _svg(fig)
+
+
+def errors_scattered(name: str, measured: np.ndarray, predictions: dict[str, np.ndarray],
+                     spreads: dict[str, np.ndarray] | None = None) -> str:
+    """Predicted against measured error per axis, one point per pose, for data sets that are no path.
+
+    A perfect model puts every point on the diagonal. With ``spreads``, a
+    model's points outside its own 95% interval are drawn hollow, and the
+    legend gives the share inside.
+    """
+    fig, axes = plt.subplots(1, 3, figsize=(8, 3.0))
+    size = 4 if len(measured) > 500 else 9
+    for a, ax in enumerate(axes):
+        low, high = float(measured[:, a].min()), float(measured[:, a].max())
+        for k, (label, pred) in enumerate(predictions.items()):
+            colour = COLOURS[k % 4]
+            inside = np.ones(len(pred), dtype=bool)
+            if spreads and label in spreads:
+                inside = np.abs(measured[:, a] - pred[:, a]) <= Z95 * spreads[label][:, a]
+                text = f"{label} ({100 * inside.mean():.0f}% within its 95% interval)"
+            else:
+                text = label
+            ax.scatter(measured[inside, a], pred[inside, a], s=size, color=colour, alpha=0.5, lw=0,
+                       label=text if a == 0 else None)
+            ax.scatter(measured[~inside, a], pred[~inside, a], s=size, facecolors="none", edgecolors=colour,
+                       alpha=0.6, lw=0.6)
+            low, high = min(low, float(pred[:, a].min())), max(high, float(pred[:, a].max()))
+        ax.plot([low, high], [low, high], color="black", lw=0.8)
+        ax.set_xlabel(f"measured d{'xyz'[a]} (mm)")
+        ax.set_aspect("equal", adjustable="datalim")
+    axes[0].set_ylabel("predicted (mm)")
+    fig.suptitle(f"{name}: predicted against measured error, one point per pose", fontsize=9)
+    fig.legend(loc="lower center", ncol=2, fontsize=8, frameon=False, bbox_to_anchor=(0.5, -0.08))
     return _svg(fig)
 
 

@@ -90,9 +90,11 @@ def _draw(spec: dict, path: Path) -> None:
     top = float(spec["residual_max"])
     for k in range(int(spec["n_paths"])):
         path_points = spec[f"path{k}"]
-        line = pv.lines_from_points(path_points)
-        line["residual (mm)"] = spec[f"residual{k}"]
-        plotter.add_mesh(line, scalars="residual (mm)", cmap="plasma", clim=(0, top), line_width=5,
+        joined = bool(spec.get(f"joined{k}", True))         # a path is a line; scattered poses stay points
+        shape = pv.lines_from_points(path_points) if joined else pv.PolyData(path_points)
+        shape["residual (mm)"] = spec[f"residual{k}"]
+        style = {"line_width": 5} if joined else {"point_size": 6, "render_points_as_spheres": True}
+        plotter.add_mesh(shape, scalars="residual (mm)", cmap="plasma", clim=(0, top), **style,
                          show_scalar_bar=(k == 0), scalar_bar_args={"title": "residual (mm)", "color": "black",
                                                                     "vertical": True, "position_x": 0.85,
                                                                     "position_y": 0.25, "height": 0.5})

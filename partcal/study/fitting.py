@@ -21,6 +21,7 @@ from contextlib import contextmanager
 from typing import Callable
 
 import numpy as np
+from numpy.typing import NDArray
 from joblib import Parallel, delayed, parallel_config
 from sklearn.base import clone
 
@@ -32,7 +33,7 @@ from ..robot.kinematics import Robot, flange_offset
 from .config import ModelSpec
 from .prepare import PreparedRun, model_inputs
 from .results import ModelResult
-from .scoring import Outputs
+from .scoring import Outputs, spread_summary
 from .selection import CVPlan, choose_granularity, held_out_residuals, nested_residuals
 
 log = logging.getLogger(__name__)
@@ -175,10 +176,25 @@ def _fit_model(spec, seed, data, cv, robot, own_frame, lines, outputs) -> ModelR
             log.warning("%s has no payload_kg column: predicted at the entry's payload_kg (%g kg)", name,
                         estimator.payload_kg)
     metrics = {name: outputs.evaluate(m, predictions[name], name in own_frame) for name, m in data.items()}
+    spreads = spreads_of(estimator, spec, data, robot)
+    for name, std in spreads.items():
+        metrics[name]["spread"] = spread_summary(data[name], predictions[name], std, name in own_frame)
     return ModelResult(spec, estimator, fit_seconds, outputs.score(resid), metrics, predictions,
                        estimator.pso_rms_ratio(), granularity, cv_seconds=cv_seconds, nested=nested,
                        cv_regions=cv_regions, cv_se=rms_standard_error(outputs.ranked(resid), cv.groups),
-                       effective_parameters=estimator.effective_parameters(), rank_on=outputs.rank_on)
+                       effective_parameters=estimator.effective_parameters(), rank_on=outputs.rank_on,
+                       spreads=spreads)
+
+
+def spreads_of(estimator, spec: ModelSpec, data: dict[str, Measurements], robot: Robot | None = None
+               ) -> dict[str, NDArray[np.float64]]:
+    """The standard deviation of the model's every prediction on every data set, like its predictions;
+    none for a kind without a spread."""
+    if estimator.spread_problem() is not None:
+        return {}
+    return {name: estimator.std_scaled(model_inputs(spec.inputs, m),
+                                       **per_row_arguments(estimator, m, robot, fitting=False))[1]
+            for name, m in data.items()}
 
 
 @contextmanager

@@ -173,6 +173,8 @@ def metrics_document(result: RunResult) -> dict:
                      "repeat_scatter_mm": result.plan.repeat_scatter_mm}
     if result.registrations:
         doc["registration"] = registration_document(result.registrations)
+    if result.iso9283:
+        doc["iso9283"] = result.iso9283
     return doc
 
 
@@ -241,7 +243,7 @@ def _write_all(result: RunResult, folder: Path) -> None:
         pred_dir = folder / "predictions" / r.spec.slug
         pred_dir.mkdir(parents=True)
         for name, m in result.datasets.items():
-            _write_predictions(pred_dir / f"{name}.csv", m, r.predictions[name])
+            _write_predictions(pred_dir / f"{name}.csv", m, r.predictions[name], r.spreads.get(name))
     if cfg.data_options.converted:
         write_datasets(cfg, result.datasets, result.registrations, folder / "data")
     (folder / "metrics.json").write_text(json.dumps(metrics_document(result), indent=1) + "\n")
@@ -288,15 +290,16 @@ def _triple(values) -> str:
     return "[" + ", ".join(f"{v:.6f}" for v in values) + "]"
 
 
-def _write_predictions(path: Path, m, predicted) -> None:
+def _write_predictions(path: Path, m, predicted, std=None) -> None:
     """Per point: joints, nominal position, measured and predicted errors (full precision); for pose errors the
-    orientation's too (``drx_meas``.. ``drx_pred``.., rotation vectors in mrad)."""
+    orientation's too (``drx_meas``.. ``drx_pred``.., rotation vectors in mrad); with the model's spread, the
+    standard deviation of each prediction (``dx_sd``..)."""
     pose = predicted.shape[1] == 6
     measured = m.pose_errors if pose else m.errors_mm
     axes = ["dx", "dy", "dz"] + (["drx", "dry", "drz"] if pose else [])
     header = joint_columns(m.n_joints) + ["x_nom", "y_nom", "z_nom"] + [f"{a}_meas" for a in axes] + \
-        [f"{a}_pred" for a in axes]
-    values = np.hstack([m.q_deg, m.nominal_mm, measured, predicted])
+        [f"{a}_pred" for a in axes] + ([f"{a}_sd" for a in axes] if std is not None else [])
+    values = np.hstack([m.q_deg, m.nominal_mm, measured, predicted] + ([std] if std is not None else []))
     with path.open("w") as handle:
         handle.write(",".join(header) + "\n")
         for row in values:

@@ -24,6 +24,8 @@ import json
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from .. import __version__
 from .._validation import FieldReader
 from .._io import atomic_write
@@ -44,6 +46,8 @@ def model_to_dict(model, *, name: str = "", robot: Robot | None = None, extra: d
     out.update(body_of(model))
     if getattr(model, "train_inputs_", None) is not None:
         out["train_inputs"] = model.train_inputs_.tolist()
+    if getattr(model, "spread_scale_", None) is not None:      # a calibrated spread (models/spread.py)
+        out["spread_scale"] = np.asarray(model.spread_scale_, dtype=float).tolist()
     out["fit"] = extra or {}
     return out
 
@@ -135,5 +139,9 @@ def model_from_dict(doc: Any, source: str = "model") -> Any:
                                f"got {r.doc.get('n_inputs')!r}")
     model = model_from_body(r)
     model.train_inputs_ = r.array("train_inputs", (None, model.n_features_in_)) if "train_inputs" in r.doc else None
+    if "spread_scale" in r.doc:
+        model.spread_scale_ = r.array("spread_scale", (model.n_outputs(),))
+        if np.any(model.spread_scale_ <= 0):
+            r.fail("spread_scale", "the calibrated scales of the spread must be > 0")
     model.check_file(r)
     return model._prepare()

@@ -346,22 +346,56 @@ def curve_lines(rows: list[dict], noise_mm: float) -> list[str]:
 
 
 # ---------------------------------------------------------------------- output
-def write_plan(robot: Robot, q_deg: NDArray[np.float64], path: str | Path, *, comment: str = "") -> None:
+def write_plan(robot: Robot, q_deg: NDArray[np.float64], path: str | Path, *, comment: str = "",
+               labels=None, cycles=None) -> None:
     """Write poses as a pose list in the measurement-CSV layout.
 
-    Columns ``q1..qN`` (deg), ``x_nom, y_nom, z_nom`` (mm, forward kinematics) and ``set`` (``plan``).
+    Columns ``q1..qN`` (deg), ``x_nom, y_nom, z_nom`` (mm, forward kinematics) and ``set`` (``plan``, or one
+    of ``labels`` per pose), then ``cycle`` when ``cycles`` (one number per pose) are given.
 
     The measured columns ``x_meas, y_meas, z_meas`` are left out: they come
     from the tracker. Written atomically.
     """
     nominal = robot.positions(q_deg)
-    header = joint_columns(robot.n_joints) + ["x_nom", "y_nom", "z_nom", "set"]
+    labels = ["plan"] * len(q_deg) if labels is None else list(labels)
+    header = joint_columns(robot.n_joints) + ["x_nom", "y_nom", "z_nom", "set"] + (["cycle"] if cycles is not None
+                                                                                   else [])
     with atomic_write(path, newline="") as handle:
         for text in comment.splitlines():
             handle.write(f"# {text}\n")
         handle.write(",".join(header) + "\n")
-        for row in np.hstack([q_deg, nominal]):
-            handle.write(",".join(f"{v:.6f}" for v in row) + ",plan\n")
+        for k, row in enumerate(np.hstack([q_deg, nominal])):
+            handle.write(",".join(f"{v:.6f}" for v in row) + f",{labels[k]}"
+                         + (f",{int(cycles[k])}" if cycles is not None else "") + "\n")
+
+
+def iso_cube_plan(robot: Robot, path: str | Path, *, cube=None, cycles: int = 30, random_state=0,
+                  comment: str = ""):
+    """Write the ISO 9283 test poses P1..P5 of a cube, ``cycles`` times, as a pose list; return the cube.
+
+    ``cube`` is ``(cx, cy, cz, edge)`` in mm (the centre and the edge), or
+    None for the largest cube found in the workspace
+    (:func:`~partcal.robot.iso_cube.largest_cube`, seeded). Every cycle visits
+    P1, P2, P3, P4, P5 in order; the ``set`` column names the point and
+    ``cycle`` counts from 1.
+    """
+    from ..robot import iso_cube
+
+    if not isinstance(cycles, (int, np.integer)) or isinstance(cycles, bool) or cycles < 1:
+        raise PartcalError(f"the number of cycles must be a whole number >= 1; got {cycles!r}")
+    solved = (iso_cube.largest_cube(robot, random_state=random_state) if cube is None
+              else iso_cube.solve_cube(robot, cube[:3], float(cube[3])))
+    corners = iso_cube.cube_corners(solved.centre_mm, solved.edge_mm)
+    text = (comment + "\n" if comment else "") + (
+        f"ISO 9283 test cube: centre {np.round(solved.centre_mm, 3).tolist()} mm, edge {solved.edge_mm:g} mm; "
+        f"corners C1..C8 {np.round(corners, 3).tolist()}; plane C1-C2-C7-C8; P1 the centre, P2..P5 at "
+        f"{iso_cube.POINT_FRACTION:g} of the diagonal from C1, C2, C7, C8; {cycles} cycles; "
+        + ("the tool keeps P1's orientation at every point" if solved.held_orientation else
+           f"{robot.name} cannot hold P1's tool orientation at every point: P2..P5 are solved for the position"))
+    n = len(solved.q_deg)
+    write_plan(robot, np.tile(solved.q_deg, (cycles, 1)), path, comment=text,
+               labels=[f"P{k + 1}" for k in range(n)] * cycles, cycles=np.repeat(np.arange(1, cycles + 1), n))
+    return solved
 
 
 def run_indices(robot: Robot, q_deg) -> Evaluation:

@@ -82,8 +82,15 @@ class Predictor:
             raise DataError(f"model {self.name!r} has no joint that yields under gravity, so a payload changes "
                             f"nothing it predicts; got payload_kg={payload_kg!r}")
 
-    def predict(self, positions=None, joints=None, payload_kg=None) -> NDArray[np.float64]:
+    def predict(self, positions=None, joints=None, payload_kg=None, return_std: bool = False):
         """Predicted errors (measured - nominal), shape (n, 3) mm, or (n, 6) for a pose model.
+
+        With ``return_std=True`` also the standard deviation of each predicted
+        error, same shape and units: ``(mean, std)``. It is the spread of the
+        error a measurement at that input would show (the model's uncertainty
+        there and the scatter it leaves unexplained; see docs/predictor.md);
+        a 95% interval is ``mean +- 1.96 std``. A model file written before
+        partcal kept what the spread needs is refused with a message saying so.
 
         A pose model (:attr:`predicts_pose`) gives the position error in mm,
         then the rotation vector in mrad (axis times angle, base frame) that
@@ -96,7 +103,48 @@ class Predictor:
         given when fitted, see the model's ``payload_kg``).
         """
         self._check_payload(payload_kg)
-        return self._errors(self._inputs(positions, joints), payload_kg)
+        X = self._inputs(positions, joints)
+        if not return_std:
+            return self._errors(X, payload_kg)
+        return self._errors_with_std(X, payload_kg)
+
+    def _errors_with_std(self, X: NDArray[np.float64], payload_kg=None
+                         ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """``(mean, std)`` of the predicted errors at validated inputs, each (n, outputs)."""
+        if len(X) == 0:
+            empty = np.zeros((0, self.model.n_outputs()))
+            return empty, empty.copy()
+        problem = self.model.spread_problem()
+        if problem is not None:
+            raise DataError(f"model {self.name or '(unnamed)'!r}: {problem}")
+        if payload_kg is None:
+            return self.model.std_scaled(X)
+        return self.model.std_scaled(X, payload_kg=payload_kg)
+
+    def expected_residual(self, targets_mm, joints=None, *, payload_kg: float | None = None
+                          ) -> tuple[CompensationResult, NDArray[np.float64], NDArray[np.float64]]:
+        """Compensate ``targets_mm`` (n, 3) mm and say what the robot is expected to miss them by, and how sure.
+
+        Returns ``(result, residual_mm, std_mm)``: the :meth:`compensate_full`
+        result; the expected position left (target minus where the model says
+        the robot goes at the command), (n, 3) mm, which is the solver's
+        remaining miss (near zero where it converged); and its standard
+        deviation, (n, 3) mm, the model's spread at the commanded inputs: where
+        the robot really lands around the target, as far as the model knows.
+        """
+        result = self.compensate_full(targets_mm, joints, payload_kg=payload_kg)
+        return (result, *self.residual_of(result, check_array(targets_mm, "targets_mm", columns=3), payload_kg))
+
+    def residual_of(self, result: CompensationResult, targets_mm: NDArray[np.float64], payload_kg=None
+                    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """The expected position left at each compensated target and its standard deviation, both (n, 3) mm
+        (see :meth:`expected_residual`); ``payload_kg``: one number or one per target."""
+        if len(targets_mm) == 0:
+            return np.zeros((0, 3)), np.zeros((0, 3))
+        X = result.commanded_mm if self.inputs == "cartesian" else result.joints_deg
+        mean, std = self._errors_with_std(X, payload_kg)
+        reached = (result.commanded_mm if self.inputs == "cartesian" else self.robot.positions(X)) + mean[:, :3]
+        return targets_mm - reached, std[:, :3]
 
     def predict_point(self, joints, offset_mm, payload_kg=None) -> NDArray[np.float64]:
         """Predicted position error of another point on the tool, shape (n, 3) mm, from a pose model.

@@ -42,6 +42,7 @@ class ModelResult:
     effective_parameters: float = float("nan")   # what "simpler" means when two CV scores are close
     notes: list[str] = field(default_factory=list)   # fits on a bound and the like: warned, and in the report
     rank_on: str = "position"           # cv_rms_3d and cv_se are of the position (mm) or the orientation (mrad)
+    spreads: dict[str, NDArray[np.float64]] = field(default_factory=dict)  # std of each prediction, by data set
 
     def score(self, rank_by: str) -> float:
         """The number the run ranks by: the CV score, or the RMS on the validation set (3-D, mm; with ``rank_on:
@@ -83,6 +84,7 @@ class RunResult:
     seconds: float
     registrations: dict[str, Registration] = field(default_factory=dict)
     plan: RunPlan | None = None
+    iso9283: dict[str, dict] = field(default_factory=dict)   # ISO 9283 pose figures of each test set (iso_figures)
 
     @functools.cached_property
     def design(self):

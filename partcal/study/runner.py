@@ -15,7 +15,8 @@ a test set. The stages, each in its module:
 3. **verify** (:func:`~partcal.study.scoring.verify_compensation`): with a
    virtual robot, the compensated test targets commanded on the simulated
    true robot;
-4. **rank** (:func:`~partcal.study.selection.choose_best`).
+4. **rank** (:func:`~partcal.study.selection.choose_best`), and the ISO 9283 pose figures of every test
+   set, uncompensated and after each model (:func:`~partcal.study.iso_figures.run_figures`).
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ import numpy as np
 
 from .config import RunConfig
 from .fitting import fit_all
+from .iso_figures import run_figures
 from .prepare import prepare
 from .results import RunResult
 from .scoring import Outputs, verify_compensation
@@ -53,5 +55,7 @@ def run(config: RunConfig, progress: Callable[[int, int, str], None] | None = No
     own = config.data_options.own_frame
     uncompensated = {name: outputs.evaluate(m, np.zeros_like(outputs.errors(m)), name in own)
                      for name, m in data.items()}
+    iso = run_figures(data, {r.spec.name: r.predictions for r in results}, {name: name in own for name in data})
     return RunResult(config, data, robot, uncompensated, results, choose_best(results, config.rank_by),
-                     time.perf_counter() - start, registrations=prepared.registrations, plan=prepared.plan)
+                     time.perf_counter() - start, registrations=prepared.registrations, plan=prepared.plan,
+                     iso9283=iso)

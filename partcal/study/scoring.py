@@ -78,6 +78,18 @@ class Outputs:
 
 
 
+Z95 = 1.959963984540054        # a 95% interval is mean +- Z95 std
+
+
+def spread_summary(m: Measurements, predicted: NDArray[np.float64], std: NDArray[np.float64],
+                   own_frame: bool = False) -> dict:
+    """How a model's spread fares on a data set: ``std_mean`` (per axis, mm) and ``coverage_95``, the share of
+    the position errors left (x, y, z of every pose, as :func:`errors_left` takes them) within ``Z95 std``."""
+    position, _ = errors_left(m, predicted, own_frame)
+    s = std[:, POSITION]
+    return {"std_mean": s.mean(axis=0).tolist(), "coverage_95": float(np.mean(np.abs(position) <= Z95 * s))}
+
+
 def errors_left(m: Measurements, predicted: NDArray[np.float64], own_frame: bool = False
                 ) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
     """The errors a model leaves on a data set: the position's, (n, 3) mm, measured - nominal - predicted,

@@ -9,6 +9,7 @@ does not fit its width switches to exponent notation.
 from __future__ import annotations
 
 from ..metrics import rms_per_axis
+from .iso_figures import run_lines
 
 # Table 2 of the paper: uncompensated RMS (mm) per data set, x / y / z.
 PAPER_UNCOMPENSATED = {
@@ -72,6 +73,8 @@ def results_table(result) -> str:
     rule = f"{'validation' if result.config.rank_by == 'validation' else 'CV'} {part}"
     lines.append(f"best: {best.spec.name} ({rule} {best.score(result.config.rank_by):.3f} {unit}), chosen by the "
                  f"{result.best_reason}")
+    if result.iso9283:
+        lines += [""] + run_lines(result.iso9283)
     regs = result.registrations
     for reg in {id(r): r for r in regs.values()}.values():
         lines.append(registration_line(reg, [n for n, r in regs.items() if r is reg]))

@@ -1,0 +1,113 @@
+"""How far to trust a prediction: coverage of the 95% intervals ``mean +- 1.96 std`` of every model kind (issue 33).
+
+Each model is fitted on an identification set and predicts, with its standard
+deviation (``predict_with_std``), the errors of test sets. The coverage is the
+share of the test coordinates (x, y, z of every pose) whose measured error
+lies within ``1.96 std`` of the prediction; the width is the mean ``std``
+(mm). A calibrated spread covers about 95% on data like the training data and
+should be wider where the model extrapolates.
+
+- the IPA UR10 (``configs/ur10_ipa.yaml``: registered as the run registers
+  it): fitted on series B 1-1000, tested on B 1001-1495 (like the training
+  data), series C (the other shoulder configuration) and series D (ISO cubes,
+  its own tracker frame: scored up to a rigid transform, as a run scores it);
+- the virtual SK120 (``data/sk120``): fitted on the 85 identification poses,
+  tested on the paper's three paths.
+
+    .venv/bin/python benchmarks/bench_coverage.py [--quick]
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _table import print_table  # noqa: E402
+
+from partcal import read_measurements  # noqa: E402
+from partcal.models.gp import GaussianProcessErrorModel  # noqa: E402
+from partcal.models.kinematic import KinematicModel  # noqa: E402
+from partcal.models.partition import KMeansPartition  # noqa: E402
+from partcal.models.partitioned import PartitionedErrorModel  # noqa: E402
+from partcal.models.series import ErrorModel  # noqa: E402
+from partcal.study.spread import calibrate_spread  # noqa: E402
+from partcal.robot.description import load_robot  # noqa: E402
+from partcal.study.config import load_config  # noqa: E402
+from partcal.study.prepare import load_datasets  # noqa: E402
+from partcal.study.scoring import errors_left  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+Z95 = 1.959963984540054
+
+
+def models(robot, quick: bool) -> dict:
+    """The models compared (unfitted), by name: one or more of every kind."""
+    gp = GaussianProcessErrorModel(inputs="joint", restarts=0, random_state=0)
+    out = {"FDP(CI)": ErrorModel(inputs="cartesian", degree=1, solver="lstsq"),
+           "SDP(AI)": ErrorModel(inputs="joint", degree=2, solver="lstsq"),
+           "FDP(AI) k-means 4": PartitionedErrorModel(partition=KMeansPartition(n_regions=4),
+                                                      local=ErrorModel(inputs="joint", degree=1, solver="lstsq"),
+                                                      random_state=0),
+           "DH": KinematicModel(robot=robot),
+           "DH + compliance": KinematicModel(robot=robot, compliance=(2, 3)),
+           "GP(AI)": gp,
+           "DH + GP(AI)": KinematicModel(robot=robot, residual=gp, random_state=0)}
+    if quick:
+        out.pop("GP(AI)")
+    return out
+
+
+def inputs_of(model, m):
+    """What the model reads: positions (mm) for Cartesian series, joints (deg) for the rest."""
+    return m.nominal_mm if getattr(model, "inputs", "joint") == "cartesian" else m.q_deg
+
+
+def coverage(model, m, own_frame: bool) -> tuple[float, float]:
+    """``(share within 1.96 std, mean std)`` on data set ``m``."""
+    mean, std = model.predict_with_std(inputs_of(model, m))
+    left, _ = errors_left(m, mean, own_frame)
+    return float(np.mean(np.abs(left) <= Z95 * std)), float(std.mean())
+
+
+def table(title: str, train, tests: dict, robot, quick: bool) -> None:
+    """Coverage and width of every model on every test set: its own spread, then calibrated (5 contiguous folds)."""
+    rows = []
+    for name, model in models(robot, quick).items():
+        start = time.perf_counter()
+        for how in ("own", "calibrated"):
+            if how == "own":
+                model.fit(inputs_of(model, train), train.errors_mm)
+            else:
+                calibrate_spread(model, inputs_of(model, train), train.errors_mm, folds=5)
+            cells = [name if how == "own" else "", how]
+            for m, own in tests.values():
+                share, width = coverage(model, m, own)
+                cells += [f"{100 * share:.1f}%", f"{width:.3f}"]
+            rows.append(cells + [f"{time.perf_counter() - start:.1f}"])
+    header = ["model", "spread"] + [h for t in tests for h in (f"{t} cover", "std mm")] + ["s"]
+    print_table(title, header, rows)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="leave out the global GP (its fit takes longest)")
+    args = parser.parse_args()
+    data, robot, registrations = load_datasets(load_config(ROOT / "configs" / "ur10_ipa.yaml"))
+    own = {name: reg is not registrations["identification"] for name, reg in registrations.items()}
+    table("IPA UR10: fitted on series B 1-1000", data["identification"],
+          {"B 1001-1495": (data["joint_configurations"], own["joint_configurations"]),
+           "C": (data["random_poses"], own["random_poses"]), "D": (data["iso_cubes"], own["iso_cubes"])},
+          robot, args.quick)
+    sk120 = ROOT / "data" / "sk120"
+    table("virtual SK120: fitted on the 85 identification poses", read_measurements(sk120 / "identification.csv"),
+          {p: (read_measurements(sk120 / f"test_{p}.csv"), False) for p in ("rectangle", "spiral_xy", "spiral_yz")},
+          load_robot("motoman_sk120"), args.quick)
+
+
+if __name__ == "__main__":
+    main()

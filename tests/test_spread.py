@@ -1,0 +1,166 @@
+"""The standard deviation of every prediction: against textbook formulas and scikit-learn, known noise, growth
+where a model extrapolates, calibration, model files old and new, the command line."""
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+from conftest import ROOT, partcal_cli
+
+from partcal.errors import DataError
+from partcal.models.gp import GaussianProcessErrorModel
+from partcal.models.kinematic import KinematicModel
+from partcal.models.partition import KMeansPartition
+from partcal.models.partitioned import PartitionedErrorModel
+from partcal.models.series import ErrorModel
+from partcal.study.spread import calibrate_spread, contiguous_folds
+from partcal.study.persist import save_model
+from partcal.study.predictor import load_predictor
+
+Z95 = 1.959963984540054
+
+
+@pytest.fixture(scope="module")
+def linear_data():
+    rng = np.random.default_rng(3)
+    X = rng.uniform(-500, 500, size=(40, 3))
+    y = X @ np.array([[0.01, 0, 0.002], [0, -0.02, 0], [0.003, 0, 0.01]]) + rng.normal(0, 0.1, size=(40, 3))
+    return X, y
+
+
+def test_series_spread_is_the_least_squares_prediction_interval(linear_data):
+    X, y = linear_data
+    model = ErrorModel(inputs="cartesian", degree=1, solver="lstsq").fit(X, y)
+    at = np.array([[0.0, 0, 0], [400.0, -300, 100], [3000.0, 0, 0]])
+    mean, std = model.predict_with_std(at)
+    A = np.hstack([np.ones((len(X), 1)), X])                      # the textbook: raw design, no scaling
+    coef, sse, *_ = np.linalg.lstsq(A, y, rcond=None)
+    sigma2 = sse / (len(X) - 4)
+    a = np.hstack([np.ones((len(at), 1)), at])
+    leverage = np.einsum("ij,jk,ik->i", a, np.linalg.inv(A.T @ A), a)
+    np.testing.assert_allclose(mean, a @ coef, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(std, np.sqrt(np.outer(1 + leverage, sigma2)), rtol=1e-9)
+    assert np.all(std[2] > 2 * std[0])                            # far outside the data: much wider
+
+
+def test_gp_spread_is_scikit_learns_posterior(linear_data):
+    from sklearn.gaussian_process import GaussianProcessRegressor
+
+    X, y = linear_data
+    model = GaussianProcessErrorModel(inputs="cartesian", restarts=0, random_state=0).fit(X, y)
+    at = np.array([[0.0, 0, 0], [450.0, 450, -450], [1e8, 1e8, 1e8]])
+    mean, std = model.predict_with_std(at)
+    Z = model.input_map_.transform(X)
+    reference = GaussianProcessRegressor(model.sklearn_kernel(), optimizer=None, alpha=1e-14).fit(Z, y[:, 0])
+    _, sd = reference.predict(model.input_map_.transform(at), return_std=True)     # sd does not depend on y
+    np.testing.assert_allclose(std, np.outer(sd, model.y_std_), rtol=1e-6)
+    np.testing.assert_allclose(mean, model.predict(at))
+    prior = np.sqrt(model.amplitude_ + model.noise_) * model.y_std_
+    np.testing.assert_allclose(std[2], prior, rtol=1e-6)            # far away: the prior's spread
+
+
+def test_one_region_blends_to_its_local_models_spread(linear_data):
+    X, y = linear_data
+    local = ErrorModel(inputs="cartesian", degree=1, solver="lstsq")
+    one = PartitionedErrorModel(partition=KMeansPartition(n_regions=1, min_samples=5), local=local).fit(X, y)
+    at = np.array([[10.0, 20, 30], [600.0, 0, 0]])
+    np.testing.assert_allclose(one.predict_with_std(at)[1], local.fit(X, y).predict_with_std(at)[1], rtol=1e-9)
+    two = PartitionedErrorModel(partition=KMeansPartition(n_regions=2, min_samples=5), local=local,
+                                random_state=0).fit(X, y)
+    mean, std = two.predict_with_std(at)
+    np.testing.assert_allclose(mean, two.predict(at), rtol=1e-9, atol=1e-12)
+    assert np.all(np.isfinite(std)) and np.all(std > 0)
+
+
+@pytest.fixture(scope="module")
+def noisy_sk120():
+    """The virtual SK120's geometry (no compliance, gears or tracker scale), its arm scattering 0.05 mm per axis."""
+    from partcal.data.simulate import load_study, sample_configurations
+
+    study = load_study(ROOT / "configs" / "sk120_virtual.yaml")
+    virtual = dataclasses.replace(study.robot, compliance=(), gear=(), tracker_scale=0.0, repeatability_mm=0.05)
+    rng = np.random.default_rng(0)
+
+    def draw(n, ranges):
+        q = sample_configurations(virtual.nominal, n, ranges, study.fixed_deg, rng)
+        return q, virtual.measure(q, rng) - virtual.nominal.positions(q)
+
+    return virtual, draw, study.ranges_deg
+
+
+def test_kinematic_spread_covers_95_percent_of_new_noisy_poses(noisy_sk120):
+    virtual, draw, ranges = noisy_sk120
+    q, e = draw(150, ranges)
+    model = KinematicModel(robot=virtual.nominal).fit(q, e)
+    q_new, e_new = draw(1000, ranges)
+    mean, std = model.predict_with_std(q_new)
+    share = np.mean(np.abs(e_new - mean) <= Z95 * std)
+    assert 0.93 <= share <= 0.97, share
+    assert np.median(std) == pytest.approx(0.05, rel=0.1)          # mostly the known scatter
+    narrow = {1: (-20, 20), 2: (-140, -120), 3: (-185, -165), 6: (-30, 30)}
+    model = KinematicModel(robot=virtual.nominal).fit(*draw(60, narrow))
+    inside = model.predict_with_std(draw(50, narrow)[0])[1]
+    outside = model.predict_with_std(draw(50, {1: (50, 60), 2: (-160, -150), 3: (-205, -195)})[0])[1]
+    assert np.median(outside) > 1.5 * np.median(inside)            # beyond the joint ranges of the data
+
+
+def test_calibration_scales_the_spread_to_held_out_blocks(linear_data):
+    X, y = linear_data
+    assert [t.tolist() for _, t in contiguous_folds(5, 2)] == [[0, 1, 2], [3, 4]]
+    stationary = calibrate_spread(ErrorModel(inputs="cartesian", solver="lstsq"), X, y, folds=4)
+    assert np.all((stationary.spread_scale_ > 0.6) & (stationary.spread_scale_ < 1.6))
+    drift = y + np.linspace(0, 1.0, len(y))[:, None]                # a session that drifts by 1 mm
+    drifting = calibrate_spread(ErrorModel(inputs="cartesian", solver="lstsq"), X, drift, folds=4)
+    assert np.all(drifting.spread_scale_ > 1.2 * stationary.spread_scale_)   # wider than its own fit says
+    own = ErrorModel(inputs="cartesian", solver="lstsq").fit(X, drift).predict_with_std(X)[1]
+    np.testing.assert_allclose(drifting.predict_with_std(X)[1], own * drifting.spread_scale_)
+
+
+def test_model_files_carry_the_spread_and_old_ones_say_they_have_none(tmp_path, linear_data, noisy_sk120):
+    X, y = linear_data
+    virtual, draw, ranges = noisy_sk120
+    series = calibrate_spread(ErrorModel(inputs="cartesian", solver="lstsq"), X, y, folds=4)
+    q, e = draw(60, ranges)
+    kinematic = KinematicModel(robot=virtual.nominal).fit(q, e)
+    for model, X_in, key, name in ((series, X, "positions", "series"), (kinematic, q, "joints", "dh")):
+        path = tmp_path / f"{name}.json"
+        save_model(model, path, name=name)
+        mean, std = load_predictor(path).predict(**{key: X_in}, return_std=True)
+        expected = model.predict_with_std(X_in)
+        np.testing.assert_allclose(mean, expected[0], rtol=1e-12)
+        np.testing.assert_allclose(std, expected[1], rtol=1e-9)
+        doc = json.loads(path.read_text())                    # as written before partcal kept the spread
+        del doc["checksum"]
+        doc.pop("spread_scale", None)
+        for section in (doc["model"], doc["model"].get("identification", {})):
+            for field in ("coef_covariance", "noise_var", "covariance", "sigma_mm"):
+                section.pop(field, None)
+        path.write_text(json.dumps(doc))
+        old = load_predictor(path)
+        np.testing.assert_allclose(old.predict(**{key: X_in}), expected[0], rtol=1e-12)
+        with pytest.raises(DataError, match=rf"^model '{name}': this .* file was written before partcal kept .*: "
+                                            r"fit it again"):
+            old.predict(**{key: X_in}, return_std=True)
+
+
+def test_predict_std_adds_sd_columns_and_compensate_std_the_expected_residual(tmp_path, linear_data):
+    X, y = linear_data
+    model = ErrorModel(inputs="cartesian", degree=1, solver="lstsq").fit(X, y)
+    path = tmp_path / "m.json"
+    save_model(model, path, name="m")
+    points = tmp_path / "p.csv"
+    points.write_text("x,y,z\n0,0,0\n400,-300,100\n")
+    res = partcal_cli("predict", str(path), str(points), "-o", str(tmp_path / "out.csv"), "--std")
+    assert res.returncode == 0, res.stderr
+    rows = (tmp_path / "out.csv").read_text().splitlines()
+    assert rows[0] == "x,y,z,dx,dy,dz,sdx,sdy,sdz"
+    values = np.array([[float(v) for v in r.split(",")] for r in rows[1:]])
+    np.testing.assert_allclose(values[:, 6:], model.predict_with_std(values[:, :3])[1], atol=2e-6)
+    res = partcal_cli("compensate", str(path), str(points), "-o", str(tmp_path / "cmd.csv"), "--std")
+    assert res.returncode == 0, res.stderr
+    rows = (tmp_path / "cmd.csv").read_text().splitlines()
+    assert rows[0] == "x,y,z,x_cmd,y_cmd,z_cmd,dx_left,dy_left,dz_left,sdx,sdy,sdz,converged"
+    values = np.array([[float(v) for v in r.split(",")[:-1]] for r in rows[1:]])
+    assert np.abs(values[:, 6:9]).max() < 1e-3                               # converged: nothing left expected
+    np.testing.assert_allclose(values[:, 9:12], model.predict_with_std(values[:, 3:6])[1], atol=2e-6)

@@ -46,7 +46,7 @@ from ..robot.kinematics import Robot
 from ..robot.kinematics import ORIENTATION_MM_PER_RAD, flange_offset, matrices_from_xyz_deg, xyz_deg_from_matrices
 from .measurements import Measurements
 from .pose_columns import PRIMARY
-from .plausibility import Plausibility, check_residuals
+from .plausibility import Plausibility, check_orientation_residuals, check_residuals
 
 log = logging.getLogger(__name__)
 
@@ -228,6 +228,9 @@ def register_tracker(robot: Robot, q_deg, measured_mm, *, tool_mm=None, fit_tool
     resid = position_residuals(sol.x)
     check_residuals(source, resid[0], p_fl + r_fl @ tool0, meas, robot.reach_mm, robot.name,
                     plausibility or Plausibility())
+    if probe is not None:
+        check_orientation_residuals(source, np.degrees(np.linalg.norm(probe.turns(rot, sol.x[6 + k_tools:]), axis=1)),
+                                    r_fl, orientation_deg, rot, plausibility or Plausibility())
     condition, weakest = _conditioning(points @ rot.T + shift, r_fl, fit_tool, [PRIMARY, *extra])
     if not condition <= max_condition:
         raise DataError(f"{source}: the tracker registration is ill-conditioned (condition number {condition:.3g} > "

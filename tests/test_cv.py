@@ -5,7 +5,7 @@ import dataclasses
 
 import numpy as np
 import pytest
-from conftest import ROOT
+from conftest import ROOT, partcal_cli
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from sklearn.gaussian_process import GaussianProcessRegressor
@@ -296,3 +296,18 @@ def test_partitioned_and_hybrid_gps_freeze_their_shared_search():
         inner = frozen.fit(q[:60], y[:60])
         regions = inner.residual_.models_ if model is hybrid else inner.models_
         assert all(np.array_equal(r.length_scale_, gp.fixed_kernel["length_scale"]) for r in regions)
+
+
+@pytest.mark.parametrize("n, models", [
+    (5, "  - {name: DH, kind: kinematic}"),
+    (10, "  - {name: DH + compliance + harmonics, kind: kinematic, compliance: [2, 3], joint_harmonics: 2}"),
+])
+def test_kinematic_models_on_a_handful_of_poses_are_fitted_and_reported(tmp_path, n, models):
+    config(tmp_path, models, ident=first_poses(tmp_path, n))
+    run_yaml = tmp_path / "configs" / "run.yaml"
+    assert partcal_cli("run", "--check", str(run_yaml)).returncode == 0
+    res = partcal_cli("run", "-q", str(run_yaml))
+    assert res.returncode == 0 and "internal error" not in res.stderr, res.stderr
+    metrics = __import__("json").loads((tmp_path / "reports" / "small" / "metrics.json").read_text())
+    model = next(iter(metrics["models"].values()))
+    assert np.isfinite(model["cv"]["rms_3d"]) and (tmp_path / "reports" / "small" / "index.html").is_file()

@@ -437,7 +437,7 @@ def _implausible(jac_at, v: NDArray[np.float64], v0: NDArray[np.float64], free: 
         return None
     resid, jac = jac_at(v)
     std = _uncertainty(jac[:, free], resid)[0]
-    loose = (beyond > 1.0) & (np.abs(v - v0)[free] < UNFIXED * std)
+    loose = (beyond > 1.0) & ~(np.abs(v - v0)[free] >= UNFIXED * std)     # no standard error (NaN): not fixed
     return int(np.flatnonzero(loose)[np.argmax(beyond[loose])]) if loose.any() else None
 
 

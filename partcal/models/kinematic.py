@@ -433,6 +433,11 @@ class KinematicModel(ErrorModelBase):
         held = [n for n in self.identification_.unidentifiable() if n.startswith("compliance[")]
         notes = [f"{', '.join(held)} not identifiable (data at one payload show only the sags): the predictions do "
                  "not change with the payload"] if held else []
+        ident = self.identification_
+        if ident.n_poses and np.isnan(ident.std_error[np.array(ident.status) == "identified"]).any():
+            notes.append(f"{sum(s == 'identified' for s in ident.status)} parameters identified from "
+                         f"{ident.n_poses} poses leave no residual to estimate their standard errors: the fit "
+                         "interpolates the data; measure more poses")
         if self.n_outputs() == 6 and not self.orientation_:
             notes.append("identified from the positions alone, it predicts the orientation its parameters imply, "
                          "which the positions do not determine (use_orientation: true identifies from it)")

@@ -396,7 +396,7 @@ def _parameter_cell(row: dict) -> dict:
 
     text = show(row["value"])
     if row["status"] == "identified":
-        text += f" ± {show(row['std_error'])}"
+        text += f" ± {show(row['std_error'])}" if row["std_error"] is not None else " ± n/a"   # no residual left
         if row["unit"] == "deg/(N m)" and row["value"] > 0:
             text += f" ({1.0 / row['value']:.4g} N m/deg)"
     return {"name": row["name"], "unit": row["unit"], "status": row["status"], "text": text,

@@ -25,7 +25,7 @@ from ..data.measurements import Measurements, read_measurements
 from ..data.registration import Registration, register_measurements, registered
 from ..data.simulate import load_study
 from ..errors import ConfigError, DataError
-from ..metrics import repeat_scatter_mm
+from ..metrics import HELD_TOLERANCE_DEG, repeat_scatter_mm
 from ..models.bases import varying_inputs
 from ..robot.kinematics import Robot
 from .config import ModelSpec, RunConfig
@@ -75,8 +75,9 @@ def load_datasets(config: RunConfig) -> tuple[dict[str, Measurements], Robot | N
                               else None)
         poses = int(measured_poses(m).max()) + 1
         if poses < len(m):
-            log.warning("%s (%s): %d rows measure %d distinct poses (identical joint angles%s): repeated "
-                        "measurements%s", path, name, len(m), poses, " and payload" if m.payload_kg is not None else "",
+            log.warning("%s (%s): %d rows measure %d distinct poses (joint angles within %g degrees%s): repeated "
+                        "measurements%s", path, name, len(m), poses, HELD_TOLERANCE_DEG,
+                        " and payload" if m.payload_kg is not None else "",
                         "; cross-validation holds out a pose's rows together" if name == "identification" else "")
         return m
 

@@ -20,6 +20,7 @@ a test set. The stages, each in its module:
 
 from __future__ import annotations
 
+import logging
 import time
 from typing import Callable
 
@@ -31,6 +32,8 @@ from .prepare import prepare
 from .results import RunResult
 from .scoring import Outputs, verify_compensation
 from .selection import choose_best
+
+log = logging.getLogger(__name__)
 
 
 def run(config: RunConfig, progress: Callable[[int, int, str], None] | None = None) -> RunResult:
@@ -53,5 +56,8 @@ def run(config: RunConfig, progress: Callable[[int, int, str], None] | None = No
     own = config.data_options.own_frame
     uncompensated = {name: outputs.evaluate(m, np.zeros_like(outputs.errors(m)), name in own)
                      for name, m in data.items()}
-    return RunResult(config, data, robot, uncompensated, results, choose_best(results, config.rank_by),
-                     time.perf_counter() - start, registrations=prepared.registrations, plan=prepared.plan)
+    result = RunResult(config, data, robot, uncompensated, results, choose_best(results, config.rank_by),
+                       time.perf_counter() - start, registrations=prepared.registrations, plan=prepared.plan)
+    for caveat in result.best_caveats:
+        log.warning("%s", caveat)
+    return result

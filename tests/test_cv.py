@@ -311,3 +311,15 @@ def test_kinematic_models_on_a_handful_of_poses_are_fitted_and_reported(tmp_path
     metrics = __import__("json").loads((tmp_path / "reports" / "small" / "metrics.json").read_text())
     model = next(iter(metrics["models"].values()))
     assert np.isfinite(model["cv"]["rms_3d"]) and (tmp_path / "reports" / "small" / "index.html").is_file()
+
+
+def test_printed_tables_show_whole_model_names(tmp_path):
+    from partcal.study.tables import results_table
+
+    long = ["DH + compliance + harmonics, wrist", "DH + compliance + harmonics, elbow"]
+    cfg = config(tmp_path, "".join(f"  - {{name: {name!r}, kind: kinematic, compliance: [2]}}\n" for name in long),
+                 ident=first_poses(tmp_path, 30))
+    table = results_table(run(cfg))
+    for name in long:
+        row = next(line for line in table.splitlines() if line.startswith(name))
+        assert row[len(name):].lstrip("*")[0] == " "      # the name whole (a mark of notes), a gap, the numbers

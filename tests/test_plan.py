@@ -364,11 +364,16 @@ def test_a_joint_list_that_is_not_numbers_gets_one_line_and_exit_2(tmp_path):
      "is the candidate file"),
     (["plan", "motoman_sk120", "-n", "10", "-o", "{tmp}/p.csv", "--candidates", "{tmp}/outside.csv"],
      r"outside.csv: data row 2 .* outside the joint limits"),
+    (["plan", "motoman_sk120", "--evaluate", "{tmp}/outside.csv"], r"outside.csv: data row 2 .* outside the joint limits"),
+    (["plan", "motoman_sk120", "--evaluate", "{tmp}/rad.csv"],
+     r"rad.csv:data row 1: every joint angle of the 6 poses lies within ±2.\d+ degrees: they look like radians"),
 ])
 def test_bad_plan_input_gets_one_line_and_exit_2(tmp_path, args, message):
     (tmp_path / "bad.csv").write_text("q1,q2,q3,q4,q5\n0,0,0,0,0\n")
     (tmp_path / "cand.csv").write_text("q1,q2,q3,q4,q5,q6\n0,-125,-165,0,0,0\n")
     (tmp_path / "outside.csv").write_text("q1,q2,q3,q4,q5,q6\n0,-125,-165,0,0,0\n0,-125,-100,0,0,0\n")
+    (tmp_path / "rad.csv").write_text("q1,q2,q3,q4,q5,q6\n" + "".join(f"0.{k},-2.{k},-2.8,0.{k},0.1,0.{k}\n"
+                                                                      for k in range(1, 7)))
     before = (tmp_path / "cand.csv").read_text()
     code, stdout, err = cli(*[a.format(tmp=tmp_path) for a in args])
     assert code == 2 and err.count("\n") == 1 and err.startswith("partcal: error: "), err

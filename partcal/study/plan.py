@@ -25,6 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .._io import atomic_write
+from ..data.plausibility import check_joint_units
 from ..errors import DataError, PartcalError
 from ..models import design
 from ..models.base import seed_from
@@ -65,8 +66,10 @@ def candidates_within_limits(robot: Robot, n: int, rng: np.random.Generator, box
 
 
 def check_candidates(robot: Robot, q_deg: NDArray[np.float64], source: str) -> NDArray[np.float64]:
-    """The user's candidate poses ``(n, N)`` deg, refused when one is outside the limits or repeated."""
+    """The user's poses ``(n, N)`` deg (candidates, or a set to evaluate), refused when they look like radians
+    (:func:`~partcal.data.plausibility.check_joint_units`) or one is outside the limits."""
     q_deg = robot.check_joints(q_deg, source)
+    check_joint_units(source, ["data row 1"], q_deg)
     bad = np.flatnonzero(~robot.within_limits(q_deg))
     if bad.size:
         k = int(bad[0])

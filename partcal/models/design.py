@@ -65,10 +65,11 @@ class PlannedModel:
     joint_harmonics : int or tuple of int
         Harmonics of every joint's transmission error, or one count per joint.
     payload_kg : float
-        The payload the measurement carries at the tool point (kg). At 0 a
-        compliance parameter has no column (only the lumped masses' sags
-        are planned for); at one payload it is the tool point's share of the
-        sags, and only data at a second payload separate it from the masses.
+        The payload the measurement carries at the tool point (kg). A plan is
+        at one payload, and at one payload, zero or not, a compliance is not
+        identifiable (it is the tool point's share of the sags, which the
+        lumped masses' sags carry; only data at a second payload separate it):
+        only the sags are planned for, whatever the payload.
 
     Several targets (one tool offset per target) will be one more field here.
     """
@@ -150,7 +151,9 @@ def model_jacobian(robot: Robot, q_deg: NDArray[np.float64], model: PlannedModel
     if errors is None:
         jac = identification_jacobian(robot, q_deg, values)[1]
     else:
-        jac = kinematic_jacobian(robot, errors, q_deg, values, np.full(len(q_deg), float(model.payload_kg)))[1]
+        # one payload: a compliance is a sag at the tool point like the masses' ones, not identifiable (its column
+        # held at zero, as the identification does: KinematicModel.fit); only data at two payloads separate it
+        jac = kinematic_jacobian(robot, errors, q_deg, values, np.zeros(len(q_deg)))[1]
     wanted = np.array([(model.tool or not n.startswith("tool.")) and (model.base or not n.startswith("base."))
                        for n, _ in names])
     return jac, wanted

@@ -225,8 +225,8 @@ def evaluate_poses(robot: Robot, q_deg, *, space: Workspace | None = None, noise
         uncertainty = design.position_std(space.blocks[:, :, own], cov)
     missing = tuple(label[i] for i in np.setdiff1d(space.structural, own))
     never = tuple(label[i] for i in np.setdiff1d(np.flatnonzero(wanted), space.structural))
-    note = ("a compliance has no column without a payload (payload_kg): the sags carry the gravity"
-            if model.compliance and model.payload_kg == 0 else "")
+    note = (f"a compliance is not identifiable from data at one payload ({model.payload_kg:g} kg): the sags carry "
+            "the gravity; data at a second payload identify it" if model.compliance else "")
     return Evaluation(ind, tuple(label), tuple(u for _, u in names), tuple(label[i] for i in own), missing, never, std,
                       float(noise_mm), float(np.sqrt(np.mean(uncertainty**2))), float(np.percentile(uncertainty, 95)),
                       float(uncertainty.max()), note)

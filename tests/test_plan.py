@@ -9,7 +9,7 @@ from conftest import ROOT
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from partcal.data.measurements import read_columns
+from partcal.data.measurements import read_columns, read_measurements
 from partcal.models import design
 from partcal.models.identification import parameter_names
 from partcal.robot import load_robot
@@ -397,3 +397,11 @@ def test_run_prints_and_reports_the_identification_sets_indices(tmp_path):
     assert "theta[7]" in line or "d[7]" in line          # the paper's wrist stays at q4 = q5 = 0
     html = (tmp_path / "reports" / "c" / "index.html").read_text()
     assert 'id="design-indices"' in html and f'data-o1="{expected.indices.o1}"' in html
+
+
+def test_evaluate_reads_a_wrist_held_with_encoder_jitter_as_held(sk120):
+    ident = read_measurements(ROOT / "data" / "sk120" / "identification.csv")
+    jittered = ident.q_deg.copy()
+    jittered[:, 3:5] += np.random.default_rng(0).normal(0.0, 0.001, (len(jittered), 2))
+    exact, noisy = (plan.evaluate_poses(sk120, q) for q in (ident.q_deg, jittered))
+    assert len(noisy.identified) == len(exact.identified) == 19 and noisy.missing == exact.missing

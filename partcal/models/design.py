@@ -44,7 +44,7 @@ from ..errors import PartcalError
 from ..robot.kinematics import Robot
 from .base import seed_from
 from .joint_errors import GRAVITY_M_S2, JointErrors, compliance_problem, harmonics_problem
-from .identification import identification_jacobian, nominal_values, parameter_names, stacked
+from .identification import held_still, identification_jacobian, nominal_values, parameter_names, stacked
 from .identification import model_jacobian as kinematic_jacobian
 from .targets import Extra
 
@@ -148,6 +148,7 @@ def model_jacobian(robot: Robot, q_deg: NDArray[np.float64], model: PlannedModel
     """
     names, values = model_parameters(robot, model)
     errors = model.joint_errors(robot)
+    q_deg = held_still(np.asarray(q_deg, dtype=float))       # a held joint's jitter identifies nothing (as in a fit)
     if errors is None:
         jac = identification_jacobian(robot, q_deg, values)[1]
     else:

@@ -473,7 +473,8 @@ def _cmd_plan(args) -> int:
                                 joint_harmonics=_one_or_many(args.joint_harmonics or (0,)),
                                 payload_kg=args.payload_kg, parametrization=args.parametrization).check(robot)
     options = {"model": model}
-    evaluated = read_columns(args.evaluate, [joint_columns(robot.n_joints)], fmt=_format(args))[1] \
+    evaluated = plan.check_candidates(robot, read_columns(args.evaluate, [joint_columns(robot.n_joints)],
+                                                          fmt=_format(args))[1], str(args.evaluate)) \
         if args.evaluate else None
     if args.candidates:
         q = plan.check_candidates(robot, read_columns(args.candidates, [joint_columns(robot.n_joints)],

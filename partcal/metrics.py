@@ -45,17 +45,44 @@ def orientation_summary(errors_mrad: NDArray[np.float64]) -> dict:
     return {"rms": s["rms"], "rms_angle": s["rms_3d"], "max_angle": s["max_3d"], "p95_angle": s["p95_3d"]}
 
 
-def pose_groups(q_deg: NDArray[np.float64], decimals: int = 6) -> NDArray[np.intp]:
-    """Group label of each row: rows with the same joint angles (to ``10**-decimals`` deg) are one pose.
+HELD_TOLERANCE_DEG = 0.01
+"""Joint angles this close (degrees) are the same: a repeated pose, or a joint held still whose encoder reads
+back a little noise (a few thousandths of a degree). Distinct poses of a calibration differ by far more."""
 
-    Labels count from 0 in the order poses first appear, so a file without
-    repeats gets ``0, 1, 2, ...``.
+
+def pose_groups(q_deg: NDArray[np.float64], tolerance_deg: float = HELD_TOLERANCE_DEG) -> NDArray[np.intp]:
+    """Group label of each row: rows whose joint angles all agree to ``tolerance_deg`` are one pose.
+
+    Two rows are one pose when every column differs by at most
+    ``tolerance_deg`` (default :data:`HELD_TOLERANCE_DEG`); a pose is every
+    row linked to another this way (single linkage). Labels count from 0 in
+    the order poses first appear, so a file without repeats gets ``0, 1, 2, ...``.
 
     >>> pose_groups(np.array([[0.0, 1.0], [5.0, 0.0], [0.0, 1.0]])).tolist()
     [0, 1, 0]
+    >>> pose_groups(np.array([[0.0, 1.0], [5.0, 0.0], [0.002, 0.999]])).tolist()     # read back with jitter
+    [0, 1, 0]
     """
-    q = np.round(np.asarray(q_deg, dtype=float), decimals).reshape(len(q_deg), -1)
-    return _first_appearance(np.unique(q, axis=0, return_index=True, return_inverse=True))
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
+    q = np.asarray(q_deg, dtype=float).reshape(len(q_deg), -1)
+    pairs = cKDTree(q).query_pairs(r=tolerance_deg, p=np.inf, output_type="ndarray") if len(q) > 1 else \
+        np.zeros((0, 2), dtype=np.intp)
+    link = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(q), len(q)))
+    labels = connected_components(link, directed=False)[1]
+    return _first_appearance(np.unique(labels, return_index=True, return_inverse=True))
+
+
+def held_joints(q_deg: NDArray[np.float64], tolerance_deg: float = HELD_TOLERANCE_DEG) -> NDArray[np.bool_]:
+    """Which joints never move (their readings span at most ``tolerance_deg``), shape (N,).
+
+    >>> held_joints(np.array([[10.0, 0.0], [20.0, 0.003], [30.0, -0.002]])).tolist()
+    [False, True]
+    """
+    q = np.asarray(q_deg, dtype=float)
+    return np.ptp(q, axis=0) <= tolerance_deg
 
 
 def labels_as_groups(labels) -> NDArray[np.intp]:

@@ -5,13 +5,13 @@ import dataclasses
 
 import numpy as np
 import pytest
-from conftest import ROOT
+from conftest import ROOT, partcal_cli
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from sklearn.gaussian_process import GaussianProcessRegressor
 from sklearn.gaussian_process.kernels import RBF, ConstantKernel, Matern, WhiteKernel
 
-from partcal import ConfigError, GaussianProcessErrorModel, read_measurements
+from partcal import ConfigError, GaussianProcessErrorModel, load_robot, read_measurements
 from partcal.data.measurements import Measurements, write_measurements
 from partcal.metrics import pooled_rms, pose_groups, repeat_scatter_mm, rms_standard_error
 from partcal.study.selection import choose_simplest, fold_rule, grouped_splits, held_out_residuals
@@ -38,6 +38,33 @@ def test_poses_are_grouped_by_identical_joints_in_order_of_appearance():
     q = np.array([[0.0, 1.0], [2.0, 0.0], [0.0, 1.0], [2.0, 0.0], [5.0, 5.0]])
     assert pose_groups(q).tolist() == [0, 1, 0, 1, 2]
     assert pose_groups(q + np.array([[1e-9, 0]] * 5)).tolist() == [0, 1, 0, 1, 2]     # below a micro-degree
+
+
+def jittered_repeats(seed: int, jitter_deg: float = 0.001) -> Measurements:
+    """The 85 SK120 identification poses and 20 of them again, q4 and q5 (held at 0) read back with jitter."""
+    rng = np.random.default_rng(seed)
+    rows = np.r_[np.arange(85), rng.choice(85, 20, replace=False)]
+    q = IDENT.q_deg[rows].copy()
+    q[:, 3:5] += rng.normal(0.0, jitter_deg, (len(rows), 2))
+    return Measurements(q, load_robot("motoman_sk120").positions(q), IDENT.measured_mm[rows], name="identification")
+
+
+@given(seed=st.integers(0, 10_000), jitter=st.floats(0.0, 0.001))
+@settings(max_examples=40, deadline=None)
+def test_repeats_read_back_with_encoder_jitter_are_one_pose(seed, jitter):
+    m = jittered_repeats(seed, jitter)
+    rows = np.r_[np.arange(85), np.random.default_rng(seed).choice(85, 20, replace=False)]
+    assert pose_groups(m.q_deg).tolist() == rows.tolist()          # each repeat joins its pose, nothing else joins
+    apart = m.q_deg.copy()
+    apart[85:, 0] += 0.05                                            # five times the stated tolerance: new poses
+    assert pose_groups(apart).max() + 1 == 105
+
+
+def test_run_check_counts_jittered_repeats_as_poses(tmp_path):
+    write_measurements(jittered_repeats(0), tmp_path / "jit.csv")
+    cfg = config(tmp_path, "  - {name: DH, kind: kinematic}", ident=tmp_path / "jit.csv")
+    data, _, _ = load_datasets(cfg)
+    assert "over 85 poses" in check_run(cfg, data).cv.describe()
 
 
 @given(n_groups=st.integers(2, 40), repeats=st.integers(1, 4), folds=st.integers(2, 12), seed=st.integers(0, 99))
@@ -269,3 +296,30 @@ def test_partitioned_and_hybrid_gps_freeze_their_shared_search():
         inner = frozen.fit(q[:60], y[:60])
         regions = inner.residual_.models_ if model is hybrid else inner.models_
         assert all(np.array_equal(r.length_scale_, gp.fixed_kernel["length_scale"]) for r in regions)
+
+
+@pytest.mark.parametrize("n, models", [
+    (5, "  - {name: DH, kind: kinematic}"),
+    (10, "  - {name: DH + compliance + harmonics, kind: kinematic, compliance: [2, 3], joint_harmonics: 2}"),
+])
+def test_kinematic_models_on_a_handful_of_poses_are_fitted_and_reported(tmp_path, n, models):
+    config(tmp_path, models, ident=first_poses(tmp_path, n))
+    run_yaml = tmp_path / "configs" / "run.yaml"
+    assert partcal_cli("run", "--check", str(run_yaml)).returncode == 0
+    res = partcal_cli("run", "-q", str(run_yaml))
+    assert res.returncode == 0 and "internal error" not in res.stderr, res.stderr
+    metrics = __import__("json").loads((tmp_path / "reports" / "small" / "metrics.json").read_text())
+    model = next(iter(metrics["models"].values()))
+    assert np.isfinite(model["cv"]["rms_3d"]) and (tmp_path / "reports" / "small" / "index.html").is_file()
+
+
+def test_printed_tables_show_whole_model_names(tmp_path):
+    from partcal.study.tables import results_table
+
+    long = ["DH + compliance + harmonics, wrist", "DH + compliance + harmonics, elbow"]
+    cfg = config(tmp_path, "".join(f"  - {{name: {name!r}, kind: kinematic, compliance: [2]}}\n" for name in long),
+                 ident=first_poses(tmp_path, 30))
+    table = results_table(run(cfg))
+    for name in long:
+        row = next(line for line in table.splitlines() if line.startswith(name))
+        assert row[len(name):].lstrip("*")[0] == " "      # the name whole (a mark of notes), a gap, the numbers

@@ -257,7 +257,7 @@ def test_the_ipa_orientation_columns_read_through_a_format(tmp_path):
 
 def test_orientation_in_radians_and_target_columns_in_metres(tmp_path):
     path = write(tmp_path, "q1,x_nom,y_nom,z_nom,x_meas,y_meas,z_meas,tx,ty,tz,rx_nom,ry_nom,rz_nom,rx,ry,rz\n"
-                           f"1,0,0,0,0.001,0,0,0.1,0.2,0.3,0,0,0,{math.pi / 2},{-math.pi / 4},0.1\n")
+                           f"1,0,0,0,0.001,0,0,0.1,0.2,0.3,{math.pi / 2},{-math.pi / 4},0.1,{math.pi / 2},{-math.pi / 4},0.1\n")
     fmt = MeasurementFormat(length_unit="m", orientation_unit="rad", columns={
         "x_meas@B": "tx", "y_meas@B": "ty", "z_meas@B": "tz", "rx_meas": "rx", "ry_meas": "ry", "rz_meas": "rz"})
     m = read_measurements(path, fmt=fmt)

@@ -266,3 +266,50 @@ def test_regions_sharing_hyperparameters_count_their_one_mean_once():
         assert model.effective_parameters() == pytest.approx(traces + means, rel=1e-12)
         same = np.array_equal(model.models_[0].y_mean_, model.models_[1].y_mean_)
         assert same == (hyper == "shared")
+
+
+def smooth_errors(seed: int):
+    """30 to 120 points in a cube with smooth errors (a sine of a random direction per axis) and noise, and 400
+    fresh points of the same function (noise-free)."""
+    rng = np.random.default_rng(seed)
+    n, d = int(rng.integers(30, 120)), int(rng.integers(1, 4))
+    X = rng.uniform(-1, 1, (n, d))
+    W = rng.normal(0, 1.5, (d, 3))
+    y = np.sin(X @ W) + rng.normal(0, rng.choice([0.05, 0.2, 0.5]), (n, 3))
+    fresh = rng.uniform(-1, 1, (400, d))
+    return X, y, fresh, np.sin(fresh @ W)
+
+
+@pytest.mark.parametrize("seed", [15, 31, 57])
+def test_the_search_escapes_the_short_length_scale_optimum_of_the_default_start(seed):
+    X, y, fresh, truth = smooth_errors(seed)
+    gp = GaussianProcessErrorModel(inputs="cartesian", restarts=0).fit(X, y)
+    Z = gp.input_map_.transform(X)
+    reference = GaussianProcessRegressor(gp._kernel(Z.shape[1]), normalize_y=True, n_restarts_optimizer=0).fit(Z, y)
+    assert reference.kernel_.k1.k2.length_scale.max() < 0.05          # scikit-learn: a white-noise fit
+    assert gp.log_marginal_likelihood_ > reference.log_marginal_likelihood_value_ + 10       # a better optimum
+    left = np.sqrt(np.mean(np.sum((truth - gp.predict(fresh)) ** 2, axis=1)))
+    left_reference = np.sqrt(np.mean(np.sum((truth - reference.predict(gp.input_map_.transform(fresh))) ** 2, axis=1)))
+    assert left < 0.8 * left_reference
+
+
+def test_a_cv_fold_whose_gp_found_another_optimum_is_noted(caplog):
+    from partcal.study.fitting import _note_other_optima
+
+    X, y, _, _ = smooth_errors(31)
+    final = GaussianProcessErrorModel(inputs="cartesian", restarts=0).fit(X, y)
+    Z = final.input_map_.transform(X)
+    poor = GaussianProcessRegressor(final._kernel(Z.shape[1]), normalize_y=True, n_restarts_optimizer=0).fit(Z, y)
+    params = poor.kernel_.get_params()
+    fold = GaussianProcessErrorModel(inputs="cartesian", fixed_kernel={
+        "input_map": final.input_map_, "amplitude": params["k1__k1__constant_value"],
+        "length_scale": params["k1__k2__length_scale"], "noise": params["k2__noise_level"]}).fit(X, y)
+    assert final.optimum_gap(final) is None
+    ratio = np.exp(np.mean(np.log(fold.length_scale_ / final.length_scale_)))
+    assert fold.optimum_gap(final) == (f"noise variance {fold.noise_:.3g} against {final.noise_:.3g}, length scales "
+                                       f"x{ratio:.3g} (geometric mean)")
+    fold.set_params(fixed_kernel=None)              # as a fold's own search would have left it
+    with caplog.at_level("WARNING", logger="partcal.study.fitting"):
+        _note_other_optima([final, fold], final)
+    assert "cross-validation fold 2 of 2: its Gaussian process found another optimum than the final fit's" in caplog.text
+    assert "fold 1 of 2" not in caplog.text

@@ -451,3 +451,31 @@ def test_a_run_reads_the_payload_of_each_pose_from_its_file(payload_files, capsy
                                                     for line in text) + "\n")
     blind = next(r for r in run(load_config(payload_files / "run.yaml")).models if r.spec.name == "DH + C")
     assert blind.metrics["half_load"]["rms_3d"] > 0.1
+
+
+def test_a_compliance_fitted_at_one_nonzero_payload_is_unidentifiable_and_predicted_there(sk120, tmp_path):
+    """5 kg on every pose: compliance x 5 kg is a sag at the tool point like the masses' ones, so the
+    compliance is reported unidentifiable (as at 0 kg), the model predicts at 5 kg when given no payload,
+    the same at any payload, and warns about a payload it never saw."""
+    from partcal import load_predictor
+    from partcal.metrics import ExtrapolationWarning
+    from partcal.study.persist import save_model
+
+    nominal = sk120.replace(tool_mm=np.zeros(3))
+    q = sk120_poses(sk120, 120, 14)
+    params = {"compliance": [2, 3], "joint_harmonics": HARMONICS}
+    vr = virtual(nominal, geometric_free(nominal, q, **params), 5.0, gears=GEARS[:3])
+    model = KinematicModel(robot=nominal, **params).fit(q, vr.true_positions(q) - nominal.positions(q),
+                                                         payload_kg=np.full(len(q), 5.0))
+    assert {"compliance[2]", "compliance[3]"} <= set(model.identification_.unidentifiable())
+    assert model.fit_notes()[0].startswith("compliance[2], compliance[3] not identifiable")
+    other = sk120_poses(sk120, 20, 15)
+    at_five = model.predict(other, payload_kg=5.0)
+    np.testing.assert_array_equal(model.predict(other), at_five)
+    for kg in (0.0, 40.0):
+        with pytest.warns(ExtrapolationWarning, match=rf"payload {kg:g} to {kg:g} kg lies outside the payloads the "
+                                                      r"model was fitted at \(5 kg\): from one payload its compliance"):
+            np.testing.assert_allclose(model.predict(other, payload_kg=kg), at_five, rtol=0, atol=1e-12)
+    save_model(model, tmp_path / "m.json", name="DH + compliance")
+    predictor = load_predictor(tmp_path / "m.json")
+    np.testing.assert_array_equal(predictor.predict(joints=other), at_five)

@@ -245,3 +245,24 @@ def test_complete_model_files_round_trip_and_refuse_what_it_cannot_fit(tmp_path)
     assert np.array_equal(loaded.predict(q), model.predict(q))
     with pytest.raises(PartcalError, match="parametrization.*one of"):
         KinematicModel(robot=nominal, parametrization="hayati").fit(q, truth(q))
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_joints_held_still_but_read_back_with_jitter_identify_as_held_ones(sk120, paper_data, seed, caplog):
+    """q4, q5 never move (the paper's poses) but read back with 0.001 degrees of noise: the identification is
+    that of the same data with q4 = q5 = 0 exactly (rank, fit), and nothing is identified from the jitter."""
+    rng = np.random.default_rng(seed)
+    rows = np.r_[np.arange(85), rng.choice(85, 20, replace=False)]
+    exact = paper_data.q_deg[rows]
+    jittered = exact.copy()
+    jittered[:, 3:5] += rng.normal(0.0, 0.001, (len(rows), 2))
+    measured = paper_data.measured_mm[rows] + rng.normal(0.0, 0.02, (len(rows), 3))
+    held = KinematicModel(robot=sk120).fit(exact, measured - sk120.positions(exact))
+    with caplog.at_level("WARNING", logger="partcal.models.identification"):
+        model = KinematicModel(robot=sk120).fit(jittered, measured - sk120.positions(jittered))
+    assert model.identification_.rank == held.identification_.rank == 19
+    assert "kept nominal" not in caplog.text                  # no wild value from the jitter had to be pruned
+    left = measured - sk120.positions(jittered) - model.predict(jittered)
+    left_held = measured - sk120.positions(exact) - held.predict(exact)
+    assert np.sqrt(np.mean(np.sum(left**2, axis=1))) == pytest.approx(np.sqrt(np.mean(np.sum(left_held**2, axis=1))),
+                                                                      abs=0.005)

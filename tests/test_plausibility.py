@@ -1,12 +1,16 @@
 """Physical plausibility at the boundary: data no robot can have produced are refused before any fit."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 from conftest import ROOT, SHARED, partcal_cli
+from scipy.spatial.transform import Rotation
 
 from partcal import load_robot, read_measurements
+from partcal.data.formats import MeasurementFormat, RowSelection
 from partcal.data.plausibility import Plausibility
-from partcal.data.registration import register_tracker
+from partcal.data.registration import register_measurements, register_tracker
 from partcal.errors import DataError, PartcalError
 
 DATA = ROOT / "data" / "sk120"
@@ -125,5 +129,171 @@ def test_the_ur10_config_with_a_unit_or_a_column_wrong_is_refused_by_check(tmp_p
     if not UR10.is_file():
         pytest.skip("the IPA UR10 data set is not beside the repository")
     res = partcal_cli("run", "--check", str(ur10_config(tmp_path, **change)))
-    assert res.returncode == 2 and res.stderr.count("\n") == 1, res.stderr
+    assert res.returncode == 2 and res.stderr.count("partcal: error:") == 1 and "Traceback" not in res.stderr, res.stderr
     assert __import__("re").search(message, res.stderr), res.stderr
+
+
+# ---------------------------------------------------------------------- the measured orientation
+
+ORIENTATION_HEADER = "q1,q2,q3,q4,q5,q6,x_meas,y_meas,z_meas"
+
+
+def pose_data(seed, n=30):
+    """A UR10 measured in its base frame: joint angles, positions (mm) and the flange's true rotations, each
+    turned by ~0.05 degrees and moved by ~0.05 mm."""
+    rng = np.random.default_rng(seed)
+    ur10 = load_robot("universal_robots_ur10")
+    q = rng.uniform(-150, 150, (n, 6))
+    frames = ur10.forward(q)
+    turned = Rotation.from_rotvec(rng.normal(0, np.radians(0.05), (n, 3))) * Rotation.from_matrix(frames[:, :3, :3])
+    return q, ur10.positions(q) + rng.normal(0, 0.05, (n, 3)), turned
+
+
+def write_pose_csv(path, q, measured_mm, rx_meas, rx_nom=None):
+    blocks, header = [q, measured_mm, rx_meas], ORIENTATION_HEADER + ",rx_meas,ry_meas,rz_meas"
+    if rx_nom is not None:
+        blocks.append(rx_nom)
+        header += ",rx_nom,ry_nom,rz_nom"
+    path.write_text(header + "\n" + "".join(",".join(f"{v:.6f}" for v in r) + "\n" for r in np.hstack(blocks)))
+    return path
+
+
+def turn_from_fk_deg(q, angles_deg):
+    """Independent of partcal: the angle from the UR10's flange to the rotations the contract reads, degrees."""
+    fk = Rotation.from_matrix(load_robot("universal_robots_ur10").forward(q)[:, :3, :3])
+    return np.degrees((fk.inv() * Rotation.from_euler("XYZ", angles_deg, degrees=True)).magnitude())
+
+
+MISTAKES = {       # a wrong way to write the true rotations, and the words that must name it
+    "radians": (lambda r: r.as_euler("XYZ"), "the angles look like radians"),
+    "rx and rz swapped": (lambda r: r.as_euler("XYZ", degrees=True)[:, ::-1], "columns rx_meas and rz_meas look swapped"),
+    "extrinsic xyz": (lambda r: r.as_euler("xyz", degrees=True), "extrinsic \\(fixed axes\\) xyz Euler angles"),
+    "intrinsic ZYX": (lambda r: r.as_euler("ZYX", degrees=True), "intrinsic ZYX Euler angles"),
+    "intrinsic ZXY": (lambda r: r.as_euler("ZXY", degrees=True), "intrinsic ZXY Euler angles"),
+}
+
+
+@pytest.mark.parametrize("mistake", list(MISTAKES))
+def test_a_measured_orientation_written_another_way_is_refused_with_its_cause(tmp_path, mistake):
+    q, p_mm, turned = pose_data(0)
+    write, words = MISTAKES[mistake]
+    right = write_pose_csv(tmp_path / "right.csv", q, p_mm, turned.as_euler("XYZ", degrees=True))
+    assert np.abs(read_measurements(right, "universal_robots_ur10").orientation_errors_deg).max() < 0.5
+    wrong = write(turned)
+    turn = turn_from_fk_deg(q, wrong)
+    path = write_pose_csv(tmp_path / "wrong.csv", q, p_mm, wrong)
+    with pytest.raises(DataError, match=rf"wrong.csv:{int(np.argmax(turn)) + 2}: the orientation error measured - "
+                                        rf"nominal is {turn.max():.4g} degrees .*"
+                                        rf"{np.count_nonzero(turn > 5)} of 30 poses beyond 5 degrees.*{words}"):
+        read_measurements(path, "universal_robots_ur10")
+
+
+def test_nominal_orientation_columns_are_compared_with_forward_kinematics(tmp_path):
+    q, p_mm, turned = pose_data(1)
+    fk = Rotation.from_matrix(load_robot("universal_robots_ur10").forward(q)[:, :3, :3]).as_euler("XYZ", degrees=True)
+    measured = turned.as_euler("XYZ", degrees=True)
+    assert len(read_measurements(write_pose_csv(tmp_path / "ok.csv", q, p_mm, measured, fk), "universal_robots_ur10"))
+    gap = turn_from_fk_deg(q, fk[:, ::-1])
+    path = write_pose_csv(tmp_path / "nom.csv", q, p_mm, measured, fk[:, ::-1])
+    with pytest.raises(DataError, match=rf"nom.csv:{int(np.argmax(gap)) + 2}: rx_nom, ry_nom, rz_nom lie "
+                                        rf"{gap.max():.4g} degrees from robot universal_robots_ur10's forward "
+                                        r"kinematics.*columns rx_nom and rz_nom look swapped"):
+        read_measurements(path, "universal_robots_ur10")
+
+
+def test_fuzz_orientation_units_and_orders_are_refused_whenever_they_matter(tmp_path):
+    for seed in range(25):
+        rng = np.random.default_rng(100 + seed)
+        n = int(rng.integers(5, 40))
+        q, p_mm, turned = pose_data(seed + 100, n)
+        mistake = list(MISTAKES)[seed % len(MISTAKES)]
+        write, words = MISTAKES[mistake]
+        wrong = write(turned)
+        path = write_pose_csv(tmp_path / f"f{seed}.csv", q, p_mm, wrong)
+        if turn_from_fk_deg(q, wrong).max() <= 5:            # no evidence: the mistake does not matter here
+            continue
+        with pytest.raises(DataError, match=words):
+            read_measurements(path, "universal_robots_ur10")
+
+
+UR10_POSE = ROOT / "configs" / "ur10_ipa_pose.yaml"
+
+
+@pytest.mark.parametrize("change, message", [
+    ({"rx_meas: measurement_rx, ry_meas: measurement_ry, rz_meas: measurement_rz":
+      "rx_meas: measurement_rz, ry_meas: measurement_ry, rz_meas: measurement_rx"},
+     r"the tracker registration's orientation residual is .* degrees .*columns rx_meas and rz_meas look swapped"),
+])
+def test_the_ur10_tmac_angles_read_wrong_are_refused_by_check(tmp_path, change, message):
+    if not UR10.is_file():
+        pytest.skip("the IPA UR10 data set is not beside the repository")
+    text = UR10_POSE.read_text().replace('rows: "1-1000"', 'rows: "1-150"')
+    for old, new in change.items():
+        assert old in text
+        text = text.replace(old, new)
+    config = tmp_path / "pose.yaml"
+    config.write_text(text.replace("../../shared/datasets/", f"{SHARED}/datasets/"))
+    res = partcal_cli("run", "--check", str(config))
+    assert res.returncode == 2 and res.stderr.count("partcal: error:") == 1 and "Traceback" not in res.stderr, res.stderr
+    assert __import__("re").search(message, res.stderr), res.stderr
+
+
+def test_the_ur10_tmac_angles_in_radians_are_refused_by_the_registration():
+    if not UR10.is_file():
+        pytest.skip("the IPA UR10 data set is not beside the repository")
+    names = dict(q1="shoulder_pan_joint", q2="shoulder_lift_joint", q3="elbow_joint", q4="wrist_1_joint",
+                 q5="wrist_2_joint", q6="wrist_3_joint", x_meas="measurement_x", y_meas="measurement_y",
+                 z_meas="measurement_z", rx_meas="measurement_rx", ry_meas="measurement_ry", rz_meas="measurement_rz")
+    fmt = MeasurementFormat(delimiter=";", decimal=",", columns=names, joint_unit="rad")
+    ur10 = load_robot("universal_robots_ur10")
+    m = read_measurements(UR10, ur10, fmt=fmt, frame="tracker", rows=RowSelection.parse("1-150"))
+    assert register_measurements(ur10, m, source="B").orientation_rms_deg < 0.2
+    in_radians = dataclasses.replace(m, measured_orientation_deg=np.radians(m.measured_orientation_deg))
+    with pytest.raises(DataError, match=r"B: pose \d+: the tracker registration's orientation residual is .* degrees "
+                                        r"\(RMS .*the angles look like radians .*reading them so leaves 0\.1\d* degrees"):
+        register_measurements(ur10, in_radians, source="B")
+
+
+# ---------------------------------------------------------------------- a mirror image at any size
+
+@pytest.mark.parametrize("n", [6, 12, 40, 85])
+@pytest.mark.parametrize("swap", [[1, 0, 2], [0, 2, 1], [2, 1, 0]])
+def test_a_mirror_image_is_refused_at_any_size(sk120, ident, n, swap):
+    rng = np.random.default_rng(n)
+    turn = Rotation.from_rotvec(rng.normal(0, 1.0, 3)).as_matrix()               # where the tracker stands
+    tracker = (ident.measured_mm[:n] - [3000.0, 500.0, 0.0]) @ turn               # base -> tracker frame
+    assert register_tracker(sk120, ident.q_deg[:n], tracker, source="src").rms_3d < 30
+    with pytest.raises(DataError, match=r"src: .*mirror image of the robot's"):
+        register_tracker(sk120, ident.q_deg[:n], tracker[:, swap], source="src")
+
+
+@pytest.mark.parametrize("rows", ["1-12", "1-30", "200-260", "2-300"])
+def test_the_ur10_with_x_and_y_swapped_is_refused_on_any_rows(rows):
+    """Series B's poses lie nearly in a plane: mirrored, they still register to 1.1 to 3.0 mm."""
+    if not UR10.is_file():
+        pytest.skip("the IPA UR10 data set is not beside the repository")
+    names = dict(q1="shoulder_pan_joint", q2="shoulder_lift_joint", q3="elbow_joint", q4="wrist_1_joint",
+                 q5="wrist_2_joint", q6="wrist_3_joint", x_meas="measurement_x", y_meas="measurement_y",
+                 z_meas="measurement_z")
+    ur10 = load_robot("universal_robots_ur10")
+    m = read_measurements(UR10, ur10, fmt=MeasurementFormat(delimiter=";", decimal=",", columns=names,
+                                                            joint_unit="rad"),
+                          frame="tracker", rows=RowSelection.parse(rows))
+    right = register_tracker(ur10, m.q_deg, m.measured_mm, source="B").rms_3d
+    with pytest.raises(DataError, match=rf"B: the measured positions are a mirror image of the robot's: the tracker "
+                                        rf"registration leaves .* mm RMS, the same points with one axis flipped "
+                                        rf"{right:.4g} mm"):
+        register_tracker(ur10, m.q_deg, m.measured_mm[:, [1, 0, 2]], source="B")
+
+
+def test_the_ur10_config_with_x_and_y_swapped_is_refused_by_check_on_299_rows(tmp_path):
+    if not UR10.is_file():
+        pytest.skip("the IPA UR10 data set is not beside the repository")
+    config = ur10_config(tmp_path, **{'rows: "1-1000"': 'rows: "2-300"', "x_meas: measurement_x,": "x_meas: measurement_y,",
+                                      "y_meas: measurement_y,": "y_meas: measurement_x,",
+                                      "    iso_cubes:": "    no_iso_cubes:", "      registration: own\n": ""})
+    text = config.read_text()
+    config.write_text(text[:text.index("    no_iso_cubes:")] + text[text.index("models:"):])
+    res = partcal_cli("run", "--check", str(config))
+    assert res.returncode == 2 and res.stderr.count("partcal: error:") == 1 and "Traceback" not in res.stderr
+    assert "the tracker registration leaves 3.036 mm RMS, the same points with one axis flipped 0.5567 mm" in res.stderr

@@ -10,6 +10,7 @@ import pytest
 from conftest import ROOT, partcal_cli
 
 from partcal import ConfigError, load_predictor, read_measurements
+from partcal.data.measurements import Measurements, write_measurements
 from partcal.metrics import summary
 from partcal.study.config import load_config
 from partcal.study.outputs import metrics_document, write_run
@@ -349,6 +350,24 @@ def test_rank_by_validation(tmp_path):
     assert choose_best(result.models, "cv") != result.best       # on this data the two rules disagree: the rule matters
     with pytest.raises(ConfigError, match=r"rank_by \(line 4\): 'validation' needs data.validation"):
         ranking_config(tmp_path, "rank_by: validation")
+
+
+def test_a_validation_set_that_repeats_identification_poses_is_refused_by_check(tmp_path):
+    ident = read_measurements(DATA / "identification.csv")
+    spiral = read_measurements(DATA / "test_spiral_xy.csv")
+    rows = [0, 1, 2]                                   # three identification poses, remeasured by the spiral's tracker
+    mixed = Measurements(np.vstack([spiral.q_deg[:40], ident.q_deg[rows] + 0.001]),
+                         np.vstack([spiral.nominal_mm[:40], ident.nominal_mm[rows]]),
+                         np.vstack([spiral.measured_mm[:40], ident.measured_mm[rows]]), name="validation")
+    write_measurements(mixed, tmp_path / "mixed.csv")
+    path = tmp_path / "configs" / "mixed.yaml"
+    path.parent.mkdir(exist_ok=True)
+    path.write_text(RANKING.replace("@RANK@", "rank_by: validation").replace(
+        "@VALIDATION@", f"validation: {tmp_path / 'mixed.csv'}"))
+    res = partcal_cli("run", "--check", str(path))
+    assert res.returncode == 2, res.stderr
+    assert "mixed.csv: 3 of 43 rows of the validation set measure poses of the identification set" in res.stderr
+    assert "the first: data row 41" in res.stderr
 
 
 def tracker_files(tmp_path, rot, t, names=("identification", "test_rectangle")):

@@ -45,7 +45,7 @@ from ..robot.kinematics import Robot, matrices_from_xyz_deg, xyz_deg_from_matric
 from .formats import MeasurementFormat, RowSelection
 from .pose_columns import (ORIENTATION_MEASURED, ORIENTATION_NOMINAL, PRIMARY, check_angles, checked_orientation,
                            checked_targets, orientation_columns, suffixed, target_columns)
-from .plausibility import Plausibility, check_measured
+from .plausibility import Plausibility, check_measured, check_orientation
 
 NOMINAL = ("x_nom", "y_nom", "z_nom")
 MEASURED = ("x_meas", "y_meas", "z_meas")
@@ -290,6 +290,9 @@ def read_measurements(path: str | Path, robot: str | Robot | None = None, *, nam
         orientation = block(ORIENTATION_MEASURED)
         nominal_orientation = (block(ORIENTATION_NOMINAL) if columns["rot_nom"]
                                else xyz_deg_from_matrices(model.forward(q)[:, :3, :3]))
+        if frame == "base":
+            check_orientation(str(path), [data[i][0] for i in keep], q, orientation, nominal_orientation, model,
+                              nominal_given=bool(columns["rot_nom"]), limits=plausibility or Plausibility())
     labels = groups = None
     if columns["set"] is not None:
         labels = tuple(data[i][1][columns["set"]].strip() for i in keep)

@@ -17,7 +17,16 @@ so the data are checked here, where they enter:
   (default 0.05) times the robot's reach (without a robot, the largest
   distance of a nominal position from the base origin, when at least five
   poses spread over 100 mm or more give one). Industrial robots err
-  by millimetres, rarely a few centimetres; 5% of a 1.3 m reach is 65 mm.
+  by millimetres, rarely a few centimetres; 5% of a 1.3 m reach is 65 mm;
+- **the measured orientation** (``rx_meas..``): a file's nominal orientation
+  (``rx_nom..``) must be the robot's forward kinematics to
+  ``nominal_orientation_tolerance_deg`` (default 0.01 degrees), and the turn
+  from nominal to measured (in a tracker's frame: the registration's
+  orientation residual, :func:`check_orientation_residuals`) must stay below
+  ``max_orientation_error_deg`` (default 5 degrees; robots err by tenths of
+  a degree: the IPA UR10 leaves 0.16 at most). The likely cause is found by
+  reading the angles each other way: radians, another order of Euler angles
+  (intrinsic or extrinsic), two of the columns swapped.
 
 Each refusal names the file, the worst row, the size of the mismatch and the
 likely cause (units, swapped columns, radians, a different robot), found by
@@ -32,9 +41,12 @@ from itertools import permutations
 import numpy as np
 from numpy.typing import NDArray
 
+from scipy.spatial.transform import Rotation
+
 from .._validation import check_params, real
 from ..errors import DataError
 from ..robot.frames import kabsch
+from ..robot.kinematics import matrices_from_xyz_deg
 
 _AXES = ("x", "y", "z")
 MIN_POSES = 5                 # fewer poses are no evidence of radians, nor (without a robot) of a workspace
@@ -53,13 +65,23 @@ class Plausibility:
     nominal_tolerance_mm : float
         How far the file's nominal positions may lie from the robot's forward
         kinematics, mm.
+    max_orientation_error_deg : float
+        The largest orientation error (and registration orientation residual)
+        accepted, degrees; in (0, 180].
+    nominal_orientation_tolerance_deg : float
+        How far the file's nominal orientation may lie from the robot's
+        forward kinematics, degrees.
     """
 
     max_error_of_reach: float = 0.05
     nominal_tolerance_mm: float = 0.01
+    max_orientation_error_deg: float = 5.0
+    nominal_orientation_tolerance_deg: float = 0.01
 
     rules = {"max_error_of_reach": real(0.0, 1.0, default=0.05, low_open=True),     # read by the config too
-             "nominal_tolerance_mm": real(0.0, default=0.01, low_open=True)}
+             "nominal_tolerance_mm": real(0.0, default=0.01, low_open=True),
+             "max_orientation_error_deg": real(0.0, 180.0, default=5.0, low_open=True),
+             "nominal_orientation_tolerance_deg": real(0.0, default=0.01, low_open=True)}
 
     def __post_init__(self):
         check_params("Plausibility", self.rules, (), {name: getattr(self, name) for name in self.rules})
@@ -188,6 +210,132 @@ def likely_cause(expected_mm, got_mm, q_deg=None, which: str = "measured", *, ro
     if robot:
         return f"is it robot {robot!r}? (the data of another robot, or another tool, look like this)"
     return "are the nominal and measured positions of the same poses, in the same frame (data.frame: tracker)?"
+
+
+def check_orientation(source: str, rows: list[int], q_deg: NDArray[np.float64], measured_deg, nominal_deg,
+                      robot=None, *, nominal_given: bool, limits: Plausibility = Plausibility()) -> None:
+    """Refuse a measured orientation (base frame) no robot can have, and nominal columns the robot does not give.
+
+    Parameters
+    ----------
+    source : str
+        The file, for messages.
+    rows : list of int
+        The file line of each pose, for messages.
+    q_deg : ndarray, shape (n, N)
+        Joint angles, degrees.
+    measured_deg, nominal_deg : ndarray, shape (n, 3)
+        Measured and nominal orientation, intrinsic XYZ angles, degrees.
+    robot : Robot, optional
+    nominal_given : bool
+        The nominal orientation came from the file (not from ``robot``).
+    """
+    nominal = matrices_from_xyz_deg(nominal_deg)
+    if robot is not None and nominal_given:
+        fk = robot.forward(q_deg)[:, :3, :3]
+        gap = _turn_deg(fk, nominal)
+        worst = int(np.argmax(gap))
+        tolerance = limits.nominal_orientation_tolerance_deg
+        if gap[worst] > tolerance:
+            raise DataError(
+                f"{source}:{rows[worst]}: rx_nom, ry_nom, rz_nom lie {gap[worst]:.4g} degrees from robot "
+                f"{robot.name}'s forward kinematics of the joint angles ({np.count_nonzero(gap > tolerance)} of "
+                f"{len(gap)} poses beyond {tolerance:g} degrees, data.checks.nominal_orientation_tolerance_deg): "
+                f"{orientation_cause(fk, nominal_deg, 'nom', robot=robot.name)}")
+    turn = _turn_deg(nominal, matrices_from_xyz_deg(measured_deg))
+    _refuse_turns([f"{source}:{r}" for r in rows], turn, "the orientation error measured - nominal", limits,
+                  lambda: orientation_cause(nominal, measured_deg, "meas"))
+
+
+def check_orientation_residuals(source: str, turn_deg: NDArray[np.float64], flange_rotations, measured_deg,
+                                frame_rotation, limits: Plausibility = Plausibility()) -> None:
+    """Refuse a tracker registration whose orientation residuals no robot has.
+
+    ``turn_deg`` (n,) are the residual angles, degrees; ``flange_rotations``
+    (n, 3, 3) the nominal flange's, ``measured_deg`` (n, 3) the probe's
+    angles in the tracker frame and ``frame_rotation`` (3, 3) the fitted
+    rotation tracker -> base, tried for the likely cause (the probe's turn
+    on the flange refitted for each reading of the angles).
+    """
+    _refuse_turns([f"{source}: pose {i + 1}" for i in range(len(turn_deg))], np.asarray(turn_deg, float),
+                  "the tracker registration's orientation residual", limits,
+                  lambda: orientation_cause(flange_rotations, measured_deg, "meas", frame_rotation=frame_rotation))
+
+
+def _refuse_turns(where: list[str], turn_deg: NDArray[np.float64], what: str, limits: Plausibility, cause) -> None:
+    """Refuse turns beyond ``limits.max_orientation_error_deg``; ``cause()`` gives the likely cause in words."""
+    limit = limits.max_orientation_error_deg
+    worst = int(np.argmax(turn_deg))
+    if turn_deg[worst] > limit:
+        raise DataError(
+            f"{where[worst]}: {what} is {turn_deg[worst]:.4g} degrees (RMS {np.sqrt(np.mean(turn_deg**2)):.4g}; "
+            f"{np.count_nonzero(turn_deg > limit)} of {len(turn_deg)} poses beyond {limit:g} degrees, "
+            f"data.checks.max_orientation_error_deg): no calibrated robot errs that much: {cause()}")
+
+
+_ORDERS = ("XZY", "YXZ", "YZX", "ZXY", "ZYX", "xyz", "xzy", "yxz", "yzx", "zxy")
+"""Euler orders tried as causes (scipy's names: upper case intrinsic, lower case extrinsic); the contract is
+intrinsic XYZ, and extrinsic zyx is the same as rx and rz swapped (tried first)."""
+
+
+def orientation_readings(angles_deg, which: str = "meas") -> list[tuple[str, NDArray[np.float64]]]:
+    """The rotations ``(n, 3, 3)`` that the angles ``(n, 3)`` would be under each likely mistake, in words.
+
+    Two of the columns swapped, radians read as degrees, and each other
+    order of Euler angles.
+    """
+    a = np.asarray(angles_deg, dtype=float)
+    out = []
+    for order in permutations(range(3)):
+        if order != (0, 1, 2) and sum(order[i] != i for i in range(3)) == 2:
+            swapped = [f"r{'xyz'[i]}_{which}" for i in range(3) if order[i] != i]
+            out.append((f"columns {' and '.join(swapped)} look swapped", matrices_from_xyz_deg(a[:, list(order)])))
+    out.append(("the angles look like radians (the format's orientation_unit: rad converts them)",
+                matrices_from_xyz_deg(np.degrees(a))))
+    for order in _ORDERS:
+        kind = "intrinsic" if order.isupper() else "extrinsic (fixed axes)"
+        out.append((f"the angles look like {kind} {order} Euler angles; the contract is intrinsic XYZ (R = Rx Ry Rz)",
+                    Rotation.from_euler(order, a, degrees=True).as_matrix()))
+    return out
+
+
+def orientation_cause(expected, got_deg, which: str = "meas", *, robot: str | None = None,
+                      frame_rotation=None) -> str:
+    """The likeliest reason why angles ``got_deg`` (n, 3) do not give rotations ``expected`` (n, 3, 3), in words.
+
+    With ``frame_rotation`` (a tracker's frame), ``got_deg`` are turned by it
+    and the probe's constant turn on the flange is refitted for each reading.
+    """
+    expected = np.asarray(expected, dtype=float)
+    rigid = frame_rotation is not None
+    left = np.eye(3) if frame_rotation is None else np.asarray(frame_rotation, dtype=float)
+    base = _turn_rms(expected, left @ matrices_from_xyz_deg(got_deg), rigid)
+    tried = [(_turn_rms(expected, left @ rot, rigid), words) for words, rot in orientation_readings(got_deg, which)]
+    best = min(rms for rms, _ in tried)
+    if best < 0.2 * base:
+        words = next(w for rms, w in tried if rms <= best * 1.001 + 1e-12)
+        return f"{words} (reading them so leaves {best:.3g} degrees RMS instead of {base:.3g})"
+    if not rigid and _turn_rms(expected, matrices_from_xyz_deg(got_deg), True) < 0.2 * base:
+        return ("the orientations differ by one constant turn: is it a probe's or tool's own frame? (the "
+                "orientation columns are the last frame's; frame: tracker fits a probe's turn on the flange)")
+    if robot:
+        return f"is it robot {robot!r}? (the data of another robot, or another tool, look like this)"
+    return "are the nominal and measured orientations of the same poses, in the same frame and convention?"
+
+
+def _turn_deg(expected: NDArray[np.float64], got: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The angle of the turn from each ``expected`` rotation to ``got`` (n, 3, 3), degrees, shape (n,)."""
+    cos = (np.einsum("nij,nij->n", expected, got) - 1.0) / 2.0
+    return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+
+
+def _turn_rms(expected: NDArray[np.float64], got: NDArray[np.float64], rigid: bool) -> float:
+    """RMS angle of the turns ``expected -> got``, degrees; with ``rigid`` after the best constant turn ``P`` on
+    the right (``got @ P.T``: a probe's turn on the flange)."""
+    if rigid:
+        u, _, vt = np.linalg.svd(np.mean(got.transpose(0, 2, 1) @ expected, axis=0))
+        got = got @ (u @ np.diag([1.0, 1.0, np.linalg.det(u @ vt)]) @ vt)
+    return float(np.sqrt(np.mean(_turn_deg(expected, got) ** 2)))
 
 
 def _spread(p: NDArray[np.float64]) -> float:

@@ -46,7 +46,7 @@ from ..robot.kinematics import Robot
 from ..robot.kinematics import ORIENTATION_MM_PER_RAD, flange_offset, matrices_from_xyz_deg, xyz_deg_from_matrices
 from .measurements import Measurements
 from .pose_columns import PRIMARY
-from .plausibility import Plausibility, check_residuals
+from .plausibility import Plausibility, check_orientation_residuals, check_residuals
 
 log = logging.getLogger(__name__)
 
@@ -228,6 +228,10 @@ def register_tracker(robot: Robot, q_deg, measured_mm, *, tool_mm=None, fit_tool
     resid = position_residuals(sol.x)
     check_residuals(source, resid[0], p_fl + r_fl @ tool0, meas, robot.reach_mm, robot.name,
                     plausibility or Plausibility())
+    _check_mirror(source, meas, p_fl, r_fl, tools0[0], fit_tool, float(np.sqrt(np.mean(np.sum(resid[0]**2, axis=1)))))
+    if probe is not None:
+        check_orientation_residuals(source, np.degrees(np.linalg.norm(probe.turns(rot, sol.x[6 + k_tools:]), axis=1)),
+                                    r_fl, orientation_deg, rot, plausibility or Plausibility())
     condition, weakest = _conditioning(points @ rot.T + shift, r_fl, fit_tool, [PRIMARY, *extra])
     if not condition <= max_condition:
         raise DataError(f"{source}: the tracker registration is ill-conditioned (condition number {condition:.3g} > "
@@ -256,6 +260,36 @@ def register_measurements(robot: Robot, m: Measurements, **options) -> Registrat
     """
     return register_tracker(robot, m.q_deg, m.measured_mm, targets=m.extra_measured_mm,
                             orientation_deg=m.measured_orientation_deg, **options)
+
+
+MIRROR_RATIO = 0.5
+"""A registration is refused as a mirror image when the measured points with one axis flipped register to
+less than this fraction of their own residual: a rotation cannot undo a mirror, so swapped tracker columns
+or a flipped sign fit worse than their mirror image. (Poses nearly in a plane register almost as well
+mirrored: IPA UR10 series B rows 2-300 with x and y swapped left 3.0 mm against 0.56 mm flipped back.)"""
+
+
+def _check_mirror(source: str, measured_mm, p_fl, r_fl, tool_mm, fit_tool: bool, rms_mm: float) -> None:
+    """Refuse points that register better mirrored (one axis flipped) than as they are (:data:`MIRROR_RATIO`)."""
+    mirrored = _position_rms(measured_mm * [-1.0, 1.0, 1.0], p_fl, r_fl, tool_mm, fit_tool)
+    if mirrored < MIRROR_RATIO * rms_mm:
+        raise DataError(f"{source}: the measured positions are a mirror image of the robot's: the tracker "
+                        f"registration leaves {rms_mm:.4g} mm RMS, the same points with one axis flipped "
+                        f"{mirrored:.4g} mm: two of the columns x_meas, y_meas, z_meas swapped, or one sign flipped")
+
+
+def _position_rms(measured_mm, p_fl, r_fl, tool_mm, fit_tool: bool) -> float:
+    """3-D RMS of the best registration (frame, and the tool with ``fit_tool``) of the points alone, mm."""
+    rot0, t0 = kabsch(measured_mm, p_fl + r_fl @ tool_mm)
+
+    def residuals(x):
+        rot = Rotation.from_rotvec(x[:3]).as_matrix() @ rot0
+        tool = x[6:9] if fit_tool else tool_mm
+        return (measured_mm @ rot.T + x[3:6] - p_fl - r_fl @ tool).ravel()
+
+    x0 = np.concatenate([np.zeros(3), t0, tool_mm if fit_tool else []])
+    sol = least_squares(residuals, x0, method="lm", xtol=1e-12, ftol=1e-12, max_nfev=200 * len(x0))
+    return float(np.sqrt(np.mean(np.sum(sol.fun.reshape(-1, 3) ** 2, axis=1))))
 
 
 def _start_tool(name: str, points: NDArray[np.float64], rot0, t0, flange, given: dict | None, fit_tool: bool,

@@ -44,7 +44,7 @@ from ..errors import PartcalError
 from ..robot.kinematics import Robot
 from .base import seed_from
 from .joint_errors import GRAVITY_M_S2, JointErrors, compliance_problem, harmonics_problem
-from .identification import (PARAMETRIZATIONS, identification_jacobian, nominal_values, parameter_names,
+from .identification import (PARAMETRIZATIONS, held_still, identification_jacobian, nominal_values, parameter_names,
                              resolved_parametrization, stacked)
 from .identification import model_jacobian as kinematic_jacobian
 from .targets import Extra
@@ -66,10 +66,11 @@ class PlannedModel:
     joint_harmonics : int or tuple of int
         Harmonics of every joint's transmission error, or one count per joint.
     payload_kg : float
-        The payload the measurement carries at the tool point (kg). At 0 a
-        compliance parameter has no column (only the lumped masses' sags
-        are planned for); at one payload it is the tool point's share of the
-        sags, and only data at a second payload separate it from the masses.
+        The payload the measurement carries at the tool point (kg). A plan is
+        at one payload, and at one payload, zero or not, a compliance is not
+        identifiable (it is the tool point's share of the sags, which the
+        lumped masses' sags carry; only data at a second payload separate it):
+        only the sags are planned for, whatever the payload.
 
     parametrization : {"auto", "dh", "complete"}
         The geometric parameters (:class:`~partcal.models.kinematic.KinematicModel`'s;
@@ -161,10 +162,13 @@ def model_jacobian(robot: Robot, q_deg: NDArray[np.float64], model: PlannedModel
     """
     names, values = model_parameters(robot, model)
     errors, par = model.joint_errors(robot), model.parametrization_for(robot)
+    q_deg = held_still(np.asarray(q_deg, dtype=float))       # a held joint's jitter identifies nothing (as in a fit)
     if errors is None:
         jac = identification_jacobian(robot, q_deg, values, par)[1]
     else:
-        jac = kinematic_jacobian(robot, errors, q_deg, values, np.full(len(q_deg), float(model.payload_kg)), par)[1]
+        # one payload: a compliance is a sag at the tool point like the masses' ones, not identifiable (its column
+        # held at zero, as the identification does: KinematicModel.fit); only data at two payloads separate it
+        jac = kinematic_jacobian(robot, errors, q_deg, values, np.zeros(len(q_deg)), par)[1]
     wanted = np.array([(model.tool or not n.startswith("tool.")) and (model.base or not n.startswith("base."))
                        for n, _ in names])
     return jac, wanted

@@ -62,6 +62,7 @@ AT_BOUND = 1.05                    # a hyperparameter within 5% of a bound sits 
 INTERPOLATING = 1e-8               # noise variance (outputs scaled to unit variance) of a GP that interpolates
 WHITE_NOISE = 0.05                 # neighbours correlated less than this (median): the GP predicts the mean
 NEAR_MEAN = 0.5                    # fewer effective parameters per output beyond the mean: a near-constant fit
+OPTIMUM_RATIO = 10.0               # a CV fold's GP whose noise or length scales differ this much found another optimum
 _BLOCK = 2048
 
 
@@ -358,6 +359,17 @@ class GaussianProcessErrorModel(ErrorModelBase):
             notes.append("the noise term at or near its lower bound: the GP reproduces its training data exactly "
                          "(set noise_floor_mm to the measurement scatter)")
         return notes
+
+    def optimum_gap(self, other: "GaussianProcessErrorModel") -> str | None:
+        """How far this fit's hyperparameters lie from ``other``'s (another fit of the same entry: a CV fold's
+        against the final fit), in words, when markedly: a noise variance (normalised outputs) or a geometric
+        mean of the length scales :data:`OPTIMUM_RATIO` times larger or smaller; None otherwise."""
+        noise = self.noise_ / other.noise_ if other.noise_ > 0 else np.inf
+        scales = float(np.exp(np.mean(np.log(self.length_scale_ / other.length_scale_))))
+        if max(noise, 1 / noise, scales, 1 / scales) < OPTIMUM_RATIO:
+            return None
+        return (f"noise variance {self.noise_:.3g} against {other.noise_:.3g}, length scales x{scales:.3g} (geometric "
+                "mean)")
 
     def _neighbour_correlation(self) -> float:
         """Median kernel correlation of a training input with its nearest other training input."""

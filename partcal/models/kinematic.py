@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import logging
 import math
+import warnings
 from pathlib import PurePath
 
 import numpy as np
@@ -20,7 +21,7 @@ from sklearn.utils.validation import check_is_fitted, validate_data
 
 from .._validation import MAX_PAYLOAD_KG, FieldReader, Requirement, boolean, check_array, one_of, param_error, real
 from ..errors import DataError, ModelFileError
-from ..metrics import MRAD_PER_DEG, MRAD_PER_RAD, ORIENTATION, POSITION, distance_outside_boxes
+from ..metrics import MRAD_PER_DEG, MRAD_PER_RAD, ORIENTATION, POSITION, ExtrapolationWarning, distance_outside_boxes
 from ..robot.description import load_robot, robot_from_dict, robot_to_dict
 from ..robot.kinematics import ORIENTATION_MM_PER_RAD, Robot
 from .base import ErrorModelBase, box_points, seed_from
@@ -187,11 +188,15 @@ class KinematicModel(ErrorModelBase):
         nominal = robot.positions(X)
         self.joint_errors_ = JointErrors.for_robot(robot, list(self.compliance), self.joint_harmonics)
         self.parametrization_ = self._resolved_parametrization(robot)
-        payload = self._payload(payload_kg, len(X))
+        payload = self._payload(payload_kg, len(X), fitting=True)
+        self.fitted_payload_kg_ = np.array([payload.min(), payload.max()])
+        # at one payload a compliance is a sag at the tool point like the lumped masses' ones: its column
+        # (compliance x payload's weight x lever) is held at zero, so it is unidentifiable at any payload
+        ident_payload = payload if np.ptp(payload) > 0 else np.zeros_like(payload)
         weight = self.orientation_mm_per_rad if orientation_mm_per_rad is None else orientation_mm_per_rad
         extra = extra_from(robot, X, targets, orientation_deg, weight)
         self.identification_ = identify(robot, X, nominal + y[:, POSITION], base=bool(self.base), tool=bool(self.tool),
-                                        rcond=float(self.rcond), errors=self.joint_errors_, payload_kg=payload,
+                                        rcond=float(self.rcond), errors=self.joint_errors_, payload_kg=ident_payload,
                                         extra=extra, parametrization=self.parametrization_)
         self.targets_ = dict(extra.tools_mm) if extra is not None else {}
         self.orientation_ = extra is not None and extra.rotations is not None
@@ -230,16 +235,35 @@ class KinematicModel(ErrorModelBase):
         return nominal if self.residual_.inputs == "cartesian" else X
 
     # ------------------------------------------------------------------ prediction
-    def _payload(self, payload_kg, n: int) -> NDArray[np.float64]:
-        """The payload per pose (n,) kg: ``payload_kg`` (a number or n values in [0, MAX_PAYLOAD_KG]), default
-        the parameter."""
-        value = self.payload_kg if payload_kg is None else payload_kg
+    def _payload(self, payload_kg, n: int, fitting: bool = False) -> NDArray[np.float64]:
+        """The payload per pose (n,) kg: ``payload_kg`` (a number or n values in [0, MAX_PAYLOAD_KG]).
+
+        Fitting, the default is the parameter ``payload_kg``. Predicting, it is
+        the payload the model was fitted at (:meth:`default_payload_kg`), and a
+        payload outside the fitted ones is warned about (an :class:`ExtrapolationWarning`).
+        """
+        fitted = None if fitting else getattr(self, "fitted_payload_kg_", None)
+        value = (self.default_payload_kg() if not fitting else self.payload_kg) if payload_kg is None else payload_kg
         arr = check_array(np.atleast_1d(np.asarray(value, dtype=float)), "payload_kg", ndim=1)
         if arr.size not in (1, n) or np.any(arr < 0) or np.any(arr > MAX_PAYLOAD_KG):
             raise DataError(f"Expected payload_kg as one number in [0, {MAX_PAYLOAD_KG:g}] or {n} of them (kg, one "
                             f"per pose), got {arr.size} values from {arr.min() if arr.size else 'none'} to "
                             f"{arr.max() if arr.size else 'none'}.")
+        if fitted is not None and self.reads_payload and np.any((arr < fitted[0] - 1e-9) | (arr > fitted[1] + 1e-9)):
+            where = f"{fitted[0]:g} kg" if fitted[0] == fitted[1] else f"{fitted[0]:g} to {fitted[1]:g} kg"
+            why = (": from one payload its compliance is not identified, so it predicts as there" if fitted[0] ==
+                   fitted[1] else "")
+            warnings.warn(f"payload {arr.min():g} to {arr.max():g} kg lies outside the payloads the model was "
+                          f"fitted at ({where}){why}", ExtrapolationWarning, stacklevel=4)
         return np.broadcast_to(arr, (n,)).copy()
+
+    def default_payload_kg(self) -> float:
+        """The payload a prediction assumes when given none, kg: the parameter ``payload_kg`` when the model was
+        fitted at it (or before the payloads were kept in model files), else the smallest fitted payload."""
+        fitted = getattr(self, "fitted_payload_kg_", None)
+        if fitted is None or fitted[0] - 1e-9 <= self.payload_kg <= fitted[1] + 1e-9:
+            return float(self.payload_kg)
+        return float(fitted[0])
 
     def _build_robots(self) -> None:
         """The identified robot, and its geometry in its own base frame (where the joint errors' lever arms
@@ -406,6 +430,8 @@ class KinematicModel(ErrorModelBase):
                 **({"targets": {k: [float(v) for v in t] for k, t in self.targets_.items()},
                     "orientation": bool(self.orientation_)} if self.targets_ or self.orientation_ else {}),
                 "data_bounds": self.data_bounds_.tolist(), "active": self.active_.tolist(),
+                **({"fitted_payload_kg": [float(v) for v in self.fitted_payload_kg_]}
+                   if getattr(self, "fitted_payload_kg_", None) is not None else {}),
                 "residual": body_of(self.residual_) if self.residual_ is not None else None}
 
     @classmethod
@@ -446,6 +472,9 @@ class KinematicModel(ErrorModelBase):
         if np.any(model.data_bounds_[0] > model.data_bounds_[1]):
             r.fail("data_bounds", "a low bound exceeds its high bound")
         model.active_ = r.array("active", (n_in,), bool)
+        model.fitted_payload_kg_ = r.array("fitted_payload_kg", (2,)) if "fitted_payload_kg" in r.doc else None
+        if model.fitted_payload_kg_ is not None and not 0 <= model.fitted_payload_kg_[0] <= model.fitted_payload_kg_[1]:
+            r.fail("fitted_payload_kg", "the smallest and largest payload of the data, 0 <= low <= high kg")
         model.n_features_in_, model.n_outputs_, model._y_1d = n_in, n_out, False
         model.residual_ = None
         if r.doc.get("residual") is not None:
@@ -508,6 +537,11 @@ class KinematicModel(ErrorModelBase):
         held = [n for n in self.identification_.unidentifiable() if n.startswith("compliance[")]
         notes = [f"{', '.join(held)} not identifiable (data at one payload show only the sags): the predictions do "
                  "not change with the payload"] if held else []
+        ident = self.identification_
+        if ident.n_poses and np.isnan(ident.std_error[np.array(ident.status) == "identified"]).any():
+            notes.append(f"{sum(s == 'identified' for s in ident.status)} parameters identified from "
+                         f"{ident.n_poses} poses leave no residual to estimate their standard errors: the fit "
+                         "interpolates the data; measure more poses")
         if self.n_outputs() == 6 and not self.orientation_:
             notes.append("identified from the positions alone, it predicts the orientation its parameters imply, "
                          "which the positions do not determine (use_orientation: true identifies from it)")

@@ -70,7 +70,7 @@ def context(result: RunResult) -> dict:
         "date": _dt.datetime.now().strftime("%Y-%m-%d %H:%M"), "config_path": str(cfg.source),
         "folds": cfg.cv_folds, "models": result.models,
         "best": {"name": best.spec.name, "score": best.score(cfg.rank_by)},
-        "best_reason": result.best_reason, "rank_by": cfg.rank_by,
+        "best_reason": result.best_reason, "best_caveats": result.best_caveats, "rank_by": cfg.rank_by,
         "pose": outputs.pose, "rank_on": cfg.rank_on, "score_unit": outputs.unit,
         "datasets": [{"name": n, "n": len(m), "bounds": [f"{lo:.0f} to {hi:.0f}" for lo, hi in
                                                          zip(m.nominal_mm.min(0), m.nominal_mm.max(0))]}
@@ -441,7 +441,7 @@ def _parameter_cell(row: dict) -> dict:
 
     text = show(row["value"])
     if row["status"] == "identified":
-        text += f" ± {show(row['std_error'])}"
+        text += f" ± {show(row['std_error'])}" if row["std_error"] is not None else " ± n/a"   # no residual left
         if row["unit"] == "deg/(N m)" and row["value"] > 0:
             text += f" ({1.0 / row['value']:.4g} N m/deg)"
     return {"name": row["name"], "unit": row["unit"], "status": row["status"], "text": text,

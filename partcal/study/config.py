@@ -150,8 +150,7 @@ class DataOptions:
                 "rows": {k: v.to_dict() for k, v in self.rows.items()}, "own_frame": list(self.own_frame),
                 "registration": ({"tool_mm": list(self.tool_mm) if self.tool_mm else None, "fit_tool": self.fit_tool}
                                  if self.frame == "tracker" else None),
-                "checks": {"max_error_of_reach": self.plausibility.max_error_of_reach,
-                           "nominal_tolerance_mm": self.plausibility.nominal_tolerance_mm},
+                "checks": {name: getattr(self.plausibility, name) for name in Plausibility.rules},
                 "groups": self.groups}
 
 

@@ -163,6 +163,7 @@ def _fit_model(spec, seed, data, cv, robot, own_frame, lines, outputs) -> ModelR
         fit_seconds = time.perf_counter() - start
         if estimator.regions_model() is not None:
             cv_regions = fold_regions([m.regions_model() for m in fold_fits])
+        _note_other_optima(fold_fits, estimator)
     part = estimator.regions_model()
     if cv_regions is not None and cv_regions[0] < part.partition_.n_regions:
         log.warning("fitted on all the identification data it has %d regions, but on the cross-validation "
@@ -195,6 +196,25 @@ def spreads_of(estimator, spec: ModelSpec, data: dict[str, Measurements], robot:
     return {name: estimator.std_scaled(model_inputs(spec.inputs, m),
                                        **per_row_arguments(estimator, m, robot, fitting=False))[1]
             for name, m in data.items()}
+
+
+def _note_other_optima(fold_fits: list, estimator) -> None:
+    """Warn about CV folds whose Gaussian process (the model, or a hybrid's residual) found hyperparameters far
+    from the final fit's: its CV score is then that of another optimum than the model written."""
+    def gp_of(model):
+        for candidate in (model, getattr(model, "residual_", None)):
+            if hasattr(candidate, "optimum_gap") and getattr(candidate, "fixed_kernel", None) is None:
+                return candidate
+        return None
+
+    final = gp_of(estimator)
+    if final is None:
+        return
+    for k, fold in enumerate(fold_fits):
+        gap = gp_of(fold).optimum_gap(final) if gp_of(fold) is not None else None
+        if gap is not None:
+            log.warning("cross-validation fold %d of %d: its Gaussian process found another optimum than the final "
+                        "fit's (%s): the CV score is partly that of other hyperparameters", k + 1, len(fold_fits), gap)
 
 
 @contextmanager

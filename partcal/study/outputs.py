@@ -168,6 +168,8 @@ def metrics_document(result: RunResult) -> dict:
         "best": result.best,
         "best_reason": result.best_reason,
     }
+    if result.best_caveats:
+        doc["best_caveats"] = result.best_caveats
     if result.plan is not None:
         doc["cv"] = {**result.plan.cv.to_dict(), "left_out": list(result.plan.notes),
                      "repeat_scatter_mm": result.plan.repeat_scatter_mm}

@@ -25,6 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .._io import atomic_write
+from ..data.plausibility import check_joint_units
 from ..errors import DataError, PartcalError
 from ..models import design
 from ..models.base import seed_from
@@ -65,8 +66,10 @@ def candidates_within_limits(robot: Robot, n: int, rng: np.random.Generator, box
 
 
 def check_candidates(robot: Robot, q_deg: NDArray[np.float64], source: str) -> NDArray[np.float64]:
-    """The user's candidate poses ``(n, N)`` deg, refused when one is outside the limits or repeated."""
+    """The user's poses ``(n, N)`` deg (candidates, or a set to evaluate), refused when they look like radians
+    (:func:`~partcal.data.plausibility.check_joint_units`) or one is outside the limits."""
     q_deg = robot.check_joints(q_deg, source)
+    check_joint_units(source, ["data row 1"], q_deg)
     bad = np.flatnonzero(~robot.within_limits(q_deg))
     if bad.size:
         k = int(bad[0])
@@ -222,8 +225,8 @@ def evaluate_poses(robot: Robot, q_deg, *, space: Workspace | None = None, noise
         uncertainty = design.position_std(space.blocks[:, :, own], cov)
     missing = tuple(label[i] for i in np.setdiff1d(space.structural, own))
     never = tuple(label[i] for i in np.setdiff1d(np.flatnonzero(wanted), space.structural))
-    note = ("a compliance has no column without a payload (payload_kg): the sags carry the gravity"
-            if model.compliance and model.payload_kg == 0 else "")
+    note = (f"a compliance is not identifiable from data at one payload ({model.payload_kg:g} kg): the sags carry "
+            "the gravity; data at a second payload identify it" if model.compliance else "")
     return Evaluation(ind, tuple(label), tuple(u for _, u in names), tuple(label[i] for i in own), missing, never, std,
                       float(noise_mm), float(np.sqrt(np.mean(uncertainty**2))), float(np.percentile(uncertainty, 95)),
                       float(uncertainty.max()), note)

@@ -25,7 +25,7 @@ from ..data.measurements import Measurements, read_measurements
 from ..data.registration import Registration, register_measurements, registered
 from ..data.simulate import load_study
 from ..errors import ConfigError, DataError
-from ..metrics import repeat_scatter_mm
+from ..metrics import HELD_TOLERANCE_DEG, pose_groups, repeat_scatter_mm
 from ..models.features import varying_inputs
 from ..robot.kinematics import Robot
 from .config import ModelSpec, RunConfig
@@ -75,8 +75,9 @@ def load_datasets(config: RunConfig) -> tuple[dict[str, Measurements], Robot | N
                               else None)
         poses = int(measured_poses(m).max()) + 1
         if poses < len(m):
-            log.warning("%s (%s): %d rows measure %d distinct poses (identical joint angles%s): repeated "
-                        "measurements%s", path, name, len(m), poses, " and payload" if m.payload_kg is not None else "",
+            log.warning("%s (%s): %d rows measure %d distinct poses (joint angles within %g degrees%s): repeated "
+                        "measurements%s", path, name, len(m), poses, HELD_TOLERANCE_DEG,
+                        " and payload" if m.payload_kg is not None else "",
                         "; cross-validation holds out a pose's rows together" if name == "identification" else "")
         return m
 
@@ -89,9 +90,25 @@ def load_datasets(config: RunConfig) -> tuple[dict[str, Measurements], Robot | N
             raise DataError(f"{path}: test set {name!r} has {m.n_joints} joint columns (q1..q{m.n_joints}) "
                             f"but the identification set {config.identification} has {n}")
         data[name] = m
+    if "validation" in data:
+        _check_held_out(config, data["identification"], data["validation"])
     if opts.frame != "tracker":
         return data, robot, {}
     return _register(config, data, robot)
+
+
+def _check_held_out(config: RunConfig, ident: Measurements, validation: Measurements) -> None:
+    """Refuse a validation set that measures poses of the identification set (joint angles within
+    :data:`~partcal.metrics.HELD_TOLERANCE_DEG`): the models were fitted on them, so its score would not be
+    held out, and the run chooses by it (``rank_by: validation``)."""
+    groups = pose_groups(np.vstack([ident.q_deg, validation.q_deg]))
+    seen = np.isin(groups[len(ident):], groups[:len(ident)])
+    if seen.any():
+        first = int(np.flatnonzero(seen)[0])
+        raise ConfigError(f"{config.validation}: {int(seen.sum())} of {len(validation)} rows of the validation set "
+                          f"measure poses of the identification set {config.identification} (joint angles within "
+                          f"{HELD_TOLERANCE_DEG:g} degrees; the first: data row {first + 1}); a validation set is "
+                          "held out only if no model saw its poses: measure other poses, or drop them")
 
 
 def _register(config: RunConfig, data: dict[str, Measurements], robot: Robot):

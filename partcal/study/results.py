@@ -95,6 +95,33 @@ class RunResult:
         return run_indices(self.robot, self.datasets["identification"].q_deg)
 
     @property
+    def best_caveats(self) -> list[str]:
+        """Where the best model leaves the part the run does not rank on worse than doing nothing, in words.
+
+        In a pose run (``predict: pose``) ranked on the position, the orientation's RMS angle on each data
+        set against the uncompensated one (ranked on the orientation, the position's 3-D RMS). The rule
+        that chooses does not change: the choice is by cross-validation on the ranked part, and the
+        caveats only say what it costs (warned, in metrics.json as ``best_caveats`` and in the report).
+        """
+        if self.config.predict != "pose":
+            return []
+        best = next(r for r in self.models if r.spec.name == self.best)
+        other, unit = ("orientation", "mrad") if self.config.rank_on == "position" else ("position", "mm")
+        out = []
+        for name, before in self.uncompensated.items():
+            after = best.metrics.get(name)
+            if after is None or "orientation" not in before or "orientation" not in after:
+                continue
+            b, a = ((before["orientation"]["rms_angle"], after["orientation"]["rms_angle"]) if other == "orientation"
+                    else (before["rms_3d"], after["rms_3d"]))
+            if a > b:
+                out.append(f"the best model, {self.best!r}, leaves the {other} of {name} worse than doing nothing: "
+                           f"{a:.3f} {unit} RMS against {b:.3f} uncompensated (the run ranks on the "
+                           f"{self.config.rank_on}; rank_on: {other}, or a model identified from the {other} too, "
+                           f"avoids it)")
+        return out
+
+    @property
     def best_reason(self) -> str:
         """Which rule chose ``best``, in words (metrics.json, the report and the printed table say it)."""
         best = next(r for r in self.models if r.spec.name == self.best)

@@ -21,6 +21,7 @@ a test set. The stages, each in its module:
 
 from __future__ import annotations
 
+import logging
 import time
 from typing import Callable
 
@@ -33,6 +34,8 @@ from .prepare import prepare
 from .results import RunResult
 from .scoring import Outputs, verify_compensation
 from .selection import choose_best
+
+log = logging.getLogger(__name__)
 
 
 def run(config: RunConfig, progress: Callable[[int, int, str], None] | None = None) -> RunResult:
@@ -56,6 +59,9 @@ def run(config: RunConfig, progress: Callable[[int, int, str], None] | None = No
     uncompensated = {name: outputs.evaluate(m, np.zeros_like(outputs.errors(m)), name in own)
                      for name, m in data.items()}
     iso = run_figures(data, {r.spec.name: r.predictions for r in results}, {name: name in own for name in data})
-    return RunResult(config, data, robot, uncompensated, results, choose_best(results, config.rank_by),
-                     time.perf_counter() - start, registrations=prepared.registrations, plan=prepared.plan,
-                     iso9283=iso)
+    result = RunResult(config, data, robot, uncompensated, results, choose_best(results, config.rank_by),
+                       time.perf_counter() - start, registrations=prepared.registrations, plan=prepared.plan,
+                       iso9283=iso)
+    for caveat in result.best_caveats:
+        log.warning("%s", caveat)
+    return result

@@ -47,7 +47,7 @@ def results_table(result) -> str:
     """The paper's Table 2 layout: RMS x / y / z (mm) per model and data set, the best model, registrations
     and the compensation check (``partcal run``)."""
     names = list(result.datasets)
-    width = 24
+    width = max(24, 3 + max((len(r.spec.name) for r in result.models), default=0))    # whole names, and the mark
     score = "CV angle (mrad)" if result.config.rank_on == "orientation" else "CV 3-D (mm)"
     head1 = f"{'RMS error (mm)':<{width}}" + "".join(f"{n[:22]:^24}" for n in names) + f"{score:^18}"
     head2 = f"{'model':<{width}}" + "".join(f"{'x':>8}{'y':>8}{'z':>8}" for _ in names) + f"{'RMS +- SE':>11}{'params':>7}"
@@ -88,7 +88,7 @@ def results_table(result) -> str:
             cells = "  ".join(f"{n}: {_before_after(c, 'rms_3d', 2)}" + (f" ({_before_after(c['orientation'], 'rms_angle', 3)})"
                                                                          if "orientation" in c else "")
                               for n, c in r.compensation.items())
-            lines.append(f"  {r.spec.name:<22}{cells}")
+            lines.append(f"  {r.spec.name:<{width - 2}}{cells}")
     return "\n".join(lines)
 
 

@@ -455,9 +455,10 @@ def identify(robot: Robot, q_deg: NDArray[np.float64], measured_mm: NDArray[np.f
             if worst is None:
                 break
         k = free[worst]
-        log.warning("%s comes out %+.4g %s from nominal, beyond %g %s (%g times a plausible manufacturing error), "
-                    "and the data do not fix it (nominal is within %g standard errors): kept nominal and the rest "
-                    "refitted", names[k][0], v[k] - v0[k], units[k], limits[k], units[k], IMPLAUSIBLE, UNFIXED)
+        log.info("%s comes out %+.4g %s from nominal", names[k][0], v[k] - v0[k], units[k])
+        log.warning("%s comes out beyond %g %s from nominal (%g times a plausible manufacturing error), and the "
+                    "data do not fix it (nominal is within %g standard errors): kept nominal and the rest refitted",
+                    names[k][0], limits[k], units[k], IMPLAUSIBLE, UNFIXED)
         free = np.delete(free, worst)
     if free.size == 0:
         v = v0.copy()

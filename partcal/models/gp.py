@@ -329,7 +329,7 @@ class GaussianProcessErrorModel(ErrorModelBase):
 
         Nested cross-validation freezes a candidate on each outer training
         set, so its inner folds do not repeat the search (see
-        :func:`partcal.metrics.nested_residuals`).
+        :func:`partcal.study.selection.nested_residuals`).
         """
         fitted = clone(self).fit(X, y)
         return clone(self).set_params(fixed_kernel=fitted.learnt_kernel())

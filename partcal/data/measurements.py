@@ -72,8 +72,8 @@ class Measurements:
     groups : tuple of str, optional
         The pose each row measures, from a column the reader was told to read
         (``group_column``): rows of one pose are held out together by
-        cross-validation. Without it, rows with identical joint angles are one
-        pose.
+        cross-validation. Without it, rows whose joint angles agree within 0.01
+        degrees are one pose.
     payload_kg : ndarray, shape (n,), optional
         The payload at the tool point of each pose, kg (the ``payload_kg``
         column). Kinematic models with joint compliance read it; it is None

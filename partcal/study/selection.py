@@ -28,7 +28,7 @@ from sklearn.base import clone
 
 from .._validation import check_int
 from ..data.measurements import Measurements
-from ..metrics import labels_as_groups, pooled_rms, pose_groups
+from ..metrics import HELD_TOLERANCE_DEG, labels_as_groups, pooled_rms, pose_groups
 from ..models.partitioned import fold_regions
 
 if TYPE_CHECKING:
@@ -349,7 +349,7 @@ class CVPlan:
             groups, by = labels_as_groups(ident.groups), f"column {config.data_options.groups!r}"
         else:
             payload = " and payload" if ident.payload_kg is not None else ""
-            groups, by = measured_poses(ident), f"identical joint angles{payload}"
+            groups, by = measured_poses(ident), f"joint angles within {HELD_TOLERANCE_DEG:g} degrees{payload}"
         rule = fold_rule(config.cv_folds, int(groups.max()) + 1)
         folds = grouped_splits(groups, rule, config.seed) if int(groups.max()) >= 1 else []
         return cls(groups, rule, folds, config.seed, by)

@@ -100,6 +100,46 @@ def test_compensate_marks_unconverged_targets_and_exits_3(joint_model, tmp_path)
         assert [r["converged"] for r in csv.DictReader(handle)] == ["true"] * 3
 
 
+@pytest.mark.parametrize("model, reasons", [("joint", ["", "out of reach", "joint limit"]),
+                                            ("cartesian", ["", "out of reach", ""])])
+def test_compensate_writes_each_targets_miss_and_why_it_missed(joint_model, cartesian_model, tmp_path, model,
+                                                               reasons):
+    m = read_measurements(DATA / "test_rectangle.csv")
+    targets = tmp_path / "targets.csv"
+    rows = [m.nominal_mm[0], [9000.0, 0.0, 0.0], [912.609, 0.0, 122.994]]  # 9 m away; the home seed folds the SK120
+    targets.write_text("x,y,z\n" + "\n".join(",".join(f"{v:.6f}" for v in p) for p in rows) + "\n")
+    out = tmp_path / "cmd.csv"
+    res = run("compensate", str(joint_model if model == "joint" else cartesian_model), str(targets), "-o", str(out))
+    assert res.returncode == 3, res.stderr
+    assert "first: data row 2 of" in res.stderr and "0.0] mm: out of reach, predicted miss" in res.stderr
+    with open(out) as handle:
+        written = list(csv.DictReader(handle))
+    assert list(written[0])[-3:] == ["miss_mm", "converged", "reason"]
+    assert [r["reason"] for r in written] == reasons
+    assert [r["converged"] for r in written] == ["true" if not r else "false" for r in reasons]
+    assert float(written[0]["miss_mm"]) <= 1e-4
+    if model == "joint":
+        assert float(written[1]["miss_mm"]) > 1000 and float(written[2]["miss_mm"]) <= 1e-4   # solved, not takeable
+
+
+def test_compensate_tolerances_are_options(joint_model, tmp_path):
+    m = read_measurements(DATA / "test_rectangle.csv")
+    targets = tmp_path / "targets.csv"
+    targets.write_text("x,y,z\n" + "\n".join(",".join(f"{v:.6f}" for v in p) for p in m.nominal_mm[:5]) + "\n")
+    misses = {}
+    for tol in ("1e-4", "0.05"):
+        out = tmp_path / f"cmd{tol}.csv"
+        res = run("compensate", str(joint_model), str(targets), "-o", str(out), "--tol-mm", tol)
+        assert res.returncode == 0, res.stderr
+        with open(out) as handle:
+            misses[tol] = np.array([float(r["miss_mm"]) for r in csv.DictReader(handle)])
+        assert misses[tol].max() <= float(tol)
+    assert misses["0.05"].max() > 1e-4            # the looser tolerance stops the solve earlier
+    res = run("compensate", str(joint_model), str(targets), "-o", str(tmp_path / "x.csv"), "--tol-mm", "0")
+    assert res.returncode == 2 and "argument --tol-mm: expected a positive number; got '0'" in res.stderr
+    assert not (tmp_path / "x.csv").exists()
+
+
 def test_output_naming_a_folder_is_refused(joint_model, tmp_path):
     m = read_measurements(DATA / "identification.csv")
     points = tmp_path / "q.csv"

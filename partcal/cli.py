@@ -410,7 +410,7 @@ def _cmd_import(args) -> int:
 
 def _import_run(args) -> int:
     from .study.config import load_config
-    from .study.outputs import check_writable, replace_folder, write_datasets
+    from .study.outputs import check_writable, replace_folder, write_datasets, write_robot_yaml
     from .study.prepare import load_datasets
     from .study.tables import registration_line
 
@@ -421,12 +421,24 @@ def _import_run(args) -> int:
     _refuse_input_as_output(args.output, "import", [("run's input", p) for p in config.inputs()])
     output = Path(args.output)
     check_writable(output, config.inputs(), option="-o")
-    datasets, _, registrations = load_datasets(config)
+    datasets, robot, registrations = load_datasets(config)
     for reg in {id(r): r for r in registrations.values()}.values():
         print(registration_line(reg, [n for n, r in registrations.items() if r is reg]))
-    paths = replace_folder(output, lambda tmp: write_datasets(config, datasets, registrations, tmp))
-    paths = [output / p.name for p in paths]
-    print(f"wrote {len(paths)} data sets ({', '.join(f'{n}: {len(m)}' for n, m in datasets.items())}) to {args.output}")
+
+    def fill(tmp: Path) -> list[Path]:
+        written = write_datasets(config, datasets, registrations, tmp)
+        if robot is None:
+            return written
+        tool = "the tool offset registered on the identification set" if registrations else "its tool offset"
+        return written + [write_robot_yaml(robot, tmp / "robot.yaml", (
+            f"robot of run {config.name!r} (partcal {__version__}, from {config.robot}) with {tool}: the robot of "
+            "the data sets beside it (base frame)"))]
+
+    paths = [output / p.name for p in replace_folder(output, fill)]
+    data = [p for p in paths if p.name != "robot.yaml"]
+    print(f"wrote {len(data)} data sets ({', '.join(f'{n}: {len(m)}' for n, m in datasets.items())}) to {args.output}")
+    if robot is not None:
+        print(f"robot (tool offset included): {output / 'robot.yaml'}")
     return 0
 
 

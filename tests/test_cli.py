@@ -302,6 +302,43 @@ models:
     assert (out / "data" / "validation.csv").is_file() and (out / "metrics.json").is_file()
 
 
+def test_import_config_writes_the_registered_robot_so_the_converted_data_run_again(tmp_path):
+    from scipy.spatial.transform import Rotation
+
+    rot, t = Rotation.from_rotvec([0.3, -1.2, 0.8]).as_matrix(), np.array([2500.0, -900.0, 400.0])
+    files = {}
+    for name in ("identification", "test_rectangle"):        # the SK120's data as seen from a tracker
+        m = read_measurements(DATA / f"{name}.csv")
+        files[name] = tmp_path / f"{name}_tracker.csv"
+        files[name].write_text("q1,q2,q3,q4,q5,q6,x_meas,y_meas,z_meas\n" + "\n".join(
+            ",".join(repr(float(v)) for v in np.r_[q, p]) for q, p in zip(m.q_deg, (m.measured_mm - t) @ rot)) + "\n")
+    models = "models:\n  - {name: FDP(CI), degree: 1, solver: {method: lstsq}}\n"
+    original = tmp_path / "tracked.yaml"
+    original.write_text(f"name: tracked\nrobot: motoman_sk120\ncv_folds: 3\ndata:\n  frame: tracker\n"
+                        f"  identification: {files['identification']}\n"
+                        f"  tests: {{rectangle: {files['test_rectangle']}}}\n{models}output: {tmp_path / 'a'}\n")
+    res = run("import", "--config", str(original), "-o", str(tmp_path / "conv"))
+    assert res.returncode == 0, res.stderr
+    robot_file = tmp_path / "conv" / "robot.yaml"
+    assert f"robot (tool offset included): {robot_file}" in res.stdout
+    assert sorted(p.name for p in (tmp_path / "conv").iterdir()) == [".partcal-output", "identification.csv",
+                                                                     "rectangle.csv", "robot.yaml"]
+    again = tmp_path / "again.yaml"
+    for robot, code in (("motoman_sk120", 2), (robot_file, 0)):    # the built-in robot lacks the registered tool
+        again.write_text(f"name: again\nrobot: {robot}\ncv_folds: 3\ndata:\n"
+                         f"  identification: {tmp_path / 'conv' / 'identification.csv'}\n"
+                         f"  tests: {{rectangle: {tmp_path / 'conv' / 'rectangle.csv'}}}\n{models}"
+                         f"output: {tmp_path / 'b'}\n")
+        res = run("run", "-q", str(again))
+        assert res.returncode == code, res.stderr
+    assert run("run", "-q", str(original)).returncode == 0
+    before, after = (json.loads((tmp_path / o / "metrics.json").read_text())["uncompensated"] for o in "ab")
+    for name in ("identification", "rectangle"):
+        np.testing.assert_allclose([after[name][k] for k in ("rms_3d", "max_3d", "p95_3d")] + after[name]["rms"],
+                                   [before[name][k] for k in ("rms_3d", "max_3d", "p95_3d")] + before[name]["rms"],
+                                   atol=1e-5, err_msg=name)
+
+
 def test_a_run_never_replaces_a_folder_holding_its_inputs_or_files_partcal_did_not_write(tmp_path):
     """``output: .`` beside the config used to delete the config and the data (the folder is replaced whole)."""
     home = tmp_path / "study"

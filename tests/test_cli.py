@@ -550,7 +550,29 @@ def test_targets_the_ur10_cannot_reach_exit_3_for_every_model_kind(ur10_models, 
     assert res.returncode == 3 and res.stderr.count("\n") == 1, res.stderr
     assert "2 of 3 targets did not converge or are unreachable (first: data row 1 of" in res.stderr
     with open(tmp_path / "c.csv") as handle:
-        assert [r["converged"] for r in csv.DictReader(handle)] == ["false", "false", "true"]
+        rows = list(csv.DictReader(handle))
+    assert [r["converged"] for r in rows] == ["false", "false", "true"]
+    assert [r["reason"] for r in rows] == ["out of reach", "out of reach", ""]
+
+
+@pytest.mark.parametrize("inputs", ["cartesian", "joint"])
+def test_the_ur10_base_origin_is_reached_with_a_long_enough_tool(tmp_path, inputs):
+    """The bare flange stays 72 mm from the base origin (exit 3 above); a 150 mm tool folds onto it."""
+    from partcal import ErrorModel, load_robot
+    from partcal.study.persist import save_model
+
+    ur10 = load_robot("universal_robots_ur10").replace(tool_mm=np.array([0.0, 0.0, 150.0]))
+    q = np.random.default_rng(0).uniform(ur10.limits_deg[:, 0], ur10.limits_deg[:, 1], (200, 6))
+    p = ur10.positions(q)
+    save_model(ErrorModel(inputs=inputs, degree=1, solver="lstsq").fit(q if inputs == "joint" else p,
+                                                                        1e-3 * p[:, [1, 2, 0]]),
+               tmp_path / "m.json", robot=ur10)
+    (tmp_path / "t.csv").write_text("x,y,z\n0,0,0\n")
+    res = run("compensate", str(tmp_path / "m.json"), str(tmp_path / "t.csv"), "-o", str(tmp_path / "c.csv"))
+    assert res.returncode == 0, res.stderr
+    with open(tmp_path / "c.csv") as handle:
+        row = next(csv.DictReader(handle))
+    assert row["converged"] == "true" and row["reason"] == "" and float(row["miss_mm"]) <= 1e-4
 
 
 def test_absurd_inputs_are_refused_in_one_line_without_numpy_warnings(cartesian_model, joint_model, tmp_path):

@@ -195,7 +195,7 @@ def _cmd_compensate(args) -> int:
     with warnings.catch_warnings():       # exit code 3 and one stderr line below say it instead
         warnings.simplefilter("ignore", CompensationWarning)
         warnings.simplefilter("ignore", ExtrapolationWarning)
-        result = _compensated(predictor, targets, seeds, payload, angles)
+        result = _compensated(predictor, targets, seeds, payload, angles, args.tol_mm, args.tol_deg)
     far = _far_from_data(predictor, result.commanded_mm if predictor.inputs == "cartesian" else result.joints_deg)
     header, parts = list(cols), [targets]
     if angles is not None:
@@ -218,8 +218,15 @@ def _cmd_compensate(args) -> int:
     if args.std:          # the position expected to be left at each target, and its spread
         header += ["dx_left", "dy_left", "dz_left", "sdx", "sdy", "sdz"]
         parts += list(predictor.residual_of(result, targets, payload))
-    _write_table(args.output, header + ["converged"], np.hstack(parts), atomic_write,
-                 flags=result.converged)
+    header.append("miss_mm")            # the predicted miss of each target after compensation
+    parts.append(result.residual_mm[:, None])
+    if angles is not None:
+        header.append("miss_deg")
+        parts.append(result.residual_deg[:, None])
+    reasons = result.reasons(args.tol_mm, args.tol_deg if angles is not None else None, predictor.robot,
+                             targets)
+    _write_table(args.output, header + ["converged", "reason"], np.hstack(parts), atomic_write,
+                 flags=result.converged, texts=reasons, significant=1 if angles is None else 2)
     bad = np.flatnonzero(~result.converged)
     if bad.size:
         first = int(bad[0])
@@ -228,7 +235,8 @@ def _cmd_compensate(args) -> int:
         miss = f"{result.residual_mm[first]:.3g} mm" + ("" if angles is None else
                                                         f", {result.residual_deg[first]:.3g} deg")
         print(f"partcal: {bad.size} of {len(targets)} targets did not converge or are unreachable (first: data "
-              f"row {first + 1} of {args.targets}, target {target}, predicted miss {miss}); {args.output} marks "
+              f"row {first + 1} of {args.targets}, target {target}: {reasons[first]}, predicted miss {miss}); "
+              f"{args.output} marks "
               f"them converged=false" + (f"; also, {far}" if far else ""), file=sys.stderr)
         return 3
     if far:
@@ -259,7 +267,8 @@ def _compensate_program(args, kind: str) -> int:
     with warnings.catch_warnings():       # exit code 3 and one stderr line below say it instead
         warnings.simplefilter("ignore", CompensationWarning)
         warnings.simplefilter("ignore", ExtrapolationWarning)
-        result = compensate_program(predictor, program, frames, keep_unconverged=args.keep_unconverged)
+        result = compensate_program(predictor, program, frames, keep_unconverged=args.keep_unconverged,
+                                    tol_mm=args.tol_mm, tol_deg=args.tol_deg)
     summary = result.summary(predictor.name)
     if not program.targets:
         print(f"partcal: warning: {args.targets} holds no targets partcal reads ({dialect.name}); written as it "
@@ -316,9 +325,9 @@ def _program_summary(summary: dict, output, summary_path) -> str:
     return text + f": {output} (summary: {summary_path})"
 
 
-def _compensated(predictor, targets, seeds, payload, angles=None):
+def _compensated(predictor, targets, seeds, payload, angles=None, tol_mm: float = 1e-4, tol_deg: float = 1e-5):
     """``compensate_full`` of every target (``compensate_pose`` with ``angles``, (n, 3) degrees), each at its
-    own payload when ``payload`` (kg per row) is given."""
+    own payload when ``payload`` (kg per row) is given, to the tolerances ``tol_mm`` and ``tol_deg``."""
     from .robot.compensation import merged
 
     def solve(rows, kg):
@@ -326,8 +335,9 @@ def _compensated(predictor, targets, seeds, payload, angles=None):
             return v if rows is None or v is None else v[rows]
 
         if angles is None:
-            return predictor.compensate_full(some(targets), some(seeds), payload_kg=kg)
-        return predictor.compensate_pose(some(targets), some(angles), some(seeds), payload_kg=kg)
+            return predictor.compensate_full(some(targets), some(seeds), payload_kg=kg, tol_mm=tol_mm)
+        return predictor.compensate_pose(some(targets), some(angles), some(seeds), payload_kg=kg, tol_mm=tol_mm,
+                                         tol_deg=tol_deg)
 
     if payload is None:
         return solve(None, None)
@@ -400,7 +410,7 @@ def _cmd_import(args) -> int:
 
 def _import_run(args) -> int:
     from .study.config import load_config
-    from .study.outputs import check_writable, replace_folder, write_datasets
+    from .study.outputs import check_writable, replace_folder, write_datasets, write_robot_yaml
     from .study.prepare import load_datasets
     from .study.tables import registration_line
 
@@ -411,21 +421,38 @@ def _import_run(args) -> int:
     _refuse_input_as_output(args.output, "import", [("run's input", p) for p in config.inputs()])
     output = Path(args.output)
     check_writable(output, config.inputs(), option="-o")
-    datasets, _, registrations = load_datasets(config)
+    datasets, robot, registrations = load_datasets(config)
     for reg in {id(r): r for r in registrations.values()}.values():
         print(registration_line(reg, [n for n, r in registrations.items() if r is reg]))
-    paths = replace_folder(output, lambda tmp: write_datasets(config, datasets, registrations, tmp))
-    paths = [output / p.name for p in paths]
-    print(f"wrote {len(paths)} data sets ({', '.join(f'{n}: {len(m)}' for n, m in datasets.items())}) to {args.output}")
+
+    def fill(tmp: Path) -> list[Path]:
+        written = write_datasets(config, datasets, registrations, tmp)
+        if robot is None:
+            return written
+        tool = "the tool offset registered on the identification set" if registrations else "its tool offset"
+        return written + [write_robot_yaml(robot, tmp / "robot.yaml", (
+            f"robot of run {config.name!r} (partcal {__version__}, from {config.robot}) with {tool}: the robot of "
+            "the data sets beside it (base frame)"))]
+
+    paths = [output / p.name for p in replace_folder(output, fill)]
+    data = [p for p in paths if p.name != "robot.yaml"]
+    print(f"wrote {len(data)} data sets ({', '.join(f'{n}: {len(m)}' for n, m in datasets.items())}) to {args.output}")
+    if robot is not None:
+        print(f"robot (tool offset included): {output / 'robot.yaml'}")
     return 0
 
 
-def _write_table(path, header, values, atomic_write, flags=None) -> None:
-    """Numbers with 6 decimals; ``flags`` (one bool per row) as a last column of true/false."""
+def _write_table(path, header, values, atomic_write, flags=None, texts=None, significant: int = 0) -> None:
+    """Numbers with 6 decimals (the last ``significant`` columns with 6 significant digits: misses of
+    micrometres); ``flags`` (one bool per row) as a column of true/false after them, then ``texts`` (one
+    string per row, no commas) as a last column."""
     with atomic_write(path) as handle:
         handle.write(",".join(header) + "\n")
         for k, row in enumerate(values):
-            cells = [f"{v:.6f}" for v in row] + ([("true" if flags[k] else "false")] if flags is not None else [])
+            split = len(row) - significant
+            cells = [f"{v:.6f}" for v in row[:split]] + [f"{v:.6g}" for v in row[split:]]
+            cells += [("true" if flags[k] else "false")] if flags is not None else []
+            cells += [texts[k]] if texts is not None else []
             handle.write(",".join(cells) + "\n")
 
 
@@ -618,6 +645,16 @@ def _one_or_many(values: tuple[int, ...]):
     return values[0] if len(values) == 1 else values
 
 
+def _positive_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not (np.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"expected a positive number; got {text!r}")
+    return value
+
+
 def _positive_int(text: str) -> int:
     try:
         value = int(text)
@@ -661,13 +698,18 @@ def build_parser() -> argparse.ArgumentParser:
                                       "XYZ degrees; or a robot program (URScript, KRL, RAPID, joint trajectory "
                                       "CSV), see --program")
     comp.add_argument("-o", "--output", required=True,
-                      help="CSV to write (targets + x_cmd,y_cmd,z_cmd[,rx_cmd,ry_cmd,rz_cmd][,qK_cmd],converged); "
+                      help="CSV to write (targets + x_cmd,y_cmd,z_cmd[,rx_cmd,ry_cmd,rz_cmd][,qK_cmd][,std columns],miss_mm"
+                           "[,miss_deg],converged,reason); "
                            "exit code 3 when any target did not converge")
     comp.add_argument("--format", metavar="FILE.yaml", help="the targets' format (delimiter, decimal, columns, "
                                                             "units), see docs/data.md")
     comp.add_argument("--std", action="store_true",
                       help="also the position expected to be left at each target (dx_left,dy_left,dz_left: target "
                            "minus where the model says the command lands) and its standard deviation sdx,sdy,sdz (mm)")
+    comp.add_argument("--tol-mm", type=_positive_float, default=1e-4,
+                      help="a target is converged when its predicted miss is within this (default 1e-4 mm)")
+    comp.add_argument("--tol-deg", type=_positive_float, default=1e-5,
+                      help="pose models: and its predicted orientation miss within this (default 1e-5 deg)")
     comp.add_argument("--program", choices=("urscript", "krl", "rapid", "joints"),
                       help="TARGETS is a robot program in this language (default: from its name: .script, "
                            ".src/.dat, .mod/.prg; a .csv with q1..qN and no x,y,z is a joint trajectory)")

@@ -100,6 +100,46 @@ def test_compensate_marks_unconverged_targets_and_exits_3(joint_model, tmp_path)
         assert [r["converged"] for r in csv.DictReader(handle)] == ["true"] * 3
 
 
+@pytest.mark.parametrize("model, reasons", [("joint", ["", "out of reach", "joint limit"]),
+                                            ("cartesian", ["", "out of reach", ""])])
+def test_compensate_writes_each_targets_miss_and_why_it_missed(joint_model, cartesian_model, tmp_path, model,
+                                                               reasons):
+    m = read_measurements(DATA / "test_rectangle.csv")
+    targets = tmp_path / "targets.csv"
+    rows = [m.nominal_mm[0], [9000.0, 0.0, 0.0], [912.609, 0.0, 122.994]]  # 9 m away; the home seed folds the SK120
+    targets.write_text("x,y,z\n" + "\n".join(",".join(f"{v:.6f}" for v in p) for p in rows) + "\n")
+    out = tmp_path / "cmd.csv"
+    res = run("compensate", str(joint_model if model == "joint" else cartesian_model), str(targets), "-o", str(out))
+    assert res.returncode == 3, res.stderr
+    assert "first: data row 2 of" in res.stderr and "0.0] mm: out of reach, predicted miss" in res.stderr
+    with open(out) as handle:
+        written = list(csv.DictReader(handle))
+    assert list(written[0])[-3:] == ["miss_mm", "converged", "reason"]
+    assert [r["reason"] for r in written] == reasons
+    assert [r["converged"] for r in written] == ["true" if not r else "false" for r in reasons]
+    assert float(written[0]["miss_mm"]) <= 1e-4
+    if model == "joint":
+        assert float(written[1]["miss_mm"]) > 1000 and float(written[2]["miss_mm"]) <= 1e-4   # solved, not takeable
+
+
+def test_compensate_tolerances_are_options(joint_model, tmp_path):
+    m = read_measurements(DATA / "test_rectangle.csv")
+    targets = tmp_path / "targets.csv"
+    targets.write_text("x,y,z\n" + "\n".join(",".join(f"{v:.6f}" for v in p) for p in m.nominal_mm[:5]) + "\n")
+    misses = {}
+    for tol in ("1e-4", "0.05"):
+        out = tmp_path / f"cmd{tol}.csv"
+        res = run("compensate", str(joint_model), str(targets), "-o", str(out), "--tol-mm", tol)
+        assert res.returncode == 0, res.stderr
+        with open(out) as handle:
+            misses[tol] = np.array([float(r["miss_mm"]) for r in csv.DictReader(handle)])
+        assert misses[tol].max() <= float(tol)
+    assert misses["0.05"].max() > 1e-4            # the looser tolerance stops the solve earlier
+    res = run("compensate", str(joint_model), str(targets), "-o", str(tmp_path / "x.csv"), "--tol-mm", "0")
+    assert res.returncode == 2 and "argument --tol-mm: expected a positive number; got '0'" in res.stderr
+    assert not (tmp_path / "x.csv").exists()
+
+
 def test_output_naming_a_folder_is_refused(joint_model, tmp_path):
     m = read_measurements(DATA / "identification.csv")
     points = tmp_path / "q.csv"
@@ -260,6 +300,43 @@ models:
     assert res.returncode == 0, res.stderr
     out = tmp_path / "reports" / "v"
     assert (out / "data" / "validation.csv").is_file() and (out / "metrics.json").is_file()
+
+
+def test_import_config_writes_the_registered_robot_so_the_converted_data_run_again(tmp_path):
+    from scipy.spatial.transform import Rotation
+
+    rot, t = Rotation.from_rotvec([0.3, -1.2, 0.8]).as_matrix(), np.array([2500.0, -900.0, 400.0])
+    files = {}
+    for name in ("identification", "test_rectangle"):        # the SK120's data as seen from a tracker
+        m = read_measurements(DATA / f"{name}.csv")
+        files[name] = tmp_path / f"{name}_tracker.csv"
+        files[name].write_text("q1,q2,q3,q4,q5,q6,x_meas,y_meas,z_meas\n" + "\n".join(
+            ",".join(repr(float(v)) for v in np.r_[q, p]) for q, p in zip(m.q_deg, (m.measured_mm - t) @ rot)) + "\n")
+    models = "models:\n  - {name: FDP(CI), degree: 1, solver: {method: lstsq}}\n"
+    original = tmp_path / "tracked.yaml"
+    original.write_text(f"name: tracked\nrobot: motoman_sk120\ncv_folds: 3\ndata:\n  frame: tracker\n"
+                        f"  identification: {files['identification']}\n"
+                        f"  tests: {{rectangle: {files['test_rectangle']}}}\n{models}output: {tmp_path / 'a'}\n")
+    res = run("import", "--config", str(original), "-o", str(tmp_path / "conv"))
+    assert res.returncode == 0, res.stderr
+    robot_file = tmp_path / "conv" / "robot.yaml"
+    assert f"robot (tool offset included): {robot_file}" in res.stdout
+    assert sorted(p.name for p in (tmp_path / "conv").iterdir()) == [".partcal-output", "identification.csv",
+                                                                     "rectangle.csv", "robot.yaml"]
+    again = tmp_path / "again.yaml"
+    for robot, code in (("motoman_sk120", 2), (robot_file, 0)):    # the built-in robot lacks the registered tool
+        again.write_text(f"name: again\nrobot: {robot}\ncv_folds: 3\ndata:\n"
+                         f"  identification: {tmp_path / 'conv' / 'identification.csv'}\n"
+                         f"  tests: {{rectangle: {tmp_path / 'conv' / 'rectangle.csv'}}}\n{models}"
+                         f"output: {tmp_path / 'b'}\n")
+        res = run("run", "-q", str(again))
+        assert res.returncode == code, res.stderr
+    assert run("run", "-q", str(original)).returncode == 0
+    before, after = (json.loads((tmp_path / o / "metrics.json").read_text())["uncompensated"] for o in "ab")
+    for name in ("identification", "rectangle"):
+        np.testing.assert_allclose([after[name][k] for k in ("rms_3d", "max_3d", "p95_3d")] + after[name]["rms"],
+                                   [before[name][k] for k in ("rms_3d", "max_3d", "p95_3d")] + before[name]["rms"],
+                                   atol=1e-5, err_msg=name)
 
 
 def test_a_run_never_replaces_a_folder_holding_its_inputs_or_files_partcal_did_not_write(tmp_path):
@@ -473,7 +550,29 @@ def test_targets_the_ur10_cannot_reach_exit_3_for_every_model_kind(ur10_models, 
     assert res.returncode == 3 and res.stderr.count("\n") == 1, res.stderr
     assert "2 of 3 targets did not converge or are unreachable (first: data row 1 of" in res.stderr
     with open(tmp_path / "c.csv") as handle:
-        assert [r["converged"] for r in csv.DictReader(handle)] == ["false", "false", "true"]
+        rows = list(csv.DictReader(handle))
+    assert [r["converged"] for r in rows] == ["false", "false", "true"]
+    assert [r["reason"] for r in rows] == ["out of reach", "out of reach", ""]
+
+
+@pytest.mark.parametrize("inputs", ["cartesian", "joint"])
+def test_the_ur10_base_origin_is_reached_with_a_long_enough_tool(tmp_path, inputs):
+    """The bare flange stays 72 mm from the base origin (exit 3 above); a 150 mm tool folds onto it."""
+    from partcal import ErrorModel, load_robot
+    from partcal.study.persist import save_model
+
+    ur10 = load_robot("universal_robots_ur10").replace(tool_mm=np.array([0.0, 0.0, 150.0]))
+    q = np.random.default_rng(0).uniform(ur10.limits_deg[:, 0], ur10.limits_deg[:, 1], (200, 6))
+    p = ur10.positions(q)
+    save_model(ErrorModel(inputs=inputs, degree=1, solver="lstsq").fit(q if inputs == "joint" else p,
+                                                                        1e-3 * p[:, [1, 2, 0]]),
+               tmp_path / "m.json", robot=ur10)
+    (tmp_path / "t.csv").write_text("x,y,z\n0,0,0\n")
+    res = run("compensate", str(tmp_path / "m.json"), str(tmp_path / "t.csv"), "-o", str(tmp_path / "c.csv"))
+    assert res.returncode == 0, res.stderr
+    with open(tmp_path / "c.csv") as handle:
+        row = next(csv.DictReader(handle))
+    assert row["converged"] == "true" and row["reason"] == "" and float(row["miss_mm"]) <= 1e-4
 
 
 def test_absurd_inputs_are_refused_in_one_line_without_numpy_warnings(cartesian_model, joint_model, tmp_path):

@@ -176,3 +176,21 @@ def test_full_pose_false_targets_put_the_true_robot_on_the_wanted_pose(name):
 
     with pytest.raises(DataError, match=r"predict must give pose errors of shape \(3, 6\)"):
         false_target_poses(lambda q: np.zeros((len(q), 3)), nominal, wanted[:3])
+
+
+def test_each_unconverged_target_says_why(sk120, joint_model):
+    """Diverged, not converged in the iterations given, out of reach, or a joint solution beyond the limits."""
+    def grows(p):                                  # 1 mm per m^2: diverges at 10 km, converges slowly near 1 km
+        return 1e-6 * p**2
+
+    targets = np.array([[1e7, 0.0, 0.0], [1000.0, 500.0, 800.0]])
+    assert false_target(grows, targets).reasons(1e-4) == ["diverged", ""]
+    assert false_target(grows, targets[1:], max_iter=1).reasons(1e-4) == ["not converged"]
+
+    m, model = joint_model
+    targets = np.array([[912.609, 0.0, 122.994], [9000.0, 0.0, 0.0], sk120.positions(m.q_deg[:1])[0]])
+    seeds = np.tile(sk120.home_deg, (3, 1))
+    res = false_target_joints(model.predict, sk120, targets, seeds, fixed=(4, 5, 6), tol_mm=1e-4)
+    assert res.converged.tolist() == [False, False, True]
+    assert res.reasons(1e-4, robot=sk120, targets_mm=targets) == ["joint limit", "out of reach", ""]
+    assert res.reasons(1e-4, robot=sk120)[1] == "joint limit"     # without the targets: what the solve ran into

@@ -208,8 +208,9 @@ def test_compensate_command_round_trip_with_orientation(pose_files, tmp_path):
     rows = read_csv(out)
     assert list(rows[0]) == ["x", "y", "z", "rx", "ry", "rz", "q1", "q2", "q3", "q4", "q5", "q6", "x_cmd", "y_cmd",
                              "z_cmd", "rx_cmd", "ry_cmd", "rz_cmd", "q1_cmd", "q2_cmd", "q3_cmd", "q4_cmd", "q5_cmd",
-                             "q6_cmd", "converged"]
-    assert [r["converged"] for r in rows] == ["true"] * 6
+                             "q6_cmd", "miss_mm", "miss_deg", "converged", "reason"]
+    assert [r["converged"] for r in rows] == ["true"] * 6 and [r["reason"] for r in rows] == [""] * 6
+    assert columns(rows, ["miss_mm"]).max() <= 1e-4 and columns(rows, ["miss_deg"]).max() <= 1e-5
     q_cmd = columns(rows, [f"q{j}_cmd" for j in range(1, 7)])
     commanded = NOMINAL.forward(q_cmd)                      # the pose written is the nominal pose of the joints
     np.testing.assert_allclose(columns(rows, ["x_cmd", "y_cmd", "z_cmd"]), commanded[:, :3, 3], atol=1e-5)
@@ -247,8 +248,9 @@ def test_compensate_command_reads_the_nominal_orientation_and_exits_3_on_an_unre
     res = run("compensate", str(pose_files[1]), str(targets), "-o", str(out))
     assert res.returncode == 3 and res.stderr.count("\n") == 1, res.stderr
     assert (f"1 of 2 targets did not converge or are unreachable (first: data row 2 of {targets}, target [1480.0, "
-            "0.0, 0.0] mm, [10.0, 20.0, 30.0] deg, predicted miss ") in res.stderr
+            "0.0, 0.0] mm, [10.0, 20.0, 30.0] deg: out of reach, predicted miss ") in res.stderr
     written = read_csv(out)
+    assert [r["reason"] for r in written] == ["", "out of reach"] and float(written[0]["miss_deg"]) <= 1e-5
     assert list(written[0])[:9] == ["x_nom", "y_nom", "z_nom", "rx_nom", "ry_nom", "rz_nom", "x_cmd", "y_cmd", "z_cmd"]
     assert [r["converged"] for r in written] == ["true", "false"]
     with warnings.catch_warnings():
@@ -279,7 +281,7 @@ def test_a_pose_model_without_orientation_columns_compensates_positions(pose_fil
     res = run("compensate", str(pose_files[1]), str(targets), "-o", str(out))
     assert res.returncode == 0, res.stderr
     rows = read_csv(out)
-    assert list(rows[0]) == ["x", "y", "z", "x_cmd", "y_cmd", "z_cmd", "converged"]
+    assert list(rows[0]) == ["x", "y", "z", "x_cmd", "y_cmd", "z_cmd", "miss_mm", "converged", "reason"]
     expected = load_predictor(pose_files[1]).compensate_full(columns(rows, ["x", "y", "z"])).commanded_mm
     np.testing.assert_allclose(columns(rows, ["x_cmd", "y_cmd", "z_cmd"]), expected, atol=1e-6)
 

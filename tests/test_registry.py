@@ -228,7 +228,8 @@ def test_cli_predict_and_compensate(small_run, tmp_path):
     res = cli("compensate", str(out / "models" / "sdp-ai.json"), str(seeds), "-o", str(tmp_path / "q.csv"))
     assert res.returncode == 0, res.stderr
     header = (tmp_path / "q.csv").read_text().splitlines()[0].split(",")
-    assert header[-10:] == ["x_cmd", "y_cmd", "z_cmd"] + [f"q{j}_cmd" for j in range(1, 7)] + ["converged"]
+    assert header[-12:] == ["x_cmd", "y_cmd", "z_cmd"] + [f"q{j}_cmd" for j in range(1, 7)] + ["miss_mm", "converged",
+                                                                                                 "reason"]
     res = cli("predict", str(out / "models" / "sdp-ai.json"), str(pts), "-o", str(tmp_path / "x.csv"))
     assert res.returncode == 2 and "column 'q1' is missing (expected columns q1,q2,q3,q4,q5,q6)" in res.stderr
 

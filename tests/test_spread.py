@@ -160,7 +160,7 @@ def test_predict_std_adds_sd_columns_and_compensate_std_the_expected_residual(tm
     res = partcal_cli("compensate", str(path), str(points), "-o", str(tmp_path / "cmd.csv"), "--std")
     assert res.returncode == 0, res.stderr
     rows = (tmp_path / "cmd.csv").read_text().splitlines()
-    assert rows[0] == "x,y,z,x_cmd,y_cmd,z_cmd,dx_left,dy_left,dz_left,sdx,sdy,sdz,converged"
-    values = np.array([[float(v) for v in r.split(",")[:-1]] for r in rows[1:]])
+    assert rows[0] == "x,y,z,x_cmd,y_cmd,z_cmd,dx_left,dy_left,dz_left,sdx,sdy,sdz,miss_mm,converged,reason"
+    values = np.array([[float(v) for v in r.split(",")[:-2]] for r in rows[1:]])
     assert np.abs(values[:, 6:9]).max() < 1e-3                               # converged: nothing left expected
     np.testing.assert_allclose(values[:, 9:12], model.predict_with_std(values[:, 3:6])[1], atol=2e-6)

@@ -57,6 +57,40 @@ class CompensationResult:
     commanded_rotation: NDArray[np.float64] | None = None    # full-pose compensation: (n, 3, 3)
     residual_deg: NDArray[np.float64] | None = None          # and its predicted orientation miss
 
+    def reasons(self, tol_mm: float, tol_deg: float | None = None, robot: Robot | None = None,
+                targets_mm: NDArray[np.float64] | None = None) -> list[str]:
+        """Why each target is not converged (``""`` where it is), from what the solve left.
+
+        In this order: ``"diverged"``, no finite prediction at the command (the
+        iteration ran away, as far outside the data); ``"out of reach"``, the
+        predicted miss (``residual_mm``, and ``residual_deg`` with ``tol_deg``)
+        is beyond the tolerance and the nominal ``robot`` does not reach the
+        target position ``targets_mm`` (n, 3) mm within its limits either
+        (:func:`reachable`); ``"joint limit"``, the joint solution
+        (``joints_deg``) breaks the robot's limits or coupled constraints;
+        ``"not converged"``, the miss is beyond the tolerance after the
+        iterations; ``"out of reach"`` too where the miss is within the
+        tolerance but the robot's inverse kinematics does not reach the command
+        within its limits (a Cartesian model's reachability check).
+        """
+        n = len(self.converged)
+        missed = ~(self.residual_mm <= tol_mm)
+        finite = np.isfinite(self.residual_mm)
+        if tol_deg is not None and self.residual_deg is not None:
+            missed |= ~(self.residual_deg <= tol_deg)
+            finite &= np.isfinite(self.residual_deg)
+        limited = np.zeros(n, dtype=bool)
+        beyond = np.zeros(n, dtype=bool)
+        if robot is not None:
+            if self.joints_deg is not None:
+                limited = ~robot.within_limits(self.joints_deg)
+            if targets_mm is not None:
+                check = np.flatnonzero(missed & finite & ~self.converged)
+                beyond[check] = ~reachable(robot, np.asarray(targets_mm, dtype=float)[check])
+        why = np.select([~finite, beyond, limited, missed], ["diverged", "out of reach", "joint limit",
+                                                             "not converged"], "out of reach")
+        return ["" if ok else str(w) for ok, w in zip(self.converged, why)]
+
     def warn_unconverged(self, tol_mm: float, tol_deg: float | None = None) -> None:
         """A :class:`CompensationWarning` naming the first unconverged targets (0-based) and their misses.
 

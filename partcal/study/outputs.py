@@ -21,7 +21,7 @@ import yaml
 from .. import __version__
 from ..data.measurements import write_measurements
 from ..errors import PartcalError
-from ..robot.description import joint_columns
+from ..robot.description import joint_columns, robot_to_dict
 from .config import RunConfig
 from .persist import save_model
 from .results import RunResult
@@ -277,6 +277,22 @@ def write_datasets(config: RunConfig, datasets: dict, registrations: dict, folde
         write_measurements(m, path, comment="\n".join(lines))
         paths.append(path)
     return paths
+
+
+def write_robot_yaml(robot, path: Path, comment: str) -> Path:
+    """The robot as a robot YAML (docs/robots.md; a URDF's chain too), ``comment`` as its header lines.
+
+    ``partcal import --config`` writes the run's robot, with the registered
+    tool offset of a tracker run, beside the converted data sets, so that a
+    run of them in the base frame needs no registration and no built-in robot.
+    """
+    from .._io import atomic_write
+
+    text = "".join(f"# {line}\n" for line in comment.splitlines()) + yaml.safe_dump(robot_to_dict(robot),
+                                                                                   sort_keys=False)
+    with atomic_write(path) as handle:
+        handle.write(text)
+    return path
 
 
 def registration_comment(reg, shared: bool) -> str:

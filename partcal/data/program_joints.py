@@ -12,7 +12,7 @@ import re
 import numpy as np
 
 from ..robot.description import joint_columns
-from .program_text import NUMBER_RE, Dialect, Field, ProgramSyntaxError, Target, syntax_error
+from .program_text import Dialect, Field, ProgramSyntaxError, Target, is_number, syntax_error
 
 DEG_DECIMALS = 6
 _JOINT = re.compile(r"q(\d+)")
@@ -57,7 +57,7 @@ def parse(text: str, source: str) -> tuple[list[Target], dict]:
             cell = cells[k]
             offset = start + int(offsets[k]) + len(cell) - len(cell.lstrip())
             value = cell.strip()
-            if not NUMBER_RE.fullmatch(value):
+            if not is_number(value):
                 raise syntax_error(source, text, offset, f"data row {row}, column {header[k]!r}",
                                    "a joint angle in degrees", value)
             fields.append(Field(offset, offset + len(value), value, float(value)))

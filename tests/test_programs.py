@@ -66,6 +66,14 @@ def test_a_zero_model_writes_the_program_back_byte_for_byte(name, robot, count, 
     assert result.output == (FIXTURES / name).read_bytes()
 
 
+def test_a_joint_trajectory_with_a_utf8_byte_order_mark_before_its_comment_is_read_and_keeps_it(tmp_path):
+    path = tmp_path / "bom.csv"
+    path.write_bytes(b"\xef\xbb\xbf" + (FIXTURES / "trajectory.csv").read_bytes())
+    assert program_kind(path) == "joints"
+    result = compensated(constant_model(UR10, np.zeros(3)), path)
+    assert len(result.program.targets) == 3 and result.output == path.read_bytes()
+
+
 def test_a_crlf_urscript_program_keeps_its_line_endings(tmp_path):
     path = tmp_path / "crlf.script"
     path.write_bytes((FIXTURES / "pick_place.script").read_bytes().replace(b"\n", b"\r\n"))

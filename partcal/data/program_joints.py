@@ -12,7 +12,7 @@ import re
 import numpy as np
 
 from ..robot.description import joint_columns
-from .program_text import Dialect, Field, ProgramSyntaxError, Target, is_number, syntax_error
+from .program_text import BOM, Dialect, Field, ProgramSyntaxError, Target, is_number, syntax_error
 
 DEG_DECIMALS = 6
 _JOINT = re.compile(r"q(\d+)")
@@ -34,6 +34,8 @@ def parse(text: str, source: str) -> tuple[list[Target], dict]:
     for number, line in enumerate(text.splitlines(keepends=True), start=1):
         start, body = at, line.rstrip("\r\n")
         at += len(line)
+        if number == 1 and body.startswith(BOM):
+            start, body = start + len(BOM), body[len(BOM):]
         if not body.strip() or body.lstrip().startswith("#"):
             continue
         cells = body.split(",")

@@ -18,6 +18,7 @@ from ..errors import DataError
 
 NUMBER = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
 NUMBER_RE = re.compile(NUMBER)
+BOM = "\xef\xbb\xbf"         # a UTF-8 byte order mark, read as latin-1: not part of the first line
 
 
 def is_number(text: str) -> bool:

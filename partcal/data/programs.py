@@ -20,7 +20,7 @@ from pathlib import Path
 
 from ..errors import DataError
 from . import program_joints, program_krl, program_rapid, program_urscript
-from .program_text import Dialect, Program, ProgramSyntaxError, Target, UnknownFrameError
+from .program_text import BOM, Dialect, Program, ProgramSyntaxError, Target, UnknownFrameError
 
 DIALECTS: dict[str, Dialect] = {d.name: d for d in (program_urscript.DIALECT, program_krl.DIALECT,
                                                      program_rapid.DIALECT, program_joints.DIALECT)}
@@ -42,7 +42,8 @@ def program_kind(path: str | Path) -> str | None:
     if suffix == ".csv":
         try:
             with open(path, encoding="latin-1") as handle:
-                header = next((line for line in handle if line.strip() and not line.lstrip().startswith("#")), "")
+                lines = (line.removeprefix(BOM) if k == 0 else line for k, line in enumerate(handle))
+                header = next((line for line in lines if line.strip() and not line.lstrip().startswith("#")), "")
         except OSError:
             return None
         names = {c.strip() for c in header.rstrip("\r\n").split(",")}

@@ -586,3 +586,16 @@ def test_numbers_keep_their_text_when_equal_and_get_enough_decimals_when_not():
     assert number_text(85.0805, old, 6) == "+85.080500"              # at least 6 decimals, the sign kept
     assert number_text(-1e-12, Field(0, 3, "0.5", 0.5), 6) == "0.000000"       # never "-0.000000"
     assert number_text(1.5, Field(0, 10, "0.12345678", 0.12345678), 6) == "1.50000000"   # as many as it had
+
+
+@pytest.mark.parametrize("name", ["pick_place.script", "pallet.src", "pallet.mod"])
+def test_a_utf16_program_is_refused_not_passed_through_uncompensated(tmp_path, name):
+    path = tmp_path / name
+    path.write_bytes((FIXTURES / name).read_bytes().decode("latin-1").encode("utf-16"))
+    robot = "universal_robots_ur10" if name.endswith((".script", ".csv")) else "motoman_sk120"
+    save_model(constant_model(load_robot(robot), np.zeros(3)).model, tmp_path / "m.json", name="zero",
+               robot=load_robot(robot))
+    out = tmp_path / ("out_" + name)
+    done = run("compensate", str(tmp_path / "m.json"), str(path), "-o", str(out))
+    assert done.returncode == 2 and f"{path}: " in done.stderr and "UTF-16" in done.stderr
+    assert len(done.stderr.strip().splitlines()) == 1 and not out.exists()

@@ -72,7 +72,14 @@ def read_program(path: str | Path, dialect: str | None = None) -> Program:
                         f"{', '.join(e for d in DIALECTS.values() for e in d.extensions)}, or a dialect in "
                         f"{', '.join(DIALECTS)}); got {name if dialect else Path(path).suffix or 'no extension'!r}")
     with open(path, "rb") as handle:
-        text = handle.read().decode("latin-1")          # one character per byte: offsets are byte offsets
+        raw = handle.read()
+    if raw.startswith((b"\xff\xfe", b"\xfe\xff")) or b"\x00" in raw:
+        nul = raw.find(b"\x00")
+        found = "a UTF-16 byte order mark" if raw[:2] in (b"\xff\xfe", b"\xfe\xff") else \
+            f"a NUL byte at byte {nul} (UTF-16 or not text)"
+        raise DataError(f"{path}: expected a text file in an 8-bit encoding (ASCII, UTF-8, cp1252), got {found}; "
+                        "save the program as UTF-8 or cp1252")
+    text = raw.decode("latin-1")          # one character per byte: offsets are byte offsets
     targets, frames = DIALECTS[name].parse(text, str(path))
     DIALECTS[name].fill(text, targets)
     return Program(str(path), text, DIALECTS[name], targets, frames)

@@ -251,3 +251,13 @@ def test_iso9283_reads_the_data_with_the_models_robot_and_refuses_another_robots
     assert res.returncode == 2 and res.stderr.count("\n") == 1
     assert "test_rectangle.csv:" in res.stderr and "universal_robots_ur10" in res.stderr
     assert not (tmp_path / "iso.json").exists()
+
+
+@pytest.mark.parametrize("centre", [["inf", "0", "800"], ["1200", "nan", "800"]])
+def test_a_cube_centre_that_is_not_a_finite_number_is_refused_naming_it(tmp_path, centre):
+    from conftest import partcal_cli
+
+    res = partcal_cli("plan", "motoman_sk120", "--iso9283", "-o", str(tmp_path / "p.csv"), "--cube", *centre, "100")
+    assert res.returncode == 2 and res.stderr.count("\n") == 1
+    assert "the cube's centre must be three finite numbers of mm" in res.stderr
+    assert not (tmp_path / "p.csv").exists()

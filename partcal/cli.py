@@ -579,12 +579,15 @@ def _cmd_iso9283(args) -> int:
     _refuse_input_as_output(args.output, "iso9283", [("data file", args.data), ("format file", args.format),
                                                     ("model file", args.model)])
     robot = load_robot(args.robot) if args.robot else None
-    data = read_iso_data(args.data, robot, fmt=_format(args), tol_deg=args.tol_deg)
-    predicted, name = None, None
+    predictor = None
     if args.model:
         from .study.predictor import load_predictor
 
         predictor = load_predictor(args.model)
+        robot = robot or predictor.robot        # the data are checked against the robot the model corrects
+    data = read_iso_data(args.data, robot, fmt=_format(args), tol_deg=args.tol_deg)
+    predicted, name = None, None
+    if predictor is not None:
         q = data.measurements.q_deg
         predicted = (predictor.predict(joints=q) if predictor.inputs == "joint"
                      else predictor.predict(positions=data.measurements.nominal_mm))

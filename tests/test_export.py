@@ -149,3 +149,14 @@ def test_export_on_the_command_line(complete_file, tmp_path):
     assert "urdf: " in done.stdout and "dh: not written:" in done.stdout
     bad = partcal_cli("export", str(path), "-o", str(tmp_path), "--formats", "step")
     assert bad.returncode == 2 and "expected one of urdf, ur, dh, yaml" in bad.stderr
+
+
+def test_export_into_a_file_or_below_one_is_refused_with_exit_2(complete_file, tmp_path):
+    path, _ = complete_file
+    a_file = tmp_path / "a_file"
+    a_file.write_text("keep\n")
+    for output in (a_file, a_file / "sub"):
+        done = partcal_cli("export", str(path), "-o", str(output))
+        assert done.returncode == 2, done.stderr
+        assert done.stderr.count("\n") == 1 and str(a_file) in done.stderr and "folder" in done.stderr
+    assert a_file.read_text() == "keep\n"

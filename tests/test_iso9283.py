@@ -234,3 +234,30 @@ def test_the_cubes_points_keep_p1s_tool_orientation_where_the_robot_can():
     assert cube.held_orientation
     np.testing.assert_allclose(pose[:, :3, 3], cube_points([300.0, -500.0, 500.0], 300.0), atol=1e-5)
     np.testing.assert_allclose(pose[:, :3, :3], np.repeat(pose[:1, :3, :3], 5, axis=0), atol=1e-7)
+
+
+def test_iso9283_reads_the_data_with_the_models_robot_and_refuses_another_robots_data(tmp_path):
+    from conftest import ROOT, partcal_cli
+
+    from partcal import ErrorModel, load_robot
+    from partcal.study.persist import save_model
+
+    rng = np.random.default_rng(0)
+    X = rng.uniform(-1000, 1000, (40, 3))
+    model = ErrorModel(inputs="cartesian", degree=1, solver="lstsq").fit(X, np.tile([0.3, -0.2, 0.1], (40, 1)))
+    save_model(model, tmp_path / "ur.json", name="ur", robot=load_robot("universal_robots_ur10"))
+    res = partcal_cli("iso9283", str(ROOT / "data" / "sk120" / "test_rectangle.csv"), "--model",
+                      str(tmp_path / "ur.json"), "-o", str(tmp_path / "iso.json"))
+    assert res.returncode == 2 and res.stderr.count("\n") == 1
+    assert "test_rectangle.csv:" in res.stderr and "universal_robots_ur10" in res.stderr
+    assert not (tmp_path / "iso.json").exists()
+
+
+@pytest.mark.parametrize("centre", [["inf", "0", "800"], ["1200", "nan", "800"]])
+def test_a_cube_centre_that_is_not_a_finite_number_is_refused_naming_it(tmp_path, centre):
+    from conftest import partcal_cli
+
+    res = partcal_cli("plan", "motoman_sk120", "--iso9283", "-o", str(tmp_path / "p.csv"), "--cube", *centre, "100")
+    assert res.returncode == 2 and res.stderr.count("\n") == 1
+    assert "the cube's centre must be three finite numbers of mm" in res.stderr
+    assert not (tmp_path / "p.csv").exists()

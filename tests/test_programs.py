@@ -66,6 +66,14 @@ def test_a_zero_model_writes_the_program_back_byte_for_byte(name, robot, count, 
     assert result.output == (FIXTURES / name).read_bytes()
 
 
+def test_a_joint_trajectory_with_a_utf8_byte_order_mark_before_its_comment_is_read_and_keeps_it(tmp_path):
+    path = tmp_path / "bom.csv"
+    path.write_bytes(b"\xef\xbb\xbf" + (FIXTURES / "trajectory.csv").read_bytes())
+    assert program_kind(path) == "joints"
+    result = compensated(constant_model(UR10, np.zeros(3)), path)
+    assert len(result.program.targets) == 3 and result.output == path.read_bytes()
+
+
 def test_a_crlf_urscript_program_keeps_its_line_endings(tmp_path):
     path = tmp_path / "crlf.script"
     path.write_bytes((FIXTURES / "pick_place.script").read_bytes().replace(b"\n", b"\r\n"))
@@ -346,7 +354,11 @@ def test_a_joint_trajectory_gets_the_joints_that_reach_its_nominal_poses(tmp_pat
     ("pallet.dat", b"Y 85.084", b"Y 85,084", "line 10, column"),
     ("pallet.mod", b"[0.212583,-0.556195,0.152896,-0.788719]", b"[0.212583,-0.556195,0.152896]",
      "line 7, column"),
-    ("trajectory.csv", b" 10.5 ", b" ten ", "line 4, column 8")])
+    ("trajectory.csv", b" 10.5 ", b" ten ", "line 4, column 8"),
+    ("pick_place.script", b"0.4299, 2.4066", b"0.4299, 2e999", "line 7, column 41"),
+    ("pallet.dat", b"Y 85.084", b"Y 85e999", "line 10, column"),
+    ("pallet.mod", b"[[5,-120", b"[[5e999,-120", "line 6, column"),
+    ("trajectory.csv", b" 10.5 ", b" 1e400 ", "line 4, column 8")])
 def test_bad_syntax_in_a_target_exits_2_naming_file_line_and_column(tmp_path, name, old, new, where):
     path = tmp_path / name
     data = (FIXTURES / name).read_bytes()
@@ -574,3 +586,16 @@ def test_numbers_keep_their_text_when_equal_and_get_enough_decimals_when_not():
     assert number_text(85.0805, old, 6) == "+85.080500"              # at least 6 decimals, the sign kept
     assert number_text(-1e-12, Field(0, 3, "0.5", 0.5), 6) == "0.000000"       # never "-0.000000"
     assert number_text(1.5, Field(0, 10, "0.12345678", 0.12345678), 6) == "1.50000000"   # as many as it had
+
+
+@pytest.mark.parametrize("name", ["pick_place.script", "pallet.src", "pallet.mod"])
+def test_a_utf16_program_is_refused_not_passed_through_uncompensated(tmp_path, name):
+    path = tmp_path / name
+    path.write_bytes((FIXTURES / name).read_bytes().decode("latin-1").encode("utf-16"))
+    robot = "universal_robots_ur10" if name.endswith((".script", ".csv")) else "motoman_sk120"
+    save_model(constant_model(load_robot(robot), np.zeros(3)).model, tmp_path / "m.json", name="zero",
+               robot=load_robot(robot))
+    out = tmp_path / ("out_" + name)
+    done = run("compensate", str(tmp_path / "m.json"), str(path), "-o", str(out))
+    assert done.returncode == 2 and f"{path}: " in done.stderr and "UTF-16" in done.stderr
+    assert len(done.stderr.strip().splitlines()) == 1 and not out.exists()

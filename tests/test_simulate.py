@@ -190,3 +190,13 @@ def test_tilts_between_parallel_axes_turn_the_true_rows_about_y(tmp_path):
                    .replace("output: ../data/ur10_tilts", f"output: {tmp_path}"))
     with pytest.raises(ConfigError, match="tilt_deg.*q7"):
         load_study(bad)
+
+
+@pytest.mark.parametrize("dataset", ["{iso9283: 3, cube: [9000, 0, 800, 100]}",
+                                     "{path: rectangle, start_mm: [9000, 0, 800]}"])
+def test_a_data_set_out_of_reach_is_refused_naming_the_config_and_the_data_set(tmp_path, dataset):
+    text = (ROOT / "configs" / "sk120_virtual.yaml").read_text()
+    text = text[:text.index("datasets:")] + f"datasets:\n  far: {dataset}\n"
+    (tmp_path / "far.yaml").write_text(text.replace("output: ../data/sk120", f"output: {tmp_path / 'out'}"))
+    with pytest.raises(ConfigError, match=r"far\.yaml: datasets\.far: .*(out of reach|unreachable)"):
+        simulate(load_study(tmp_path / "far.yaml"))

@@ -284,3 +284,11 @@ def test_import_computes_nominal_positions_from_a_urdf(tmp_path):
                        f"{path}#base=base_link&tip=tool0")
     assert done.returncode == 0, done.stderr
     np.testing.assert_allclose(read_measurements(tmp_path / "out.csv").nominal_mm, robot.positions(q), atol=1e-6)
+
+
+@pytest.mark.parametrize("name", ["ur10.xml", "folder"])
+def test_a_urdf_mapping_naming_a_file_without_the_urdf_suffix_says_what_was_expected(tmp_path, name):
+    (tmp_path / "folder").mkdir()
+    (tmp_path / "ur10.xml").write_text("<robot name='r'/>\n")
+    with pytest.raises(ConfigError, match=rf"robot: urdf: expected a file ending in \.urdf, got '\S*/{name}'"):
+        load_robot({"urdf": str(tmp_path / name), "base": "base_link", "tip": "tool0"})

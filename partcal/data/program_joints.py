@@ -12,7 +12,7 @@ import re
 import numpy as np
 
 from ..robot.description import joint_columns
-from .program_text import NUMBER_RE, Dialect, Field, ProgramSyntaxError, Target, syntax_error
+from .program_text import BOM, Dialect, Field, ProgramSyntaxError, Target, is_number, syntax_error
 
 DEG_DECIMALS = 6
 _JOINT = re.compile(r"q(\d+)")
@@ -34,6 +34,8 @@ def parse(text: str, source: str) -> tuple[list[Target], dict]:
     for number, line in enumerate(text.splitlines(keepends=True), start=1):
         start, body = at, line.rstrip("\r\n")
         at += len(line)
+        if number == 1 and body.startswith(BOM):
+            start, body = start + len(BOM), body[len(BOM):]
         if not body.strip() or body.lstrip().startswith("#"):
             continue
         cells = body.split(",")
@@ -57,7 +59,7 @@ def parse(text: str, source: str) -> tuple[list[Target], dict]:
             cell = cells[k]
             offset = start + int(offsets[k]) + len(cell) - len(cell.lstrip())
             value = cell.strip()
-            if not NUMBER_RE.fullmatch(value):
+            if not is_number(value):
                 raise syntax_error(source, text, offset, f"data row {row}, column {header[k]!r}",
                                    "a joint angle in degrees", value)
             fields.append(Field(offset, offset + len(value), value, float(value)))

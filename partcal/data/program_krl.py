@@ -26,7 +26,7 @@ import re
 import numpy as np
 
 from ..robot.rotations import kuka_abc_from_matrices, matrices_from_kuka_abc
-from .program_text import (NUMBER_RE, Dialect, Field, ProgramSyntaxError, Target, closing, frame_pose, line_end,
+from .program_text import (Dialect, Field, ProgramSyntaxError, Target, closing, frame_pose, is_number, line_end,
                            masked, syntax_error)
 
 POSE_TYPES = {"E6POS", "POS", "E3POS", "FRAME"}
@@ -102,7 +102,7 @@ def _items(text, code, source, start, end) -> dict:
             else:
                 key, value = m.group(1).upper(), m.group(2)
                 offset = at + m.start(2)
-                field = Field(offset, offset + len(value), value, float(value)) if NUMBER_RE.fullmatch(value) \
+                field = Field(offset, offset + len(value), value, float(value)) if is_number(value) \
                     else None
                 out[key] = (field, value, offset)
         at += len(part) + 1

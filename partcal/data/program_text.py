@@ -18,6 +18,12 @@ from ..errors import DataError
 
 NUMBER = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
 NUMBER_RE = re.compile(NUMBER)
+BOM = "\xef\xbb\xbf"         # a UTF-8 byte order mark, read as latin-1: not part of the first line
+
+
+def is_number(text: str) -> bool:
+    """Whether ``text`` is a number as the vendors write it and finite as a float (``1e999`` is not)."""
+    return bool(NUMBER_RE.fullmatch(text)) and np.isfinite(float(text))
 
 
 class ProgramSyntaxError(DataError):
@@ -214,8 +220,7 @@ def numbers(source: str, text: str, start: int, end: int, count: int | tuple, wh
     for k, part in enumerate(parts):
         stripped = part.strip()
         offset = at + (len(part) - len(part.lstrip()))
-        m = NUMBER_RE.fullmatch(stripped)
-        if not m:
+        if not is_number(stripped):
             raise syntax_error(source, text, offset, f"{what}, item {k + 1}", "a number", stripped)
         out.append(Field(offset, offset + len(stripped), stripped, float(stripped)))
         at += len(part) + 1

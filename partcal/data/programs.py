@@ -20,7 +20,7 @@ from pathlib import Path
 
 from ..errors import DataError
 from . import program_joints, program_krl, program_rapid, program_urscript
-from .program_text import Dialect, Program, ProgramSyntaxError, Target, UnknownFrameError
+from .program_text import BOM, Dialect, Program, ProgramSyntaxError, Target, UnknownFrameError
 
 DIALECTS: dict[str, Dialect] = {d.name: d for d in (program_urscript.DIALECT, program_krl.DIALECT,
                                                      program_rapid.DIALECT, program_joints.DIALECT)}
@@ -42,7 +42,8 @@ def program_kind(path: str | Path) -> str | None:
     if suffix == ".csv":
         try:
             with open(path, encoding="latin-1") as handle:
-                header = next((line for line in handle if line.strip() and not line.lstrip().startswith("#")), "")
+                lines = (line.removeprefix(BOM) if k == 0 else line for k, line in enumerate(handle))
+                header = next((line for line in lines if line.strip() and not line.lstrip().startswith("#")), "")
         except OSError:
             return None
         names = {c.strip() for c in header.rstrip("\r\n").split(",")}
@@ -71,7 +72,14 @@ def read_program(path: str | Path, dialect: str | None = None) -> Program:
                         f"{', '.join(e for d in DIALECTS.values() for e in d.extensions)}, or a dialect in "
                         f"{', '.join(DIALECTS)}); got {name if dialect else Path(path).suffix or 'no extension'!r}")
     with open(path, "rb") as handle:
-        text = handle.read().decode("latin-1")          # one character per byte: offsets are byte offsets
+        raw = handle.read()
+    if raw.startswith((b"\xff\xfe", b"\xfe\xff")) or b"\x00" in raw:
+        nul = raw.find(b"\x00")
+        found = "a UTF-16 byte order mark" if raw[:2] in (b"\xff\xfe", b"\xfe\xff") else \
+            f"a NUL byte at byte {nul} (UTF-16 or not text)"
+        raise DataError(f"{path}: expected a text file in an 8-bit encoding (ASCII, UTF-8, cp1252), got {found}; "
+                        "save the program as UTF-8 or cp1252")
+    text = raw.decode("latin-1")          # one character per byte: offsets are byte offsets
     targets, frames = DIALECTS[name].parse(text, str(path))
     DIALECTS[name].fill(text, targets)
     return Program(str(path), text, DIALECTS[name], targets, frames)

@@ -25,7 +25,7 @@ from scipy.spatial.transform import Rotation
 from .._io import check_folder_writable, replace_all
 from .._validation import one_of, safe_name
 from .._yamlio import Section, load_yaml, range_check
-from ..errors import ConfigError
+from ..errors import ConfigError, PartcalError
 from ..robot.description import joint_columns, load_robot, robot_reference
 from ..robot.iso_cube import largest_cube, solve_cube
 from ..robot.kinematics import Robot, matrix_from_euler_deg, rpy_deg_from_matrix, xyz_deg_from_matrices
@@ -410,19 +410,22 @@ def simulate(study: Study) -> dict[str, Measurements]:
     for (name, spec), child in zip(study.datasets.items(), children):
         rng = np.random.default_rng(child)
         labels = (name,)
-        if "sample" in spec:
-            q = sample_configurations(vr.nominal, spec["sample"], study.ranges_deg, study.fixed_deg, rng)
-        elif "iso9283" in spec:            # P1..P5 of the cube, once per cycle: the cycles are the repeats
-            c = spec["cube"]
-            cube = largest_cube(vr.nominal, random_state=rng) if c is None else solve_cube(vr.nominal, c[:3], c[3])
-            q = np.tile(cube.q_deg, (spec["iso9283"], 1))
-            labels = tuple(f"P{k + 1}" for k in range(len(cube.q_deg)))
-        else:
-            targets = paper_path(spec["path"], spec["start_mm"])
-            seed = vr.nominal.home_deg.copy()
-            for j, value in study.fixed_deg.items():
-                seed[j - 1] = value
-            q = vr.nominal.inverse_path(targets, seed, fixed=tuple(study.fixed_deg))
+        try:
+            if "sample" in spec:
+                q = sample_configurations(vr.nominal, spec["sample"], study.ranges_deg, study.fixed_deg, rng)
+            elif "iso9283" in spec:            # P1..P5 of the cube, once per cycle: the cycles are the repeats
+                c = spec["cube"]
+                cube = largest_cube(vr.nominal, random_state=rng) if c is None else solve_cube(vr.nominal, c[:3], c[3])
+                q = np.tile(cube.q_deg, (spec["iso9283"], 1))
+                labels = tuple(f"P{k + 1}" for k in range(len(cube.q_deg)))
+            else:
+                targets = paper_path(spec["path"], spec["start_mm"])
+                seed = vr.nominal.home_deg.copy()
+                for j, value in study.fixed_deg.items():
+                    seed[j - 1] = value
+                q = vr.nominal.inverse_path(targets, seed, fixed=tuple(study.fixed_deg))
+        except PartcalError as exc:     # a cube or path out of reach: the data set of the config that asks for it
+            raise ConfigError(f"{study.source}: datasets.{name}: {exc}") from None
         nominal = vr.nominal.positions(q)
         measured = vr.measure(q, rng)
         extra, orientation = vr.measure_more(q, rng)

@@ -128,6 +128,8 @@ def urdf_reference(spec: dict, base: Path, where: str = "robot") -> str:
     if "urdf" not in spec or not set(spec) <= keys or not all(isinstance(v, str) and v for v in spec.values()):
         raise ConfigError(f"{where}: expected a built-in name, a robot file, or {{urdf: FILE.urdf, base: LINK, "
                           f"tip: LINK}} (texts); got {spec!r}"[:300])
+    if not is_urdf(spec["urdf"]):
+        raise ConfigError(f"{where}: urdf: expected a file ending in .urdf, got {spec['urdf']!r}")
     return UrdfReference(base / spec["urdf"], spec.get("base"), spec.get("tip")).text()
 
 

@@ -88,6 +88,8 @@ def solve_cube(robot: Robot, centre_mm, edge_mm: float, seed_deg=None) -> Cube:
     such as the column about a first joint's axis).
     """
     centre = np.asarray(centre_mm, dtype=float).reshape(3)
+    if not np.all(np.isfinite(centre)):
+        raise DataError(f"the cube's centre must be three finite numbers of mm; got {centre.tolist()}")
     if not (np.isfinite(edge_mm) and edge_mm > 0):
         raise DataError(f"the cube's edge must be a positive number of mm; got {edge_mm!r}")
     seed = robot.check_joints(robot.home_deg if seed_deg is None else seed_deg)

@@ -100,6 +100,9 @@ def export_model(model_path, output: Path, formats=FORMATS, q_deg=None, errors_m
     robot, base_pose = calibrated_geometry(model)
     name = Path(model_path).stem
     output = Path(output)
+    below = next(f for f in (output, *output.parents) if f.exists() or f == f.parent)
+    if not below.is_dir():
+        raise PartcalError(f"{output}: {below} is a file; export -o expects a folder (new or existing)")
     output.mkdir(parents=True, exist_ok=True)
     stamp = (f"Calibrated {model.robot_.name} from {Path(model_path).name} ({model.parametrization_} "
              "parametrization), written by partcal export.")

@@ -70,6 +70,28 @@ def write_text(tmp_path, text, name):
 DH_FIELDS = ("theta_offset_deg", "d_mm", "a_mm", "alpha_deg")
 
 
+def tilted_dh_chain(q_deg, d_mm, a_mm, alpha_rad, offset_deg, tilts_deg, start=None):
+    """Poses (n, 4, 4) of a chain of standard DH rows written out as 4 x 4 matrices (independently of
+    partcal's walk), ``start @ row_1 @ ... @ row_R``, with a turn about y of ``tilts_deg[r]`` degrees ending
+    row ``r`` (0-based) where given: tilts between parallel axes, which DH rows cannot hold."""
+    import numpy as np
+    from scipy.spatial.transform import Rotation
+
+    out = np.tile(np.eye(4) if start is None else start, (len(q_deg), 1, 1))
+    for r in range(len(d_mm)):
+        t = np.radians(q_deg[:, r] + offset_deg[r])
+        row = np.zeros((len(q_deg), 4, 4))
+        ct, st, ca, sa = np.cos(t), np.sin(t), np.cos(alpha_rad[r]), np.sin(alpha_rad[r])
+        row[:, 0] = np.column_stack([ct, -st * ca, st * sa, a_mm[r] * ct])
+        row[:, 1] = np.column_stack([st, ct * ca, -ct * sa, a_mm[r] * st])
+        row[:, 2, 1:] = [sa, ca, d_mm[r]]
+        row[:, 3, 3] = 1.0
+        out = out @ row
+        if r in tilts_deg:
+            out[:, :3, :3] = out[:, :3, :3] @ Rotation.from_euler("y", tilts_deg[r], degrees=True).as_matrix()
+    return out
+
+
 def moved_positions(robot, q_deg, k, step):
     """Forward kinematics with geometric parameter ``k`` moved by ``step``, written out from the robot's
     fields (for central differences): four DH fields per row, then the tool's x, y, z (mm), then the

@@ -4,7 +4,7 @@ builds its chain), the DH table, and what geometry cannot carry."""
 import numpy as np
 import pytest
 import yaml
-from conftest import ROOT, partcal_cli
+from conftest import ROOT, partcal_cli, tilted_dh_chain
 from scipy.spatial.transform import Rotation
 
 from partcal import ErrorModel, KinematicModel, PartcalError, load_robot, read_measurements
@@ -24,20 +24,10 @@ def tilted_ur10_errors(q, seed=0):
     a = nominal.a_mm + rng.normal(0, 0.5, 6)
     alpha = np.radians(nominal.alpha_deg + rng.normal(0, 0.02, 6))
     offset = rng.normal(0, 0.05, 6)
-    out = np.tile(np.eye(4), (len(q), 1, 1))
-    out[:, :3, :3] = Rotation.from_euler("xyz", [0.02, -0.03, 0.04], degrees=True).as_matrix()
-    out[:, :3, 3] = [1.0, -0.5, 0.8]
-    for r in range(6):
-        t = np.radians(q[:, r] + offset[r])
-        row = np.zeros((len(q), 4, 4))
-        ct, st, ca, sa = np.cos(t), np.sin(t), np.cos(alpha[r]), np.sin(alpha[r])
-        row[:, 0] = np.column_stack([ct, -st * ca, st * sa, a[r] * ct])
-        row[:, 1] = np.column_stack([st, ct * ca, -ct * sa, a[r] * st])
-        row[:, 2, 1:] = [sa, ca, d[r]]
-        row[:, 3, 3] = 1.0
-        out = out @ row
-        if r in (1, 2):
-            out[:, :3, :3] = out[:, :3, :3] @ Rotation.from_euler("y", [0.03, -0.02][r - 1], degrees=True).as_matrix()
+    start = np.eye(4)
+    start[:3, :3] = Rotation.from_euler("xyz", [0.02, -0.03, 0.04], degrees=True).as_matrix()
+    start[:3, 3] = [1.0, -0.5, 0.8]
+    out = tilted_dh_chain(q, d, a, alpha, offset, {1: 0.03, 2: -0.02}, start)
     return nominal, (out @ [0.3, -0.2, 120.4, 1.0])[:, :3] - nominal.positions(q)
 
 

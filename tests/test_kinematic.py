@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from conftest import ROOT
+from conftest import ROOT, tilted_dh_chain
 from sklearn.base import clone
 
 from partcal import ErrorModel, GaussianProcessErrorModel, KinematicModel, PartcalError, read_measurements
@@ -159,29 +159,14 @@ def test_model_files_round_trip_bit_for_bit(tmp_path, sk120, paper_data):
 def _tilted_ur10(seed):
     """A UR10 with DH errors, a 120 mm tool and tilts about y between the parallel axes 2-3 (0.03 deg) and
     3-4 (-0.02 deg), written as 4 x 4 matrices from the published DH table (not from partcal's walk)."""
-    from scipy.spatial.transform import Rotation
-
     rng = np.random.default_rng(seed)
     d = np.array([118.0, 0, 0, 163.9, 115.7, 92.2]) + rng.normal(0, 0.5, 6)
     a = np.array([0.0, -612.7, -571.6, 0, 0, 0]) + rng.normal(0, 0.5, 6)
     alpha = np.radians([90.0, 0, 0, 90, -90, 0])
     offset = rng.normal(0, 0.05, 6)
-    tilt = {1: Rotation.from_euler("y", 0.03, degrees=True).as_matrix(),
-            2: Rotation.from_euler("y", -0.02, degrees=True).as_matrix()}
 
     def positions(q):
-        out = np.tile(np.eye(4), (len(q), 1, 1))
-        for r in range(6):
-            t = np.radians(q[:, r] + offset[r])
-            row = np.zeros((len(q), 4, 4))
-            ct, st, ca, sa = np.cos(t), np.sin(t), np.cos(alpha[r]), np.sin(alpha[r])
-            row[:, 0] = np.column_stack([ct, -st * ca, st * sa, a[r] * ct])
-            row[:, 1] = np.column_stack([st, ct * ca, -ct * sa, a[r] * st])
-            row[:, 2, 1:] = [sa, ca, d[r]]
-            row[:, 3, 3] = 1.0
-            out = out @ row
-            if r in tilt:
-                out[:, :3, :3] = out[:, :3, :3] @ tilt[r]
+        out = tilted_dh_chain(q, d, a, alpha, offset, {1: 0.03, 2: -0.02})
         return (out @ [0.3, -0.2, 120.4, 1.0])[:, :3]
     return positions
 

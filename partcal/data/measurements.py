@@ -314,16 +314,10 @@ def first_bad_payload(values: NDArray[np.float64]) -> int | None:
     return int(bad[0]) if bad.size else None
 
 
-def read_payloads(path: str | Path, fmt: MeasurementFormat | None = None) -> NDArray[np.float64] | None:
-    """The ``payload_kg`` column of a CSV, kg per data row, or None when the file has none (``partcal predict``
-    and ``compensate`` read it for models with compliant joints). Refusals name the file, line and column."""
-    return read_table(path, f"...,{PAYLOAD}", fmt).payloads()
-
-
 @dataclass(frozen=True)
 class CsvTable:
     """A CSV parsed once (header checked, rows split), whose numeric columns are read on demand: what
-    :func:`read_columns` and :func:`read_payloads` read, for a reader that takes several groups of one file."""
+    :func:`read_columns` reads, and the payload column, for a reader that takes several groups of one file."""
 
     path: Path
     line: int                    # the header's line
@@ -358,7 +352,8 @@ class CsvTable:
         return chosen, values[:, :k], (values[:, k:] if extra else None)
 
     def payloads(self) -> NDArray[np.float64] | None:
-        """See :func:`read_payloads`."""
+        """The ``payload_kg`` column, kg per data row, or None when the file has none (``partcal predict`` and
+        ``compensate`` read it for models with compliant joints). Refusals name the file, line and column."""
         if PAYLOAD not in self.seen:
             return None
         return _payloads(self.path, self.line, self.header, self.data, self.seen[PAYLOAD], self.fmt.decimal)

@@ -261,3 +261,30 @@ def test_a_cube_centre_that_is_not_a_finite_number_is_refused_naming_it(tmp_path
     assert res.returncode == 2 and res.stderr.count("\n") == 1
     assert "the cube's centre must be three finite numbers of mm" in res.stderr
     assert not (tmp_path / "p.csv").exists()
+
+
+def test_figures_measured_after_compensation_count_the_converged_targets_only(tmp_path):
+    from conftest import ROOT
+
+    from partcal.data.simulate import load_study, simulate
+    from partcal.study.iso_figures import measured_after
+
+    text = (ROOT / "configs" / "sk120_virtual.yaml").read_text()
+    text = text.replace("errors:\n", "errors:\n  repeatability_mm: 0.05\n", 1)
+    text = text[:text.index("datasets:")] + "datasets:\n  cube: {iso9283: 30, cube: [1500, 0, 1000, 400]}\n"
+    (tmp_path / "v.yaml").write_text(text)
+    study = load_study(tmp_path / "v.yaml")
+    m = simulate(study)["cube"]
+    reached = study.robot.measure(m.q_deg, np.random.default_rng(7))
+    sent = np.ones(len(m), dtype=bool)
+    sent[m.labels.index("P3"):: 5] = False                    # P3 never converged: not a pose of the figures
+    sent[0] = False                                            # one cycle of P1 not sent
+    s = measured_after(m, reached, sent)
+    assert (s["poses"], s["converged"], s["n"]) == (4, 149 - 30, 150)
+    kept = [p for p in ("P1", "P2", "P4", "P5")]
+    miss = [np.linalg.norm(reached[sent & (np.array(m.labels) == p)].mean(axis=0) - m.nominal_mm[m.labels.index(p)])
+            for p in kept]
+    assert s["AP_max_mm"] == pytest.approx(max(miss)) and s["AP_mean_mm"] == pytest.approx(np.mean(miss))
+    known = 0.05 * math.sqrt(1 - 1 / 30) * (2 * math.sqrt(2 / math.pi) + 3 * math.sqrt(3 - 8 / math.pi))
+    assert abs(s["RP_mean_mm"] / known - 1) < 0.15
+    assert measured_after(m, reached, np.zeros(len(m), dtype=bool)) is None

@@ -576,3 +576,16 @@ def test_a_set_in_its_own_tracker_frame_is_scored_up_to_a_rigid_transform():
     position, turned = errors_left(pose, predicted, own_frame=True)
     assert np.abs(position).max() < 1e-9 and np.abs(turned).max() < 1e-6                          # mrad
     assert np.abs(errors_left(pose, predicted, own_frame=False)[1]).max() > 1.0    # the frame's 3.7 mrad turn
+
+
+def test_the_iso_figures_measured_on_the_virtual_robot_follow_its_compensation(small_run):
+    result, _ = small_run
+    for r in result.models:
+        for ds, c in r.compensation.items():
+            measured = result.iso9283[ds]["measured"][r.spec.name]
+            predicted = result.iso9283[ds]["models"][r.spec.name]
+            assert (measured["converged"], measured["n"], measured["poses"]) == (c["converged"], c["n"], c["n"])
+            # a path visits every pose once: AP of a pose is the length of its miss, whose RMS is the 'after' figure
+            assert measured["AP_mean_mm"] <= c["after"]["rms_3d"] <= measured["AP_max_mm"]
+            assert measured["AP_mean_mm"] == pytest.approx(predicted["AP_mean_mm"], rel=0.2), (r.spec.name, ds)
+            assert measured["AP_mean_mm"] < 0.5 * result.iso9283[ds]["uncompensated"]["AP_mean_mm"]

@@ -116,16 +116,19 @@ def error_figures(result: RunResult, shown: list[ModelResult]) -> list[dict]:
 
 
 def iso_rows(result: RunResult) -> list[dict]:
-    """The ISO 9283 section: per test set, AP mean and max (mm) uncompensated and after each model, and RP."""
+    """The ISO 9283 section: per test set, AP mean and max (mm) uncompensated and after each model (predicted,
+    and measured on the virtual robot where the run has one), and RP."""
     out = []
     for name, entry in result.iso9283.items():
-        rows = [{"name": "uncompensated", "uncompensated": True, **entry["uncompensated"]}]
-        rows += [{"name": model, "uncompensated": False, **stats} for model, stats in entry["models"].items()]
+        measured = entry.get("measured", {})
+        rows = [{"name": "uncompensated", "uncompensated": True, **entry["uncompensated"], "measured": None}]
+        rows += [{"name": model, "uncompensated": False, **stats, "measured": measured.get(model)}
+                 for model, stats in entry["models"].items()]
         best = min(rows[1:], key=lambda r: r["AP_mean_mm"], default=None)
         for row in rows:
             row["best"] = row is best
         out.append({"name": name, "poses": entry["poses"], "cycles": entry["cycles_max"],
-                    "rp": entry["uncompensated"]["RP_max_mm"], "rows": rows})
+                    "rp": entry["uncompensated"]["RP_max_mm"], "rows": rows, "measured": bool(measured)})
     return out
 
 

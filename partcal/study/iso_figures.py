@@ -139,8 +139,10 @@ def of_measurements(m: Measurements, tol_deg: float = iso9283.DEFAULT_TOLERANCE_
 
 
 def run_figures(datasets: dict[str, Measurements], predictions: dict[str, dict[str, NDArray[np.float64]]],
-                own_frame: dict[str, bool] | None = None) -> dict[str, dict]:
-    """The ISO 9283 pose figures of every test set of a run, uncompensated and after each model.
+                own_frame: dict[str, bool] | None = None,
+                attained: dict[str, dict[str, tuple[NDArray[np.float64], NDArray[np.bool_]]]] | None = None
+                ) -> dict[str, dict]:
+    """The ISO 9283 figures of every test set of a run, uncompensated and after each model.
 
     Parameters
     ----------
@@ -150,15 +152,22 @@ def run_figures(datasets: dict[str, Measurements], predictions: dict[str, dict[s
         Each model's predicted errors on each data set, ``{model: {data set: (n, 3 or 6)}}``.
     own_frame : dict of str to bool, optional
         The data sets registered in their own tracker frame (scored up to a rigid transform).
+    attained : dict, optional
+        With a virtual robot, ``{model: {data set: (positions (n, 3) mm, converged (n,) bool)}}``: what
+        its tracker read when the compensated targets were commanded
+        (:func:`~partcal.study.scoring.verify_compensation`).
 
     Returns
     -------
     dict
-        ``{data set: {"poses", "cycles_max", "uncompensated": summary, "models": {model: summary}}}``
-        with the summaries of :func:`partcal.data.iso9283.summary` (``AP_mean_mm``, ``AP_max_mm``,
-        ``RP_mean_mm``, ``RP_max_mm``; RP None without repeated poses).
+        ``{data set: {"poses", "cycles_max", "uncompensated": summary, "models": {model: summary},
+        "measured": {model: summary}}}`` with the summaries of :func:`summary` (``AP_mean_mm``,
+        ``AP_max_mm``, ``RP_mean_mm``, ``RP_max_mm``; RP None without repeated poses). ``models`` holds
+        the figures predicted (the measured position minus the predicted error); ``measured`` those
+        the virtual robot reached with the compensated targets, over the converged ones
+        (``converged`` of ``n`` in the summary), and is there only with a virtual robot.
     """
-    own_frame = own_frame or {}
+    own_frame, attained = own_frame or {}, attained or {}
     out = {}
     for name, m in datasets.items():
         if name == "identification":
@@ -171,38 +180,72 @@ def run_figures(datasets: dict[str, Measurements], predictions: dict[str, dict[s
             if name in by_set:
                 figures = iso_figures(data, by_set[name], own_frame=own_frame.get(name, False))
                 entry["models"][model] = summary(figures.pose)
+        measured = {model: measured_after(m, *by_set[name]) for model, by_set in attained.items() if name in by_set}
+        if measured:
+            entry["measured"] = measured
         out[name] = entry
     return out
 
 
-def run_lines(figures: dict[str, dict], width: int = 24) -> list[str]:
-    """The printed table of :func:`run_figures`: AP mean / max (mm) per model and test set, and each set's RP.
+def measured_after(m: Measurements, reached_mm: NDArray[np.float64], converged: NDArray[np.bool_],
+                   tol_deg: float = iso9283.DEFAULT_TOLERANCE_DEG) -> dict | None:
+    """The pose figures of what a robot reached when given the compensated targets of ``m``.
+
+    The commanded position of a row is its nominal position (the target), the
+    attained one ``reached_mm``; only the ``converged`` targets count (the
+    others were never sent), their poses recognised from repeated commanded
+    joints as in :func:`of_measurements`. None when no target converged.
+
+    >>> from partcal.data.measurements import Measurements
+    >>> m = Measurements(np.zeros((3, 6)), np.zeros((3, 3)), np.zeros((3, 3)))
+    >>> s = measured_after(m, np.array([[0.3, 0, 0], [0.1, 0, 0], [9.0, 9, 9]]), np.array([True, True, False]))
+    >>> s["poses"], round(s["AP_max_mm"], 6), s["converged"], s["n"]
+    (1, 0.2, 2, 3)
+    """
+    converged = np.asarray(converged, dtype=bool)
+    if not converged.any():
+        return None
+    cycles = iso9283.cycles_from_joints(m.q_deg[converged], tol_deg)
+    figures = iso9283.pose_figures(m.nominal_mm[converged], np.asarray(reached_mm)[converged], cycles)
+    return {**summary(figures), "converged": int(converged.sum()), "n": len(converged)}
+
+
+def run_lines(figures: dict[str, dict]) -> list[str]:
+    """The printed table of :func:`run_figures`: AP mean / max (mm) per model and test set, and each set's RP;
+    with a virtual robot, the same measured on it after compensation.
 
     >>> print("\\n".join(run_lines({"cubes": {"poses": 2, "cycles_max": 3, "uncompensated": {
     ...     "AP_mean_mm": 1.0, "AP_max_mm": 2.0, "RP_max_mm": 0.1}, "models": {"DH": {
-    ...     "AP_mean_mm": 0.5, "AP_max_mm": 0.75, "RP_max_mm": 0.1}}}})))
+    ...     "AP_mean_mm": 0.5, "AP_max_mm": 0.75, "RP_max_mm": 0.1}}, "measured": {"DH": {
+    ...     "AP_mean_mm": 0.55, "AP_max_mm": 0.8, "RP_max_mm": 0.1}}}})))
     ISO 9283 pose accuracy AP (mm), mean / max over the poses of each test set
-    model                                cubes
-    uncompensated                1.000 / 2.000
-    DH                           0.500 / 0.750
-    poses (cycles, RP max)        2 (3, 0.100)
+    model                                     cubes
+    uncompensated                     1.000 / 2.000
+    DH                                0.500 / 0.750
+    DH, measured (virtual robot)      0.550 / 0.800
+    poses (cycles, RP max)             2 (3, 0.100)
     """
     names = list(figures)
     models = list(dict.fromkeys(m for entry in figures.values() for m in entry["models"]))
+    measured = list(dict.fromkeys(m for entry in figures.values() for m in entry.get("measured", {})))
+    rows = [("uncompensated", [figures[n]["uncompensated"] for n in names])]
+    rows += [(model, [figures[n]["models"].get(model) for n in names]) for model in models]
+    rows += [(f"{model}, measured (virtual robot)", [figures[n].get("measured", {}).get(model) for n in names])
+             for model in measured]
+    width = max(len("poses (cycles, RP max)"), *(len(label) for label, _ in rows)) + 1
+    columns = [max(16, len(n)) + 2 for n in names]
+
+    def cell(stats: dict | None, size: int) -> str:
+        return "-".rjust(size) if stats is None else f"{stats['AP_mean_mm']:.3f} / {stats['AP_max_mm']:.3f}".rjust(size)
+
     lines = ["ISO 9283 pose accuracy AP (mm), mean / max over the poses of each test set",
-             f"{'model':<{width}}" + "".join(f"{n[:17]:>18}" for n in names)]
-
-    def cell(stats: dict | None) -> str:
-        return f"{'-':>18}" if stats is None else f"{stats['AP_mean_mm']:>9.3f} / {stats['AP_max_mm']:.3f}".rjust(18)
-
-    lines.append(f"{'uncompensated':<{width}}" + "".join(cell(figures[n]["uncompensated"]) for n in names))
-    for model in models:
-        lines.append(f"{model[:width - 1]:<{width}}" + "".join(cell(figures[n]["models"].get(model)) for n in names))
+             f"{'model':<{width}}" + "".join(n.rjust(c) for n, c in zip(names, columns))]
+    lines += [f"{label:<{width}}" + "".join(cell(s, c) for s, c in zip(stats, columns)) for label, stats in rows]
     tail = []
     for n in names:
         rp = figures[n]["uncompensated"]["RP_max_mm"]
         tail.append(f"{figures[n]['poses']} ({figures[n]['cycles_max']}" + (f", {rp:.3f})" if rp is not None else ")"))
-    lines.append(f"{'poses (cycles, RP max)':<{width}}" + "".join(f"{t:>18}" for t in tail))
+    lines.append(f"{'poses (cycles, RP max)':<{width}}" + "".join(t.rjust(c) for t, c in zip(tail, columns)))
     return lines
 
 

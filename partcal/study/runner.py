@@ -16,7 +16,8 @@ a test set. The stages, each in its module:
    virtual robot, the compensated test targets commanded on the simulated
    true robot;
 4. **rank** (:func:`~partcal.study.selection.choose_best`), and the ISO 9283 pose figures of every test
-   set, uncompensated and after each model (:func:`~partcal.study.iso_figures.run_figures`).
+   set, uncompensated and after each model (:func:`~partcal.study.iso_figures.run_figures`): predicted,
+   and, with a virtual robot, measured on it after compensation.
 """
 
 from __future__ import annotations
@@ -52,13 +53,16 @@ def run(config: RunConfig, progress: Callable[[int, int, str], None] | None = No
     outputs = Outputs.of(config)
     results = fit_all(prepared, outputs, progress)
     data, robot = prepared.datasets, prepared.robot
+    attained = {}
     if prepared.virtual is not None:
         for result in results:
-            result.compensation = verify_compensation(result, data, robot, prepared.virtual, config.seed)
+            result.compensation, attained[result.spec.name] = verify_compensation(result, data, robot,
+                                                                                 prepared.virtual, config.seed)
     own = config.data_options.own_frame
     uncompensated = {name: outputs.evaluate(m, np.zeros_like(outputs.errors(m)), name in own)
                      for name, m in data.items()}
-    iso = run_figures(data, {r.spec.name: r.predictions for r in results}, {name: name in own for name in data})
+    iso = run_figures(data, {r.spec.name: r.predictions for r in results}, {name: name in own for name in data},
+                      attained)
     result = RunResult(config, data, robot, uncompensated, results, choose_best(results, config.rank_by),
                        time.perf_counter() - start, registrations=prepared.registrations, plan=prepared.plan,
                        iso9283=iso)

@@ -120,7 +120,7 @@ def errors_left(m: Measurements, predicted: NDArray[np.float64], own_frame: bool
 
 
 def verify_compensation(result: ModelResult, data: dict[str, Measurements], robot: Robot, virtual,
-                        seed: int) -> dict[str, dict]:
+                        seed: int) -> tuple[dict[str, dict], dict[str, tuple[NDArray[np.float64], NDArray[np.bool_]]]]:
     """Command the compensated test targets on the virtual robot; compare before, predicted and after.
 
     ``predicted_residual`` is the model's error on the measured test set (what
@@ -131,11 +131,16 @@ def verify_compensation(result: ModelResult, data: dict[str, Measurements], robo
     (the test poses' nominal position and orientation,
     :meth:`Predictor.compensate_pose`), and ``orientation`` holds the same three
     figures of the orientation (mrad).
+
+    Returns the figures by test set, and by test set the positions the
+    virtual robot's tracker read (n, 3) mm with the mask of the converged
+    targets (what :func:`~partcal.study.iso_figures.run_figures` measures the
+    ISO figures after compensation from).
     """
     predictor = Predictor(result.model, {"name": result.spec.name, "inputs": result.spec.inputs,
                                          "n_inputs": result.model.n_features_in_, "kind": "run"}, robot)
     pose = result.model.n_outputs() == 6
-    out = {}
+    out, attained = {}, {}
     for k, (name, m) in enumerate(data.items()):
         if name == "identification":
             continue
@@ -155,6 +160,7 @@ def verify_compensation(result: ModelResult, data: dict[str, Measurements], robo
                 q_cmd = robot.inverse(comp.commanded_mm, m.q_deg, fixed=fixed).q_deg
         rng = np.random.default_rng([seed, k])
         reached, ok = virtual.measure(q_cmd, rng), comp.converged
+        attained[name] = (reached, ok)
         out[name] = {"before": summary(m.errors_mm),
                      "predicted_residual": summary(m.errors_mm - result.predictions[name][:, POSITION]),
                      "after": summary((reached - targets)[ok]) if ok.any() else None,
@@ -164,7 +170,7 @@ def verify_compensation(result: ModelResult, data: dict[str, Measurements], robo
             out[name]["orientation"] = {"before": orientation_summary(m.orientation_errors_deg * MRAD_PER_DEG),
                                         "predicted_residual": result.metrics[name]["orientation"],
                                         "after": orientation_summary(turned[ok]) if ok.any() else None}
-    return out
+    return out, attained
 
 
 def _turn_reached(virtual, q_deg: NDArray[np.float64], m: Measurements, rng: np.random.Generator

@@ -178,7 +178,8 @@ def test_iso9283_refuses_single_cycles_when_repeatability_is_asked(tmp_path):
 
     res = partcal_cli("iso9283", str(ROOT / "data" / "sk120" / "identification.csv"), "--repeatability")
     assert res.returncode == 2 and res.stderr.count("\n") == 1
-    assert "identification.csv:4: column 'cycle': pose 1 was measured in 1 cycle" in res.stderr
+    assert ("identification.csv:4: columns q1..q6 (no other row commands the same joints within 0.01 deg; a 'cycle' "
+            "column names the cycles): pose 1 was measured in 1 cycle" in res.stderr), res.stderr
 
 
 def test_the_virtual_robots_repeatability_is_read_from_its_yaml(tmp_path):

@@ -166,12 +166,15 @@ def cycles_from_column(cycle_labels, q_deg, tol_deg: float = DEFAULT_TOLERANCE_D
     return Cycles(pose, cycle)
 
 
-def require_repeats(cycles: Cycles, *, source: str = "data", lines=None, what: str = "repeatability") -> None:
-    """Refuse a pose measured in fewer than two cycles, naming its first line: ``what`` needs repeats."""
+def require_repeats(cycles: Cycles, *, source: str = "data", lines=None, what: str = "repeatability",
+                    field: str = "column 'cycle'") -> None:
+    """Refuse a pose measured in fewer than two cycles, naming its first line and ``field``, what its cycles
+    came from (the ``cycle`` column, or the joint columns when poses are recognised from repeated joints):
+    ``what`` needs repeats."""
     once = np.flatnonzero(cycles.counts < 2)
     if once.size:
         row = int(cycles.first_rows()[once[0]])
-        raise DataError(f"{where(source, lines, row)}: column 'cycle': pose {once[0] + 1} was measured in 1 cycle, "
+        raise DataError(f"{where(source, lines, row)}: {field}: pose {once[0] + 1} was measured in 1 cycle, "
                         f"but {what} needs at least 2 (ISO 9283 asks for 30); {once.size} of {cycles.n_poses} poses "
                         "have a single cycle")
 

@@ -40,6 +40,8 @@ class IsoData:
     source : str
     by_column : bool
         Whether the cycles came from a ``cycle`` column (else from repeated commanded joints).
+    tol_deg : float
+        Commanded joints this close are one pose.
     """
 
     measurements: Measurements
@@ -47,6 +49,7 @@ class IsoData:
     lines: NDArray[np.intp]
     source: str
     by_column: bool
+    tol_deg: float = iso9283.DEFAULT_TOLERANCE_DEG
 
 
 def read_iso_data(path, robot=None, *, fmt=None, tol_deg: float = iso9283.DEFAULT_TOLERANCE_DEG) -> IsoData:
@@ -61,7 +64,7 @@ def read_iso_data(path, robot=None, *, fmt=None, tol_deg: float = iso9283.DEFAUL
         cycles = iso9283.cycles_from_column(labels, m.q_deg, tol_deg, source=str(path), lines=lines,
                                             columns=[fmt.file_column(c) if fmt else c
                                                      for c in joint_columns(m.n_joints)])
-    return IsoData(m, cycles, lines, str(path), labels is not None)
+    return IsoData(m, cycles, lines, str(path), labels is not None, tol_deg)
 
 
 @dataclass(frozen=True)
@@ -100,7 +103,10 @@ def iso_figures(data: IsoData, predicted: NDArray[np.float64] | None = None, *, 
     """
     m, cycles = data.measurements, data.cycles
     if repeatability or path:
-        iso9283.require_repeats(cycles, source=data.source, lines=data.lines,
+        field = ("column 'cycle'" if data.by_column else
+                 f"columns q1..q{m.n_joints} (no other row commands the same joints within {data.tol_deg:g} deg; "
+                 "a 'cycle' column names the cycles)")
+        iso9283.require_repeats(cycles, source=data.source, lines=data.lines, field=field,
                                 what="path repeatability" if path else "repeatability")
     zeros = np.zeros((len(m), 3 if predicted is None else predicted.shape[1]))
     left, _ = errors_left(m, zeros if predicted is None else predicted, own_frame)
@@ -135,7 +141,7 @@ def describe(data: IsoData) -> str:
 
 def of_measurements(m: Measurements, tol_deg: float = iso9283.DEFAULT_TOLERANCE_DEG) -> IsoData:
     """A data set already read (a run's), its poses recognised from repeated commanded joints; no lines."""
-    return IsoData(m, iso9283.cycles_from_joints(m.q_deg, tol_deg), np.arange(1, len(m) + 1), m.name, False)
+    return IsoData(m, iso9283.cycles_from_joints(m.q_deg, tol_deg), np.arange(1, len(m) + 1), m.name, False, tol_deg)
 
 
 def run_figures(datasets: dict[str, Measurements], predictions: dict[str, dict[str, NDArray[np.float64]]],

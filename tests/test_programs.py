@@ -358,7 +358,8 @@ def test_a_joint_trajectory_gets_the_joints_that_reach_its_nominal_poses(tmp_pat
     ("pick_place.script", b"0.4299, 2.4066", b"0.4299, 2e999", "line 7, column 41"),
     ("pallet.dat", b"Y 85.084", b"Y 85e999", "line 10, column"),
     ("pallet.mod", b"[[5,-120", b"[[5e999,-120", "line 6, column"),
-    ("trajectory.csv", b" 10.5 ", b" 1e400 ", "line 4, column 8")])
+    ("trajectory.csv", b" 10.5 ", b" 1e400 ", "line 4, column 8"),
+    ("pick_place.script", b"  set_payload(1.5)\n", b"  spare = p[0.1, 0.2, 0.3, 0, 0\n", "line 5, column 12")])
 def test_bad_syntax_in_a_target_exits_2_naming_file_line_and_column(tmp_path, name, old, new, where):
     path = tmp_path / name
     data = (FIXTURES / name).read_bytes()

@@ -46,6 +46,8 @@ def parse(text: str, source: str) -> tuple[list[Target], dict]:
     targets = []
     for m in _POSE.finditer(code):
         start = m.end() - 1
+        if closing(code, start, "[", "]") < 0:          # a broken program, whether or not a move takes this pose
+            raise syntax_error(source, text, start, "pose literal", "a closing ']'")
         before = code[max(0, m.start() - 200):m.start()]
         frame = None
         if re.search(r"\bset_tcp\s*\(\s*$", before):

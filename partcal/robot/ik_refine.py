@@ -43,7 +43,7 @@ def refine_pose(robot, positions: NDArray[np.float64], rotations: NDArray[np.flo
     :data:`RESTARTS_DEG` (the largest joint's change, nearest first): near a
     singularity the solution can lie a large turn of ``q4`` away, which
     small steps from the seed do not reach. The first restart that meets the
-    tolerances is kept; a pose that none brings there keeps the first
+    tolerances within the robot's limits and constraints is kept; a pose that none brings there keeps the first
     solve's joints, near its seed. Returns joints (n, N) degrees and
     iterations (n,), all solves counted.
     """
@@ -81,7 +81,7 @@ def refine_pose(robot, positions: NDArray[np.float64], rotations: NDArray[np.flo
         seeds[:, free] = np.clip(seeds[:, free] + turn_deg * weak[k], lo, hi)
         q_new, its = lm(left[k], seeds)
         iterations[left[k]] += its
-        ok = met(left[k], q_new)
+        ok = met(left[k], q_new) & robot.within_limits(q_new)       # a constraint the box clip cannot keep
         out[left[k[ok]]] = q_new[ok]
         todo[k[ok]] = False
     return out, iterations

@@ -274,7 +274,9 @@ class Predictor:
             is within ``tol_mm`` (position) and ``tol_deg`` (the angle of the
             orientation miss), and the robot can take the command.
         max_iter : int
-            Iterations of the solve.
+            Iterations of each solve: the fixed-damping steps of a joint model,
+            then each Levenberg-Marquardt solve that finishes the targets they
+            leave near a singularity (``iterations`` counts them all).
 
         Returns
         -------

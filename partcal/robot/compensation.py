@@ -50,6 +50,9 @@ class CompensationResult:
     """Commanded positions (and joints for joint models), with per-target convergence.
 
     ``residual_mm`` is the predicted miss after compensation: ``|p' + e(p') - p|``.
+    ``singular`` (a full-pose joint solve, else None) marks the unconverged
+    targets whose solve stopped at a singularity (:meth:`reasons` says
+    ``"singular"`` for them).
     """
 
     commanded_mm: NDArray[np.float64]

@@ -194,3 +194,36 @@ def test_each_unconverged_target_says_why(sk120, joint_model):
     assert res.converged.tolist() == [False, False, True]
     assert res.reasons(1e-4, robot=sk120, targets_mm=targets) == ["joint limit", "out of reach", ""]
     assert res.reasons(1e-4, robot=sk120)[1] == "joint limit"     # without the targets: what the solve ran into
+
+
+def test_a_pose_beyond_the_stretched_elbow_is_refused_as_singular():
+    """A UR10 with its elbow straight (q3 = 0) whose model says it falls 1 mm short in z: the command would have to
+    lie 1 mm beyond the arm's reach. The solve stops at the stretched elbow and says so; the same error at a bent
+    elbow (q3 = 60) is compensated."""
+    from partcal import load_robot
+    from partcal.robot.compensation import false_target_poses
+
+    ur10 = load_robot("universal_robots_ur10").replace(tool_mm=np.array([0.0, 0.0, 120.0]))
+    q = np.array([[0.0, -90.0, 0.0, -90.0, 30.0, 0.0], [0.0, -90.0, 60.0, -90.0, 30.0, 0.0]])
+    wanted = ur10.forward(q)
+    result = false_target_poses(lambda q: np.tile([0.0, 0.0, -1.0, 0.0, 0.0, 0.0], (len(q), 1)), ur10, wanted, q)
+    assert result.converged.tolist() == [False, True]
+    assert result.residual_mm[0] > 0.5 and result.singular.tolist() == [True, False]
+    assert result.reasons(1e-4, 1e-5, ur10, wanted[:, :3, 3]) == ["singular", ""]
+
+
+def test_unconverged_warnings_name_the_source_and_each_targets_reason():
+    """Each listed target carries its reason: a miss inside the tolerance is listed as what failed (here the joint
+    limit), never as a bare number."""
+    from partcal import load_robot
+    from partcal.robot.compensation import CompensationResult, CompensationWarning
+
+    sk120 = load_robot("motoman_sk120")
+    q = np.array([[0.0, 0.0, 0.0, 0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 0.0, 0.0, 0.0], [400.0, 0.0, 0.0, 0.0, 0.0, 0.0]])
+    q[:2] = sk120.home_deg
+    result = CompensationResult(sk120.positions(np.clip(q, -180, 180)), q, np.ones(3, dtype=np.int64),
+                                np.array([0.0, 0.5, 1e-6]), np.array([True, False, False]))
+    with pytest.warns(CompensationWarning, match=r"^model 'M' on data set 'test': 2 of 3 targets did not converge to "
+                                                 r"0.0001 mm: #1 \(0.5 mm: not converged\), #2 \(1e-06 mm: joint "
+                                                 r"limit\)$"):
+        result.warn_unconverged(1e-4, robot=sk120, source="model 'M' on data set 'test'")

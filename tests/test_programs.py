@@ -600,3 +600,15 @@ def test_a_utf16_program_is_refused_not_passed_through_uncompensated(tmp_path, n
     done = run("compensate", str(tmp_path / "m.json"), str(path), "-o", str(out))
     assert done.returncode == 2 and f"{path}: " in done.stderr and "UTF-16" in done.stderr
     assert len(done.stderr.strip().splitlines()) == 1 and not out.exists()
+
+
+def test_a_target_whose_solve_stops_at_a_singularity_says_so(tmp_path):
+    """A UR10 joint trajectory with its elbow straight (q3 = 0) under a model whose arm falls 1 mm short in z: the
+    command would lie beyond the arm's reach, so the solve stops at the stretched elbow, and the reason says so;
+    the same error at a bent elbow is compensated."""
+    path = tmp_path / "stretched.csv"
+    path.write_text("q1,q2,q3,q4,q5,q6\n0,-90,0,-90,30,0\n0,-90,60,-90,30,0\n")
+    result = compensated(constant_model(UR10, [0.0, 0.0, -1.0, 0.0, 0.0, 0.0], "joint"), path)
+    assert [t.name for t, _ in result.failures] == [result.program.targets[0].name]
+    assert result.failures[0][1].startswith("did not converge: its solve stopped at a singularity, no joints near "
+                                            "the target's take its compensated pose (predicted miss ")

@@ -34,8 +34,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import DataError
-from . import ik
+from . import ik, ik_refine
 from .kinematics import Robot, checked_poses, ik_settings
+
+
+SINGULAR_CONDITIONING = 1e-3    # a pose Jacobian whose singular values span more than this is at a singularity
 
 
 class CompensationWarning(UserWarning):
@@ -47,6 +50,9 @@ class CompensationResult:
     """Commanded positions (and joints for joint models), with per-target convergence.
 
     ``residual_mm`` is the predicted miss after compensation: ``|p' + e(p') - p|``.
+    ``singular`` (a full-pose joint solve, else None) marks the unconverged
+    targets whose solve stopped at a singularity (:meth:`reasons` says
+    ``"singular"`` for them).
     """
 
     commanded_mm: NDArray[np.float64]
@@ -56,6 +62,7 @@ class CompensationResult:
     converged: NDArray[np.bool_]
     commanded_rotation: NDArray[np.float64] | None = None    # full-pose compensation: (n, 3, 3)
     residual_deg: NDArray[np.float64] | None = None          # and its predicted orientation miss
+    singular: NDArray[np.bool_] | None = None                # full-pose joint solve: stopped at a singularity
 
     def reasons(self, tol_mm: float, tol_deg: float | None = None, robot: Robot | None = None,
                 targets_mm: NDArray[np.float64] | None = None) -> list[str]:
@@ -69,9 +76,12 @@ class CompensationResult:
         (:func:`reachable`); ``"joint limit"``, the joint solution
         (``joints_deg``) breaks the robot's limits or coupled constraints;
         ``"not converged"``, the miss is beyond the tolerance after the
-        iterations; ``"out of reach"`` too where the miss is within the
-        tolerance but the robot's inverse kinematics does not reach the command
-        within its limits (a Cartesian model's reachability check).
+        iterations, or ``"singular"`` where it is and the solve stopped at
+        joints where the robot loses a direction of motion (``singular``, a
+        full-pose joint solve: the compensated pose lies across a singularity
+        from the seed's posture); ``"out of reach"`` too where the miss is
+        within the tolerance but the robot's inverse kinematics does not reach
+        the command within its limits (a Cartesian model's reachability check).
         """
         n = len(self.converged)
         missed = ~(self.residual_mm <= tol_mm)
@@ -87,23 +97,33 @@ class CompensationResult:
             if targets_mm is not None:
                 check = np.flatnonzero(missed & finite & ~self.converged)
                 beyond[check] = ~reachable(robot, np.asarray(targets_mm, dtype=float)[check])
-        why = np.select([~finite, beyond, limited, missed], ["diverged", "out of reach", "joint limit",
-                                                             "not converged"], "out of reach")
+        singular = missed & (self.singular if self.singular is not None else False)
+        why = np.select([~finite, beyond, limited, singular, missed],
+                        ["diverged", "out of reach", "joint limit", "singular", "not converged"], "out of reach")
         return ["" if ok else str(w) for ok, w in zip(self.converged, why)]
 
-    def warn_unconverged(self, tol_mm: float, tol_deg: float | None = None) -> None:
-        """A :class:`CompensationWarning` naming the first unconverged targets (0-based) and their misses.
+    def warn_unconverged(self, tol_mm: float, tol_deg: float | None = None, *, robot: Robot | None = None,
+                         targets_mm: NDArray[np.float64] | None = None, source: str = "") -> None:
+        """A :class:`CompensationWarning` naming the first unconverged targets (0-based), their misses and why.
 
-        ``tol_deg`` (full-pose results) adds the orientation tolerance and misses.
+        ``tol_deg`` (full-pose results) adds the orientation tolerance and
+        misses; each listed target gives its reason (:meth:`reasons`, with
+        ``robot`` and ``targets_mm`` as there), so a miss inside the tolerance
+        is never listed without what failed (a joint limit, out of reach).
+        ``source`` leads the message: the model, and the data set (``model
+        'DH' on data set 'test'``).
         """
         bad = np.flatnonzero(~self.converged)
         if bad.size:
             pose = tol_deg is not None and self.residual_deg is not None
-            listed = ", ".join(f"#{i} ({self.residual_mm[i]:.3g} mm" + (f", {self.residual_deg[i]:.3g} deg)"
-                                                                         if pose else ")") for i in bad[:5])
+            why = self.reasons(tol_mm, tol_deg if pose else None, robot, targets_mm)
+            listed = ", ".join(f"#{i} ({self.residual_mm[i]:.3g} mm" + (f", {self.residual_deg[i]:.3g} deg"
+                                                                         if pose else "") + f": {why[i]})"
+                               for i in bad[:5])
             more = f" and {bad.size - 5} more" if bad.size > 5 else ""
             tolerance = f"{tol_mm:g} mm" + (f" and {tol_deg:g} deg" if pose else "")
-            warnings.warn(f"{bad.size} of {len(self.converged)} targets did not converge to {tolerance}: "
+            lead = f"{source}: " if source else ""
+            warnings.warn(f"{lead}{bad.size} of {len(self.converged)} targets did not converge to {tolerance}: "
                           f"{listed}{more}", CompensationWarning, stacklevel=3)
 
 
@@ -201,10 +221,18 @@ def false_target_poses(predict: Callable[[NDArray[np.float64]], NDArray[np.float
     real one: the robot commanded to ``q`` reaches ``p(q) + dp`` with the
     orientation ``exp(dr) R(q)``. As :func:`false_target_joints`: the plain
     full-pose IK of every pose from its seed, then damped least-squares steps
-    on the whole equation with the model's slope neglected. The commanded
+    on the whole equation with the model's slope neglected. Poses those
+    leave off the tolerances (near a singularity, where the fixed damping
+    creeps and the neglected slope matters) are finished by
+    Levenberg-Marquardt on the whole equation, the model's slope included,
+    with restarts along the self-motion (:func:`~partcal.robot.ik_refine.refine_pose`);
+    ``iterations`` counts every step. The commanded
     pose is the nominal pose at the solution (``commanded_mm``,
     ``commanded_rotation``); ``residual_mm`` and ``residual_deg`` are the
-    predicted misses.
+    predicted misses; ``singular`` marks the unconverged poses whose solve
+    stopped at a singularity (the pose Jacobian's singular values spanning
+    more than ``1 / SINGULAR_CONDITIONING``): no joints near the seed's
+    posture take the compensated pose.
     """
     poses = checked_poses(poses)
     free, settings = robot._free_joints(fixed), ik_settings(tol_mm, max_iter, 10.0, 0.05, tol_deg=tol_deg,
@@ -221,6 +249,11 @@ def false_target_poses(predict: Callable[[NDArray[np.float64]], NDArray[np.float
     q = ik.solve_pose(robot, positions, rotations, robot._seeds(seeds_deg, len(poses)), free, ik.Settings(), 1e-8,
                       length_mm)[0]
     q, iterations = ik.solve_pose(robot, positions, rotations, q, free, settings, tol_deg, length_mm, bias=errors)
+    left = np.flatnonzero(iterations >= max_iter)         # near a singularity: the whole equation's slope
+    if left.size:
+        q[left], more = ik_refine.refine_pose(robot, positions[left], rotations[left], q[left], free, settings,
+                                              tol_deg, length_mm, bias=errors)
+        iterations[left] += more
     nominal = robot.forward(q)
     with np.errstate(over="ignore", invalid="ignore"):
         finite = np.isfinite(np.asarray(predict(q), dtype=float)).all(axis=1)
@@ -229,8 +262,12 @@ def false_target_poses(predict: Callable[[NDArray[np.float64]], NDArray[np.float
     residual_deg = np.where(finite, np.degrees(np.linalg.norm(ik.rotation_vectors(rotations @ turned.transpose(0, 2, 1)),
                                                                 axis=1)), np.inf)
     converged = (residual_mm <= tol_mm) & (residual_deg <= tol_deg) & robot.within_limits(q)
+    singular = np.zeros(len(q), dtype=bool)
+    off = np.flatnonzero(~converged)
+    if off.size:
+        singular[off] = ik_refine.conditioning(robot, q[off], free, length_mm) < SINGULAR_CONDITIONING
     return CompensationResult(nominal[:, :3, 3], q, iterations, residual_mm, converged,
-                              commanded_rotation=nominal[:, :3, :3], residual_deg=residual_deg)
+                              commanded_rotation=nominal[:, :3, :3], residual_deg=residual_deg, singular=singular)
 
 
 def false_target_cartesian_poses(predict: Callable[[NDArray[np.float64]], NDArray[np.float64]],

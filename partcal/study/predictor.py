@@ -66,6 +66,11 @@ class Predictor:
         return f"Predictor({self.name!r}, inputs={self.inputs!r}, kind={self.document['kind']!r})"
 
     @property
+    def _label(self) -> str:
+        """How warnings name the model: ``model 'NAME'`` (nothing for a model without a name)."""
+        return f"model {self.name!r}" if self.name else ""
+
+    @property
     def predicts_pose(self) -> bool:
         """True for a model of pose errors (6 outputs: mm, then mrad), False for a position model (3)."""
         return self.model.n_outputs() == POSE_OUTPUTS
@@ -242,7 +247,7 @@ class Predictor:
             fixed, seeds = self._joint_seeds(joints, len(targets))
             result = false_target_joints(errors, self.robot, targets, seeds, fixed, tol_mm=tol_mm,
                                          max_iter=max_iter)
-        result.warn_unconverged(tol_mm)
+        result.warn_unconverged(tol_mm, robot=self.robot, targets_mm=targets, source=self._label)
         return result
 
     def compensate_pose(self, positions_mm, orientations_deg, joints=None, *, payload_kg: float | None = None,
@@ -269,7 +274,9 @@ class Predictor:
             is within ``tol_mm`` (position) and ``tol_deg`` (the angle of the
             orientation miss), and the robot can take the command.
         max_iter : int
-            Iterations of the solve.
+            Iterations of each solve: the fixed-damping steps of a joint model,
+            then each Levenberg-Marquardt solve that finishes the targets they
+            leave near a singularity (``iterations`` counts them all).
 
         Returns
         -------
@@ -358,7 +365,7 @@ class Predictor:
             fixed, seeds = self._joint_seeds(joints, n)
             result = false_target_poses(errors, self.robot, poses, seeds, fixed, tol_mm=tol_mm, tol_deg=tol_deg,
                                         max_iter=max_iter)
-        result.warn_unconverged(tol_mm, tol_deg)
+        result.warn_unconverged(tol_mm, tol_deg, robot=self.robot, targets_mm=poses[:, :3, 3], source=self._label)
         return result
 
     def _errors_at(self, payload_kg):

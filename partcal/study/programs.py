@@ -199,12 +199,18 @@ def _solved(predictor: Predictor, program: Program, wanted, q0, failures: dict, 
         ik = robot.inverse_pose(commanded[idx], q0[idx], tol_mm=min(tol_mm, 1e-6), tol_deg=min(tol_deg, 1e-6))
         q1[idx] = ik.q_deg
         converged &= ik.success
-    for k, ok, miss_mm, miss_deg in zip(idx, converged, r.residual_mm, r.residual_deg):
+    singular = r.singular if r.singular is not None else np.zeros(len(idx), dtype=bool)
+    for k, ok, miss_mm, miss_deg, at_singularity in zip(idx, converged, r.residual_mm, r.residual_deg, singular):
         if not ok:
             miss = f"predicted miss {miss_mm:.3g} mm, {miss_deg:.3g} deg"
-            failures[k] = (f"did not converge ({miss})" if not (miss_mm <= tol_mm and miss_deg <= tol_deg) else
-                           f"is unreachable: the robot cannot take its compensated command within its joint "
-                           f"limits ({miss})")
+            if miss_mm <= tol_mm and miss_deg <= tol_deg:
+                failures[k] = (f"is unreachable: the robot cannot take its compensated command within its joint "
+                               f"limits ({miss})")
+            elif at_singularity:
+                failures[k] = (f"did not converge: its solve stopped at a singularity, no joints near the target's "
+                               f"take its compensated pose ({miss})")
+            else:
+                failures[k] = f"did not converge ({miss})"
     chosen = [program.targets[k] for k in idx]
     for k, same in zip(idx, _configuration_kept(robot, program, chosen, q0[idx], q1[idx])):
         if not same and k not in failures:

@@ -11,6 +11,7 @@ simulated true robot.
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -20,6 +21,7 @@ from scipy.spatial.transform import Rotation
 from ..data.measurements import Measurements
 from ..metrics import MRAD_PER_DEG, MRAD_PER_RAD, ORIENTATION, POSITION, orientation_summary, pooled_rms, summary
 from ..models.features import varying_inputs
+from ..robot.compensation import CompensationWarning
 from ..robot.frames import kabsch
 from ..robot.kinematics import Robot, matrices_from_xyz_deg
 from .config import RunConfig
@@ -78,6 +80,7 @@ class Outputs:
 
 
 
+TOL_MM, TOL_DEG = 1e-4, 1e-5    # the compensation's tolerances (compensate_full's and compensate_pose's defaults)
 Z95 = 1.959963984540054        # a 95% interval is mean +- Z95 std
 
 
@@ -130,7 +133,9 @@ def verify_compensation(result: ModelResult, data: dict[str, Measurements], robo
     controller would send). A model of pose errors compensates the full pose
     (the test poses' nominal position and orientation,
     :meth:`Predictor.compensate_pose`), and ``orientation`` holds the same three
-    figures of the orientation (mrad).
+    figures of the orientation (mrad). Targets that do not converge raise one
+    ``CompensationWarning`` per model and data set, naming both, with each
+    listed target's predicted miss and reason (:meth:`CompensationResult.reasons`).
 
     Returns the figures by test set, and by test set the positions the
     virtual robot's tracker read (n, 3) mm with the mask of the converged
@@ -145,10 +150,14 @@ def verify_compensation(result: ModelResult, data: dict[str, Measurements], robo
         if name == "identification":
             continue
         targets, seeds = m.nominal_mm, m.q_deg if result.spec.inputs == "joint" else None
-        if pose:
-            comp = predictor.compensate_pose(targets, m.nominal_orientation_deg, seeds)
-        else:
-            comp = predictor.compensate_full(targets, seeds)
+        with warnings.catch_warnings():        # warned below, naming the data set too
+            warnings.simplefilter("ignore", CompensationWarning)
+            if pose:
+                comp = predictor.compensate_pose(targets, m.nominal_orientation_deg, seeds)
+            else:
+                comp = predictor.compensate_full(targets, seeds)
+        comp.warn_unconverged(TOL_MM, TOL_DEG if pose else None, robot=robot, targets_mm=targets,
+                              source=f"verifying compensation: model {result.spec.name!r} on data set {name!r}")
         if result.spec.inputs == "joint":
             q_cmd = comp.joints_deg
         else:     # the controller turns the false target into joints with its nominal model

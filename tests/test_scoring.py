@@ -34,5 +34,7 @@ def test_verify_compensation_warns_naming_the_model_the_data_set_and_each_reason
     with pytest.warns(CompensationWarning, match=r"^verifying compensation: model 'FDP\(CI\)' on data set 'test': 1 "
                                                  r"of 40 targets did not converge to 0.0001 mm: #0 \(\S+ mm: out of "
                                                  r"reach\)$"):
-        out = verify_compensation(result, {"test": test}, robot, virtual, seed=0)
+        out, attained = verify_compensation(result, {"test": test}, robot, virtual, seed=0)
     assert out["test"]["converged"] == 39 and out["test"]["n"] == 40
+    reached, sent = attained["test"]
+    assert reached.shape == (40, 3) and sent.tolist() == [False] + [True] * 39

@@ -612,3 +612,26 @@ def test_a_target_whose_solve_stops_at_a_singularity_says_so(tmp_path):
     assert [t.name for t, _ in result.failures] == [result.program.targets[0].name]
     assert result.failures[0][1].startswith("did not converge: its solve stopped at a singularity, no joints near "
                                             "the target's take its compensated pose (predicted miss ")
+
+
+def test_a_joint_model_fitted_with_the_wrist_held_compensates_full_poses_where_the_wrist_turns():
+    """The paper's data hold q4 = q5 = 0; a KRL/RAPID target keeps its orientation, so its wrist must move a
+    little: all six joints are free (four would leave the 6-DOF pose unreachable, 4.9 mm / 0.31 deg)."""
+    from partcal import read_measurements
+
+    ident = read_measurements(ROOT / "data" / "sk120" / "identification.csv")
+    assert np.ptp(ident.q_deg[:, 3:5]) == 0
+    model = KinematicModel(robot=SK120).fit(ident.q_deg, ident.errors_mm)
+    predictor = Predictor(model, model_to_dict(model, name="DH", robot=SK120), SK120)
+    for name in ("pallet.src", "pallet.mod"):
+        result = compensated(predictor, FIXTURES / name)
+        assert not result.failures, (name, result.failures)
+    q = np.array([[0.0, -130.0, -160.0, 5.0, 25.0, 100.0], [10.0, -100.0, -140.0, -20.0, 40.0, 0.0]])
+    target = SK120.forward(q)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        comp = predictor.compensate_poses(target, q, orientation_kept=True)
+    reached = SK120.forward(comp.joints_deg)         # the nominal pose, moved by the predicted error
+    np.testing.assert_allclose(reached[:, :3, 3] + model.predict(comp.joints_deg), target[:, :3, 3], atol=1e-3)
+    np.testing.assert_allclose(reached[:, :3, :3], target[:, :3, :3], atol=1e-9)
+    assert np.abs(comp.joints_deg[:, 3:5] - q[:, 3:5]).max() > 0.01      # the wrist moved to keep the orientation

@@ -265,8 +265,11 @@ class Predictor:
             (``R = Rx(rx) Ry(ry) Rz(rz)``, as ``rx_meas..`` of a measurement CSV).
         joints : array-like, shape (n, N), optional
             Degrees: IK seeds, as for :meth:`compensate_full` (joint models:
-            the joints the model never saw move are held at their training
-            value; Cartesian models: the seeds of the reachability check).
+            the joints the model never saw move are held at the seed's value
+            as long as six others are free; a full pose needs six, so a
+            six-axis arm's held wrist moves by what the pose asks, usually a
+            fraction of a degree; Cartesian models: the seeds of the
+            reachability check).
         payload_kg : float, optional
             As for :meth:`compensate`.
         tol_mm, tol_deg : float
@@ -363,6 +366,8 @@ class Predictor:
                 result = dataclasses.replace(result, converged=ok)
         else:
             fixed, seeds = self._joint_seeds(joints, n)
+            if self.robot.n_joints - len(fixed) < 6:      # a full pose needs six joints: the held ones move too
+                fixed = ()
             result = false_target_poses(errors, self.robot, poses, seeds, fixed, tol_mm=tol_mm, tol_deg=tol_deg,
                                         max_iter=max_iter)
         result.warn_unconverged(tol_mm, tol_deg, robot=self.robot, targets_mm=poses[:, :3, 3], source=self._label)

@@ -2,6 +2,7 @@
 
 import contextlib
 import io
+import re
 
 import numpy as np
 import pytest
@@ -109,7 +110,8 @@ def test_candidates_below_the_floor_are_refused_naming_the_row_and_the_point(tmp
     code, _, err = cli("plan", "universal_robots_ur10", "-n", 1, "-o", tmp_path / "p.csv", "--candidates", cand)
     assert code == 2
     assert err.startswith("partcal: error: ") and err.count("\n") == 1
-    assert "cand.csv: data row 2 ([0.0, 0.0, 0.0, 0.0, 0.0, 0.0] deg) puts frame 5 at z = 2.3 mm, below the floor" in err
+    assert ("cand.csv: data row 2 ([0.0, 0.0, 0.0, 0.0, 0.0, 0.0] deg) puts frame 5 at z = 2.3 mm, below the "
+            "floor") in err
 
 
 @pytest.mark.parametrize("args, message", [
@@ -120,7 +122,7 @@ def test_candidates_below_the_floor_are_refused_naming_the_row_and_the_point(tmp
 def test_bad_floor_options_get_one_line_and_exit_2(tmp_path, args, message):
     code, _, err = cli("plan", "universal_robots_ur10", "-n", 10, "-o", tmp_path / "p.csv", *args)
     assert code == 2 and err.count("\n") == 1
-    assert __import__("re").search(message, err)
+    assert re.search(message, err)
 
 
 def test_a_clearance_without_any_floor_is_refused():

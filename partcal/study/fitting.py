@@ -39,6 +39,7 @@ from .selection import CVPlan, choose_granularity, fits_on_folds, nested_residua
 log = logging.getLogger(__name__)
 
 SLOW_SECONDS = 5.0          # a model still cross-validating after this long reports each fold
+LARGE_ROWS = 10_000         # a model fitted on this many identification rows or more says when it starts
 
 
 def model_seed(run_seed: int, name: str) -> int:
@@ -159,6 +160,15 @@ def _fit_model(spec, seed, data, cv, robot, own_frame, lines, outputs, n_jobs=1)
         if lines is not None and elapsed > SLOW_SECONDS:
             lines(f"{spec.name}: cross-validation fold {done}/{total} ({elapsed:.0f} s)")
 
+    def final_done(spent: float) -> None:
+        elapsed = time.perf_counter() - start
+        if lines is not None and elapsed > SLOW_SECONDS:
+            lines(f"{spec.name}: final fit on all {len(X)} rows done in {spent:.0f} s ({elapsed:.0f} s)")
+
+    if lines is not None and len(X) >= LARGE_ROWS:
+        lines(f"{spec.name}: fitting {len(cv.folds)} cross-validation folds and the final fit on {len(X)} rows, "
+              f"{min(n_jobs, len(cv.folds) + 1)} at a time")
+
     if len(candidates) > 1:
         resid = nested_residuals(candidates, X, y, folds=cv.folds, inner=cv.inner, progress=fold_done, per_row=rows,
                                  score=outputs.score, n_jobs=n_jobs)
@@ -176,7 +186,8 @@ def _fit_model(spec, seed, data, cv, robot, own_frame, lines, outputs, n_jobs=1)
     else:
         fold_fits: list = []            # the folds and the final fit, side by side when n_jobs allows
         resid, estimator, fit_seconds = fits_on_folds(candidates[0], X, y, cv.folds, fitted=fold_fits,
-                                                      progress=fold_done, per_row=rows, n_jobs=n_jobs, final=True)
+                                                      progress=fold_done, per_row=rows, n_jobs=n_jobs, final=True,
+                                                      on_final=final_done)
         cv_seconds = time.perf_counter() - start - fit_seconds
         if estimator.regions_model() is not None:
             cv_regions = fold_regions([m.regions_model() for m in fold_fits])

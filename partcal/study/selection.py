@@ -137,7 +137,8 @@ def held_out_residuals(model, X, y, folds, *, fitted: list | None = None,
 
 def fits_on_folds(model, X, y, folds, *, fitted: list | None = None,
                   progress: Callable[[int, int], None] | None = None, per_row: dict | None = None,
-                  n_jobs: int = 1, final: bool = False) -> tuple[NDArray[np.float64], object, float]:
+                  n_jobs: int = 1, final: bool = False, on_final: Callable[[float], None] | None = None
+                  ) -> tuple[NDArray[np.float64], object, float]:
     """Held-out residuals of ``model`` on ``folds`` (see :func:`held_out_residuals`) and, with ``final``, the
     model fitted on all of ``X, y`` and the seconds of that fit; ``(residuals, final model or None, seconds)``.
 
@@ -145,7 +146,7 @@ def fits_on_folds(model, X, y, folds, *, fitted: list | None = None,
     joblib workers, the final fit first (the longest) beside the folds, and each result is put in its
     place, so the residuals, fold models and final model are those of ``n_jobs = 1``, where the folds run
     in order and the final fit after them. Large arrays reach the workers memory-mapped (joblib's
-    default), not copied once per fold.
+    default), not copied once per fold. ``on_final(seconds)`` is called when the final fit is done.
     """
     X, y = np.asarray(X, dtype=float), np.asarray(y, dtype=float)
     resid = np.empty_like(y)
@@ -168,6 +169,8 @@ def fits_on_folds(model, X, y, folds, *, fitted: list | None = None,
             done += 1
             if progress is not None:
                 progress(done, len(folds))
+        elif on_final is not None:
+            on_final(spent)
     if fitted is not None:
         fitted.extend(models[:len(folds)])
     return resid, (models[-1] if final else None), (seconds[-1] if final else 0.0)

@@ -13,10 +13,11 @@ change with ``n_jobs``, nor between the code trees).
 a shared machine: wall time swings by 2x and more), e.g. the commit before a change:
 ``git archive COMMIT partcal | tar -x -C /tmp/before``.
 
-Measured on the shared 2-core machine (2026-11-25, load 5 to 9 from other jobs), 100,000 poses, before
-(commit 4aa4c2c) and after the scale changes of issue 31: n_jobs 1: fit 51.8 -> 40.1 s, CV 329 -> 155 s,
-CPU 193 -> 112 s; n_jobs 2: fit 60.8 -> 81.8 s, CV 188 -> 164 s, CPU 183 -> 129 s; the CV score the same
-for n_jobs 1 and 2. The table and what it shows (and does not): docs/models.md, "Scale".
+Measured on the shared 2-core machine (2026-11-25, load 4 to 9 from other jobs), 100,000 poses, before
+(commit 4aa4c2c) and after the scale changes of issue 31: n_jobs 1: fit 51.8 -> 19.1 s, CV 329 -> 105 s,
+wall 400 -> 136 s, CPU 193 -> 101 s; n_jobs 2: fit 60.8 -> 41.6 s (beside the folds), CV 188 -> 62 s,
+wall 286 -> 117 s; the CV score the same for n_jobs 1 and 2. The table, and what it shows and does
+not: docs/models.md, "Scale".
 
 Run: .venv/bin/python benchmarks/bench_scale.py [--poses 100000] [--before DIR] [--jobs 1,2]
 """

@@ -17,6 +17,7 @@ except PackageNotFoundError:  # running from a source tree without installing
 _EXPORTS = {
     "errors": ["ConfigError", "DataError", "ModelFileError", "PartcalError", "RobotFileError", "UnreachableError"],
     "robot.kinematics": ["Robot"],
+    "robot.floor": ["Floor"],
     "robot.urdf": ["robot_from_urdf"],
     "robot.description": ["available_robots", "load_robot"],
     "data.measurements": ["Measurements", "read_measurements", "write_measurements"],

@@ -494,6 +494,7 @@ def _cmd_plan(args) -> int:
     _refuse_input_as_output(args.output, "plan", [("candidate file", args.candidates), ("format file", args.format),
                                                  ("evaluated file", args.evaluate), ("robot file", args.robot)])
     robot = load_robot(args.robot)
+    floor = _plan_floor(args, robot)
     say = (lambda text: None) if args.quiet else (lambda text: print(f"partcal: plan: {text}", file=sys.stderr))
     start = time.perf_counter()
     model = design.PlannedModel(base=not args.no_base, tool=not args.no_tool, compliance=args.compliance or (),
@@ -505,15 +506,16 @@ def _cmd_plan(args) -> int:
         if args.evaluate else None
     if args.candidates:
         q = plan.check_candidates(robot, read_columns(args.candidates, [joint_columns(robot.n_joints)],
-                                                      fmt=_format(args))[1], str(args.candidates))
+                                                      fmt=_format(args))[1], str(args.candidates), floor)
         space, where = plan.workspace(robot, q, **options), f"the {len(q)} poses of {args.candidates}"
     else:
         box = None if args.box is None else np.array(args.box, dtype=float).reshape(2, 3)
         if box is not None and np.any(box[0] >= box[1]):
             raise PartcalError(f"plan: --box takes XMIN YMIN ZMIN XMAX YMAX ZMAX (mm) with each min below its max; "
                                f"got {args.box}")
-        space = plan.workspace(robot, random_state=args.seed, n_poses=args.pool, box_mm=box, **options)
-        where = f"{args.pool} random poses within the joint limits" + (" and the box" if box is not None else "")
+        space = plan.workspace(robot, random_state=args.seed, n_poses=args.pool, box_mm=box, floor=floor, **options)
+        where = (f"{args.pool} random poses within the joint limits" + (" and the box" if box is not None else "")
+                 + (f", every link above the floor ({floor.describe()})" if floor is not None else ", no floor"))
     if planning or args.curve:                             # bad input gets its one line before any progress
         plan.check_count(robot, args.n if planning else plan.min_poses(space.structural.size), space)
     say(f"{robot.name}, {model.describe(robot)}: {space.structural.size} identifiable parameters over {where} "
@@ -607,6 +609,23 @@ def _cmd_iso9283(args) -> int:
     return 0
 
 
+def _plan_floor(args, robot):
+    """The floor ``plan`` keeps every pose above (None: none), from --floor-mm, --clearance-mm, --no-floor."""
+    from .robot.floor import robot_floor
+
+    if args.floor_mm is not None and not np.isfinite(args.floor_mm):
+        raise PartcalError(f"plan: --floor-mm must be a finite number of mm (the floor's height in the base frame); "
+                           f"got {args.floor_mm!r}")
+    if args.clearance_mm is not None and not (np.isfinite(args.clearance_mm) and args.clearance_mm >= 0):
+        raise PartcalError(f"plan: --clearance-mm must be a number of mm >= 0; got {args.clearance_mm!r}")
+    if args.no_floor and (args.floor_mm is not None or args.clearance_mm is not None):
+        raise PartcalError("plan: --no-floor goes without --floor-mm and --clearance-mm")
+    if args.clearance_mm is not None and args.floor_mm is None and robot.floor_mm is None:
+        raise PartcalError(f"plan: --clearance-mm needs a floor, and {robot.name} is described without one "
+                           "(floor_mm: null): give --floor-mm too")
+    return robot_floor(robot, args.floor_mm, args.clearance_mm, off=args.no_floor)
+
+
 def _plan_iso9283(args) -> int:
     from .robot.description import load_robot
     from .study import plan
@@ -616,8 +635,9 @@ def _plan_iso9283(args) -> int:
                            "without -n, --evaluate or --curve")
     _refuse_input_as_output(args.output, "plan", [("robot file", args.robot)])
     robot = load_robot(args.robot)
+    floor = _plan_floor(args, robot)
     cycles = 30 if args.cycles is None else args.cycles
-    cube = plan.iso_cube_plan(robot, args.output, cube=args.cube, cycles=cycles, random_state=args.seed,
+    cube = plan.iso_cube_plan(robot, args.output, cube=args.cube, cycles=cycles, random_state=args.seed, floor=floor,
                               comment=f"ISO 9283 test poses planned by partcal {__version__} for {robot.name}. "
                                       "Joint angles in degrees, nominal tool positions in mm.")
     for k, (p, q) in enumerate(zip(cube.points_mm, cube.q_deg)):
@@ -809,6 +829,13 @@ def build_parser() -> argparse.ArgumentParser:
                      help="with --iso9283: the cube's centre and edge (mm, base frame; default the largest cube "
                           "found in the workspace)")
     pln.add_argument("--cycles", type=_positive_int, help="with --iso9283: cycles of P1..P5 (default 30)")
+    pln.add_argument("--floor-mm", type=float, metavar="Z",
+                     help="height of the floor in the base frame (mm); every planned pose keeps its links, flange "
+                          "and tool above it (default: the robot's floor_mm, 0 for a robot standing on its base)")
+    pln.add_argument("--clearance-mm", type=float, metavar="C",
+                     help="how far above the floor the joint origins, flange and tool stay (default 100 mm)")
+    pln.add_argument("--no-floor", action="store_true",
+                     help="no floor (a ceiling- or wall-mounted robot): poses anywhere within the limits")
     pln.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
     pln.set_defaults(func=_cmd_plan)
     return parser

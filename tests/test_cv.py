@@ -323,3 +323,26 @@ def test_printed_tables_show_whole_model_names(tmp_path):
     for name in long:
         row = next(line for line in table.splitlines() if line.startswith(name))
         assert row[len(name):].lstrip("*")[0] == " "      # the name whole (a mark of notes), a gap, the numbers
+
+
+def test_folds_fitted_side_by_side_are_the_sequential_folds():
+    from partcal.models.kinematic import KinematicModel
+    from partcal.study.selection import fits_on_folds, grouped_splits
+
+    model = KinematicModel(robot="motoman_sk120", compliance=[2, 3], random_state=0)
+    folds = grouped_splits(np.arange(len(IDENT)), 5, 0)
+    runs = []
+    for n_jobs in (1, 2):
+        fitted, said, finals = [], [], []
+        resid, final, seconds = fits_on_folds(model, IDENT.q_deg, IDENT.errors_mm, folds, fitted=fitted, n_jobs=n_jobs,
+                                              final=True, progress=lambda done, total: said.append((done, total)),
+                                              on_final=finals.append)
+        assert said == [(k, 5) for k in range(1, 6)] and len(finals) == 1 and seconds == finals[0] > 0
+        runs.append((resid, final, fitted))
+    (r1, f1, m1), (r2, f2, m2) = runs
+    np.testing.assert_array_equal(r1, r2)
+    np.testing.assert_array_equal(f1.predict(IDENT.q_deg), f2.predict(IDENT.q_deg))
+    for a, b in zip(m1, m2):          # each fold's model in its place
+        np.testing.assert_array_equal(a.identification_.value, b.identification_.value)
+    alone = held_out_residuals(model, IDENT.q_deg, IDENT.errors_mm, folds)
+    np.testing.assert_array_equal(alone, r1)

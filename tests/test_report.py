@@ -412,3 +412,14 @@ def test_a_run_gives_the_iso_figures_and_each_models_spread(report):
     assert header.endswith("dx_pred,dy_pred,dz_pred,dx_sd,dy_sd,dz_sd")
     page = (out / "index.html").read_text()
     assert 'id="iso9283"' in page and 'id="spread"' in page and "95% band" in page
+
+
+def test_a_scatter_of_many_poses_draws_an_evenly_spaced_share_and_says_so():
+    from partcal.report import figures
+
+    rng = np.random.default_rng(1)
+    measured = rng.normal(0, 1, size=(12_000, 3))
+    many = figures.errors_scattered("big", measured, {"M": 0.9 * measured})
+    few = figures.errors_scattered("small", measured[:figures.MAX_SCATTERED], {"M": 0.9 * measured[:5000]})
+    assert "(5,000 of 12,000 poses drawn, evenly spaced)" in many and "poses drawn" not in few
+    assert len(many) < 1.2 * len(few)

@@ -274,8 +274,8 @@ def model_jacobian(nominal: Robot, errors: JointErrors | None, q_deg: NDArray[np
         return p, jac
     joints = robot_with(nominal, values, parametrization).jacobian(q_actual)      # (n, 3, N) mm/deg
     if moves is not None:
-        jac[:, :size - 6] += np.einsum("nij,njp->nip", joints, moves).reshape(-1, size - 6)
-    extra = np.einsum("nij,njp->nip", joints, design).reshape(-1, design.shape[2])
+        jac[:, :size - 6] += (joints @ moves).reshape(-1, size - 6)      # batched matmul: about 2x faster than einsum
+    extra = (joints @ design).reshape(-1, design.shape[2])
     return p, np.hstack([jac, extra])
 
 
@@ -647,8 +647,8 @@ def stacked(nominal: Robot, errors: JointErrors | None, q_deg: NDArray[np.float6
         if design is not None:
             joints = robot_with(nominal, v_k, par).jacobian(q_actual)
             if moves is not None:
-                jac[:, :size - 6] += np.einsum("nij,njp->nip", joints, moves).reshape(-1, size - 6)
-            block[:, size:own] = np.einsum("nij,njp->nip", joints, design).reshape(-1, design.shape[2])
+                jac[:, :size - 6] += (joints @ moves).reshape(-1, size - 6)
+            block[:, size:own] = (joints @ design).reshape(-1, design.shape[2])
         block[:, :size] = jac
         blocks.append(block)
     if extra.rotations is not None:

@@ -245,39 +245,44 @@ class _Frames:
         (the tool's is ``R + 1``), ``w`` (n, K) their weights (deg/m). A row before the pivot turns the
         pivot, its axis and every point together: the lever changes only by a rotation (a tilt against
         gravity), never by a shift. A row after it moves the points beyond it, the axis staying put.
+
+        The weighted lever is linear in the points, so each motion acts on one weighted sum of them
+        (``sum_k w_k u x r_k = u x sum_k w_k r_k``), never on every point: one cross product of
+        ``(n, 3)`` per motion.
         """
-        n, rows = arm.shape[0], self.origins.shape[1] - 1
+        n = arm.shape[0]
         size = len(self.motions)
         out = np.zeros((n, size + 3))
         index = np.asarray(index)
         rad = np.pi / 180.0
 
-        def change(dz, moved):
-            value = _cross_z(moved, z[:, None])
-            if dz is not None:
-                value = value + _cross_z(arm, dz[:, None])
-            return np.sum(w * value, axis=1) / 1000.0
+        def torque(v):                     # the lever's change when the points move by v (weights summed)
+            return (v[:, 0] * z[:, 1] - v[:, 1] * z[:, 0]) / 1000.0
 
+        whole = np.einsum("nk,nki->ni", w, arm)             # sum_k w_k arm_k
+        beyond: dict[int, tuple] = {}                       # per row: sum of w_k, sum of w_k (point_k - pivot)
+
+        def sums(r: int) -> tuple:
+            if r not in beyond:
+                mask = index >= r + 1
+                beyond[r] = (w[:, mask].sum(axis=1), np.einsum("nk,nki->ni", w[:, mask], arm[:, mask]))
+            return beyond[r]
+
+        pivot_at = self.origins[:, pivot]
         for c, (kind, u, centre, r) in enumerate(self.motions):
             if pivot >= r + 1:                                  # the whole lever turns (shifts change nothing)
                 if kind == "turn":
-                    out[:, c] = change(np.cross(u, z), np.cross(u[:, None], arm)) * rad
+                    dz = np.cross(u, z)
+                    out[:, c] = (torque(np.cross(u, whole)) + (whole[:, 0] * dz[:, 1] - whole[:, 1] * dz[:, 0])
+                                 / 1000.0) * rad
                 continue
-            beyond = index >= r + 1
-            if not beyond.any():
-                continue
-            moved = np.zeros_like(arm)
-            if kind == "turn":
-                points = arm[:, beyond] + self.origins[:, pivot, None]
-                moved[:, beyond] = np.cross(u[:, None], points - centre[:, None])
-                out[:, c] = change(None, moved) * rad
+            weight, moment = sums(r)
+            if kind == "turn":              # sum_k w_k u x (point_k - centre)
+                out[:, c] = torque(np.cross(u, moment + weight[:, None] * (pivot_at - centre))) * rad
             else:
-                moved[:, beyond] = u[:, None]
-                out[:, c] = change(None, moved)
+                out[:, c] = torque(u) * weight
         for k, axis in enumerate((self.xs[:, -1], self.y_last, self.zs[:, -1])):
-            moved = np.zeros_like(arm)
-            moved[:, -1] = axis
-            out[:, size + k] = change(None, moved)
+            out[:, size + k] = torque(axis) * w[:, -1]
         return out
 
 

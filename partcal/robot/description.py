@@ -134,7 +134,7 @@ def urdf_reference(spec: dict, base: Path, where: str = "robot") -> str:
 
 
 _ROBOT_KEYS = {"name", "description", "joints", "links", "tool_mm", "limits_deg", "home_deg",
-               "constraints_deg", "base"}
+               "constraints_deg", "base", "floor_mm"}
 
 
 def robot_from_dict(spec: dict, source: str = "robot", lines: dict[str, int] | None = None) -> Robot:
@@ -153,10 +153,12 @@ def robot_from_dict(spec: dict, source: str = "robot", lines: dict[str, int] | N
     tool = r.numbers("tool_mm", spec.get("tool_mm", [0, 0, 0]), (3,), "[x, y, z]")
     constraints = _constraints(spec.get("constraints_deg") or [], n, r)
     base = _origin(spec.get("base"), "base", r)
+    floor = spec.get("floor_mm", 0.0)
+    floor = None if floor is None else r.number("floor_mm", floor)
     return Robot(name=str(spec["name"]), n_joints=n, alpha_deg=alpha, d_mm=d, a_mm=a,
                  theta_offset_deg=off, coupling=coupling, tool_mm=tool, limits_deg=limits,
                  home_deg=home, constraints=constraints, origins=origins, prismatic=prismatic,
-                 base_rotation=matrix_from_euler_deg(base[3:]), base_mm=base[:3])
+                 base_rotation=matrix_from_euler_deg(base[3:]), base_mm=base[:3], floor_mm=floor)
 
 
 class _Reader:
@@ -306,6 +308,7 @@ def robot_to_dict(robot: Robot) -> dict:
         "home_deg": robot.home_deg.tolist(),
         "constraints_deg": [{"expr": _expression(0.0, c), "range": [lo, hi]} for c, lo, hi in robot.constraints],
         **_base_entry(robot),
+        **({} if robot.floor_mm == 0.0 else {"floor_mm": robot.floor_mm}),
     }
 
 

@@ -21,6 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import DataError
+from .floor import Floor, above_floor, below_floor_text
 from .kinematics import Robot
 
 POINT_FRACTION = 0.1            # P2..P5: this fraction of the diagonal from its corner
@@ -75,7 +76,7 @@ def _reach(robot: Robot, targets: NDArray[np.float64], seeds: NDArray[np.float64
     return result.q_deg, result.success
 
 
-def solve_cube(robot: Robot, centre_mm, edge_mm: float, seed_deg=None) -> Cube:
+def solve_cube(robot: Robot, centre_mm, edge_mm: float, seed_deg=None, floor: Floor | None = None) -> Cube:
     """The cube's test poses for ``robot``, refused (naming the corner) when a corner or point is out of reach.
 
     The centre is solved from ``seed_deg`` (default the home pose), every
@@ -85,19 +86,27 @@ def solve_cube(robot: Robot, centre_mm, edge_mm: float, seed_deg=None) -> Cube:
     the position alone (``held_orientation`` says which); a corner the robot cannot reach within
     its joint limits and constraints leaves the workspace, and so does a cube
     with a point of its 4 x 4 x 4 grid out of reach (a hole in the workspace,
-    such as the column about a first joint's axis).
+    such as the column about a first joint's axis). With ``floor`` (:class:`~partcal.robot.floor.Floor`), a
+    cube whose bottom corners lie below it is refused naming the lowest corner (C1: the bottom face is
+    C1..C4), and so are test poses that put a link, the flange or the tool below it.
     """
     centre = np.asarray(centre_mm, dtype=float).reshape(3)
     if not np.all(np.isfinite(centre)):
         raise DataError(f"the cube's centre must be three finite numbers of mm; got {centre.tolist()}")
     if not (np.isfinite(edge_mm) and edge_mm > 0):
         raise DataError(f"the cube's edge must be a positive number of mm; got {edge_mm!r}")
+    corners = cube_corners(centre, edge_mm)
+    if floor is not None and np.any(corners[:, 2] < floor.lowest_mm):
+        low = np.flatnonzero(corners[:, 2] < floor.lowest_mm)
+        raise DataError(f"the cube (centre {np.round(centre, 3).tolist()} mm, edge {edge_mm:g} mm) reaches below "
+                        f"the floor of {robot.name} ({floor.describe()}) at corner C{low[0] + 1} "
+                        f"{np.round(corners[low[0]], 3).tolist()} mm ({low.size} of 8 corners below): raise the "
+                        "centre or shrink the edge")
     seed = robot.check_joints(robot.home_deg if seed_deg is None else seed_deg)
     q0, ok = _reach(robot, centre[None], seed)
     if not ok[0]:
         raise DataError(f"the cube's centre P1 {np.round(centre, 3).tolist()} mm is out of reach of {robot.name} "
                         "within its joint limits")
-    corners = cube_corners(centre, edge_mm)
     _, ok = _reach(robot, corners, np.repeat(q0, 8, axis=0))
     if not ok.all():
         k = int(np.flatnonzero(~ok)[0])
@@ -116,17 +125,24 @@ def solve_cube(robot: Robot, centre_mm, edge_mm: float, seed_deg=None) -> Cube:
     poses[:, :3, 3] = points
     held = robot.inverse_pose(poses, np.repeat(q0, len(points), axis=0), tol_mm=_IK_TOL_MM, tol_deg=1e-6,
                               max_iter=300)
-    if held.success.all():
+    if held.success.all() and above_floor(robot, held.q_deg, floor).all():
         return Cube(centre, float(edge_mm), points, held.q_deg, True)
     q, ok = _reach(robot, points, np.repeat(q0, 5, axis=0))
     if not ok.all():
         k = int(np.flatnonzero(~ok)[0])
         raise DataError(f"the cube's test point P{k + 1} {np.round(points[k], 3).tolist()} mm is out of reach of "
                         f"{robot.name} within its joint limits")
+    low = np.flatnonzero(~above_floor(robot, q, floor))
+    if low.size:
+        k = int(low[0])
+        raise DataError(f"the cube's test pose P{k + 1} {np.round(points[k], 3).tolist()} mm "
+                        f"{below_floor_text(robot, q[k], floor)}, below the floor of {robot.name} "
+                        f"({floor.describe()}): raise the cube")
     return Cube(centre, float(edge_mm), points, q, False)
 
 
-def largest_cube(robot: Robot, *, random_state=0, n_centres: int = 40, steps: int = 14) -> Cube:
+def largest_cube(robot: Robot, *, random_state=0, n_centres: int = 40, steps: int = 14,
+                 floor: Floor | None = None) -> Cube:
     """The largest test cube found in the workspace, solved (see :func:`solve_cube`).
 
     Candidate centres are the tool positions of ``n_centres`` random poses
@@ -135,17 +151,22 @@ def largest_cube(robot: Robot, *, random_state=0, n_centres: int = 40, steps: in
     centre's joints is found by bisection
     over ``steps`` halvings of the robot's reach, all centres at once. A cube
     may not hold the vertical line through the base (the first joint's axis
-    on an upright robot: the arm's own column). The largest of them is returned.
+    on an upright robot: the arm's own column). With ``floor``, the centres' poses keep above it and
+    the cube's bottom face (corners C1..C4) stays above it. The largest of them is returned.
     """
     rng = np.random.default_rng(random_state)
     lo, hi = robot.limits_deg[:, 0], robot.limits_deg[:, 1]
     q = rng.uniform(lo, hi, size=(50 * n_centres, robot.n_joints))
-    q = q[robot.within_limits(q)][:n_centres]
+    q = q[robot.within_limits(q) & above_floor(robot, q, floor)][:n_centres]
     if len(q) == 0:
-        raise DataError(f"no random pose within the joint limits of {robot.name}: give the cube (--cube)")
+        raise DataError(f"no random pose within the joint limits of {robot.name}"
+                        + (f" above its floor ({floor.describe()})" if floor is not None else "")
+                        + ": give the cube (--cube)")
     centres = robot.positions(q)
     axis = robot.base_mm[:2]      # the first joint's axis (vertical through the base): no cube holds it
     low, high = np.zeros(len(q)), np.minimum(robot.reach_mm, 2.0 * np.abs(centres[:, :2] - axis).max(axis=1))
+    if floor is not None:                 # the bottom face C1..C4 at centre - edge / 2 stays above the floor
+        high = np.maximum(np.minimum(high, 2.0 * (centres[:, 2] - floor.lowest_mm)), 0.0)
     seeds = np.repeat(q, len(_GRID), axis=0)
     for _ in range(steps):
         mid = 0.5 * (low + high)
@@ -156,7 +177,7 @@ def largest_cube(robot: Robot, *, random_state=0, n_centres: int = 40, steps: in
         if low[k] <= 0:
             break
         try:
-            return solve_cube(robot, centres[k], float(np.floor(low[k])), q[k])
+            return solve_cube(robot, centres[k], float(np.floor(low[k])), q[k], floor)
         except DataError:
             continue
     raise DataError(f"found no test cube within the workspace of {robot.name}: give the cube (--cube)")

@@ -158,6 +158,11 @@ class Robot:
         ``x, y, z`` (mm) then ``roll, pitch, yaw`` (degrees, the rotation
         ``Rz(yaw) Ry(pitch) Rx(roll)``, a URDF origin's convention). None: the
         identity for every row (a plain DH chain).
+    floor_mm : float or None
+        Height of the floor in the base frame, mm (0: the base frame stands on
+        it); None for an arm not standing on a floor (ceiling, wall) or one whose
+        mounting height is not known. ``partcal plan`` keeps every pose above it
+        (:mod:`partcal.robot.floor`).
     """
 
     name: str
@@ -175,6 +180,7 @@ class Robot:
     constraints: tuple = ()
     origins: NDArray[np.float64] | None = None
     prismatic: NDArray[np.bool_] | None = None
+    floor_mm: float | None = 0.0
 
     def replace(self, **changes) -> "Robot":
         """Return a copy with some fields changed (used to build perturbed robots)."""

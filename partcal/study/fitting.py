@@ -3,7 +3,8 @@
 Each entry's estimator is built once (one per granularity for a list of
 them) and cloned for every fold and for the final fit. Entries run in
 parallel with joblib (``n_jobs``; a Dask cluster when the config gives its
-address); each entry's seed comes from the run seed and its name
+address); workers the entries leave spare fit an entry's folds side by side
+(:func:`worker_split`); each entry's seed comes from the run seed and its name
 (:func:`model_seed`), so results depend neither on ``n_jobs``, nor on the
 order in which jobs finish, nor on the entry's place in the list. A fit's
 warnings are collected in whichever process fits it and said by the run,
@@ -23,7 +24,6 @@ from typing import Callable
 import numpy as np
 from numpy.typing import NDArray
 from joblib import Parallel, delayed, parallel_config
-from sklearn.base import clone
 
 from ..data.measurements import Measurements
 from ..errors import ConfigError
@@ -34,11 +34,12 @@ from .config import ModelSpec
 from .prepare import PreparedRun, model_inputs
 from .results import ModelResult
 from .scoring import Outputs, spread_summary
-from .selection import CVPlan, choose_granularity, held_out_residuals, nested_residuals
+from .selection import CVPlan, choose_granularity, fits_on_folds, nested_residuals
 
 log = logging.getLogger(__name__)
 
 SLOW_SECONDS = 5.0          # a model still cross-validating after this long reports each fold
+LARGE_ROWS = 10_000         # a model fitted on this many identification rows or more says when it starts
 
 
 def model_seed(run_seed: int, name: str) -> int:
@@ -90,11 +91,12 @@ def fit_all(prepared: PreparedRun, outputs: Outputs,
     own = config.data_options.own_frame
     lines = FoldLines() if progress else None
     order = _costliest_first(specs, prepared.datasets["identification"])
+    model_jobs, fold_jobs = worker_split(config.n_jobs, len(specs), bool(config.dask_address))
     jobs = [delayed(fit_model)(specs[i], model_seed(config.seed, specs[i].name), prepared.datasets, plan.cv,
-                               prepared.robot, own, lines, outputs) for i in order]
+                               prepared.robot, own, lines, outputs, fold_jobs) for i in order]
     results: list[ModelResult] = []
     with _backend(config):
-        for result in Parallel(n_jobs=config.n_jobs, return_as="generator")(jobs):
+        for result in Parallel(n_jobs=model_jobs, return_as="generator")(jobs):
             results.append(result)
             for note in result.notes:
                 log.warning("%s: %s", result.spec.name, note)
@@ -106,9 +108,28 @@ def fit_all(prepared: PreparedRun, outputs: Outputs,
     return [results[order.index(i)] for i in range(len(specs))]        # back in the config's order
 
 
+def worker_split(n_jobs: int, n_models: int, distributed: bool = False) -> tuple[int, int]:
+    """How a run's ``n_jobs`` workers are shared: ``(models at a time, folds at a time per model)``.
+
+    Models come first: with at least as many models as workers, each worker fits one model (its folds
+    one after another). With fewer, the spare workers fit a model's folds (and its final fit) side by
+    side, ``n_jobs // models`` per model, so that the workers never exceed ``n_jobs``; a run of one model
+    on two workers fits two folds at a time. ``-1`` is every core (joblib's count); on a Dask cluster
+    the models are spread and the folds stay in order.
+
+    >>> worker_split(1, 1), worker_split(2, 1), worker_split(2, 12), worker_split(4, 3), worker_split(4, 1, True)
+    ((1, 1), (1, 2), (2, 1), (3, 1), (4, 1))
+    """
+    from joblib import effective_n_jobs
+
+    workers = effective_n_jobs(n_jobs) if n_jobs == -1 else int(n_jobs)
+    models = max(1, min(workers, n_models))
+    return (n_jobs if distributed else models), (1 if distributed else max(1, workers // models))
+
+
 def fit_model(spec: ModelSpec, seed: int, data: dict[str, Measurements], cv: CVPlan, robot: Robot | None = None,
               own_frame: tuple[str, ...] = (), lines: Callable[[str], None] | None = None,
-              outputs: Outputs = Outputs()) -> ModelResult:
+              outputs: Outputs = Outputs(), n_jobs: int = 1) -> ModelResult:
     """Fit one planned entry and evaluate it (runs in a joblib worker).
 
     ``cv`` holds the run's shared folds on the identification set (and the
@@ -118,15 +139,15 @@ def fit_model(spec: ModelSpec, seed: int, data: dict[str, Measurements], cv: CVP
     once, in one format, whichever process fitted
     (:attr:`ModelResult.notes`). ``lines`` receives per-fold progress once
     the cross-validation has taken :data:`SLOW_SECONDS`. ``outputs``: what the
-    model fits and what its CV score reads.
+    model fits and what its CV score reads. ``n_jobs``: folds fitted at a time (:func:`worker_split`).
     """
     with _collected() as said:
-        result = _fit_model(spec, seed, data, cv, robot, own_frame, lines, outputs)
+        result = _fit_model(spec, seed, data, cv, robot, own_frame, lines, outputs, n_jobs)
     result.notes = list(dict.fromkeys(said + result.model.fit_notes()))      # the run names the model in front
     return result
 
 
-def _fit_model(spec, seed, data, cv, robot, own_frame, lines, outputs) -> ModelResult:
+def _fit_model(spec, seed, data, cv, robot, own_frame, lines, outputs, n_jobs=1) -> ModelResult:
     ident = data["identification"]
     X, y = model_inputs(spec.inputs, ident), outputs.errors(ident)
     candidates = [spec.build(seed, size) for size in spec.sizes] or [spec.build(seed)]   # built once, then cloned
@@ -139,11 +160,20 @@ def _fit_model(spec, seed, data, cv, robot, own_frame, lines, outputs) -> ModelR
         if lines is not None and elapsed > SLOW_SECONDS:
             lines(f"{spec.name}: cross-validation fold {done}/{total} ({elapsed:.0f} s)")
 
+    def final_done(spent: float) -> None:
+        elapsed = time.perf_counter() - start
+        if lines is not None and elapsed > SLOW_SECONDS:
+            lines(f"{spec.name}: final fit on all {len(X)} rows done in {spent:.0f} s ({elapsed:.0f} s)")
+
+    if lines is not None and len(X) >= LARGE_ROWS:
+        lines(f"{spec.name}: fitting {len(cv.folds)} cross-validation folds and the final fit on {len(X)} rows, "
+              f"{min(n_jobs, len(cv.folds) + 1)} at a time")
+
     if len(candidates) > 1:
         resid = nested_residuals(candidates, X, y, folds=cv.folds, inner=cv.inner, progress=fold_done, per_row=rows,
-                                 score=outputs.score)
+                                 score=outputs.score, n_jobs=n_jobs)
         estimator, granularity = choose_granularity(candidates, spec.sizes, X, y, cv.folds, per_row=rows,
-                                                    score=outputs.score)                  # returned fitted
+                                                    score=outputs.score, n_jobs=n_jobs)   # returned fitted
         for row in granularity:
             log.info("%s, granularity %s: CV RMS %.4f over %d regions", spec.name, row["granularity"],
                      row["cv_rms_3d"], row["regions"])
@@ -154,13 +184,11 @@ def _fit_model(spec, seed, data, cv, robot, own_frame, lines, outputs) -> ModelR
         cv_seconds, nested = time.perf_counter() - start - fit_seconds, True
         cv_regions = granularity[chosen]["cv_regions"]
     else:
-        fold_fits: list = []
-        resid = held_out_residuals(candidates[0], X, y, cv.folds, fitted=fold_fits, progress=fold_done,
-                                   per_row=rows)
-        cv_seconds = time.perf_counter() - start
-        start = time.perf_counter()
-        estimator = clone(candidates[0]).fit(X, y, **rows)
-        fit_seconds = time.perf_counter() - start
+        fold_fits: list = []            # the folds and the final fit, side by side when n_jobs allows
+        resid, estimator, fit_seconds = fits_on_folds(candidates[0], X, y, cv.folds, fitted=fold_fits,
+                                                      progress=fold_done, per_row=rows, n_jobs=n_jobs, final=True,
+                                                      on_final=final_done)
+        cv_seconds = time.perf_counter() - start - fit_seconds
         if estimator.regions_model() is not None:
             cv_regions = fold_regions([m.regions_model() for m in fold_fits])
         _note_other_optima(fold_fits, estimator)

@@ -30,6 +30,7 @@ from ..errors import DataError, PartcalError
 from ..models import design
 from ..models.base import seed_from
 from ..robot.description import joint_columns
+from ..robot.floor import Floor, above_floor, below_floor_text, robot_floor
 from ..robot.kinematics import Robot
 
 log = logging.getLogger(__name__)
@@ -37,14 +38,19 @@ DEFAULT_NOISE_MM = 0.03     # a laser tracker at 2-3 m: about 15 um + 6 um/m per
 DEFAULT_POOL = 2000         # candidate poses drawn within the limits (or the box)
 WORKSPACE_POSES = 1000      # joint-limit poses over which a pose set's uncertainty is predicted
 _MAX_DRAWS = 400_000        # uniform joint-space draws before a candidate search gives up
+ROBOT_FLOOR = "robot"       # the floor of the robot's description (floor_mm), the default of every drawn pool
 
 
 # ---------------------------------------------------------------------- candidates
-def candidates_within_limits(robot: Robot, n: int, rng: np.random.Generator, box_mm=None) -> NDArray[np.float64]:
+def candidates_within_limits(robot: Robot, n: int, rng: np.random.Generator, box_mm=None,
+                             floor: Floor | None = None) -> NDArray[np.float64]:
     """``n`` uniform random poses within the joint limits and coupled constraints, shape ``(n, N)`` deg.
 
     With ``box_mm`` (``[[xmin, ymin, zmin], [xmax, ymax, zmax]]``, mm) only
-    poses whose nominal tool position lies in the box count.
+    poses whose nominal tool position lies in the box count; with ``floor``
+    (:class:`~partcal.robot.floor.Floor`) only poses whose links, flange and tool
+    stay above it. Poses that fail are drawn again, so ``n`` come back or a
+    one-line error says that the limits, box and floor leave too little room.
     """
     lo, hi = robot.limits_deg[:, 0], robot.limits_deg[:, 1]
     found, draws, batch = [], 0, max(4 * n, 1000)
@@ -56,18 +62,37 @@ def candidates_within_limits(robot: Robot, n: int, rng: np.random.Generator, box
         if box_mm is not None and len(q):
             p = robot.positions(q)
             q = q[np.all((p >= box_mm[0]) & (p <= box_mm[1]), axis=1)]
+        if floor is not None and len(q):
+            q = q[above_floor(robot, q, floor)]
         found.append(q)
         kept += len(q)
     if kept < n:
-        where = (f" with the tool inside the box {np.asarray(box_mm).tolist()} mm" if box_mm is not None else "")
+        where = "".join([f" with the tool inside the box {np.asarray(box_mm).tolist()} mm" if box_mm is not None
+                         else "", f" with every link above the floor ({floor.describe()})" if floor is not None
+                         else ""])
         raise DataError(f"only {kept} of {draws} random joint-limit poses of {robot.name} are admissible{where}; "
-                        f"{n} candidates were asked for: widen the box or give a candidate CSV")
+                        f"{n} candidates were asked for: "
+                        + ("widen the box, " if box_mm is not None else "")
+                        + ("lower the floor (--floor-mm, --clearance-mm), " if floor is not None else "")
+                        + "or give a candidate CSV")
     return np.concatenate(found)[:n]
 
 
-def check_candidates(robot: Robot, q_deg: NDArray[np.float64], source: str) -> NDArray[np.float64]:
+def floor_of(robot: Robot, floor) -> Floor | None:
+    """The floor a plan keeps above: ``floor`` itself (a :class:`~partcal.robot.floor.Floor` or None for none),
+    or the robot's own (``floor_mm`` of its description, default clearance) for :data:`ROBOT_FLOOR`."""
+    if isinstance(floor, str) and floor == ROBOT_FLOOR:
+        return robot_floor(robot)
+    if floor is not None and not isinstance(floor, Floor):
+        raise PartcalError(f"floor must be a Floor, None or {ROBOT_FLOOR!r}; got {floor!r}")
+    return floor
+
+
+def check_candidates(robot: Robot, q_deg: NDArray[np.float64], source: str,
+                     floor: Floor | None = None) -> NDArray[np.float64]:
     """The user's poses ``(n, N)`` deg (candidates, or a set to evaluate), refused when they look like radians
-    (:func:`~partcal.data.plausibility.check_joint_units`) or one is outside the limits."""
+    (:func:`~partcal.data.plausibility.check_joint_units`), one is outside the limits, or (with ``floor``) one
+    puts a link, the flange or the tool below the floor."""
     q_deg = robot.check_joints(q_deg, source)
     check_joint_units(source, ["data row 1"], q_deg)
     bad = np.flatnonzero(~robot.within_limits(q_deg))
@@ -76,6 +101,14 @@ def check_candidates(robot: Robot, q_deg: NDArray[np.float64], source: str) -> N
         raise DataError(f"{source}: data row {k + 1} ({np.round(q_deg[k], 4).tolist()} deg) is outside the joint "
                         f"limits or coupled constraints of {robot.name}; expected admissible poses only "
                         f"({bad.size} of {len(q_deg)} are not)")
+    if floor is not None:
+        low = np.flatnonzero(~above_floor(robot, q_deg, floor))
+        if low.size:
+            k = int(low[0])
+            raise DataError(f"{source}: data row {k + 1} ({np.round(q_deg[k], 4).tolist()} deg) "
+                            f"{below_floor_text(robot, q_deg[k], floor)}, below the floor of {robot.name} "
+                            f"({floor.describe()}; {low.size} of {len(q_deg)} poses are below): give poses above "
+                            "it, or set the floor (--floor-mm, --clearance-mm) or turn it off (--no-floor)")
     return q_deg
 
 
@@ -162,15 +195,17 @@ class Workspace:
 
 
 def workspace(robot: Robot, q_deg=None, *, model: design.PlannedModel = design.DH, random_state=0,
-              n_poses: int = WORKSPACE_POSES, box_mm=None, rcond: float = 1e-6) -> Workspace:
+              n_poses: int = WORKSPACE_POSES, box_mm=None, floor=ROBOT_FLOOR, rcond: float = 1e-6) -> Workspace:
     """The workspace a pose set is judged on: ``q_deg`` (candidates), else joint-limit poses (seeded).
 
     ``model`` is the kinematic model planned for (:class:`~partcal.models.design.PlannedModel`: base,
-    tool, compliance, joint harmonics, payload).
+    tool, compliance, joint harmonics, payload). Drawn poses keep above ``floor`` (see :func:`floor_of`;
+    default the robot's own floor); ``q_deg`` are taken as given (:func:`check_candidates` checks them).
     """
     model.check(robot)
     if q_deg is None:
-        q_deg = candidates_within_limits(robot, n_poses, np.random.default_rng(random_state), box_mm)
+        q_deg = candidates_within_limits(robot, n_poses, np.random.default_rng(random_state), box_mm,
+                                         floor_of(robot, floor))
     jac, wanted = design.model_jacobian(robot, q_deg, model)
     scales = design.parameter_scales(robot, model)
     structural = design.identifiable(jac, wanted, rcond)
@@ -270,7 +305,7 @@ def check_count(robot: Robot, n, space: Workspace) -> None:
 
 
 def plan_poses(robot: Robot, n: int, *, space: Workspace | None = None, noise_mm: float = DEFAULT_NOISE_MM,
-               model: design.PlannedModel | None = None, random_state=0, callback=None) -> Plan:
+               model: design.PlannedModel | None = None, random_state=0, callback=None, floor=ROBOT_FLOOR) -> Plan:
     """Choose ``n`` poses of the candidate pool that make the kinematic model best identifiable.
 
     Parameters
@@ -291,11 +326,15 @@ def plan_poses(robot: Robot, n: int, *, space: Workspace | None = None, noise_mm
         Seeds the pool (when drawn here) and the exchange's random start.
     callback : callable, optional
         ``callback(exchanges, logdet)`` after each accepted exchange.
+    floor : Floor, None or "robot"
+        The floor the pool drawn here keeps above (:func:`floor_of`; default the robot's own). A given
+        ``space`` holds its poses already.
     """
     seeds = np.random.SeedSequence(seed_from(random_state)).spawn(2)
     model = _model_of(space, model)
     if space is None:
-        space = workspace(robot, model=model, random_state=np.random.default_rng(seeds[0]), n_poses=DEFAULT_POOL)
+        space = workspace(robot, model=model, random_state=np.random.default_rng(seeds[0]), n_poses=DEFAULT_POOL,
+                          floor=floor)
     check_count(robot, n, space)
     blocks = space.blocks[:, :, space.structural]
     result = design.detmax(blocks, int(n), random_state=np.random.default_rng(seeds[1]), callback=callback)
@@ -373,21 +412,23 @@ def write_plan(robot: Robot, q_deg: NDArray[np.float64], path: str | Path, *, co
 
 
 def iso_cube_plan(robot: Robot, path: str | Path, *, cube=None, cycles: int = 30, random_state=0,
-                  comment: str = ""):
+                  comment: str = "", floor=ROBOT_FLOOR):
     """Write the ISO 9283 test poses P1..P5 of a cube, ``cycles`` times, as a pose list; return the cube.
 
     ``cube`` is ``(cx, cy, cz, edge)`` in mm (the centre and the edge), or
     None for the largest cube found in the workspace
     (:func:`~partcal.robot.iso_cube.largest_cube`, seeded). Every cycle visits
     P1, P2, P3, P4, P5 in order; the ``set`` column names the point and
-    ``cycle`` counts from 1.
+    ``cycle`` counts from 1. The cube and its test poses keep above ``floor`` (:func:`floor_of`; default the
+    robot's own floor): a given cube that does not is refused naming its lowest corner or the pose.
     """
     from ..robot import iso_cube
 
     if not isinstance(cycles, (int, np.integer)) or isinstance(cycles, bool) or cycles < 1:
         raise PartcalError(f"the number of cycles must be a whole number >= 1; got {cycles!r}")
-    solved = (iso_cube.largest_cube(robot, random_state=random_state) if cube is None
-              else iso_cube.solve_cube(robot, cube[:3], float(cube[3])))
+    floor = floor_of(robot, floor)
+    solved = (iso_cube.largest_cube(robot, random_state=random_state, floor=floor) if cube is None
+              else iso_cube.solve_cube(robot, cube[:3], float(cube[3]), floor=floor))
     corners = iso_cube.cube_corners(solved.centre_mm, solved.edge_mm)
     text = (comment + "\n" if comment else "") + (
         f"ISO 9283 test cube: centre {np.round(solved.centre_mm, 3).tolist()} mm, edge {solved.edge_mm:g} mm; "

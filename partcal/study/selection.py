@@ -30,6 +30,7 @@ from .._validation import check_int
 from ..data.measurements import Measurements
 from ..metrics import HELD_TOLERANCE_DEG, labels_as_groups, pooled_rms, pose_groups
 from ..models.partitioned import fold_regions
+from ..models.threads import one_blas_thread
 
 if TYPE_CHECKING:
     from .config import RunConfig
@@ -123,23 +124,70 @@ def rows_of(per_row: dict | None, rows, *, predicting: bool = False) -> dict:
 
 def held_out_residuals(model, X, y, folds, *, fitted: list | None = None,
                        progress: Callable[[int, int], None] | None = None,
-                       per_row: dict | None = None) -> NDArray[np.float64]:
+                       per_row: dict | None = None, n_jobs: int = 1) -> NDArray[np.float64]:
     """``y - prediction`` of every sample by ``model`` fitted on the folds without it, shape of ``y``.
 
     ``fitted`` receives the model fitted on each fold; ``progress(done, total)`` is called after each fold.
     ``per_row`` holds arguments of ``fit`` and ``predict`` with one value per sample (a payload per pose),
-    split with the samples.
+    split with the samples. ``n_jobs`` folds are fitted at a time (joblib; see :func:`fits_on_folds`): the
+    residuals are the same for any ``n_jobs``.
+    """
+    return fits_on_folds(model, X, y, folds, fitted=fitted, progress=progress, per_row=per_row, n_jobs=n_jobs)[0]
+
+
+def fits_on_folds(model, X, y, folds, *, fitted: list | None = None,
+                  progress: Callable[[int, int], None] | None = None, per_row: dict | None = None,
+                  n_jobs: int = 1, final: bool = False, on_final: Callable[[float], None] | None = None
+                  ) -> tuple[NDArray[np.float64], object, float]:
+    """Held-out residuals of ``model`` on ``folds`` (see :func:`held_out_residuals`) and, with ``final``, the
+    model fitted on all of ``X, y`` and the seconds of that fit; ``(residuals, final model or None, seconds)``.
+
+    The ``k`` fold fits (and the final one) are independent: with ``n_jobs > 1`` they run on that many
+    joblib workers, the final fit first (the longest) beside the folds, and each result is put in its
+    place, so the residuals, fold models and final model are those of ``n_jobs = 1``, where the folds run
+    in order and the final fit after them. Large arrays reach the workers memory-mapped (joblib's
+    default), not copied once per fold. ``on_final(seconds)`` is called when the final fit is done.
     """
     X, y = np.asarray(X, dtype=float), np.asarray(y, dtype=float)
     resid = np.empty_like(y)
-    for i, (train, test) in enumerate(folds):
+    tasks = [(train, test) for train, test in folds] + ([(np.arange(len(X)), None)] if final else [])
+    models: list = [None] * len(tasks)
+    seconds = [0.0] * len(tasks)
+    if n_jobs == 1 or len(tasks) < 2:
+        results = (_fit_fold(k, model, X, y, train, test, per_row) for k, (train, test) in enumerate(tasks))
+    else:
+        from joblib import Parallel, delayed
+
+        order = ([len(tasks) - 1] if final else []) + list(range(len(folds)))      # the final fit first
+        results = Parallel(n_jobs=min(n_jobs, len(tasks)), return_as="generator_unordered")(
+            delayed(_fit_fold)(k, model, X, y, *tasks[k], per_row) for k in order)
+    done = 0
+    for k, fold, part, spent in results:
+        models[k], seconds[k] = fold, spent
+        if k < len(folds):
+            resid[folds[k][1]] = part
+            done += 1
+            if progress is not None:
+                progress(done, len(folds))
+        elif on_final is not None:
+            on_final(spent)
+    if fitted is not None:
+        fitted.extend(models[:len(folds)])
+    return resid, (models[-1] if final else None), (seconds[-1] if final else 0.0)
+
+
+def _fit_fold(k: int, model, X, y, train, test, per_row):
+    """Fit a clone of ``model`` on the rows ``train``; its residuals on ``test`` (None: none), and the seconds.
+
+    BLAS runs on one thread here, in this process or a worker alike: a QR or product split over another
+    number of threads rounds differently (1e-14 relative on 100,000 poses), and the results must not
+    depend on where, or beside what, a fold was fitted."""
+    with one_blas_thread():
+        begin = time.perf_counter()
         fold = clone(model).fit(X[train], y[train], **rows_of(per_row, train))
-        resid[test] = y[test] - fold.predict(X[test], **rows_of(per_row, test, predicting=True))
-        if fitted is not None:
-            fitted.append(fold)
-        if progress is not None:
-            progress(i + 1, len(folds))
-    return resid
+        spent = time.perf_counter() - begin
+        part = None if test is None else y[test] - fold.predict(X[test], **rows_of(per_row, test, predicting=True))
+    return k, fold, part, spent
 
 
 def cross_validated_rms(model, X, y, *, folds=5, random_state=0, fitted: list | None = None,
@@ -165,7 +213,7 @@ def cross_validated_rms(model, X, y, *, folds=5, random_state=0, fitted: list | 
 
 
 def select_by_cv(candidates, X, y, *, folds, fold_models: list | None = None, per_row: dict | None = None,
-                 score: Callable[[NDArray[np.float64]], float] | None = None
+                 score: Callable[[NDArray[np.float64]], float] | None = None, n_jobs: int = 1
                  ) -> tuple[int, list[float], list, list[float]]:
     """Score unfitted ``candidates`` by CV on ``folds``, then fit each on all of ``X, y``.
 
@@ -174,13 +222,15 @@ def select_by_cv(candidates, X, y, *, folds, fold_models: list | None = None, pe
     candidates and the seconds of each final fit. ``fold_models`` receives,
     per candidate, the list of its models fitted on the folds; ``per_row``:
     see :func:`held_out_residuals`; ``score`` turns held-out residuals into the
-    score (default :func:`pooled_rms`; a run of pose errors scores some columns).
+    score (default :func:`pooled_rms`; a run of pose errors scores some columns); ``n_jobs``: folds fitted
+    at a time (:func:`fits_on_folds`).
     """
     score = score or pooled_rms
     scores, fitted, seconds = [], [], []
     for candidate in candidates:
         folds_fitted: list = []
-        scores.append(score(held_out_residuals(candidate, X, y, folds, fitted=folds_fitted, per_row=per_row)))
+        scores.append(score(held_out_residuals(candidate, X, y, folds, fitted=folds_fitted, per_row=per_row,
+                                               n_jobs=n_jobs)))
         if fold_models is not None:
             fold_models.append(folds_fitted)
         begin = time.perf_counter()
@@ -191,7 +241,8 @@ def select_by_cv(candidates, X, y, *, folds, fold_models: list | None = None, pe
 
 def nested_residuals(candidates, X, y, *, folds, inner: Callable[[NDArray[np.intp]], list],
                      progress: Callable[[int, int], None] | None = None, per_row: dict | None = None,
-                     score: Callable[[NDArray[np.float64]], float] | None = None) -> NDArray[np.float64]:
+                     score: Callable[[NDArray[np.float64]], float] | None = None, n_jobs: int = 1
+                     ) -> NDArray[np.float64]:
     """Held-out residuals of "choose among ``candidates`` by CV, then fit": the choice is made inside each fold.
 
     For every outer ``(train, test)`` fold the candidate (an unfitted
@@ -203,7 +254,8 @@ def nested_residuals(candidates, X, y, *, folds, inner: Callable[[NDArray[np.int
     outer training rows (``candidate.frozen(X, y)``: a Gaussian process fixes
     the hyperparameters it learns there), so the inner fits only solve; no
     fold learns anything from its held-out rows. ``per_row``: see
-    :func:`held_out_residuals`; ``score``: see :func:`select_by_cv`.
+    :func:`held_out_residuals`; ``score``: see :func:`select_by_cv`; ``n_jobs``: inner folds fitted at a
+    time.
     """
     score = score or pooled_rms
     X, y = np.asarray(X, dtype=float), np.asarray(y, dtype=float)
@@ -212,7 +264,7 @@ def nested_residuals(candidates, X, y, *, folds, inner: Callable[[NDArray[np.int
         Xt, yt, rows = X[train], y[train], rows_of(per_row, train)
         frozen = [_frozen(c, Xt, yt, rows) for c in candidates]
         splits = inner(train)
-        scores = [score(held_out_residuals(c, Xt, yt, splits, per_row=rows)) for c in frozen]
+        scores = [score(held_out_residuals(c, Xt, yt, splits, per_row=rows, n_jobs=n_jobs)) for c in frozen]
         chosen = frozen[min(range(len(scores)), key=scores.__getitem__)]
         resid[test] = y[test] - clone(chosen).fit(Xt, yt, **rows).predict(X[test], **rows_of(per_row, test,
                                                                                                predicting=True))
@@ -267,8 +319,8 @@ def _frozen(model, X, y, rows: dict):
 
 
 def choose_granularity(candidates: Sequence, granularities: Sequence[int], X, y, folds: list, *,
-                       per_row: dict | None = None, score: Callable[[NDArray[np.float64]], float] | None = None
-                       ) -> tuple[object, list[dict]]:
+                       per_row: dict | None = None, score: Callable[[NDArray[np.float64]], float] | None = None,
+                       n_jobs: int = 1) -> tuple[object, list[dict]]:
     """Choose among unfitted partitioned ``candidates`` (one per granularity) by cross-validation on ``folds``.
 
     A candidate is a partitioned model or any model whose ``regions_model()``
@@ -285,7 +337,7 @@ def choose_granularity(candidates: Sequence, granularities: Sequence[int], X, y,
     """
     fold_models: list = []
     best, scores, fitted, seconds = select_by_cv(list(candidates), X, y, folds=folds, fold_models=fold_models,
-                                                 per_row=per_row, score=score)
+                                                 per_row=per_row, score=score, n_jobs=n_jobs)
     table = [{"granularity": int(size), "cv_rms_3d": s, "regions": int(f.regions_model().partition_.n_regions),
               "cv_regions": fold_regions([m.regions_model() for m in folded]), "fit_seconds": t}
              for size, s, f, folded, t in zip(granularities, scores, fitted, fold_models, seconds)]

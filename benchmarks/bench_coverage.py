@@ -5,7 +5,8 @@ deviation (``predict_with_std``), the errors of test sets. The coverage is the
 share of the test coordinates (x, y, z of every pose) whose measured error
 lies within ``1.96 std`` of the prediction; the width is the mean ``std``
 (mm). A calibrated spread covers about 95% on data like the training data and
-should be wider where the model extrapolates.
+should be wider where the model extrapolates. The last column is seconds: the
+fit for the ``own`` row, the calibration's added fits for the others.
 
 - the IPA UR10 (``configs/ur10_ipa.yaml``: registered as the run registers
   it): fitted on series B 1-1000, tested on B 1001-1495 (like the training
@@ -35,7 +36,9 @@ from partcal.models.kinematic import KinematicModel  # noqa: E402
 from partcal.models.partition import KMeansPartition  # noqa: E402
 from partcal.models.partitioned import PartitionedErrorModel  # noqa: E402
 from partcal.models.series import ErrorModel  # noqa: E402
-from partcal.study.spread import calibrate_spread  # noqa: E402
+from partcal.study.config import SpreadOptions  # noqa: E402
+from partcal.study.selection import grouped_splits, measured_poses  # noqa: E402
+from partcal.study.spread import run_scale  # noqa: E402
 from partcal.robot.description import load_robot  # noqa: E402
 from partcal.study.config import load_config  # noqa: E402
 from partcal.study.prepare import load_datasets  # noqa: E402
@@ -43,9 +46,10 @@ from partcal.study.scoring import errors_left  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 Z95 = 1.959963984540054
+CALIBRATIONS = ("contiguous", "forward", "folds")
 
 
-def models(robot, quick: bool) -> dict:
+def models(robot, quick: bool, only: list[str] | None = None) -> dict:
     """The models compared (unfitted), by name: one or more of every kind."""
     gp = GaussianProcessErrorModel(inputs="joint", restarts=0, random_state=0)
     out = {"FDP(CI)": ErrorModel(inputs="cartesian", degree=1, solver="lstsq"),
@@ -59,7 +63,7 @@ def models(robot, quick: bool) -> dict:
            "DH + GP(AI)": KinematicModel(robot=robot, residual=gp, random_state=0)}
     if quick:
         out.pop("GP(AI)")
-    return out
+    return {name: model for name, model in out.items() if not only or name in only}
 
 
 def inputs_of(model, m):
@@ -74,21 +78,26 @@ def coverage(model, m, own_frame: bool) -> tuple[float, float]:
     return float(np.mean(np.abs(left) <= Z95 * std)), float(std.mean())
 
 
-def table(title: str, train, tests: dict, robot, quick: bool) -> None:
-    """Coverage and width of every model on every test set: its own spread, then calibrated (5 contiguous folds)."""
+def table(title: str, train, tests: dict, robot, quick: bool, only: list[str] | None = None,
+          calibrations: tuple = CALIBRATIONS) -> None:
+    """Coverage and width of every model on every test set: its own spread, then calibrated as a run calibrates
+    it (:func:`partcal.study.spread.run_scale`): on 5 contiguous blocks (``spread: {calibration: contiguous}``,
+    the default) and on the run's 5 cross-validation folds (``calibration: folds``: shuffled poses, seed 0)."""
     rows = []
-    for name, model in models(robot, quick).items():
+    cv_folds = grouped_splits(measured_poses(train), 5, 0)
+    for name, model in models(robot, quick, only).items():
+        X = inputs_of(model, train)
         start = time.perf_counter()
-        for how in ("own", "calibrated"):
-            if how == "own":
-                model.fit(inputs_of(model, train), train.errors_mm)
-            else:
-                calibrate_spread(model, inputs_of(model, train), train.errors_mm, folds=5)
+        model.fit(X, train.errors_mm)
+        for how in ("own", *calibrations):
+            lap = time.perf_counter()
+            model.spread_scale_ = None if how == "own" else run_scale(
+                SpreadOptions(calibration=how), model, X, train.errors_mm, cv_folds=cv_folds)
             cells = [name if how == "own" else "", how]
             for m, own in tests.values():
                 share, width = coverage(model, m, own)
                 cells += [f"{100 * share:.1f}%", f"{width:.3f}"]
-            rows.append(cells + [f"{time.perf_counter() - start:.1f}"])
+            rows.append(cells + [f"{time.perf_counter() - (start if how == 'own' else lap):.1f}"])
     header = ["model", "spread"] + [h for t in tests for h in (f"{t} cover", "std mm")] + ["s"]
     print_table(title, header, rows)
 
@@ -96,17 +105,22 @@ def table(title: str, train, tests: dict, robot, quick: bool) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="leave out the global GP (its fit takes longest)")
+    parser.add_argument("--only", nargs="+", metavar="MODEL", help="only these models (their names in the table)")
+    parser.add_argument("--calibrations", nargs="+", default=CALIBRATIONS, choices=CALIBRATIONS,
+                        help="the calibrated rows (default: all)")
+    parser.add_argument("--sk120-only", action="store_true", help="only the virtual SK120's table")
     args = parser.parse_args()
-    data, robot, registrations = load_datasets(load_config(ROOT / "configs" / "ur10_ipa.yaml"))
-    own = {name: reg is not registrations["identification"] for name, reg in registrations.items()}
-    table("IPA UR10: fitted on series B 1-1000", data["identification"],
-          {"B 1001-1495": (data["joint_configurations"], own["joint_configurations"]),
-           "C": (data["random_poses"], own["random_poses"]), "D": (data["iso_cubes"], own["iso_cubes"])},
-          robot, args.quick)
+    if not args.sk120_only:
+        data, robot, registrations = load_datasets(load_config(ROOT / "configs" / "ur10_ipa.yaml"))
+        own = {name: reg is not registrations["identification"] for name, reg in registrations.items()}
+        table("IPA UR10: fitted on series B 1-1000", data["identification"],
+              {"B 1001-1495": (data["joint_configurations"], own["joint_configurations"]),
+               "C": (data["random_poses"], own["random_poses"]), "D": (data["iso_cubes"], own["iso_cubes"])},
+              robot, args.quick, args.only, tuple(args.calibrations))
     sk120 = ROOT / "data" / "sk120"
     table("virtual SK120: fitted on the 85 identification poses", read_measurements(sk120 / "identification.csv"),
           {p: (read_measurements(sk120 / f"test_{p}.csv"), False) for p in ("rectangle", "spiral_xy", "spiral_yz")},
-          load_robot("motoman_sk120"), args.quick)
+          load_robot("motoman_sk120"), args.quick, args.only, tuple(args.calibrations))
 
 
 if __name__ == "__main__":

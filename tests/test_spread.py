@@ -175,8 +175,73 @@ def test_calibration_scales_the_spread_to_held_out_blocks(linear_data):
     drift = y + np.linspace(0, 1.0, len(y))[:, None]                # a session that drifts by 1 mm
     drifting = calibrate_spread(ErrorModel(inputs="cartesian", solver="lstsq"), X, drift, folds=4)
     assert np.all(drifting.spread_scale_ > 1.2 * stationary.spread_scale_)   # wider than its own fit says
+    from partcal.study.config import SpreadOptions
+    from partcal.study.spread import forward_folds, run_scale
+
+    assert [(a.tolist(), b.tolist()) for a, b in forward_folds(5, 2)] == [([0, 1, 2], [3, 4])]
+    later = run_scale(SpreadOptions("forward", folds=4), ErrorModel(inputs="cartesian", solver="lstsq").fit(X, drift),
+                      X, drift, cv_folds=[])
+    assert np.all(later > drifting.spread_scale_)          # predicted only from the past, the drift shows more
     own = ErrorModel(inputs="cartesian", solver="lstsq").fit(X, drift).predict_with_std(X)[1]
     np.testing.assert_allclose(drifting.predict_with_std(X)[1], own * drifting.spread_scale_)
+
+
+def test_scale_from_scores_is_the_quantile_over_the_normal_one():
+    from scipy.stats import norm
+
+    from partcal.study.spread import scale_from_scores
+
+    rng = np.random.default_rng(11)
+    scores = np.abs(rng.normal(0, 1, (200_000, 2))) * [1.0, 2.5]      # a spread right, and one 2.5 times too narrow
+    np.testing.assert_allclose(scale_from_scores(scores, 0.95), [1.0, 2.5], rtol=0.02)
+    few = np.array([[0.1, np.nan], [0.2, np.nan], [0.3, np.nan], [0.4, np.nan], [0.5, np.inf]])
+    np.testing.assert_allclose(scale_from_scores(few, 0.9), [np.quantile([0.1, 0.2, 0.3, 0.4, 0.5], 0.9)
+                                                             / norm.ppf(0.95), 1.0])   # no finite score: 1
+
+
+def test_folds_calibration_reads_the_cross_validation_fits_as_a_refit_would(linear_data):
+    from partcal.study.config import SpreadOptions
+    from partcal.study.selection import held_out_residuals
+    from partcal.study.spread import run_scale
+
+    X, y = linear_data
+    model = ErrorModel(inputs="cartesian", solver="lstsq")
+    folds = contiguous_folds(len(X), 4)[::-1]                             # any folds: the run's
+    fits: list = []
+    held_out_residuals(model, X, y, folds, fitted=fits)
+    fitted = run_scale(SpreadOptions(calibration="folds"), model.fit(X, y), X, y, cv_folds=folds, fold_fits=fits)
+    refit = run_scale(SpreadOptions(calibration="folds"), model, X, y, cv_folds=folds)
+    np.testing.assert_allclose(fitted, refit, rtol=1e-12)
+    contiguous = run_scale(SpreadOptions("contiguous", folds=4), model, X, y, cv_folds=folds)
+    np.testing.assert_allclose(contiguous, calibrate_spread(clone_of(model), X, y, folds=4).spread_scale_, rtol=1e-12)
+    assert run_scale(SpreadOptions(calibration="none"), model, X, y, cv_folds=folds) is None
+
+
+def clone_of(model):
+    from sklearn.base import clone
+
+    return clone(model)
+
+
+def test_spread_key_of_a_run_config(tmp_path):
+    from partcal.errors import ConfigError
+    from partcal.study.config import SpreadOptions, load_config
+
+    data = ROOT / "data" / "sk120"
+    base = (f"name: s\ndata:\n  identification: {data / 'identification.csv'}\n"
+            "models:\n  - {name: a, degree: 1, solver: {method: lstsq}}\n")
+    path = tmp_path / "run.yaml"
+    path.write_text(base)
+    assert load_config(path).spread == SpreadOptions("forward", 0.95, 5)
+    path.write_text(base + "spread: {calibration: folds, coverage: 0.9}\n")
+    assert load_config(path).spread == SpreadOptions("folds", 0.9, 5)
+    for bad, match in (("{calibration: blocks}", r"spread.calibration \(line 6\): must be one of .*got 'blocks'"),
+                       ("{coverage: 1.0}", r"spread.coverage \(line 6\): must be a number in \[0.5, 1\)"),
+                       ("{folds: 1}", r"spread.folds \(line 6\): must be .*got 1"),
+                       ("{fold: 3}", r"spread.fold .*did you mean 'folds'")):
+        path.write_text(base + f"spread: {bad}\n")
+        with pytest.raises(ConfigError, match=match):
+            load_config(path)
 
 
 def test_model_files_carry_the_spread_and_old_ones_say_they_have_none(tmp_path, linear_data, noisy_sk120):

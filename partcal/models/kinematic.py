@@ -614,6 +614,8 @@ def _quadratic(J: NDArray[np.float64], C: NDArray[np.float64]) -> NDArray[np.flo
     """``diag(J C J^T)``, shape (m,), for a covariance ``C`` (k, k), never negative: through ``C``'s eigenvectors
     (eigenvalues clipped at 0), so that nearly dependent parameters (sags of one joint) cancel without
     rounding below zero."""
+    if not np.all(np.isfinite(C)):          # a fit with no residual degrees of freedom: no covariance
+        return np.full(len(J), np.nan)
     values, vectors = np.linalg.eigh(C)
     return np.sum((J @ vectors) ** 2 * np.maximum(values, 0.0), axis=1)
 

@@ -13,7 +13,10 @@ fit for the ``own`` row, the calibration's added fits for the others.
   data), series C (the other shoulder configuration) and series D (ISO cubes,
   its own tracker frame: scored up to a rigid transform, as a run scores it);
 - the virtual SK120 (``data/sk120``): fitted on the 85 identification poses,
-  tested on the paper's three paths.
+  tested on the paper's three paths, and where its wrist (held at q4 = q5 = 0
+  in the identification poses) turns: the ISO 9283 cube and 300 poses with
+  q4, q5 across +-90, +-60 degrees, measured on the virtual robot (the
+  unidentified wrist parameters must widen the kinematic spread there).
 
     .venv/bin/python benchmarks/bench_coverage.py [--quick]
 """
@@ -31,6 +34,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _table import print_table  # noqa: E402
 
 from partcal import read_measurements  # noqa: E402
+from partcal.data.measurements import Measurements  # noqa: E402
+from partcal.data.simulate import load_study, sample_configurations  # noqa: E402
+from partcal.robot.iso_cube import largest_cube  # noqa: E402
 from partcal.models.gp import GaussianProcessErrorModel  # noqa: E402
 from partcal.models.kinematic import KinematicModel  # noqa: E402
 from partcal.models.partition import KMeansPartition  # noqa: E402
@@ -81,8 +87,9 @@ def coverage(model, m, own_frame: bool) -> tuple[float, float]:
 def table(title: str, train, tests: dict, robot, quick: bool, only: list[str] | None = None,
           calibrations: tuple = CALIBRATIONS) -> None:
     """Coverage and width of every model on every test set: its own spread, then calibrated as a run calibrates
-    it (:func:`partcal.study.spread.run_scale`): on 5 contiguous blocks (``spread: {calibration: contiguous}``,
-    the default) and on the run's 5 cross-validation folds (``calibration: folds``: shuffled poses, seed 0)."""
+    it (:func:`partcal.study.spread.run_scale`): ``contiguous`` (5 blocks, each from the others), ``forward``
+    (each later block from the earlier ones: a run's default) and ``folds`` (the run's 5 cross-validation
+    folds: shuffled poses, seed 0)."""
     rows = []
     cv_folds = grouped_splits(measured_poses(train), 5, 0)
     for name, model in models(robot, quick, only).items():
@@ -121,6 +128,26 @@ def main() -> None:
     table("virtual SK120: fitted on the 85 identification poses", read_measurements(sk120 / "identification.csv"),
           {p: (read_measurements(sk120 / f"test_{p}.csv"), False) for p in ("rectangle", "spiral_xy", "spiral_yz")},
           load_robot("motoman_sk120"), args.quick, args.only, tuple(args.calibrations))
+    turned_wrist(args.quick, args.only, tuple(args.calibrations))
+
+
+def turned_wrist(quick: bool, only: list[str] | None, calibrations: tuple) -> None:
+    """The SK120 fitted on the paper's poses (wrist held at q4 = q5 = 0), tested where the wrist turns: the
+    ISO 9283 cube (its P1..P5, 10 cycles) and 300 poses with q4, q5 across +-90, +-60 degrees, measured on
+    the virtual robot (``configs/sk120_virtual.yaml``)."""
+    study = load_study(ROOT / "configs" / "sk120_virtual.yaml")
+    virtual, rng = study.robot, np.random.default_rng(2006)
+    cube = np.tile(largest_cube(virtual.nominal, random_state=rng).q_deg, (10, 1))
+    turned = sample_configurations(virtual.nominal, 300, {**study.ranges_deg, 4: (-90, 90), 5: (-60, 60)}, {}, rng)
+    tests = {name: (measured(virtual, q, rng), False) for name, q in (("ISO cube", cube), ("wrist turned", turned))}
+    table("virtual SK120: fitted on the 85 identification poses (q4 = q5 = 0), the wrist turned",
+          read_measurements(ROOT / "data" / "sk120" / "identification.csv"), tests, virtual.nominal, quick, only,
+          calibrations)
+
+
+def measured(virtual, q, rng) -> Measurements:
+    """What the virtual robot's tracker measures at joints ``q`` (deg), as a data set."""
+    return Measurements(q, virtual.nominal.positions(q), virtual.measure(q, rng))
 
 
 if __name__ == "__main__":

@@ -101,7 +101,7 @@ def scale_from_scores(scores: NDArray[np.float64], coverage: float) -> NDArray[n
     (a pose model's orientation that has no spread) and where the quantile is not a finite positive number.
 
     >>> scale_from_scores(np.array([[0.5], [1.0], [1.5], [2.0]]), 0.5).round(4).tolist()
-    [1.8532]
+    [1.8533]
     """
     flat = np.asarray(scores, dtype=float).reshape(len(scores), -1)
     flat = np.where(np.isfinite(flat), flat, np.nan)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from conftest import ROOT, partcal_cli
 
-from partcal.errors import DataError
+from partcal.errors import DataError, PartcalError
 from partcal.models.gp import GaussianProcessErrorModel
 from partcal.models.kinematic import KinematicModel
 from partcal.models.partition import KMeansPartition
@@ -308,3 +308,17 @@ def test_predict_std_adds_sd_columns_and_compensate_std_the_expected_residual(tm
     values = np.array([[float(v) for v in r.split(",")[:-2]] for r in rows[1:]])
     assert np.abs(values[:, 6:9]).max() < 1e-3                               # converged: nothing left expected
     np.testing.assert_allclose(values[:, 9:12], model.predict_with_std(values[:, 3:6])[1], atol=2e-6)
+
+
+def test_forward_calibration_leaves_out_the_blocks_a_model_cannot_be_fitted_before(linear_data):
+    from partcal.study.config import SpreadOptions
+    from partcal.study.spread import forward_folds, held_out_scores, run_scale, scale_from_scores
+
+    X, y = linear_data
+    model = PartitionedErrorModel(partition=KMeansPartition(n_regions=1, min_samples=15),
+                                  local=ErrorModel(inputs="cartesian", degree=1, solver="lstsq")).fit(X, y)
+    folds = forward_folds(len(X), 4)                # trained on 10, 20 and 30 rows: the first is refused
+    with pytest.raises(PartcalError, match="a region needs at least 15 samples .*; got 10 samples in all"):
+        clone_of(model).fit(X[folds[0][0]], y[folds[0][0]])
+    scale = run_scale(SpreadOptions("forward", folds=4), model, X, y, cv_folds=[])
+    np.testing.assert_allclose(scale, scale_from_scores(held_out_scores(model, X, y, folds[1:]), 0.95), rtol=1e-12)

@@ -14,8 +14,8 @@ standard deviation from then on.
 A run does this for every model (:func:`run_scale`, the YAML's ``spread:`` key, docs/config.md). By
 default (``calibration: forward``) each block is predicted by the model fitted on the blocks measured
 *before* it (:func:`forward_folds`), as a test set measured after the identification set will be: on the
-IPA UR10 this brings every model's intervals to 92-98% of held-out series B, where the blocks on both
-sides (``contiguous``) leave a kinematic model with compliance at 88% (``benchmarks/bench_coverage.py``,
+IPA UR10 this brings every model's intervals to 92.9-98.1% of held-out series B, where the blocks on
+both sides (``contiguous``) leave a kinematic model with compliance at 88% (``benchmarks/bench_coverage.py``,
 docs/predictor.md). ``folds`` reuses the run's cross-validation fits (no fit added, but shuffled folds
 mix early and late poses, so a drift goes unseen); ``none`` keeps each model's own spread. Only
 identification data are used: the test sets never set a scale.

@@ -52,6 +52,7 @@ def without_timings(doc):
     for entry in doc["models"].values():
         entry.pop("fit_seconds")
         entry.pop("cv_seconds")
+        entry.pop("spread_seconds")
     return doc
 
 

@@ -412,6 +412,33 @@ def test_a_run_gives_the_iso_figures_and_each_models_spread(report):
     assert header.endswith("dx_pred,dy_pred,dz_pred,dx_sd,dy_sd,dz_sd")
     page = (out / "index.html").read_text()
     assert 'id="iso9283"' in page and 'id="spread"' in page and "95% band" in page
+    assert "rectangle: coverage of the 95% interval" in page and "5 contiguous blocks in measurement order" in page
+
+
+def test_a_run_calibrates_every_spread_on_later_blocks_of_the_identification_set(report):
+    from scipy.stats import norm
+    from sklearn.base import clone
+
+    from partcal.study.prepare import model_inputs
+
+    result, out = report
+    metrics = json.loads((out / "metrics.json").read_text())
+    ident = result.datasets["identification"]
+    for r in result.models:
+        X, y = model_inputs(r.spec.inputs, ident), ident.errors_mm
+        scores = []                     # by hand: 5 blocks in measurement order (85 rows: 17 each), each after
+        for k in range(1, 5):           # the first predicted by the model fitted on the rows before it
+            fold = clone(r.model).fit(X[:17 * k], y[:17 * k])
+            mean, std = fold.predict_with_std(X[17 * k:17 * (k + 1)])
+            scores.append(np.abs(y[17 * k:17 * (k + 1)] - mean) / std)
+        expected = np.quantile(np.vstack(scores), 0.95, axis=0) / norm.ppf(0.975)
+        calibration = metrics["models"][r.spec.name]["spread_calibration"]
+        assert calibration["method"] == "forward" and calibration["folds"] == 5
+        np.testing.assert_allclose(calibration["scale"], expected, rtol=1e-5)
+        written = json.loads((out / "models" / f"{r.spec.slug}.json").read_text())
+        np.testing.assert_allclose(written["spread_scale"], expected, rtol=1e-9)
+        own = r.model.std_validated(model_inputs(r.spec.inputs, result.datasets["rectangle"]))[1]
+        np.testing.assert_allclose(r.spreads["rectangle"], own * expected, rtol=1e-9)
 
 
 def test_a_scatter_of_many_poses_draws_an_evenly_spaced_share_and_says_so():

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from conftest import ROOT, partcal_cli
 
-from partcal.errors import DataError
+from partcal.errors import DataError, PartcalError
 from partcal.models.gp import GaussianProcessErrorModel
 from partcal.models.kinematic import KinematicModel
 from partcal.models.partition import KMeansPartition
@@ -105,6 +105,68 @@ def test_kinematic_spread_covers_95_percent_of_new_noisy_poses(noisy_sk120):
     assert np.median(outside) > 1.5 * np.median(inside)            # beyond the joint ranges of the data
 
 
+def test_prior_variance_is_the_unabsorbed_part_of_j_p_jt():
+    from partcal.models.identification import prior_variance
+
+    J_i = np.array([[1.0, 0.0], [0.0, 2.0], [1.0, 1.0]])        # 3 outputs, 2 identified parameters
+    J_u = np.array([[1.0, 3.0], [0.5, 0.0], [2.0, 1.0]])        # 2 parameters the data do not identify
+    A = np.array([[1.0, 0.0], [0.0, 0.5]])                      # how the fit absorbed them
+    p = np.array([0.5, 0.2])
+    # by hand: J = J_u - J_i A = [[0, 3], [0.5, -1], [1, 0.5]]; diag(J diag(p^2) J^T)
+    expected = [0 * 0.25 + 9 * 0.04, 0.25 * 0.25 + 1 * 0.04, 1 * 0.25 + 0.25 * 0.04]
+    np.testing.assert_allclose(prior_variance(J_i, J_u, A, p), expected, rtol=1e-12)
+    np.testing.assert_allclose(prior_variance(np.zeros((3, 0)), J_u, np.zeros((0, 2)), p),
+                               np.diag(J_u @ np.diag(p**2) @ J_u.T), rtol=1e-12)   # nothing absorbs: J_u P J_u^T
+
+
+def _fd_jacobian(nominal, values, q, h=1e-5):
+    """d positions / d values by central differences, (3 n, P): the forward kinematics alone."""
+    from partcal.models.identification import robot_with
+
+    cols = []
+    for k in range(values.size):
+        step = np.zeros_like(values)
+        step[k] = h
+        cols.append((robot_with(nominal, values + step).positions(q) - robot_with(nominal, values - step).positions(q)
+                     ).ravel() / (2 * h))
+    return np.column_stack(cols)
+
+
+def test_unidentified_parameters_add_their_plausible_error_where_the_data_did_not_go(noisy_sk120):
+    from partcal.models.identification import PLAUSIBLE_ERROR
+    from partcal.data.simulate import sample_configurations
+
+    virtual, draw, ranges = noisy_sk120
+    q, e = draw(150, ranges)                                   # the paper's poses: wrist held at q4 = q5 = 0
+    model = KinematicModel(robot=virtual.nominal).fit(q, e)
+    table = model.identification_
+    free = np.flatnonzero(np.array(table.status) == "identified")
+    prior = np.flatnonzero([s == "unidentifiable" for s in table.status])
+    assert {"theta[4]", "theta[5]"} <= {table.names[k] for k in prior}      # the held wrist's joint offsets
+    np.testing.assert_array_equal(table.prior_std[prior], [PLAUSIBLE_ERROR[table.units[k]] for k in prior])
+    assert np.isnan(np.delete(table.prior_std, prior)).all()
+    turned = {**ranges, 4: (-90, 90), 5: (-60, 60)}
+    rng = np.random.default_rng(7)
+    q_new = sample_configurations(virtual.nominal, 20, turned, {}, rng)
+    # by hand: J = J_u - J_i A at the new poses, A from the Jacobian on the data (finite differences)
+    train, new = _fd_jacobian(virtual.nominal, table.value, q), _fd_jacobian(virtual.nominal, table.value, q_new)
+    A = np.linalg.lstsq(train[:, free], train[:, prior], rcond=None)[0]
+    J = new[:, prior] - new[:, free] @ A
+    by_hand = np.einsum("ij,j,ij->i", J, table.prior_std[prior] ** 2, J).reshape(-1, 3)
+    std = model.predict_with_std(q_new)[1]
+    model.identification_ = dataclasses.replace(table, prior_std=None, prior_absorbed=None)   # as an older file
+    without = model.predict_with_std(q_new)[1]
+    np.testing.assert_allclose(std**2 - without**2, by_hand, rtol=1e-4, atol=1e-8)
+    model.identification_ = table
+    q_held, e_held = draw(300, ranges)
+    q_turned = sample_configurations(virtual.nominal, 300, turned, {}, rng)
+    e_turned = virtual.measure(q_turned, rng) - virtual.nominal.positions(q_turned)
+    for q_at, e_at in ((q_held, e_held), (q_turned, e_turned)):    # the interval holds on both
+        mean, std = model.predict_with_std(q_at)
+        assert 0.92 <= np.mean(np.abs(e_at - mean) <= Z95 * std) <= 0.99
+    assert np.median(model.predict_with_std(q_turned)[1]) > 10 * np.median(model.predict_with_std(q_held)[1])
+
+
 def test_calibration_scales_the_spread_to_held_out_blocks(linear_data):
     X, y = linear_data
     assert [t.tolist() for _, t in contiguous_folds(5, 2)] == [[0, 1, 2], [3, 4]]
@@ -113,8 +175,73 @@ def test_calibration_scales_the_spread_to_held_out_blocks(linear_data):
     drift = y + np.linspace(0, 1.0, len(y))[:, None]                # a session that drifts by 1 mm
     drifting = calibrate_spread(ErrorModel(inputs="cartesian", solver="lstsq"), X, drift, folds=4)
     assert np.all(drifting.spread_scale_ > 1.2 * stationary.spread_scale_)   # wider than its own fit says
+    from partcal.study.config import SpreadOptions
+    from partcal.study.spread import forward_folds, run_scale
+
+    assert [(a.tolist(), b.tolist()) for a, b in forward_folds(5, 2)] == [([0, 1, 2], [3, 4])]
+    later = run_scale(SpreadOptions("forward", folds=4), ErrorModel(inputs="cartesian", solver="lstsq").fit(X, drift),
+                      X, drift, cv_folds=[])
+    assert np.all(later > drifting.spread_scale_)          # predicted only from the past, the drift shows more
     own = ErrorModel(inputs="cartesian", solver="lstsq").fit(X, drift).predict_with_std(X)[1]
     np.testing.assert_allclose(drifting.predict_with_std(X)[1], own * drifting.spread_scale_)
+
+
+def test_scale_from_scores_is_the_quantile_over_the_normal_one():
+    from scipy.stats import norm
+
+    from partcal.study.spread import scale_from_scores
+
+    rng = np.random.default_rng(11)
+    scores = np.abs(rng.normal(0, 1, (200_000, 2))) * [1.0, 2.5]      # a spread right, and one 2.5 times too narrow
+    np.testing.assert_allclose(scale_from_scores(scores, 0.95), [1.0, 2.5], rtol=0.02)
+    few = np.array([[0.1, np.nan], [0.2, np.nan], [0.3, np.nan], [0.4, np.nan], [0.5, np.inf]])
+    np.testing.assert_allclose(scale_from_scores(few, 0.9), [np.quantile([0.1, 0.2, 0.3, 0.4, 0.5], 0.9)
+                                                             / norm.ppf(0.95), 1.0])   # no finite score: 1
+
+
+def test_folds_calibration_reads_the_cross_validation_fits_as_a_refit_would(linear_data):
+    from partcal.study.config import SpreadOptions
+    from partcal.study.selection import held_out_residuals
+    from partcal.study.spread import run_scale
+
+    X, y = linear_data
+    model = ErrorModel(inputs="cartesian", solver="lstsq")
+    folds = contiguous_folds(len(X), 4)[::-1]                             # any folds: the run's
+    fits: list = []
+    held_out_residuals(model, X, y, folds, fitted=fits)
+    fitted = run_scale(SpreadOptions(calibration="folds"), model.fit(X, y), X, y, cv_folds=folds, fold_fits=fits)
+    refit = run_scale(SpreadOptions(calibration="folds"), model, X, y, cv_folds=folds)
+    np.testing.assert_allclose(fitted, refit, rtol=1e-12)
+    contiguous = run_scale(SpreadOptions("contiguous", folds=4), model, X, y, cv_folds=folds)
+    np.testing.assert_allclose(contiguous, calibrate_spread(clone_of(model), X, y, folds=4).spread_scale_, rtol=1e-12)
+    assert run_scale(SpreadOptions(calibration="none"), model, X, y, cv_folds=folds) is None
+
+
+def clone_of(model):
+    from sklearn.base import clone
+
+    return clone(model)
+
+
+def test_spread_key_of_a_run_config(tmp_path):
+    from partcal.errors import ConfigError
+    from partcal.study.config import SpreadOptions, load_config
+
+    data = ROOT / "data" / "sk120"
+    base = (f"name: s\ndata:\n  identification: {data / 'identification.csv'}\n"
+            "models:\n  - {name: a, degree: 1, solver: {method: lstsq}}\n")
+    path = tmp_path / "run.yaml"
+    path.write_text(base)
+    assert load_config(path).spread == SpreadOptions("forward", 0.95, 5)
+    path.write_text(base + "spread: {calibration: folds, coverage: 0.9}\n")
+    assert load_config(path).spread == SpreadOptions("folds", 0.9, 5)
+    for bad, match in (("{calibration: blocks}", r"spread.calibration \(line 6\): must be one of .*got 'blocks'"),
+                       ("{coverage: 1.0}", r"spread.coverage \(line 6\): must be a number in \[0.5, 1\)"),
+                       ("{folds: 1}", r"spread.folds \(line 6\): must be .*got 1"),
+                       ("{fold: 3}", r"spread.fold .*did you mean 'folds'")):
+        path.write_text(base + f"spread: {bad}\n")
+        with pytest.raises(ConfigError, match=match):
+            load_config(path)
 
 
 def test_model_files_carry_the_spread_and_old_ones_say_they_have_none(tmp_path, linear_data, noisy_sk120):
@@ -144,6 +271,23 @@ def test_model_files_carry_the_spread_and_old_ones_say_they_have_none(tmp_path, 
             old.predict(**{key: X_in}, return_std=True)
 
 
+def test_kinematic_files_before_the_prior_load_with_the_identified_parameters_spread(tmp_path, noisy_sk120):
+    virtual, draw, ranges = noisy_sk120
+    q, e = draw(60, ranges)
+    model = KinematicModel(robot=virtual.nominal).fit(q, e)
+    path = tmp_path / "dh.json"
+    save_model(model, path, name="dh")
+    doc = json.loads(path.read_text())
+    assert doc["model"]["identification"]["prior_std"].count(None) < len(doc["model"]["identification"]["names"])
+    del doc["checksum"], doc["model"]["identification"]["prior_std"], doc["model"]["identification"]["prior_absorbed"]
+    path.write_text(json.dumps(doc))
+    q_turned = q.copy()
+    q_turned[:, 3:5] = [40.0, 30.0]
+    std = load_predictor(path).predict(joints=q_turned, return_std=True)[1]
+    model.identification_ = dataclasses.replace(model.identification_, prior_std=None, prior_absorbed=None)
+    np.testing.assert_allclose(std, model.predict_with_std(q_turned)[1], rtol=1e-9)
+
+
 def test_predict_std_adds_sd_columns_and_compensate_std_the_expected_residual(tmp_path, linear_data):
     X, y = linear_data
     model = ErrorModel(inputs="cartesian", degree=1, solver="lstsq").fit(X, y)
@@ -164,3 +308,17 @@ def test_predict_std_adds_sd_columns_and_compensate_std_the_expected_residual(tm
     values = np.array([[float(v) for v in r.split(",")[:-2]] for r in rows[1:]])
     assert np.abs(values[:, 6:9]).max() < 1e-3                               # converged: nothing left expected
     np.testing.assert_allclose(values[:, 9:12], model.predict_with_std(values[:, 3:6])[1], atol=2e-6)
+
+
+def test_forward_calibration_leaves_out_the_blocks_a_model_cannot_be_fitted_before(linear_data):
+    from partcal.study.config import SpreadOptions
+    from partcal.study.spread import forward_folds, held_out_scores, run_scale, scale_from_scores
+
+    X, y = linear_data
+    model = PartitionedErrorModel(partition=KMeansPartition(n_regions=1, min_samples=15),
+                                  local=ErrorModel(inputs="cartesian", degree=1, solver="lstsq")).fit(X, y)
+    folds = forward_folds(len(X), 4)                # trained on 10, 20 and 30 rows: the first is refused
+    with pytest.raises(PartcalError, match="a region needs at least 15 samples .*; got 10 samples in all"):
+        clone_of(model).fit(X[folds[0][0]], y[folds[0][0]])
+    scale = run_scale(SpreadOptions("forward", folds=4), model, X, y, cv_folds=[])
+    np.testing.assert_allclose(scale, scale_from_scores(held_out_scores(model, X, y, folds[1:]), 0.95), rtol=1e-12)

@@ -316,6 +316,16 @@ class Identification:
         degrees): what a prediction's standard deviation needs. None in tables written before it was kept.
     sigma_mm : float, optional
         ``sigma``: the residual standard deviation per coordinate of the fit (mm).
+    prior_std : ndarray, shape (P,), optional
+        The prior standard deviation of every geometric parameter the data do not identify (status
+        ``unidentifiable``: rank-deficient, too weak a lever, or kept nominal as implausible), its plausible
+        manufacturing error (:data:`PLAUSIBLE_ERROR`); NaN for the others. None in tables written before it.
+    prior_absorbed : ndarray, shape (K, U), optional
+        How the ``K`` identified parameters absorb the ``U`` prior ones on the identification data:
+        ``A = (J_i^T J_i)^-1 J_i^T J_u`` (the least-squares fit's answer to an error ``u`` of those
+        parameters is ``-A u``). A prediction's error from them is ``(J_u(q) - J_i(q) A) u``: nil where
+        the identified parameters stand in for them (a base turn for the first joint's offset), growing
+        where the data did not go (:func:`prior_variance`).
     """
 
     names: tuple[str, ...]
@@ -334,6 +344,8 @@ class Identification:
     primary_identifiable: int | None = None
     covariance: NDArray[np.float64] | None = None
     sigma_mm: float | None = None
+    prior_std: NDArray[np.float64] | None = None
+    prior_absorbed: NDArray[np.float64] | None = None
 
     @property
     def correction(self) -> NDArray[np.float64]:
@@ -360,7 +372,9 @@ class Identification:
                 **({"target_rms_mm": dict(self.target_rms_mm), "orientation_rms_deg": self.orientation_rms_deg,
                     "primary_identifiable": self.primary_identifiable} if self.target_rms_mm else {}),
                 **({"covariance": self.covariance.tolist(), "sigma_mm": float(self.sigma_mm)}
-                   if self.covariance is not None else {})}
+                   if self.covariance is not None else {}),
+                **({"prior_std": [None if np.isnan(v) else float(v) for v in self.prior_std],
+                    "prior_absorbed": self.prior_absorbed.tolist()} if self.prior_std is not None else {})}
 
     @classmethod
     def from_dict(cls, d: dict) -> "Identification":
@@ -372,7 +386,21 @@ class Identification:
                    d.get("orientation_rms_deg"), d.get("primary_identifiable"),
                    None if d.get("covariance") is None else np.asarray(d["covariance"], dtype=float).reshape(
                        len(d["covariance"]), -1),
-                   None if d.get("sigma_mm") is None else float(d["sigma_mm"]))
+                   None if d.get("sigma_mm") is None else float(d["sigma_mm"]),
+                   None if d.get("prior_std") is None else np.array(
+                       [np.nan if v is None else v for v in d["prior_std"]], dtype=float),
+                   None if d.get("prior_absorbed") is None else _matrix(
+                       d["prior_absorbed"], sum(s == "identified" for s in d["status"])))
+
+    def prior_indices(self) -> NDArray[np.intp]:
+        """Indices of the parameters with a prior standard deviation (:attr:`prior_std`), in table order."""
+        return np.zeros(0, dtype=np.intp) if self.prior_std is None else np.flatnonzero(np.isfinite(self.prior_std))
+
+
+def _matrix(rows: list, n_rows: int) -> NDArray[np.float64]:
+    """A JSON matrix (a list of rows) as an array of ``n_rows`` rows (an empty one keeps its shape)."""
+    arr = np.asarray(rows, dtype=float)
+    return arr.reshape(n_rows, -1) if arr.size else np.zeros((n_rows, 0))
 
 
 def identify(robot: Robot, q_deg: NDArray[np.float64], measured_mm: NDArray[np.float64], *, base: bool = True,
@@ -468,16 +496,48 @@ def identify(robot: Robot, q_deg: NDArray[np.float64], measured_mm: NDArray[np.f
     std_full[free] = std
     status = np.where(wanted, "unidentifiable", "fixed").astype(object)
     status[free] = "identified"
+    prior_std, absorbed = _prior(jac, free, status, units, size)
     rms, angle = _target_rms(resid, len(q_deg), extra)
     more = {} if extra is None else {
         "target_rms_mm": dict(zip([PRIMARY_TARGET, *extra.tools_mm], rms)), "orientation_rms_deg": angle,
         "primary_identifiable": _identifiable(jac0[:3 * len(q_deg), :own], wanted[:own], rcond, units[:own])[1]}
     result = Identification(tuple(n for n, _ in names), tuple(u for _, u in names), v0, v, std_full,
                             tuple(str(s) for s in status), rank, condition, rms[0], q_deg.shape[0], evaluations,
-                            **more, covariance=covariance, sigma_mm=sigma)
+                            **more, covariance=covariance, sigma_mm=sigma, prior_std=prior_std,
+                            prior_absorbed=absorbed)
     log.info("identified %d of %d parameters (condition %.3g): RMS %.4f mm", free.size, v.size, condition,
              result.rms_mm)
     return result
+
+
+def _prior(jac: NDArray[np.float64], free: NDArray[np.intp], status, units: list[str], size: int
+           ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The prior standard deviations of the geometric parameters the data do not identify (their plausible
+    error, :data:`PLAUSIBLE_ERROR`; NaN for the rest), shape (P,), and how the identified parameters absorb
+    them on the identification data, ``A = (J_i^T J_i)^-1 J_i^T J_u``, shape (K, U), from the stacked Jacobian
+    ``jac`` at the solution (see :attr:`Identification.prior_absorbed`)."""
+    prior = np.full(len(units), np.nan)
+    unknown = [k for k in range(size) if status[k] == "unidentifiable" and units[k] in PLAUSIBLE_ERROR]
+    prior[unknown] = [PLAUSIBLE_ERROR[units[k]] for k in unknown]
+    if free.size == 0 or not unknown:
+        return prior, np.zeros((free.size, len(unknown)))
+    return prior, np.linalg.lstsq(jac[:, free], jac[:, unknown], rcond=None)[0]
+
+
+def prior_variance(jac_identified: NDArray[np.float64], jac_prior: NDArray[np.float64],
+                   absorbed: NDArray[np.float64], prior_std: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The variance a prediction gets from the parameters the data do not identify, shape (m,).
+
+    ``diag(J P J^T)`` with ``J = J_u - J_i A``: ``J_u`` (m, U) the prediction's Jacobian over those
+    parameters, ``J_i`` (m, K) over the identified ones, ``A`` (K, U) ``absorbed`` (how the fit made up for
+    them on its data) and ``P = diag(prior_std**2)``. Where the identified parameters stand in for an
+    unidentified one everywhere, ``J`` is nil; where the data left it unseen, it grows.
+
+    >>> float(prior_variance(np.zeros((1, 0)), np.array([[2.0]]), np.zeros((0, 1)), np.array([0.5]))[0])
+    1.0
+    """
+    effective = jac_prior - jac_identified @ absorbed
+    return np.sum(effective**2 * prior_std**2, axis=1)
 
 
 def held_still(q_deg: NDArray[np.float64]) -> NDArray[np.float64]:

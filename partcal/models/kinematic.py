@@ -27,8 +27,8 @@ from ..robot.kinematics import ORIENTATION_MM_PER_RAD, Robot
 from .base import ErrorModelBase, box_points, seed_from
 from .features import varying_inputs
 from .identification import (PARAMETRIZATIONS, PRIMARY_TARGET, STATUSES, Identification, geometric_size, identify,
-                             model_jacobian, nominal_values, own_geometry, parameter_names, resolved_parametrization,
-                             robot_with)
+                             model_jacobian, nominal_values, own_geometry, parameter_names, prior_variance,
+                             resolved_parametrization, robot_with)
 from .joint_errors import JointErrors, compliance_problem, harmonics_problem
 from .kindtable import body_of, may_be_residual, model_from_body, residual_kinds
 from .pose import PoseErrorModel
@@ -343,7 +343,12 @@ class KinematicModel(ErrorModelBase):
         The kinematic part's position variance is ``J(q) C J(q)^T`` per axis
         (``J`` the model's Jacobian at the commanded joints over the identified
         parameters, ``C`` their covariance ``sigma^2 (J^T J)^-1`` from the
-        fit), which grows where the joints leave the ranges of the data; to it
+        fit), which grows where the joints leave the ranges of the data, plus
+        that of the geometric parameters the data did not identify, each with
+        the prior standard deviation of its plausible error
+        (:func:`~partcal.models.identification.prior_variance`: nil where the
+        identified ones stand in for it, growing where the data did not go,
+        such as a wrist turned that the data held still); to it
         is added the residual model's variance (its own noise included), or,
         without one, the fit's residual variance per coordinate. A pose
         model's turn gets the fit's orientation residual (or its residual
@@ -359,7 +364,15 @@ class KinematicModel(ErrorModelBase):
         free = np.flatnonzero(np.array(table.status) == "identified")
         keep = free < own
         _, jac = model_jacobian(self.robot_, self.joint_errors_, X, table.value[:own], payload, self.parametrization_)
-        var = _quadratic(jac[:, free[keep]], table.covariance[np.ix_(keep, keep)]).reshape(len(X), 3)
+        var = _quadratic(jac[:, free[keep]], table.covariance[np.ix_(keep, keep)])
+        prior = table.prior_indices()
+        if prior.size:      # tables written before the prior have none: the identified parameters' alone
+            on_tool = prior < own           # a further target's offset moves no prediction of the primary target
+            jac_prior = np.zeros((len(jac), prior.size))
+            jac_prior[:, on_tool] = jac[:, prior[on_tool]]
+            var = var + prior_variance(jac[:, free[keep]], jac_prior, table.prior_absorbed[keep],
+                                       table.prior_std[prior])
+        var = var.reshape(len(X), 3)
         mean = self._predict_trusted(X, payload_kg)
         std = np.full(mean.shape, np.nan)
         if self.residual_ is not None:
@@ -601,6 +614,8 @@ def _quadratic(J: NDArray[np.float64], C: NDArray[np.float64]) -> NDArray[np.flo
     """``diag(J C J^T)``, shape (m,), for a covariance ``C`` (k, k), never negative: through ``C``'s eigenvectors
     (eigenvalues clipped at 0), so that nearly dependent parameters (sags of one joint) cancel without
     rounding below zero."""
+    if not np.all(np.isfinite(C)):          # a fit with no residual degrees of freedom: no covariance
+        return np.full(len(J), np.nan)
     values, vectors = np.linalg.eigh(C)
     return np.sum((J @ vectors) ** 2 * np.maximum(values, 0.0), axis=1)
 
@@ -663,4 +678,13 @@ def _identification_from(ident: FieldReader, robot: Robot, errors: JointErrors |
             ident.fail("covariance", "a symmetric matrix with a diagonal >= 0")
         if ident.number("sigma_mm", 0.0) < 0:
             ident.fail("sigma_mm", "a standard deviation >= 0")
+    if "prior_std" in ident.doc:            # files before the unidentified parameters' prior have none
+        prior = ident.get("prior_std", list)
+        if len(prior) != len(names) or not all(v is None or (isinstance(v, (int, float)) and math.isfinite(v)
+                                                             and v > 0) for v in prior):
+            ident.fail("prior_std", f"expected {len(names)} standard deviations > 0 or nulls")
+        if any(v is not None and s == "identified" for v, s in zip(prior, status)):
+            ident.fail("prior_std", "a prior only for parameters that are not identified (null for the others)")
+        if status.count("identified"):     # with none identified the matrix has no rows: []
+            ident.array("prior_absorbed", (status.count("identified"), sum(v is not None for v in prior)))
     return Identification.from_dict(ident.doc)

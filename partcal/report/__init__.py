@@ -144,8 +144,20 @@ def spread_rows(result: RunResult) -> dict | None:
         for n in names:
             s = r.metrics[n].get("spread")
             cells.append("-" if s is None else f"{100 * s['coverage_95']:.1f}% ({np.mean(s['std_mean']):.3f})")
-        rows.append({"name": r.spec.name, "cells": cells})
-    return {"datasets": names, "rows": rows} if rows else None
+        scale = getattr(r.model, "spread_scale_", None)
+        rows.append({"name": r.spec.name, "cells": cells,
+                     "scale": "own" if scale is None else " ".join(f"{v:.2f}" for v in scale[:3])})
+    spread = result.config.spread
+    how = {"forward": f"scaled so that {100 * spread.coverage:g}% of the residuals of the identification set's "
+                      f"later blocks ({spread.folds} contiguous blocks in measurement order, each after the first "
+                      "predicted by the model fitted on the blocks before it) fall within the interval",
+           "contiguous": f"scaled so that {100 * spread.coverage:g}% of the residuals of {spread.folds} contiguous "
+                         "blocks of the identification set (in measurement order), each predicted by the model "
+                         "fitted on the others, fall within the interval",
+           "folds": f"scaled so that {100 * spread.coverage:g}% of the run's cross-validation residuals fall "
+                    "within the interval",
+           "none": "not calibrated: each model's own spread"}[spread.calibration]
+    return {"datasets": names, "rows": rows, "calibration": how} if rows else None
 
 
 def _positions(models: list[ModelResult], name: str) -> dict:

@@ -154,6 +154,26 @@ class DataOptions:
                 "groups": self.groups}
 
 
+SPREAD_CALIBRATIONS = ("forward", "contiguous", "folds", "none")
+
+
+@dataclass(frozen=True)
+class SpreadOptions:
+    """How a run calibrates every model's spread (``spread:`` in the YAML; docs/config.md).
+
+    ``calibration``: ``forward`` (the identification rows cut into ``folds`` blocks in measurement order,
+    each block after the first predicted by the model fitted on the blocks before it: data measured later,
+    as a test set is; ``folds - 1`` more fits on 20% to 80% of the rows), ``contiguous`` (each block
+    predicted by the model fitted on all the others; ``folds`` more fits), ``folds`` (the run's own
+    cross-validation fits, none added; they mix early and late poses) or ``none`` (the model's own spread).
+    ``coverage``: the share of held-out residuals the interval ``mean +- z std`` is scaled to hold.
+    """
+
+    calibration: str = "forward"
+    coverage: float = 0.95
+    folds: int = 5
+
+
 @dataclass(frozen=True)
 class RunConfig:
     """A batch run: data, models, and where the results go."""
@@ -174,6 +194,7 @@ class RunConfig:
     validation: Path | None = None
     predict: str = "position"           # position: (n, 3) mm; pose: and the orientation error, mrad (n, 6)
     rank_on: str = "position"           # the part of the errors the ranking reads (orientation: pose runs)
+    spread: SpreadOptions = field(default_factory=SpreadOptions)
     lines: dict = field(default_factory=dict, compare=False, repr=False)   # key path -> line, for messages
     nominal_robot: Robot | None = field(default=None, compare=False, repr=False)   # ``robot``, loaded once
 
@@ -232,6 +253,7 @@ def load_config(path: str | Path) -> RunConfig:
     rank_on = top.get("rank_on", "str", default="position", check=one_of(*RANKED_ON).problem)
     if rank_on == "orientation" and predict != "pose":
         top.fail("rank_on", "'orientation' needs predict: pose (the models then predict the orientation error)")
+    spread = _spread(top.section("spread"))
     dask = top.section("dask")
     address = dask.get("address", "str", default=None) if dask.data else None
     dask.done()
@@ -260,7 +282,18 @@ def load_config(path: str | Path) -> RunConfig:
                      output=Path(os.path.normpath(output)), robot=robot, seed=seed, n_jobs=n_jobs,
                      cv_folds=cv_folds, dask_address=address, virtual_robot=virtual, rank_by=rank_by,
                      validation=validation, lines=lines, data_options=data_options, predict=predict,
-                     rank_on=rank_on, nominal_robot=nominal)
+                     rank_on=rank_on, nominal_robot=nominal, spread=spread)
+
+
+def _spread(sec: Section) -> SpreadOptions:
+    """``spread: {calibration: forward | contiguous | folds | none, coverage: 0.95, folds: 5}`` (all optional)."""
+    out = SpreadOptions(
+        calibration=sec.get("calibration", "str", default="forward", check=one_of(*SPREAD_CALIBRATIONS).problem),
+        coverage=sec.get("coverage", "float", default=0.95,
+                         check=lambda v: None if 0.5 <= v < 1.0 else "a number in [0.5, 1)"),
+        folds=sec.get("folds", "int", default=5, check=integer(2, 100).problem))
+    sec.done()
+    return out
 
 
 def _fold_problem(value) -> str | None:

@@ -30,11 +30,12 @@ from ..errors import ConfigError
 from ..metrics import rms_standard_error
 from ..models.partitioned import fold_regions
 from ..robot.kinematics import Robot, flange_offset
-from .config import ModelSpec
+from .config import ModelSpec, SpreadOptions
 from .prepare import PreparedRun, model_inputs
 from .results import ModelResult
 from .scoring import Outputs, spread_summary
 from .selection import CVPlan, choose_granularity, fits_on_folds, nested_residuals
+from .spread import run_scale
 
 log = logging.getLogger(__name__)
 
@@ -93,7 +94,7 @@ def fit_all(prepared: PreparedRun, outputs: Outputs,
     order = _costliest_first(specs, prepared.datasets["identification"])
     model_jobs, fold_jobs = worker_split(config.n_jobs, len(specs), bool(config.dask_address))
     jobs = [delayed(fit_model)(specs[i], model_seed(config.seed, specs[i].name), prepared.datasets, plan.cv,
-                               prepared.robot, own, lines, outputs, fold_jobs) for i in order]
+                               prepared.robot, own, lines, outputs, fold_jobs, config.spread) for i in order]
     results: list[ModelResult] = []
     with _backend(config):
         for result in Parallel(n_jobs=model_jobs, return_as="generator")(jobs):
@@ -129,7 +130,8 @@ def worker_split(n_jobs: int, n_models: int, distributed: bool = False) -> tuple
 
 def fit_model(spec: ModelSpec, seed: int, data: dict[str, Measurements], cv: CVPlan, robot: Robot | None = None,
               own_frame: tuple[str, ...] = (), lines: Callable[[str], None] | None = None,
-              outputs: Outputs = Outputs(), n_jobs: int = 1) -> ModelResult:
+              outputs: Outputs = Outputs(), n_jobs: int = 1, spread: SpreadOptions = SpreadOptions()
+              ) -> ModelResult:
     """Fit one planned entry and evaluate it (runs in a joblib worker).
 
     ``cv`` holds the run's shared folds on the identification set (and the
@@ -140,19 +142,22 @@ def fit_model(spec: ModelSpec, seed: int, data: dict[str, Measurements], cv: CVP
     (:attr:`ModelResult.notes`). ``lines`` receives per-fold progress once
     the cross-validation has taken :data:`SLOW_SECONDS`. ``outputs``: what the
     model fits and what its CV score reads. ``n_jobs``: folds fitted at a time (:func:`worker_split`).
+    ``spread``: how the model's spread is calibrated on the identification set
+    (:func:`~partcal.study.spread.run_scale`).
     """
     with _collected() as said:
-        result = _fit_model(spec, seed, data, cv, robot, own_frame, lines, outputs, n_jobs)
+        result = _fit_model(spec, seed, data, cv, robot, own_frame, lines, outputs, n_jobs, spread)
     result.notes = list(dict.fromkeys(said + result.model.fit_notes()))      # the run names the model in front
     return result
 
 
-def _fit_model(spec, seed, data, cv, robot, own_frame, lines, outputs, n_jobs=1) -> ModelResult:
+def _fit_model(spec, seed, data, cv, robot, own_frame, lines, outputs, n_jobs=1,
+               spread: SpreadOptions = SpreadOptions()) -> ModelResult:
     ident = data["identification"]
     X, y = model_inputs(spec.inputs, ident), outputs.errors(ident)
     candidates = [spec.build(seed, size) for size in spec.sizes] or [spec.build(seed)]   # built once, then cloned
     rows = per_row_arguments(candidates[0], ident, robot)
-    granularity, nested, cv_regions = None, False, None
+    granularity, nested, cv_regions, fold_fits = None, False, None, []
     start = time.perf_counter()
 
     def fold_done(done: int, total: int) -> None:
@@ -184,7 +189,7 @@ def _fit_model(spec, seed, data, cv, robot, own_frame, lines, outputs, n_jobs=1)
         cv_seconds, nested = time.perf_counter() - start - fit_seconds, True
         cv_regions = granularity[chosen]["cv_regions"]
     else:
-        fold_fits: list = []            # the folds and the final fit, side by side when n_jobs allows
+        # the folds and the final fit, side by side when n_jobs allows
         resid, estimator, fit_seconds = fits_on_folds(candidates[0], X, y, cv.folds, fitted=fold_fits,
                                                       progress=fold_done, per_row=rows, n_jobs=n_jobs, final=True,
                                                       on_final=final_done)
@@ -192,6 +197,9 @@ def _fit_model(spec, seed, data, cv, robot, own_frame, lines, outputs, n_jobs=1)
         if estimator.regions_model() is not None:
             cv_regions = fold_regions([m.regions_model() for m in fold_fits])
         _note_other_optima(fold_fits, estimator)
+    start = time.perf_counter()
+    estimator.spread_scale_ = run_scale(spread, estimator, X, y, cv_folds=cv.folds, fold_fits=fold_fits, per_row=rows)
+    spread_seconds = time.perf_counter() - start
     part = estimator.regions_model()
     if cv_regions is not None and cv_regions[0] < part.partition_.n_regions:
         log.warning("fitted on all the identification data it has %d regions, but on the cross-validation "
@@ -212,7 +220,7 @@ def _fit_model(spec, seed, data, cv, robot, own_frame, lines, outputs, n_jobs=1)
                        estimator.pso_rms_ratio(), granularity, cv_seconds=cv_seconds, nested=nested,
                        cv_regions=cv_regions, cv_se=rms_standard_error(outputs.ranked(resid), cv.groups),
                        effective_parameters=estimator.effective_parameters(), rank_on=outputs.rank_on,
-                       spreads=spreads)
+                       spreads=spreads, spread_seconds=spread_seconds)
 
 
 def spreads_of(estimator, spec: ModelSpec, data: dict[str, Measurements], robot: Robot | None = None

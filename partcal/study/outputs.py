@@ -127,13 +127,23 @@ def _top_foreign(name: str, allowed: set[str]) -> str:
     return name
 
 
+def _spread_calibration(cfg, r) -> dict:
+    """How the model's spread was calibrated: the config's ``spread`` options and the scale of each output
+    (None: the model's own spread; the seconds it took are the entry's ``spread_seconds``)."""
+    scale = getattr(r.model, "spread_scale_", None)
+    opts = cfg.spread
+    return {"method": opts.calibration, "coverage": opts.coverage,
+            **({"folds": opts.folds} if opts.calibration in ("contiguous", "forward") else {}),
+            "scale": None if scale is None else [round(float(v), 6) for v in scale]}
+
+
 def metrics_document(result: RunResult) -> dict:
     """The content of ``metrics.json`` (CONTRACTS.md section 4)."""
     cfg = result.config
     models = {}
     for r in result.models:
         entry = {"file": f"models/{r.spec.slug}.json", "fit_seconds": round(r.fit_seconds, 4),
-                 "cv_seconds": round(r.cv_seconds, 4)}
+                 "cv_seconds": round(r.cv_seconds, 4), "spread_seconds": round(r.spread_seconds, 4)}
         entry.update(r.metrics)
         plan = result.plan
         folds = len(plan.cv.folds) if plan is not None else cfg.cv_folds
@@ -142,6 +152,7 @@ def metrics_document(result: RunResult) -> dict:
         if cfg.predict == "pose":            # the score of the ranked part: the position's (mm) or orientation's (mrad)
             entry["cv"] |= {"on": cfg.rank_on, "unit": "mrad" if cfg.rank_on == "orientation" else "mm"}
         entry["effective_parameters"] = _number(r.effective_parameters)
+        entry["spread_calibration"] = _spread_calibration(cfg, r)
         if r.notes:
             entry["notes"] = r.notes
         entry["inputs"], entry["solver"], entry["regions"] = r.spec.inputs, r.model.solver_name, r.n_regions

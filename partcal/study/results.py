@@ -43,6 +43,7 @@ class ModelResult:
     notes: list[str] = field(default_factory=list)   # fits on a bound and the like: warned, and in the report
     rank_on: str = "position"           # cv_rms_3d and cv_se are of the position (mm) or the orientation (mrad)
     spreads: dict[str, NDArray[np.float64]] = field(default_factory=dict)  # std of each prediction, by data set
+    spread_seconds: float = 0.0         # calibrating the spread (config ``spread``): the fits it added
 
     def score(self, rank_by: str) -> float:
         """The number the run ranks by: the CV score, or the RMS on the validation set (3-D, mm; with ``rank_on:

@@ -322,3 +322,44 @@ def test_forward_calibration_leaves_out_the_blocks_a_model_cannot_be_fitted_befo
         clone_of(model).fit(X[folds[0][0]], y[folds[0][0]])
     scale = run_scale(SpreadOptions("forward", folds=4), model, X, y, cv_folds=[])
     np.testing.assert_allclose(scale, scale_from_scores(held_out_scores(model, X, y, folds[1:]), 0.95), rtol=1e-12)
+
+
+class _WarnsOnFewRows:
+    """The mean and scatter of the training errors; a partcal warning when fitted on fewer than ``below`` rows."""
+
+    def __init__(self, below=25):
+        self.below = below
+
+    def get_params(self, deep=True):
+        return {"below": self.below}
+
+    def set_params(self, **params):
+        self.below = params.get("below", self.below)
+        return self
+
+    def fit(self, X, y):
+        import logging
+        if len(X) < self.below:
+            logging.getLogger("partcal.models.fake").warning("fitted on %d rows", len(X))
+        self.mean_, self.std_ = y.mean(axis=0), y.std(axis=0)
+        return self
+
+    def predict_with_std(self, X):
+        return np.tile(self.mean_, (len(X), 1)), np.tile(self.std_, (len(X), 1))
+
+
+def test_the_spread_calibrations_fits_on_part_of_the_rows_warn_once_naming_the_calibration(caplog):
+    from partcal.study.spread import forward_folds, held_out_scores
+
+    rng = np.random.default_rng(3)
+    X, y = rng.normal(size=(40, 3)), rng.normal(size=(40, 3))
+    folds = forward_folds(40, 4)                  # fitted on 10, 20 and 30 rows: the first two warn
+    with caplog.at_level("WARNING", logger="partcal"):
+        scores = held_out_scores(_WarnsOnFewRows(below=25), X, y, folds)
+    said = [r.getMessage() for r in caplog.records if r.levelname == "WARNING"]
+    assert said == ["spread calibration: its 3 fits on part of the identification rows gave 2 warnings (theirs, "
+                    "not those of the model fitted on all the rows), the first: fitted on 10 rows"]
+    expected = np.full_like(y, np.nan)
+    for n in (10, 20, 30):                        # each block of 10 held out from the mean of the rows before it
+        expected[n:n + 10] = np.abs(y[n:n + 10] - y[:n].mean(axis=0)) / y[:n].std(axis=0)
+    np.testing.assert_allclose(scores, expected, rtol=1e-12)

@@ -363,3 +363,21 @@ def test_the_spread_calibrations_fits_on_part_of_the_rows_warn_once_naming_the_c
     for n in (10, 20, 30):                        # each block of 10 held out from the mean of the rows before it
         expected[n:n + 10] = np.abs(y[n:n + 10] - y[:n].mean(axis=0)) / y[:n].std(axis=0)
     np.testing.assert_allclose(scores, expected, rtol=1e-12)
+
+
+def test_metrics_name_the_blocks_cut_when_folds_exceed_the_rows(tmp_path):
+    from partcal.study.config import load_config
+    from partcal.study.outputs import metrics_document
+    from partcal.study.runner import run
+
+    rows = (ROOT / "data" / "sk120" / "identification.csv").read_text().splitlines()
+    data = [r for r in rows if not r.startswith("#")]
+    (tmp_path / "ident.csv").write_text("\n".join(data[:13]) + "\n")       # header and 12 poses
+    (tmp_path / "run.yaml").write_text(
+        "name: s\ncv_folds: 3\ndata:\n  identification: ident.csv\nspread: {folds: 50}\n"
+        "models:\n  - {name: a, degree: 1, solver: {method: lstsq}}\n")
+    result = run(load_config(tmp_path / "run.yaml"))
+    calibration = metrics_document(result)["models"]["a"]["spread_calibration"]
+    assert (calibration["method"], calibration["folds"]) == ("forward", 12)     # one row a block, not 50
+    from partcal.report import spread_rows
+    assert "later blocks (12 contiguous blocks" in spread_rows(result)["calibration"]

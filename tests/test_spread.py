@@ -381,3 +381,26 @@ def test_metrics_name_the_blocks_cut_when_folds_exceed_the_rows(tmp_path):
     assert (calibration["method"], calibration["folds"]) == ("forward", 12)     # one row a block, not 50
     from partcal.report import spread_rows
     assert "later blocks (12 contiguous blocks" in spread_rows(result)["calibration"]
+
+
+def test_forward_calibration_leaves_out_a_fit_on_as_many_rows_as_terms():
+    from scipy.stats import norm
+
+    from partcal.study.config import SpreadOptions
+    from partcal.study.spread import run_scale
+
+    rng = np.random.default_rng(5)
+    X = rng.uniform(-500.0, 500.0, (6, 3))
+    y = X @ rng.normal(size=(3, 3)) * 1e-3 + rng.normal(0.0, 0.1, (6, 3))
+    model = ErrorModel(inputs="cartesian", degree=1, solver="lstsq")
+    saturated = clone_of(model).fit(X[:4], y[:4])              # 4 rows, 4 terms: residuals of rounding alone
+    assert "no more samples than its 4 terms" in saturated.spread_problem()
+    # blocks [0 1] [2] [3] [4] [5]: the fits on 2 and 3 rows are refused, the one on 4 has no spread; the
+    # fit on rows 0..4 predicts row 5: its score by hand, least squares on [1, x, y, z]
+    phi = np.column_stack([np.ones(6), X])
+    coef, rss, *_ = np.linalg.lstsq(phi[:5], y[:5], rcond=None)
+    leverage = phi[5] @ np.linalg.inv(phi[:5].T @ phi[:5]) @ phi[5]
+    std = np.sqrt((1.0 + leverage) * rss / (5 - 4))
+    expected = np.abs(y[5] - phi[5] @ coef) / std / norm.ppf(0.975)
+    scale = run_scale(SpreadOptions("forward", folds=5), model.fit(X, y), X, y, cv_folds=[])
+    np.testing.assert_allclose(scale, expected, rtol=1e-8)

@@ -67,7 +67,8 @@ def held_out_scores(model, X, y, folds, per_row: dict | None = None, *, skip_unf
     """``|y - mean| / std`` of every row predicted by ``model`` fitted on the folds without it, shape of ``y``.
 
     With ``skip_unfittable`` a fold whose training rows the model refuses (a :class:`PartcalError`: too few
-    poses for its regions, say) leaves its rows NaN instead of raising. The warnings of these fits on part
+    poses for its regions, say), or whose fit has no spread (a series fitted on as many rows as terms, whose
+    zero residuals would make the scale astronomical), leaves its rows NaN instead of raising. The warnings of these fits on part
     of the rows are not the model's (a kinematic fit on a few early poses keeps parameters nominal that all
     the rows fix): they are said once, as one warning that names the spread calibration.
     """
@@ -82,6 +83,10 @@ def held_out_scores(model, X, y, folds, per_row: dict | None = None, *, skip_unf
                     raise
                 log.info("spread calibration: a fit on %d rows was refused (%s); its block is left out",
                          len(train), exc)
+                continue
+            if skip_unfittable and fold.spread_problem() is not None:     # fitted with no residual to go by
+                log.info("spread calibration: the fit on %d rows has no spread (%s); its block is left out",
+                         len(train), fold.spread_problem())
                 continue
             mean, std = fold.predict_with_std(X[test], **rows_of(per_row, test, predicting=True))
             with np.errstate(divide="ignore", invalid="ignore"):

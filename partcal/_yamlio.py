@@ -9,12 +9,24 @@ reads one mapping field by field and refuses what it did not read, with a
 from __future__ import annotations
 
 import difflib
+import re
 from pathlib import Path
 from typing import Any, Callable
 
 import yaml
 
 from .errors import ConfigError
+
+
+class _Loader(yaml.SafeLoader):
+    """The safe loader, reading ``1e-3`` and ``-2E5`` as numbers as YAML 1.2 does (YAML 1.1, PyYAML's, wants a
+    dot in the mantissa and read them as text)."""
+
+
+_Loader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?(?:[0-9][0-9_]*)(?:\.[0-9_]*)?[eE][-+]?[0-9]+$"),
+    list("-+0123456789"))
 
 
 def load_yaml(path: str | Path) -> tuple[Any, dict[str, int]]:
@@ -29,7 +41,7 @@ def load_yaml(path: str | Path) -> tuple[Any, dict[str, int]]:
         raise ConfigError(f"{path}: no such file") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise ConfigError(f"{path}: cannot read: {exc}") from None
-    loader = yaml.SafeLoader(text)
+    loader = _Loader(text)
     try:
         node = loader.get_single_node()
         lines: dict[str, int] = {}

@@ -146,3 +146,11 @@ def test_the_largest_iso_cube_and_its_poses_stay_above_the_floor(tmp_path):
     edge = float(stdout.split("edge ")[1].split(" mm")[0])
     assert cube_corners(centre, edge)[:, 2].min() >= 100.0
     assert ur10_frame_origins(read_poses(out))[:, 1:, 2].min() >= 100.0
+
+
+def test_a_floor_takes_numpy_numbers_and_refuses_a_bool():
+    floor = Floor(np.int64(-650), np.float32(150.0))
+    assert (floor.height_mm, floor.clearance_mm, floor.lowest_mm) == (-650.0, 150.0, -500.0)
+    assert type(floor.height_mm) is float and floor == Floor(-650.0, 150.0)
+    with pytest.raises(PartcalError, match=r"the floor's height must be a finite number of mm; got True"):
+        Floor(True)

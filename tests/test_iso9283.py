@@ -289,3 +289,19 @@ def test_figures_measured_after_compensation_count_the_converged_targets_only(tm
     known = 0.05 * math.sqrt(1 - 1 / 30) * (2 * math.sqrt(2 / math.pi) + 3 * math.sqrt(3 - 8 / math.pi))
     assert abs(s["RP_mean_mm"] / known - 1) < 0.15
     assert measured_after(m, reached, np.zeros(len(m), dtype=bool)) is None
+
+
+def test_printed_measured_rows_say_how_many_targets_converged_when_some_did_not():
+    from partcal.study.iso_figures import run_lines
+
+    def stats(**extra):
+        return {"AP_mean_mm": 0.05, "AP_max_mm": 0.13, "RP_max_mm": None, **extra}
+
+    figures = {"test": {"poses": 400, "cycles_max": 1, "uncompensated": stats(), "models": {"DH": stats()},
+                        "measured": {"DH": stats(converged=391, n=400)}},
+               "cube": {"poses": 5, "cycles_max": 30, "uncompensated": stats(), "models": {"DH": stats()},
+                        "measured": {"DH": stats(converged=150, n=150)}}}
+    lines = run_lines(figures)
+    assert lines[-1] == "measured over the targets whose compensation converged: DH on test: 391 of 400"
+    figures["test"]["measured"]["DH"]["converged"] = 400
+    assert run_lines(figures)[-1].startswith("poses (cycles, RP max)")

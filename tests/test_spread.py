@@ -322,3 +322,85 @@ def test_forward_calibration_leaves_out_the_blocks_a_model_cannot_be_fitted_befo
         clone_of(model).fit(X[folds[0][0]], y[folds[0][0]])
     scale = run_scale(SpreadOptions("forward", folds=4), model, X, y, cv_folds=[])
     np.testing.assert_allclose(scale, scale_from_scores(held_out_scores(model, X, y, folds[1:]), 0.95), rtol=1e-12)
+
+
+class _WarnsOnFewRows:
+    """The mean and scatter of the training errors; a partcal warning when fitted on fewer than ``below`` rows."""
+
+    def __init__(self, below=25):
+        self.below = below
+
+    def get_params(self, deep=True):
+        return {"below": self.below}
+
+    def set_params(self, **params):
+        self.below = params.get("below", self.below)
+        return self
+
+    def fit(self, X, y):
+        import logging
+        if len(X) < self.below:
+            logging.getLogger("partcal.models.fake").warning("fitted on %d rows", len(X))
+        self.mean_, self.std_ = y.mean(axis=0), y.std(axis=0)
+        return self
+
+    def predict_with_std(self, X):
+        return np.tile(self.mean_, (len(X), 1)), np.tile(self.std_, (len(X), 1))
+
+
+def test_the_spread_calibrations_fits_on_part_of_the_rows_warn_once_naming_the_calibration(caplog):
+    from partcal.study.spread import forward_folds, held_out_scores
+
+    rng = np.random.default_rng(3)
+    X, y = rng.normal(size=(40, 3)), rng.normal(size=(40, 3))
+    folds = forward_folds(40, 4)                  # fitted on 10, 20 and 30 rows: the first two warn
+    with caplog.at_level("WARNING", logger="partcal"):
+        scores = held_out_scores(_WarnsOnFewRows(below=25), X, y, folds)
+    said = [r.getMessage() for r in caplog.records if r.levelname == "WARNING"]
+    assert said == ["spread calibration: its 3 fits on part of the identification rows gave 2 warnings (theirs, "
+                    "not those of the model fitted on all the rows), the first: fitted on 10 rows"]
+    expected = np.full_like(y, np.nan)
+    for n in (10, 20, 30):                        # each block of 10 held out from the mean of the rows before it
+        expected[n:n + 10] = np.abs(y[n:n + 10] - y[:n].mean(axis=0)) / y[:n].std(axis=0)
+    np.testing.assert_allclose(scores, expected, rtol=1e-12)
+
+
+def test_metrics_name_the_blocks_cut_when_folds_exceed_the_rows(tmp_path):
+    from partcal.study.config import load_config
+    from partcal.study.outputs import metrics_document
+    from partcal.study.runner import run
+
+    rows = (ROOT / "data" / "sk120" / "identification.csv").read_text().splitlines()
+    data = [r for r in rows if not r.startswith("#")]
+    (tmp_path / "ident.csv").write_text("\n".join(data[:13]) + "\n")       # header and 12 poses
+    (tmp_path / "run.yaml").write_text(
+        "name: s\ncv_folds: 3\ndata:\n  identification: ident.csv\nspread: {folds: 50}\n"
+        "models:\n  - {name: a, degree: 1, solver: {method: lstsq}}\n")
+    result = run(load_config(tmp_path / "run.yaml"))
+    calibration = metrics_document(result)["models"]["a"]["spread_calibration"]
+    assert (calibration["method"], calibration["folds"]) == ("forward", 12)     # one row a block, not 50
+    from partcal.report import spread_rows
+    assert "later blocks (12 contiguous blocks" in spread_rows(result)["calibration"]
+
+
+def test_forward_calibration_leaves_out_a_fit_on_as_many_rows_as_terms():
+    from scipy.stats import norm
+
+    from partcal.study.config import SpreadOptions
+    from partcal.study.spread import run_scale
+
+    rng = np.random.default_rng(5)
+    X = rng.uniform(-500.0, 500.0, (6, 3))
+    y = X @ rng.normal(size=(3, 3)) * 1e-3 + rng.normal(0.0, 0.1, (6, 3))
+    model = ErrorModel(inputs="cartesian", degree=1, solver="lstsq")
+    saturated = clone_of(model).fit(X[:4], y[:4])              # 4 rows, 4 terms: residuals of rounding alone
+    assert "no more samples than its 4 terms" in saturated.spread_problem()
+    # blocks [0 1] [2] [3] [4] [5]: the fits on 2 and 3 rows are refused, the one on 4 has no spread; the
+    # fit on rows 0..4 predicts row 5: its score by hand, least squares on [1, x, y, z]
+    phi = np.column_stack([np.ones(6), X])
+    coef, rss, *_ = np.linalg.lstsq(phi[:5], y[:5], rcond=None)
+    leverage = phi[5] @ np.linalg.inv(phi[:5].T @ phi[:5]) @ phi[5]
+    std = np.sqrt((1.0 + leverage) * rss / (5 - 4))
+    expected = np.abs(y[5] - phi[5] @ coef) / std / norm.ppf(0.975)
+    scale = run_scale(SpreadOptions("forward", folds=5), model.fit(X, y), X, y, cv_folds=[])
+    np.testing.assert_allclose(scale, expected, rtol=1e-8)

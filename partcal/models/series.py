@@ -203,6 +203,7 @@ class ErrorModel(ErrorModelBase):
         best = np.sqrt(problem.lstsq_sse.sum() / total_w)
         self.rms_ratio_ = float(np.sqrt((self.train_rms_**2).sum()) / best) if best > 0 else 1.0
         self.coef_covariance_, self.noise_var_ = spread_of(problem.to_coef, w, resid)
+        self.residual_dof_ = float(w.sum() ** 2 / np.sum(w**2) - problem.to_coef.shape[1])   # n_eff - rank
         return self
 
     # ------------------------------------------------------------------ prediction
@@ -239,6 +240,10 @@ class ErrorModel(ErrorModelBase):
         if getattr(self, "coef_covariance_", None) is None:
             return ("this series model's file was written before partcal kept the least-squares covariance of the "
                     "coefficients, so its predictions have no standard deviation: fit it again (partcal run)")
+        if getattr(self, "residual_dof_", 1.0) < 0.5:      # as many samples as terms: residuals all but zero
+            return (f"this series model was fitted on no more samples than its {self.coef_covariance_.shape[0]} "
+                    "terms, so its residuals cannot tell the scatter of new data: its predictions have no "
+                    "standard deviation")
         return None
 
     def _prepare(self) -> "ErrorModel":

@@ -148,10 +148,11 @@ def spread_rows(result: RunResult) -> dict | None:
         rows.append({"name": r.spec.name, "cells": cells,
                      "scale": "own" if scale is None else " ".join(f"{v:.2f}" for v in scale[:3])})
     spread = result.config.spread
+    blocks = min(spread.folds, len(result.datasets["identification"]))      # at most one block a row
     how = {"forward": f"scaled so that {100 * spread.coverage:g}% of the residuals of the identification set's "
-                      f"later blocks ({spread.folds} contiguous blocks in measurement order, each after the first "
+                      f"later blocks ({blocks} contiguous blocks in measurement order, each after the first "
                       "predicted by the model fitted on the blocks before it) fall within the interval",
-           "contiguous": f"scaled so that {100 * spread.coverage:g}% of the residuals of {spread.folds} contiguous "
+           "contiguous": f"scaled so that {100 * spread.coverage:g}% of the residuals of {blocks} contiguous "
                          "blocks of the identification set (in measurement order), each predicted by the model "
                          "fitted on the others, fall within the interval",
            "folds": f"scaled so that {100 * spread.coverage:g}% of the run's cross-validation residuals fall "

@@ -22,6 +22,7 @@ shoulder at 118 mm) are not checked: no pose changes them.
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass
 
 import numpy as np
@@ -42,11 +43,12 @@ class Floor:
     clearance_mm: float = DEFAULT_CLEARANCE_MM
 
     def __post_init__(self):
-        if not (isinstance(self.height_mm, (int, float)) and math.isfinite(self.height_mm)):
+        if not (_is_number(self.height_mm) and math.isfinite(self.height_mm)):
             raise PartcalError(f"the floor's height must be a finite number of mm; got {self.height_mm!r}")
-        if not (isinstance(self.clearance_mm, (int, float)) and math.isfinite(self.clearance_mm)
-                and self.clearance_mm >= 0):
+        if not (_is_number(self.clearance_mm) and math.isfinite(self.clearance_mm) and self.clearance_mm >= 0):
             raise PartcalError(f"the floor clearance must be a number of mm >= 0; got {self.clearance_mm!r}")
+        object.__setattr__(self, "height_mm", float(self.height_mm))        # numpy scalars: plain floats
+        object.__setattr__(self, "clearance_mm", float(self.clearance_mm))
 
     @property
     def lowest_mm(self) -> float:
@@ -56,6 +58,11 @@ class Floor:
     def describe(self) -> str:
         """``z >= 100 mm: floor 0 mm + clearance 100 mm``."""
         return f"z >= {self.lowest_mm:g} mm: floor {self.height_mm:g} mm + clearance {self.clearance_mm:g} mm"
+
+
+def _is_number(value) -> bool:
+    """A real number (Python's or numpy's), not a bool."""
+    return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
 
 
 def robot_floor(robot: Robot, height_mm: float | None = None, clearance_mm: float | None = None,

@@ -252,6 +252,10 @@ def run_lines(figures: dict[str, dict]) -> list[str]:
         rp = figures[n]["uncompensated"]["RP_max_mm"]
         tail.append(f"{figures[n]['poses']} ({figures[n]['cycles_max']}" + (f", {rp:.3f})" if rp is not None else ")"))
     lines.append(f"{'poses (cycles, RP max)':<{width}}" + "".join(t.rjust(c) for t, c in zip(tail, columns)))
+    short = [f"{model} on {n}: {s['converged']} of {s['n']}" for model in measured for n in names
+             if (s := figures[n].get("measured", {}).get(model)) is not None and s.get("converged", 0) < s.get("n", 0)]
+    if short:
+        lines.append("measured over the targets whose compensation converged: " + "; ".join(short))
     return lines
 
 

@@ -127,13 +127,14 @@ def _top_foreign(name: str, allowed: set[str]) -> str:
     return name
 
 
-def _spread_calibration(cfg, r) -> dict:
+def _spread_calibration(cfg, r, rows: int) -> dict:
     """How the model's spread was calibrated: the config's ``spread`` options and the scale of each output
-    (None: the model's own spread; the seconds it took are the entry's ``spread_seconds``)."""
+    (None: the model's own spread; the seconds it took are the entry's ``spread_seconds``). ``folds`` is the
+    number of blocks cut from the ``rows`` identification rows: at most one a row."""
     scale = getattr(r.model, "spread_scale_", None)
     opts = cfg.spread
     return {"method": opts.calibration, "coverage": opts.coverage,
-            **({"folds": opts.folds} if opts.calibration in ("contiguous", "forward") else {}),
+            **({"folds": min(opts.folds, rows)} if opts.calibration in ("contiguous", "forward") else {}),
             "scale": None if scale is None else [round(float(v), 6) for v in scale]}
 
 
@@ -152,7 +153,7 @@ def metrics_document(result: RunResult) -> dict:
         if cfg.predict == "pose":            # the score of the ranked part: the position's (mm) or orientation's (mrad)
             entry["cv"] |= {"on": cfg.rank_on, "unit": "mrad" if cfg.rank_on == "orientation" else "mm"}
         entry["effective_parameters"] = _number(r.effective_parameters)
-        entry["spread_calibration"] = _spread_calibration(cfg, r)
+        entry["spread_calibration"] = _spread_calibration(cfg, r, len(result.datasets["identification"]))
         if r.notes:
             entry["notes"] = r.notes
         entry["inputs"], entry["solver"], entry["regions"] = r.spec.inputs, r.model.solver_name, r.n_regions

@@ -24,6 +24,8 @@ identification data are used: the test sets never set a scale.
 from __future__ import annotations
 
 import logging
+import warnings
+from contextlib import contextmanager
 
 import numpy as np
 from numpy.typing import NDArray
@@ -65,22 +67,57 @@ def held_out_scores(model, X, y, folds, per_row: dict | None = None, *, skip_unf
     """``|y - mean| / std`` of every row predicted by ``model`` fitted on the folds without it, shape of ``y``.
 
     With ``skip_unfittable`` a fold whose training rows the model refuses (a :class:`PartcalError`: too few
-    poses for its regions, say) leaves its rows NaN instead of raising.
+    poses for its regions, say), or whose fit has no spread (a series fitted on as many rows as terms, whose
+    zero residuals would make the scale astronomical), leaves its rows NaN instead of raising. The warnings of these fits on part
+    of the rows are not the model's (a kinematic fit on a few early poses keeps parameters nominal that all
+    the rows fix): they are said once, as one warning that names the spread calibration.
     """
     X, y = np.asarray(X, dtype=float), np.asarray(y, dtype=float)
     scores = np.full_like(y, np.nan)
-    for train, test in folds:
-        try:
-            fold = clone(model).fit(X[train], y[train], **rows_of(per_row, train))
-        except PartcalError as exc:
-            if not skip_unfittable:
-                raise
-            log.info("spread calibration: a fit on %d rows was refused (%s); its block is left out", len(train), exc)
-            continue
-        mean, std = fold.predict_with_std(X[test], **rows_of(per_row, test, predicting=True))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            scores[test] = np.abs(y[test] - mean) / std
+    with _fits_warnings() as said:
+        for train, test in folds:
+            try:
+                fold = clone(model).fit(X[train], y[train], **rows_of(per_row, train))
+            except PartcalError as exc:
+                if not skip_unfittable:
+                    raise
+                log.info("spread calibration: a fit on %d rows was refused (%s); its block is left out",
+                         len(train), exc)
+                continue
+            if skip_unfittable and fold.spread_problem() is not None:     # fitted with no residual to go by
+                log.info("spread calibration: the fit on %d rows has no spread (%s); its block is left out",
+                         len(train), fold.spread_problem())
+                continue
+            mean, std = fold.predict_with_std(X[test], **rows_of(per_row, test, predicting=True))
+            with np.errstate(divide="ignore", invalid="ignore"):
+                scores[test] = np.abs(y[test] - mean) / std
+    if said:
+        log.warning("spread calibration: its %d fits on part of the identification rows gave %d warning%s "
+                    "(theirs, not those of the model fitted on all the rows), the first: %s", len(folds),
+                    len(said), "" if len(said) == 1 else "s", said[0])
     return scores
+
+
+@contextmanager
+def _fits_warnings():
+    """Hold partcal's log warnings and Python warnings of a block (a list of texts, in order), printing none."""
+    said: list[str] = []
+
+    class Hold(logging.Handler):
+        def emit(self, record: logging.LogRecord) -> None:
+            said.append(record.getMessage())
+
+    logger = logging.getLogger("partcal")
+    handlers, propagate = logger.handlers[:], logger.propagate
+    logger.handlers, logger.propagate = [Hold(logging.WARNING)], False
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            warnings.simplefilter("ignore", RuntimeWarning)
+            yield said
+        said += [str(w.message) for w in caught]
+    finally:
+        logger.handlers, logger.propagate = handlers, propagate
 
 
 def fitted_scores(fitted: list, X, y, folds, per_row: dict | None = None) -> NDArray[np.float64]:

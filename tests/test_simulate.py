@@ -200,3 +200,20 @@ def test_a_data_set_out_of_reach_is_refused_naming_the_config_and_the_data_set(t
     (tmp_path / "far.yaml").write_text(text.replace("output: ../data/sk120", f"output: {tmp_path / 'out'}"))
     with pytest.raises(ConfigError, match=r"far\.yaml: datasets\.far: .*(out of reach|unreachable)"):
         simulate(load_study(tmp_path / "far.yaml"))
+
+
+def test_the_regenerate_command_in_the_files_names_the_config_where_it_is(tmp_path, monkeypatch):
+    from partcal.data.simulate import write_study
+
+    (tmp_path / "elsewhere").mkdir()
+    config = tmp_path / "elsewhere" / "sim.yaml"
+    config.write_text(CONFIG.read_text())
+    study = dataclasses.replace(load_study(config), output=tmp_path / "out")
+    (tmp_path / "out").mkdir()
+    data = {"identification": simulate(study)["identification"]}
+    monkeypatch.chdir(tmp_path)
+    write_study(study, data)
+    assert "Regenerate with: partcal simulate elsewhere/sim.yaml." in (tmp_path / "out" / "identification.csv").read_text()
+    monkeypatch.chdir(tmp_path / "out")
+    write_study(study, data)
+    assert f"Regenerate with: partcal simulate {config.resolve()}." in (tmp_path / "out" / "identification.csv").read_text()

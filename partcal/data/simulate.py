@@ -441,6 +441,16 @@ def simulate(study: Study) -> dict[str, Measurements]:
     return out
 
 
+def _shown(path: Path) -> str:
+    """``path`` as a command run here would name it: relative to the working folder when inside it, else
+    absolute (``configs/sk120_virtual.yaml`` from the project's root)."""
+    full = Path(path).resolve()
+    try:
+        return full.relative_to(Path.cwd().resolve()).as_posix()
+    except ValueError:
+        return str(full)
+
+
 def write_study(study: Study, data: dict[str, Measurements]) -> list[Path]:
     """Write each data set to ``<output>/<name>.csv`` and return the paths.
 
@@ -454,7 +464,7 @@ def write_study(study: Study, data: dict[str, Measurements]) -> list[Path]:
             target = study.output / f"{name}.csv"
             note = (f"Virtual {study.robot.nominal.name}, data set '{name}', simulated by partcal from "
                     f"{study.source.name} with seed {study.seed}.\nRegenerate with: partcal simulate "
-                    f"configs/{study.source.name}. Do not edit by hand.")
+                    f"{_shown(study.source)}. Do not edit by hand.")
             tmp = study.output / f".{name}.csv.partial"
             write_measurements(m, tmp, comment=note)
             pending.append((tmp, target))

@@ -203,8 +203,6 @@ def test_a_data_set_out_of_reach_is_refused_naming_the_config_and_the_data_set(t
 
 
 def test_the_regenerate_command_in_the_files_names_the_config_where_it_is(tmp_path, monkeypatch):
-    from partcal.data.simulate import write_study
-
     (tmp_path / "elsewhere").mkdir()
     config = tmp_path / "elsewhere" / "sim.yaml"
     config.write_text(CONFIG.read_text())
@@ -217,3 +215,19 @@ def test_the_regenerate_command_in_the_files_names_the_config_where_it_is(tmp_pa
     monkeypatch.chdir(tmp_path / "out")
     write_study(study, data)
     assert f"Regenerate with: partcal simulate {config.resolve()}." in (tmp_path / "out" / "identification.csv").read_text()
+
+
+def test_a_robot_description_given_as_a_virtual_robot_is_named_as_such(tmp_path):
+    from partcal.study.config import load_config
+    from partcal.study.prepare import prepare
+
+    robot_file = ROOT / "partcal" / "robot" / "builtin" / "motoman_sk120.yaml"
+    with pytest.raises(ConfigError, match=r"motoman_sk120\.yaml: a robot description \(it has 'links' and 'joints'\), "
+                                          r"not a virtual robot's config"):
+        load_study(robot_file)
+    config = tmp_path / "run.yaml"
+    config.write_text((ROOT / "configs" / "paper_sk120.yaml").read_text()
+                      .replace("../data/", f"{ROOT}/data/").replace("sk120_virtual.yaml", str(robot_file)))
+    with pytest.raises(ConfigError, match=r"run\.yaml: verify\.virtual_robot: .*motoman_sk120\.yaml: a robot "
+                                          r"description"):
+        prepare(load_config(config))

@@ -169,6 +169,10 @@ def load_study(path: str | Path) -> Study:
     path = Path(path)
     data, lines = load_yaml(path)
     top = Section(data, "", lines, str(path))
+    if isinstance(data, dict) and "robot" not in data and {"links", "joints"} <= set(data):
+        raise ConfigError(f"{path}: a robot description (it has 'links' and 'joints'), not a virtual robot's "
+                          "config: a virtual robot names its nominal robot under 'robot' and adds 'errors', "
+                          "'tracker', 'sampling' and 'datasets' (docs/virtual_robot.md)")
     spec = top.get("robot", "any", check=lambda v: None if isinstance(v, (str, dict)) else
                    "a built-in robot name, a robot YAML or URDF file, or {urdf: FILE.urdf, base: LINK, tip: LINK}")
     try:

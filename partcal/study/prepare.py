@@ -272,7 +272,10 @@ def _virtual_robot(config: RunConfig, robot: Robot | None):
     another robot than the run's."""
     if config.virtual_robot is None:
         return None
-    study = load_study(config.virtual_robot)
+    try:
+        study = load_study(config.virtual_robot)
+    except ConfigError as exc:
+        raise ConfigError(f"{config.source}: verify.virtual_robot: {exc}") from None
     if robot is None or study.robot.nominal.name != robot.name:
         raise ConfigError(f"{config.source}: verify.virtual_robot simulates {study.robot.nominal.name!r}, "
                           f"but the run's robot is {robot.name if robot else 'not set'!r}")

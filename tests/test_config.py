@@ -69,6 +69,7 @@ def test_defaults_and_paths(tmp_path):
     ("{method: hard}", "{method: gaussian, width: .nan}", r"models\[1\]\.blend\.width \(line {line}\): must be a real number in \[0\.6, 10\.0\]; got nan"),
     ("    degree: 2\n    solver: {method: lstsq}\n", "    degree: 2\n    inputs: joint\n    solver: {method: lstsq}\n", r"models\[1\]\.partition\.method \(line {line}\): octree splits the Cartesian workspace; for joint inputs use method: kmeans"),
     ("name: demo\n", "name: demo\nrank_by: best\n", r"rank_by \(line {line}\): must be one of 'cv', 'validation'; got 'best'"),
+    ("name: demo\n", "name: demo\nverify: {}\n", r"verify \(line {line}\): missing required key 'virtual_robot'"),
 ])
 def test_errors_name_path_and_line(tmp_path, old, new, message):
     text = BASE.replace(old, new, 1)

@@ -272,7 +272,7 @@ def load_config(path: str | Path) -> RunConfig:
             top.fail(f"models[{i}].name", f"{m.name!r} gives the same file name ({m.slug}) as another model")
     verify = top.section("verify")
     virtual = None
-    if verify.data:
+    if top.has("verify"):               # an empty verify would verify nothing, silently
         virtual = _existing(verify, "virtual_robot", base)
     verify.done()
     default_out = base.parent / "reports" / name

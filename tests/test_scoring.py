@@ -36,5 +36,5 @@ def test_verify_compensation_warns_naming_the_model_the_data_set_and_each_reason
                                                  r"reach\)$"):
         out, attained = verify_compensation(result, {"test": test}, robot, virtual, seed=0)
     assert out["test"]["converged"] == 39 and out["test"]["n"] == 40
-    reached, sent = attained["test"]
-    assert reached.shape == (40, 3) and sent.tolist() == [False] + [True] * 39
+    reached, sent, turned = attained["test"]
+    assert reached.shape == (40, 3) and sent.tolist() == [False] + [True] * 39 and turned is None

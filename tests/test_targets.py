@@ -378,6 +378,11 @@ models:
     assert check["DH (orientation)"]["after"]["rms_3d"] < 0.1 * check["DH (orientation)"]["before"]["rms_3d"]
     assert turned["after"]["rms_angle"] == pytest.approx(turned["predicted_residual"]["rms_angle"], rel=0.2)
     assert check["DH"]["orientation"]["after"]["rms_angle"] > 5 * turned["after"]["rms_angle"]    # left to chance
+    iso = result.iso9283["test"]["measured"]         # ISO orientation accuracy of what the virtual robot reached
+    for name in ("DH (orientation)", "DH"):
+        worst = max(iso[name]["AP_abc_max_deg"])      # a pose visited once: a component of its turn; below the angle
+        assert 0 < worst <= check[name]["orientation"]["after"]["max_angle"] / 1000 * 180 / np.pi * (1 + 1e-12)
+    assert max(iso["DH (orientation)"]["AP_abc_max_deg"]) < 0.2 * max(iso["DH"]["AP_abc_max_deg"])
     from partcal.report import render_report
 
     html = render_report(result, tmp_path).read_text()                 # the report's Compensation table says it

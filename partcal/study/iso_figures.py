@@ -159,8 +159,8 @@ def run_figures(datasets: dict[str, Measurements], predictions: dict[str, dict[s
     own_frame : dict of str to bool, optional
         The data sets registered in their own tracker frame (scored up to a rigid transform).
     attained : dict, optional
-        With a virtual robot, ``{model: {data set: (positions (n, 3) mm, converged (n,) bool)}}``: what
-        its tracker read when the compensated targets were commanded
+        With a virtual robot, ``{model: {data set: (positions (n, 3) mm, converged (n,) bool, turn (n, 3)
+        deg or None)}}``: what its tracker read when the compensated targets were commanded
         (:func:`~partcal.study.scoring.verify_compensation`).
 
     Returns
@@ -194,13 +194,16 @@ def run_figures(datasets: dict[str, Measurements], predictions: dict[str, dict[s
 
 
 def measured_after(m: Measurements, reached_mm: NDArray[np.float64], converged: NDArray[np.bool_],
+                   turned_deg: NDArray[np.float64] | None = None,
                    tol_deg: float = iso9283.DEFAULT_TOLERANCE_DEG) -> dict | None:
     """The pose figures of what a robot reached when given the compensated targets of ``m``.
 
     The commanded position of a row is its nominal position (the target), the
     attained one ``reached_mm``; only the ``converged`` targets count (the
     others were never sent), their poses recognised from repeated commanded
-    joints as in :func:`of_measurements`. None when no target converged.
+    joints as in :func:`of_measurements`. ``turned_deg`` (n, 3), the turn from
+    each target orientation to the one reached (rotation vectors, degrees),
+    gives the orientation figures too. None when no target converged.
 
     >>> from partcal.data.measurements import Measurements
     >>> m = Measurements(np.zeros((3, 6)), np.zeros((3, 3)), np.zeros((3, 3)))
@@ -212,7 +215,8 @@ def measured_after(m: Measurements, reached_mm: NDArray[np.float64], converged: 
     if not converged.any():
         return None
     cycles = iso9283.cycles_from_joints(m.q_deg[converged], tol_deg)
-    figures = iso9283.pose_figures(m.nominal_mm[converged], np.asarray(reached_mm)[converged], cycles)
+    turn = None if turned_deg is None else np.asarray(turned_deg, dtype=float)[converged]
+    figures = iso9283.pose_figures(m.nominal_mm[converged], np.asarray(reached_mm)[converged], cycles, turn)
     return {**summary(figures), "converged": int(converged.sum()), "n": len(converged)}
 
 

@@ -123,7 +123,7 @@ def errors_left(m: Measurements, predicted: NDArray[np.float64], own_frame: bool
 
 
 def verify_compensation(result: ModelResult, data: dict[str, Measurements], robot: Robot, virtual,
-                        seed: int) -> tuple[dict[str, dict], dict[str, tuple[NDArray[np.float64], NDArray[np.bool_]]]]:
+                        seed: int) -> tuple[dict[str, dict], dict[str, tuple]]:
     """Command the compensated test targets on the virtual robot; compare before, predicted and after.
 
     ``predicted_residual`` is the model's error on the measured test set (what
@@ -138,9 +138,11 @@ def verify_compensation(result: ModelResult, data: dict[str, Measurements], robo
     listed target's predicted miss and reason (:meth:`CompensationResult.reasons`).
 
     Returns the figures by test set, and by test set the positions the
-    virtual robot's tracker read (n, 3) mm with the mask of the converged
-    targets (what :func:`~partcal.study.iso_figures.run_figures` measures the
-    ISO figures after compensation from).
+    virtual robot's tracker read (n, 3) mm, the mask of the converged targets
+    and, for a model of pose errors, the turn from each target orientation to
+    the one reached (rotation vectors, degrees; else None): what
+    :func:`~partcal.study.iso_figures.run_figures` measures the ISO figures
+    after compensation from.
     """
     predictor = Predictor(result.model, {"name": result.spec.name, "inputs": result.spec.inputs,
                                          "n_inputs": result.model.n_features_in_, "kind": "run"}, robot)
@@ -169,13 +171,14 @@ def verify_compensation(result: ModelResult, data: dict[str, Measurements], robo
                 q_cmd = robot.inverse(comp.commanded_mm, m.q_deg, fixed=fixed).q_deg
         rng = np.random.default_rng([seed, k])
         reached, ok = virtual.measure(q_cmd, rng), comp.converged
-        attained[name] = (reached, ok)
+        attained[name] = (reached, ok, None)
         out[name] = {"before": summary(m.errors_mm),
                      "predicted_residual": summary(m.errors_mm - result.predictions[name][:, POSITION]),
                      "after": summary((reached - targets)[ok]) if ok.any() else None,
                      "converged": int(ok.sum()), "n": len(targets)}
         if pose:
             turned = _turn_reached(virtual, q_cmd, m, rng)
+            attained[name] = (reached, ok, turned / MRAD_PER_DEG)
             out[name]["orientation"] = {"before": orientation_summary(m.orientation_errors_deg * MRAD_PER_DEG),
                                         "predicted_residual": result.metrics[name]["orientation"],
                                         "after": orientation_summary(turned[ok]) if ok.any() else None}

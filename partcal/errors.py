@@ -1,11 +1,18 @@
-"""The exception hierarchy: every user error is a :class:`PartcalError`.
+"""The exception hierarchy: every user error is a :class:`PartcalError`; and warnings held back as texts.
 
 User errors (bad files, bad parameters, bad arrays) subclass ``ValueError`` so
 that code written for scikit-learn conventions keeps working; the command
 line turns any of them into exit code 2 and one line on stderr.
+:func:`held_warnings` holds a block's warnings so that a run says each once, in
+its own words.
 """
 
 from __future__ import annotations
+
+import logging
+import warnings
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 
 class PartcalError(ValueError):
@@ -44,3 +51,31 @@ class UnreachableError(PartcalError):
 
 class ModelFileError(PartcalError):
     """A model file is damaged, foreign, or of an unsupported version."""
+
+
+@contextmanager
+def held_warnings(*, exclusive: bool = False) -> Iterator[list[str]]:
+    """Collect partcal's log warnings and Python warnings of a block (a list of texts, in order), printing none.
+
+    With ``exclusive`` the block's warnings reach no handler already on partcal's logger, not even the
+    collector of an enclosing ``held_warnings``: the enclosing block hears of them only as the caller
+    words them (the spread calibration's fits, held inside a model's fit, say).
+    """
+    said: list[str] = []
+
+    class Hold(logging.Handler):
+        def emit(self, record: logging.LogRecord) -> None:
+            said.append(record.getMessage())
+
+    logger, handler = logging.getLogger("partcal"), Hold(logging.WARNING)
+    handlers, propagate = logger.handlers[:], logger.propagate
+    logger.handlers = [handler] if exclusive else handlers + [handler]
+    logger.propagate = False
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            warnings.simplefilter("ignore", RuntimeWarning)      # numbers are checked, never warned about
+            yield said
+        said += [str(w.message) for w in caught]
+    finally:
+        logger.handlers, logger.propagate = handlers, propagate

@@ -17,7 +17,6 @@ import hashlib
 import logging
 import sys
 import time
-import warnings
 from contextlib import contextmanager
 from typing import Callable
 
@@ -26,7 +25,7 @@ from numpy.typing import NDArray
 from joblib import Parallel, delayed, parallel_config
 
 from ..data.measurements import Measurements
-from ..errors import ConfigError
+from ..errors import ConfigError, held_warnings
 from ..metrics import rms_standard_error
 from ..models.partitioned import fold_regions
 from ..robot.kinematics import Robot, flange_offset
@@ -145,7 +144,7 @@ def fit_model(spec: ModelSpec, seed: int, data: dict[str, Measurements], cv: CVP
     ``spread``: how the model's spread is calibrated on the identification set
     (:func:`~partcal.study.spread.run_scale`).
     """
-    with _collected() as said:
+    with held_warnings() as said:
         result = _fit_model(spec, seed, data, cv, robot, own_frame, lines, outputs, n_jobs, spread)
     result.notes = list(dict.fromkeys(said + result.model.fit_notes()))      # the run names the model in front
     return result
@@ -251,30 +250,6 @@ def _note_other_optima(fold_fits: list, estimator) -> None:
         if gap is not None:
             log.warning("cross-validation fold %d of %d: its Gaussian process found another optimum than the final "
                         "fit's (%s): the CV score is partly that of other hyperparameters", k + 1, len(fold_fits), gap)
-
-
-@contextmanager
-def _collected():
-    """Collect partcal's log warnings and Python warnings of a block (a list of texts), printing none."""
-    said: list[str] = []
-
-    class Collect(logging.Handler):
-        def emit(self, record: logging.LogRecord) -> None:
-            said.append(record.getMessage())
-
-    logger, handler = logging.getLogger("partcal"), Collect(logging.WARNING)
-    propagate = logger.propagate
-    logger.addHandler(handler)
-    logger.propagate = False
-    try:
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            warnings.simplefilter("ignore", RuntimeWarning)      # numbers are checked, never warned about
-            yield said
-        said += [str(w.message) for w in caught]
-    finally:
-        logger.removeHandler(handler)
-        logger.propagate = propagate
 
 
 def _regions_text(counts: list[int]) -> str:

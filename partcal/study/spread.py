@@ -24,15 +24,13 @@ identification data are used: the test sets never set a scale.
 from __future__ import annotations
 
 import logging
-import warnings
-from contextlib import contextmanager
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.stats import norm
 from sklearn.base import clone
 
-from ..errors import DataError, PartcalError
+from ..errors import DataError, PartcalError, held_warnings
 from .selection import rows_of
 
 log = logging.getLogger(__name__)
@@ -74,7 +72,7 @@ def held_out_scores(model, X, y, folds, per_row: dict | None = None, *, skip_unf
     """
     X, y = np.asarray(X, dtype=float), np.asarray(y, dtype=float)
     scores = np.full_like(y, np.nan)
-    with _fits_warnings() as said:
+    with held_warnings(exclusive=True) as said:
         for train, test in folds:
             try:
                 fold = clone(model).fit(X[train], y[train], **rows_of(per_row, train))
@@ -96,28 +94,6 @@ def held_out_scores(model, X, y, folds, per_row: dict | None = None, *, skip_unf
                     "(theirs, not those of the model fitted on all the rows), the first: %s", len(folds),
                     len(said), "" if len(said) == 1 else "s", said[0])
     return scores
-
-
-@contextmanager
-def _fits_warnings():
-    """Hold partcal's log warnings and Python warnings of a block (a list of texts, in order), printing none."""
-    said: list[str] = []
-
-    class Hold(logging.Handler):
-        def emit(self, record: logging.LogRecord) -> None:
-            said.append(record.getMessage())
-
-    logger = logging.getLogger("partcal")
-    handlers, propagate = logger.handlers[:], logger.propagate
-    logger.handlers, logger.propagate = [Hold(logging.WARNING)], False
-    try:
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            warnings.simplefilter("ignore", RuntimeWarning)
-            yield said
-        said += [str(w.message) for w in caught]
-    finally:
-        logger.handlers, logger.propagate = handlers, propagate
 
 
 def fitted_scores(fitted: list, X, y, folds, per_row: dict | None = None) -> NDArray[np.float64]:

@@ -52,7 +52,7 @@ def test_another_robots_nominal_columns_are_refused_with_the_worst_row(ident, tm
 def test_the_run_config_with_another_robot_is_refused_by_check(tmp_path):
     text = (ROOT / "configs" / "paper_sk120.yaml").read_text().replace("robot: motoman_sk120",
                                                                        "robot: universal_robots_ur10")
-    text = "\n".join(line for line in text.splitlines() if "virtual_robot" not in line and line != "verify:")
+    text = "\n".join(line for line in text.splitlines() if "virtual_robot" not in line and not line.startswith("verify:"))
     config = tmp_path / "c.yaml"
     config.write_text(text.replace("../data/sk120/", f"{DATA}/"))
     res = partcal_cli("run", "--check", str(config))

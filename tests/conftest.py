@@ -92,6 +92,18 @@ def tilted_dh_chain(q_deg, d_mm, a_mm, alpha_rad, offset_deg, tilts_deg, start=N
     return out
 
 
+def assert_jacobian_is_the_central_difference(robot, q_deg, h):
+    """``robot.jacobian(q_deg)`` (n, 3, N) equals the central differences of ``robot.positions`` with each
+    joint moved by ``+-h`` degrees, to 1e-6 mm/deg."""
+    import numpy as np
+
+    for j in range(robot.n_joints):
+        step = np.zeros(robot.n_joints)
+        step[j] = h
+        numeric = (robot.positions(q_deg + step) - robot.positions(q_deg - step)) / (2 * h)
+        np.testing.assert_allclose(robot.jacobian(q_deg)[:, :, j], numeric, atol=1e-6, err_msg=f"joint {j + 1}")
+
+
 def moved_positions(robot, q_deg, k, step):
     """Forward kinematics with geometric parameter ``k`` moved by ``step``, written out from the robot's
     fields (for central differences): four DH fields per row, then the tool's x, y, z (mm), then the

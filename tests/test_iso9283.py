@@ -282,7 +282,7 @@ def test_figures_measured_after_compensation_count_the_converged_targets_only(tm
     sent[0] = False                                            # one cycle of P1 not sent
     s = measured_after(m, reached, sent)
     assert (s["poses"], s["converged"], s["n"]) == (4, 149 - 30, 150)
-    kept = [p for p in ("P1", "P2", "P4", "P5")]
+    kept = ("P1", "P2", "P4", "P5")
     miss = [np.linalg.norm(reached[sent & (np.array(m.labels) == p)].mean(axis=0) - m.nominal_mm[m.labels.index(p)])
             for p in kept]
     assert s["AP_max_mm"] == pytest.approx(max(miss)) and s["AP_mean_mm"] == pytest.approx(np.mean(miss))

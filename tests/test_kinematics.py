@@ -4,7 +4,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import moved_positions
+from conftest import assert_jacobian_is_the_central_difference, moved_positions
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
@@ -412,11 +412,7 @@ def test_a_chain_with_general_origins_matches_matrices_and_inverts():
     q = np.random.default_rng(32).uniform(-180, 180, (200, 6))
     np.testing.assert_allclose(robot.forward(q), _hand_transforms(robot, q), rtol=0, atol=1e-9)
     h = 1e-5
-    for j in range(6):
-        step = np.zeros(6)
-        step[j] = h
-        numeric = (robot.positions(q[:5] + step) - robot.positions(q[:5] - step)) / (2 * h)
-        np.testing.assert_allclose(robot.jacobian(q[:5])[:, :, j], numeric, atol=1e-6)
+    assert_jacobian_is_the_central_difference(robot, q[:5], h)
     p, jac = robot.parameter_jacobian(q[:5])
     for k in range(4 * 6 + 3):
         numeric = (moved_positions(robot, q[:5], k, h) - moved_positions(robot, q[:5], k, -h)) / (2 * h)

@@ -5,6 +5,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import assert_jacobian_is_the_central_difference
 
 from partcal import ConfigError, RobotFileError, load_robot
 from partcal.robot.description import robot_from_dict, robot_reference, robot_to_dict
@@ -229,12 +230,7 @@ def test_prismatic_joints_slide_in_mm_and_equal_yourdfpy(tmp_path):
     expected = np.array(expected)
     expected[:, :3, 3] *= 1000.0
     np.testing.assert_allclose(robot.forward(q), expected, rtol=0, atol=1e-9)
-    h = 1e-6
-    for j in range(4):
-        step = np.zeros(4)
-        step[j] = h
-        numeric = (robot.positions(q[:5] + step) - robot.positions(q[:5] - step)) / (2 * h)
-        np.testing.assert_allclose(robot.jacobian(q[:5])[:, :, j], numeric, atol=1e-6)
+    assert_jacobian_is_the_central_difference(robot, q[:5], 1e-6)
     start = np.clip(q[:20] + [20.0, 3.0, 10.0, 3.0], robot.limits_deg[:, 0], robot.limits_deg[:, 1])
     result = robot.inverse(robot.positions(q[:20]), start)
     assert result.error_mm.max() < 1e-8

@@ -135,6 +135,18 @@ def _solve_block(robot, targets, qT, free, settings: Settings, bias, tol, seed_j
     return done_q, iterations
 
 
+def within_pose_tolerance(err: NDArray[np.float64], tol_mm: float, tol_length: float) -> NDArray[np.bool_]:
+    """Which poses of a pose error (6, m) (mm, and ``length`` x rad) meet both tolerances, shape (m,)."""
+    return (np.sum(err[:3] ** 2, axis=0) <= tol_mm ** 2) & (np.sum(err[3:] ** 2, axis=0) <= tol_length ** 2)
+
+
+def pose_jacobian(robot, p, frames, free: NDArray[np.intp], length: float) -> NDArray[np.float64]:
+    """The forward kinematics' pose Jacobian (F, 6, m) per degree of the walked chain: the position's rows, then
+    the turn's times ``length``."""
+    return np.concatenate([robot._jacobian(p, frames, free), length * robot._jacobian(p, frames, free, True)],
+                          axis=1)
+
+
 def _take_step(qT, free, step, settings: Settings, lo, hi) -> None:
     """Move the free joints of ``qT`` (N, m) by ``step`` (F, m), each target's step capped at
     ``max_step_deg`` for its largest joint, and clipped to the joint limits ``lo, hi`` (F, 1)."""
@@ -215,15 +227,14 @@ def _pose_block(robot, targets, rotations, qT, free, settings: Settings, tol_rad
         at, turned = (p, reached) if bias is None else biased_pose(p, reached, bias(qT.T))
         turn = rotation_vectors(rotations @ turned.transpose(0, 2, 1)).T                              # (3, m) rad
         err = np.concatenate([targets - at, length * turn])
-        keep = (np.sum(err[:3] ** 2, axis=0) > settings.tol_mm ** 2) | (np.sum(turn ** 2, axis=0) > tol_rad ** 2)
+        keep = ~within_pose_tolerance(err, settings.tol_mm, length * tol_rad)
         if not keep.any():
             break
         if not keep.all():                              # drop the converged poses
             done_q[:, idx[~keep]] = qT[:, ~keep]
             idx, qT, targets, rotations, err = idx[keep], qT[:, keep], targets[:, keep], rotations[keep], err[:, keep]
             p, frames = p[:, keep], {r: (z[:, keep], o[:, keep]) for r, (z, o) in frames.items()}
-        jac = np.concatenate([robot._jacobian(p, frames, free), length * robot._jacobian(p, frames, free, True)],
-                             axis=1)                                                            # (F, 6, m)
+        jac = pose_jacobian(robot, p, frames, free, length)                                     # (F, 6, m)
         J = jac.transpose(2, 1, 0)                                                              # (m, 6, F)
         A = J @ J.transpose(0, 2, 1) + settings.damping ** 2 * np.eye(6)
         step = (J.transpose(0, 2, 1) @ np.linalg.solve(A, err.T[:, :, None]))[:, :, 0].T        # (F, m)

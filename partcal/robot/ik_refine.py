@@ -15,7 +15,7 @@ from typing import Callable
 import numpy as np
 from numpy.typing import NDArray
 
-from .ik import _CHUNK, Settings, _take_step, biased_pose, rotation_vectors
+from .ik import _CHUNK, Settings, _take_step, biased_pose, pose_jacobian, rotation_vectors, within_pose_tolerance
 
 RESTARTS_DEG = (30.0, -30.0, 90.0, -90.0, 180.0, -180.0)   # along the weakest direction, from where the solve stuck
 
@@ -59,8 +59,7 @@ def refine_pose(robot, positions: NDArray[np.float64], rotations: NDArray[np.flo
 
     def met(rows, q_rows):
         err = _pose_error(robot, positions[rows].T, rotations[rows], q_rows.T, free, length_mm, bias)
-        return (np.sum(err[:3] ** 2, axis=0) <= settings.tol_mm ** 2) & \
-            (np.sum(err[3:] ** 2, axis=0) <= (length_mm * tol_rad) ** 2)
+        return within_pose_tolerance(err, settings.tol_mm, length_mm * tol_rad)
 
     everyone = np.arange(len(q))
     out, iterations = lm(everyone, q)
@@ -91,9 +90,7 @@ def conditioning(robot, q: NDArray[np.float64], free: NDArray[np.intp], length_m
     """The ratio of the smallest to the largest singular value of the free joints' pose Jacobian at joints
     ``q`` (n, N) degrees (orientation rows times ``length_mm``), shape (n,): 0 at a singularity."""
     p, _, frames = robot._walk(robot._trig(np.asarray(q, dtype=float).T), record=robot._moving(free))
-    jac = np.concatenate([robot._jacobian(p, frames, free), length_mm * robot._jacobian(p, frames, free, True)],
-                         axis=1)
-    s = np.linalg.svd(jac.transpose(2, 1, 0), compute_uv=False)
+    s = np.linalg.svd(pose_jacobian(robot, p, frames, free, length_mm).transpose(2, 1, 0), compute_uv=False)
     return s[:, -1] / np.maximum(s[:, 0], 1e-300)
 
 
@@ -108,8 +105,7 @@ def _pose_error(robot, targets, rotations, qT, free, length: float, bias, fd_deg
     err = np.concatenate([targets - at, length * rotation_vectors(rotations @ turned.transpose(0, 2, 1)).T])
     if fd_deg is None:
         return err
-    jac = np.concatenate([robot._jacobian(p, frames, free), length * robot._jacobian(p, frames, free, True)],
-                         axis=1)                                                        # (F, 6, m) per degree
+    jac = pose_jacobian(robot, p, frames, free, length)                              # (F, 6, m) per degree
     if b is not None:          # the bias moves the pose too: its slope by forward differences
         for f, j in enumerate(free):
             shifted = qT.copy()
@@ -133,8 +129,7 @@ def _lm_block(robot, targets, rotations, qT, free, settings: Settings, tol_rad: 
     mu = 1e-6 * scale
     eye = np.eye(len(free))
     for _ in range(settings.max_iter):
-        met = (np.sum(err[:3] ** 2, axis=0) <= settings.tol_mm ** 2) & \
-              (np.sum(err[3:] ** 2, axis=0) <= (length * tol_rad) ** 2)
+        met = within_pose_tolerance(err, settings.tol_mm, length * tol_rad)
         stuck = mu > 1e8 * scale                                  # no step lowers the error: give up
         keep = ~(met | stuck)
         if not keep.any():

@@ -45,7 +45,7 @@ from partcal.models.partitioned import PartitionedErrorModel  # noqa: E402
 from partcal.models.series import ErrorModel  # noqa: E402
 from partcal.study.config import SpreadOptions  # noqa: E402
 from partcal.study.selection import grouped_splits, measured_poses  # noqa: E402
-from partcal.study.spread import run_scale  # noqa: E402
+from partcal.study.spread import CalibratedSpread, run_spread  # noqa: E402
 from partcal.robot.description import load_robot  # noqa: E402
 from partcal.study.config import load_config  # noqa: E402
 from partcal.study.prepare import load_datasets  # noqa: E402
@@ -53,7 +53,7 @@ from partcal.study.scoring import errors_left  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 Z95 = 1.959963984540054
-CALIBRATIONS = ("contiguous", "forward", "folds")
+CALIBRATIONS = ("contiguous", "forward", "folds", "contiguous+depth", "forward+depth", "folds+depth")
 
 
 def models(robot, quick: bool, only: list[str] | None = None) -> dict:
@@ -88,9 +88,10 @@ def coverage(model, m, own_frame: bool) -> tuple[float, float]:
 def table(title: str, train, tests: dict, robot, quick: bool, only: list[str] | None = None,
           calibrations: tuple = CALIBRATIONS) -> None:
     """Coverage and width of every model on every test set: its own spread, then calibrated as a run calibrates
-    it (:func:`partcal.study.spread.run_scale`): ``contiguous`` (5 blocks, each from the others), ``forward``
-    (each later block from the earlier ones: a run's default) and ``folds`` (the run's 5 cross-validation
-    folds: shuffled poses, seed 0)."""
+    it (:func:`partcal.study.spread.run_spread`): ``contiguous`` (5 blocks, each from the others), ``forward``
+    (each later block from the earlier ones) and ``folds`` (the run's 5 cross-validation folds: shuffled poses,
+    seed 0), each with a scale the same everywhere and (``+depth``) growing with the inputs' depth as the
+    held-out residuals show (a run's default: ``forward+depth``)."""
     rows = []
     cv_folds = grouped_splits(measured_poses(train), 5, 0)
     for name, model in models(robot, quick, only).items():
@@ -99,8 +100,10 @@ def table(title: str, train, tests: dict, robot, quick: bool, only: list[str] | 
         model.fit(X, train.errors_mm)
         for how in ("own", *calibrations):
             lap = time.perf_counter()
-            model.spread_scale_ = None if how == "own" else run_scale(
-                SpreadOptions(calibration=how), model, X, train.errors_mm, cv_folds=cv_folds)
+            calibrated = None if how == "own" else run_spread(
+                SpreadOptions(calibration=how.split("+")[0], depth=how.endswith("+depth")), model, X, train.errors_mm,
+                cv_folds=cv_folds)
+            (calibrated or CalibratedSpread(None)).apply(model)
             cells = [name if how == "own" else "", how]
             for m, own in tests.values():
                 share, width = coverage(model, m, own)

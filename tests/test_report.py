@@ -421,24 +421,45 @@ def test_a_run_calibrates_every_spread_on_later_blocks_of_the_identification_set
 
     from partcal.study.prepare import model_inputs
 
+    def depth(train, at):               # Mahalanobis in the training inputs; a held input at the least moved sd
+        sd = train.std(axis=0)
+        cov = np.cov(train, rowvar=False, bias=True) + np.diag(np.where(sd > 1e-6, 0.0, sd[sd > 1e-6].min() ** 2))
+        diff = at - train.mean(axis=0)
+        return np.sqrt(np.einsum("ij,jk,ik->i", diff, np.linalg.pinv(cov), diff))
+
+    def loglik(scores, d, beta):        # half-normal scores of sd c_k sqrt(1 + beta d^2), c_k at its optimum
+        g2 = 1.0 + beta * d ** 2
+        return sum(-0.5 * (len(d) * np.log(np.mean(col ** 2 / g2)) + np.log(g2).sum()) for col in scores.T)
+
     result, out = report
     metrics = json.loads((out / "metrics.json").read_text())
     ident = result.datasets["identification"]
+    grew = 0
     for r in result.models:
         X, y = model_inputs(r.spec.inputs, ident), ident.errors_mm
-        scores = []                     # by hand: 5 blocks in measurement order (85 rows: 17 each), each after
+        scores, depths = [], []         # by hand: 5 blocks in measurement order (85 rows: 17 each), each after
         for k in range(1, 5):           # the first predicted by the model fitted on the rows before it
             fold = clone(r.model).fit(X[:17 * k], y[:17 * k])
             mean, std = fold.predict_with_std(X[17 * k:17 * (k + 1)])
             scores.append(np.abs(y[17 * k:17 * (k + 1)] - mean) / std)
-        expected = np.quantile(np.vstack(scores), 0.95, axis=0) / norm.ppf(0.975)
+            depths.append(depth(X[:17 * k], X[17 * k:17 * (k + 1)]))
+        scores, depths = np.vstack(scores), np.concatenate(depths)
         calibration = metrics["models"][r.spec.name]["spread_calibration"]
-        assert calibration["method"] == "forward" and calibration["folds"] == 5
+        beta = r.model.spread_depth_.beta if r.model.spread_depth_ is not None else 0.0
+        assert calibration["depth_beta"] == pytest.approx(beta, abs=1e-6)
+        assert calibration["method"] == "forward" and calibration["folds"] == 5 and calibration["depth"] is True
+        assert 0.0 <= beta <= 4.0 and loglik(scores, depths, beta) >= loglik(scores, depths, 0.0) - 1e-9
+        assert loglik(scores, depths, beta) >= max(loglik(scores, depths, b) for b in (beta / 2, min(2 * beta, 4.0)))
+        grew += beta > 0
+        expected = np.quantile(scores / np.sqrt(1.0 + beta * depths ** 2)[:, None], 0.95, axis=0) / norm.ppf(0.975)
         np.testing.assert_allclose(calibration["scale"], expected, rtol=1e-5)
         written = json.loads((out / "models" / f"{r.spec.slug}.json").read_text())
         np.testing.assert_allclose(written["spread_scale"], expected, rtol=1e-9)
-        own = r.model.std_validated(model_inputs(r.spec.inputs, result.datasets["rectangle"]))[1]
-        np.testing.assert_allclose(r.spreads["rectangle"], own * expected, rtol=1e-9)
+        rect = model_inputs(r.spec.inputs, result.datasets["rectangle"])
+        own = r.model.std_validated(rect)[1]
+        growth = np.sqrt(1.0 + beta * depth(X, rect) ** 2)[:, None]
+        np.testing.assert_allclose(r.spreads["rectangle"], own * expected * growth, rtol=1e-7)
+    assert grew                         # some model's residuals grow towards the edges of the virtual SK120's poses
 
 
 def test_a_scatter_of_many_poses_draws_an_evenly_spaced_share_and_says_so():

@@ -1,6 +1,7 @@
 """The standard deviation of every prediction: against textbook formulas and scikit-learn, known noise, growth
 where a model extrapolates, calibration, model files old and new, the command line."""
 
+import copy
 import dataclasses
 import json
 
@@ -170,17 +171,17 @@ def test_unidentified_parameters_add_their_plausible_error_where_the_data_did_no
 def test_calibration_scales_the_spread_to_held_out_blocks(linear_data):
     X, y = linear_data
     assert [t.tolist() for _, t in contiguous_folds(5, 2)] == [[0, 1, 2], [3, 4]]
-    stationary = calibrate_spread(ErrorModel(inputs="cartesian", solver="lstsq"), X, y, folds=4)
+    stationary = calibrate_spread(ErrorModel(inputs="cartesian", solver="lstsq"), X, y, folds=4, depth=False)
     assert np.all((stationary.spread_scale_ > 0.6) & (stationary.spread_scale_ < 1.6))
     drift = y + np.linspace(0, 1.0, len(y))[:, None]                # a session that drifts by 1 mm
-    drifting = calibrate_spread(ErrorModel(inputs="cartesian", solver="lstsq"), X, drift, folds=4)
+    drifting = calibrate_spread(ErrorModel(inputs="cartesian", solver="lstsq"), X, drift, folds=4, depth=False)
     assert np.all(drifting.spread_scale_ > 1.2 * stationary.spread_scale_)   # wider than its own fit says
     from partcal.study.config import SpreadOptions
-    from partcal.study.spread import forward_folds, run_scale
+    from partcal.study.spread import forward_folds, run_spread
 
     assert [(a.tolist(), b.tolist()) for a, b in forward_folds(5, 2)] == [([0, 1, 2], [3, 4])]
-    later = run_scale(SpreadOptions("forward", folds=4), ErrorModel(inputs="cartesian", solver="lstsq").fit(X, drift),
-                      X, drift, cv_folds=[])
+    later = run_spread(SpreadOptions("forward", folds=4, depth=False),
+                       ErrorModel(inputs="cartesian", solver="lstsq").fit(X, drift), X, drift, cv_folds=[]).scale
     assert np.all(later > drifting.spread_scale_)          # predicted only from the past, the drift shows more
     own = ErrorModel(inputs="cartesian", solver="lstsq").fit(X, drift).predict_with_std(X)[1]
     np.testing.assert_allclose(drifting.predict_with_std(X)[1], own * drifting.spread_scale_)
@@ -202,19 +203,21 @@ def test_scale_from_scores_is_the_quantile_over_the_normal_one():
 def test_folds_calibration_reads_the_cross_validation_fits_as_a_refit_would(linear_data):
     from partcal.study.config import SpreadOptions
     from partcal.study.selection import held_out_residuals
-    from partcal.study.spread import run_scale
+    from partcal.study.spread import run_spread
 
     X, y = linear_data
     model = ErrorModel(inputs="cartesian", solver="lstsq")
     folds = contiguous_folds(len(X), 4)[::-1]                             # any folds: the run's
     fits: list = []
     held_out_residuals(model, X, y, folds, fitted=fits)
-    fitted = run_scale(SpreadOptions(calibration="folds"), model.fit(X, y), X, y, cv_folds=folds, fold_fits=fits)
-    refit = run_scale(SpreadOptions(calibration="folds"), model, X, y, cv_folds=folds)
-    np.testing.assert_allclose(fitted, refit, rtol=1e-12)
-    contiguous = run_scale(SpreadOptions("contiguous", folds=4), model, X, y, cv_folds=folds)
-    np.testing.assert_allclose(contiguous, calibrate_spread(clone_of(model), X, y, folds=4).spread_scale_, rtol=1e-12)
-    assert run_scale(SpreadOptions(calibration="none"), model, X, y, cv_folds=folds) is None
+    fitted = run_spread(SpreadOptions(calibration="folds"), model.fit(X, y), X, y, cv_folds=folds, fold_fits=fits)
+    refit = run_spread(SpreadOptions(calibration="folds"), model, X, y, cv_folds=folds)
+    np.testing.assert_allclose(fitted.scale, refit.scale, rtol=1e-12)
+    assert (fitted.depth is None) == (refit.depth is None)
+    contiguous = run_spread(SpreadOptions("contiguous", folds=4), model, X, y, cv_folds=folds)
+    alone = calibrate_spread(clone_of(model), X, y, folds=4)
+    np.testing.assert_allclose(contiguous.scale, alone.spread_scale_, rtol=1e-12)
+    assert run_spread(SpreadOptions(calibration="none"), model, X, y, cv_folds=folds) is None
 
 
 def clone_of(model):
@@ -235,10 +238,15 @@ def test_spread_key_of_a_run_config(tmp_path):
     assert load_config(path).spread == SpreadOptions("forward", 0.95, 5)
     path.write_text(base + "spread: {calibration: folds, coverage: 0.9}\n")
     assert load_config(path).spread == SpreadOptions("folds", 0.9, 5)
+    path.write_text(base + "spread: {depth: false}\n")
+    assert load_config(path).spread == SpreadOptions("forward", 0.95, 5, depth=False)
     for bad, match in (("{calibration: blocks}", r"spread.calibration \(line 6\): must be one of .*got 'blocks'"),
                        ("{coverage: 1.0}", r"spread.coverage \(line 6\): must be a number in \[0.5, 1\)"),
                        ("{folds: 1}", r"spread.folds \(line 6\): must be .*got 1"),
-                       ("{fold: 3}", r"spread.fold .*did you mean 'folds'")):
+                       ("{fold: 3}", r"spread.fold .*did you mean 'folds'"),
+                       ("{calibration: none, folds: 7}",
+                        r"spread.folds \(line 6\): applies to calibration: forward or contiguous only"),
+                       ("{depth: 1}", r"spread.depth \(line 6\): must be true or false")):
         path.write_text(base + f"spread: {bad}\n")
         with pytest.raises(ConfigError, match=match):
             load_config(path)
@@ -312,7 +320,7 @@ def test_predict_std_adds_sd_columns_and_compensate_std_the_expected_residual(tm
 
 def test_forward_calibration_leaves_out_the_blocks_a_model_cannot_be_fitted_before(linear_data):
     from partcal.study.config import SpreadOptions
-    from partcal.study.spread import forward_folds, held_out_scores, run_scale, scale_from_scores
+    from partcal.study.spread import forward_folds, held_out_scores, run_spread, scale_from_scores
 
     X, y = linear_data
     model = PartitionedErrorModel(partition=KMeansPartition(n_regions=1, min_samples=15),
@@ -320,7 +328,7 @@ def test_forward_calibration_leaves_out_the_blocks_a_model_cannot_be_fitted_befo
     folds = forward_folds(len(X), 4)                # trained on 10, 20 and 30 rows: the first is refused
     with pytest.raises(PartcalError, match="a region needs at least 15 samples .*; got 10 samples in all"):
         clone_of(model).fit(X[folds[0][0]], y[folds[0][0]])
-    scale = run_scale(SpreadOptions("forward", folds=4), model, X, y, cv_folds=[])
+    scale = run_spread(SpreadOptions("forward", folds=4, depth=False), model, X, y, cv_folds=[]).scale
     np.testing.assert_allclose(scale, scale_from_scores(held_out_scores(model, X, y, folds[1:]), 0.95), rtol=1e-12)
 
 
@@ -387,7 +395,7 @@ def test_forward_calibration_leaves_out_a_fit_on_as_many_rows_as_terms():
     from scipy.stats import norm
 
     from partcal.study.config import SpreadOptions
-    from partcal.study.spread import run_scale
+    from partcal.study.spread import run_spread
 
     rng = np.random.default_rng(5)
     X = rng.uniform(-500.0, 500.0, (6, 3))
@@ -402,5 +410,143 @@ def test_forward_calibration_leaves_out_a_fit_on_as_many_rows_as_terms():
     leverage = phi[5] @ np.linalg.inv(phi[:5].T @ phi[:5]) @ phi[5]
     std = np.sqrt((1.0 + leverage) * rss / (5 - 4))
     expected = np.abs(y[5] - phi[5] @ coef) / std / norm.ppf(0.975)
-    scale = run_scale(SpreadOptions("forward", folds=5), model.fit(X, y), X, y, cv_folds=[])
+    scale = run_spread(SpreadOptions("forward", folds=5, depth=False), model.fit(X, y), X, y, cv_folds=[]).scale
     np.testing.assert_allclose(scale, expected, rtol=1e-8)
+
+
+# ---------------------------------------------------------------- the spread's growth with the inputs' depth
+def test_depth_is_the_mahalanobis_distance_with_held_inputs_at_the_smallest_moved_scatter():
+    from partcal.models.depth import DepthSpread
+
+    rng = np.random.default_rng(8)
+    X = np.column_stack([rng.normal(10, 3, 200), rng.normal(-5, 1, 200), np.full(200, 7.0)])
+    X[:, 1] += 0.5 * X[:, 0]                                   # correlated inputs; the third held at 7
+    at = np.array([[10.0, 0.0, 7.0], [16.0, 0.0, 7.0], [10.0, 0.0, 9.0]])
+    cov = np.cov(X, rowvar=False, bias=True)
+    cov[2, 2] = min(X[:, 0].std(), X[:, 1].std()) ** 2          # the held input: the smallest moved scatter
+    expected = np.sqrt(np.einsum("ij,jk,ik->i", at - X.mean(0), np.linalg.inv(cov), at - X.mean(0)))
+    depth = DepthSpread.of_inputs(X, beta=0.5)
+    np.testing.assert_allclose(depth.depth(at), expected, rtol=1e-9)
+    np.testing.assert_allclose(depth.factor(at), np.sqrt(1 + 0.5 * expected ** 2), rtol=1e-9)
+    assert DepthSpread.of_inputs(X[:1]) is None
+
+
+def _heteroscedastic(n, rng, growth=1.0):
+    """Inputs in a box and errors of a plane plus noise whose scatter grows with the distance from the middle."""
+    X = rng.uniform(-300.0, 300.0, (n, 3))
+    r = np.linalg.norm(X / 173.2, axis=1)                        # about the depth: the box's sd is 173.2
+    noise = rng.normal(size=(n, 3)) * (0.05 * np.sqrt(1 + growth * r ** 2))[:, None]
+    return X, X @ np.array([[0.01, 0, 0.002], [0, -0.02, 0], [0.003, 0, 0.01]]) + noise
+
+
+def test_depth_grows_the_spread_where_held_out_residuals_grow_and_covers_middle_and_edge():
+    from partcal.study.spread import depth_from_scores, held_out_depths
+
+    rng = np.random.default_rng(21)
+    X, y = _heteroscedastic(600, rng)
+    flat = calibrate_spread(ErrorModel(inputs="cartesian", solver="lstsq"), X, y, folds=5, depth=False)
+    grown = calibrate_spread(ErrorModel(inputs="cartesian", solver="lstsq"), X, y, folds=5)
+    assert flat.spread_depth_ is None and 0.3 < grown.spread_depth_.beta <= 4.0
+    truth = 1.0                                    # the noise's own growth, in the box's standard deviations
+    assert grown.spread_depth_.beta == pytest.approx(truth, rel=0.3)
+    X_new, y_new = _heteroscedastic(20_000, rng)
+    depth = np.linalg.norm(X_new / 173.2, axis=1)
+    middle, edge = depth < 0.7, depth > 1.6
+    cover = {}
+    for name, model in (("flat", flat), ("grown", grown)):
+        mean, std = model.predict_with_std(X_new)
+        inside = np.abs(y_new - mean) <= Z95 * std
+        cover[name] = (inside[middle].mean(), inside[edge].mean())
+    assert cover["flat"][0] > 0.99 and cover["flat"][1] < 0.935        # a spread the same everywhere: both wrong
+    assert 0.93 <= cover["grown"][0] <= 0.97 and 0.93 <= cover["grown"][1] <= 0.97
+    # homoscedastic residuals: no growth
+    X0 = rng.uniform(-300.0, 300.0, (600, 3))
+    scores = np.abs(rng.normal(size=(600, 3)))
+    assert depth_from_scores(scores, held_out_depths(X0, contiguous_folds(600, 5)), 0.95)[0] == 0.0
+
+
+def test_a_model_file_carries_the_depth_and_refuses_a_bad_one(tmp_path):
+    from partcal.errors import ModelFileError
+
+    rng = np.random.default_rng(22)
+    X, y = _heteroscedastic(300, rng)
+    model = calibrate_spread(ErrorModel(inputs="cartesian", solver="lstsq"), X, y, folds=5)
+    assert model.spread_depth_ is not None
+    path = tmp_path / "m.json"
+    save_model(model, path, name="m")
+    at = np.array([[0.0, 0, 0], [300.0, -300, 300], [2000.0, 0, 0]])
+    mean, std = load_predictor(path).predict(positions=at, return_std=True)
+    np.testing.assert_allclose(std, model.predict_with_std(at)[1], rtol=1e-12)
+    assert std[2, 0] > 5 * std[0, 0]                                   # far out: far wider
+    doc = json.loads(path.read_text())
+    del doc["checksum"]
+    for field, value, match in (("beta", -1.0, r"field 'spread_depth.beta': expected a finite number in \[0.0, 4.0\]; got -1.0"),
+                                ("whiten", [[1.0]], r"field 'spread_depth.whiten': expected shape \(3, 3\); got shape \(1, 1\)")):
+        bad = json.loads(json.dumps(doc))
+        bad["spread_depth"][field] = value
+        path.write_text(json.dumps(bad))
+        with pytest.raises(ModelFileError, match=match):
+            load_predictor(path)
+
+
+def test_a_hybrids_kinematic_part_counts_as_noise_only_what_its_residual_model_leaves(tmp_path):
+    from partcal.data.simulate import load_study, sample_configurations
+
+    study = load_study(ROOT / "configs" / "sk120_virtual.yaml")          # compliance and gears: DH leaves 0.5 mm
+    virtual, rng = study.robot, np.random.default_rng(0)
+
+    def draw(n):
+        q = sample_configurations(virtual.nominal, n, study.ranges_deg, study.fixed_deg, rng)
+        return q, virtual.measure(q, rng) - virtual.nominal.positions(q)
+
+    q, e = draw(85)
+    q_new, e_new = draw(1000)                                           # new poses like the data
+    alone = KinematicModel(robot=virtual.nominal).fit(q, e)
+    left = e - alone.predict(q)                                         # the DH fit's residuals, by hand
+    dh_variance = np.sum(left ** 2) / (left.size - alone.identification_.status.count("identified"))
+    hybrid = KinematicModel(robot=virtual.nominal, residual=ErrorModel(inputs="joint", degree=2, solver="lstsq"),
+                            random_state=0).fit(q, e)
+    resid_variance = np.mean(hybrid.residual_.predict_with_std(q)[1] ** 2)
+    assert hybrid.covariance_scale_ == pytest.approx(resid_variance / dh_variance, rel=1e-6)
+    assert alone.covariance_scale_ == 1.0 and hybrid.covariance_scale_ < 0.3
+    mean, std = hybrid.predict_with_std(q_new)
+    counted_twice = copy.copy(hybrid)
+    counted_twice.covariance_scale_ = 1.0
+    assert 0.93 <= np.mean(np.abs(e_new - mean) <= Z95 * std) <= 0.985
+    assert np.mean(np.abs(e_new - mean) <= Z95 * counted_twice.predict_with_std(q_new)[1]) > 0.985
+    path = tmp_path / "hybrid.json"
+    save_model(hybrid, path, name="hybrid")
+    assert json.loads(path.read_text())["model"]["covariance_scale"] == pytest.approx(hybrid.covariance_scale_)
+    np.testing.assert_allclose(load_predictor(path).predict(joints=q_new, return_std=True)[1], std, rtol=1e-9)
+
+
+def test_a_data_model_widens_where_a_joint_its_data_held_still_turns():
+    from partcal.data.simulate import load_study, sample_configurations
+
+    study = load_study(ROOT / "configs" / "sk120_virtual.yaml")
+    virtual, rng = study.robot, np.random.default_rng(4)
+
+    def draw(n, ranges, fixed):
+        q = sample_configurations(virtual.nominal, n, ranges, fixed, rng)
+        return q, virtual.measure(q, rng) - virtual.nominal.positions(q)
+
+    q, e = draw(85, study.ranges_deg, study.fixed_deg)                  # the wrist held at q4 = q5 = 0
+    q_turned, e_turned = draw(300, {**study.ranges_deg, 4: (-90, 90), 5: (-60, 60)}, {})
+    gp = GaussianProcessErrorModel(inputs="joint", restarts=0, random_state=0)
+    own = clone_of(gp).fit(q, e)
+    model = calibrate_spread(gp, q, e, folds=5)
+    # by hand: the training errors' variance, reached as the held joints move a few of the least moved joint's sd
+    length = q[:, [0, 1, 2, 5]].std(axis=0).min()
+    moved = np.sum((q_turned[:, 3:5] / length) ** 2, axis=1)
+    prior = (1.0 - np.exp(-0.5 * moved))[:, None] * e.var(axis=0)
+    np.testing.assert_allclose(model.spread_depth_.held_prior(q_turned), prior, rtol=1e-9)
+    mean, std = model.predict_with_std(q_turned)
+    calibrated_alone = model.std_validated(q_turned)[1] * model.spread_scale_ * model.spread_depth_.factor(q_turned)[:, None]
+    np.testing.assert_allclose(std, np.sqrt(calibrated_alone ** 2 + prior), rtol=1e-9)
+    assert np.mean(np.abs(e_turned - own.predict(q_turned)) <= Z95 * own.predict_with_std(q_turned)[1]) < 0.1
+    assert np.mean(np.abs(e_turned - mean) <= Z95 * std) > 0.9
+    held = model.predict_with_std(q[:5])[1]                            # where the data held them: no prior
+    np.testing.assert_allclose(held, model.std_validated(q[:5])[1] * model.spread_scale_
+                               * model.spread_depth_.factor(q[:5])[:, None], rtol=1e-12)
+    kinematic = calibrate_spread(KinematicModel(robot=virtual.nominal), q, e, folds=5)   # has its own prior
+    assert kinematic.spread_depth_ is None or kinematic.spread_depth_.held_variance is None

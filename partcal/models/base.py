@@ -227,11 +227,25 @@ class ErrorModelBase(RegressorMixin, BaseEstimator):
         return self.std_scaled(X, **per_row)
 
     def std_scaled(self, X: NDArray[np.float64], **per_row) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """:meth:`std_validated` times the calibrated scales ``spread_scale_`` (one per output) when the model
-        has them (:func:`partcal.study.spread.calibrate_spread`)."""
+        """:meth:`std_validated` times the calibrated scales ``spread_scale_`` (one per output) and the growth
+        with the inputs' depth ``spread_depth_`` (:class:`~partcal.models.depth.DepthSpread`), with the held
+        inputs' prior added, when the model has them (:func:`partcal.study.spread.calibrate_spread`)."""
         mean, std = self.std_validated(X, **per_row)
         scale = getattr(self, "spread_scale_", None)
-        return mean, std if scale is None else std * scale
+        depth = getattr(self, "spread_depth_", None)
+        if depth is not None:
+            factor = depth.factor(X)
+            std = std * (factor[:, None] if std.ndim == 2 else factor)
+        if scale is not None:
+            std = std * scale
+        prior = depth.held_prior(X) if depth is not None else None
+        if prior is not None:
+            std = np.sqrt(std ** 2 + (prior if std.ndim == 2 else prior[:, 0]))
+        return mean, std
+
+    #: Whether the model's own spread already holds a prior for what its data left unknown (a kinematic
+    #: model's unidentified parameters): then a calibration adds no held inputs' prior (models/depth.py).
+    own_prior = False
 
     def std_validated(self, X: NDArray[np.float64], **per_row) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """:meth:`predict_with_std` of inputs already checked as a finite ``(n, d)`` float array."""

@@ -118,6 +118,7 @@ class KinematicModel(ErrorModelBase):
         self.random_state = random_state
 
     kind = "kinematic"
+    own_prior = True        # the unidentified parameters' prior: no held inputs' prior of a calibration on top
     file_kind = "kinematic"
     takes_residual = True
     fits_pose_errors = True
@@ -215,7 +216,20 @@ class KinematicModel(ErrorModelBase):
                 residual.set_params(random_state=seed)
                 self.residual_ = PoseErrorModel(residual) if self.n_outputs_ == 6 else residual   # one per part
             self.residual_.fit(self._residual_inputs(X, nominal), leftover)
+        self.covariance_scale_ = self._hybrid_covariance_scale(X, nominal)
         return self._prepare()
+
+    def _hybrid_covariance_scale(self, X: NDArray[np.float64], nominal: NDArray[np.float64]) -> float:
+        """What the identified parameters' covariance is multiplied by: 1 alone; with a residual model, the
+        scatter the whole model leaves (the residual model's own variance at the training inputs, mean over
+        rows and axes) over the kinematic fit's residual variance, at most 1. The covariance ``sigma^2
+        (J^T J)^-1`` took all the kinematic fit left as noise; what the residual model explains of it is not
+        noise (counting it in both parts made a hybrid's interval cover 100% of new poses like the data)."""
+        own = self._noise_mm()
+        if self.residual_ is None or not own > 0 or self.residual_.spread_problem() is not None:
+            return 1.0
+        resid = self.residual_.std_validated(self._residual_inputs(X, nominal))[1][:, POSITION]
+        return float(min(1.0, np.mean(resid ** 2) / own ** 2))
 
     def _prepare(self) -> "KinematicModel":
         """Build what a prediction reads (after fitting or loading); returns self.
@@ -343,7 +357,9 @@ class KinematicModel(ErrorModelBase):
         The kinematic part's position variance is ``J(q) C J(q)^T`` per axis
         (``J`` the model's Jacobian at the commanded joints over the identified
         parameters, ``C`` their covariance ``sigma^2 (J^T J)^-1`` from the
-        fit), which grows where the joints leave the ranges of the data, plus
+        fit, with a residual model scaled by ``covariance_scale_``: what the
+        residual model explains is not noise), which grows where the joints
+        leave the ranges of the data, plus
         that of the geometric parameters the data did not identify, each with
         the prior standard deviation of its plausible error
         (:func:`~partcal.models.identification.prior_variance`: nil where the
@@ -364,7 +380,7 @@ class KinematicModel(ErrorModelBase):
         free = np.flatnonzero(np.array(table.status) == "identified")
         keep = free < own
         _, jac = model_jacobian(self.robot_, self.joint_errors_, X, table.value[:own], payload, self.parametrization_)
-        var = _quadratic(jac[:, free[keep]], table.covariance[np.ix_(keep, keep)])
+        var = _quadratic(jac[:, free[keep]], table.covariance[np.ix_(keep, keep)]) * self.covariance_scale_
         prior = table.prior_indices()
         if prior.size:      # tables written before the prior have none: the identified parameters' alone
             on_tool = prior < own           # a further target's offset moves no prediction of the primary target
@@ -443,6 +459,7 @@ class KinematicModel(ErrorModelBase):
                 **({"targets": {k: [float(v) for v in t] for k, t in self.targets_.items()},
                     "orientation": bool(self.orientation_)} if self.targets_ or self.orientation_ else {}),
                 "data_bounds": self.data_bounds_.tolist(), "active": self.active_.tolist(),
+                **({"covariance_scale": self.covariance_scale_} if self.covariance_scale_ != 1.0 else {}),
                 **({"fitted_payload_kg": [float(v) for v in self.fitted_payload_kg_]}
                    if getattr(self, "fitted_payload_kg_", None) is not None else {}),
                 "residual": body_of(self.residual_) if self.residual_ is not None else None}
@@ -485,6 +502,7 @@ class KinematicModel(ErrorModelBase):
         if np.any(model.data_bounds_[0] > model.data_bounds_[1]):
             r.fail("data_bounds", "a low bound exceeds its high bound")
         model.active_ = r.array("active", (n_in,), bool)
+        model.covariance_scale_ = r.number("covariance_scale", 0.0, 1.0) if "covariance_scale" in r.doc else 1.0
         model.fitted_payload_kg_ = r.array("fitted_payload_kg", (2,)) if "fitted_payload_kg" in r.doc else None
         if model.fitted_payload_kg_ is not None and not 0 <= model.fitted_payload_kg_[0] <= model.fitted_payload_kg_[1]:
             r.fail("fitted_payload_kg", "the smallest and largest payload of the data, 0 <= low <= high kg")

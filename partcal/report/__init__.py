@@ -145,8 +145,10 @@ def spread_rows(result: RunResult) -> dict | None:
             s = r.metrics[n].get("spread")
             cells.append("-" if s is None else f"{100 * s['coverage_95']:.1f}% ({np.mean(s['std_mean']):.3f})")
         scale = getattr(r.model, "spread_scale_", None)
+        depth = getattr(r.model, "spread_depth_", None)
         rows.append({"name": r.spec.name, "cells": cells,
-                     "scale": "own" if scale is None else " ".join(f"{v:.2f}" for v in scale[:3])})
+                     "scale": "own" if scale is None else " ".join(f"{v:.2f}" for v in scale[:3]),
+                     "beta": "-" if scale is None else f"{depth.beta if depth is not None else 0.0:.3g}"})
     spread = result.config.spread
     blocks = min(spread.folds, len(result.datasets["identification"]))      # at most one block a row
     how = {"forward": f"scaled so that {100 * spread.coverage:g}% of the residuals of the identification set's "
@@ -158,6 +160,9 @@ def spread_rows(result: RunResult) -> dict | None:
            "folds": f"scaled so that {100 * spread.coverage:g}% of the run's cross-validation residuals fall "
                     "within the interval",
            "none": "not calibrated: each model's own spread"}[spread.calibration]
+    if spread.calibration != "none" and spread.depth:
+        how += ("; it grows as sqrt(1 + beta d^2) with the depth d of the pose (its distance from the middle of "
+                "the identification inputs, in their standard deviations) where the held-out residuals do")
     return {"datasets": names, "rows": rows, "calibration": how} if rows else None
 
 

@@ -167,11 +167,14 @@ class SpreadOptions:
     predicted by the model fitted on all the others; ``folds`` more fits), ``folds`` (the run's own
     cross-validation fits, none added; they mix early and late poses) or ``none`` (the model's own spread).
     ``coverage``: the share of held-out residuals the interval ``mean +- z std`` is scaled to hold.
+    ``depth``: let the spread grow with the inputs' distance from the middle of the identification inputs
+    where the held-out residuals do (:mod:`partcal.models.depth`).
     """
 
     calibration: str = "forward"
     coverage: float = 0.95
     folds: int = 5
+    depth: bool = True
 
 
 @dataclass(frozen=True)
@@ -286,12 +289,17 @@ def load_config(path: str | Path) -> RunConfig:
 
 
 def _spread(sec: Section) -> SpreadOptions:
-    """``spread: {calibration: forward | contiguous | folds | none, coverage: 0.95, folds: 5}`` (all optional)."""
+    """``spread: {calibration: forward | contiguous | folds | none, coverage: 0.95, folds: 5, depth: true}`` (all
+    optional); ``folds`` only with ``forward`` or ``contiguous`` (the others cut no blocks)."""
     out = SpreadOptions(
         calibration=sec.get("calibration", "str", default="forward", check=one_of(*SPREAD_CALIBRATIONS).problem),
         coverage=sec.get("coverage", "float", default=0.95,
                          check=lambda v: None if 0.5 <= v < 1.0 else "a number in [0.5, 1)"),
-        folds=sec.get("folds", "int", default=5, check=integer(2, 100).problem))
+        folds=sec.get("folds", "int", default=5, check=integer(2, 100).problem),
+        depth=sec.get("depth", "bool", default=True))
+    if sec.has("folds") and out.calibration not in ("forward", "contiguous"):
+        sec.fail(sec.path("folds"), f"applies to calibration: forward or contiguous only (calibration: "
+                                    f"{out.calibration} cuts no blocks; 'folds' reads the run's cv_folds)")
     sec.done()
     return out
 

@@ -34,7 +34,7 @@ from .prepare import PreparedRun, model_inputs
 from .results import ModelResult
 from .scoring import Outputs, spread_summary
 from .selection import CVPlan, choose_granularity, fits_on_folds, nested_residuals
-from .spread import run_scale
+from .spread import run_spread
 
 log = logging.getLogger(__name__)
 
@@ -142,7 +142,7 @@ def fit_model(spec: ModelSpec, seed: int, data: dict[str, Measurements], cv: CVP
     the cross-validation has taken :data:`SLOW_SECONDS`. ``outputs``: what the
     model fits and what its CV score reads. ``n_jobs``: folds fitted at a time (:func:`worker_split`).
     ``spread``: how the model's spread is calibrated on the identification set
-    (:func:`~partcal.study.spread.run_scale`).
+    (:func:`~partcal.study.spread.run_spread`).
     """
     with held_warnings() as said:
         result = _fit_model(spec, seed, data, cv, robot, own_frame, lines, outputs, n_jobs, spread)
@@ -197,7 +197,9 @@ def _fit_model(spec, seed, data, cv, robot, own_frame, lines, outputs, n_jobs=1,
             cv_regions = fold_regions([m.regions_model() for m in fold_fits])
         _note_other_optima(fold_fits, estimator)
     start = time.perf_counter()
-    estimator.spread_scale_ = run_scale(spread, estimator, X, y, cv_folds=cv.folds, fold_fits=fold_fits, per_row=rows)
+    calibrated = run_spread(spread, estimator, X, y, cv_folds=cv.folds, fold_fits=fold_fits, per_row=rows)
+    if calibrated is not None:
+        calibrated.apply(estimator)
     spread_seconds = time.perf_counter() - start
     part = estimator.regions_model()
     if cv_regions is not None and cv_regions[0] < part.partition_.n_regions:

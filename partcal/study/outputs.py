@@ -129,13 +129,16 @@ def _top_foreign(name: str, allowed: set[str]) -> str:
 
 def _spread_calibration(cfg, r, rows: int) -> dict:
     """How the model's spread was calibrated: the config's ``spread`` options and the scale of each output
-    (None: the model's own spread; the seconds it took are the entry's ``spread_seconds``). ``folds`` is the
+    (None: the model's own spread; the seconds it took are the entry's ``spread_seconds``) and ``depth_beta``,
+    how fast it grows with the inputs' depth (0: not at all; None without a calibration). ``folds`` is the
     number of blocks cut from the ``rows`` identification rows: at most one a row."""
     scale = getattr(r.model, "spread_scale_", None)
+    depth = getattr(r.model, "spread_depth_", None)
     opts = cfg.spread
-    return {"method": opts.calibration, "coverage": opts.coverage,
+    return {"method": opts.calibration, "coverage": opts.coverage, "depth": opts.depth,
             **({"folds": min(opts.folds, rows)} if opts.calibration in ("contiguous", "forward") else {}),
-            "scale": None if scale is None else [round(float(v), 6) for v in scale]}
+            "scale": None if scale is None else [round(float(v), 6) for v in scale],
+            "depth_beta": None if scale is None else round(depth.beta if depth is not None else 0.0, 6)}
 
 
 def metrics_document(result: RunResult) -> dict:

@@ -30,6 +30,7 @@ from .. import __version__
 from .._validation import FieldReader
 from .._io import atomic_write
 from ..errors import ModelFileError, PartcalError
+from ..models.depth import BETA_MAX, DepthSpread
 from ..models.kinds import body_of, model_from_body
 from ..robot.description import robot_from_dict, robot_to_dict
 from ..robot.kinematics import Robot
@@ -46,8 +47,10 @@ def model_to_dict(model, *, name: str = "", robot: Robot | None = None, extra: d
     out.update(body_of(model))
     if getattr(model, "train_inputs_", None) is not None:
         out["train_inputs"] = model.train_inputs_.tolist()
-    if getattr(model, "spread_scale_", None) is not None:      # a calibrated spread (models/spread.py)
+    if getattr(model, "spread_scale_", None) is not None:      # a calibrated spread (study/spread.py)
         out["spread_scale"] = np.asarray(model.spread_scale_, dtype=float).tolist()
+    if getattr(model, "spread_depth_", None) is not None:      # its growth with the depth (models/depth.py)
+        out["spread_depth"] = model.spread_depth_.to_dict()
     out["fit"] = extra or {}
     return out
 
@@ -143,5 +146,18 @@ def model_from_dict(doc: Any, source: str = "model") -> Any:
         model.spread_scale_ = r.array("spread_scale", (model.n_outputs(),))
         if np.any(model.spread_scale_ <= 0):
             r.fail("spread_scale", "the calibrated scales of the spread must be > 0")
+    model.spread_depth_ = _spread_depth(r, model.n_features_in_, model.n_outputs()) if "spread_depth" in r.doc else None
     model.check_file(r)
     return model._prepare()
+
+
+def _spread_depth(r: FieldReader, n_inputs: int, n_outputs: int) -> DepthSpread:
+    """A model file's ``spread_depth`` (the spread's growth with the inputs' depth, models/depth.py)."""
+    sec = r.sub("spread_depth")
+    held = sec.array("held", (n_inputs,), bool) if sec.doc.get("held") is not None else None
+    variance = sec.array("held_variance", (n_outputs,)) if sec.doc.get("held_variance") is not None else None
+    if variance is not None and (held is None or np.any(variance < 0)):
+        sec.fail("held_variance", "the held inputs' prior needs 'held' and variances >= 0")
+    return DepthSpread(sec.array("centre", (n_inputs,)), sec.array("whiten", (n_inputs, n_inputs)),
+                       sec.number("beta", 0.0, BETA_MAX), held,
+                       sec.number("length", 1e-12) if "length" in sec.doc else 1.0, variance)

@@ -24,6 +24,7 @@ identification data are used: the test sets never set a scale.
 from __future__ import annotations
 
 import logging
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
@@ -31,6 +32,7 @@ from scipy.stats import norm
 from sklearn.base import clone
 
 from ..errors import DataError, PartcalError, held_warnings
+from ..models.depth import BETA_MAX, DepthSpread
 from .selection import rows_of
 
 log = logging.getLogger(__name__)
@@ -127,7 +129,84 @@ def scale_from_scores(scores: NDArray[np.float64], coverage: float) -> NDArray[n
     return scale
 
 
-def calibrate_spread(model, X, y, *, folds: int = 5, coverage: float = 0.95, per_row: dict | None = None):
+def held_out_depths(X, folds) -> NDArray[np.float64]:
+    """The depth (:class:`~partcal.models.depth.DepthSpread`) of every held-out row among the training rows of
+    its fold, shape (n,); NaN for rows no fold holds out and for folds of fewer than two training rows."""
+    X = np.asarray(X, dtype=float)
+    depths = np.full(len(X), np.nan)
+    for train, test in folds:
+        fold = DepthSpread.of_inputs(X[train])
+        if fold is not None:
+            depths[test] = fold.depth(X[test])
+    return depths
+
+
+def depth_from_scores(scores: NDArray[np.float64], depths: NDArray[np.float64], coverage: float
+                      ) -> tuple[float, NDArray[np.float64]]:
+    """``(beta, scale)``: how fast the spread grows with the depth, and each output's scale.
+
+    ``beta`` (on a grid from 0 to :data:`~partcal.models.depth.BETA_MAX`) maximises the likelihood of the held-out
+    ``scores`` (n, outputs) as half-normal with standard deviation ``c_k sqrt(1 + beta d^2)`` (``c_k`` of output
+    ``k`` at its maximum-likelihood value), a proper score, so a wider spread out at the edges is chosen only
+    when the residuals there are larger; the scales then make ``coverage`` of the scores divided by
+    ``sqrt(1 + beta d^2)`` fall within ``z`` (:func:`scale_from_scores`). Rows without a finite depth do not
+    take part in choosing ``beta``.
+
+    >>> d = np.linspace(0.0, 3.0, 400)
+    >>> scores = np.abs(np.random.default_rng(0).normal(size=(400, 1))) * np.sqrt(1 + 2.0 * d ** 2)[:, None]
+    >>> float(depth_from_scores(scores, d, 0.95)[0]) > 1.0, float(depth_from_scores(scores[:, :1] * 0 + 1, d, 0.95)[0])
+    (True, 0.0)
+    """
+    flat = np.asarray(scores, dtype=float).reshape(len(scores), -1)
+    depths = np.asarray(depths, dtype=float)
+    usable = np.isfinite(flat) & (flat > 0) & np.isfinite(depths)[:, None]
+    best_beta, best = 0.0, -np.inf
+    for beta in BETA_GRID:
+        g2 = 1.0 + beta * depths ** 2
+        loglik = 0.0
+        for k in range(flat.shape[1]):
+            rows = usable[:, k]
+            if rows.sum() < 2:
+                continue
+            c2 = np.mean(flat[rows, k] ** 2 / g2[rows])
+            loglik -= 0.5 * (rows.sum() * np.log(c2) + np.log(g2[rows]).sum())
+        if loglik > best + 1e-9 * max(1.0, abs(loglik)):       # a wider growth only when it is clearly likelier
+            best_beta, best = float(beta), loglik
+    growth = np.sqrt(1.0 + best_beta * np.where(np.isfinite(depths), depths, 0.0) ** 2)
+    return best_beta, scale_from_scores(flat / growth[:, None], coverage)
+
+
+BETA_GRID = np.concatenate([[0.0], np.logspace(-3, np.log10(BETA_MAX), 25)])
+
+
+@dataclass(frozen=True)
+class CalibratedSpread:
+    """A calibrated spread: each output's ``scale`` and, when it grows with the inputs' depth, ``depth``."""
+
+    scale: NDArray[np.float64]
+    depth: DepthSpread | None = None
+
+    def apply(self, model):
+        """Give ``model`` this spread (``spread_scale_``, ``spread_depth_``); returns it."""
+        model.spread_scale_, model.spread_depth_ = self.scale, self.depth
+        return model
+
+
+def calibrated(scores, X, folds, coverage: float, depth: bool = True, y=None) -> CalibratedSpread:
+    """The spread the held-out ``scores`` of ``folds`` call for: growing with the depth (``beta`` > 0) only when
+    they show it, and only with ``depth``; with the training errors ``y`` (of a model without a prior of its
+    own, :attr:`~partcal.models.base.ErrorModelBase.own_prior`) also the prior of inputs the data held still."""
+    if not depth:
+        return CalibratedSpread(scale_from_scores(scores, coverage))
+    beta, scale = depth_from_scores(scores, held_out_depths(X, folds), coverage)
+    whole = DepthSpread.of_inputs(X, beta, y)
+    if whole is None or (beta == 0.0 and whole.held_prior(X[:1]) is None):
+        return CalibratedSpread(scale_from_scores(scores, coverage))
+    return CalibratedSpread(scale, whole)
+
+
+def calibrate_spread(model, X, y, *, folds: int = 5, coverage: float = 0.95, per_row: dict | None = None,
+                     depth: bool = True):
     """Fit ``model`` on ``X, y`` and scale its spread so that held-out blocks reach ``coverage``; returns it.
 
     Parameters
@@ -142,19 +221,21 @@ def calibrate_spread(model, X, y, *, folds: int = 5, coverage: float = 0.95, per
         The share of held-out residuals the interval ``mean +- z std`` is made to hold.
     per_row : dict, optional
         Per-row arguments of ``fit`` and ``predict`` (a payload per pose).
+    depth : bool
+        Let the spread grow with the inputs' depth where the held-out residuals do (:func:`depth_from_scores`).
     """
     if not 0.0 < coverage < 1.0:
         raise DataError(f"the coverage of a calibrated spread must lie in (0, 1); got {coverage!r}")
     X, y = np.asarray(X, dtype=float), np.asarray(y, dtype=float)
-    scores = held_out_scores(model, X, y, contiguous_folds(len(X), folds), per_row)
+    blocks = contiguous_folds(len(X), folds)
+    scores = held_out_scores(model, X, y, blocks, per_row)
     model.fit(X, y, **(per_row or {}))
-    model.spread_scale_ = scale_from_scores(scores, coverage)
-    return model
+    return calibrated(scores, X, blocks, coverage, depth, None if model.own_prior else y).apply(model)
 
 
-def run_scale(options, model, X, y, *, cv_folds: list, fold_fits: list | None = None,
-              per_row: dict | None = None) -> NDArray[np.float64] | None:
-    """The spread scales of a run's model fitted on ``X, y`` (the identification set), by the run's
+def run_spread(options, model, X, y, *, cv_folds: list, fold_fits: list | None = None,
+               per_row: dict | None = None) -> CalibratedSpread | None:
+    """The calibrated spread of a run's model fitted on ``X, y`` (the identification set), by the run's
     ``spread`` options (:class:`~partcal.study.config.SpreadOptions`); None when ``calibration: none`` or the
     model has no spread.
 
@@ -163,11 +244,13 @@ def run_scale(options, model, X, y, *, cv_folds: list, fold_fits: list | None = 
     one block per row); ``folds`` reads the run's cross-validation: ``fold_fits`` (the models already
     fitted on ``cv_folds``) when given, else clones fitted on ``cv_folds`` (a nested CV keeps no fits of the
     chosen granularity). A block whose fit the model refuses (too few rows) is left out; with none left, or
-    no spread on any, the model keeps its own spread (None, warned).
+    no spread on any, the model keeps its own spread (None, warned). With ``options.depth`` the spread grows
+    with the inputs' depth as far as the held-out residuals show (:func:`depth_from_scores`).
     """
     if options.calibration == "none" or model.spread_problem() is not None or len(X) < 2:
         return None
     if options.calibration == "folds" and fold_fits:
+        folds = cv_folds
         scores = fitted_scores(fold_fits, X, y, cv_folds, per_row)
     else:
         blocks = {"contiguous": contiguous_folds, "forward": forward_folds}.get(options.calibration)
@@ -179,4 +262,4 @@ def run_scale(options, model, X, y, *, cv_folds: list, fold_fits: list | None = 
         log.warning("the spread could not be calibrated (no held-out block could be predicted with a spread): "
                     "the model's own spread is kept")
         return None
-    return scale_from_scores(scores, options.coverage)
+    return calibrated(scores, X, folds, options.coverage, options.depth, None if model.own_prior else y)

@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import logging
 import os
+import re
 import sys
 import time
 import warnings
@@ -648,10 +649,19 @@ def _plan_iso9283(args) -> int:
 
 
 class _Parser(argparse.ArgumentParser):
-    """argparse with the project's rule for bad input: one line on stderr, exit 2 (no usage block)."""
+    """argparse with the project's rule for bad input: one line on stderr, exit 2 (no usage block); a negative
+    number in any notation (``-650``, ``-0.5``, ``-1e3``) is a value, not an option (argparse's own rule
+    knows no exponent, so ``--floor-mm -1e3`` read ``-1e3`` as an option)."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = _NEGATIVE_NUMBER
 
     def error(self, message: str):
         self.exit(2, f"partcal: error: {self.prog}: {message} (see '{self.prog} --help')\n")
+
+
+_NEGATIVE_NUMBER = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?$")
 
 
 def _int_list(text: str) -> tuple[int, ...]:

@@ -117,6 +117,7 @@ def test_candidates_below_the_floor_are_refused_naming_the_row_and_the_point(tmp
 @pytest.mark.parametrize("args, message", [
     (["--floor-mm", "nan"], r"--floor-mm must be a finite number of mm .*got nan"),
     (["--clearance-mm", "-5"], r"--clearance-mm must be a number of mm >= 0; got -5.0"),
+    (["--clearance-mm", "-1e1"], r"--clearance-mm must be a number of mm >= 0; got -10.0"),   # an exponent: a value
     (["--no-floor", "--floor-mm", "0"], r"--no-floor goes without --floor-mm"),
 ])
 def test_bad_floor_options_get_one_line_and_exit_2(tmp_path, args, message):
@@ -154,3 +155,11 @@ def test_a_floor_takes_numpy_numbers_and_refuses_a_bool():
     assert type(floor.height_mm) is float and floor == Floor(-650.0, 150.0)
     with pytest.raises(PartcalError, match=r"the floor's height must be a finite number of mm; got True"):
         Floor(True)
+
+
+def test_a_negative_number_with_an_exponent_is_a_value_not_an_option():
+    from partcal.cli import build_parser
+
+    for text in ("-5e2", "-500", "-500.0", "-.5e3", "-5E+2"):
+        args = build_parser().parse_args(["plan", "universal_robots_ur10", "-o", "p.csv", "--floor-mm", text])
+        assert args.floor_mm == -500.0, text

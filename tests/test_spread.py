@@ -550,3 +550,19 @@ def test_a_data_model_widens_where_a_joint_its_data_held_still_turns():
                                * model.spread_depth_.factor(q[:5])[:, None], rtol=1e-12)
     kinematic = calibrate_spread(KinematicModel(robot=virtual.nominal), q, e, folds=5)   # has its own prior
     assert kinematic.spread_depth_ is None or kinematic.spread_depth_.held_variance is None
+
+
+def test_a_joint_that_jitters_in_the_data_is_held_for_the_depth_and_its_prior():
+    from partcal.models.depth import DepthSpread
+
+    rng = np.random.default_rng(9)
+    X = np.column_stack([rng.uniform(-60, 60, 100), rng.uniform(-160, -100, 100), np.zeros(100)])
+    y = rng.normal(0, 2.0, (100, 3))
+    jitter = X.copy()
+    jitter[:, 2] = rng.uniform(-0.004, 0.004, 100)                  # within the data layer's 0.01 degree
+    at = np.array([[0.0, -130.0, 0.0], [0.0, -130.0, 30.0]])
+    exact, jittered = DepthSpread.of_inputs(X, 0.5, y), DepthSpread.of_inputs(jitter, 0.5, y)
+    assert jittered.held.tolist() == [False, False, True]
+    np.testing.assert_allclose(jittered.depth(at), exact.depth(at), rtol=1e-3, atol=1e-3)
+    np.testing.assert_allclose(jittered.held_prior(at), exact.held_prior(at), rtol=1e-3, atol=1e-6)
+    assert jittered.depth(at)[1] < 10                    # 30 degrees in the smallest moved sd (17), not in 0.002

@@ -5,7 +5,8 @@ what it leaves, a GP with few poses all fit worse towards the edges of the data 
 middle, and worse still beyond them. :class:`DepthSpread` measures the *depth* ``d`` of an
 input: its Mahalanobis distance from the training inputs' mean, in their own covariance (an
 input the training data held still, a wrist at q4 = 0, counts with the smallest standard
-deviation ``l`` of the inputs that moved, so turning it is leaving the data). The spread is
+deviation ``l`` of the inputs that moved, so turning it is leaving the data; held is the data
+layer's rule, a span of at most 0.01 degree or mm, so a joint that jitters is held too). The spread is
 multiplied by ``sqrt(1 + beta d^2)``: 1 at the middle, growing linearly with ``d`` far out.
 ``beta`` (between 0 and :data:`BETA_MAX`) is fitted to held-out residuals by
 :func:`partcal.study.spread.depth_from_scores`; ``beta = 0`` is a spread the same everywhere.
@@ -25,6 +26,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+
+from ..metrics import held_joints
 
 BETA_MAX = 4.0          # at one standard deviation of the data from their middle, at most sqrt(5) times as wide
 
@@ -54,7 +57,7 @@ class DepthSpread:
         if X.ndim != 2 or len(X) < 2:
             return None
         spread = X.std(axis=0)
-        moved = spread > 1e-9 * max(1.0, float(np.abs(X).max()))
+        moved = ~held_joints(X)
         floor = float(spread[moved].min()) if moved.any() else 1.0
         cov = np.atleast_2d(np.cov(X, rowvar=False, bias=True)) + np.diag(np.where(moved, 0.0, floor ** 2))
         w, v = np.linalg.eigh(cov)

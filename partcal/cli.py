@@ -126,7 +126,7 @@ def _cmd_predict(args) -> int:
     std = None
     if args.std:
         errors, std = errors
-    predictor.refuse_implausible(X, errors, source=args.input)     # nothing is written then
+    predictor.refuse_implausible(X, errors, source=args.input, std=std)     # nothing is written then
     given = [X] if payload is None else [X, payload[:, None]]
     header = table.columns + (["payload_kg"] if payload is not None else []) + ["dx", "dy", "dz"] + (
         TURN_COLUMNS if predictor.predicts_pose else [])

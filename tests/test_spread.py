@@ -246,7 +246,9 @@ def test_spread_key_of_a_run_config(tmp_path):
                        ("{fold: 3}", r"spread.fold .*did you mean 'folds'"),
                        ("{calibration: none, folds: 7}",
                         r"spread.folds \(line 6\): applies to calibration: forward or contiguous only"),
-                       ("{depth: 1}", r"spread.depth \(line 6\): must be true or false")):
+                       ("{depth: 1}", r"spread.depth \(line 6\): must be true or false"),
+                       ("{calibration: none, depth: false}",
+                        r"spread.depth \(line 6\): applies to a calibrated spread only")):
         path.write_text(base + f"spread: {bad}\n")
         with pytest.raises(ConfigError, match=match):
             load_config(path)
@@ -566,3 +568,74 @@ def test_a_joint_that_jitters_in_the_data_is_held_for_the_depth_and_its_prior():
     np.testing.assert_allclose(jittered.depth(at), exact.depth(at), rtol=1e-3, atol=1e-3)
     np.testing.assert_allclose(jittered.held_prior(at), exact.held_prior(at), rtol=1e-3, atol=1e-6)
     assert jittered.depth(at)[1] < 10                    # 30 degrees in the smallest moved sd (17), not in 0.002
+
+
+def test_inputs_the_data_moved_together_count_as_held_not_as_a_direction_of_no_scatter():
+    from partcal.models.depth import DepthSpread
+
+    rng = np.random.default_rng(12)
+    q = rng.uniform(-60, 60, (85, 3))
+    coupled = np.column_stack([q, q[:, 0]])                  # q4 follows q1 in every pose
+    depth = DepthSpread.of_inputs(coupled)
+    step = coupled[:1].copy()
+    step[0, 3] += 1.0                                         # one degree off the coupling
+    assert depth.depth(step)[0] - depth.depth(coupled[:1])[0] < 1.0 / q.std(axis=0).min() + 1e-9
+    plane = rng.uniform(0, 1000, (100, 2))
+    xyz = np.column_stack([plane, 1000.0 - plane[:, 0]])     # a tilted plane: x + z constant
+    off = np.array([[500.0, 500.0, 510.0]])                  # 10 mm off it, in its middle
+    assert DepthSpread.of_inputs(xyz).depth(off)[0] < 0.1
+    nearly = xyz + rng.normal(0, 0.5, xyz.shape) * [1, 0, 1]  # x + z scatters by 0.7 mm only: at least l / 10
+    assert DepthSpread.of_inputs(nearly).depth(off)[0] < 10 / (0.1 * xyz.std(axis=0).min()) + 1.0
+
+
+def test_a_one_output_model_calibrates_as_a_column_does(linear_data):
+    X, y = linear_data
+    flat = calibrate_spread(ErrorModel(inputs="cartesian", solver="lstsq"), X, y[:, 0], folds=4)
+    column = calibrate_spread(ErrorModel(inputs="cartesian", solver="lstsq"), X, y[:, :1], folds=4)
+    np.testing.assert_allclose(flat.spread_scale_, column.spread_scale_, rtol=1e-12)
+
+
+def test_bad_spread_fields_of_a_model_file_are_refused_naming_the_field(tmp_path, noisy_sk120):
+    from partcal.errors import ModelFileError
+
+    virtual, draw, ranges = noisy_sk120
+    q, e = draw(60, ranges)
+    for model, name, edit, match in (
+            (KinematicModel(robot=virtual.nominal).fit(q, e), "dh", lambda d: d["model"].update(covariance_scale=0.5),
+             r"field 'model.covariance_scale': a model without a residual model .*got 0.5"),
+            (calibrate_spread(KinematicModel(robot=virtual.nominal), q, e, folds=4), "dh2",
+             lambda d: d.update(spread_depth={"centre": [0.0] * 6, "whiten": np.eye(6).tolist(), "beta": 0.0,
+                                              "held": [False] * 6, "length": 1.0, "held_variance": [1.0] * 3}),
+             r"field 'spread_depth.held_variance': a kinematic model has its own prior"),
+            (calibrate_spread(ErrorModel(inputs="joint", solver="lstsq"), q, e, folds=4), "sdp",
+             lambda d: d.update(spread_depth={"centre": [0.0] * 6, "whiten": np.eye(6).tolist(), "beta": 0.0,
+                                              "held": None, "length": 1.0, "held_variance": [1.0] * 3}),
+             r"field 'spread_depth.held': the held inputs' prior .*needs")):
+        path = tmp_path / f"{name}.json"
+        save_model(model, path, name=name)
+        doc = json.loads(path.read_text())
+        del doc["checksum"]
+        edit(doc)
+        path.write_text(json.dumps(doc))
+        with pytest.raises(ModelFileError, match=match):
+            load_predictor(path)
+
+
+def test_predict_refuses_a_spread_beyond_meaning_and_writes_nothing(tmp_path, noisy_sk120):
+    virtual, draw, ranges = noisy_sk120
+    q, e = draw(60, ranges)
+    model = calibrate_spread(ErrorModel(inputs="joint", solver="lstsq"), q, e, folds=4)
+    path = tmp_path / "m.json"
+    save_model(model, path, name="m", robot=virtual.nominal)
+    doc = json.loads(path.read_text())
+    del doc["checksum"]
+    doc["spread_depth"] = {"centre": q.mean(axis=0).tolist(), "whiten": (np.eye(6) * 1e200).tolist(), "beta": 4.0}
+    path.write_text(json.dumps(doc))
+    points = tmp_path / "q.csv"
+    points.write_text("q1,q2,q3,q4,q5,q6\n" + ",".join(f"{v:.6f}" for v in q[0] + 1.0) + "\n")
+    out = tmp_path / "out.csv"
+    assert partcal_cli("predict", str(path), str(points), "-o", str(out)).returncode == 0   # the mean is fine
+    out.unlink()
+    res = partcal_cli("predict", str(path), str(points), "-o", str(out), "--std")
+    assert res.returncode == 2 and res.stderr.count("\n") == 1 and not out.exists()
+    assert "data row 1: the standard deviation of the predicted error is not finite" in res.stderr

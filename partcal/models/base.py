@@ -233,14 +233,13 @@ class ErrorModelBase(RegressorMixin, BaseEstimator):
         mean, std = self.std_validated(X, **per_row)
         scale = getattr(self, "spread_scale_", None)
         depth = getattr(self, "spread_depth_", None)
-        if depth is not None:
-            factor = depth.factor(X)
-            std = std * (factor[:, None] if std.ndim == 2 else factor)
+        if depth is not None:                               # std is (n, outputs), as std_validated's
+            std = std * depth.factor(X)[:, None]
         if scale is not None:
             std = std * scale
         prior = depth.held_prior(X) if depth is not None else None
         if prior is not None:
-            std = np.sqrt(std ** 2 + (prior if std.ndim == 2 else prior[:, 0]))
+            std = np.sqrt(std ** 2 + prior)
         return mean, std
 
     #: Whether the model's own spread already holds a prior for what its data left unknown (a kinematic

@@ -6,7 +6,9 @@ middle, and worse still beyond them. :class:`DepthSpread` measures the *depth* `
 input: its Mahalanobis distance from the training inputs' mean, in their own covariance (an
 input the training data held still, a wrist at q4 = 0, counts with the smallest standard
 deviation ``l`` of the inputs that moved, so turning it is leaving the data; held is the data
-layer's rule, a span of at most 0.01 degree or mm, so a joint that jitters is held too). The spread is
+layer's rule, a span of at most 0.01 degree or mm, so a joint that jitters is held too; so does a
+combination of inputs the data held, q6 = q1 or a tilted plane, and no direction counts with less
+than ``l / 10``). The spread is
 multiplied by ``sqrt(1 + beta d^2)``: 1 at the middle, growing linearly with ``d`` far out.
 ``beta`` (between 0 and :data:`BETA_MAX`) is fitted to held-out residuals by
 :func:`partcal.study.spread.depth_from_scores`; ``beta = 0`` is a spread the same everywhere.
@@ -27,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from ..metrics import held_joints
+from ..metrics import HELD_TOLERANCE_DEG, held_joints
 
 BETA_MAX = 4.0          # at one standard deviation of the data from their middle, at most sqrt(5) times as wide
 
@@ -59,9 +61,11 @@ class DepthSpread:
         spread = X.std(axis=0)
         moved = ~held_joints(X)
         floor = float(spread[moved].min()) if moved.any() else 1.0
-        cov = np.atleast_2d(np.cov(X, rowvar=False, bias=True)) + np.diag(np.where(moved, 0.0, floor ** 2))
-        w, v = np.linalg.eigh(cov)
-        w = np.maximum(w, 1e-12 * w.max())
+        w, v = np.linalg.eigh(np.atleast_2d(np.cov(X, rowvar=False, bias=True)))
+        # a direction the data held still (a held input, or inputs moved together: q6 = q1, a tilted plane)
+        # counts with the least moved input's scatter, as a held input does; no direction with less than a
+        # tenth of it, so a step off a nearly held combination is not thousands of standard deviations
+        w = np.where(w <= HELD_TOLERANCE_DEG ** 2, floor ** 2, np.maximum(w, (0.1 * floor) ** 2))
         held_variance = None
         if y is not None and not moved.all():
             held_variance = np.asarray(y, dtype=float).reshape(len(X), -1).var(axis=0)

@@ -503,6 +503,9 @@ class KinematicModel(ErrorModelBase):
             r.fail("data_bounds", "a low bound exceeds its high bound")
         model.active_ = r.array("active", (n_in,), bool)
         model.covariance_scale_ = r.number("covariance_scale", 0.0, 1.0) if "covariance_scale" in r.doc else 1.0
+        if model.covariance_scale_ != 1.0 and r.doc.get("residual") is None:
+            r.fail("covariance_scale", f"a model without a residual model counts all its fit leaves as noise: "
+                                       f"expected 1 or no field; got {model.covariance_scale_!r}")
         model.fitted_payload_kg_ = r.array("fitted_payload_kg", (2,)) if "fitted_payload_kg" in r.doc else None
         if model.fitted_payload_kg_ is not None and not 0 <= model.fitted_payload_kg_[0] <= model.fitted_payload_kg_[1]:
             r.fail("fitted_payload_kg", "the smallest and largest payload of the data, 0 <= low <= high kg")

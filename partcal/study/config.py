@@ -300,6 +300,8 @@ def _spread(sec: Section) -> SpreadOptions:
     if sec.has("folds") and out.calibration not in ("forward", "contiguous"):
         sec.fail(sec.path("folds"), f"applies to calibration: forward or contiguous only (calibration: "
                                     f"{out.calibration} cuts no blocks; 'folds' reads the run's cv_folds)")
+    if sec.has("depth") and out.calibration == "none":
+        sec.fail(sec.path("depth"), "applies to a calibrated spread only (calibration: none keeps each model's own)")
     sec.done()
     return out
 

@@ -146,18 +146,24 @@ def model_from_dict(doc: Any, source: str = "model") -> Any:
         model.spread_scale_ = r.array("spread_scale", (model.n_outputs(),))
         if np.any(model.spread_scale_ <= 0):
             r.fail("spread_scale", "the calibrated scales of the spread must be > 0")
-    model.spread_depth_ = _spread_depth(r, model.n_features_in_, model.n_outputs()) if "spread_depth" in r.doc else None
+    model.spread_depth_ = _spread_depth(r, model.n_features_in_, model.n_outputs(), model.own_prior) if "spread_depth" in r.doc else None
     model.check_file(r)
     return model._prepare()
 
 
-def _spread_depth(r: FieldReader, n_inputs: int, n_outputs: int) -> DepthSpread:
+def _spread_depth(r: FieldReader, n_inputs: int, n_outputs: int, own_prior: bool) -> DepthSpread:
     """A model file's ``spread_depth`` (the spread's growth with the inputs' depth, models/depth.py)."""
     sec = r.sub("spread_depth")
     held = sec.array("held", (n_inputs,), bool) if sec.doc.get("held") is not None else None
     variance = sec.array("held_variance", (n_outputs,)) if sec.doc.get("held_variance") is not None else None
-    if variance is not None and (held is None or np.any(variance < 0)):
-        sec.fail("held_variance", "the held inputs' prior needs 'held' and variances >= 0")
+    if variance is not None:
+        if own_prior:
+            sec.fail("held_variance", "a kinematic model has its own prior for what its data left unknown: "
+                                      "expected null")
+        if held is None:
+            sec.fail("held", "the held inputs' prior (held_variance) needs the inputs the data held")
+        if np.any(variance < 0):
+            sec.fail("held_variance", "expected variances >= 0")
     return DepthSpread(sec.array("centre", (n_inputs,)), sec.array("whiten", (n_inputs, n_inputs)),
                        sec.number("beta", 0.0, BETA_MAX), held,
-                       sec.number("length", 1e-12) if "length" in sec.doc else 1.0, variance)
+                       sec.number("length", 1e-12) if variance is not None else 1.0, variance)

@@ -409,14 +409,22 @@ class Predictor:
         fixed = tuple(int(j) + 1 for j in np.flatnonzero(~active))
         return fixed, low[[j - 1 for j in fixed]]
 
-    def refuse_implausible(self, X, errors, source: str = "input") -> None:
+    def refuse_implausible(self, X, errors, source: str = "input", std=None) -> None:
         """Refuse predicted errors ``(n, 3)`` mm (or pose errors ``(n, 6)``) that are not finite, longer than
-        the robot's reach, or turn by more than half a turn.
+        the robot's reach, or turn by more than half a turn; with ``std`` (their standard deviations, same
+        shape) the same of the spread (an orientation without one, NaN, is not refused: docs/predictor.md).
 
         Such a number is the model extrapolated beyond meaning (a polynomial
         at 1e200 mm), not an error: a :class:`DataError` names the first such
         data row of ``source``, its input ``X`` and its distance from the data.
         """
+        if std is not None:
+            std = np.hstack([std[:, :3], np.where(np.isnan(std[:, 3:]), 0.0, std[:, 3:])])
+        for values, name in ((errors, "predicted error"), (std, "standard deviation of the predicted error")):
+            if values is not None:
+                self._refuse(X, values, source, name)
+
+    def _refuse(self, X, errors, source: str, name: str) -> None:
         size = np.linalg.norm(errors[:, :3], axis=1)
         turn = np.linalg.norm(errors[:, 3:], axis=1)        # mrad (zeros for a position model)
         limit = self.robot.reach_mm if self.robot is not None else np.inf
@@ -430,7 +438,7 @@ class Predictor:
                 else f"turns by {turn[k]:.4g} mrad, more than half a turn ({HALF_TURN_MRAD:.0f} mrad)")
         key = "positions" if self.inputs == "cartesian" else "joints"
         far = self.distance_to_data(**{key: X[k:k + 1]})[0]
-        raise DataError(f"{source}: data row {k + 1}: the predicted error {what} ({int(bad.sum())} of {len(bad)} "
+        raise DataError(f"{source}: data row {k + 1}: the {name} {what} ({int(bad.sum())} of {len(bad)} "
                         f"rows); the input [{', '.join(f'{v:.6g}' for v in X[k])}] lies {far:.4g} "
                         f"{'mm' if self.inputs == 'cartesian' else 'deg'} from the data the model was fitted on: "
                         "nothing written")

@@ -89,8 +89,8 @@ def held_out_scores(model, X, y, folds, per_row: dict | None = None, *, skip_unf
                          len(train), fold.spread_problem())
                 continue
             mean, std = fold.predict_with_std(X[test], **rows_of(per_row, test, predicting=True))
-            with np.errstate(divide="ignore", invalid="ignore"):
-                scores[test] = np.abs(y[test] - mean) / std
+            with np.errstate(divide="ignore", invalid="ignore"):     # (m, 1) against a 1-D y's (m,)
+                scores[test] = np.abs(y[test] - mean.reshape(y[test].shape)) / std.reshape(y[test].shape)
     if said:
         log.warning("spread calibration: its %d fits on part of the identification rows gave %d warning%s "
                     "(theirs, not those of the model fitted on all the rows), the first: %s", len(folds),
@@ -106,7 +106,7 @@ def fitted_scores(fitted: list, X, y, folds, per_row: dict | None = None) -> NDA
     for fold, (_, test) in zip(fitted, folds):
         mean, std = fold.predict_with_std(X[test], **rows_of(per_row, test, predicting=True))
         with np.errstate(divide="ignore", invalid="ignore"):
-            scores[test] = np.abs(y[test] - mean) / std
+            scores[test] = np.abs(y[test] - mean.reshape(y[test].shape)) / std.reshape(y[test].shape)
     return scores
 
 

@@ -482,8 +482,9 @@ def test_a_model_file_carries_the_depth_and_refuses_a_bad_one(tmp_path):
     assert std[2, 0] > 5 * std[0, 0]                                   # far out: far wider
     doc = json.loads(path.read_text())
     del doc["checksum"]
-    for field, value, match in (("beta", -1.0, r"field 'spread_depth.beta': expected a finite number in \[0.0, 4.0\]; got -1.0"),
-                                ("whiten", [[1.0]], r"field 'spread_depth.whiten': expected shape \(3, 3\); got shape \(1, 1\)")):
+    for field, value, match in (
+            ("beta", -1.0, r"field 'spread_depth.beta': expected a finite number in \[0.0, 4.0\]; got -1.0"),
+            ("whiten", [[1.0]], r"field 'spread_depth.whiten': expected shape \(3, 3\); got shape \(1, 1\)")):
         bad = json.loads(json.dumps(doc))
         bad["spread_depth"][field] = value
         path.write_text(json.dumps(bad))
@@ -543,7 +544,8 @@ def test_a_data_model_widens_where_a_joint_its_data_held_still_turns():
     prior = (1.0 - np.exp(-0.5 * moved))[:, None] * e.var(axis=0)
     np.testing.assert_allclose(model.spread_depth_.held_prior(q_turned), prior, rtol=1e-9)
     mean, std = model.predict_with_std(q_turned)
-    calibrated_alone = model.std_validated(q_turned)[1] * model.spread_scale_ * model.spread_depth_.factor(q_turned)[:, None]
+    growth = model.spread_depth_.factor(q_turned)[:, None]
+    calibrated_alone = model.std_validated(q_turned)[1] * model.spread_scale_ * growth
     np.testing.assert_allclose(std, np.sqrt(calibrated_alone ** 2 + prior), rtol=1e-9)
     assert np.mean(np.abs(e_turned - own.predict(q_turned)) <= Z95 * own.predict_with_std(q_turned)[1]) < 0.1
     assert np.mean(np.abs(e_turned - mean) <= Z95 * std) > 0.9

@@ -146,7 +146,8 @@ def model_from_dict(doc: Any, source: str = "model") -> Any:
         model.spread_scale_ = r.array("spread_scale", (model.n_outputs(),))
         if np.any(model.spread_scale_ <= 0):
             r.fail("spread_scale", "the calibrated scales of the spread must be > 0")
-    model.spread_depth_ = _spread_depth(r, model.n_features_in_, model.n_outputs(), model.own_prior) if "spread_depth" in r.doc else None
+    model.spread_depth_ = (_spread_depth(r, model.n_features_in_, model.n_outputs(), model.own_prior)
+                           if "spread_depth" in r.doc else None)
     model.check_file(r)
     return model._prepare()
 

@@ -424,9 +424,10 @@ class Predictor:
             if values is not None:
                 self._refuse(X, values, source, name)
 
-    def _refuse(self, X, errors, source: str, name: str) -> None:
-        size = np.linalg.norm(errors[:, :3], axis=1)
-        turn = np.linalg.norm(errors[:, 3:], axis=1)        # mrad (zeros for a position model)
+    def _refuse(self, X, values, source: str, name: str) -> None:
+        """:meth:`refuse_implausible` of one array (errors or their spread), named ``name`` in the message."""
+        size = np.linalg.norm(values[:, :3], axis=1)
+        turn = np.linalg.norm(values[:, 3:], axis=1)        # mrad (zeros for a position model)
         limit = self.robot.reach_mm if self.robot is not None else np.inf
         finite = np.isfinite(size) & np.isfinite(turn)
         bad = ~finite | (size > limit) | (turn > HALF_TURN_MRAD)

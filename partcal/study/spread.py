@@ -88,9 +88,7 @@ def held_out_scores(model, X, y, folds, per_row: dict | None = None, *, skip_unf
                 log.info("spread calibration: the fit on %d rows has no spread (%s); its block is left out",
                          len(train), fold.spread_problem())
                 continue
-            mean, std = fold.predict_with_std(X[test], **rows_of(per_row, test, predicting=True))
-            with np.errstate(divide="ignore", invalid="ignore"):     # (m, 1) against a 1-D y's (m,)
-                scores[test] = np.abs(y[test] - mean.reshape(y[test].shape)) / std.reshape(y[test].shape)
+            scores[test] = _scores(fold, X, y, test, per_row)
     if said:
         log.warning("spread calibration: its %d fits on part of the identification rows gave %d warning%s "
                     "(theirs, not those of the model fitted on all the rows), the first: %s", len(folds),
@@ -104,10 +102,17 @@ def fitted_scores(fitted: list, X, y, folds, per_row: dict | None = None) -> NDA
     X, y = np.asarray(X, dtype=float), np.asarray(y, dtype=float)
     scores = np.full_like(y, np.nan)
     for fold, (_, test) in zip(fitted, folds):
-        mean, std = fold.predict_with_std(X[test], **rows_of(per_row, test, predicting=True))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            scores[test] = np.abs(y[test] - mean.reshape(y[test].shape)) / std.reshape(y[test].shape)
+        scores[test] = _scores(fold, X, y, test, per_row)
     return scores
+
+
+def _scores(fold, X, y, test, per_row: dict | None) -> NDArray[np.float64]:
+    """``|y - mean| / std`` of the rows ``test`` predicted by the fitted ``fold``, shape of ``y[test]`` (a 1-D
+    ``y`` against the model's (m, 1) prediction)."""
+    mean, std = fold.predict_with_std(X[test], **rows_of(per_row, test, predicting=True))
+    shape = y[test].shape
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.abs(y[test] - mean.reshape(shape)) / std.reshape(shape)
 
 
 def scale_from_scores(scores: NDArray[np.float64], coverage: float) -> NDArray[np.float64]:
@@ -139,6 +144,9 @@ def held_out_depths(X, folds) -> NDArray[np.float64]:
         if fold is not None:
             depths[test] = fold.depth(X[test])
     return depths
+
+
+BETA_GRID = np.concatenate([[0.0], np.logspace(-3, np.log10(BETA_MAX), 25)])     # the betas tried
 
 
 def depth_from_scores(scores: NDArray[np.float64], depths: NDArray[np.float64], coverage: float
@@ -176,9 +184,6 @@ def depth_from_scores(scores: NDArray[np.float64], depths: NDArray[np.float64], 
     return best_beta, scale_from_scores(flat / growth[:, None], coverage)
 
 
-BETA_GRID = np.concatenate([[0.0], np.logspace(-3, np.log10(BETA_MAX), 25)])
-
-
 @dataclass(frozen=True)
 class CalibratedSpread:
     """A calibrated spread: each output's ``scale`` and, when it grows with the inputs' depth, ``depth``."""
@@ -198,11 +203,10 @@ def calibrated(scores, X, folds, coverage: float, depth: bool = True, y=None) ->
     own, :attr:`~partcal.models.base.ErrorModelBase.own_prior`) also the prior of inputs the data held still."""
     if not depth:
         return CalibratedSpread(scale_from_scores(scores, coverage))
-    beta, scale = depth_from_scores(scores, held_out_depths(X, folds), coverage)
+    beta, scale = depth_from_scores(scores, held_out_depths(X, folds), coverage)   # beta 0: scale_from_scores's
     whole = DepthSpread.of_inputs(X, beta, y)
-    if whole is None or (beta == 0.0 and whole.held_prior(X[:1]) is None):
-        return CalibratedSpread(scale_from_scores(scores, coverage))
-    return CalibratedSpread(scale, whole)
+    kept = whole is not None and (beta > 0 or whole.held_variance is not None)     # it changes some spread
+    return CalibratedSpread(scale, whole if kept else None)
 
 
 def calibrate_spread(model, X, y, *, folds: int = 5, coverage: float = 0.95, per_row: dict | None = None,

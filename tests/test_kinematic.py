@@ -251,3 +251,34 @@ def test_joints_held_still_but_read_back_with_jitter_identify_as_held_ones(sk120
     left_held = measured - sk120.positions(exact) - held.predict(exact)
     assert np.sqrt(np.mean(np.sum(left**2, axis=1))) == pytest.approx(np.sqrt(np.mean(np.sum(left_held**2, axis=1))),
                                                                       abs=0.005)
+
+
+def test_column_pivoting_without_ties_picks_the_columns_pivoted_qr_picks():
+    """Away from ties the greedy choice is QR's column pivoting (scipy's LAPACK geqp3), order included."""
+    import scipy.linalg
+
+    from partcal.models.identification import _most_independent
+
+    columns = np.random.default_rng(3).normal(size=(40, 9)) * np.geomspace(1, 20, 9)
+    pivots = scipy.linalg.qr(columns, mode="r", pivoting=True)[1]
+    assert _most_independent(columns, 9).tolist() == pivots.tolist()
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_which_of_exactly_dependent_parameters_is_identified_does_not_depend_on_rounding(seed):
+    """The UR10's identification Jacobian from positions (base frame included) has exactly dependent columns
+    (joint 1's offset and the base's turn about z, among others). Rounding at the level different BLAS kernels
+    leave (1e-14 of a column) must not change which of them is kept: the first in the table is, always."""
+    from partcal import load_robot
+    from partcal.models.identification import _identifiable, identification_jacobian
+
+    robot = load_robot("universal_robots_ur10").replace(tool_mm=np.array([0.0, 0.0, 120.0]))
+    q = np.random.default_rng(11).uniform(-180, 180, (60, 6))
+    full = identification_jacobian(robot, q, nominal_values(robot), "dh")[1]
+    wanted = np.ones(full.shape[1], dtype=bool)
+    units = ["mm"] * full.shape[1]
+    reference, rank = _identifiable(full, wanted, 1e-10, units)
+    rng = np.random.default_rng(seed)
+    shaken = full * (1 + 1e-14 * rng.standard_normal(full.shape))
+    assert _identifiable(shaken, wanted, 1e-10, units)[0].tolist() == reference.tolist()
+    assert rank < np.count_nonzero(np.linalg.norm(full, axis=0) > 0)       # there are dependent columns to choose from

@@ -253,17 +253,19 @@ def test_kinematic_files_are_checked_for_meaning(kinematic_file, tmp_path):
 
 
 def test_a_deliberate_edit_of_an_identified_value_is_used_as_written(kinematic_file, tmp_path):
-    """The control of the checks above: a plausible edit (the base 1 mm higher) loads, and every
-    predicted error moves by exactly 1 mm along z."""
-    z = kinematic_file["model"]["identification"]["names"].index("base.z")
-    doc = edited(kinematic_file, ["model", "identification", "value", z], lambda v: v + 1.0)
+    """The control of the checks above: a plausible edit (the base 1 mm along x) loads, and every
+    predicted error moves by exactly 1 mm along x."""
+    ident = kinematic_file["model"]["identification"]
+    x = ident["names"].index("base.x")
+    assert ident["status"][x] == "identified"
+    doc = edited(kinematic_file, ["model", "identification", "value", x], lambda v: v + 1.0)
     del doc["checksum"]
     path = tmp_path / "edited.json"
     path.write_text(json.dumps(doc))
     original, _ = load_model_from(kinematic_file, tmp_path / "original.json")
     model, _ = load_model(path)
     shift = model.predict(IDENT.q_deg) - original.predict(IDENT.q_deg)
-    np.testing.assert_allclose(shift, np.tile([0.0, 0.0, 1.0], (len(shift), 1)), atol=1e-9)
+    np.testing.assert_allclose(shift, np.tile([1.0, 0.0, 0.0], (len(shift), 1)), atol=1e-9)
 
 
 def load_model_from(doc, path):

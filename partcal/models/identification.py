@@ -22,7 +22,8 @@ share one ``d``, the first joint's offset is a turn of the base about its z
 axis, and a wrist that never moves hides its own offsets. Those directions
 are found before the fit from the rank of the identification Jacobian (its
 columns scaled to unit length; the rank from the singular values, the choice
-of which parameters to keep from a QR factorisation with column pivoting).
+of which parameters to keep by column pivoting, ties going to the first in the
+table, so that the choice is the same on every processor).
 They stay at their nominal values and are reported as unidentifiable.
 
 Joint errors the geometry cannot carry, gravity compliance and cyclic
@@ -589,8 +590,8 @@ def _identifiable(jac0: NDArray[np.float64], wanted: NDArray[np.bool_], rcond: f
     """Indices of the parameters to identify, and the rank, from the Jacobian ``jac0`` at nominal.
 
     The columns are scaled to unit length; the rank counts singular values
-    above ``rcond`` times the largest; a QR factorisation with column
-    pivoting picks that many columns (the most independent first). Columns
+    above ``rcond`` times the largest; column pivoting picks that many
+    columns (the most independent first, :func:`_most_independent`). Columns
     that do not move the tool at all never count, and neither does a
     geometric parameter (mm, degrees) whose plausible error
     (:data:`PLAUSIBLE_ERROR`) moves the tool by less than :data:`WEAK_LEVER`
@@ -609,10 +610,43 @@ def _identifiable(jac0: NDArray[np.float64], wanted: NDArray[np.bool_], rcond: f
     if candidates.size == 0:
         return candidates, 0
     scaled = jac0[:, candidates] / norms[candidates]
-    r, pivots = scipy.linalg.qr(scaled, mode="r", pivoting=True)       # R has the singular values of ``scaled``
-    singular = np.linalg.svd(r[:candidates.size], compute_uv=False)
+    singular = np.linalg.svd(scaled, compute_uv=False)
     rank = int(np.sum(singular > rcond * singular[0]))
-    return np.sort(candidates[pivots[:rank]]), rank
+    return np.sort(candidates[_most_independent(scaled, rank)]), rank
+
+
+PIVOT_TIE = 1e-6
+"""Columns whose parts left after the columns already chosen differ in length by less than this fraction of
+the longest count as equally independent, and the first of them is chosen (see :func:`_most_independent`)."""
+
+
+def _most_independent(columns: NDArray[np.float64], count: int) -> NDArray[np.intp]:
+    """The positions of ``count`` columns of ``columns``, the most independent first: at each step the column
+    with the longest part left after projecting out those already chosen (QR's column pivoting).
+
+    Parameters whose columns are exactly dependent (a joint offset and the base's turn about the same axis,
+    as positions see them) leave parts of equal length, which rounding orders at random: pivoted QR picked
+    one with one processor's BLAS kernels and the other with another's, and the model's orientation changed
+    with the choice. Here parts within :data:`PIVOT_TIE` of the longest count as equal and the first such
+    column of the parameter table is chosen, so the choice is the same wherever it runs.
+
+    Examples
+    --------
+    >>> columns = np.array([[1.0, 0.0, 1.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1e-15]])
+    >>> _most_independent(columns, 2).tolist()
+    [0, 1]
+    """
+    left = np.array(columns, dtype=float)
+    chosen: list[int] = []
+    for _ in range(count):
+        lengths = np.linalg.norm(left, axis=0)
+        lengths[chosen] = -1.0
+        best = int(np.flatnonzero(lengths >= (1.0 - PIVOT_TIE) * lengths.max())[0])
+        chosen.append(best)
+        direction = left[:, best] / lengths[best]
+        for _ in range(2):                                      # twice: Gram-Schmidt keeps its orthogonality
+            left -= np.outer(direction, direction @ left)
+    return np.array(chosen, dtype=np.intp)
 
 
 def _implausible(jac_at, v: NDArray[np.float64], v0: NDArray[np.float64], free: NDArray[np.intp],

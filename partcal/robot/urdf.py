@@ -279,7 +279,7 @@ def _check_elements(path: Path) -> None:
             if len(values) != count or not all(math.isfinite(v) for v in values):
                 raise RobotFileError(f"{where} <{tag} {attribute}=\"{text}\">: expected {count} finite "
                                      f"number{'s' if count > 1 else ''} (metres, radians)")
-            if tag == "axis" and not any(values) and joint.get("type") != "fixed":   # a fixed joint's axis means nothing
+            if tag == "axis" and not any(values) and joint.get("type") != "fixed":    # a fixed one means nothing
                 raise RobotFileError(f"{where} <axis xyz=\"{text}\">: expected a non-zero axis")
     _check_tree(path, root)
 

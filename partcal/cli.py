@@ -565,8 +565,9 @@ def _cmd_export(args) -> int:
         print(f"{fmt}: {path}")
     for fmt, why in result.skipped.items():
         print(f"{fmt}: not written: {why}")
-    if result.tcp_mm is not None:
-        print("ur: tool centre point in tool0 (mm): " + " ".join(f"{v:.6f}" for v in result.tcp_mm))
+    if result.tcp_text:
+        print(f"ur: the kinematics file has no tool; set the tool centre point in tool0 on the controller: "
+              f"{result.tcp_text}")
     if result.not_carried:
         print(result.not_carried)
     return 0

@@ -36,6 +36,7 @@ from ..models.kinematic import KinematicModel
 from ..robot.description import robot_to_dict
 from ..robot.export import ExportError, dh_rows, transform, ur_kinematics_from_robot, urdf_from_robot
 from ..robot.kinematics import Robot, matrix_from_euler_deg
+from ..robot.rotations import matrices_from_rotation_vectors
 from .persist import load_model
 
 FORMATS = ("urdf", "ur", "dh", "yaml")
@@ -50,6 +51,7 @@ class Exported:
     skipped: dict = field(default_factory=dict)
     not_carried: str = ""
     tcp_mm: NDArray[np.float64] | None = None
+    tcp_text: str = ""            # the UR TCP, position and rotation, as the controller takes it (one line)
 
 
 def calibrated_geometry(model: KinematicModel) -> tuple[Robot, NDArray[np.float64]]:
@@ -59,6 +61,16 @@ def calibrated_geometry(model: KinematicModel) -> tuple[Robot, NDArray[np.float6
     size = geometric_size(model.robot_, model.parametrization_)
     robot = own_geometry(model.robot_, values, model.parametrization_)
     return robot, transform(matrix_from_euler_deg(values[size - 3:size]), values[size - 6:size - 3])
+
+
+def tool_turn(model: KinematicModel) -> NDArray[np.float64] | None:
+    """The identified turn ``(3, 3)`` of the tool (reflector, probe) in the flange frame, None when the
+    identification did not turn it (``probe.rx``, ``probe.ry``, ``probe.rz``: a rotation vector, degrees)."""
+    if not model.orientation_:
+        return None
+    names = list(model.identification_.names)
+    rotvec_deg = model.identification_.value[[names.index(f"probe.r{c}") for c in "xyz"]]
+    return matrices_from_rotation_vectors(np.radians(rotvec_deg))[0]
 
 
 def left_out(model: KinematicModel) -> str:
@@ -106,15 +118,15 @@ def export_model(model_path, output: Path, formats=FORMATS, q_deg=None, errors_m
     output.mkdir(parents=True, exist_ok=True)
     stamp = (f"Calibrated {model.robot_.name} from {Path(model_path).name} ({model.parametrization_} "
              "parametrization), written by partcal export.")
-    files, skipped, tcp = {}, {}, None
-    writers = {"urdf": lambda: (f"{name}.urdf", urdf_from_robot(robot, base_pose, comment=stamp)),
+    files, skipped, tcp, tcp_text, turn = {}, {}, None, "", tool_turn(model)
+    writers = {"urdf": lambda: (f"{name}.urdf", urdf_from_robot(robot, base_pose, comment=stamp, tool_rotation=turn)),
                "yaml": lambda: (f"{name}_robot.yaml", _robot_yaml(robot, stamp)),
                "dh": lambda: (f"{name}_dh.csv", _dh_csv(robot))}
     for fmt in formats:
         try:
             if fmt == "ur":
-                ur = ur_kinematics_from_robot(robot)
-                tcp = ur.tcp_mm
+                ur = ur_kinematics_from_robot(robot, turn)
+                tcp, tcp_text = ur.tcp_mm, ur.tcp_text()
                 text = ur.yaml_text(_hash(ur.joints), _ur_comment(stamp, ur))
                 filename = f"{name}_ur_kinematics.yaml"
             else:
@@ -131,7 +143,13 @@ def export_model(model_path, output: Path, formats=FORMATS, q_deg=None, errors_m
         full = model.predict(q_deg)[:, :3]
         note += (f" (on the {len(q_deg)} poses given: 3-D RMS left {pooled_rms(errors_mm - geometry):.3f} mm by the "
                  f"exported geometry, {pooled_rms(errors_mm - full):.3f} mm by the full model)")
-    return Exported(files, skipped, note, tcp)
+    pointless = [f for f in ("yaml", "dh") if f in files]
+    if turn is not None and pointless:        # their tool is a point: say what they leave out
+        angle = np.degrees(np.arccos(np.clip((np.trace(turn) - 1.0) / 2.0, -1.0, 1.0)))
+        note += ("; " if note else "") + (f"the tool's identified turn ({angle:.4f} deg) is not carried by "
+                                          f"{' and '.join(files[f].name for f in pointless)} (a tool point only; "
+                                          "the URDF and the UR TCP carry it)")
+    return Exported(files, skipped, note, tcp, tcp_text)
 
 
 def _robot_yaml(robot: Robot, stamp: str) -> str:
@@ -159,9 +177,9 @@ def _hash(joints: dict) -> str:
 
 
 def _ur_comment(stamp: str, ur) -> str:
-    x, y, z = ur.tcp_mm
     return (f"{stamp}\nur_description's kinematics parameters: per joint the origin from the parent link, "
             "translation x, y, z (metres) then\nrotation Rz(yaw) Ry(pitch) Rx(roll) (radians, fixed axes), then the "
             "joint's turn about z. The chain starts in\nbase_link_inertia (partcal's robot base frame; base_link is "
             "turned by 180 degrees about z from it).\nThe hash is partcal's own tag, not the controller's calibration "
-            f"checksum.\nTool centre point in tool0 (set it on the controller): x {x:.6f} y {y:.6f} z {z:.6f} mm.")
+            "checksum.\nThis file has no tool: set the tool centre point in tool0 on the controller, position and "
+            f"rotation:\n{ur.tcp_text()}.")

@@ -188,7 +188,7 @@ def _robot(path: Path, urdf, joints: list, name: str) -> Robot:
     return Robot(name=name, n_joints=n, alpha_deg=zeros, d_mm=slide_mm, a_mm=zeros.copy(),
                  theta_offset_deg=offsets, coupling=coupling, tool_mm=np.zeros(3), limits_deg=limits, home_deg=home,
                  base_rotation=before[0][:3, :3] @ axes[0], base_mm=before[0][:3, 3] * _M_TO_MM, origins=origins,
-                 prismatic=slides if slides.any() else None)
+                 prismatic=slides if slides.any() else None, floor_mm=None)    # a URDF states no floor
 
 
 def _origin(joint) -> NDArray[np.float64]:

@@ -1,6 +1,8 @@
 """The calibrated robot out: URDF (reloaded by yourdfpy), the UR kinematics YAML (rebuilt as ur_description
 builds its chain), the DH table, and what geometry cannot carry."""
 
+import re
+
 import numpy as np
 import pytest
 import yaml
@@ -254,3 +256,53 @@ def test_export_prints_the_ur_tcp_with_its_rotation_and_what_the_tool_point_file
     line = next(t for t in done.stdout.splitlines() if t.startswith("ur: the kinematics file has no tool"))
     assert " rad (rotation vector, a turn of " in line and "set_tcp(p[" in line
     assert "the tool's identified turn (" in done.stdout and "is not carried by turned_robot.yaml" in done.stdout
+
+
+KR16_LIKE = {"name": "kr16_like", "joints": 6, "limits_deg": [[-170, 170]] * 6,
+             "links": [{"theta": "q1", "d": 675, "a": 260, "alpha": -90}, {"theta": "q2", "d": 0, "a": 680, "alpha": 0},
+                       {"theta": "q3 - 90", "d": 0, "a": -35, "alpha": 90},
+                       {"theta": "q4", "d": -670, "a": 0, "alpha": -90}, {"theta": "q5", "d": 0, "a": 0, "alpha": 90},
+                       {"theta": "q6", "d": -115, "a": 0, "alpha": 0}]}
+SEVEN = {"name": "seven", "joints": 7, "limits_deg": [[-170, 170]] * 7,
+         "links": [{"theta": f"q{k}", "d": 300 if k % 2 else 0, "a": 0, "alpha": 90 if k % 2 else -90}
+                   for k in range(1, 8)]}
+
+
+def nominal_model_file(spec, folder, name):
+    """A kinematic model of the robot ``spec`` fitted on its own nominal positions (zero errors)."""
+    from partcal.robot.description import robot_from_dict
+
+    robot = robot_from_dict(spec)
+    q = np.random.default_rng(9).uniform(-150, 150, (60, robot.n_joints))
+    model = KinematicModel(robot=robot).fit(q, np.zeros((60, 3)))
+    path = folder / f"{name}.json"
+    save_model(model, path, name=name, robot=robot)
+    return path
+
+
+def test_the_ur_file_is_written_for_ur_shaped_chains_only(tmp_path):
+    """A KUKA-shaped arm (joint 4 along the forearm) gets the URDF, DH table and robot YAML by default, and the
+    UR file is skipped saying why; the UR10 (joints 2, 3, 4 parallel) gets it (the test above)."""
+    path = nominal_model_file(KR16_LIKE, tmp_path, "kr16")
+    result = export_model(path, tmp_path / "out")
+    assert set(result.files) == {"urdf", "dh", "yaml"} and result.tcp_text == ""
+    assert result.skipped["ur"] == ("kr16_like: the UR kinematics file is for UR-shaped chains (joints 2, 3 and 4 "
+                                    "about parallel axes, joint 5 across them, as ur_description builds its arms); "
+                                    "here joints 3 and 4 turn about axes 90.0 degrees apart")
+
+
+@pytest.mark.parametrize("which, formats, message", [
+    ("seven", "ur", r"nothing written for .*seven\.json: ur: seven: the UR kinematics file needs six rows turned by "
+                    r"q1\.\.q6 in order; the robot has 7 joints in 7 rows"),
+    ("complete", "dh", r"nothing written for .*complete\.json: dh: .*no DH table"),
+    ("kr16", "ur", r"nothing written for .*kr16\.json: ur: kr16_like: the UR kinematics file is for UR-shaped"),
+])
+def test_an_export_that_writes_nothing_exits_2_naming_the_format_and_why(complete_file, tmp_path, which, formats,
+                                                                         message):
+    path = {"seven": lambda: nominal_model_file(SEVEN, tmp_path, "seven"),
+            "kr16": lambda: nominal_model_file(KR16_LIKE, tmp_path, "kr16"),
+            "complete": lambda: complete_file[0]}[which]()
+    out = tmp_path / "out"
+    done = partcal_cli("export", str(path), "-o", str(out), "--formats", formats)
+    assert done.returncode == 2 and done.stderr.count("\n") == 1, done.stderr
+    assert re.search(message, done.stderr) and not out.exists()

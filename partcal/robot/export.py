@@ -235,6 +235,7 @@ def ur_kinematics_from_robot(robot: Robot, tool_rotation: NDArray[np.float64] | 
             (robot.prismatic is not None and robot.prismatic.any()):
         raise ExportError(f"{robot.name}: the UR kinematics file needs six rows turned by q1..q6 in order; the robot "
                           f"has {robot.n_joints} joints in {rows} rows")
+    _check_ur_shape(robot)
     fixed = fixed_transforms(robot)
     rest = transform(robot.base_rotation, robot.base_mm)
     out = {}
@@ -249,6 +250,23 @@ def ur_kinematics_from_robot(robot: Robot, tool_rotation: NDArray[np.float64] | 
         out[name] = {"x": x, "y": y, "z": z, "roll": roll, "pitch": pitch, "yaw": yaw}
     tcp = rest @ transform(tool_rotation, robot.tool_mm)
     return UrKinematics(out, tcp[:3, 3].copy(), tcp[:3, :3].copy())
+
+
+UR_PARALLEL_TOL_DEG = 1.0       # how far from parallel UR-shaped axes 2, 3, 4 may be (identified tilts: ~0.05 deg)
+
+
+def _check_ur_shape(robot: Robot) -> None:
+    """Refuse a six-joint chain that is not a UR arm's: ur_description builds shoulder, elbow and wrist 1 about
+    parallel axes (joints 2, 3 and 4), and wrist 2 across them; a KUKA or ABB arm (joint 4 along the forearm)
+    has no UR kinematics file."""
+    axes = robot.frames(robot.home_deg[None])[1][0]           # z of frames 0..R: joint k turns about z of k - 1
+    angle = [math.degrees(math.acos(min(1.0, abs(float(axes[k] @ axes[k + 1]))))) for k in range(5)]
+    bad = [(k + 1, k + 2) for k in (1, 2) if angle[k] > UR_PARALLEL_TOL_DEG]
+    if bad or angle[3] < 90.0 - UR_PARALLEL_TOL_DEG:
+        j, k = bad[0] if bad else (4, 5)
+        raise ExportError(f"{robot.name}: the UR kinematics file is for UR-shaped chains (joints 2, 3 and 4 about "
+                          f"parallel axes, joint 5 across them, as ur_description builds its arms); here joints {j} "
+                          f"and {k} turn about axes {angle[j - 1]:.1f} degrees apart")
 
 
 def dh_rows(robot: Robot) -> list[dict]:

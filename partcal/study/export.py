@@ -115,10 +115,9 @@ def export_model(model_path, output: Path, formats=FORMATS, q_deg=None, errors_m
     below = next(f for f in (output, *output.parents) if f.exists() or f == f.parent)
     if not below.is_dir():
         raise PartcalError(f"{output}: {below} is a file; export -o expects a folder (new or existing)")
-    output.mkdir(parents=True, exist_ok=True)
     stamp = (f"Calibrated {model.robot_.name} from {Path(model_path).name} ({model.parametrization_} "
              "parametrization), written by partcal export.")
-    files, skipped, tcp, tcp_text, turn = {}, {}, None, "", tool_turn(model)
+    texts, files, skipped, tcp, tcp_text, turn = {}, {}, {}, None, "", tool_turn(model)
     writers = {"urdf": lambda: (f"{name}.urdf", urdf_from_robot(robot, base_pose, comment=stamp, tool_rotation=turn)),
                "yaml": lambda: (f"{name}_robot.yaml", _robot_yaml(robot, stamp)),
                "dh": lambda: (f"{name}_dh.csv", _dh_csv(robot))}
@@ -134,6 +133,12 @@ def export_model(model_path, output: Path, formats=FORMATS, q_deg=None, errors_m
         except ExportError as exc:
             skipped[fmt] = str(exc)
             continue
+        texts[fmt] = (filename, text)
+    if not texts:                          # nothing to write: say why, and leave no empty folder behind
+        raise ExportError(f"export: nothing written for {model_path}: "
+                          + "; ".join(f"{fmt}: {why}" for fmt, why in skipped.items()))
+    output.mkdir(parents=True, exist_ok=True)
+    for fmt, (filename, text) in texts.items():
         with atomic_write(output / filename) as handle:
             handle.write(text)
         files[fmt] = output / filename

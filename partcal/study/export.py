@@ -5,16 +5,18 @@ identified geometry (:mod:`partcal.robot.export` does the writing):
 
 - ``<name>.urdf``: the calibrated chain, joint offsets folded into the joint
   origins, the identified base pose as the fixed joint ``world -> base_link``
-  and the tool point as ``flange -> tcp``;
+  and the tool point, turned by the tool's identified turn, as ``flange -> tcp``;
 - ``<name>_ur_kinematics.yaml``: ur_description's ``default_kinematics.yaml``
-  (six-joint chains turned by q1..q6), with the TCP it needs in ``tool0``;
+  (UR-shaped six-joint chains turned by q1..q6), with the TCP it needs in
+  ``tool0``, position and rotation, in its header (the file has no tool);
 - ``<name>_dh.csv``: the DH table, when the identified chain is one (DH
   parametrization of a DH robot);
 - ``<name>_robot.yaml``: partcal's own robot YAML of the calibrated chain.
 
 What geometry cannot carry (compliance, transmission harmonics, a residual
-model) is named in one line, with the RMS of the exported geometry beside the
-full model's on a data set when one is given.
+model; the tool's turn in the files whose tool is a point) is named in one
+line, with the RMS of the exported geometry beside the full model's on a data
+set when one is given. An export that can write nothing is refused.
 """
 
 from __future__ import annotations

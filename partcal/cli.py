@@ -506,8 +506,10 @@ def _cmd_plan(args) -> int:
                                                           fmt=_format(args))[1], str(args.evaluate)) \
         if args.evaluate else None
     if args.candidates:
+        stated = args.floor_mm is not None or args.clearance_mm is not None    # a cell's own poses: the cell's
         q = plan.check_candidates(robot, read_columns(args.candidates, [joint_columns(robot.n_joints)],
-                                                      fmt=_format(args))[1], str(args.candidates), floor)
+                                                      fmt=_format(args))[1], str(args.candidates),
+                                  floor if stated else None)
         space, where = plan.workspace(robot, q, **options), f"the {len(q)} poses of {args.candidates}"
     else:
         box = None if args.box is None else np.array(args.box, dtype=float).reshape(2, 3)
@@ -565,8 +567,9 @@ def _cmd_export(args) -> int:
         print(f"{fmt}: {path}")
     for fmt, why in result.skipped.items():
         print(f"{fmt}: not written: {why}")
-    if result.tcp_mm is not None:
-        print("ur: tool centre point in tool0 (mm): " + " ".join(f"{v:.6f}" for v in result.tcp_mm))
+    if result.tcp_text:
+        print(f"ur: the kinematics file has no tool; set the tool centre point in tool0 on the controller: "
+              f"{result.tcp_text}")
     if result.not_carried:
         print(result.not_carried)
     return 0
@@ -841,7 +844,8 @@ def build_parser() -> argparse.ArgumentParser:
     pln.add_argument("--cycles", type=_positive_int, help="with --iso9283: cycles of P1..P5 (default 30)")
     pln.add_argument("--floor-mm", type=float, metavar="Z",
                      help="height of the floor in the base frame (mm); every planned pose keeps its links, flange "
-                          "and tool above it (default: the robot's floor_mm, 0 for a robot standing on its base)")
+                          "and tool above it (default: the robot's floor_mm, none when its description states "
+                          "none); --candidates are checked against a floor only when this or --clearance-mm is given")
     pln.add_argument("--clearance-mm", type=float, metavar="C",
                      help="how far above the floor the joint origins, flange and tool stay (default 100 mm)")
     pln.add_argument("--no-floor", action="store_true",

@@ -4,8 +4,14 @@ import contextlib
 import io
 import re
 
+from pathlib import Path
+
 import numpy as np
 import pytest
+import yaml
+from conftest import SHARED
+
+import partcal
 
 from partcal.errors import PartcalError
 from partcal.robot import load_robot
@@ -104,10 +110,14 @@ def test_a_floor_that_leaves_no_room_gets_one_line():
         plan.candidates_within_limits(robot, 10, np.random.default_rng(0), floor=Floor(1900.0, 100.0))
 
 
-def test_candidates_below_the_floor_are_refused_naming_the_row_and_the_point(tmp_path):
+def test_candidates_below_a_floor_the_command_states_are_refused_naming_the_row_and_the_point(tmp_path):
+    """The cell's own candidates are checked against --floor-mm (or --clearance-mm), not the description's."""
     cand = tmp_path / "cand.csv"
     cand.write_text("q1,q2,q3,q4,q5,q6\n0,-90,0,-90,0,0\n0,0,0,0,0,0\n")
-    code, _, err = cli("plan", "universal_robots_ur10", "-n", 1, "-o", tmp_path / "p.csv", "--candidates", cand)
+    code, _, err = cli("plan", "universal_robots_ur10", "-n", 2, "-o", tmp_path / "p.csv", "--candidates", cand)
+    assert code == 0, err                                     # the built-in's floor_mm: 0 is for drawn poses
+    code, _, err = cli("plan", "universal_robots_ur10", "-n", 1, "-o", tmp_path / "p.csv", "--candidates", cand,
+                       "--floor-mm", 0)
     assert code == 2
     assert err.startswith("partcal: error: ") and err.count("\n") == 1
     assert ("cand.csv: data row 2 ([0.0, 0.0, 0.0, 0.0, 0.0, 0.0] deg) puts frame 5 at z = 2.3 mm, below the "
@@ -163,3 +173,66 @@ def test_a_negative_number_with_an_exponent_is_a_value_not_an_option():
     for text in ("-5e2", "-500", "-500.0", "-.5e3", "-5E+2"):
         args = build_parser().parse_args(["plan", "universal_robots_ur10", "-o", "p.csv", "--floor-mm", text])
         assert args.floor_mm == -500.0, text
+
+
+IPA_SERIES_B = SHARED / "datasets" / "ipa_ur10" / "Series_B" / "measurements_joint_configurations.csv"
+IPA_JOINTS = ["shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint", "wrist_1_joint", "wrist_2_joint",
+              "wrist_3_joint"]
+
+
+def test_a_robot_described_without_floor_mm_has_no_floor(tmp_path):
+    """No floor_mm (and a URDF's chain): no floor, and none written back; a stated one, 0 too, round-trips."""
+    from partcal.robot.description import robot_from_dict, robot_to_dict
+    from partcal.robot.urdf import robot_from_urdf
+
+    spec = robot_to_dict(load_robot("universal_robots_ur10"))
+    assert spec["floor_mm"] == 0.0
+    del spec["floor_mm"]
+    bare = robot_from_dict(spec)
+    assert bare.floor_mm is None and robot_floor(bare) is None and "floor_mm" not in robot_to_dict(bare)
+    assert robot_from_dict({**spec, "floor_mm": -650}).floor_mm == -650.0
+    urdf = tmp_path / "one.urdf"
+    urdf.write_text('<robot name="one"><link name="a"/><link name="b"/><joint name="j" type="revolute">'
+                    '<parent link="a"/><child link="b"/><axis xyz="0 0 1"/><limit lower="-1" upper="1"/></joint>'
+                    '</robot>')
+    assert robot_from_urdf(urdf).floor_mm is None
+    path = tmp_path / "ur10.yaml"
+    path.write_text(yaml.safe_dump(spec))
+    code, _, err = cli("plan", path, "-n", 30, "-o", tmp_path / "p.csv", "--pool", 400)
+    assert code == 0 and ", no floor" in err
+
+
+def ipa_series_b_joints():
+    """The 1495 joint sets (deg) of the IPA UR10's series B, read here from the tracker export (semicolons,
+    decimal commas, radians)."""
+    if not IPA_SERIES_B.is_file():
+        pytest.skip(f"the IPA UR10 data set is not at {IPA_SERIES_B}")
+    lines = IPA_SERIES_B.read_text().splitlines()
+    header = lines[0].split(";")
+    columns = [header.index(name) for name in IPA_JOINTS]
+    rows = [line.split(";") for line in lines[1:] if line.strip()]
+    return np.degrees(np.array([[float(row[c].replace(",", ".")) for c in columns] for row in rows]))
+
+
+def test_a_cells_own_measured_poses_are_taken_as_candidates(tmp_path):
+    """The IPA UR10's 1495 measured poses of series B as --candidates: taken with the built-in UR10 (floor_mm:
+    0) and with a robot file without floor_mm; --floor-mm 0 refuses them naming as many poses below the floor
+    (z < 100 mm) as the hand-written FK finds (34: the elbow's frame 2 near the base plane)."""
+    q = ipa_series_b_joints()
+    below = int((ur10_frame_origins(q)[:, 1:, 2].min(axis=1) < 100.0).sum())     # frames 2..6: the moving ones
+    assert len(q) == 1495 and below == 34
+    fmt = tmp_path / "fmt.yaml"
+    fmt.write_text(yaml.safe_dump({"delimiter": ";", "decimal": ",", "joint_unit": "rad",
+                                   "columns": {f"q{k + 1}": name for k, name in enumerate(IPA_JOINTS)}}))
+    spec = yaml.safe_load((Path(partcal.__file__).parent / "robot" / "builtin" / "universal_robots_ur10.yaml")
+                          .read_text())
+    del spec["floor_mm"]
+    bare = tmp_path / "ur10_pedestal.yaml"
+    bare.write_text(yaml.safe_dump(spec))
+    args = ["--candidates", IPA_SERIES_B, "--format", fmt, "-n", 30, "-o", tmp_path / "p.csv"]
+    for robot in ("universal_robots_ur10", bare):
+        code, _, err = cli("plan", robot, *args)
+        assert code == 0, err
+        assert "over the 1495 poses of" in err
+    code, _, err = cli("plan", "universal_robots_ur10", *args, "--floor-mm", 0)
+    assert code == 2 and f"; {below} of 1495 poses are below)" in err

@@ -139,6 +139,115 @@ def test_a_chain_that_is_not_there_is_refused(tmp_path):
     assert load_robot(robot_reference({"urdf": "arm.urdf"}, tmp_path)).n_joints == 2     # root and only leaf
 
 
+def six_joint_arm(extra_links: str = "", extra_joints: str = "") -> str:
+    """A six-joint serial arm l0 -> l1 -> ... -> l6 (joints j1..j6 on lines 4..15), with more links and joints
+    appended."""
+    links = "".join(f'<link name="l{k}"/>' for k in range(7))
+    joints = "".join(f'  <joint name="j{k}" type="revolute"><parent link="l{k - 1}"/><child link="l{k}"/>\n'
+                     f'    <origin xyz="0 0.1 0.2" rpy="0.3 0 0"/><axis xyz="0 0 1"/>'
+                     f'<limit lower="-3" upper="3" effort="1" velocity="1"/></joint>\n' for k in range(1, 7))
+    return f'<?xml version="1.0"?>\n<robot name="six">\n  {links}{extra_links}\n{joints}{extra_joints}</robot>\n'
+
+
+TWO_PARENTS = ("", '  <joint name="extra" type="fixed"><parent link="l0"/><child link="l4"/></joint>\n')
+
+
+@pytest.mark.parametrize("extra, tip, message", [
+    (TWO_PARENTS, None, r"line 16: <joint name='extra'> <child link='l4'>: expected one parent joint per link \(a "
+                        r"URDF is a tree\); 'l4' is already the child of joint 'j4' at line 10$"),
+    (('<link name="l3"/>', ""), None, r"line 3: <link name='l3'>: expected each link name once; already declared "
+                                      r"at line 3$"),
+    (('<link name="a"/><link name="b"/>',
+      '  <joint name="ab" type="fixed"><parent link="a"/><child link="b"/></joint>\n'
+      '  <joint name="ba" type="fixed"><parent link="b"/><child link="a"/></joint>\n'), None,
+     r"line 17: <joint name='ba'>: closes a cycle of links \(a -> b -> a\); expected a tree$"),
+    (("", '  <joint name="loop" type="fixed"><parent link="l6"/><child link="l0"/></joint>\n'), "l6",
+     r"line 16: <joint name='loop'>: closes a cycle of links \(l0 -> l1 -> l2 -> l3 -> l4 -> l5 -> l6 -> l0\)"),
+    (("", '  <joint name="extra" type="fixed"><parent link="l6"/><child link="hand"/></joint>\n'), "l6",
+     r"line 16: <joint name='extra'> <child link='hand'>: expected a declared <link>; no link of that name$"),
+    (('<link name="t"/>', '  <joint name="j2" type="fixed"><parent link="l6"/><child link="t"/></joint>\n'), "l6",
+     r"line 16: <joint name='j2'>: expected each joint name once; already declared at line 6$"),
+])
+def test_a_urdf_that_is_not_a_tree_is_refused_naming_the_line_and_element(tmp_path, extra, tip, message):
+    """Two parents of one link, a link or joint name twice, a cycle (apart from the chain, or through it with
+    base and tip named), a joint to an undeclared link: refused in one line before any chain is built."""
+    path = tmp_path / "bad.urdf"
+    path.write_text(six_joint_arm(*extra))
+    with pytest.raises(RobotFileError, match=message) as info:
+        robot_from_urdf(path, "l0" if tip else None, tip)
+    assert str(info.value).startswith(f"{path}: line ") and "\n" not in str(info.value)
+
+
+def test_a_link_with_two_parents_is_refused_as_yourdfpy_refuses_it(tmp_path):
+    """Without the check the chain kept the second parent (2 joints, extra -> j5 -> j6, instead of 6)."""
+    good, bad = tmp_path / "good.urdf", tmp_path / "bad.urdf"
+    good.write_text(six_joint_arm())
+    bad.write_text(six_joint_arm(*TWO_PARENTS))
+    assert robot_from_urdf(good).n_joints == 6
+    with pytest.raises(ValueError):
+        yourdfpy.URDF.load(str(bad), load_meshes=False)
+    with pytest.raises(RobotFileError, match="expected one parent joint per link"):
+        robot_from_urdf(bad)
+
+
+@pytest.mark.parametrize("relative, tip, joints", [
+    ("kinova_description/robots/kinova.urdf", "j2s6s200_end_effector", [f"j2s6s200_joint_{k}" for k in range(1, 7)]),
+    ("so_arm_description/urdf/so101.urdf", "gripper_frame_link",
+     ["shoulder_pan", "shoulder_lift", "elbow_flex", "wrist_flex", "wrist_roll"]),
+])
+def test_fixed_joints_with_a_zero_axis_are_read_as_shipped(relative, tip, joints):
+    """example-robot-data's kinova and so101 give their fixed joints ``<axis xyz="0 0 0"/>`` (the URDF spec
+    ignores a fixed joint's axis): read, and equal to yourdfpy's forward kinematics on 300 sets."""
+    path = example_urdf(relative)
+    robot = load_robot({"urdf": str(path), "tip": tip})
+    assert robot.n_joints == len(joints)
+    q = np.random.default_rng(33).uniform(robot.limits_deg[:, 0], robot.limits_deg[:, 1], (300, robot.n_joints))
+    root = yourdfpy.URDF.load(str(path), load_meshes=False).base_link
+    expected = yourdfpy_poses(path, root, tip, q, names=joints)
+    np.testing.assert_allclose(robot.forward(q), expected, rtol=0, atol=1e-9)
+
+
+IIWA_LIKE = """<?xml version="1.0"?>
+<robot name="iiwa_like">
+  <link name="world"/><link name="base_link"/><link name="base"/><link name="link_1"/><link name="link_2"/>
+  <link name="link_3"/><link name="link_4"/><link name="link_5"/><link name="link_6"/><link name="link_7"/>
+  <link name="tool0"/>
+  <joint name="world-base_link" type="fixed"><parent link="world"/><child link="base_link"/>
+    <origin xyz="0 0 0.5" rpy="0 0 0"/><axis xyz="0 0 0"/></joint>
+  <joint name="base_link-base" type="fixed"><parent link="base_link"/><child link="base"/>
+    <origin xyz="0 0 0" rpy="0 0 0"/><axis xyz="0 0 0"/></joint>
+  {joints}
+  <joint name="joint_a7-tool0" type="fixed"><parent link="link_7"/><child link="tool0"/>
+    <origin xyz="0 0 0.126" rpy="0 0 0"/><axis xyz="0 0 0"/></joint>
+</robot>
+"""
+IIWA_AXES = [("0 0 0.1575", "0 0 1"), ("0 0 0.2025", "0 1 0"), ("0 0.2045 0", "0 0 1"), ("0 0 0.2155", "0 -1 0"),
+             ("0 0.1845 0", "0 0 1"), ("0 0 0.2155", "0 1 0"), ("0 0.081 0", "0 0 1")]
+
+
+def test_an_iiwa_like_chain_with_zero_axis_fixed_joints_on_and_off_the_chain(tmp_path):
+    """kuka_experimental's iiwa shape: fixed joints with a zero axis outside the chain (world -> base_link)
+    and inside it (base_link -> base, joint_a7 -> tool0); a moving joint's zero axis stays refused."""
+    joints = "\n  ".join(
+        f'<joint name="joint_a{k}" type="revolute"><parent link="{"base" if k == 1 else f"link_{k - 1}"}"/>'
+        f'<child link="link_{k}"/><origin xyz="{xyz}" rpy="0 0 0"/><axis xyz="{axis}"/>'
+        f'<limit lower="-2.96" upper="2.96" effort="300" velocity="10"/></joint>'
+        for k, (xyz, axis) in enumerate(IIWA_AXES, start=1))
+    path = tmp_path / "iiwa.urdf"
+    path.write_text(IIWA_LIKE.format(joints=joints))
+    robot = load_robot(f"{path}#base=base_link&tip=tool0")
+    assert robot.n_joints == 7
+    q = np.random.default_rng(34).uniform(robot.limits_deg[:, 0], robot.limits_deg[:, 1], (300, 7))
+    expected = yourdfpy_poses(path, "base_link", "tool0", q, names=[f"joint_a{k}" for k in range(1, 8)])
+    np.testing.assert_allclose(robot.forward(q), expected, rtol=0, atol=1e-9)
+    # at zero the origins add up: y 204.5 + 184.5 + 81, z 157.5 + 202.5 + 215.5 + 215.5 + 126 (mm)
+    np.testing.assert_allclose(robot.positions(np.zeros((1, 7)))[0], [0.0, 470.0, 917.0], rtol=0, atol=1e-9)
+    path.write_text(IIWA_LIKE.format(joints=joints.replace('<axis xyz="0 1 0"/>', '<axis xyz="0 0 0"/>', 1)))
+    with pytest.raises(RobotFileError, match=r"<joint name='joint_a2'> <axis xyz=\"0 0 0\">: expected a non-zero "
+                                             r"axis"):
+        robot_from_urdf(path, "base_link", "tool0")
+
+
 def test_runs_and_simulations_take_a_urdf_beside_their_yaml(tmp_path):
     """``robot: {urdf: ur10.urdf, base: base_link, tip: tool0}`` (path relative to the YAML) in a virtual
     robot config and a run config; the complete model identifies the simulated URDF robot to the noise."""

@@ -153,7 +153,7 @@ def robot_from_dict(spec: dict, source: str = "robot", lines: dict[str, int] | N
     tool = r.numbers("tool_mm", spec.get("tool_mm", [0, 0, 0]), (3,), "[x, y, z]")
     constraints = _constraints(spec.get("constraints_deg") or [], n, r)
     base = _origin(spec.get("base"), "base", r)
-    floor = spec.get("floor_mm", 0.0)
+    floor = spec.get("floor_mm")                 # a floor the description does not state is not assumed
     floor = None if floor is None else r.number("floor_mm", floor)
     return Robot(name=str(spec["name"]), n_joints=n, alpha_deg=alpha, d_mm=d, a_mm=a,
                  theta_offset_deg=off, coupling=coupling, tool_mm=tool, limits_deg=limits,
@@ -308,7 +308,7 @@ def robot_to_dict(robot: Robot) -> dict:
         "home_deg": robot.home_deg.tolist(),
         "constraints_deg": [{"expr": _expression(0.0, c), "range": [lo, hi]} for c, lo, hi in robot.constraints],
         **_base_entry(robot),
-        **({} if robot.floor_mm == 0.0 else {"floor_mm": robot.floor_mm}),
+        **({} if robot.floor_mm is None else {"floor_mm": robot.floor_mm}),
     }
 
 

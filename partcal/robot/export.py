@@ -10,7 +10,8 @@ degrees inside, metres and radians in URDF and UR files.
   row before (``B`` for the first) times ``Rz(offset)``: the joint offsets
   fold into the origins, as drivers ignore ``<calibration>``. Base and tool
   are fixed joints (``world -> base_link`` for a given base pose, ``flange ->
-  tcp`` for the tool point).
+  tcp`` for the tool point, turned by the identified turn of the tool or
+  reflector when one is given: ``flange_T_tool``'s rotation).
 - :func:`ur_kinematics_from_robot`: the ``kinematics:`` mapping of
   ur_description's ``default_kinematics.yaml``. ur_description builds
   ``base_link_inertia -> shoulder -> upper_arm -> forearm -> wrist_1 ->
@@ -20,7 +21,11 @@ degrees inside, metres and radians in URDF and UR files.
   into ``Tz(h) Rz(gamma)``, which commutes with the joint's turn and moves in
   front of it, and the rest ``N``, which goes into the next joint's origin;
   the last row's ``N`` cannot follow ``q6`` in that file, so it goes into the
-  tool centre point (TCP) reported beside it.
+  tool centre point (TCP) reported beside it, with the tool's own turn. The
+  file has no tool (ur_description's ``tool0`` hangs at a fixed turn from
+  ``flange``): the TCP, position and rotation, is for the controller
+  (``set_tcp(p[x, y, z, rx, ry, rz])``, metres and a rotation vector in
+  radians, as the Installation's TCP takes it), written in the file's header.
 - :func:`dh_rows`: the standard DH table, for a chain that is one.
 """
 
@@ -34,6 +39,7 @@ from numpy.typing import NDArray
 
 from ..errors import PartcalError
 from .kinematics import Robot, matrix_from_euler_deg, rpy_deg_from_matrix
+from .rotations import rotation_vectors_from_matrices
 
 UR_JOINTS = ("shoulder", "upper_arm", "forearm", "wrist_1", "wrist_2", "wrist_3")
 _MM_TO_M = 1e-3
@@ -101,7 +107,8 @@ class UrdfJoint:
     limits_deg: tuple[float, float] | None = None      # mm for a prismatic joint
 
 
-def urdf_joints(robot: Robot, base_pose: NDArray[np.float64] | None = None) -> list[UrdfJoint]:
+def urdf_joints(robot: Robot, base_pose: NDArray[np.float64] | None = None,
+                tool_rotation: NDArray[np.float64] | None = None) -> list[UrdfJoint]:
     """The joints of :func:`urdf_from_robot` (see the module notes)."""
     rows = _row_joints(robot)
     fixed = fixed_transforms(robot)
@@ -133,11 +140,12 @@ def urdf_joints(robot: Robot, base_pose: NDArray[np.float64] | None = None) -> l
                                         limits_deg=(-360.0 * abs(c) - 360.0, 360.0 * abs(c) + 360.0)))
         previous, parent = fixed[r], child
     joints.append(UrdfJoint("flange_joint", "fixed", parent, "flange", previous))
-    joints.append(UrdfJoint("tcp_joint", "fixed", "flange", "tcp", transform(None, robot.tool_mm)))
+    joints.append(UrdfJoint("tcp_joint", "fixed", "flange", "tcp", transform(tool_rotation, robot.tool_mm)))
     return joints
 
 
-def urdf_from_robot(robot: Robot, base_pose: NDArray[np.float64] | None = None, comment: str = "") -> str:
+def urdf_from_robot(robot: Robot, base_pose: NDArray[np.float64] | None = None, comment: str = "",
+                    tool_rotation: NDArray[np.float64] | None = None) -> str:
     """The chain as URDF text: links ``[world], base_link, link1..linkR, flange, tcp`` (metres, radians).
 
     Parameters
@@ -148,12 +156,16 @@ def urdf_from_robot(robot: Robot, base_pose: NDArray[np.float64] | None = None, 
         ``world -> base_link``. None: the file starts at ``base_link``.
     comment : str
         Put at the top of the file.
+    tool_rotation : ndarray, shape (3, 3), optional
+        The tool's (or reflector's) turn in the flange frame, ``flange_T_tool``'s
+        rotation (an identified probe turn): the fixed joint ``flange -> tcp``
+        carries it. None: the tool frame is the flange's, moved to the tool point.
     """
     from xml.sax.saxutils import quoteattr
 
     lines = ['<?xml version="1.0"?>', *(f"<!-- {c} -->" for c in comment.splitlines() if c),
              f"<robot name={quoteattr(robot.name + '_calibrated')}>"]
-    joints = urdf_joints(robot, base_pose)
+    joints = urdf_joints(robot, base_pose, tool_rotation)
     links = [joints[0].parent] + [j.child for j in joints]
     lines += [f'  <link name="{name}"/>' for name in links]
     for j in joints:
@@ -183,6 +195,21 @@ class UrKinematics:
     tcp_mm: NDArray[np.float64]
     tcp_rotation: NDArray[np.float64]
 
+    @property
+    def tcp_rotvec_rad(self) -> NDArray[np.float64]:
+        """The TCP's turn as a rotation vector ``(3,)``, radians (``rx, ry, rz`` of UR's TCP)."""
+        return rotation_vectors_from_matrices(self.tcp_rotation)[0]
+
+    def tcp_text(self) -> str:
+        """The TCP as the controller takes it, one line: position (mm) and rotation vector (radians, and the
+        angle in degrees), and ``set_tcp``'s form (metres, radians)."""
+        x, y, z = (float(v) for v in self.tcp_mm)
+        rx, ry, rz = (float(v) for v in self.tcp_rotvec_rad)
+        angle = math.degrees(math.sqrt(rx * rx + ry * ry + rz * rz))
+        pose = ", ".join(repr(v) for v in (x * _MM_TO_M, y * _MM_TO_M, z * _MM_TO_M, rx, ry, rz))
+        return (f"x {x:.6f} y {y:.6f} z {z:.6f} mm, rx {rx:.9f} ry {ry:.9f} rz {rz:.9f} rad (rotation vector, a "
+                f"turn of {angle:.6f} deg); set_tcp(p[{pose}])")
+
     def yaml_text(self, hash_text: str, comment: str = "") -> str:
         """The file, in ur_description's layout."""
         lines = [f"# {c}" if c else "#" for c in comment.splitlines()]
@@ -194,8 +221,9 @@ class UrKinematics:
         return "\n".join(lines) + "\n"
 
 
-def ur_kinematics_from_robot(robot: Robot) -> UrKinematics:
-    """The UR kinematics of a six-joint chain whose row ``k`` turns with ``q_k`` alone (see the module notes).
+def ur_kinematics_from_robot(robot: Robot, tool_rotation: NDArray[np.float64] | None = None) -> UrKinematics:
+    """The UR kinematics of a six-joint chain whose row ``k`` turns with ``q_k`` alone (see the module notes);
+    ``tool_rotation`` (3, 3), the tool's turn in the flange frame, goes into the TCP with the last row's rest.
 
     Raises
     ------
@@ -207,6 +235,7 @@ def ur_kinematics_from_robot(robot: Robot) -> UrKinematics:
             (robot.prismatic is not None and robot.prismatic.any()):
         raise ExportError(f"{robot.name}: the UR kinematics file needs six rows turned by q1..q6 in order; the robot "
                           f"has {robot.n_joints} joints in {rows} rows")
+    _check_ur_shape(robot)
     fixed = fixed_transforms(robot)
     rest = transform(robot.base_rotation, robot.base_mm)
     out = {}
@@ -219,8 +248,25 @@ def ur_kinematics_from_robot(robot: Robot) -> UrKinematics:
         roll, pitch, yaw = (math.radians(float(v)) for v in rpy_deg_from_matrix(origin[:3, :3]))
         x, y, z = (float(v) * _MM_TO_M for v in origin[:3, 3])
         out[name] = {"x": x, "y": y, "z": z, "roll": roll, "pitch": pitch, "yaw": yaw}
-    tcp = rest @ transform(None, robot.tool_mm)
+    tcp = rest @ transform(tool_rotation, robot.tool_mm)
     return UrKinematics(out, tcp[:3, 3].copy(), tcp[:3, :3].copy())
+
+
+UR_PARALLEL_TOL_DEG = 1.0       # how far from parallel UR-shaped axes 2, 3, 4 may be (identified tilts: ~0.05 deg)
+
+
+def _check_ur_shape(robot: Robot) -> None:
+    """Refuse a six-joint chain that is not a UR arm's: ur_description builds shoulder, elbow and wrist 1 about
+    parallel axes (joints 2, 3 and 4), and wrist 2 across them; a KUKA or ABB arm (joint 4 along the forearm)
+    has no UR kinematics file."""
+    axes = robot.frames(robot.home_deg[None])[1][0]           # z of frames 0..R: joint k turns about z of k - 1
+    angle = [math.degrees(math.acos(min(1.0, abs(float(axes[k] @ axes[k + 1]))))) for k in range(5)]
+    bad = [(k + 1, k + 2) for k in (1, 2) if angle[k] > UR_PARALLEL_TOL_DEG]
+    if bad or angle[3] < 90.0 - UR_PARALLEL_TOL_DEG:
+        j, k = bad[0] if bad else (4, 5)
+        raise ExportError(f"{robot.name}: the UR kinematics file is for UR-shaped chains (joints 2, 3 and 4 about "
+                          f"parallel axes, joint 5 across them, as ur_description builds its arms); here joints {j} "
+                          f"and {k} turn about axes {angle[j - 1]:.1f} degrees apart")
 
 
 def dh_rows(robot: Robot) -> list[dict]:

@@ -1,8 +1,9 @@
 """The floor a floor-mounted arm must stay above: which poses put a link, the flange or the tool below it.
 
-The floor is the horizontal plane ``z = height_mm`` of the robot's base frame
-(by default its base plane, ``z = 0``; a robot description may set another
-height with ``floor_mm``, or none for a ceiling- or wall-mounted arm). A pose is
+The floor is the horizontal plane ``z = height_mm`` of the robot's base frame,
+where the robot's description states one (``floor_mm``: the built-in UR10's is
+its base plane, ``z = 0``) or a command sets one; a description without
+``floor_mm`` (a pedestal, a ceiling or a wall, a URDF) has none. A pose is
 *above the floor* when every point of the arm that the joints can move stays
 at least ``clearance_mm`` above it. The points are the origins of the
 kinematic frames 1..R (the joints' frames, the last one the flange) and the

@@ -188,7 +188,7 @@ def _robot(path: Path, urdf, joints: list, name: str) -> Robot:
     return Robot(name=name, n_joints=n, alpha_deg=zeros, d_mm=slide_mm, a_mm=zeros.copy(),
                  theta_offset_deg=offsets, coupling=coupling, tool_mm=np.zeros(3), limits_deg=limits, home_deg=home,
                  base_rotation=before[0][:3, :3] @ axes[0], base_mm=before[0][:3, 3] * _M_TO_MM, origins=origins,
-                 prismatic=slides if slides.any() else None)
+                 prismatic=slides if slides.any() else None, floor_mm=None)    # a URDF states no floor
 
 
 def _origin(joint) -> NDArray[np.float64]:
@@ -242,7 +242,8 @@ def _limits(path: Path, joint) -> tuple[float, float]:
 def _check_elements(path: Path) -> None:
     """The elements the chain reads, checked with their lines before yourdfpy parses the file: a ``<robot>``
     root; every ``<joint>`` with a name, a known type, ``<parent link>`` and ``<child link>``; numbers of
-    the right count in ``<origin>``, ``<axis>`` (not zero) and ``<limit>``."""
+    the right count in ``<origin>``, ``<axis>`` (not zero, but for a fixed joint) and ``<limit>``; and the
+    links and joints a tree (:func:`_check_tree`)."""
     from lxml import etree     # yourdfpy's own XML parser
 
     try:
@@ -278,5 +279,53 @@ def _check_elements(path: Path) -> None:
             if len(values) != count or not all(math.isfinite(v) for v in values):
                 raise RobotFileError(f"{where} <{tag} {attribute}=\"{text}\">: expected {count} finite "
                                      f"number{'s' if count > 1 else ''} (metres, radians)")
-            if tag == "axis" and not any(values):
+            if tag == "axis" and not any(values) and joint.get("type") != "fixed":    # a fixed one means nothing
                 raise RobotFileError(f"{where} <axis xyz=\"{text}\">: expected a non-zero axis")
+    _check_tree(path, root)
+
+
+def _check_tree(path: Path, root) -> None:
+    """The links and joints of ``root`` form a tree: each ``<link>`` and ``<joint>`` name once, each joint
+    between two declared links, each link the child of at most one joint, and no cycle. A link with two
+    parents would otherwise keep one of them silently (and build another robot)."""
+    links, joints, parent_of = {}, {}, {}
+    for link in root.findall("link"):
+        name = link.get("name")
+        if not name:
+            raise RobotFileError(f"{path}: line {link.sourceline}: <link>: expected a name attribute")
+        if name in links:
+            raise RobotFileError(f"{path}: line {link.sourceline}: <link name={name!r}>: expected each link name "
+                                 f"once; already declared at line {links[name]}")
+        links[name] = link.sourceline
+    for joint in root.findall("joint"):
+        name, line = joint.get("name"), joint.sourceline
+        where = f"{path}: line {line}: <joint name={name!r}>"
+        if name in joints:
+            raise RobotFileError(f"{where}: expected each joint name once; already declared at line {joints[name]}")
+        joints[name] = line
+        parent, child = joint.find("parent").get("link"), joint.find("child").get("link")
+        for tag, link in (("parent", parent), ("child", child)):
+            if link not in links:
+                raise RobotFileError(f"{where} <{tag} link={link!r}>: expected a declared <link>; no link of that "
+                                     "name")
+        if child in parent_of:
+            other, other_line, _ = parent_of[child]
+            raise RobotFileError(f"{where} <child link={child!r}>: expected one parent joint per link (a URDF is a "
+                                 f"tree); {child!r} is already the child of joint {other!r} at line {other_line}")
+        parent_of[child] = (name, line, parent)
+    done: set[str] = set()
+    for start in links:                    # follow each link's parents up to a root; a link met twice: a cycle
+        path_links, link = [], start
+        while link in parent_of and link not in done:
+            if link in path_links:
+                loop = path_links[path_links.index(link):]
+                child = max(loop, key=lambda k: parent_of[k][1])      # the joint read last closes it
+                name, line, _ = parent_of[child]
+                down = loop[::-1]                                     # parent -> child, from that joint's child
+                down = down[down.index(child):] + down[:down.index(child)]
+                chain = " -> ".join(down + [child])
+                raise RobotFileError(f"{path}: line {line}: <joint name={name!r}>: closes a cycle of links ({chain}); "
+                                     "expected a tree")
+            path_links.append(link)
+            link = parent_of[link][2]
+        done.update(path_links)

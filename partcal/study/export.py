@@ -5,16 +5,18 @@ identified geometry (:mod:`partcal.robot.export` does the writing):
 
 - ``<name>.urdf``: the calibrated chain, joint offsets folded into the joint
   origins, the identified base pose as the fixed joint ``world -> base_link``
-  and the tool point as ``flange -> tcp``;
+  and the tool point, turned by the tool's identified turn, as ``flange -> tcp``;
 - ``<name>_ur_kinematics.yaml``: ur_description's ``default_kinematics.yaml``
-  (six-joint chains turned by q1..q6), with the TCP it needs in ``tool0``;
+  (UR-shaped six-joint chains turned by q1..q6), with the TCP it needs in
+  ``tool0``, position and rotation, in its header (the file has no tool);
 - ``<name>_dh.csv``: the DH table, when the identified chain is one (DH
   parametrization of a DH robot);
 - ``<name>_robot.yaml``: partcal's own robot YAML of the calibrated chain.
 
 What geometry cannot carry (compliance, transmission harmonics, a residual
-model) is named in one line, with the RMS of the exported geometry beside the
-full model's on a data set when one is given.
+model; the tool's turn in the files whose tool is a point) is named in one
+line, with the RMS of the exported geometry beside the full model's on a data
+set when one is given. An export that can write nothing is refused.
 """
 
 from __future__ import annotations
@@ -36,6 +38,7 @@ from ..models.kinematic import KinematicModel
 from ..robot.description import robot_to_dict
 from ..robot.export import ExportError, dh_rows, transform, ur_kinematics_from_robot, urdf_from_robot
 from ..robot.kinematics import Robot, matrix_from_euler_deg
+from ..robot.rotations import matrices_from_rotation_vectors
 from .persist import load_model
 
 FORMATS = ("urdf", "ur", "dh", "yaml")
@@ -50,6 +53,7 @@ class Exported:
     skipped: dict = field(default_factory=dict)
     not_carried: str = ""
     tcp_mm: NDArray[np.float64] | None = None
+    tcp_text: str = ""            # the UR TCP, position and rotation, as the controller takes it (one line)
 
 
 def calibrated_geometry(model: KinematicModel) -> tuple[Robot, NDArray[np.float64]]:
@@ -59,6 +63,16 @@ def calibrated_geometry(model: KinematicModel) -> tuple[Robot, NDArray[np.float6
     size = geometric_size(model.robot_, model.parametrization_)
     robot = own_geometry(model.robot_, values, model.parametrization_)
     return robot, transform(matrix_from_euler_deg(values[size - 3:size]), values[size - 6:size - 3])
+
+
+def tool_turn(model: KinematicModel) -> NDArray[np.float64] | None:
+    """The identified turn ``(3, 3)`` of the tool (reflector, probe) in the flange frame, None when the
+    identification did not turn it (``probe.rx``, ``probe.ry``, ``probe.rz``: a rotation vector, degrees)."""
+    if not model.orientation_:
+        return None
+    names = list(model.identification_.names)
+    rotvec_deg = model.identification_.value[[names.index(f"probe.r{c}") for c in "xyz"]]
+    return matrices_from_rotation_vectors(np.radians(rotvec_deg))[0]
 
 
 def left_out(model: KinematicModel) -> str:
@@ -103,18 +117,17 @@ def export_model(model_path, output: Path, formats=FORMATS, q_deg=None, errors_m
     below = next(f for f in (output, *output.parents) if f.exists() or f == f.parent)
     if not below.is_dir():
         raise PartcalError(f"{output}: {below} is a file; export -o expects a folder (new or existing)")
-    output.mkdir(parents=True, exist_ok=True)
     stamp = (f"Calibrated {model.robot_.name} from {Path(model_path).name} ({model.parametrization_} "
              "parametrization), written by partcal export.")
-    files, skipped, tcp = {}, {}, None
-    writers = {"urdf": lambda: (f"{name}.urdf", urdf_from_robot(robot, base_pose, comment=stamp)),
+    texts, files, skipped, tcp, tcp_text, turn = {}, {}, {}, None, "", tool_turn(model)
+    writers = {"urdf": lambda: (f"{name}.urdf", urdf_from_robot(robot, base_pose, comment=stamp, tool_rotation=turn)),
                "yaml": lambda: (f"{name}_robot.yaml", _robot_yaml(robot, stamp)),
                "dh": lambda: (f"{name}_dh.csv", _dh_csv(robot))}
     for fmt in formats:
         try:
             if fmt == "ur":
-                ur = ur_kinematics_from_robot(robot)
-                tcp = ur.tcp_mm
+                ur = ur_kinematics_from_robot(robot, turn)
+                tcp, tcp_text = ur.tcp_mm, ur.tcp_text()
                 text = ur.yaml_text(_hash(ur.joints), _ur_comment(stamp, ur))
                 filename = f"{name}_ur_kinematics.yaml"
             else:
@@ -122,6 +135,12 @@ def export_model(model_path, output: Path, formats=FORMATS, q_deg=None, errors_m
         except ExportError as exc:
             skipped[fmt] = str(exc)
             continue
+        texts[fmt] = (filename, text)
+    if not texts:                          # nothing to write: say why, and leave no empty folder behind
+        raise ExportError(f"export: nothing written for {model_path}: "
+                          + "; ".join(f"{fmt}: {why}" for fmt, why in skipped.items()))
+    output.mkdir(parents=True, exist_ok=True)
+    for fmt, (filename, text) in texts.items():
         with atomic_write(output / filename) as handle:
             handle.write(text)
         files[fmt] = output / filename
@@ -131,7 +150,13 @@ def export_model(model_path, output: Path, formats=FORMATS, q_deg=None, errors_m
         full = model.predict(q_deg)[:, :3]
         note += (f" (on the {len(q_deg)} poses given: 3-D RMS left {pooled_rms(errors_mm - geometry):.3f} mm by the "
                  f"exported geometry, {pooled_rms(errors_mm - full):.3f} mm by the full model)")
-    return Exported(files, skipped, note, tcp)
+    pointless = [f for f in ("yaml", "dh") if f in files]
+    if turn is not None and pointless:        # their tool is a point: say what they leave out
+        angle = np.degrees(np.arccos(np.clip((np.trace(turn) - 1.0) / 2.0, -1.0, 1.0)))
+        note += ("; " if note else "") + (f"the tool's identified turn ({angle:.4f} deg) is not carried by "
+                                          f"{' and '.join(files[f].name for f in pointless)} (a tool point only; "
+                                          "the URDF and the UR TCP carry it)")
+    return Exported(files, skipped, note, tcp, tcp_text)
 
 
 def _robot_yaml(robot: Robot, stamp: str) -> str:
@@ -159,9 +184,9 @@ def _hash(joints: dict) -> str:
 
 
 def _ur_comment(stamp: str, ur) -> str:
-    x, y, z = ur.tcp_mm
     return (f"{stamp}\nur_description's kinematics parameters: per joint the origin from the parent link, "
             "translation x, y, z (metres) then\nrotation Rz(yaw) Ry(pitch) Rx(roll) (radians, fixed axes), then the "
             "joint's turn about z. The chain starts in\nbase_link_inertia (partcal's robot base frame; base_link is "
             "turned by 180 degrees about z from it).\nThe hash is partcal's own tag, not the controller's calibration "
-            f"checksum.\nTool centre point in tool0 (set it on the controller): x {x:.6f} y {y:.6f} z {z:.6f} mm.")
+            "checksum.\nThis file has no tool: set the tool centre point in tool0 on the controller, position and "
+            f"rotation:\n{ur.tcp_text()}.")

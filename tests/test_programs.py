@@ -635,3 +635,84 @@ def test_a_joint_model_fitted_with_the_wrist_held_compensates_full_poses_where_t
     np.testing.assert_allclose(reached[:, :3, 3] + model.predict(comp.joints_deg), target[:, :3, 3], atol=1e-3)
     np.testing.assert_allclose(reached[:, :3, :3], target[:, :3, :3], atol=1e-9)
     assert np.abs(comp.joints_deg[:, 3:5] - q[:, 3:5]).max() > 0.01      # the wrist moved to keep the orientation
+
+
+# ---------------------------------------------------------------------- line endings, one-line programs
+ONE_LINERS = {
+    "one.script": (b"movel(p[-0.7446, -0.2977, 0.4299, 2.4066, 2.0194, 0.0], a=1.2, v=0.25)", UR10, 9),
+    "one.src": (b"LIN {X 1044.037,Y -8.472,Z 652.644,A -90.8302,B 14.6598,C -84.9212} C_DIS", SK120, 8),
+    "one.mod": (b"MODULE One CONST robtarget p10:=[[1201.645,85.084,1050.031],[0.212583,-0.556195,0.152896,"
+                b"-0.788719],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]]; ENDMODULE", SK120, 35),
+    "one.csv": (b"q1,q2,q3,q4,q5,q6\n10.0,-80.0,90.0,-100.0,-90.0,20.0", UR10, 1)}
+
+
+@pytest.mark.parametrize("name", sorted(ONE_LINERS))
+def test_a_program_of_one_line_without_a_final_newline_is_read_and_compensated(tmp_path, name):
+    data, robot, column = ONE_LINERS[name]
+    path = tmp_path / name
+    path.write_bytes(data)
+    program = read_program(path)
+    assert [(t.line, t.column) for t in program.targets] == [(2 if name.endswith(".csv") else 1, column)]
+    assert compensated(constant_model(robot, np.zeros(3)), path).output == data
+    out = compensated(constant_model(robot, [0.3, -0.2, 0.1]), path).output
+    assert out != data and not out.endswith((b"\n", b"\r")) and out.count(b"\n") == data.count(b"\n")
+
+
+@pytest.mark.parametrize("name, robot", [("pick_place.script", UR10), ("pallet.dat", SK120), ("pallet.src", SK120),
+                                         ("pallet.mod", SK120), ("trajectory.csv", UR10)])
+def test_a_program_with_cr_only_line_endings_has_the_targets_and_lines_of_its_lf_twin(tmp_path, name, robot):
+    lf = tmp_path / ("lf_" + name)
+    lf.write_bytes((FIXTURES / name).read_bytes().replace(b"\r\n", b"\n"))
+    cr = tmp_path / name
+    cr.write_bytes(lf.read_bytes().replace(b"\n", b"\r"))
+    assert b"\n" not in cr.read_bytes()
+    twin = [(t.name, t.line, t.column) for t in read_program(lf).targets]
+    assert [(t.name, t.line, t.column) for t in read_program(cr).targets] == twin and twin
+    assert compensated(constant_model(robot, np.zeros(3)), cr).output == cr.read_bytes()
+    moved = compensated(constant_model(robot, [0.3, -0.2, 0.1]), cr).output
+    assert b"\n" not in moved and moved.count(b"\r") == cr.read_bytes().count(b"\r")
+    assert moved.replace(b"\r", b"\n") == compensated(constant_model(robot, [0.3, -0.2, 0.1]), lf).output
+
+
+def test_a_note_on_a_cr_only_program_goes_on_the_target_line_with_its_line_ending(tmp_path):
+    # an unreachable joint trajectory row gets a comment line before it, ended as the file's lines are
+    path = tmp_path / "cr.csv"
+    path.write_bytes(b"q1,q2,q3,q4,q5,q6\r10,-80,90,-100,-90,20\r")
+    result = compensated(constant_model(UR10, [1e5, 0, 0]), path, keep_unconverged=True)
+    assert result.failures
+    assert result.output.startswith(b"q1,q2,q3,q4,q5,q6\r# partcal: not compensated: ")
+    assert result.output.endswith(b"\r10,-80,90,-100,-90,20\r") and b"\n" not in result.output
+
+
+def test_a_cp1252_ellipsis_in_a_joint_trajectory_comment_does_not_split_its_line(tmp_path):
+    path = tmp_path / "ellipsis.csv"
+    path.write_bytes(b"# steps \x85 every 8 ms\nq1,q2,q3,q4,q5,q6\n10,-80,90,-100,-90,20\n")
+    assert [(t.line, t.column) for t in read_program(path).targets] == [(3, 1)]
+
+
+# ---------------------------------------------------------------------- quaternions of tools and work objects
+@pytest.mark.parametrize("old, new, field", [
+    (b"[[0,0,100],[1,0,0,0]]", b"[[0,0,100],[0,0,0,0]]", "tooldata tGripper tframe: quaternion of norm 0"),
+    (b"[[0,0,100],[1,0,0,0]]", b"[[0,0,100],[0.9,0,0,0]]", "tooldata tGripper tframe: quaternion of norm 0.9"),
+    (b"[[1000, 0, 500], [1, 0, 0, 0]]", b"[[1000, 0, 500], [0, 0, 0, 0]]", "wobjdata wTable uframe: quaternion of norm 0"),
+    (b"[[0,0,0],[1,0,0,0]]];", b"[[0,0,0],[0,0,0,0]]];", "wobjdata wTable oframe: quaternion of norm 0")])
+def test_a_zero_or_non_unit_quaternion_of_a_tool_or_work_object_exits_2_naming_it(tmp_path, old, new, field):
+    path = tmp_path / "q.mod"
+    data = (FIXTURES / "pallet.mod").read_bytes()
+    assert data.count(old) == 1
+    path.write_bytes(data.replace(old, new))
+    at = data.index(old) + new.index(b"],[") + 3 if b"],[" in new else data.index(old) + new.index(b"], [") + 4
+    line, column = data.count(b"\n", 0, at) + 1, at - data.rfind(b"\n", 0, at)
+    where = f"line {line}, column {column}"
+    save_model(constant_model(SK120, np.zeros(3)).model, tmp_path / "m.json", name="zero", robot=SK120)
+    done = run("compensate", str(tmp_path / "m.json"), str(path), "-o", str(tmp_path / "o.mod"))
+    assert done.returncode == 2, done.stderr
+    assert f"{path}: {where}: {field}: expected a unit quaternion (norm 1 to 0.001)" in done.stderr
+    assert len(done.stderr.strip().splitlines()) == 1 and not (tmp_path / "o.mod").exists()
+
+
+def test_a_zero_quaternion_given_as_a_tool_option_exits_2(tmp_path):
+    save_model(constant_model(SK120, np.zeros(3)).model, tmp_path / "m.json", name="zero", robot=SK120)
+    done = run("compensate", str(tmp_path / "m.json"), str(FIXTURES / "pallet.mod"), "-o", str(tmp_path / "o.mod"),
+               "--tool", "tGripper=[[0, 0, 100], [0, 0, 0, 0]]")
+    assert done.returncode == 2 and "quaternion of norm 0: expected a unit quaternion" in done.stderr, done.stderr

@@ -25,6 +25,7 @@ from .program_text import (Dialect, ProgramSyntaxError, Target, UnknownFrameErro
                            line_and_column, line_end, masked, numbers, syntax_error)
 
 MM_DECIMALS, QUATERNION_DECIMALS, DEG_DECIMALS = 6, 9, 6
+UNIT_TOLERANCE = 1e-3      # a quaternion's norm may differ from 1 by this much (numbers rounded when written)
 _DECL = re.compile(r"\b(?:CONST|PERS|VAR)\s+(robtarget|jointtarget|tooldata|wobjdata)\s+([A-Za-z_]\w*)"
                    r"\s*(\{\s*\d+\s*\})?\s*:=\s*\[", re.IGNORECASE)
 _MOVE = re.compile(r"\b(Move\w*)\s+([^;]*);", re.IGNORECASE)
@@ -133,12 +134,19 @@ def _robtarget(text, code, source, start, name) -> Target:
     trans = numbers(source, text, parts[0][0] + 1, parts[0][1], 3, f"{name}: position [x, y, z] (mm)")
     rot = numbers(source, text, parts[1][0] + 1, parts[1][1], 4, f"{name}: quaternion [q1, q2, q3, q4]")
     conf = numbers(source, text, parts[2][0] + 1, parts[2][1], 4, f"{name}: confdata [cf1, cf4, cf6, cfx]")
-    q = np.array([f.value for f in rot])
-    if abs(np.linalg.norm(q) - 1.0) > 1e-3:
-        raise syntax_error(source, text, rot[0].start, f"{name}: quaternion of norm {np.linalg.norm(q):.6g}",
-                           "a unit quaternion (norm 1 to 1e-3)")
+    _check_unit(text, source, rot, f"{name}: quaternion")
     return Target(name, 0, 0, "pose", tuple(trans + rot), configuration=tuple(int(f.value) for f in conf),
                   line_end=line_end(text, start))
+
+
+def _check_unit(text, source, fields, what) -> None:
+    """A quaternion of a robtarget, a tool or a work object: of norm 1 within 1e-3 (the controller's own
+    check), else refused naming where it is; never normalised silently (a zero one has no rotation)."""
+    norm = float(np.linalg.norm([f.value for f in fields]))
+    if abs(norm - 1.0) > UNIT_TOLERANCE:
+        raise syntax_error(source, text, fields[0].start, f"{what} of norm {norm:.6g}",
+                           f"a unit quaternion (norm 1 to {UNIT_TOLERANCE:g})",
+                           "[" + ", ".join(f.text for f in fields) + "]")
 
 
 def _jointtarget(text, code, source, start, name) -> Target:
@@ -157,6 +165,7 @@ def _pose(text, code, source, start, what) -> np.ndarray:
         raise syntax_error(source, text, start, what, "[[x, y, z], [q1, q2, q3, q4]]")
     trans = numbers(source, text, parts[0][0] + 1, parts[0][1], 3, f"{what}: [x, y, z]")
     rot = numbers(source, text, parts[1][0] + 1, parts[1][1], 4, f"{what}: [q1, q2, q3, q4]")
+    _check_unit(text, source, rot, f"{what}: quaternion")
     return frame_pose([f.value for f in trans], matrices_from_quaternions([f.value for f in rot])[0])
 
 

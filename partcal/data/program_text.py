@@ -19,6 +19,8 @@ from ..errors import DataError
 NUMBER = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
 NUMBER_RE = re.compile(NUMBER)
 BOM = "\xef\xbb\xbf"         # a UTF-8 byte order mark, read as latin-1: not part of the first line
+LINE_BREAK = re.compile(r"\r\n|\r|\n")    # a line ends at CR LF, LF or a lone CR (old Mac editors)
+_BREAK_CHAR = re.compile(r"[\r\n]")
 
 
 def is_number(text: str) -> bool:
@@ -126,11 +128,10 @@ class Dialect:
         """Lines, columns, poses and joints of parsed targets, computed for all of them at once."""
         if not targets:
             return
-        newlines = np.flatnonzero(np.frombuffer(text.encode("latin-1"), dtype=np.uint8) == 10)
+        starts = line_starts(text)
         offsets = np.array([t.fields[0].start for t in targets])
-        lines = np.searchsorted(newlines, offsets)                  # newlines before each target
-        starts = np.where(lines > 0, newlines[np.maximum(lines - 1, 0)] + 1, 0)
-        for t, line, column in zip(targets, lines + 1, offsets - starts + 1):
+        lines = np.searchsorted(starts, offsets, side="right")      # lines started at or before each target
+        for t, line, column in zip(targets, lines, offsets - starts[lines - 1] + 1):
             t.line, t.column = int(line), int(column)
         poses = [t for t in targets if t.kind == "pose"]
         if poses:
@@ -163,9 +164,9 @@ class Dialect:
             end = text.find(self.statement_end, target.fields[-1].end) if self.statement_end else -1
             at = line_end(text, end) if end >= 0 else target.line_end
             return at, at, f" {self.comment} {message}"
-        start = text.rfind("\n", 0, target.fields[0].start) + 1
-        ending = "\r\n" if text[target.line_end:target.line_end + 2] == "\r\n" else "\n"
-        return start, start, f"{self.comment} {message}{ending}"
+        start = line_start(text, target.fields[0].start)
+        ending = LINE_BREAK.match(text, target.line_end) or LINE_BREAK.search(text)
+        return start, start, f"{self.comment} {message}{ending.group() if ending else chr(10)}"
 
 
 @dataclass
@@ -189,17 +190,29 @@ class Program:
         return "".join(out).encode("latin-1")
 
 
+def line_starts(text: str) -> np.ndarray:
+    """Offsets at which the lines of ``text`` start (the first is 0; CR LF, LF and a lone CR end a line)."""
+    return np.array([0] + [m.end() for m in LINE_BREAK.finditer(text)], dtype=np.int64)
+
+
+def line_start(text: str, offset: int) -> int:
+    """Offset of the start of the line holding ``offset``."""
+    return max(text.rfind("\n", 0, offset), text.rfind("\r", 0, offset)) + 1
+
+
 def line_and_column(text: str, offset: int) -> tuple[int, int]:
-    """1-based line and column of a character offset (a CR LF or LF ends a line)."""
-    line = text.count("\n", 0, offset) + 1
-    return line, offset - (text.rfind("\n", 0, offset) + 1) + 1
+    """1-based line and column of a character offset (CR LF, LF or a lone CR ends a line).
+
+    >>> line_and_column("a\rbc\r\nd", 7), line_and_column("one line", 4)
+    ((3, 1), (1, 5))
+    """
+    return len(LINE_BREAK.findall(text, 0, offset)) + 1, offset - line_start(text, offset) + 1
 
 
 def line_end(text: str, offset: int) -> int:
-    """Offset of the end of the line holding ``offset``, before its ``\\r\\n`` or ``\\n``."""
-    end = text.find("\n", offset)
-    end = len(text) if end < 0 else end
-    return end - 1 if end > 0 and text[end - 1] == "\r" else end
+    """Offset of the end of the line holding ``offset``, before its line break (the end of the text if none)."""
+    end = _BREAK_CHAR.search(text, offset)
+    return len(text) if end is None else end.start()
 
 
 def syntax_error(source: str, text: str, offset: int, what: str, expected: str,
@@ -207,7 +220,7 @@ def syntax_error(source: str, text: str, offset: int, what: str, expected: str,
     """One error naming the file, line and column, what was found (default: the text there) and what was
     expected; nothing is written."""
     line, column = line_and_column(text, offset)
-    found = text[offset:offset + 40].split("\n")[0].rstrip("\r") if found is None else found
+    found = _BREAK_CHAR.split(text[offset:offset + 40])[0] if found is None else found
     return ProgramSyntaxError(f"{source}: line {line}, column {column}: {what}: expected {expected}, got "
                               f"{found!r}; nothing written")
 

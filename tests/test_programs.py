@@ -716,3 +716,48 @@ def test_a_zero_quaternion_given_as_a_tool_option_exits_2(tmp_path):
     done = run("compensate", str(tmp_path / "m.json"), str(FIXTURES / "pallet.mod"), "-o", str(tmp_path / "o.mod"),
                "--tool", "tGripper=[[0, 0, 100], [0, 0, 0, 0]]")
     assert done.returncode == 2 and "quaternion of norm 0: expected a unit quaternion" in done.stderr, done.stderr
+
+
+# ---------------------------------------------------------------------- URScript: the TCP of the move
+def test_a_polyscope_waypoint_has_the_tcp_set_before_the_move_not_before_its_declaration(tmp_path):
+    path = FIXTURES / "polyscope_tcp.script"
+    program = read_program(path)
+    assert [(t.name, t.line, t.tool) for t in program.targets] == [
+        ("Waypoint_1_p", 10, "set_tcp at line 19"), ("Waypoint_2_p", 12, "set_tcp at line 19"),
+        ("Waypoint_3_p", 14, "set_tcp at line 26")]
+    np.testing.assert_allclose(program.frames["set_tcp at line 26"][:3, 3], [0, 50, 200])
+    # the same moves with each pose written inline after its set_tcp: the tool there is the one in force
+    text = path.read_text()
+    for t in program.targets:
+        literal = text.splitlines()[t.line - 1].split("=", 1)[1]
+        text = text.replace(f"({t.name},", f"({literal},").replace(f"({t.name}, ", f"({literal}, ")
+    inline = tmp_path / "inline.script"
+    inline.write_text(text)
+    assert [t.tool for t in read_program(inline).targets] == [t.tool for t in program.targets]
+    model = constant_model(UR10, [0.3, -0.2, 0.1, 0.05, 0.02, -0.03])        # mm and degrees
+    mine, theirs = compensated(model, path), compensated(model, inline)
+    assert not mine.failures and not theirs.failures
+    np.testing.assert_allclose(mine.correction_mm, theirs.correction_mm, rtol=1e-9)
+    ours = np.array([t.position_mm for t in read_program_bytes(tmp_path, "a.script", mine.output).targets])
+    inl = np.array([t.position_mm for t in read_program_bytes(tmp_path, "b.script", theirs.output).targets])
+    np.testing.assert_allclose(ours, inl, atol=1e-5)
+    # with the header's zero TCP instead (where the waypoints are declared), Waypoint_3 would land elsewhere
+    header = ProgramFrames(tools={"set_tcp at line 26": program.frames["set_tcp at line 7"]})
+    other = read_program_bytes(tmp_path, "c.script", compensated(model, path, header).output)
+    assert np.linalg.norm(other.targets[2].position_mm - ours[2]) > 0.005      # 0.012 mm: 0.06 deg at 0.2 m
+    np.testing.assert_allclose(other.targets[1].position_mm, ours[1], atol=1e-5)
+
+
+def read_program_bytes(tmp_path, name, data):
+    path = tmp_path / name
+    path.write_bytes(data)
+    return read_program(path)
+
+
+def test_a_waypoint_moved_to_with_two_tcps_is_refused(tmp_path):
+    path = tmp_path / "two.script"
+    path.write_bytes((FIXTURES / "polyscope_tcp.script").read_bytes().replace(
+        b"movel(Waypoint_3_p, a=1.2, v=0.25)", b"movel(Waypoint_1_p, a=1.2, v=0.25)"))
+    with pytest.raises(UnknownFrameError, match=r"line 10, column 25: target Waypoint_1_p: it is moved to with the "
+                                                r"tools set_tcp at line 19 and set_tcp at line 26: one pose cannot"):
+        read_program(path)

@@ -350,7 +350,7 @@ def test_a_joint_trajectory_gets_the_joints_that_reach_its_nominal_poses(tmp_pat
 
 # ---------------------------------------------------------------------- refusals
 @pytest.mark.parametrize("name, old, new, where", [
-    ("pick_place.script", b"0.4299, 2.4066", b"0.4299, z_up", "line 7, column 41"),
+    ("pick_place.script", b"0.4299, 2.4066", b"0.4299, 2.40.66", "line 7, column 41"),
     ("pallet.dat", b"Y 85.084", b"Y 85,084", "line 10, column"),
     ("pallet.mod", b"[0.212583,-0.556195,0.152896,-0.788719]", b"[0.212583,-0.556195,0.152896]",
      "line 7, column"),
@@ -761,3 +761,201 @@ def test_a_waypoint_moved_to_with_two_tcps_is_refused(tmp_path):
     with pytest.raises(UnknownFrameError, match=r"line 10, column 25: target Waypoint_1_p: it is moved to with the "
                                                 r"tools set_tcp at line 19 and set_tcp at line 26: one pose cannot"):
         read_program(path)
+
+
+# ---------------------------------------------------------------------- KRL: the base and tool of the motions
+CELL = FIXTURES / "kuka_cell"
+CONFIG_FRAMES = ProgramFrames(frames={"BASE_DATA[1]": np.array([[1, 0, 0, 1500], [0, 1, 0, 0], [0, 0, 1, 400],
+                                                                [0, 0, 0, 1.0]]),
+                                      "BASE_DATA[3]": np.array([[0, -1, 0, 1200], [1, 0, 0, -300], [0, 0, 1, 250],
+                                                                [0, 0, 0, 1.0]])},   # A 90: x -> y
+                              tools={"TOOL_DATA[2]": np.block([[matrices_from_kuka_abc([[0, 30, 0]])[0],
+                                                                np.array([[12.5], [-3.0], [240.0]])],
+                                                               [np.zeros((1, 3)), np.ones((1, 1))]])})
+
+
+def krl_fields(data: bytes, name: bytes) -> dict:
+    line = next(x for x in data.split(b"\r\n") if x.startswith(name))
+    return {k.decode(): float(v) for k, v in re.findall(rb"\b([XYZABC]) ([-\d.]+)", line)}
+
+
+def test_krl_targets_follow_the_base_and_tool_set_before_their_motions():
+    dat = read_program(CELL / "weld.dat")
+    assert [(t.name, t.frame, t.tool) for t in dat.targets] == [
+        ("XSEAM1", "BASE_DATA[3]", "TOOL_DATA[2]"), ("XSEAM2", "BASE_DATA[3]", "TOOL_DATA[2]"),
+        ("XAPPROACH", "BASE_DATA[1]", "TOOL_DATA[2]")]                       # $BASE =, then BAS(#BASE, 1)
+    src = read_program(CELL / "weld.src")
+    assert [(t.name, t.line, t.frame, t.tool) for t in src.targets] == [("LIN", 17, "BASE_DATA[1]", "TOOL_DATA[2]")]
+    # a constant error e in the robot base moves every TCP by -e there: by -R^T e in the base's own axes
+    e = np.array([0.5, -0.3, 0.2])
+    result = compensated(constant_model(SK120, e), CELL / "weld.dat", CONFIG_FRAMES)
+    assert not result.failures
+    old = (CELL / "weld.dat").read_bytes()
+    for name, shift in ((b"DECL E6POS XSEAM1=", [0.3, 0.5, -0.2]), (b"DECL E6POS XAPPROACH=", [-0.5, 0.3, -0.2])):
+        before, after = krl_fields(old, name), krl_fields(result.output, name)
+        np.testing.assert_allclose([after[k] - before[k] for k in "XYZ"], shift, atol=1e-6)
+        assert [after[k] for k in "ABC"] == [before[k] for k in "ABC"]
+
+
+def test_a_krl_point_in_a_base_computed_at_run_time_is_left_as_written_and_reported(tmp_path):
+    for name, left in (("weld.dat", [("basePos[1]", 11, "no motion of weld.src reaches it"),
+                                     ("basePos[2]", 12, "no motion of weld.src reaches it"),
+                                     ("XCOMP", 13, "moved to in a base or tool set at run time ($BASE = "
+                                                   "BASE_DATA[1] : basePos[2] at line 20)")]),
+                       ("weld.src", [("LIN", 22, "moved to in a base or tool set at run time ($BASE = BASE_DATA[1] "
+                                                 ": basePos[2] at line 20)")])):
+        program = read_program(CELL / name)
+        assert [(x.name, x.line) for x in program.left] == [(n, line) for n, line, _ in left]
+        assert all(why in x.reason for x, (_, _, why) in zip(program.left, left))
+    save_model(constant_model(SK120, np.zeros(3)).model, tmp_path / "m.json", name="zero", robot=SK120)
+    out = tmp_path / "weld.src"
+    done = run("compensate", str(tmp_path / "m.json"), str(CELL / "weld.src"), "-o", str(out), "--frame",
+               "BASE_DATA[1]={X 1500,Y 0,Z 400,A 0,B 0,C 0}", "--tool", "TOOL_DATA[2]={X 12.5,Y -3,Z 240,A 0,B 30,C 0}")
+    assert done.returncode == 0, done.stderr
+    assert "weld.src: line 22, column 10: LIN: left as written: moved to in a base or tool set at run time" in done.stderr
+    summary = json.loads((tmp_path / "weld.src.json").read_text())
+    assert [(x["line"], x["target"]) for x in summary["left_as_written"]] == [(22, "LIN")]
+
+
+def test_a_krl_point_moved_to_in_two_bases_is_refused(tmp_path):
+    for name in ("weld.dat", "$config.dat"):
+        (tmp_path / name).write_bytes((CELL / name).read_bytes())
+    (tmp_path / "weld.src").write_bytes((CELL / "weld.src").read_bytes().replace(b"  PTP XAPPROACH\r\n",
+                                                                                 b"  PTP XAPPROACH\r\n  LIN XSEAM1\r\n"))
+    with pytest.raises(UnknownFrameError, match=r"weld.dat: line 7, column 22: target XSEAM1: it is moved to with "
+                                                r"\$BASE BASE_DATA\[1\], \$TOOL TOOL_DATA\[2\] and \$BASE BASE_DATA\[3\]"):
+        read_program(tmp_path / "weld.dat")
+
+
+def test_krl_data_that_no_motion_reaches_stay_byte_for_byte():
+    e = np.array([0.5, -0.3, 0.2])
+    result = compensated(constant_model(SK120, e), CELL / "weld.dat", CONFIG_FRAMES)
+    old, new = (CELL / "weld.dat").read_bytes().split(b"\r\n"), result.output.split(b"\r\n")
+    changed = [a.split(b"=")[0] for a, b in zip(old, new) if a != b]
+    assert changed == [b"DECL E6POS XSEAM1", b"DECL E6POS XSEAM2", b"DECL E6POS XAPPROACH"]   # not basePos, XCOMP
+    # $config.dat: the home position is a target (every program moves there); the system frames are not
+    config = compensated(constant_model(SK120, e), CELL / "$config.dat")
+    assert [t.name for t in config.program.targets] == ["XHOME"]
+    assert [x.name for x in config.program.left] == ["TOOL_CORR", "BASE_CORR", "REF_TOOL", "REF_PT[1]", "REF_PT[2]"]
+    old, new = (CELL / "$config.dat").read_bytes().split(b"\r\n"), config.output.split(b"\r\n")
+    assert [a.split(b"=")[0] for a, b in zip(old, new) if a != b] == [b"DECL E6AXIS XHOME"]
+
+
+# ---------------------------------------------------------------------- RAPID: names, monitoring, run-time data
+def test_a_generated_rapid_module_with_configuration_monitoring_off_is_compensated():
+    path = FIXTURES / "taco_pick.mod"
+    program = read_program(path)
+    assert [(t.tool, t.frame, t.configuration) for t in program.targets] == [("custom_tool1", "wobj0", None)] * 6
+    model = constant_model(SK120, [0.5, -0.3, 0.2])
+    result = compensated(model, path)
+    assert not result.failures and result.output != path.read_bytes()
+    np.testing.assert_allclose(result.correction_mm, np.linalg.norm([0.5, 0.3, 0.2]), rtol=1e-9)
+
+
+def test_a_written_configuration_is_checked_where_monitoring_is_on(tmp_path):
+    # the generator wrote [0,-1,-1,0] for every target; the joints it came from have axis 4 at 0 (cf4 = 0):
+    # with ConfJ and ConfL on (the default) the controller would stop, and partcal says so
+    path = tmp_path / "on.mod"
+    path.write_bytes((FIXTURES / "taco_pick.mod").read_bytes().replace(b"ConfL \\Off;", b"ConfL \\On;")
+                     .replace(b"ConfJ \\Off;", b""))
+    program = read_program(path)
+    assert [t.configuration for t in program.targets] == [(0, -1, -1, 0)] * 6
+    result = compensated(constant_model(SK120, [0.5, -0.3, 0.2]), path)
+    assert len(result.failures) == 6 and all("in its configuration (0, -1, -1, 0)" in why for _, why in result.failures)
+    # monitoring off for linear moves only: the MoveJ targets keep theirs
+    path.write_bytes((FIXTURES / "taco_pick.mod").read_bytes().replace(b"ConfJ \\Off;", b""))
+    assert [t.configuration for t in read_program(path).targets] == [(0, -1, -1, 0), None] * 3
+
+
+def test_rapid_names_are_case_insensitive(tmp_path):
+    path = tmp_path / "case.mod"
+    path.write_bytes((FIXTURES / "pallet.mod").read_bytes()
+                     .replace(b"MoveL p30, v100, fine, tGripper\\WObj:=wTable;", b"MoveL P30, v100, fine, TGRIPPER\\WOBJ:=WTable;")
+                     .replace(b"MoveJ p10, v1000, z50, tool0;", b"MoveJ p10, v1000, z50, Tool0\\WObj:=WObj0;"))
+    program = read_program(path)
+    assert [(t.name, t.tool, t.frame) for t in program.targets if t.kind == "pose"] == [
+        ("p10", "tool0", "wobj0"), ("p20", "tool0", "wobj0"), ("p30", "tGripper", "wTable"), ("MoveL", "tool0", "wobj0")]
+    model = constant_model(SK120, [0.5, -0.3, 0.2, 0.01, 0.02, -0.01])
+    mine, theirs = compensated(model, path), compensated(model, FIXTURES / "pallet.mod")
+    assert not mine.failures
+    np.testing.assert_allclose(mine.correction_mm, theirs.correction_mm, rtol=1e-12)
+
+
+@pytest.mark.parametrize("statement, target, reason", [
+    (b"wTable.oframe.trans.x := 20;", "p30", "its work object wTable is changed at run time (wTable.oframe.trans.x "
+                                             ":= 20 at line 12)"),
+    (b"tGripper.tframe.trans.z := tGripper.tframe.trans.z + 5;", "p30", "its tool tGripper is changed at run time"),
+    (b"p20 := Offs(p10, 0, 0, 100);", "p20", "assigned at run time (p20 := Offs(p10, 0, 0, 100) at line 12)"),
+    (b"PDispOn \\ExeP:=p10, p20, tool0;", "p30", "moved to under a program displacement (PDispOn)")])
+def test_rapid_data_changed_at_run_time_are_left_as_written_and_reported(tmp_path, statement, target, reason):
+    path = tmp_path / "runtime.mod"
+    path.write_bytes((FIXTURES / "pallet.mod").read_bytes().replace(b"  PROC main()\r\n",
+                                                                    b"  PROC main()\r\n    " + statement + b"\r\n"))
+    program = read_program(path)
+    assert target in [x.name for x in program.left] and target not in [t.name for t in program.targets]
+    assert reason in next(x.reason for x in program.left if x.name == target)
+    result = compensated(constant_model(SK120, [0.5, -0.3, 0.2]), path)
+    kept = next(line for line in path.read_bytes().split(b"\r\n") if f" {target}:=".encode() in line
+                or f" {target} :=".encode() in line)
+    assert not result.failures and kept in result.output.split(b"\r\n")
+
+
+# ---------------------------------------------------------------------- URScript: poses computed at run time
+def test_urscript_poses_computed_at_run_time_are_left_as_written_and_the_rest_compensated(tmp_path):
+    path = FIXTURES / "admittance.script"
+    program = read_program(path)
+    assert [(t.name, t.line, t.kind) for t in program.targets] == [("movel", 7, "pose"), ("movej", 14, "joints")]
+    assert [(x.name, x.line, x.column) for x in program.left] == [("movel", 8, 11), ("movel", 11, 25),
+                                                                   ("movej", 13, 10)]
+    assert program.left[0].reason == ("a pose computed at run time (p[home[0] + r, home[1], home[2], home[3], "
+                                      "home[4], home[5]]): kept as written")
+    assert program.left[2].reason.startswith("a joint list computed at run time ([q[0] + 0.1, q[1],")
+    save_model(constant_model(UR10, [0.3, -0.2, 0.1]).model, tmp_path / "m.json", name="c", robot=UR10)
+    out = tmp_path / "out.script"
+    done = run("compensate", str(tmp_path / "m.json"), str(path), "-o", str(out))
+    assert done.returncode == 0, done.stderr
+    assert done.stderr.count("left as written: a ") == 3 and "admittance.script: line 11, column 25: movel" in done.stderr
+    old, new = path.read_bytes().split(b"\n"), out.read_bytes().split(b"\n")
+    assert [k + 1 for k, (a, b) in enumerate(zip(old, new)) if a != b] == [7, 14]
+    summary = json.loads((tmp_path / "out.script.json").read_text())
+    assert [(x["line"], x["target"]) for x in summary["left_as_written"]] == [(8, "movel"), (11, "movel"), (13, "movej")]
+
+
+def test_urscript_a_tcp_computed_at_run_time_leaves_the_poses_moved_to_with_it():
+    path = FIXTURES / "admittance.script"
+    text = path.read_text().replace("set_tcp(p[0.0, 0.0, 0.12, 0.0, 0.0, 0.0])", "set_tcp(p[0, 0, tool_z, 0, 0, 0])")
+    import tempfile
+    with tempfile.TemporaryDirectory() as folder:
+        other = f"{folder}/tcp.script"
+        open(other, "w").write(text)
+        program = read_program(other)
+    assert [t.name for t in program.targets] == ["movej"]
+    assert program.left[0].reason == "moved to with a TCP computed at run time (set_tcp at line 4 (computed at run " \
+                                     "time)): kept as written"
+
+
+# ---------------------------------------------------------------------- file names
+@pytest.mark.parametrize("name, fixture, kind", [
+    ("ur_driver.urscript", "pick_place.script", "urscript"), ("Pallet.modx", "pallet.mod", "rapid"),
+    ("USER.sys", "pallet.mod", "rapid"), ("PALLET_MOD", "pallet.mod", "rapid"), ("pick_place", "pick_place.script",
+                                                                                "urscript"),
+    ("polyscope", "polyscope_tcp.script", "urscript"), ("weld_src", "kuka_cell/weld.src", "krl"),
+    ("config_dat", "kuka_cell/$config.dat", "krl"), ("pallet.txt", "pallet.mod", "rapid")])
+def test_programs_with_other_names_or_none_are_read_as_programs_not_as_a_targets_csv(tmp_path, name, fixture, kind):
+    path = tmp_path / name
+    path.write_bytes((FIXTURES / fixture).read_bytes())
+    assert program_kind(path) == kind
+    twin = read_program(FIXTURES / fixture) if not fixture.startswith("kuka_cell/weld") else None
+    robot = UR10 if kind == "urscript" else SK120
+    save_model(constant_model(robot, np.zeros(3)).model, tmp_path / "m.json", name="zero", robot=robot)
+    done = run("compensate", str(tmp_path / "m.json"), str(path), "-o", str(tmp_path / "out"), "--frame",
+               "BASE_DATA[1]={X 1500,Y 0,Z 400,A 0,B 0,C 0}", "--tool",
+               "TOOL_DATA[2]={X 12.5,Y -3,Z 240,A 0,B 30,C 0}") if kind == "krl" else \
+        run("compensate", str(tmp_path / "m.json"), str(path), "-o", str(tmp_path / "out"))
+    assert done.returncode == 0, done.stderr
+    assert (tmp_path / "out").read_bytes() == path.read_bytes()
+    if twin is not None:
+        assert [(t.name, t.line) for t in read_program(path).targets] == [(t.name, t.line) for t in twin.targets]
+    targets = tmp_path / "targets"
+    targets.write_text("x,y,z\n1000,0,1000\n")
+    assert program_kind(targets) is None                # a targets CSV without a name stays one

@@ -65,7 +65,7 @@ def parse(text: str, source: str) -> tuple[list[Target], dict]:
             fields.append(Field(offset, offset + len(value), value, float(value)))
         targets.append(Target(f"row {row}", number, fields[0].start - start + 1, "joints", tuple(fields),
                               line_end=start + len(body)))
-    return targets, {}
+    return targets, {}, []
 
 
 def _lines(text: str) -> list[str]:

@@ -92,11 +92,35 @@ class Target:
 
 
 @dataclass(frozen=True)
+class Left:
+    """A pose of a program that is not compensated and stays as written: where it is, and why.
+
+    ``name`` is the variable (or the move) it belongs to; ``line`` and ``column`` (1-based) are where its text
+    starts; ``reason`` says why it is no target partcal can compensate (computed at run time, in a frame set at
+    run time, reached by no motion)."""
+
+    name: str
+    line: int
+    column: int
+    reason: str
+
+    def where(self, source: str) -> str:
+        return f"{source}: line {self.line}, column {self.column}: {self.name}"
+
+
+def lf_view(code: str) -> str:
+    """``code`` with each lone CR made a LF (same length, same offsets): ``^`` and ``$`` of a multi-line regular
+    expression then find the lines of a CR-only file too."""
+    return re.sub(r"\r(?!\n)", "\n", code)
+
+
+@dataclass(frozen=True)
 class Dialect:
     """A program language: how to find its targets, and its units and rotations.
 
-    ``parse(text, source)`` -> the targets (list of Target, their fields only) and the frames and tools the
-    program defines itself (name -> pose (4, 4) mm). A pose target's fields are its position, then its
+    ``parse(text, source)`` -> the targets (list of Target, their fields only), the frames and tools the
+    program defines itself (name -> pose (4, 4) mm) and the poses left as written (list of ``(offset, name,
+    reason)``: computed at run time, in a frame set at run time, reached by no motion). A pose target's fields are its position, then its
     rotation: ``poses(values (n, k))`` -> positions (n, 3) mm and rotations (n, 3, 3), and
     ``pose_values(positions, rotations, old (n, k))`` -> the fields' values, the rotation written nearest the
     old one; ``pose_decimals``: the fewest decimals of each field. A joint target's fields are its joints,
@@ -178,6 +202,7 @@ class Program:
     dialect: Dialect
     targets: list[Target] = field(default_factory=list)
     frames: dict = field(default_factory=dict)      # frames and tools defined in the program: name -> (4, 4) mm
+    left: list[Left] = field(default_factory=list)  # poses not compensated, kept as written, with the reason
 
     def rewritten(self, replacements: list[tuple[int, int, str]]) -> bytes:
         """The program's bytes with ``(start, end, new text)`` spans replaced (spans do not overlap)."""

@@ -37,14 +37,14 @@ _SET_TCP = re.compile(r"\bset_tcp\s*\(\s*")
 M_DECIMALS, RAD_DECIMALS = 8, 9        # 1e-8 m = 1e-5 mm; 1e-9 rad
 
 
-def parse(text: str, source: str) -> tuple[list[Target], dict]:
-    """The targets of a URScript program (``text``: the file decoded as latin-1), and the tools it sets
-    (name -> pose (4, 4) mm)."""
+def parse(text: str, source: str) -> tuple[list[Target], dict, list]:
+    """The targets of a URScript program (``text``: the file decoded as latin-1), the tools it sets (name ->
+    pose (4, 4) mm), and the poses computed at run time, left as written."""
     code = masked(text, "#")
     tools: dict = {}
     tcps = _tcps(text, code, source, tools)
     uses = _pose_uses(code, tcps)
-    targets = []
+    targets, left = [], []
     for m in _POSE.finditer(code):
         start = m.end() - 1
         if closing(code, start, "[", "]") < 0:          # a broken program, whether or not a move takes this pose
@@ -63,9 +63,48 @@ def parse(text: str, source: str) -> tuple[list[Target], dict]:
             frame, tool = _one_use(text, code, source, start, assigned.group(1), uses[assigned.group(1)])
         else:
             continue                                        # an offset, an argument, a variable no move takes
-        targets.append(_pose_target(text, code, source, start, frame, tool))
-    targets += _joint_targets(text, code, source)
-    return sorted(targets, key=lambda t: t.fields[0].start), tools
+        name = _name_before(code, start) or "p[...]"
+        why = _computed(code, start, "pose") or (f"moved to with a TCP computed at run time ({tool})" if tool and
+                                                  tool.endswith(_COMPUTED_TCP) else None)
+        if why:
+            left.append((_first_item(code, start), name, why + ": kept as written"))
+        else:
+            targets.append(_pose_target(text, code, source, start, frame, tool, name))
+    targets += _joint_targets(text, code, source, left)
+    return sorted(targets, key=lambda t: t.fields[0].start), tools, left
+
+
+_IDENTIFIER = re.compile(r"(?<![\w.])[A-Za-z_]\w*")
+_EXPRESSION = re.compile(r"[\w\s.+\-*/%()\[\],]+")
+_COMPUTED_TCP = "(computed at run time)"
+
+
+def _computed(code: str, start: int, what: str) -> str | None:
+    """Why the list at ``start`` is no target: some item is an expression of run-time values (``p[home[0] + r,
+    ..]``); None when every item is a number, or when an item is neither (then the caller refuses it)."""
+    end = _end_of(code, start)
+    items = _top_level(code[start + 1:end])
+    if any(_IDENTIFIER.search(item) and _EXPRESSION.fullmatch(item.strip()) for item in items):
+        body = " ".join(code[start + 1:end].split())
+        shown = body if len(body) <= 60 else body[:57] + "..."
+        return f"a {what} computed at run time ({'p' if what == 'pose' else ''}[{shown}])"
+    return None
+
+
+def _first_item(code: str, start: int) -> int:
+    """Offset of the first character of the first item of the list at ``start``."""
+    return start + 1 + len(code[start + 1:]) - len(code[start + 1:].lstrip())
+
+
+def _top_level(body: str) -> list[str]:
+    """The comma-separated items of a list body, commas inside brackets and calls not counted."""
+    out, depth, at = [], 0, 0
+    for k, c in enumerate(body):
+        depth += 1 if c in "[(" else -1 if c in "])" else 0
+        if c == "," and depth == 0:
+            out.append(body[at:k])
+            at = k + 1
+    return out + [body[at:]]
 
 
 def _one_use(text, code, source, start, name, used) -> tuple:
@@ -91,12 +130,11 @@ def _tool_at(tcps: list, offset: int) -> str | None:
     return next((t for at, t in reversed(tcps) if at < offset), None)
 
 
-def _pose_target(text, code, source, start, frame, tool) -> Target:
+def _pose_target(text, code, source, start, frame, tool, name) -> Target:
     end = closing(code, start, "[", "]")
     if end < 0:
         raise syntax_error(source, text, start, "pose literal", "a closing ']'")
     fields = numbers(source, text, start + 1, end, 6, "pose p[x, y, z, rx, ry, rz] (m, rad)")
-    name = _name_before(code, start) or "p[...]"
     return Target(name, 0, 0, "pose", tuple(fields), frame=frame, tool=tool, line_end=line_end(text, start))
 
 
@@ -123,7 +161,9 @@ def _tcps(text: str, code: str, source: str, tools: dict) -> list[tuple[int, str
     for m in _SET_TCP.finditer(code):
         end = closing(code, code.rfind("(", 0, m.end()), "(", ")")
         arg = code[m.end():end].strip() if end > 0 else ""
-        if re.match(r"p\s*\[", arg):
+        if re.match(r"p\s*\[", arg) and _computed(code, code.index("[", m.end()), "pose"):
+            out.append((m.start(), f"set_tcp at line {line_and_column(text, m.start())[0]} {_COMPUTED_TCP}"))
+        elif re.match(r"p\s*\[", arg):
             inner = code.index("[", m.end())
             fields = numbers(source, text, inner + 1, closing(code, inner, "[", "]"), 6, "set_tcp pose")
             v = np.array([f.value for f in fields])
@@ -149,19 +189,25 @@ def _pose_uses(code: str, tcps: list) -> dict:
     return uses
 
 
-def _joint_targets(text: str, code: str, source: str) -> list[Target]:
-    """Lists of six numbers taken by a move: inline, or through a variable."""
-    out, moved = [], set()
+def _joint_targets(text: str, code: str, source: str, left: list) -> list[Target]:
+    """Lists of six numbers taken by a move: inline, or through a variable (computed ones go to ``left``)."""
+    out, moved, found = [], set(), []
     for m in _MOVE.finditer(code):
         at = m.end()
         if code.startswith("[", at):
-            out.append(_joints(text, code, source, at, m.group(1)))
+            found.append((at, m.group(1)))
         elif (name := re.match(r"[A-Za-z_]\w*", code[at:])) is not None:
             moved.add(name.group())
     for name in moved:
         for m in re.finditer(r"(?:^|[\r\n;])[ \t]*(?:global[ \t]+|local[ \t]+)?" + re.escape(name) +
                              r"[ \t]*=[ \t]*\[", code):
-            out.append(_joints(text, code, source, m.end() - 1, name))
+            found.append((m.end() - 1, name))
+    for at, name in found:
+        why = _computed(code, at, "joint list")
+        if why:
+            left.append((_first_item(code, at), name, why + ": kept as written"))
+        else:
+            out.append(_joints(text, code, source, at, name))
     return out
 
 
@@ -193,6 +239,6 @@ def frame(value: str, source: str) -> np.ndarray:
     return frame_pose(v[:3] * 1000.0, matrices_from_rotation_vectors(v[3:])[0])
 
 
-DIALECT = Dialect("urscript", (".script",), parse, frame, "#", poses=poses, pose_values=pose_values,
+DIALECT = Dialect("urscript", (".script", ".urscript"), parse, frame, "#", poses=poses, pose_values=pose_values,
                   pose_decimals=(M_DECIMALS,) * 3 + (RAD_DECIMALS,) * 3, joint_unit_deg=180.0 / np.pi,
                   joint_decimals=RAD_DECIMALS)

@@ -87,7 +87,8 @@ class ProgramResult:
 
     def summary(self, model: str = "") -> dict:
         """The summary written beside the output (JSON values): counts, the largest move and turn of a target
-        (with its name and line), the largest predicted residual, and the targets not compensated."""
+        (with its name and line), the largest predicted residual, the targets not compensated, and the poses
+        the program reader left as written (with their reasons)."""
         n, bad = len(self.program.targets), len(self.failures)
         ok = np.isfinite(self.residual_mm)
 
@@ -107,6 +108,8 @@ class ProgramResult:
                 "max_mm": float(self.residual_mm[ok].max()), "max_deg": float(self.residual_deg[ok].max())},
             "not_compensated": [{"line": t.line, "column": t.column, "target": t.name, "reason": why}
                                 for t, why in self.failures],
+            "left_as_written": [{"line": x.line, "column": x.column, "target": x.name, "reason": x.reason}
+                                for x in self.program.left],
             "written": self.output is not None,
         }
 

@@ -879,6 +879,11 @@ def test_rapid_names_are_case_insensitive(tmp_path):
     mine, theirs = compensated(model, path), compensated(model, FIXTURES / "pallet.mod")
     assert not mine.failures
     np.testing.assert_allclose(mine.correction_mm, theirs.correction_mm, rtol=1e-12)
+    # a tool the module does not declare, spelt two ways, is one tool (named as first written)
+    path.write_bytes((FIXTURES / "pallet.mod").read_bytes().replace(b"MoveL p20, v200, z10, tool0 \\WObj:=wobj0;",
+                                                                    b"MoveL p20, v200, z10, tWeld;")
+                     .replace(b"MoveL Offs(p20, 0, 0, 50), v200, z10, tool0;", b"MoveL Offs(p20, 0, 0, 50), v200, z10, TWELD;"))
+    assert [t.tool for t in read_program(path).targets if t.name == "p20"] == ["tWeld"]
 
 
 @pytest.mark.parametrize("statement, target, reason", [
@@ -959,3 +964,68 @@ def test_programs_with_other_names_or_none_are_read_as_programs_not_as_a_targets
     targets = tmp_path / "targets"
     targets.write_text("x,y,z\n1000,0,1000\n")
     assert program_kind(targets) is None                # a targets CSV without a name stays one
+
+
+# ---------------------------------------------------------------------- a Cartesian model: program and CSV agree
+def quadratic_model(robot):
+    """A second-degree Cartesian model (the paper's SDP(CI) kind) of a smooth error field, with its robot."""
+    rng = np.random.default_rng(3)
+    X = rng.uniform([600, -900, 0], [1800, 900, 1500], (200, 3))
+    y = np.stack([1e-6 * (X[:, 0] - 1000) ** 2 + 2e-3 * X[:, 1], 3e-3 * X[:, 2] - 1e-6 * X[:, 0] * X[:, 1] / 2,
+                  -2e-6 * (X[:, 2] - 700) ** 2 + 1e-3 * X[:, 0]], axis=1)
+    model = ErrorModel(inputs="cartesian", degree=2, solver="lstsq").fit(X, y)
+    return Predictor(model, model_to_dict(model, name="SDP(CI)", robot=robot), robot)
+
+
+def program_of(dialect, flanges, tool_mm, q):
+    """Ten targets as a program of ``dialect`` with the TCP ``tool_mm`` (no turn): the TCP poses."""
+    tcp = flanges.copy()
+    tcp[:, :3, 3] += np.einsum("nij,j->ni", flanges[:, :3, :3], tool_mm)
+    p, R = tcp[:, :3, 3], tcp[:, :3, :3]
+    if dialect == "urscript":
+        rv = rotation_vectors_from_matrices(R)
+        lines = ["def rect():", "  set_tcp(p[%.6f, %.6f, %.6f, 0, 0, 0])" % tuple(np.asarray(tool_mm) / 1000)]
+        lines += ["  movel(p[%.8f, %.8f, %.8f, %.9f, %.9f, %.9f], a=1.2, v=0.25)" % (*x / 1000, *r) for x, r in zip(p, rv)]
+        return "rect.script", "\n".join(lines + ["end"]) + "\n"
+    if dialect == "krl":
+        abc = kuka_abc_from_matrices(R)
+        lines = ["DEFDAT RECT", "DECL FRAME TOOL_DATA[1]={X %.6f,Y %.6f,Z %.6f,A 0,B 0,C 0}" % tuple(tool_mm)]
+        for k, (x, a) in enumerate(zip(p, abc)):
+            lines += ["DECL E6POS XP%d={X %.6f,Y %.6f,Z %.6f,A %.6f,B %.6f,C %.6f}" % (k, *x, *a),
+                      "DECL FDAT FP%d={TOOL_NO 1,BASE_NO 0,IPO_FRAME #BASE}" % k]
+        return "rect.dat", "\r\n".join(lines + ["ENDDAT"]) + "\r\n"
+    quat, cf = quaternions_from_matrices(R), np.floor(q[:, [0, 3, 5]] / 90).astype(int)
+    lines = ["MODULE Rect", "  PERS tooldata tTcp:=[TRUE,[[%.6f,%.6f,%.6f],[1,0,0,0]],[1,[0,0,1],[1,0,0,0],0,0,0]];"
+             % tuple(tool_mm)]
+    lines += ["  CONST robtarget p%d:=[[%.6f,%.6f,%.6f],[%.9f,%.9f,%.9f,%.9f],[%d,%d,%d,0],[9E9,9E9,9E9,9E9,9E9,9E9]];"
+              % (k, *x, *qq, *c) for k, (x, qq, c) in enumerate(zip(p, quat, cf))]
+    lines += ["  PROC main()"] + ["    MoveL p%d, v100, fine, tTcp;" % k for k in range(len(p))] + ["  ENDPROC"]
+    return "rect.mod", "\r\n".join(lines + ["ENDMODULE"]) + "\r\n"
+
+
+@pytest.mark.parametrize("dialect", ["urscript", "krl", "rapid"])
+def test_a_cartesian_model_compensates_a_program_as_a_csv_of_the_same_tool_points(tmp_path, dialect):
+    """A Cartesian model is a function of its tool point's position (the point it was fitted on). A program
+    with the model's tool as its TCP names those points: its commands are the CSV's. A program with another
+    TCP (here none: the flange) names other points; its TCPs move as the model's tool point does, so the CSV
+    of the tool points carried there gives its commands too (1.2 mm from the CSV of the program's own
+    numbers on the paper run's SDP(CI): the model read 234 mm away, not a disagreement)."""
+    predictor = quadratic_model(SK120)
+    save_model(predictor.model, tmp_path / "m.json", name="SDP(CI)", robot=SK120)
+    q = np.column_stack([np.linspace(35, 27, 10), np.linspace(-118, -126, 10), np.linspace(-152, -155, 10),
+                         np.zeros(10), np.full(10, 30.0), np.linspace(-6, -4.5, 10)])      # axis 4 at 0, tool down
+    flanges, tool = SK120.flange(q), SK120.tool_mm
+    tool_points = flanges[:, :3, 3] + np.einsum("nij,j->ni", flanges[:, :3, :3], tool)
+    (tmp_path / "targets.csv").write_text("x,y,z\n" + "".join("%.6f,%.6f,%.6f\n" % tuple(x) for x in tool_points))
+    done = run("compensate", str(tmp_path / "m.json"), str(tmp_path / "targets.csv"), "-o", str(tmp_path / "c.csv"))
+    assert done.returncode == 0, done.stderr
+    csv = np.loadtxt(tmp_path / "c.csv", delimiter=",", skiprows=1, usecols=(3, 4, 5))
+    assert np.linalg.norm(csv - tool_points, axis=1).min() > 0.5                # the model does move them
+    for tcp, expected in ((tool, csv), (np.zeros(3), csv - (tool_points - flanges[:, :3, 3]))):
+        name, text = program_of(dialect, flanges, tcp, q)
+        (tmp_path / name).write_bytes(text.encode())
+        out = tmp_path / ("out_" + name)
+        done = run("compensate", str(tmp_path / "m.json"), str(tmp_path / name), "-o", str(out))
+        assert done.returncode == 0, done.stderr
+        got = np.array([t.position_mm for t in read_program(out).targets])
+        np.testing.assert_allclose(got, expected, atol=1e-4)

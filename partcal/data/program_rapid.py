@@ -119,7 +119,7 @@ def _use(text, code, source, m, state, names, changed, targets, uses, left) -> N
     wobj = _WOBJ.search(m.group("args"))
     tool_name = tool.group() if tool else plain[n_targets + 2][0]
     wobj_name = wobj.group(1) if wobj else "wobj0"
-    where = (names.get(tool_name.lower(), tool_name), names.get(wobj_name.lower(), wobj_name))
+    where = (names.setdefault(tool_name.lower(), tool_name), names.setdefault(wobj_name.lower(), wobj_name))
     for arg, start in plain[:n_targets]:
         if arg.startswith("["):
             pose = arg.startswith("[[") and arg.count("[") >= 5
@@ -316,4 +316,5 @@ def seeds(configurations, reference_deg) -> np.ndarray:
 
 DIALECT = Dialect("rapid", (".mod", ".modx", ".prg", ".sys"), parse, frame, "!", poses=poses, pose_values=pose_values,
                   pose_decimals=(MM_DECIMALS,) * 3 + (QUATERNION_DECIMALS,) * 4, joint_decimals=DEG_DECIMALS,
-                  configuration=configuration, compare=(0, 1, 2), seeds=seeds, statement_end=";")
+                  configuration=configuration, compare=(0, 1, 2), seeds=seeds, statement_end=";",
+                  edge_kept=True)

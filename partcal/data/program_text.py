@@ -129,7 +129,10 @@ class Dialect:
     ``configuration(q_deg (n, N))`` -> the configuration each joint solution has (n, k) ints, compared
     with a target's written one at the indices ``compare``; ``seeds(configurations (n, k), reference (n, N)
     deg)`` -> IK seeds that have the written configurations (-1: not written), near the reference joints.
-    ``comment``: the line-comment mark.
+    ``comment``: the line-comment mark. ``edge_kept``: a target whose intended joint lies on the edge of two
+    configurations (ABB's axis 4 at 0 degrees, tool down) has both, and its compensated joints may take either
+    side (the ABB controller takes the nearest; a KUKA ``T`` bit decides the turn of a ``PTP``, so KRL keeps
+    the written side).
     """
 
     name: str
@@ -147,6 +150,7 @@ class Dialect:
     seeds: Callable | None = None
     comment_line: bool = False          # a note goes on a line of its own before the target (CSV)
     statement_end: str = ""             # a note goes after the statement's end (RAPID's ";"), not mid-statement
+    edge_kept: bool = False             # a target on a configuration's edge keeps it on either side (ABB)
 
     def fill(self, text: str, targets: list[Target]) -> None:
         """Lines, columns, poses and joints of parsed targets, computed for all of them at once."""

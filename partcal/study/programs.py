@@ -313,16 +313,22 @@ def _intended_joints(robot, program: Program, wanted, q_given, joints, failures:
     return q0
 
 
-def _matches(program: Program, targets: list[Target], q: NDArray[np.float64]) -> NDArray[np.bool_]:
-    """Whether joint solutions have the configuration their targets name (the parts the dialect compares)."""
+def _matches(program: Program, targets: list[Target], q: NDArray[np.float64], q0=None) -> NDArray[np.bool_]:
+    """Whether joint solutions have the configuration their targets name (the parts the dialect compares).
+    With the intended joints ``q0`` and a dialect whose edges are kept (``Dialect.edge_kept``): a target whose
+    intended joint lies on an edge (ABB axis 4 at 0, tool down) has both sides' configuration, so ``q`` may be
+    on either."""
     dialect = program.dialect
     ok = np.ones(len(q), dtype=bool)
     if dialect.configuration is None or not dialect.compare:
         return ok
     low, high = _configuration_bounds(dialect, q)
+    edge = _configuration_bounds(dialect, q0) if q0 is not None and dialect.edge_kept else None
     for j, t in enumerate(targets):
         if t.configuration is not None:
-            ok[j] = all(t.configuration[i] is None or t.configuration[i] in (low[j, i], high[j, i])
+            ok[j] = all(t.configuration[i] is None or t.configuration[i] in (low[j, i], high[j, i]) or
+                        (edge is not None and edge[0][j, i] != edge[1][j, i] and t.configuration[i] in
+                         (edge[0][j, i], edge[1][j, i]) and {low[j, i], high[j, i]} & {edge[0][j, i], edge[1][j, i]})
                         for i in dialect.compare)
     return ok
 
@@ -337,7 +343,7 @@ def _configuration_kept(robot, program: Program, targets: list[Target], q0, q1) 
     """No flip (the Jacobian's determinant keeps its sign, where not ~0), and the configuration written with a
     target (KUKA ``T``, ABB ``cf1 cf4 cf6``) still that of the compensated joints. A target written without
     one is the controller's to solve near where the robot is: only a flip changes it."""
-    return (_branch(robot, q0) * _branch(robot, q1) >= 0) & _matches(program, targets, q1)
+    return (_branch(robot, q0) * _branch(robot, q1) >= 0) & _matches(program, targets, q1, q0)
 
 
 def _configurations(program: Program, q0, q1) -> str:

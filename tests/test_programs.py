@@ -1029,3 +1029,23 @@ def test_a_cartesian_model_compensates_a_program_as_a_csv_of_the_same_tool_point
         assert done.returncode == 0, done.stderr
         got = np.array([t.position_mm for t in read_program(out).targets])
         np.testing.assert_allclose(got, expected, atol=1e-4)
+
+
+def test_a_krl_point_with_a_fixed_tool_is_left_as_written_and_reported_not_asked_for_as_a_frame(tmp_path):
+    path = tmp_path / "fixed.dat"
+    path.write_bytes((FIXTURES / "pallet.dat").read_bytes().replace(b"IPO_FRAME #BASE", b"IPO_FRAME #TCP"))
+    program = read_program(path)
+    assert "XP1" not in [t.name for t in program.targets]
+    assert [(x.name, x.line, x.reason) for x in program.left] == [
+        ("XP1", 10, "moved to with a fixed tool (IPO_FRAME #TCP: the robot carries the workpiece): not compensated, "
+                    "kept as written")]
+    result = compensated(constant_model(SK120, [0.5, -0.3, 0.2]), path)
+    line = next(x for x in path.read_bytes().split(b"\r\n") if x.startswith(b"DECL E6POS XP1="))
+    assert not result.failures and line in result.output.split(b"\r\n")
+
+
+@pytest.mark.parametrize("name", ["gone.script", "gone.mod", "gone.src"])
+def test_a_missing_program_file_exits_2_naming_it(tmp_path, name):
+    save_model(constant_model(SK120, np.zeros(3)).model, tmp_path / "m.json", name="zero", robot=SK120)
+    done = run("compensate", str(tmp_path / "m.json"), str(tmp_path / name), "-o", str(tmp_path / "out"))
+    assert done.returncode == 2 and f"{tmp_path / name}: no such program file" in done.stderr, done.stderr

@@ -89,6 +89,21 @@ class Computed(str):
     """A base or tool set at run time (its statement and line): targets moved to in it are left as written."""
 
 
+class FixedTool(str):
+    """An ``FDAT`` with ``IPO_FRAME #TCP``: the robot carries the workpiece past a fixed tool, its points are
+    in the tool's frame; they are left as written (the robot's own tool point is not on them)."""
+
+
+def _unusable(states: set) -> str | None:
+    """Why points moved to with these (base, tool) pairs cannot be compensated, if they cannot."""
+    for kind, text in ((FixedTool, "moved to with a fixed tool ({}: the robot carries the workpiece)"),
+                       (Computed, "moved to in a base or tool set at run time ({})")):
+        found = sorted(str(x) for state in states for x in state if isinstance(x, kind))
+        if found:
+            return text.format(found[0]) + ": not compensated, kept as written"
+    return None
+
+
 @dataclass
 class _Record:
     """One aggregate ``{..}`` that may be a point: its span, how it is named (``decl``, ``assign``, ``motion``),
@@ -158,6 +173,10 @@ def _record_target(text, source, rec: _Record, reach, fdat, left) -> Target | No
     target = _target(text, source, rec.name, kind, rec.items, rec.start)
     if kind == "pose" and _fdat_of(upper, fdat) is not None and rec.via != "motion":
         _frames_of(target, fdat)
+        why = _unusable({(target.frame, target.tool)})
+        if why:
+            left.append((first, rec.name, why))
+            return None
         return target
     if reach is None:
         return target                          # a data list without its .src: every point, as declared
@@ -167,10 +186,9 @@ def _record_target(text, source, rec: _Record, reach, fdat, left) -> Target | No
         left.append((first, rec.name, f"reached only through the expression {why}, not compensated" if why else
                      f"no motion of {reach.source_name} reaches it: not a target, kept as written"))
         return None
-    computed = sorted(str(x) for state in states for x in state if isinstance(x, Computed))
-    if computed:
-        left.append((first, rec.name, f"moved to in a base or tool set at run time ({computed[0]}): not "
-                                      "compensated, kept as written"))
+    why = _unusable(states) if kind == "pose" else None
+    if why:
+        left.append((first, rec.name, why))
         return None
     if len(states) > 1:
         named = " and ".join(f"$BASE {b or 'default'}, $TOOL {t or 'default'}" for b, t in sorted(
@@ -371,7 +389,7 @@ def _fdat_of(name: str, fdat: dict) -> dict | None:
 def _fdat_frames(data: dict) -> tuple:
     """The base and tool an FDAT sets (``BASE_NO``, ``TOOL_NO``; 0: the robot base, the flange)."""
     if data.get("IPO_FRAME", "#BASE").upper() != "#BASE":
-        return f"IPO_FRAME {data['IPO_FRAME']} (a fixed tool)", None
+        return FixedTool(f"IPO_FRAME {data['IPO_FRAME']}"), None
     base, tool = data.get("BASE_NO", "0").strip(), data.get("TOOL_NO", "0").strip()
     if not re.fullmatch(r"\d+", base) or not re.fullmatch(r"\d+", tool):
         return Computed(f"FDAT BASE_NO {base}, TOOL_NO {tool}"), None

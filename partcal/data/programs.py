@@ -106,8 +106,11 @@ def read_program(path: str | Path, dialect: str | None = None) -> Program:
         raise DataError(f"{path}: cannot tell which robot program language this is (expected a file ending in "
                         f"{', '.join(e for d in DIALECTS.values() for e in d.extensions)}, or a dialect in "
                         f"{', '.join(DIALECTS)}); got {name if dialect else Path(path).suffix or 'no extension'!r}")
-    with open(path, "rb") as handle:
-        raw = handle.read()
+    try:
+        with open(path, "rb") as handle:
+            raw = handle.read()
+    except (FileNotFoundError, IsADirectoryError, NotADirectoryError) as exc:
+        raise DataError(f"{path}: no such program file ({exc.strerror.lower()}); nothing written") from None
     if raw.startswith((b"\xff\xfe", b"\xfe\xff")) or b"\x00" in raw:
         nul = raw.find(b"\x00")
         found = "a UTF-16 byte order mark" if raw[:2] in (b"\xff\xfe", b"\xfe\xff") else \

@@ -230,9 +230,9 @@ def line_start(text: str, offset: int) -> int:
 
 
 def line_and_column(text: str, offset: int) -> tuple[int, int]:
-    """1-based line and column of a character offset (CR LF, LF or a lone CR ends a line).
+    r"""1-based line and column of a character offset (CR LF, LF or a lone CR ends a line).
 
-    >>> line_and_column("a\rbc\r\nd", 7), line_and_column("one line", 4)
+    >>> line_and_column("a\rbc\r\nd", 6), line_and_column("one line", 4)
     ((3, 1), (1, 5))
     """
     return len(LINE_BREAK.findall(text, 0, offset)) + 1, offset - line_start(text, offset) + 1

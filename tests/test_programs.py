@@ -489,8 +489,9 @@ def test_a_partial_krl_motion_target_is_refused_and_an_offset_is_kept(tmp_path):
     with pytest.raises(ProgramSyntaxError, match=r"partial.src: line 3, column 7: PTP to a partial aggregate: "
                                                  r"expected a whole target"):
         read_program(path)
-    path.write_bytes(b"DEF partial( )\r\n  LIN_REL {Z 50}\r\n  XP1 = XP1 : {X 10}\r\nEND\r\n")
-    assert read_program(path).targets == []
+    path.write_bytes(b"DEF partial( )\r\n  LIN_REL {Z 50}\r\n  XP1 = XP1 : {X 10}\r\n"
+                     b"  LIN_REL {X 0,Y 0,Z 50,A 0,B 0,C 0}\r\nEND\r\n")
+    assert read_program(path).targets == [] and read_program(path).left == []      # offsets, whole or not
 
 
 def test_frames_and_tools_are_given_in_the_vendors_own_syntax_on_the_command_line(tmp_path):

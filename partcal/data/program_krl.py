@@ -155,8 +155,8 @@ def _record_target(text, source, rec: _Record, reach, fdat, left) -> Target | No
     """The target an aggregate is (None: not a target; a point not compensated goes into ``left``)."""
     upper = _key(rec.name)
     if rec.kind == "FDAT" or upper.startswith(("$", "BASE_DATA[", "TOOL_DATA[")) or \
-            rec.kind not in (None, "pose", "joints"):
-        return None
+            rec.kind not in (None, "pose", "joints") or (rec.via == "motion" and upper.endswith("_REL")):
+        return None                                   # frames, other data, and relative motions' offsets
     kind = rec.kind or ("pose" if all(k in rec.items for k in POSE_KEYS) else
                         "joints" if all(k in rec.items for k in JOINT_KEYS) else None)
     if kind is None:

@@ -1050,3 +1050,19 @@ def test_a_missing_program_file_exits_2_naming_it(tmp_path, name):
     save_model(constant_model(SK120, np.zeros(3)).model, tmp_path / "m.json", name="zero", robot=SK120)
     done = run("compensate", str(tmp_path / "m.json"), str(tmp_path / name), "-o", str(tmp_path / "out"))
     assert done.returncode == 2 and f"{tmp_path / name}: no such program file" in done.stderr, done.stderr
+
+
+def test_a_krl_inline_form_sets_the_base_and_tool_of_the_motions_after_it(tmp_path):
+    # KSS's inline form: FDAT_ACT = FP1 then BAS(#PTP_PARAMS) set $TOOL and $BASE from FP1; a motion after the
+    # fold moves in them too
+    (tmp_path / "folded.dat").write_bytes(
+        b"DEFDAT  FOLDED\r\nDECL E6POS XP1={X 382.190,Y -377.300,Z 894.064,A 117.9789,B -28.1725,C -31.7403,S 2,"
+        b"T 6}\r\nDECL FDAT FP1={TOOL_NO 2,BASE_NO 3,IPO_FRAME #BASE,POINT2[] \" \"}\r\nENDDAT\r\n")
+    (tmp_path / "folded.src").write_bytes(
+        b"DEF folded( )\r\n;FOLD PTP P1 Vel=100 % PDAT1 Tool[2] Base[3];%{PE}%R 8.3.31,%MKUKATPBASIS,%CMOVE\r\n"
+        b"$BWDSTART=FALSE\r\nPDAT_ACT=PPDAT1\r\nFDAT_ACT=FP1\r\nBAS(#PTP_PARAMS,100)\r\nPTP XP1 \r\n;ENDFOLD\r\n"
+        b"LIN {X 382.190,Y -377.300,Z 794.064,A 117.9789,B -28.1725,C -31.7403}\r\nEND\r\n")
+    assert [(t.name, t.frame, t.tool) for t in read_program(tmp_path / "folded.dat").targets] == [
+        ("XP1", "BASE_DATA[3]", "TOOL_DATA[2]")]
+    assert [(t.name, t.line, t.frame, t.tool) for t in read_program(tmp_path / "folded.src").targets] == [
+        ("LIN", 9, "BASE_DATA[3]", "TOOL_DATA[2]")]

@@ -350,7 +350,7 @@ def test_a_joint_trajectory_gets_the_joints_that_reach_its_nominal_poses(tmp_pat
 
 # ---------------------------------------------------------------------- refusals
 @pytest.mark.parametrize("name, old, new, where", [
-    ("pick_place.script", b"0.4299, 2.4066", b"0.4299, z_up", "line 7, column 41"),
+    ("pick_place.script", b"0.4299, 2.4066", b"0.4299, 2.40.66", "line 7, column 41"),
     ("pallet.dat", b"Y 85.084", b"Y 85,084", "line 10, column"),
     ("pallet.mod", b"[0.212583,-0.556195,0.152896,-0.788719]", b"[0.212583,-0.556195,0.152896]",
      "line 7, column"),
@@ -489,8 +489,9 @@ def test_a_partial_krl_motion_target_is_refused_and_an_offset_is_kept(tmp_path):
     with pytest.raises(ProgramSyntaxError, match=r"partial.src: line 3, column 7: PTP to a partial aggregate: "
                                                  r"expected a whole target"):
         read_program(path)
-    path.write_bytes(b"DEF partial( )\r\n  LIN_REL {Z 50}\r\n  XP1 = XP1 : {X 10}\r\nEND\r\n")
-    assert read_program(path).targets == []
+    path.write_bytes(b"DEF partial( )\r\n  LIN_REL {Z 50}\r\n  XP1 = XP1 : {X 10}\r\n"
+                     b"  LIN_REL {X 0,Y 0,Z 50,A 0,B 0,C 0}\r\nEND\r\n")
+    assert read_program(path).targets == [] and read_program(path).left == []      # offsets, whole or not
 
 
 def test_frames_and_tools_are_given_in_the_vendors_own_syntax_on_the_command_line(tmp_path):
@@ -635,3 +636,433 @@ def test_a_joint_model_fitted_with_the_wrist_held_compensates_full_poses_where_t
     np.testing.assert_allclose(reached[:, :3, 3] + model.predict(comp.joints_deg), target[:, :3, 3], atol=1e-3)
     np.testing.assert_allclose(reached[:, :3, :3], target[:, :3, :3], atol=1e-9)
     assert np.abs(comp.joints_deg[:, 3:5] - q[:, 3:5]).max() > 0.01      # the wrist moved to keep the orientation
+
+
+# ---------------------------------------------------------------------- line endings, one-line programs
+ONE_LINERS = {
+    "one.script": (b"movel(p[-0.7446, -0.2977, 0.4299, 2.4066, 2.0194, 0.0], a=1.2, v=0.25)", UR10, 9),
+    "one.src": (b"LIN {X 1044.037,Y -8.472,Z 652.644,A -90.8302,B 14.6598,C -84.9212} C_DIS", SK120, 8),
+    "one.mod": (b"MODULE One CONST robtarget p10:=[[1201.645,85.084,1050.031],[0.212583,-0.556195,0.152896,"
+                b"-0.788719],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]]; ENDMODULE", SK120, 35),
+    "one.csv": (b"q1,q2,q3,q4,q5,q6\n10.0,-80.0,90.0,-100.0,-90.0,20.0", UR10, 1)}
+
+
+@pytest.mark.parametrize("name", sorted(ONE_LINERS))
+def test_a_program_of_one_line_without_a_final_newline_is_read_and_compensated(tmp_path, name):
+    data, robot, column = ONE_LINERS[name]
+    path = tmp_path / name
+    path.write_bytes(data)
+    program = read_program(path)
+    assert [(t.line, t.column) for t in program.targets] == [(2 if name.endswith(".csv") else 1, column)]
+    assert compensated(constant_model(robot, np.zeros(3)), path).output == data
+    out = compensated(constant_model(robot, [0.3, -0.2, 0.1]), path).output
+    assert out != data and not out.endswith((b"\n", b"\r")) and out.count(b"\n") == data.count(b"\n")
+
+
+@pytest.mark.parametrize("name, robot", [("pick_place.script", UR10), ("pallet.dat", SK120), ("pallet.src", SK120),
+                                         ("pallet.mod", SK120), ("trajectory.csv", UR10)])
+def test_a_program_with_cr_only_line_endings_has_the_targets_and_lines_of_its_lf_twin(tmp_path, name, robot):
+    lf = tmp_path / ("lf_" + name)
+    lf.write_bytes((FIXTURES / name).read_bytes().replace(b"\r\n", b"\n"))
+    cr = tmp_path / name
+    cr.write_bytes(lf.read_bytes().replace(b"\n", b"\r"))
+    assert b"\n" not in cr.read_bytes()
+    twin = [(t.name, t.line, t.column) for t in read_program(lf).targets]
+    assert [(t.name, t.line, t.column) for t in read_program(cr).targets] == twin and twin
+    assert compensated(constant_model(robot, np.zeros(3)), cr).output == cr.read_bytes()
+    moved = compensated(constant_model(robot, [0.3, -0.2, 0.1]), cr).output
+    assert b"\n" not in moved and moved.count(b"\r") == cr.read_bytes().count(b"\r")
+    assert moved.replace(b"\r", b"\n") == compensated(constant_model(robot, [0.3, -0.2, 0.1]), lf).output
+
+
+def test_a_note_on_a_cr_only_program_goes_on_the_target_line_with_its_line_ending(tmp_path):
+    # an unreachable joint trajectory row gets a comment line before it, ended as the file's lines are
+    path = tmp_path / "cr.csv"
+    path.write_bytes(b"q1,q2,q3,q4,q5,q6\r10,-80,90,-100,-90,20\r")
+    result = compensated(constant_model(UR10, [1e5, 0, 0]), path, keep_unconverged=True)
+    assert result.failures
+    assert result.output.startswith(b"q1,q2,q3,q4,q5,q6\r# partcal: not compensated: ")
+    assert result.output.endswith(b"\r10,-80,90,-100,-90,20\r") and b"\n" not in result.output
+
+
+def test_a_cp1252_ellipsis_in_a_joint_trajectory_comment_does_not_split_its_line(tmp_path):
+    path = tmp_path / "ellipsis.csv"
+    path.write_bytes(b"# steps \x85 every 8 ms\nq1,q2,q3,q4,q5,q6\n10,-80,90,-100,-90,20\n")
+    assert [(t.line, t.column) for t in read_program(path).targets] == [(3, 1)]
+
+
+# ---------------------------------------------------------------------- quaternions of tools and work objects
+@pytest.mark.parametrize("old, new, field", [
+    (b"[[0,0,100],[1,0,0,0]]", b"[[0,0,100],[0,0,0,0]]", "tooldata tGripper tframe: quaternion of norm 0"),
+    (b"[[0,0,100],[1,0,0,0]]", b"[[0,0,100],[0.9,0,0,0]]", "tooldata tGripper tframe: quaternion of norm 0.9"),
+    (b"[[1000, 0, 500], [1, 0, 0, 0]]", b"[[1000, 0, 500], [0, 0, 0, 0]]", "wobjdata wTable uframe: quaternion of norm 0"),
+    (b"[[0,0,0],[1,0,0,0]]];", b"[[0,0,0],[0,0,0,0]]];", "wobjdata wTable oframe: quaternion of norm 0")])
+def test_a_zero_or_non_unit_quaternion_of_a_tool_or_work_object_exits_2_naming_it(tmp_path, old, new, field):
+    path = tmp_path / "q.mod"
+    data = (FIXTURES / "pallet.mod").read_bytes()
+    assert data.count(old) == 1
+    path.write_bytes(data.replace(old, new))
+    at = data.index(old) + new.index(b"],[") + 3 if b"],[" in new else data.index(old) + new.index(b"], [") + 4
+    line, column = data.count(b"\n", 0, at) + 1, at - data.rfind(b"\n", 0, at)
+    where = f"line {line}, column {column}"
+    save_model(constant_model(SK120, np.zeros(3)).model, tmp_path / "m.json", name="zero", robot=SK120)
+    done = run("compensate", str(tmp_path / "m.json"), str(path), "-o", str(tmp_path / "o.mod"))
+    assert done.returncode == 2, done.stderr
+    assert f"{path}: {where}: {field}: expected a unit quaternion (norm 1 to 0.001)" in done.stderr
+    assert len(done.stderr.strip().splitlines()) == 1 and not (tmp_path / "o.mod").exists()
+
+
+def test_a_zero_quaternion_given_as_a_tool_option_exits_2(tmp_path):
+    save_model(constant_model(SK120, np.zeros(3)).model, tmp_path / "m.json", name="zero", robot=SK120)
+    done = run("compensate", str(tmp_path / "m.json"), str(FIXTURES / "pallet.mod"), "-o", str(tmp_path / "o.mod"),
+               "--tool", "tGripper=[[0, 0, 100], [0, 0, 0, 0]]")
+    assert done.returncode == 2 and "quaternion of norm 0: expected a unit quaternion" in done.stderr, done.stderr
+
+
+# ---------------------------------------------------------------------- URScript: the TCP of the move
+def test_a_polyscope_waypoint_has_the_tcp_set_before_the_move_not_before_its_declaration(tmp_path):
+    path = FIXTURES / "polyscope_tcp.script"
+    program = read_program(path)
+    assert [(t.name, t.line, t.tool) for t in program.targets] == [
+        ("Waypoint_1_p", 10, "set_tcp at line 19"), ("Waypoint_2_p", 12, "set_tcp at line 19"),
+        ("Waypoint_3_p", 14, "set_tcp at line 26")]
+    np.testing.assert_allclose(program.frames["set_tcp at line 26"][:3, 3], [0, 50, 200])
+    # the same moves with each pose written inline after its set_tcp: the tool there is the one in force
+    text = path.read_text()
+    for t in program.targets:
+        literal = text.splitlines()[t.line - 1].split("=", 1)[1]
+        text = text.replace(f"({t.name},", f"({literal},").replace(f"({t.name}, ", f"({literal}, ")
+    inline = tmp_path / "inline.script"
+    inline.write_text(text)
+    assert [t.tool for t in read_program(inline).targets] == [t.tool for t in program.targets]
+    model = constant_model(UR10, [0.3, -0.2, 0.1, 0.05, 0.02, -0.03])        # mm and degrees
+    mine, theirs = compensated(model, path), compensated(model, inline)
+    assert not mine.failures and not theirs.failures
+    np.testing.assert_allclose(mine.correction_mm, theirs.correction_mm, rtol=1e-9)
+    ours = np.array([t.position_mm for t in read_program_bytes(tmp_path, "a.script", mine.output).targets])
+    inl = np.array([t.position_mm for t in read_program_bytes(tmp_path, "b.script", theirs.output).targets])
+    np.testing.assert_allclose(ours, inl, atol=1e-5)
+    # with the header's zero TCP instead (where the waypoints are declared), Waypoint_3 would land elsewhere
+    header = ProgramFrames(tools={"set_tcp at line 26": program.frames["set_tcp at line 7"]})
+    other = read_program_bytes(tmp_path, "c.script", compensated(model, path, header).output)
+    assert np.linalg.norm(other.targets[2].position_mm - ours[2]) > 0.005      # 0.012 mm: 0.06 deg at 0.2 m
+    np.testing.assert_allclose(other.targets[1].position_mm, ours[1], atol=1e-5)
+
+
+def read_program_bytes(tmp_path, name, data):
+    path = tmp_path / name
+    path.write_bytes(data)
+    return read_program(path)
+
+
+def test_a_waypoint_moved_to_with_two_tcps_is_refused(tmp_path):
+    path = tmp_path / "two.script"
+    path.write_bytes((FIXTURES / "polyscope_tcp.script").read_bytes().replace(
+        b"movel(Waypoint_3_p, a=1.2, v=0.25)", b"movel(Waypoint_1_p, a=1.2, v=0.25)"))
+    with pytest.raises(UnknownFrameError, match=r"line 10, column 25: target Waypoint_1_p: it is moved to with the "
+                                                r"tools set_tcp at line 19 and set_tcp at line 26: one pose cannot"):
+        read_program(path)
+
+
+# ---------------------------------------------------------------------- KRL: the base and tool of the motions
+CELL = FIXTURES / "kuka_cell"
+CONFIG_FRAMES = ProgramFrames(frames={"BASE_DATA[1]": np.array([[1, 0, 0, 1500], [0, 1, 0, 0], [0, 0, 1, 400],
+                                                                [0, 0, 0, 1.0]]),
+                                      "BASE_DATA[3]": np.array([[0, -1, 0, 1200], [1, 0, 0, -300], [0, 0, 1, 250],
+                                                                [0, 0, 0, 1.0]])},   # A 90: x -> y
+                              tools={"TOOL_DATA[2]": np.block([[matrices_from_kuka_abc([[0, 30, 0]])[0],
+                                                                np.array([[12.5], [-3.0], [240.0]])],
+                                                               [np.zeros((1, 3)), np.ones((1, 1))]])})
+
+
+def krl_fields(data: bytes, name: bytes) -> dict:
+    line = next(x for x in data.split(b"\r\n") if x.startswith(name))
+    return {k.decode(): float(v) for k, v in re.findall(rb"\b([XYZABC]) ([-\d.]+)", line)}
+
+
+def test_krl_targets_follow_the_base_and_tool_set_before_their_motions():
+    dat = read_program(CELL / "weld.dat")
+    assert [(t.name, t.frame, t.tool) for t in dat.targets] == [
+        ("XSEAM1", "BASE_DATA[3]", "TOOL_DATA[2]"), ("XSEAM2", "BASE_DATA[3]", "TOOL_DATA[2]"),
+        ("XAPPROACH", "BASE_DATA[1]", "TOOL_DATA[2]")]                       # $BASE =, then BAS(#BASE, 1)
+    src = read_program(CELL / "weld.src")
+    assert [(t.name, t.line, t.frame, t.tool) for t in src.targets] == [("LIN", 17, "BASE_DATA[1]", "TOOL_DATA[2]")]
+    # a constant error e in the robot base moves every TCP by -e there: by -R^T e in the base's own axes
+    e = np.array([0.5, -0.3, 0.2])
+    result = compensated(constant_model(SK120, e), CELL / "weld.dat", CONFIG_FRAMES)
+    assert not result.failures
+    old = (CELL / "weld.dat").read_bytes()
+    for name, shift in ((b"DECL E6POS XSEAM1=", [0.3, 0.5, -0.2]), (b"DECL E6POS XAPPROACH=", [-0.5, 0.3, -0.2])):
+        before, after = krl_fields(old, name), krl_fields(result.output, name)
+        np.testing.assert_allclose([after[k] - before[k] for k in "XYZ"], shift, atol=1e-6)
+        assert [after[k] for k in "ABC"] == [before[k] for k in "ABC"]
+
+
+def test_a_krl_point_in_a_base_computed_at_run_time_is_left_as_written_and_reported(tmp_path):
+    for name, left in (("weld.dat", [("basePos[1]", 11, "no motion of weld.src reaches it"),
+                                     ("basePos[2]", 12, "no motion of weld.src reaches it"),
+                                     ("XCOMP", 13, "moved to in a base or tool set at run time ($BASE = "
+                                                   "BASE_DATA[1] : basePos[2] at line 20)")]),
+                       ("weld.src", [("LIN", 22, "moved to in a base or tool set at run time ($BASE = BASE_DATA[1] "
+                                                 ": basePos[2] at line 20)")])):
+        program = read_program(CELL / name)
+        assert [(x.name, x.line) for x in program.left] == [(n, line) for n, line, _ in left]
+        assert all(why in x.reason for x, (_, _, why) in zip(program.left, left))
+    save_model(constant_model(SK120, np.zeros(3)).model, tmp_path / "m.json", name="zero", robot=SK120)
+    out = tmp_path / "weld.src"
+    done = run("compensate", str(tmp_path / "m.json"), str(CELL / "weld.src"), "-o", str(out), "--frame",
+               "BASE_DATA[1]={X 1500,Y 0,Z 400,A 0,B 0,C 0}", "--tool", "TOOL_DATA[2]={X 12.5,Y -3,Z 240,A 0,B 30,C 0}")
+    assert done.returncode == 0, done.stderr
+    assert "weld.src: line 22, column 10: LIN: left as written: moved to in a base or tool set at run time" in done.stderr
+    summary = json.loads((tmp_path / "weld.src.json").read_text())
+    assert [(x["line"], x["target"]) for x in summary["left_as_written"]] == [(22, "LIN")]
+
+
+def test_a_krl_point_moved_to_in_two_bases_is_refused(tmp_path):
+    for name in ("weld.dat", "$config.dat"):
+        (tmp_path / name).write_bytes((CELL / name).read_bytes())
+    (tmp_path / "weld.src").write_bytes((CELL / "weld.src").read_bytes().replace(b"  PTP XAPPROACH\r\n",
+                                                                                 b"  PTP XAPPROACH\r\n  LIN XSEAM1\r\n"))
+    with pytest.raises(UnknownFrameError, match=r"weld.dat: line 7, column 22: target XSEAM1: it is moved to with "
+                                                r"\$BASE BASE_DATA\[1\], \$TOOL TOOL_DATA\[2\] and \$BASE BASE_DATA\[3\]"):
+        read_program(tmp_path / "weld.dat")
+
+
+def test_krl_data_that_no_motion_reaches_stay_byte_for_byte():
+    e = np.array([0.5, -0.3, 0.2])
+    result = compensated(constant_model(SK120, e), CELL / "weld.dat", CONFIG_FRAMES)
+    old, new = (CELL / "weld.dat").read_bytes().split(b"\r\n"), result.output.split(b"\r\n")
+    changed = [a.split(b"=")[0] for a, b in zip(old, new) if a != b]
+    assert changed == [b"DECL E6POS XSEAM1", b"DECL E6POS XSEAM2", b"DECL E6POS XAPPROACH"]   # not basePos, XCOMP
+    # $config.dat: the home position is a target (every program moves there); the system frames are not
+    config = compensated(constant_model(SK120, e), CELL / "$config.dat")
+    assert [t.name for t in config.program.targets] == ["XHOME"]
+    assert [x.name for x in config.program.left] == ["TOOL_CORR", "BASE_CORR", "REF_TOOL", "REF_PT[1]", "REF_PT[2]"]
+    old, new = (CELL / "$config.dat").read_bytes().split(b"\r\n"), config.output.split(b"\r\n")
+    assert [a.split(b"=")[0] for a, b in zip(old, new) if a != b] == [b"DECL E6AXIS XHOME"]
+
+
+# ---------------------------------------------------------------------- RAPID: names, monitoring, run-time data
+def test_a_generated_rapid_module_with_configuration_monitoring_off_is_compensated():
+    path = FIXTURES / "taco_pick.mod"
+    program = read_program(path)
+    assert [(t.tool, t.frame, t.configuration) for t in program.targets] == [("custom_tool1", "wobj0", None)] * 6
+    model = constant_model(SK120, [0.5, -0.3, 0.2])
+    result = compensated(model, path)
+    assert not result.failures and result.output != path.read_bytes()
+    np.testing.assert_allclose(result.correction_mm, np.linalg.norm([0.5, 0.3, 0.2]), rtol=1e-9)
+
+
+def test_a_written_configuration_is_checked_where_monitoring_is_on(tmp_path):
+    # the generator wrote [0,-1,-1,0] for every target; the joints it came from have axis 4 at 0 (cf4 = 0):
+    # with ConfJ and ConfL on (the default) the controller would stop, and partcal says so
+    path = tmp_path / "on.mod"
+    path.write_bytes((FIXTURES / "taco_pick.mod").read_bytes().replace(b"ConfL \\Off;", b"ConfL \\On;")
+                     .replace(b"ConfJ \\Off;", b""))
+    program = read_program(path)
+    assert [t.configuration for t in program.targets] == [(0, -1, -1, 0)] * 6
+    result = compensated(constant_model(SK120, [0.5, -0.3, 0.2]), path)
+    assert len(result.failures) == 6 and all("in its configuration (0, -1, -1, 0)" in why for _, why in result.failures)
+    # monitoring off for linear moves only: the MoveJ targets keep theirs
+    path.write_bytes((FIXTURES / "taco_pick.mod").read_bytes().replace(b"ConfJ \\Off;", b""))
+    assert [t.configuration for t in read_program(path).targets] == [(0, -1, -1, 0), None] * 3
+
+
+def test_rapid_names_are_case_insensitive(tmp_path):
+    path = tmp_path / "case.mod"
+    path.write_bytes((FIXTURES / "pallet.mod").read_bytes()
+                     .replace(b"MoveL p30, v100, fine, tGripper\\WObj:=wTable;", b"MoveL P30, v100, fine, TGRIPPER\\WOBJ:=WTable;")
+                     .replace(b"MoveJ p10, v1000, z50, tool0;", b"MoveJ p10, v1000, z50, Tool0\\WObj:=WObj0;"))
+    program = read_program(path)
+    assert [(t.name, t.tool, t.frame) for t in program.targets if t.kind == "pose"] == [
+        ("p10", "tool0", "wobj0"), ("p20", "tool0", "wobj0"), ("p30", "tGripper", "wTable"), ("MoveL", "tool0", "wobj0")]
+    model = constant_model(SK120, [0.5, -0.3, 0.2, 0.01, 0.02, -0.01])
+    mine, theirs = compensated(model, path), compensated(model, FIXTURES / "pallet.mod")
+    assert not mine.failures
+    np.testing.assert_allclose(mine.correction_mm, theirs.correction_mm, rtol=1e-12)
+    # a tool the module does not declare, spelt two ways, is one tool (named as first written)
+    path.write_bytes((FIXTURES / "pallet.mod").read_bytes().replace(b"MoveL p20, v200, z10, tool0 \\WObj:=wobj0;",
+                                                                    b"MoveL p20, v200, z10, tWeld;")
+                     .replace(b"MoveL Offs(p20, 0, 0, 50), v200, z10, tool0;", b"MoveL Offs(p20, 0, 0, 50), v200, z10, TWELD;"))
+    assert [t.tool for t in read_program(path).targets if t.name == "p20"] == ["tWeld"]
+
+
+@pytest.mark.parametrize("statement, target, reason", [
+    (b"wTable.oframe.trans.x := 20;", "p30", "its work object wTable is changed at run time (wTable.oframe.trans.x "
+                                             ":= 20 at line 12)"),
+    (b"tGripper.tframe.trans.z := tGripper.tframe.trans.z + 5;", "p30", "its tool tGripper is changed at run time"),
+    (b"p20 := Offs(p10, 0, 0, 100);", "p20", "assigned at run time (p20 := Offs(p10, 0, 0, 100) at line 12)"),
+    (b"PDispOn \\ExeP:=p10, p20, tool0;", "p30", "moved to under a program displacement (PDispOn)")])
+def test_rapid_data_changed_at_run_time_are_left_as_written_and_reported(tmp_path, statement, target, reason):
+    path = tmp_path / "runtime.mod"
+    path.write_bytes((FIXTURES / "pallet.mod").read_bytes().replace(b"  PROC main()\r\n",
+                                                                    b"  PROC main()\r\n    " + statement + b"\r\n"))
+    program = read_program(path)
+    assert target in [x.name for x in program.left] and target not in [t.name for t in program.targets]
+    assert reason in next(x.reason for x in program.left if x.name == target)
+    result = compensated(constant_model(SK120, [0.5, -0.3, 0.2]), path)
+    kept = next(line for line in path.read_bytes().split(b"\r\n") if f" {target}:=".encode() in line
+                or f" {target} :=".encode() in line)
+    assert not result.failures and kept in result.output.split(b"\r\n")
+
+
+# ---------------------------------------------------------------------- URScript: poses computed at run time
+def test_urscript_poses_computed_at_run_time_are_left_as_written_and_the_rest_compensated(tmp_path):
+    path = FIXTURES / "admittance.script"
+    program = read_program(path)
+    assert [(t.name, t.line, t.kind) for t in program.targets] == [("movel", 7, "pose"), ("movej", 14, "joints")]
+    assert [(x.name, x.line, x.column) for x in program.left] == [("movel", 8, 11), ("movel", 11, 25),
+                                                                   ("movej", 13, 10)]
+    assert program.left[0].reason == ("a pose computed at run time (p[home[0] + r, home[1], home[2], home[3], "
+                                      "home[4], home[5]]): kept as written")
+    assert program.left[2].reason.startswith("a joint list computed at run time ([q[0] + 0.1, q[1],")
+    save_model(constant_model(UR10, [0.3, -0.2, 0.1]).model, tmp_path / "m.json", name="c", robot=UR10)
+    out = tmp_path / "out.script"
+    done = run("compensate", str(tmp_path / "m.json"), str(path), "-o", str(out))
+    assert done.returncode == 0, done.stderr
+    assert done.stderr.count("left as written: a ") == 3 and "admittance.script: line 11, column 25: movel" in done.stderr
+    old, new = path.read_bytes().split(b"\n"), out.read_bytes().split(b"\n")
+    assert [k + 1 for k, (a, b) in enumerate(zip(old, new)) if a != b] == [7, 14]
+    summary = json.loads((tmp_path / "out.script.json").read_text())
+    assert [(x["line"], x["target"]) for x in summary["left_as_written"]] == [(8, "movel"), (11, "movel"), (13, "movej")]
+
+
+def test_urscript_a_tcp_computed_at_run_time_leaves_the_poses_moved_to_with_it():
+    path = FIXTURES / "admittance.script"
+    text = path.read_text().replace("set_tcp(p[0.0, 0.0, 0.12, 0.0, 0.0, 0.0])", "set_tcp(p[0, 0, tool_z, 0, 0, 0])")
+    import tempfile
+    with tempfile.TemporaryDirectory() as folder:
+        other = f"{folder}/tcp.script"
+        open(other, "w").write(text)
+        program = read_program(other)
+    assert [t.name for t in program.targets] == ["movej"]
+    assert program.left[0].reason == "moved to with a TCP computed at run time (set_tcp at line 4 (computed at run " \
+                                     "time)): kept as written"
+
+
+# ---------------------------------------------------------------------- file names
+@pytest.mark.parametrize("name, fixture, kind", [
+    ("ur_driver.urscript", "pick_place.script", "urscript"), ("Pallet.modx", "pallet.mod", "rapid"),
+    ("USER.sys", "pallet.mod", "rapid"), ("PALLET_MOD", "pallet.mod", "rapid"), ("pick_place", "pick_place.script",
+                                                                                "urscript"),
+    ("polyscope", "polyscope_tcp.script", "urscript"), ("weld_src", "kuka_cell/weld.src", "krl"),
+    ("config_dat", "kuka_cell/$config.dat", "krl"), ("pallet.txt", "pallet.mod", "rapid")])
+def test_programs_with_other_names_or_none_are_read_as_programs_not_as_a_targets_csv(tmp_path, name, fixture, kind):
+    path = tmp_path / name
+    path.write_bytes((FIXTURES / fixture).read_bytes())
+    assert program_kind(path) == kind
+    twin = read_program(FIXTURES / fixture) if not fixture.startswith("kuka_cell/weld") else None
+    robot = UR10 if kind == "urscript" else SK120
+    save_model(constant_model(robot, np.zeros(3)).model, tmp_path / "m.json", name="zero", robot=robot)
+    done = run("compensate", str(tmp_path / "m.json"), str(path), "-o", str(tmp_path / "out"), "--frame",
+               "BASE_DATA[1]={X 1500,Y 0,Z 400,A 0,B 0,C 0}", "--tool",
+               "TOOL_DATA[2]={X 12.5,Y -3,Z 240,A 0,B 30,C 0}") if kind == "krl" else \
+        run("compensate", str(tmp_path / "m.json"), str(path), "-o", str(tmp_path / "out"))
+    assert done.returncode == 0, done.stderr
+    assert (tmp_path / "out").read_bytes() == path.read_bytes()
+    if twin is not None:
+        assert [(t.name, t.line) for t in read_program(path).targets] == [(t.name, t.line) for t in twin.targets]
+    targets = tmp_path / "targets"
+    targets.write_text("x,y,z\n1000,0,1000\n")
+    assert program_kind(targets) is None                # a targets CSV without a name stays one
+
+
+# ---------------------------------------------------------------------- a Cartesian model: program and CSV agree
+def quadratic_model(robot):
+    """A second-degree Cartesian model (the paper's SDP(CI) kind) of a smooth error field, with its robot."""
+    rng = np.random.default_rng(3)
+    X = rng.uniform([600, -900, 0], [1800, 900, 1500], (200, 3))
+    y = np.stack([1e-6 * (X[:, 0] - 1000) ** 2 + 2e-3 * X[:, 1], 3e-3 * X[:, 2] - 1e-6 * X[:, 0] * X[:, 1] / 2,
+                  -2e-6 * (X[:, 2] - 700) ** 2 + 1e-3 * X[:, 0]], axis=1)
+    model = ErrorModel(inputs="cartesian", degree=2, solver="lstsq").fit(X, y)
+    return Predictor(model, model_to_dict(model, name="SDP(CI)", robot=robot), robot)
+
+
+def program_of(dialect, flanges, tool_mm, q):
+    """Ten targets as a program of ``dialect`` with the TCP ``tool_mm`` (no turn): the TCP poses."""
+    tcp = flanges.copy()
+    tcp[:, :3, 3] += np.einsum("nij,j->ni", flanges[:, :3, :3], tool_mm)
+    p, R = tcp[:, :3, 3], tcp[:, :3, :3]
+    if dialect == "urscript":
+        rv = rotation_vectors_from_matrices(R)
+        lines = ["def rect():", "  set_tcp(p[%.6f, %.6f, %.6f, 0, 0, 0])" % tuple(np.asarray(tool_mm) / 1000)]
+        lines += ["  movel(p[%.8f, %.8f, %.8f, %.9f, %.9f, %.9f], a=1.2, v=0.25)" % (*x / 1000, *r) for x, r in zip(p, rv)]
+        return "rect.script", "\n".join(lines + ["end"]) + "\n"
+    if dialect == "krl":
+        abc = kuka_abc_from_matrices(R)
+        lines = ["DEFDAT RECT", "DECL FRAME TOOL_DATA[1]={X %.6f,Y %.6f,Z %.6f,A 0,B 0,C 0}" % tuple(tool_mm)]
+        for k, (x, a) in enumerate(zip(p, abc)):
+            lines += ["DECL E6POS XP%d={X %.6f,Y %.6f,Z %.6f,A %.6f,B %.6f,C %.6f}" % (k, *x, *a),
+                      "DECL FDAT FP%d={TOOL_NO 1,BASE_NO 0,IPO_FRAME #BASE}" % k]
+        return "rect.dat", "\r\n".join(lines + ["ENDDAT"]) + "\r\n"
+    quat, cf = quaternions_from_matrices(R), np.floor(q[:, [0, 3, 5]] / 90).astype(int)
+    lines = ["MODULE Rect", "  PERS tooldata tTcp:=[TRUE,[[%.6f,%.6f,%.6f],[1,0,0,0]],[1,[0,0,1],[1,0,0,0],0,0,0]];"
+             % tuple(tool_mm)]
+    lines += ["  CONST robtarget p%d:=[[%.6f,%.6f,%.6f],[%.9f,%.9f,%.9f,%.9f],[%d,%d,%d,0],[9E9,9E9,9E9,9E9,9E9,9E9]];"
+              % (k, *x, *qq, *c) for k, (x, qq, c) in enumerate(zip(p, quat, cf))]
+    lines += ["  PROC main()"] + ["    MoveL p%d, v100, fine, tTcp;" % k for k in range(len(p))] + ["  ENDPROC"]
+    return "rect.mod", "\r\n".join(lines + ["ENDMODULE"]) + "\r\n"
+
+
+@pytest.mark.parametrize("dialect", ["urscript", "krl", "rapid"])
+def test_a_cartesian_model_compensates_a_program_as_a_csv_of_the_same_tool_points(tmp_path, dialect):
+    """A Cartesian model is a function of its tool point's position (the point it was fitted on). A program
+    with the model's tool as its TCP names those points: its commands are the CSV's. A program with another
+    TCP (here none: the flange) names other points; its TCPs move as the model's tool point does, so the CSV
+    of the tool points carried there gives its commands too (1.2 mm from the CSV of the program's own
+    numbers on the paper run's SDP(CI): the model read 234 mm away, not a disagreement)."""
+    predictor = quadratic_model(SK120)
+    save_model(predictor.model, tmp_path / "m.json", name="SDP(CI)", robot=SK120)
+    q = np.column_stack([np.linspace(35, 27, 10), np.linspace(-118, -126, 10), np.linspace(-152, -155, 10),
+                         np.zeros(10), np.full(10, 30.0), np.linspace(-6, -4.5, 10)])      # axis 4 at 0, tool down
+    flanges, tool = SK120.flange(q), SK120.tool_mm
+    tool_points = flanges[:, :3, 3] + np.einsum("nij,j->ni", flanges[:, :3, :3], tool)
+    (tmp_path / "targets.csv").write_text("x,y,z\n" + "".join("%.6f,%.6f,%.6f\n" % tuple(x) for x in tool_points))
+    done = run("compensate", str(tmp_path / "m.json"), str(tmp_path / "targets.csv"), "-o", str(tmp_path / "c.csv"))
+    assert done.returncode == 0, done.stderr
+    csv = np.loadtxt(tmp_path / "c.csv", delimiter=",", skiprows=1, usecols=(3, 4, 5))
+    assert np.linalg.norm(csv - tool_points, axis=1).min() > 0.5                # the model does move them
+    for tcp, expected in ((tool, csv), (np.zeros(3), csv - (tool_points - flanges[:, :3, 3]))):
+        name, text = program_of(dialect, flanges, tcp, q)
+        (tmp_path / name).write_bytes(text.encode())
+        out = tmp_path / ("out_" + name)
+        done = run("compensate", str(tmp_path / "m.json"), str(tmp_path / name), "-o", str(out))
+        assert done.returncode == 0, done.stderr
+        got = np.array([t.position_mm for t in read_program(out).targets])
+        np.testing.assert_allclose(got, expected, atol=1e-4)
+
+
+def test_a_krl_point_with_a_fixed_tool_is_left_as_written_and_reported_not_asked_for_as_a_frame(tmp_path):
+    path = tmp_path / "fixed.dat"
+    path.write_bytes((FIXTURES / "pallet.dat").read_bytes().replace(b"IPO_FRAME #BASE", b"IPO_FRAME #TCP"))
+    program = read_program(path)
+    assert "XP1" not in [t.name for t in program.targets]
+    assert [(x.name, x.line, x.reason) for x in program.left] == [
+        ("XP1", 10, "moved to with a fixed tool (IPO_FRAME #TCP: the robot carries the workpiece): not compensated, "
+                    "kept as written")]
+    result = compensated(constant_model(SK120, [0.5, -0.3, 0.2]), path)
+    line = next(x for x in path.read_bytes().split(b"\r\n") if x.startswith(b"DECL E6POS XP1="))
+    assert not result.failures and line in result.output.split(b"\r\n")
+
+
+@pytest.mark.parametrize("name", ["gone.script", "gone.mod", "gone.src"])
+def test_a_missing_program_file_exits_2_naming_it(tmp_path, name):
+    save_model(constant_model(SK120, np.zeros(3)).model, tmp_path / "m.json", name="zero", robot=SK120)
+    done = run("compensate", str(tmp_path / "m.json"), str(tmp_path / name), "-o", str(tmp_path / "out"))
+    assert done.returncode == 2 and f"{tmp_path / name}: no such program file" in done.stderr, done.stderr
+
+
+def test_a_krl_inline_form_sets_the_base_and_tool_of_the_motions_after_it(tmp_path):
+    # KSS's inline form: FDAT_ACT = FP1 then BAS(#PTP_PARAMS) set $TOOL and $BASE from FP1; a motion after the
+    # fold moves in them too
+    (tmp_path / "folded.dat").write_bytes(
+        b"DEFDAT  FOLDED\r\nDECL E6POS XP1={X 382.190,Y -377.300,Z 894.064,A 117.9789,B -28.1725,C -31.7403,S 2,"
+        b"T 6}\r\nDECL FDAT FP1={TOOL_NO 2,BASE_NO 3,IPO_FRAME #BASE,POINT2[] \" \"}\r\nENDDAT\r\n")
+    (tmp_path / "folded.src").write_bytes(
+        b"DEF folded( )\r\n;FOLD PTP P1 Vel=100 % PDAT1 Tool[2] Base[3];%{PE}%R 8.3.31,%MKUKATPBASIS,%CMOVE\r\n"
+        b"$BWDSTART=FALSE\r\nPDAT_ACT=PPDAT1\r\nFDAT_ACT=FP1\r\nBAS(#PTP_PARAMS,100)\r\nPTP XP1 \r\n;ENDFOLD\r\n"
+        b"LIN {X 382.190,Y -377.300,Z 794.064,A 117.9789,B -28.1725,C -31.7403}\r\nEND\r\n")
+    assert [(t.name, t.frame, t.tool) for t in read_program(tmp_path / "folded.dat").targets] == [
+        ("XP1", "BASE_DATA[3]", "TOOL_DATA[2]")]
+    assert [(t.name, t.line, t.frame, t.tool) for t in read_program(tmp_path / "folded.src").targets] == [
+        ("LIN", 9, "BASE_DATA[3]", "TOOL_DATA[2]")]

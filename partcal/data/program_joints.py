@@ -12,7 +12,7 @@ import re
 import numpy as np
 
 from ..robot.description import joint_columns
-from .program_text import BOM, Dialect, Field, ProgramSyntaxError, Target, is_number, syntax_error
+from .program_text import BOM, LINE_BREAK, Dialect, Field, ProgramSyntaxError, Target, is_number, syntax_error
 
 DEG_DECIMALS = 6
 _JOINT = re.compile(r"q(\d+)")
@@ -31,7 +31,7 @@ def parse(text: str, source: str) -> tuple[list[Target], dict]:
     """Every data row of a joint trajectory CSV as a joint target (``text``: its bytes decoded as latin-1)."""
     targets, header, columns, row = [], None, [], 0
     at = 0
-    for number, line in enumerate(text.splitlines(keepends=True), start=1):
+    for number, line in enumerate(_lines(text), start=1):
         start, body = at, line.rstrip("\r\n")
         at += len(line)
         if number == 1 and body.startswith(BOM):
@@ -65,7 +65,15 @@ def parse(text: str, source: str) -> tuple[list[Target], dict]:
             fields.append(Field(offset, offset + len(value), value, float(value)))
         targets.append(Target(f"row {row}", number, fields[0].start - start + 1, "joints", tuple(fields),
                               line_end=start + len(body)))
-    return targets, {}
+    return targets, {}, []
+
+
+def _lines(text: str) -> list[str]:
+    """The lines of ``text`` with their endings (CR LF, LF or a lone CR; not the other breaks of
+    ``str.splitlines``: a cp1252 ellipsis, byte 0x85, read as latin-1 is NEL and stays in its line)."""
+    ends = [m.end() for m in LINE_BREAK.finditer(text)]
+    bounds = [0] + ends + ([len(text)] if not ends or ends[-1] < len(text) else [])
+    return [text[a:b] for a, b in zip(bounds, bounds[1:])]
 
 
 def frame(value: str, source: str):

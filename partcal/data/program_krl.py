@@ -5,29 +5,36 @@ Units of the language: ``X Y Z`` in mm, ``A B C`` Z-Y-X Euler angles in degrees 
 in binary (``'B010'``); joint targets ``A1 .. A6`` in degrees. Targets are
 
 - declarations of ``E6POS``, ``POS``, ``E3POS``, ``FRAME`` (poses) and ``E6AXIS``, ``AXIS``, ``E3AXIS``
-  (joints), with an initial value;
-- assignments of a whole aggregate to a variable (``XP1 = {X ..}``, in ``.src`` files too), and inline
-  aggregates of a motion (``PTP {A1 0, ..}``, ``LIN {X .., ..}``).
+  (joints) with an initial value, and assignments of a whole aggregate (``XP1 = {X ..}``, ``P[3] = {..}``),
+  that a motion of the module reaches by name (a ``.dat`` is read with its module's ``.src`` beside it; a
+  ``.dat`` without one takes every point it declares), or that an inline form's ``FDAT`` names;
+- inline aggregates of a motion (``PTP {A1 0, ..}``, ``LIN {X .., ..}``).
 
-An aggregate lacking some of ``X Y Z A B C`` (or ``A1 .. A6``) after a ``:``, of ``PTP_REL`` or
-``LIN_REL``, or assigned to no declared target is an offset and stays as written; a partial aggregate as
-the target of ``PTP``, ``LIN`` or ``CIRC`` (the other coordinates: wherever the robot is) is refused.
-``$BASE``, ``$TOOL``, ``BASE_DATA[n]`` and ``TOOL_DATA[n]`` aggregates are frames, not targets:
-``BASE_DATA[n]`` and ``TOOL_DATA[n]`` defined in the file are used for the targets that name them.
-A target ``XP1`` (or ``P1``) with an ``FDAT`` named ``FP1`` is in the frame ``BASE_DATA[BASE_NO]`` with
-the tool ``TOOL_DATA[TOOL_NO]`` (number 0: the robot base, the flange); without one, in the frames of
-the options ``--frame`` and ``--tool`` (default: the robot base, the flange).
+A point no motion reaches (numbers for arithmetic), reached only through an expression, or moved to in a
+base or tool computed at run time is kept as written and reported (``left``); so are the controller's
+system variables (``TOOL_CORR``, ``BASE_CORR``, ``REF_TOOL``, ``REF_PT[]`` of ``$config.dat``). An aggregate
+lacking some of ``X Y Z A B C`` (or ``A1 .. A6``) after a ``:``, of ``PTP_REL`` or ``LIN_REL``, or assigned to
+no declared target is an offset and stays as written; a partial aggregate as the target of ``PTP``, ``LIN`` or
+``CIRC`` (the other coordinates: wherever the robot is) is refused. ``BASE_DATA[n]`` and ``TOOL_DATA[n]``
+aggregates are frames. A point is in the base and with the tool in force at its motions (``$BASE =``,
+``$TOOL =``, ``BAS(#BASE, n)``, ``BAS(#TOOL, n)``, ``FDAT_ACT``, in file order; before them, the frames of the
+options ``--frame`` and ``--tool``, default the robot base and the flange); a point ``XP1`` (or ``P1``) with
+an ``FDAT`` ``FP1`` in ``BASE_DATA[BASE_NO]`` with ``TOOL_DATA[TOOL_NO]`` (number 0: the robot base, the
+flange).
 """
 
 from __future__ import annotations
 
+import logging
 import re
+from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
 from ..robot.rotations import kuka_abc_from_matrices, matrices_from_kuka_abc
-from .program_text import (Dialect, Field, ProgramSyntaxError, Target, closing, frame_pose, is_number, line_end,
-                           masked, syntax_error)
+from .program_text import (Dialect, Field, ProgramSyntaxError, Target, UnknownFrameError, closing, frame_pose,
+                           is_number, lf_view, line_and_column, line_end, masked, syntax_error)
 
 POSE_TYPES = {"E6POS", "POS", "E3POS", "FRAME"}
 JOINT_TYPES = {"E6AXIS", "AXIS", "E3AXIS"}
@@ -41,53 +48,278 @@ _MOTION = re.compile(r"\b(PTP|LIN|CIRC|SPTP|SLIN|SCIRC|PTP_REL|LIN_REL)\s+$", re
 _ABSOLUTE_MOTIONS = {"PTP", "LIN", "CIRC", "SPTP", "SLIN", "SCIRC"}
 _ITEM = re.compile(r"\s*([A-Za-z_]\w*)\s+(\S(?:.*\S)?)\s*$", re.DOTALL)
 _INT = re.compile(r"[-+]?\d+|'[BbHh][0-9A-Fa-f]+'")
+_EVENT = re.compile(                      # in file order: what sets the base and tool, and the motions
+    r"^[ \t]*(?P<sys>\$BASE|\$TOOL)[ \t]*=(?!=)[ \t]*(?P<value>[^\r\n]*?)[ \t]*(?=[\r\n]|\Z)"
+    r"|\bBAS[ \t]*\([ \t]*#(?P<bas>BASE|TOOL)[ \t]*,(?P<number>[^)\r\n]*)\)"
+    r"|\bFDAT_ACT[ \t]*=[ \t]*(?P<fdat>[A-Za-z_]\w*)"
+    r"|^[ \t]*(?P<motion>PTP|LIN|CIRC|SPTP|SLIN|SCIRC)[ \t]+(?P<args>[^\r\n]*?)[ \t]*(?=[\r\n]|\Z)",
+    re.IGNORECASE | re.MULTILINE)
+SYSTEM_FRAMES = {"TOOL_CORR", "BASE_CORR", "REF_TOOL", "REF_PT", "MACHINE_DEF", "MACHINE_TOOL_DAT",
+                 "MACHINE_FRAME_DAT", "LOAD_DATA", "TOOL_DATA", "BASE_DATA"}    # $config.dat's, never targets
+log = logging.getLogger(__name__)
 
 
-def parse(text: str, source: str) -> tuple[list[Target], dict]:
-    """The targets of a KRL file (``text``: its bytes decoded as latin-1) and the frames it defines."""
-    code = masked(text, ";")
-    targets, frames, fdat = [], {NULLFRAME: np.eye(4)}, {}
-    at = 0
+def parse(text: str, source: str) -> tuple[list[Target], dict, list]:
+    """The targets of a KRL file (``text``: its bytes decoded as latin-1), the frames it defines and the points
+    left as written. A ``.dat`` is read with its module's ``.src`` beside it (same name), whose motions say which
+    of its points are targets and in which base and tool; a ``.src`` with its ``.dat`` (its ``FDAT``s)."""
+    code = lf_view(masked(text, ";"))
+    frames, fdat = {NULLFRAME: np.eye(4)}, {}
+    records = _aggregates(text, code, source)
+    partner = _partner(source)
+    for rec in records + (_aggregates(*partner) if partner else []):
+        _definitions(rec, frames, fdat)
+    suffix = Path(source).suffix.lower()
+    is_dat = suffix == ".dat" or (suffix != ".src" and re.search(r"^[ \t]*DEFDAT\b", code, re.I | re.M) is not None)
+    motions = (partner if partner and partner[2].lower().endswith(".src") else None) if is_dat else (text, code, source)
+    reach = _Reach(*motions, fdat, frames) if motions else None
+    targets, left = [], []
+    for rec in records:
+        target = _record_target(text, source, rec, reach, fdat, left)
+        if target is not None:
+            targets.append(target)
+    if is_dat and reach is None and targets:
+        log.warning("%s: no module .src beside it: every point it declares is taken as a target, in the base and "
+                    "tool of its FDAT or of --frame and --tool (put its .src beside it to take only what motions "
+                    "reach, in the base and tool set before them)", source)
+    return targets, frames, left
+
+
+class Computed(str):
+    """A base or tool set at run time (its statement and line): targets moved to in it are left as written."""
+
+
+class FixedTool(str):
+    """An ``FDAT`` with ``IPO_FRAME #TCP``: the robot carries the workpiece past a fixed tool, its points are
+    in the tool's frame; they are left as written (the robot's own tool point is not on them)."""
+
+
+def _unusable(states: set) -> str | None:
+    """Why points moved to with these (base, tool) pairs cannot be compensated, if they cannot."""
+    for kind, text in ((FixedTool, "moved to with a fixed tool ({}: the robot carries the workpiece)"),
+                       (Computed, "moved to in a base or tool set at run time ({})")):
+        found = sorted(str(x) for state in states for x in state if isinstance(x, kind))
+        if found:
+            return text.format(found[0]) + ": not compensated, kept as written"
+    return None
+
+
+@dataclass
+class _Record:
+    """One aggregate ``{..}`` that may be a point: its span, how it is named (``decl``, ``assign``, ``motion``),
+    its name, the declared kind (``pose``, ``joints``, another type's name, or None) and its items."""
+
+    start: int
+    end: int
+    via: str
+    name: str
+    kind: str | None
+    items: dict
+
+
+def _aggregates(text: str, code: str, source: str) -> list[_Record]:
+    """Every aggregate of a file that is declared, assigned or a motion's inline target."""
+    out, at = [], 0
     while (start := code.find("{", at)) >= 0:
         end = closing(code, start, "{", "}")
         if end < 0:
             raise syntax_error(source, text, start, "aggregate", "a closing '}'")
         at = end + 1
         before = code[max(0, start - 200):start]
-        decl, assign = _DECL.search(before), _ASSIGN.search(before)
-        kind = name = None
+        decl, assign, motion = _DECL.search(before), _ASSIGN.search(before), _MOTION.search(before)
         if decl:
-            typ, name = decl.group(1).upper(), decl.group(2)
+            typ, name, via = decl.group(1).upper(), decl.group(2), "decl"
             kind = "pose" if typ in POSE_TYPES else "joints" if typ in JOINT_TYPES else typ
         elif assign:
-            name = assign.group(1)
-        elif _MOTION.search(before):
-            name = _MOTION.search(before).group(1).upper()
+            name, kind, via = assign.group(1), None, "assign"
+        elif motion:
+            name, kind, via = motion.group(1).upper(), None, "motion"
         else:
             continue                                                 # an offset (after ':') or an argument
-        items = _items(text, code, source, start, end)
-        if kind == "FDAT":
-            fdat[name.upper()] = {k: v[1] for k, v in items.items() if k is not None}
-            continue
-        upper = name.upper()
-        if upper.startswith(("BASE_DATA[", "TOOL_DATA[")) and all(k in items for k in POSE_KEYS):
-            frames[upper.replace(" ", "")] = _pose_of(items, text, source)[0]
-            continue
-        if upper.startswith("$") or kind not in (None, "pose", "joints"):
-            continue
-        if kind is None:
-            kind = "pose" if all(k in items for k in POSE_KEYS) else \
-                "joints" if all(k in items for k in JOINT_KEYS) else None
-            if kind is None and upper in _ABSOLUTE_MOTIONS:     # the other coordinates: whatever the robot has
-                raise syntax_error(source, text, start, f"{upper} to a partial aggregate", "a whole target: all "
-                                   f"of {' '.join(POSE_KEYS)} or of {' '.join(JOINT_KEYS)} (a partial one cannot "
-                                   "be compensated)")
-            if kind is None:
+        out.append(_Record(start, end, via, name, kind, _items(text, code, source, start, end)))
+    return out
+
+
+def _definitions(rec: _Record, frames: dict, fdat: dict) -> None:
+    """``FDAT``s, and ``BASE_DATA[n]`` and ``TOOL_DATA[n]`` frames written as numbers."""
+    upper = _key(rec.name)
+    if rec.kind == "FDAT":
+        fdat[upper] = {k: v[1] for k, v in rec.items.items() if k is not None}
+    elif upper.startswith(("BASE_DATA[", "TOOL_DATA[")) and all(k in rec.items and rec.items[k][0] is not None
+                                                                for k in POSE_KEYS):
+        v = np.array([rec.items[k][0].value for k in POSE_KEYS])
+        frames[upper] = frame_pose(v[:3], matrices_from_kuka_abc(v[3:])[0])
+
+
+def _record_target(text, source, rec: _Record, reach, fdat, left) -> Target | None:
+    """The target an aggregate is (None: not a target; a point not compensated goes into ``left``)."""
+    upper = _key(rec.name)
+    if rec.kind == "FDAT" or upper.startswith(("$", "BASE_DATA[", "TOOL_DATA[")) or \
+            rec.kind not in (None, "pose", "joints") or (rec.via == "motion" and upper.endswith("_REL")):
+        return None                                   # frames, other data, and relative motions' offsets
+    kind = rec.kind or ("pose" if all(k in rec.items for k in POSE_KEYS) else
+                        "joints" if all(k in rec.items for k in JOINT_KEYS) else None)
+    if kind is None:
+        if rec.via == "motion" and upper in _ABSOLUTE_MOTIONS:      # the other coordinates: whatever the robot has
+            raise syntax_error(source, text, rec.start, f"{upper} to a partial aggregate", "a whole target: all of "
+                               f"{' '.join(POSE_KEYS)} or of {' '.join(JOINT_KEYS)} (a partial one cannot be "
+                               "compensated)")
+        return None
+    first = _first_value(rec)
+    if rec.via != "motion" and upper.split("[")[0] in SYSTEM_FRAMES:
+        left.append((first, rec.name, f"a system variable of the controller ({upper.split('[')[0]}), not a motion "
+                                      "target: kept as written"))
+        return None
+    target = _target(text, source, rec.name, kind, rec.items, rec.start)
+    if kind == "pose" and _fdat_of(upper, fdat) is not None and rec.via != "motion":
+        _frames_of(target, fdat)
+        why = _unusable({(target.frame, target.tool)})
+        if why:
+            left.append((first, rec.name, why))
+            return None
+        return target
+    if reach is None:
+        return target                          # a data list without its .src: every point, as declared
+    states = reach.inline.get(rec.start) if rec.via == "motion" else reach.states(upper)
+    if not states:
+        why = reach.through.get(upper) or reach.through.get(upper.split("[")[0])
+        left.append((first, rec.name, f"reached only through the expression {why}, not compensated" if why else
+                     f"no motion of {reach.source_name} reaches it: not a target, kept as written"))
+        return None
+    why = _unusable(states) if kind == "pose" else None
+    if why:
+        left.append((first, rec.name, why))
+        return None
+    if len(states) > 1:
+        named = " and ".join(f"$BASE {b or 'default'}, $TOOL {t or 'default'}" for b, t in sorted(
+            states, key=lambda s: (str(s[0]), str(s[1]))))
+        line, column = line_and_column(text, first)
+        raise UnknownFrameError(f"{source}: line {line}, column {column}: target {rec.name}: it is moved to with "
+                                f"{named}: one point cannot be compensated for two frames or tools; nothing written")
+    if kind == "pose":
+        target.frame, target.tool = next(iter(states))
+    return target
+
+
+def _first_value(rec: _Record) -> int:
+    """Offset of the first value of an aggregate (where a note about it points)."""
+    offsets = [v[2] for k, v in rec.items.items() if k is not None]
+    return min(offsets) if offsets else rec.start
+
+
+def _key(name: str) -> str:
+    """A name as KRL compares it: upper case, no spaces (``xp1`` is ``XP1``; ``P[ 3 ]`` is ``P[3]``)."""
+    return re.sub(r"\s+", "", name).upper()
+
+
+def _partner(source: str) -> tuple[str, str, str] | None:
+    """The other file of the module (``.src`` for a ``.dat`` and back, same name, any case): its text, masked
+    code and path; None when there is none."""
+    path = Path(source)
+    want = {".dat": ".src", ".src": ".dat"}.get(path.suffix.lower())
+    if want is None:
+        return None
+    try:
+        match = next((p for p in path.parent.iterdir() if p.name.lower() == (path.stem + want).lower()), None)
+        if match is None:
+            return None
+        raw = match.read_bytes()
+    except OSError:
+        return None
+    text = raw.decode("latin-1")
+    return text, lf_view(masked(text, ";")), str(match)
+
+
+class _Reach:
+    """What the motions of a ``.src`` reach, and in which base and tool: the ``$BASE``/``$TOOL`` assignments,
+    ``BAS(#BASE, n)``/``BAS(#TOOL, n)`` and ``FDAT_ACT`` before each motion, in file order (from the program's
+    start: the default frames, those of ``--frame`` and ``--tool``)."""
+
+    def __init__(self, text: str, code: str, source: str, fdat: dict, frames: dict):
+        self.source_name = Path(source).name
+        self.named: dict = {}          # NAME or NAME[3] -> {(base, tool)}; NAME[] (any element) for NAME[i]
+        self.through: dict = {}        # NAME -> the expression a motion reaches it through
+        self.inline: dict = {}         # offset of an inline aggregate -> {(base, tool)}
+        base = tool = None
+        for m in _EVENT.finditer(code):
+            line = line_and_column(text, m.start())[0]
+            if m.group("sys"):
+                which = m.group("sys").upper()
+                value = _state_value(which, m.group("value"), line, frames, source)
+                base, tool = (value, tool) if which == "$BASE" else (base, value)
+            elif m.group("bas"):
+                number = m.group("number").strip()
+                which = m.group("bas").upper()
+                value = (NULLFRAME if int(number) == 0 else f"{which}_DATA[{int(number)}]") if \
+                    re.fullmatch(r"\d+", number) else Computed(f"BAS(#{which}, {number}) at line {line}")
+                base, tool = (value, tool) if which == "BASE" else (base, value)
+            elif m.group("fdat"):
+                data = fdat.get(m.group("fdat").upper())
+                if data is None:
+                    base = tool = Computed(f"FDAT_ACT = {m.group('fdat')} at line {line}, not defined")
+                else:
+                    base, tool = _fdat_frames(data)
+            else:
+                self._motion(m, code, (base, tool))
+
+    def _motion(self, m, code: str, state: tuple) -> None:
+        args = m.group("args")
+        parts = [args] if m.group("motion").upper() not in ("CIRC", "SCIRC") else _top_level(args)[:2]
+        for part in parts:
+            offset = m.start("args") + args.find(part) + len(part) - len(part.lstrip())
+            part = part.strip()
+            if part.startswith("{"):
+                self.inline.setdefault(offset, set()).add(state)
                 continue
-        targets.append(_target(text, source, name, kind, items, start))
-    for t in targets:
-        _frames_of(t, fdat)
-    return targets, frames
+            name = re.match(r"([$A-Za-z_][\w$]*)\s*(\[[^\]]*\])?", part)
+            if name is None:
+                continue
+            rest = part[name.end():].lstrip()
+            index = re.sub(r"\s+", "", name.group(2) or "")
+            key = name.group(1).upper() + (index if re.fullmatch(r"\[\d+\]", index) else "[]" if index else "")
+            if rest.startswith(":") or (rest[:1] in "+-*/" and rest):
+                self.through.setdefault(key.replace("[]", ""), part.split(" C_")[0].strip())
+            else:
+                self.named.setdefault(key, set()).add(state)
+
+    def states(self, key: str) -> set:
+        """The (base, tool) pairs a named point is moved to with (an element: also those of ``NAME[i]``)."""
+        found = set(self.named.get(key, set()))
+        if "[" in key:
+            found |= self.named.get(key.split("[")[0] + "[]", set())
+        return found
+
+
+def _state_value(which: str, value: str, line: int, frames: dict, source: str):
+    """The base or tool a ``$BASE = ..``/``$TOOL = ..`` assignment sets: a name, a literal frame (defined here
+    as ``$BASE at line N``), or Computed."""
+    upper = re.sub(r"\s+", "", value).upper()
+    data = "BASE_DATA" if which == "$BASE" else "TOOL_DATA"
+    if upper == NULLFRAME:
+        return NULLFRAME
+    if re.fullmatch(data + r"\[\d+\]", upper):
+        return upper
+    if upper.startswith("{") and upper.endswith("}"):
+        try:
+            pose = frame(value, source)
+        except ProgramSyntaxError:
+            pose = None
+        if pose is not None:
+            name = f"{which} at line {line}"
+            frames[name] = pose
+            return name
+    return Computed(f"{which} = {value.strip()} at line {line}")
+
+
+def _top_level(text: str) -> list[str]:
+    """Comma-separated parts of ``text`` outside braces and brackets."""
+    out, depth, at = [], 0, 0
+    for k, c in enumerate(text):
+        depth += c in "{[(" and 1 or (-1 if c in "}])" else 0)
+        if c == "," and depth == 0:
+            out.append(text[at:k])
+            at = k + 1
+    return out + [text[at:]]
 
 
 def _items(text, code, source, start, end) -> dict:
@@ -149,18 +381,27 @@ def _status(item, text, source, name, key) -> int | None:
     return int(value)
 
 
+def _fdat_of(name: str, fdat: dict) -> dict | None:
+    """The FDAT of an inline form's point (``FP1`` for ``XP1`` or ``P1``), if any."""
+    return fdat.get("F" + name) or (fdat.get("F" + name[1:]) if name.startswith("X") else None)
+
+
+def _fdat_frames(data: dict) -> tuple:
+    """The base and tool an FDAT sets (``BASE_NO``, ``TOOL_NO``; 0: the robot base, the flange)."""
+    if data.get("IPO_FRAME", "#BASE").upper() != "#BASE":
+        return FixedTool(f"IPO_FRAME {data['IPO_FRAME']}"), None
+    base, tool = data.get("BASE_NO", "0").strip(), data.get("TOOL_NO", "0").strip()
+    if not re.fullmatch(r"\d+", base) or not re.fullmatch(r"\d+", tool):
+        return Computed(f"FDAT BASE_NO {base}, TOOL_NO {tool}"), None
+    return (NULLFRAME if int(base) == 0 else f"BASE_DATA[{int(base)}]",
+            NULLFRAME if int(tool) == 0 else f"TOOL_DATA[{int(tool)}]")
+
+
 def _frames_of(target: Target, fdat: dict) -> None:
     """The base and tool an FDAT names for ``target`` (``FP1`` for ``XP1`` or ``P1``)."""
-    name = target.name.upper()
-    data = fdat.get("F" + name) or (fdat.get("F" + name[1:]) if name.startswith("X") else None)
-    if data is None or target.kind != "pose":
-        return
-    if data.get("IPO_FRAME", "#BASE").upper() != "#BASE":
-        target.frame = f"IPO_FRAME {data['IPO_FRAME']} (a fixed tool)"
-        return
-    base, tool = data.get("BASE_NO", "0").strip(), data.get("TOOL_NO", "0").strip()
-    target.frame = NULLFRAME if base == "0" else f"BASE_DATA[{base}]"
-    target.tool = NULLFRAME if tool == "0" else f"TOOL_DATA[{tool}]"
+    data = _fdat_of(_key(target.name), fdat)
+    if data is not None and target.kind == "pose":
+        target.frame, target.tool = _fdat_frames(data)
 
 
 def poses(values):

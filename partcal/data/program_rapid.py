@@ -11,7 +11,11 @@ A robtarget is in the work object and with the tool of the moves that use it (``
 tool1 \\WObj:=wobj1;``, also through ``Offs(p10, ..)`` and ``RelTool(p10, ..)``); ``wobj0`` (the world,
 taken as the robot base) and ``tool0`` (the flange) when no move names others. ``tooldata`` (held by the
 robot) and ``wobjdata`` (a fixed user frame: ``uframe`` then ``oframe``) declared in the module are used;
-others must be given as options. A robtarget used with two different tools or work objects is refused.
+others must be given as options. A robtarget used with two different tools or work objects is refused. Names
+are case-insensitive (``WObj0`` is ``wobj0``). ``ConfJ \\Off`` and ``ConfL \\Off`` drop the written
+configuration of the targets of the moves they govern (the controller does not monitor it). A robtarget
+assigned at run time, or moved to with a tool or work object assigned at run time or under ``PDispOn``, is left
+as written and reported.
 """
 
 from __future__ import annotations
@@ -25,17 +29,20 @@ from .program_text import (Dialect, ProgramSyntaxError, Target, UnknownFrameErro
                            line_and_column, line_end, masked, numbers, syntax_error)
 
 MM_DECIMALS, QUATERNION_DECIMALS, DEG_DECIMALS = 6, 9, 6
+UNIT_TOLERANCE = 1e-3      # a quaternion's norm may differ from 1 by this much (numbers rounded when written)
 _DECL = re.compile(r"\b(?:CONST|PERS|VAR)\s+(robtarget|jointtarget|tooldata|wobjdata)\s+([A-Za-z_]\w*)"
                    r"\s*(\{\s*\d+\s*\})?\s*:=\s*\[", re.IGNORECASE)
-_MOVE = re.compile(r"\b(Move\w*)\s+([^;]*);", re.IGNORECASE)
 _WOBJ = re.compile(r"\\WObj\s*:=\s*([A-Za-z_]\w*)", re.IGNORECASE)
 
 
-def parse(text: str, source: str) -> tuple[list[Target], dict]:
-    """The targets of a RAPID module (``text``: its bytes decoded as latin-1) and the tools and work objects
-    it declares (name -> pose (4, 4) mm; ``tool0`` and ``wobj0`` the identity)."""
+def parse(text: str, source: str) -> tuple[list[Target], dict, list]:
+    """The targets of a RAPID module (``text``: its bytes decoded as latin-1), the tools and work objects it
+    declares (name -> pose (4, 4) mm; ``tool0`` and ``wobj0`` the identity) and the poses left as written.
+
+    RAPID names are case-insensitive: ``WObj0`` is ``wobj0``, ``TGRIPPER`` the ``tGripper`` declared."""
     code = masked(text, "!")
     frames = {"tool0": np.eye(4), "wobj0": np.eye(4)}
+    names = {"tool0": "tool0", "wobj0": "wobj0"}           # lower case -> the name as declared
     targets = []
     for m in _DECL.finditer(code):
         kind, name, start = m.group(1).lower(), m.group(2), m.end() - 1
@@ -50,41 +57,128 @@ def parse(text: str, source: str) -> tuple[list[Target], dict]:
         elif read is not None:
             targets.append(read(text, code, source, start, name))
         else:
+            names.setdefault(name.lower(), name)
             pose = _frame_data(text, code, source, start, name, kind)
             if pose is not None:
                 frames[name] = pose
+    changed = _changed_at_run_time(text, code)
     uses: dict = {}
-    for m in _MOVE.finditer(code):
-        args = _arguments(code, m.start(2), m.end(2))
-        plain = [(a, s) for a, s in args if not a.startswith("\\")]
-        n_targets = 2 if m.group(1).upper().startswith("MOVEC") else 1
-        if len(plain) <= n_targets + 2:
+    left: list = []
+    for move, state in _moves(code):
+        _use(text, code, source, move, state, names, changed, targets, uses, left)
+    return _framed(text, source, targets, uses, changed, left), frames, left
+
+
+_EVENT = re.compile(r"\bConf(?P<conf>[LJ])\s*\\(?P<on>On|Off)\b|\b(?P<pdisp>PDispOn|PDispSet|PDispOff)\b"
+                    r"|(?P<move>\bMove\w*)\s+(?P<args>[^;]*);", re.IGNORECASE)
+_ASSIGNED = re.compile(r"(?:^|;|\bTHEN\b|\bELSE\b|\bDO\b)[ \t]*(?P<name>[A-Za-z_]\w*)"
+                       r"(?P<part>(?:[ \t]*\.[ \t]*\w+|[ \t]*\{[^}\r\n]*\})*)[ \t]*:=", re.IGNORECASE | re.MULTILINE)
+
+
+def _moves(code: str):
+    """Each ``Move*`` instruction in file order, with the state before it: whether its configuration is
+    monitored (``ConfJ`` for ``MoveJ*``, ``ConfL`` for ``MoveL*`` and ``MoveC*``; on until ``\\Off``) and the
+    program displacement (``PDispOn``/``PDispSet`` until ``PDispOff``) in force."""
+    conf = {"L": True, "J": True}
+    displaced = None
+    for m in _EVENT.finditer(code):
+        if m.group("conf"):
+            conf[m.group("conf").upper()] = m.group("on").lower() == "on"
+        elif m.group("pdisp"):
+            displaced = None if m.group("pdisp").lower() == "pdispoff" else m.group("pdisp")
+        else:
+            kind = m.group("move").upper()
+            monitored = conf["J"] if kind.startswith("MOVEJ") else conf["L"] if kind.startswith(("MOVEL", "MOVEC")) \
+                else True
+            yield m, (monitored, displaced)
+
+
+def _changed_at_run_time(text: str, code: str) -> dict:
+    """Data assigned by an instruction (``wobj1.oframe.trans.x := ..``, ``p10 := CRobT()``): lower-case name ->
+    the statement and its line. Declarations (``PERS wobjdata wobj1 := ..``) are no assignments."""
+    out: dict = {}
+    for m in _ASSIGNED.finditer(code):
+        name = m.group("name")
+        if name.upper() in ("CONST", "PERS", "VAR", "TASK", "LOCAL"):
             continue
-        tool = re.match(r"[A-Za-z_]\w*", plain[n_targets + 2][0])
-        wobj = _WOBJ.search(m.group(2))
-        where = (tool.group() if tool else plain[n_targets + 2][0], wobj.group(1) if wobj else "wobj0")
-        for arg, start in plain[:n_targets]:
-            if arg.startswith("["):
-                literal = _robtarget(text, code, source, start, m.group(1)) if arg.startswith("[[") and \
-                    arg.count("[") >= 5 else _jointtarget(text, code, source, start, m.group(1))
-                literal.tool, literal.frame = where
-                targets.append(literal)
-            else:
-                used = re.match(r"(?:(?:Offs|RelTool)\s*\(\s*)?([A-Za-z_]\w*)", arg, re.IGNORECASE)
-                if used:
-                    uses.setdefault(used.group(1).lower(), set()).add(where)
+        stop = code.find(";", m.end())
+        statement = " ".join(code[m.start("name"):stop if stop > 0 else m.end()].split())
+        out.setdefault(name.lower(), f"{statement} at line {line_and_column(text, m.start('name'))[0]}")
+    return out
+
+
+def _use(text, code, source, m, state, names, changed, targets, uses, left) -> None:
+    """A move's targets: inline ones become targets (or are left), named ones record the use."""
+    monitored, displaced = state
+    args = _arguments(code, m.start("args"), m.end("args"))
+    plain = [(a, s) for a, s in args if not a.startswith("\\")]
+    n_targets = 2 if m.group("move").upper().startswith("MOVEC") else 1
+    if len(plain) <= n_targets + 2:
+        return
+    tool = re.match(r"[A-Za-z_]\w*", plain[n_targets + 2][0])
+    wobj = _WOBJ.search(m.group("args"))
+    tool_name = tool.group() if tool else plain[n_targets + 2][0]
+    wobj_name = wobj.group(1) if wobj else "wobj0"
+    where = (names.setdefault(tool_name.lower(), tool_name), names.setdefault(wobj_name.lower(), wobj_name))
+    for arg, start in plain[:n_targets]:
+        if arg.startswith("["):
+            pose = arg.startswith("[[") and arg.count("[") >= 5
+            literal = _robtarget(text, code, source, start, m.group("move")) if pose else \
+                _jointtarget(text, code, source, start, m.group("move"))
+            why = _why_left(where, displaced, changed) if pose else None
+            if why:
+                left.append((literal.fields[0].start, literal.name, why))
+                continue
+            literal.tool, literal.frame = where
+            if not monitored:
+                literal.configuration = None
+            targets.append(literal)
+        else:
+            used = re.match(r"(?:(?:Offs|RelTool)\s*\(\s*)?([A-Za-z_]\w*)", arg, re.IGNORECASE)
+            if used:
+                uses.setdefault(used.group(1).lower(), set()).add((where, monitored, displaced))
+
+
+def _why_left(where: tuple, displaced, changed: dict) -> str | None:
+    """Why a robtarget moved to with ``where`` (tool, work object) cannot be compensated, if it cannot."""
+    if displaced:
+        return f"moved to under a program displacement ({displaced}), set at run time: not compensated, kept as written"
+    for what, name in zip(("tool", "work object"), where):
+        if name.lower() in changed:
+            return (f"its {what} {name} is changed at run time ({changed[name.lower()]}): not compensated in its "
+                    "declared value, kept as written")
+    return None
+
+
+def _framed(text, source, targets, uses, changed, left) -> list[Target]:
+    """Named targets with the tool and work object of their moves (several: refused), the configuration
+    dropped where every move that takes it leaves it unmonitored; those that cannot be compensated go to
+    ``left``."""
+    out = []
     for t in targets:
-        seen = uses.get(t.name.split("{")[0].lower())
+        base = t.name.split("{")[0].lower()
+        seen = uses.get(base)
+        if t.kind == "pose" and t.tool is None and base in changed:
+            left.append((t.fields[0].start, t.name, f"assigned at run time ({changed[base]}): its declared value "
+                                                   "is not what the robot moves to, kept as written"))
+            continue
         if t.kind == "pose" and seen and t.tool is None:
-            if len(seen) > 1:
-                uses_text = " and ".join(f"{a}\\WObj:={b}" for a, b in sorted(seen))
+            wheres = {w for w, _, _ in seen}
+            if len(wheres) > 1:
+                uses_text = " and ".join(f"{a}\\WObj:={b}" for a, b in sorted(wheres))
                 t.line, t.column = line_and_column(text, t.fields[0].start)
                 raise UnknownFrameError(f"{t.where(source)}: it is used with {uses_text}: one robtarget cannot be "
                                         "compensated for two tools or work objects (declare one per use); nothing "
                                         "written")
-            else:
-                t.tool, t.frame = next(iter(seen))
-    return sorted(targets, key=lambda t: t.fields[0].start), frames
+            why = next((w for w in (_why_left(where, d, changed) for where, _, d in seen) if w), None)
+            if why:
+                left.append((t.fields[0].start, t.name, why))
+                continue
+            t.tool, t.frame = next(iter(wheres))
+            if not any(monitored for _, monitored, _ in seen):
+                t.configuration = None
+        out.append(t)
+    return sorted(out, key=lambda t: t.fields[0].start)
 
 
 def _arguments(code: str, start: int, end: int) -> list[tuple[str, int]]:
@@ -133,12 +227,19 @@ def _robtarget(text, code, source, start, name) -> Target:
     trans = numbers(source, text, parts[0][0] + 1, parts[0][1], 3, f"{name}: position [x, y, z] (mm)")
     rot = numbers(source, text, parts[1][0] + 1, parts[1][1], 4, f"{name}: quaternion [q1, q2, q3, q4]")
     conf = numbers(source, text, parts[2][0] + 1, parts[2][1], 4, f"{name}: confdata [cf1, cf4, cf6, cfx]")
-    q = np.array([f.value for f in rot])
-    if abs(np.linalg.norm(q) - 1.0) > 1e-3:
-        raise syntax_error(source, text, rot[0].start, f"{name}: quaternion of norm {np.linalg.norm(q):.6g}",
-                           "a unit quaternion (norm 1 to 1e-3)")
+    _check_unit(text, source, rot, f"{name}: quaternion")
     return Target(name, 0, 0, "pose", tuple(trans + rot), configuration=tuple(int(f.value) for f in conf),
                   line_end=line_end(text, start))
+
+
+def _check_unit(text, source, fields, what) -> None:
+    """A quaternion of a robtarget, a tool or a work object: of norm 1 within 1e-3 (the controller's own
+    check), else refused naming where it is; never normalised silently (a zero one has no rotation)."""
+    norm = float(np.linalg.norm([f.value for f in fields]))
+    if abs(norm - 1.0) > UNIT_TOLERANCE:
+        raise syntax_error(source, text, fields[0].start, f"{what} of norm {norm:.6g}",
+                           f"a unit quaternion (norm 1 to {UNIT_TOLERANCE:g})",
+                           "[" + ", ".join(f.text for f in fields) + "]")
 
 
 def _jointtarget(text, code, source, start, name) -> Target:
@@ -157,6 +258,7 @@ def _pose(text, code, source, start, what) -> np.ndarray:
         raise syntax_error(source, text, start, what, "[[x, y, z], [q1, q2, q3, q4]]")
     trans = numbers(source, text, parts[0][0] + 1, parts[0][1], 3, f"{what}: [x, y, z]")
     rot = numbers(source, text, parts[1][0] + 1, parts[1][1], 4, f"{what}: [q1, q2, q3, q4]")
+    _check_unit(text, source, rot, f"{what}: quaternion")
     return frame_pose([f.value for f in trans], matrices_from_quaternions([f.value for f in rot])[0])
 
 
@@ -212,6 +314,7 @@ def seeds(configurations, reference_deg) -> np.ndarray:
     return q
 
 
-DIALECT = Dialect("rapid", (".mod", ".prg"), parse, frame, "!", poses=poses, pose_values=pose_values,
+DIALECT = Dialect("rapid", (".mod", ".modx", ".prg", ".sys"), parse, frame, "!", poses=poses, pose_values=pose_values,
                   pose_decimals=(MM_DECIMALS,) * 3 + (QUATERNION_DECIMALS,) * 4, joint_decimals=DEG_DECIMALS,
-                  configuration=configuration, compare=(0, 1, 2), seeds=seeds, statement_end=";")
+                  configuration=configuration, compare=(0, 1, 2), seeds=seeds, statement_end=";",
+                  edge_kept=True)

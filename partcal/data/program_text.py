@@ -19,6 +19,8 @@ from ..errors import DataError
 NUMBER = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
 NUMBER_RE = re.compile(NUMBER)
 BOM = "\xef\xbb\xbf"         # a UTF-8 byte order mark, read as latin-1: not part of the first line
+LINE_BREAK = re.compile(r"\r\n|\r|\n")    # a line ends at CR LF, LF or a lone CR (old Mac editors)
+_BREAK_CHAR = re.compile(r"[\r\n]")
 
 
 def is_number(text: str) -> bool:
@@ -90,11 +92,35 @@ class Target:
 
 
 @dataclass(frozen=True)
+class Left:
+    """A pose of a program that is not compensated and stays as written: where it is, and why.
+
+    ``name`` is the variable (or the move) it belongs to; ``line`` and ``column`` (1-based) are where its text
+    starts; ``reason`` says why it is no target partcal can compensate (computed at run time, in a frame set at
+    run time, reached by no motion)."""
+
+    name: str
+    line: int
+    column: int
+    reason: str
+
+    def where(self, source: str) -> str:
+        return f"{source}: line {self.line}, column {self.column}: {self.name}"
+
+
+def lf_view(code: str) -> str:
+    """``code`` with each lone CR made a LF (same length, same offsets): ``^`` and ``$`` of a multi-line regular
+    expression then find the lines of a CR-only file too."""
+    return re.sub(r"\r(?!\n)", "\n", code)
+
+
+@dataclass(frozen=True)
 class Dialect:
     """A program language: how to find its targets, and its units and rotations.
 
-    ``parse(text, source)`` -> the targets (list of Target, their fields only) and the frames and tools the
-    program defines itself (name -> pose (4, 4) mm). A pose target's fields are its position, then its
+    ``parse(text, source)`` -> the targets (list of Target, their fields only), the frames and tools the
+    program defines itself (name -> pose (4, 4) mm) and the poses left as written (list of ``(offset, name,
+    reason)``: computed at run time, in a frame set at run time, reached by no motion). A pose target's fields are its position, then its
     rotation: ``poses(values (n, k))`` -> positions (n, 3) mm and rotations (n, 3, 3), and
     ``pose_values(positions, rotations, old (n, k))`` -> the fields' values, the rotation written nearest the
     old one; ``pose_decimals``: the fewest decimals of each field. A joint target's fields are its joints,
@@ -103,7 +129,10 @@ class Dialect:
     ``configuration(q_deg (n, N))`` -> the configuration each joint solution has (n, k) ints, compared
     with a target's written one at the indices ``compare``; ``seeds(configurations (n, k), reference (n, N)
     deg)`` -> IK seeds that have the written configurations (-1: not written), near the reference joints.
-    ``comment``: the line-comment mark.
+    ``comment``: the line-comment mark. ``edge_kept``: a target whose intended joint lies on the edge of two
+    configurations (ABB's axis 4 at 0 degrees, tool down) has both, and its compensated joints may take either
+    side (the ABB controller takes the nearest; a KUKA ``T`` bit decides the turn of a ``PTP``, so KRL keeps
+    the written side).
     """
 
     name: str
@@ -121,16 +150,16 @@ class Dialect:
     seeds: Callable | None = None
     comment_line: bool = False          # a note goes on a line of its own before the target (CSV)
     statement_end: str = ""             # a note goes after the statement's end (RAPID's ";"), not mid-statement
+    edge_kept: bool = False             # a target on a configuration's edge keeps it on either side (ABB)
 
     def fill(self, text: str, targets: list[Target]) -> None:
         """Lines, columns, poses and joints of parsed targets, computed for all of them at once."""
         if not targets:
             return
-        newlines = np.flatnonzero(np.frombuffer(text.encode("latin-1"), dtype=np.uint8) == 10)
+        starts = line_starts(text)
         offsets = np.array([t.fields[0].start for t in targets])
-        lines = np.searchsorted(newlines, offsets)                  # newlines before each target
-        starts = np.where(lines > 0, newlines[np.maximum(lines - 1, 0)] + 1, 0)
-        for t, line, column in zip(targets, lines + 1, offsets - starts + 1):
+        lines = np.searchsorted(starts, offsets, side="right")      # lines started at or before each target
+        for t, line, column in zip(targets, lines, offsets - starts[lines - 1] + 1):
             t.line, t.column = int(line), int(column)
         poses = [t for t in targets if t.kind == "pose"]
         if poses:
@@ -163,9 +192,9 @@ class Dialect:
             end = text.find(self.statement_end, target.fields[-1].end) if self.statement_end else -1
             at = line_end(text, end) if end >= 0 else target.line_end
             return at, at, f" {self.comment} {message}"
-        start = text.rfind("\n", 0, target.fields[0].start) + 1
-        ending = "\r\n" if text[target.line_end:target.line_end + 2] == "\r\n" else "\n"
-        return start, start, f"{self.comment} {message}{ending}"
+        start = line_start(text, target.fields[0].start)
+        ending = LINE_BREAK.match(text, target.line_end) or LINE_BREAK.search(text)
+        return start, start, f"{self.comment} {message}{ending.group() if ending else chr(10)}"
 
 
 @dataclass
@@ -177,6 +206,7 @@ class Program:
     dialect: Dialect
     targets: list[Target] = field(default_factory=list)
     frames: dict = field(default_factory=dict)      # frames and tools defined in the program: name -> (4, 4) mm
+    left: list[Left] = field(default_factory=list)  # poses not compensated, kept as written, with the reason
 
     def rewritten(self, replacements: list[tuple[int, int, str]]) -> bytes:
         """The program's bytes with ``(start, end, new text)`` spans replaced (spans do not overlap)."""
@@ -189,17 +219,29 @@ class Program:
         return "".join(out).encode("latin-1")
 
 
+def line_starts(text: str) -> np.ndarray:
+    """Offsets at which the lines of ``text`` start (the first is 0; CR LF, LF and a lone CR end a line)."""
+    return np.array([0] + [m.end() for m in LINE_BREAK.finditer(text)], dtype=np.int64)
+
+
+def line_start(text: str, offset: int) -> int:
+    """Offset of the start of the line holding ``offset``."""
+    return max(text.rfind("\n", 0, offset), text.rfind("\r", 0, offset)) + 1
+
+
 def line_and_column(text: str, offset: int) -> tuple[int, int]:
-    """1-based line and column of a character offset (a CR LF or LF ends a line)."""
-    line = text.count("\n", 0, offset) + 1
-    return line, offset - (text.rfind("\n", 0, offset) + 1) + 1
+    r"""1-based line and column of a character offset (CR LF, LF or a lone CR ends a line).
+
+    >>> line_and_column("a\rbc\r\nd", 6), line_and_column("one line", 4)
+    ((3, 1), (1, 5))
+    """
+    return len(LINE_BREAK.findall(text, 0, offset)) + 1, offset - line_start(text, offset) + 1
 
 
 def line_end(text: str, offset: int) -> int:
-    """Offset of the end of the line holding ``offset``, before its ``\\r\\n`` or ``\\n``."""
-    end = text.find("\n", offset)
-    end = len(text) if end < 0 else end
-    return end - 1 if end > 0 and text[end - 1] == "\r" else end
+    """Offset of the end of the line holding ``offset``, before its line break (the end of the text if none)."""
+    end = _BREAK_CHAR.search(text, offset)
+    return len(text) if end is None else end.start()
 
 
 def syntax_error(source: str, text: str, offset: int, what: str, expected: str,
@@ -207,7 +249,7 @@ def syntax_error(source: str, text: str, offset: int, what: str, expected: str,
     """One error naming the file, line and column, what was found (default: the text there) and what was
     expected; nothing is written."""
     line, column = line_and_column(text, offset)
-    found = text[offset:offset + 40].split("\n")[0].rstrip("\r") if found is None else found
+    found = _BREAK_CHAR.split(text[offset:offset + 40])[0] if found is None else found
     return ProgramSyntaxError(f"{source}: line {line}, column {column}: {what}: expected {expected}, got "
                               f"{found!r}; nothing written")
 

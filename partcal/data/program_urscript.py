@@ -12,8 +12,9 @@ joints in radians. Targets are
 - a list of six numbers as the first argument of a move (joints), or assigned to a variable that some
   move takes as its first argument.
 
-``set_tcp(p[...])`` sets the tool of the targets after it (in file order); ``set_tcp`` of anything else
-names a tool that must be given (``--tool``). Relative motions (``pose_add``, ``pose_trans`` of a
+``set_tcp(p[...])`` sets the tool of the moves after it (in file order): a pose variable has the tool of the
+moves that take it, wherever it is assigned (PolyScope declares every waypoint at the top); ``set_tcp`` of
+anything else names a tool that must be given (``--tool``). Relative motions (``pose_add``, ``pose_trans`` of a
 variable) are no targets and stay as written.
 """
 
@@ -30,26 +31,26 @@ from .program_text import (Dialect, ProgramSyntaxError, Target, UnknownFrameErro
 MOVES = ("movel", "movej", "movep", "movec", "servoj")
 _POSE = re.compile(r"\bp\s*\[")
 _MOVE = re.compile(r"\b(" + "|".join(MOVES) + r")\s*\(\s*")
-_ASSIGN = re.compile(r"(?:^|[\n;])[ \t]*(?:global[ \t]+|local[ \t]+)?([A-Za-z_]\w*)[ \t]*=[ \t]*$")
+_ASSIGN = re.compile(r"(?:^|[\r\n;])[ \t]*(?:global[ \t]+|local[ \t]+)?([A-Za-z_]\w*)[ \t]*=[ \t]*$")
 _POSE_TRANS = re.compile(r"\bpose_trans\s*\(\s*([A-Za-z_]\w*)\s*,\s*$")
 _SET_TCP = re.compile(r"\bset_tcp\s*\(\s*")
 M_DECIMALS, RAD_DECIMALS = 8, 9        # 1e-8 m = 1e-5 mm; 1e-9 rad
 
 
-def parse(text: str, source: str) -> tuple[list[Target], dict]:
-    """The targets of a URScript program (``text``: the file decoded as latin-1), and the tools it sets
-    (name -> pose (4, 4) mm)."""
+def parse(text: str, source: str) -> tuple[list[Target], dict, list]:
+    """The targets of a URScript program (``text``: the file decoded as latin-1), the tools it sets (name ->
+    pose (4, 4) mm), and the poses computed at run time, left as written."""
     code = masked(text, "#")
     tools: dict = {}
     tcps = _tcps(text, code, source, tools)
-    uses = _pose_uses(code)
-    targets = []
+    uses = _pose_uses(code, tcps)
+    targets, left = [], []
     for m in _POSE.finditer(code):
         start = m.end() - 1
         if closing(code, start, "[", "]") < 0:          # a broken program, whether or not a move takes this pose
             raise syntax_error(source, text, start, "pose literal", "a closing ']'")
         before = code[max(0, m.start() - 200):m.start()]
-        frame = None
+        frame, tool = None, _tool_at(tcps, start)
         if re.search(r"\bset_tcp\s*\(\s*$", before):
             continue                                                    # a tool, not a target
         assigned = _ASSIGN.search(before)
@@ -59,31 +60,81 @@ def parse(text: str, source: str) -> tuple[list[Target], dict]:
         elif (trans := _POSE_TRANS.search(before)) is not None:
             frame = trans.group(1)
         elif assigned and assigned.group(1) in uses:                    # a pose variable that a move takes
-            frames = uses[assigned.group(1)]
-            if len(frames) > 1:
-                first = start + 1 + len(code[start + 1:_end_of(code, start)]) - \
-                    len(code[start + 1:_end_of(code, start)].lstrip())                # the first number
-                line, column = line_and_column(text, first)
-                named = " and ".join("the base" if f is None else f"pose_trans({f}, ..)" for f in
-                                     sorted(frames, key=str))
-                raise UnknownFrameError(f"{source}: line {line}, column {column}: target {assigned.group(1)}: it "
-                                        f"is used in {named}: one pose cannot be compensated for two frames; "
-                                        "nothing written")
-            frame = next(iter(frames))
+            frame, tool = _one_use(text, code, source, start, assigned.group(1), uses[assigned.group(1)])
         else:
             continue                                        # an offset, an argument, a variable no move takes
-        targets.append(_pose_target(text, code, source, start, frame, tcps))
-    targets += _joint_targets(text, code, source)
-    return sorted(targets, key=lambda t: t.fields[0].start), tools
+        name = _name_before(code, start) or "p[...]"
+        why = _computed(code, start, "pose") or (f"moved to with a TCP computed at run time ({tool})" if tool and
+                                                  tool.endswith(_COMPUTED_TCP) else None)
+        if why:
+            left.append((_first_item(code, start), name, why + ": kept as written"))
+        else:
+            targets.append(_pose_target(text, code, source, start, frame, tool, name))
+    targets += _joint_targets(text, code, source, left)
+    return sorted(targets, key=lambda t: t.fields[0].start), tools, left
 
 
-def _pose_target(text, code, source, start, frame, tcps) -> Target:
+_IDENTIFIER = re.compile(r"(?<![\w.])[A-Za-z_]\w*")
+_EXPRESSION = re.compile(r"[\w\s.+\-*/%()\[\],]+")
+_COMPUTED_TCP = "(computed at run time)"
+
+
+def _computed(code: str, start: int, what: str) -> str | None:
+    """Why the list at ``start`` is no target: some item is an expression of run-time values (``p[home[0] + r,
+    ..]``); None when every item is a number, or when an item is neither (then the caller refuses it)."""
+    end = _end_of(code, start)
+    items = _top_level(code[start + 1:end])
+    if any(_IDENTIFIER.search(item) and _EXPRESSION.fullmatch(item.strip()) for item in items):
+        body = " ".join(code[start + 1:end].split())
+        shown = body if len(body) <= 60 else body[:57] + "..."
+        return f"a {what} computed at run time ({'p' if what == 'pose' else ''}[{shown}])"
+    return None
+
+
+def _first_item(code: str, start: int) -> int:
+    """Offset of the first character of the first item of the list at ``start``."""
+    return start + 1 + len(code[start + 1:]) - len(code[start + 1:].lstrip())
+
+
+def _top_level(body: str) -> list[str]:
+    """The comma-separated items of a list body, commas inside brackets and calls not counted."""
+    out, depth, at = [], 0, 0
+    for k, c in enumerate(body):
+        depth += 1 if c in "[(" else -1 if c in "])" else 0
+        if c == "," and depth == 0:
+            out.append(body[at:k])
+            at = k + 1
+    return out + [body[at:]]
+
+
+def _one_use(text, code, source, start, name, used) -> tuple:
+    """The frame and the tool of a pose variable: those of the moves that take it (PolyScope declares every
+    waypoint at the top and sets the TCP before the moves); refused when they differ."""
+    if len(used) > 1:
+        first = start + 1 + len(code[start + 1:_end_of(code, start)]) - \
+            len(code[start + 1:_end_of(code, start)].lstrip())                # the first number
+        line, column = line_and_column(text, first)
+        frames = {f for f, _ in used}
+        if len(frames) > 1:
+            named = " and ".join("the base" if f is None else f"pose_trans({f}, ..)" for f in sorted(frames, key=str))
+            raise UnknownFrameError(f"{source}: line {line}, column {column}: target {name}: it is used in {named}: "
+                                    "one pose cannot be compensated for two frames; nothing written")
+        named = " and ".join("the flange" if t is None else t for t in sorted({t for _, t in used}, key=str))
+        raise UnknownFrameError(f"{source}: line {line}, column {column}: target {name}: it is moved to with the "
+                                f"tools {named}: one pose cannot be compensated for two tools; nothing written")
+    return next(iter(used))
+
+
+def _tool_at(tcps: list, offset: int) -> str | None:
+    """The tool in force at ``offset``: the last ``set_tcp`` before it (None: none, the default)."""
+    return next((t for at, t in reversed(tcps) if at < offset), None)
+
+
+def _pose_target(text, code, source, start, frame, tool, name) -> Target:
     end = closing(code, start, "[", "]")
     if end < 0:
         raise syntax_error(source, text, start, "pose literal", "a closing ']'")
     fields = numbers(source, text, start + 1, end, 6, "pose p[x, y, z, rx, ry, rz] (m, rad)")
-    name = _name_before(code, start) or "p[...]"
-    tool = next((t for at, t in reversed(tcps) if at < start), None)
     return Target(name, 0, 0, "pose", tuple(fields), frame=frame, tool=tool, line_end=line_end(text, start))
 
 
@@ -110,7 +161,9 @@ def _tcps(text: str, code: str, source: str, tools: dict) -> list[tuple[int, str
     for m in _SET_TCP.finditer(code):
         end = closing(code, code.rfind("(", 0, m.end()), "(", ")")
         arg = code[m.end():end].strip() if end > 0 else ""
-        if re.match(r"p\s*\[", arg):
+        if re.match(r"p\s*\[", arg) and _computed(code, code.index("[", m.end()), "pose"):
+            out.append((m.start(), f"set_tcp at line {line_and_column(text, m.start())[0]} {_COMPUTED_TCP}"))
+        elif re.match(r"p\s*\[", arg):
             inner = code.index("[", m.end())
             fields = numbers(source, text, inner + 1, closing(code, inner, "[", "]"), 6, "set_tcp pose")
             v = np.array([f.value for f in fields])
@@ -122,32 +175,39 @@ def _tcps(text: str, code: str, source: str, tools: dict) -> list[tuple[int, str
     return out
 
 
-def _pose_uses(code: str) -> dict:
+def _pose_uses(code: str, tcps: list) -> dict:
     """The variables that moves take as a pose (``movel(wp1, ..)``, ``movel(pose_trans(Plane_1, wp1), ..)``,
-    both poses of ``movec``), each with the frames it is used in (None: the default frame)."""
+    both poses of ``movec``), each with the (frame, tool) pairs it is moved to with (None: the default frame;
+    the tool: the last ``set_tcp`` before the move, not before the variable's assignment)."""
     uses: dict = {}
     moves = "|".join(MOVES) + "|get_inverse_kin"
     for m in re.finditer(r"\b(?:" + moves + r")\s*\(\s*(?:pose_trans\s*\(\s*([A-Za-z_]\w*)\s*,\s*)?"
                          r"([A-Za-z_]\w*)\s*[,)]", code):
-        uses.setdefault(m.group(2), set()).add(m.group(1))
+        uses.setdefault(m.group(2), set()).add((m.group(1), _tool_at(tcps, m.start())))
     for m in re.finditer(r"\bmovec\s*\([^(),]*,\s*([A-Za-z_]\w*)\s*[,)]", code):
-        uses.setdefault(m.group(1), set()).add(None)
+        uses.setdefault(m.group(1), set()).add((None, _tool_at(tcps, m.start())))
     return uses
 
 
-def _joint_targets(text: str, code: str, source: str) -> list[Target]:
-    """Lists of six numbers taken by a move: inline, or through a variable."""
-    out, moved = [], set()
+def _joint_targets(text: str, code: str, source: str, left: list) -> list[Target]:
+    """Lists of six numbers taken by a move: inline, or through a variable (computed ones go to ``left``)."""
+    out, moved, found = [], set(), []
     for m in _MOVE.finditer(code):
         at = m.end()
         if code.startswith("[", at):
-            out.append(_joints(text, code, source, at, m.group(1)))
+            found.append((at, m.group(1)))
         elif (name := re.match(r"[A-Za-z_]\w*", code[at:])) is not None:
             moved.add(name.group())
     for name in moved:
-        for m in re.finditer(r"(?:^|[\n;])[ \t]*(?:global[ \t]+|local[ \t]+)?" + re.escape(name) +
+        for m in re.finditer(r"(?:^|[\r\n;])[ \t]*(?:global[ \t]+|local[ \t]+)?" + re.escape(name) +
                              r"[ \t]*=[ \t]*\[", code):
-            out.append(_joints(text, code, source, m.end() - 1, name))
+            found.append((m.end() - 1, name))
+    for at, name in found:
+        why = _computed(code, at, "joint list")
+        if why:
+            left.append((_first_item(code, at), name, why + ": kept as written"))
+        else:
+            out.append(_joints(text, code, source, at, name))
     return out
 
 
@@ -179,6 +239,6 @@ def frame(value: str, source: str) -> np.ndarray:
     return frame_pose(v[:3] * 1000.0, matrices_from_rotation_vectors(v[3:])[0])
 
 
-DIALECT = Dialect("urscript", (".script",), parse, frame, "#", poses=poses, pose_values=pose_values,
+DIALECT = Dialect("urscript", (".script", ".urscript"), parse, frame, "#", poses=poses, pose_values=pose_values,
                   pose_decimals=(M_DECIMALS,) * 3 + (RAD_DECIMALS,) * 3, joint_unit_deg=180.0 / np.pi,
                   joint_decimals=RAD_DECIMALS)

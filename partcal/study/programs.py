@@ -87,7 +87,8 @@ class ProgramResult:
 
     def summary(self, model: str = "") -> dict:
         """The summary written beside the output (JSON values): counts, the largest move and turn of a target
-        (with its name and line), the largest predicted residual, and the targets not compensated."""
+        (with its name and line), the largest predicted residual, the targets not compensated, and the poses
+        the program reader left as written (with their reasons)."""
         n, bad = len(self.program.targets), len(self.failures)
         ok = np.isfinite(self.residual_mm)
 
@@ -107,6 +108,8 @@ class ProgramResult:
                 "max_mm": float(self.residual_mm[ok].max()), "max_deg": float(self.residual_deg[ok].max())},
             "not_compensated": [{"line": t.line, "column": t.column, "target": t.name, "reason": why}
                                 for t, why in self.failures],
+            "left_as_written": [{"line": x.line, "column": x.column, "target": x.name, "reason": x.reason}
+                                for x in self.program.left],
             "written": self.output is not None,
         }
 
@@ -310,16 +313,22 @@ def _intended_joints(robot, program: Program, wanted, q_given, joints, failures:
     return q0
 
 
-def _matches(program: Program, targets: list[Target], q: NDArray[np.float64]) -> NDArray[np.bool_]:
-    """Whether joint solutions have the configuration their targets name (the parts the dialect compares)."""
+def _matches(program: Program, targets: list[Target], q: NDArray[np.float64], q0=None) -> NDArray[np.bool_]:
+    """Whether joint solutions have the configuration their targets name (the parts the dialect compares).
+    With the intended joints ``q0`` and a dialect whose edges are kept (``Dialect.edge_kept``): a target whose
+    intended joint lies on an edge (ABB axis 4 at 0, tool down) has both sides' configuration, so ``q`` may be
+    on either."""
     dialect = program.dialect
     ok = np.ones(len(q), dtype=bool)
     if dialect.configuration is None or not dialect.compare:
         return ok
     low, high = _configuration_bounds(dialect, q)
+    edge = _configuration_bounds(dialect, q0) if q0 is not None and dialect.edge_kept else None
     for j, t in enumerate(targets):
         if t.configuration is not None:
-            ok[j] = all(t.configuration[i] is None or t.configuration[i] in (low[j, i], high[j, i])
+            ok[j] = all(t.configuration[i] is None or t.configuration[i] in (low[j, i], high[j, i]) or
+                        (edge is not None and edge[0][j, i] != edge[1][j, i] and t.configuration[i] in
+                         (edge[0][j, i], edge[1][j, i]) and {low[j, i], high[j, i]} & {edge[0][j, i], edge[1][j, i]})
                         for i in dialect.compare)
     return ok
 
@@ -334,7 +343,7 @@ def _configuration_kept(robot, program: Program, targets: list[Target], q0, q1) 
     """No flip (the Jacobian's determinant keeps its sign, where not ~0), and the configuration written with a
     target (KUKA ``T``, ABB ``cf1 cf4 cf6``) still that of the compensated joints. A target written without
     one is the controller's to solve near where the robot is: only a flip changes it."""
-    return (_branch(robot, q0) * _branch(robot, q1) >= 0) & _matches(program, targets, q1)
+    return (_branch(robot, q0) * _branch(robot, q1) >= 0) & _matches(program, targets, q1, q0)
 
 
 def _configurations(program: Program, q0, q1) -> str:

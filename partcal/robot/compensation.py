@@ -198,11 +198,11 @@ def false_target_joints(predict: Callable[[NDArray[np.float64]], NDArray[np.floa
     full IK per fixed-point iteration. ``iterations`` counts the second
     phase's steps (at most ``max_iter``).
     """
-    free = robot._free_joints(fixed)
+    free = robot.free_joints(fixed)
     q = ik.solve(robot, targets_mm, np.array(seeds_deg, dtype=float), free, ik.Settings())[0]
     q, iterations = ik.solve(robot, targets_mm, q, free, ik.Settings(max_iter=max_iter), bias=predict,
                              tol_mm=tol_mm)
-    reached = robot._positions(q)
+    reached = robot.positions_validated(q)
     with np.errstate(over="ignore", invalid="ignore"):
         residual = np.linalg.norm(reached + predict(q) - targets_mm, axis=1)
     converged = (residual <= tol_mm) & robot.within_limits(q)      # a pose the robot cannot take is no answer
@@ -235,7 +235,7 @@ def false_target_poses(predict: Callable[[NDArray[np.float64]], NDArray[np.float
     posture take the compensated pose.
     """
     poses = checked_poses(poses)
-    free, settings = robot._free_joints(fixed), ik_settings(tol_mm, max_iter, 10.0, 0.05, tol_deg=tol_deg,
+    free, settings = robot.free_joints(fixed), ik_settings(tol_mm, max_iter, 10.0, 0.05, tol_deg=tol_deg,
                                                              length_mm=length_mm)
     positions, rotations = poses[:, :3, 3], poses[:, :3, :3]
 
@@ -246,7 +246,7 @@ def false_target_poses(predict: Callable[[NDArray[np.float64]], NDArray[np.float
                             f"radians); got shape {e.shape}")
         return np.where(np.isfinite(e).all(axis=1, keepdims=True), e, 0.0)
 
-    q = ik.solve_pose(robot, positions, rotations, robot._seeds(seeds_deg, len(poses)), free, ik.Settings(), 1e-8,
+    q = ik.solve_pose(robot, positions, rotations, robot.checked_seeds(seeds_deg, len(poses)), free, ik.Settings(), 1e-8,
                       length_mm)[0]
     q, iterations = ik.solve_pose(robot, positions, rotations, q, free, settings, tol_deg, length_mm, bias=errors)
     left = np.flatnonzero(iterations >= max_iter)         # near a singularity: the whole equation's slope

@@ -216,6 +216,15 @@ class Robot:
         return ok
 
     # ------------------------------------------------------------------ kinematics
+    # The walk is the robot layer's own geometry, public so that solvers (IK, identification) can walk the chain
+    # once per iteration: ``p, axes, frames = robot.walk(robot.rotors(qT), record=robot.moving_rows(free))``,
+    # then ``robot.walk_jacobian(p, frames, free)``. Joints enter transposed, ``qT`` (N, n) degrees, and
+    # vectors leave as (3, n): every operation then runs over contiguous runs of the n poses.
+    @property
+    def n_rows(self) -> int:
+        """The number of rows ``R`` of the chain (joint turns or slides, each with its fixed transform)."""
+        return len(self.alpha_deg)
+
     @functools.cached_property
     def _rows(self) -> tuple["_Row", ...]:
         """The DH rows compiled for the walk (built once per robot)."""
@@ -232,13 +241,22 @@ class Robot:
         rot = matrix_from_euler_deg(self.origins[row, 3:])
         return tuple(tuple(float(v) for v in line) for line in rot), tuple(float(v) for v in self.origins[row, :3])
 
-    def _trig(self, qT: NDArray[np.float64], rows=None) -> list:
-        """The rotor ``exp(-i theta)`` of each DH row (all, or those in ``rows``), for joints ``qT`` (N, n).
+    def rotors(self, qT: NDArray[np.float64], rows=None) -> list:
+        """The rotor ``exp(-i theta)`` of each row, the input of :meth:`walk`.
 
-        Constant rows give a Python complex, rows not asked for ``None``, a
-        sliding row the pair ``(rotor, slide (n,) mm)``. Every operation is
-        elementwise in the poses, so a pose gets the same bits alone or in any
-        batch.
+        Parameters
+        ----------
+        qT : ndarray, shape (N, n)
+            Joint angles in degrees (mm for a slide), one column per pose: the transpose of ``q_deg``.
+        rows : collection of int, optional
+            Only these rows (0-based); the others are ``None`` (a solver fills them from an earlier call).
+
+        Returns
+        -------
+        list of length R
+            Per row a complex array ``(n,)`` (its turn ``theta`` varies with the joints), a Python complex
+            (constant), ``None`` (not asked for), or for a sliding row the pair ``(rotor, slide (n,) mm)``.
+            Every operation is elementwise in the poses, so a pose gets the same bits alone or in any batch.
         """
         out: list = [None] * len(self._rows)
         varying = []
@@ -261,15 +279,29 @@ class Robot:
                 out[r] = rotors[k]
         return out
 
-    def _walk(self, trig: list, record=()) -> tuple:
-        """Walk the chain for the rows' rotors; return the tool position and frames.
+    def walk(self, trig: list, record=()) -> tuple:
+        """Walk the chain from the base to the tool for the rows' rotors (:meth:`rotors`).
 
         A frame is kept as ``w = x + i y`` (3, n) complex and ``z`` (3, n): the
         turn by ``theta`` about ``z`` is one complex product, ``w exp(-i theta)``.
-        Vectors are ``(3, n)``, so every operation runs over contiguous runs of
-        ``n`` values. Returns ``p`` (3, n), the last frame's axes ``(x, y, z)``
-        and, for each row in ``record``, the axis ``z`` and origin ``o`` (3, n)
-        it turns about.
+
+        Parameters
+        ----------
+        trig : list of length R
+            The rotors of every row, as :meth:`rotors` gives them.
+        record : collection of int
+            Rows (0-based; ``R`` for the frame after the last row) whose axis and origin to keep.
+
+        Returns
+        -------
+        p : ndarray, shape (3, n)
+            Tool positions in the base frame, mm.
+        axes : tuple of three ndarrays, shape (3, n) or (3, 1)
+            The tool frame's ``x, y, z`` axes in the base frame (unit vectors; an axis no joint turns
+            comes back as one column).
+        frames : dict
+            ``{row: (z (3, n), o (3, n) mm)}`` for each row in ``record``: the axis the row turns about
+            and its origin, in the base frame.
         """
         n = next((e.shape[-1] for e in (t[1] if isinstance(t, tuple) else t for t in trig)
                   if isinstance(e, np.ndarray)), 1)
@@ -374,7 +406,7 @@ class Robot:
         Frame 0 is the first DH frame (the base); frame ``k`` follows row ``k``.
         """
         qT = self.check_joints(q_deg).T
-        _, _, frames = self._walk(self._trig(qT), record=range(len(self._rows) + 1))
+        _, _, frames = self.walk(self.rotors(qT), record=range(len(self._rows) + 1))
         keys = sorted(frames)
         return (np.stack([frames[k][1].T for k in keys], axis=1), np.stack([frames[k][0].T for k in keys], axis=1))
 
@@ -402,20 +434,21 @@ class Robot:
         >>> robot.positions([[0, -90, -180, 0, 0, 0]]).round(2).tolist()
         [[1857.65, 0.0, 1555.32]]
         """
-        return self._positions(self.check_joints(q_deg))
+        return self.positions_validated(self.check_joints(q_deg))
 
-    def _positions(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
-        """:meth:`positions` on validated joints (n, N), in cache-sized blocks."""
+    def positions_validated(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
+        """:meth:`positions` of joint angles already checked as a float ``(n, N)`` array in degrees (as
+        :meth:`check_joints` returns them; nothing is checked here), shape ``(n, 3)`` mm, in cache-sized blocks."""
         out = np.empty((q.shape[0], 3))
         for start in range(0, q.shape[0], _CHUNK):  # cache-sized blocks: ~2x faster on big batches
             qT = q[start:start + _CHUNK].T
-            out[start:start + _CHUNK] = self._walk(self._trig(qT))[0].T
+            out[start:start + _CHUNK] = self.walk(self.rotors(qT))[0].T
         return out
 
     def forward(self, q_deg) -> NDArray[np.float64]:
         """Tool poses as homogeneous transforms, shape ``(n, 4, 4)`` (mm)."""
         q = self.check_joints(q_deg)
-        p, axes, _ = self._walk(self._trig(q.T))
+        p, axes, _ = self.walk(self.rotors(q.T))
         out = np.zeros((q.shape[0], 4, 4))
         n = q.shape[0]      # an axis that no joint turns (a planar arm's z) comes back as one column
         out[:, :3, :3] = np.stack([np.broadcast_to(a, (3, n)).T for a in axes], axis=-1)
@@ -435,26 +468,42 @@ class Robot:
         coupling matrix.
         """
         qT = self.check_joints(q_deg).T
-        _, jac = self._position_jacobian(self._trig(qT), np.arange(self.n_joints))
+        _, jac = self._position_jacobian(self.rotors(qT), np.arange(self.n_joints))
         return jac.transpose(2, 1, 0)
 
     def _position_jacobian(self, trig: list, free: NDArray[np.intp]):
         """Tool position (3, n) mm and Jacobian ``(F, 3, n)`` mm/deg for the joints ``free``."""
-        moving = self._moving(free)
-        p, _, frames = self._walk(trig, record=moving)
-        return p, self._jacobian(p, frames, free)
+        moving = self.moving_rows(free)
+        p, _, frames = self.walk(trig, record=moving)
+        return p, self.walk_jacobian(p, frames, free)
 
-    def _moving(self, free) -> list[int]:
-        """The DH rows that some joint in ``free`` turns."""
+    def moving_rows(self, free) -> list[int]:
+        """The rows (0-based, ascending) that some joint in ``free`` (0-based joint indices) turns or slides:
+        the ``record`` a :meth:`walk` needs for :meth:`walk_jacobian`."""
         free = {int(j) for j in free}
         return [r for r, row in enumerate(self._rows) if any(j in free for j, _ in row.terms)]
 
-    def _jacobian(self, p: NDArray[np.float64], frames: dict, free, angular: bool = False) -> NDArray[np.float64]:
-        """The Jacobian ``(F, 3, n)`` mm/deg from a walk that recorded the rows :meth:`_moving` gives; with
-        ``angular``, that of the tool's orientation instead (rad/deg: the axes the joints turn about).
+    def walk_jacobian(self, p: NDArray[np.float64], frames: dict, free, angular: bool = False) -> NDArray[np.float64]:
+        """The Jacobian of the walked tool position (or orientation) by the joints ``free``.
 
-        Sums run in a fixed order, elementwise in the poses: a pose gets the
-        same bits alone or in any batch (batched path IK relies on it).
+        Parameters
+        ----------
+        p : ndarray, shape (3, n)
+            Tool positions (mm) from :meth:`walk`.
+        frames : dict
+            The ``frames`` of that walk, which recorded at least the rows :meth:`moving_rows` gives for ``free``.
+        free : sequence of int, length F
+            0-based joints, in the order of the Jacobian's columns.
+        angular : bool
+            The orientation's Jacobian instead: the axes the joints turn the tool about, rad per degree
+            (zero for a slide).
+
+        Returns
+        -------
+        ndarray, shape (F, 3, n)
+            ``d p / d q`` in mm per degree (mm per mm for a slide), base frame. Sums run in a fixed order,
+            elementwise in the poses: a pose gets the same bits alone or in any batch (batched path IK
+            relies on it).
         """
         moving, plan = self._jacobian_plan(tuple(int(j) for j in free))
         jac = np.zeros((len(free), 3, p.shape[1]))
@@ -485,7 +534,7 @@ class Robot:
         plan = self._plans.get(free)
         if plan is None:
             where = {j: f for f, j in enumerate(free)}
-            moving = self._moving(free)
+            moving = self.moving_rows(free)
             plan = self._plans[free] = (moving, [(k, where[j], c) for k, r in enumerate(moving)
                                                  for j, c in self._rows[r].terms if j in where])
         return plan
@@ -554,9 +603,9 @@ class Robot:
         seeds = self.home_deg if seeds_deg is None else seeds_deg
         q = np.array(np.broadcast_to(np.asarray(seeds, dtype=float), (n, self.n_joints)))
         q = self.check_joints(q, "seeds_deg")
-        free = self._free_joints(fixed)
+        free = self.free_joints(fixed)
         q = ik.solve(self, targets, q, free, ik.Settings(tol_mm, max_iter, max_step_deg, damping))[0]
-        dist = np.linalg.norm(targets - self._positions(q), axis=1)
+        dist = np.linalg.norm(targets - self.positions_validated(q), axis=1)
         return IKResult(q_deg=q, error_mm=dist, success=(dist <= tol_mm) & self.within_limits(q))
 
     def inverse_pose(
@@ -587,14 +636,21 @@ class Robot:
             others end at the least-squares compromise and are not a success.
         """
         poses = checked_poses(poses)
-        q, free = self._seeds(seeds_deg, len(poses)), self._free_joints(fixed)
+        q, free = self.checked_seeds(seeds_deg, len(poses)), self.free_joints(fixed)
         settings = ik_settings(tol_mm, max_iter, max_step_deg, damping, tol_deg=tol_deg, length_mm=length_mm)
         q = ik.solve_pose(self, poses[:, :3, 3], poses[:, :3, :3], q, free, settings, tol_deg, length_mm)[0]
         error_mm, error_deg = pose_errors(self.forward(q), poses)
         return IKResult(q_deg=q, error_mm=error_mm, error_deg=error_deg,
                         success=(error_mm <= tol_mm) & (error_deg <= tol_deg) & self.within_limits(q))
 
-    def _free_joints(self, fixed) -> NDArray[np.intp]:
+    def free_joints(self, fixed) -> NDArray[np.intp]:
+        """The 0-based joints that move, ``(F,)`` ascending, when the 1-based joints ``fixed`` are held.
+
+        Raises
+        ------
+        DataError
+            A ``fixed`` entry that is not a joint number, or ``fixed`` holding every joint.
+        """
         bad = [j for j in fixed if not (isinstance(j, (int, np.integer)) and 1 <= j <= self.n_joints)]
         if bad:
             raise DataError(f"fixed joints must be in 1..{self.n_joints}; got {bad[0]!r}")
@@ -603,8 +659,9 @@ class Robot:
             raise DataError(f"fixed holds every joint of {self.name} (1..{self.n_joints}): nothing is left to move")
         return free
 
-    def _seeds(self, seeds_deg, n: int) -> NDArray[np.float64]:
-        """IK seeds ``(n, N)`` degrees from one seed (``(N,)`` or ``(1, N)``), one per target, or None (home)."""
+    def checked_seeds(self, seeds_deg, n: int) -> NDArray[np.float64]:
+        """IK seeds ``(n, N)`` degrees for ``n`` targets from ``seeds_deg``: one seed ``(N,)`` or ``(1, N)``
+        for all, one per target ``(n, N)``, or None (the home pose); checked finite, a bad shape refused."""
         seeds = np.asarray(self.home_deg if seeds_deg is None else seeds_deg, dtype=float)
         if seeds.shape not in ((self.n_joints,), (1, self.n_joints), (n, self.n_joints)):
             raise DataError(f"Expected seeds_deg with shape ({self.n_joints},) or ({n}, {self.n_joints}) (degrees), "
@@ -627,9 +684,9 @@ class Robot:
         """
         targets = check_array(targets_mm, "targets_mm", columns=3, min_rows=1)
         seed = self.check_joints(self.home_deg if seed_deg is None else seed_deg, "seed_deg")[0]
-        free = self._free_joints(fixed)
+        free = self.free_joints(fixed)
         q = ik.solve_path(self, targets, seed, free, ik.Settings(tol_mm))
-        errors = np.linalg.norm(targets - self._positions(q), axis=1)
+        errors = np.linalg.norm(targets - self.positions_validated(q), axis=1)
         ok = (errors <= tol_mm) & self.within_limits(q)
         if not ok.all():
             bad = np.flatnonzero(~ok)

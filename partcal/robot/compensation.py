@@ -36,6 +36,7 @@ from numpy.typing import NDArray
 from ..errors import DataError
 from . import ik, ik_refine
 from .kinematics import Robot, checked_poses, ik_settings
+from .rotations import matrices_from_rotation_vectors, rotation_vectors_from_matrices
 
 
 SINGULAR_CONDITIONING = 1e-3    # a pose Jacobian whose singular values span more than this is at a singularity
@@ -259,7 +260,7 @@ def false_target_poses(predict: Callable[[NDArray[np.float64]], NDArray[np.float
         finite = np.isfinite(np.asarray(predict(q), dtype=float)).all(axis=1)
     at, turned = ik.biased_pose(nominal[:, :3, 3].T, nominal[:, :3, :3], errors(q))
     residual_mm = np.where(finite, np.linalg.norm(at.T - positions, axis=1), np.inf)
-    residual_deg = np.where(finite, np.degrees(np.linalg.norm(ik.rotation_vectors(rotations @ turned.transpose(0, 2, 1)),
+    residual_deg = np.where(finite, np.degrees(np.linalg.norm(rotation_vectors_from_matrices(rotations @ turned.transpose(0, 2, 1)),
                                                                 axis=1)), np.inf)
     converged = (residual_mm <= tol_mm) & (residual_deg <= tol_deg) & robot.within_limits(q)
     singular = np.zeros(len(q), dtype=bool)
@@ -297,8 +298,6 @@ def false_target_cartesian_poses(predict: Callable[[NDArray[np.float64]], NDArra
     >>> np.degrees(np.arctan2(r.commanded_rotation[0, 1, 0], r.commanded_rotation[0, 0, 0])).round(4)
     np.float64(-0.573)
     """
-    from scipy.spatial.transform import Rotation
-
     poses = checked_poses(poses)
     rotations = poses[:, :3, :3]
 
@@ -314,9 +313,9 @@ def false_target_cartesian_poses(predict: Callable[[NDArray[np.float64]], NDArra
         turn = errors(position.commanded_mm)[:, 3:]
     ok = np.isfinite(turn).all(axis=1) & np.isfinite(position.residual_mm)
     turn[~ok] = 0.0
-    commanded = Rotation.from_rotvec(-turn).as_matrix() @ rotations
-    real = Rotation.from_rotvec(turn).as_matrix() @ commanded            # what the model says the robot reaches
-    residual_deg = np.where(ok, np.degrees(np.linalg.norm(ik.rotation_vectors(rotations @ real.transpose(0, 2, 1)),
+    commanded = matrices_from_rotation_vectors(-turn) @ rotations
+    real = matrices_from_rotation_vectors(turn) @ commanded            # what the model says the robot reaches
+    residual_deg = np.where(ok, np.degrees(np.linalg.norm(rotation_vectors_from_matrices(rotations @ real.transpose(0, 2, 1)),
                                                           axis=1)), np.inf)
     return dataclasses.replace(position, converged=position.converged & ok & (residual_deg <= tol_deg),
                                commanded_rotation=commanded, residual_deg=residual_deg)

@@ -39,6 +39,8 @@ from typing import Callable
 import numpy as np
 from numpy.typing import NDArray
 
+from .rotations import matrices_from_rotation_vectors, rotation_vectors_from_matrices
+
 CHUNK = 4096           # targets per block: the working arrays stay in cache
 _SEGMENT = 256         # path points per chain: keeps the correction accurate on long paths
 _PASSES = 12
@@ -209,9 +211,7 @@ def solve_pose(robot, positions: NDArray[np.float64], rotations: NDArray[np.floa
 
 def biased_pose(p: NDArray[np.float64], reached: NDArray[np.float64], error: NDArray[np.float64]) -> tuple:
     """The pose ``(p (3, m), R (m, 3, 3))`` moved by a pose error ``(m, 6)``: position mm, rotation vector rad."""
-    from scipy.spatial.transform import Rotation
-
-    return p + error[:, :3].T, Rotation.from_rotvec(error[:, 3:]).as_matrix() @ reached
+    return p + error[:, :3].T, matrices_from_rotation_vectors(error[:, 3:]) @ reached
 
 
 def _pose_block(robot, targets, rotations, qT, free, settings: Settings, tol_rad: float, length: float, bias=None):
@@ -225,7 +225,7 @@ def _pose_block(robot, targets, rotations, qT, free, settings: Settings, tol_rad
         p, axes, frames = robot.walk(robot.rotors(qT), record=record)
         reached = np.stack([np.broadcast_to(a, p.shape) for a in axes], axis=1).transpose(2, 0, 1)   # (m, 3, 3)
         at, turned = (p, reached) if bias is None else biased_pose(p, reached, bias(qT.T))
-        turn = rotation_vectors(rotations @ turned.transpose(0, 2, 1)).T                              # (3, m) rad
+        turn = rotation_vectors_from_matrices(rotations @ turned.transpose(0, 2, 1)).T                              # (3, m) rad
         err = np.concatenate([targets - at, length * turn])
         keep = ~within_pose_tolerance(err, settings.tol_mm, length * tol_rad)
         if not keep.any():
@@ -242,13 +242,6 @@ def _pose_block(robot, targets, rotations, qT, free, settings: Settings, tol_rad
         iterations[idx] += 1
     done_q[:, idx] = qT
     return done_q.T, iterations
-
-
-def rotation_vectors(R: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Rotation vectors (axis times angle, radians) of rotation matrices ``(n, 3, 3)``, shape (n, 3)."""
-    from scipy.spatial.transform import Rotation
-
-    return Rotation.from_matrix(R).as_rotvec()
 
 
 # ---------------------------------------------------------------------- paths

@@ -15,7 +15,8 @@ from typing import Callable
 import numpy as np
 from numpy.typing import NDArray
 
-from .ik import CHUNK, Settings, biased_pose, pose_jacobian, rotation_vectors, take_step, within_pose_tolerance
+from .ik import CHUNK, Settings, biased_pose, pose_jacobian, take_step, within_pose_tolerance
+from .rotations import rotation_vectors_from_matrices
 
 RESTARTS_DEG = (30.0, -30.0, 90.0, -90.0, 180.0, -180.0)   # along the weakest direction, from where the solve stuck
 
@@ -102,7 +103,7 @@ def _pose_error(robot, targets, rotations, qT, free, length: float, bias, fd_deg
     reached = np.stack([np.broadcast_to(a, p.shape) for a in axes], axis=1).transpose(2, 0, 1)
     b = None if bias is None else bias(qT.T)
     at, turned = (p, reached) if b is None else biased_pose(p, reached, b)
-    err = np.concatenate([targets - at, length * rotation_vectors(rotations @ turned.transpose(0, 2, 1)).T])
+    err = np.concatenate([targets - at, length * rotation_vectors_from_matrices(rotations @ turned.transpose(0, 2, 1)).T])
     if fd_deg is None:
         return err
     jac = pose_jacobian(robot, p, frames, free, length)                              # (F, 6, m) per degree

@@ -30,6 +30,11 @@ from numpy.typing import NDArray
 from .._validation import check_array
 from ..errors import DataError, UnreachableError
 from . import ik
+from .rotations import matrices_from_xyz_deg, rpy_deg_from_matrix, xyz_deg_from_matrices  # noqa: F401 - as before
+from .rotations import matrix_from_rpy_deg, rotation_vectors_from_matrices
+
+#: :func:`~partcal.robot.rotations.matrix_from_rpy_deg` by its name before rotations.py held every convention.
+matrix_from_euler_deg = matrix_from_rpy_deg
 
 _CHUNK = 8192
 _I1, _I2 = [1, 2, 0], [2, 0, 1]          # cross product: (a x b)_k = a_{k+1} b_{k+2} - a_{k+2} b_{k+1}
@@ -45,83 +50,10 @@ def _cos_sin_deg(angle_deg: NDArray[np.float64]) -> tuple[NDArray[np.float64], N
     return c, s
 
 
-def matrix_from_euler_deg(angles_deg) -> NDArray[np.float64]:
-    """The rotation ``Rz(rz) Ry(ry) Rx(rx)`` from angles ``(rx, ry, rz)`` in degrees, shape ``(3, 3)``.
-
-    Turns about the fixed x, then y, then z axes: the convention of the virtual
-    robot's base (``errors.base.rotation_deg``) and of the kinematic model's base
-    correction.
-
-    >>> (matrix_from_euler_deg([0.0, 0.0, 90.0]) @ [1.0, 0.0, 0.0]).round(12) + 0.0
-    array([0., 1., 0.])
-    """
-    rad = np.radians(np.asarray(angles_deg, dtype=float))
-    cx, cy, cz = np.cos(rad)
-    sx, sy, sz = np.sin(rad)
-    rot_x = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
-    rot_y = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
-    rot_z = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
-    return rot_z @ rot_y @ rot_x
-
-
-def rpy_deg_from_matrix(rotation) -> NDArray[np.float64]:
-    """Roll, pitch, yaw ``(3,)`` degrees of a rotation ``(3, 3)``: the inverse of :func:`matrix_from_euler_deg`
-    (a URDF origin's ``rpy``), pitch in [-90, 90].
-
-    Accurate near a pitch of +-90 degrees too: the yaw is taken first, then pitch and roll from what is
-    left after turning it back, ``Rz(-yaw) R = Ry(pitch) Rx(roll)``, whose entries are all of order one.
-
-    >>> rpy_deg_from_matrix(matrix_from_euler_deg([10.0, -20.0, 30.0])).round(12).tolist()
-    [10.0, -20.0, 30.0]
-    """
-    rot = np.asarray(rotation, dtype=float)
-    yaw = np.arctan2(rot[1, 0], rot[0, 0])
-    c, s = np.cos(yaw), np.sin(yaw)
-    left = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]]) @ rot
-    pitch = np.arctan2(-left[2, 0], left[0, 0])
-    roll = np.arctan2(-left[1, 2], left[1, 1])
-    return np.degrees([roll, pitch, yaw])
-
-
 ORIENTATION_MM_PER_RAD = 200.0
 """How many mm an orientation residual of one radian counts as beside position residuals (registration,
 identification): the displacement a turn causes 200 mm from its axis, about a tool plate's size. For a
 tracker's 0.02-0.03 mm and a 6-D probe's 0.005-0.01 degrees, this weighs each roughly by its noise."""
-
-
-def matrices_from_xyz_deg(angles_deg) -> NDArray[np.float64]:
-    """Rotations ``Rx(rx) Ry(ry) Rz(rz)`` from intrinsic XYZ angles ``(n, 3)`` degrees, shape ``(n, 3, 3)``.
-
-    Turns about the moving x, then the new y, then the newest z axis (the
-    same rotation as turns about the fixed z, y, then x axes). The convention
-    of the measured orientation columns ``rx_meas, ry_meas, rz_meas`` and of a
-    Leica T-Mac's export; :func:`matrix_from_euler_deg` is the other order.
-
-    >>> (matrices_from_xyz_deg([[90.0, 0.0, 90.0]])[0] @ [1.0, 0.0, 0.0]).round(12) + 0.0   # x: to y, then to z
-    array([0., 0., 1.])
-    """
-    rad = np.radians(np.atleast_2d(np.asarray(angles_deg, dtype=float)))
-    cx, cy, cz = np.cos(rad).T
-    sx, sy, sz = np.sin(rad).T
-    out = np.empty((rad.shape[0], 3, 3))
-    out[:, 0] = np.stack([cy * cz, -cy * sz, sy], axis=1)
-    out[:, 1] = np.stack([cx * sz + sx * sy * cz, cx * cz - sx * sy * sz, -sx * cy], axis=1)
-    out[:, 2] = np.stack([sx * sz - cx * sy * cz, sx * cz + cx * sy * sz, cx * cy], axis=1)
-    return out
-
-
-def xyz_deg_from_matrices(rotations) -> NDArray[np.float64]:
-    """Intrinsic XYZ angles ``(n, 3)`` degrees of rotations ``(n, 3, 3)``: the inverse of
-    :func:`matrices_from_xyz_deg`, with ``rx, rz`` in [-180, 180] and ``ry`` in [-90, 90].
-
-    >>> xyz_deg_from_matrices(matrices_from_xyz_deg([[10.0, -20.0, 30.0]])).round(12).tolist()
-    [[10.0, -20.0, 30.0]]
-    """
-    rot = np.asarray(rotations, dtype=float).reshape(-1, 3, 3)
-    ry = np.arcsin(np.clip(rot[:, 0, 2], -1.0, 1.0))
-    rx = np.arctan2(-rot[:, 1, 2], rot[:, 2, 2])
-    rz = np.arctan2(-rot[:, 0, 1], rot[:, 0, 0])
-    return np.degrees(np.stack([rx, ry, rz], axis=1))
 
 
 @dataclass(frozen=True, eq=False)
@@ -238,7 +170,7 @@ class Robot:
         """Row ``row``'s transform ``E`` as ``(rotation (3, 3), translation (3,) mm)`` of floats, None if identity."""
         if self.origins is None or not np.any(self.origins[row]):
             return None
-        rot = matrix_from_euler_deg(self.origins[row, 3:])
+        rot = matrix_from_rpy_deg(self.origins[row, 3:])
         return tuple(tuple(float(v) for v in line) for line in rot), tuple(float(v) for v in self.origins[row, :3])
 
     def rotors(self, qT: NDArray[np.float64], rows=None) -> list:
@@ -822,10 +754,10 @@ def ik_settings(tol_mm, max_iter, max_step_deg, damping, *, tol_deg=0.0, length_
     return ik.Settings(float(tol_mm), int(max_iter), float(max_step_deg), float(damping))
 
 
-def flange_offset(flange: NDArray[np.float64], points_mm: NDArray[np.float64]) -> NDArray[np.float64]:
-    """The offset in the flange frame (3,) mm that best puts the tool on ``points_mm`` (n, 3) from flange poses
-    ``(n, 4, 4)``: the mean over the poses of ``R^T (p - o)``."""
-    return np.einsum("nji,nj->i", flange[:, :3, :3], points_mm - flange[:, :3, 3]) / len(points_mm)
+def flange_offset(base_T_flange: NDArray[np.float64], points_mm: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The offset in the flange frame (3,) mm that best puts the tool on ``points_mm`` (n, 3, base frame) from
+    flange poses ``base_T_flange`` ``(n, 4, 4)``: the mean over the poses of ``R^T (p - o)``."""
+    return np.einsum("nji,nj->i", base_T_flange[:, :3, :3], points_mm - base_T_flange[:, :3, 3]) / len(points_mm)
 
 
 def pose_errors(reached: NDArray[np.float64], wanted: NDArray[np.float64]
@@ -833,5 +765,5 @@ def pose_errors(reached: NDArray[np.float64], wanted: NDArray[np.float64]
     """Position error (mm) and orientation error (deg: the angle of ``R_wanted R_reached^T``) of poses
     ``(n, 4, 4)``, each shape (n,)."""
     dist = np.linalg.norm(wanted[:, :3, 3] - reached[:, :3, 3], axis=1)
-    return dist, np.degrees(np.linalg.norm(ik.rotation_vectors(wanted[:, :3, :3] @ reached[:, :3, :3]
+    return dist, np.degrees(np.linalg.norm(rotation_vectors_from_matrices(wanted[:, :3, :3] @ reached[:, :3, :3]
                                                                .transpose(0, 2, 1)), axis=1))

@@ -26,18 +26,12 @@ def module_name(path: Path) -> str:
 
 def imported_modules(me: str, source: str) -> list[tuple[int, str]]:
     """Every partcal module that the file ``me`` (repo-relative) imports anywhere, as ``(line, dotted name)``."""
-    path = ROOT / me
-    package = module_name(path) if path.name == "__init__.py" else module_name(path).rsplit(".", 1)[0]
     out = []
     for node in ast.walk(ast.parse(source)):
         if isinstance(node, ast.Import):
             out += [(node.lineno, a.name) for a in node.names if a.name.split(".")[0] == "partcal"]
         elif isinstance(node, ast.ImportFrom):
-            if node.level:
-                base = package.split(".")[: len(package.split(".")) - node.level + 1]
-                target = ".".join(base + ([node.module] if node.module else []))
-            else:
-                target = node.module or ""
+            target = import_source(me, node)
             if target.split(".")[0] != "partcal":
                 continue
             # "from . import x" may name a module x of that package
@@ -45,6 +39,16 @@ def imported_modules(me: str, source: str) -> list[tuple[int, str]]:
                 candidate = f"{target}.{alias.name}"
                 out.append((node.lineno, candidate if _file_of(candidate) else target))
     return out
+
+
+def import_source(me: str, node: ast.ImportFrom) -> str:
+    """The dotted module that ``from ... import`` in file ``me`` (repo-relative) imports from."""
+    if not node.level:
+        return node.module or ""
+    path = ROOT / me
+    package = module_name(path) if path.name == "__init__.py" else module_name(path).rsplit(".", 1)[0]
+    base = package.split(".")[: len(package.split(".")) - node.level + 1]
+    return ".".join(base + ([node.module] if node.module else []))
 
 
 def _file_of(dotted: str) -> str | None:
@@ -277,17 +281,10 @@ def private_uses(me: str, source: str) -> list[str]:
                 continue
             out.append(f"{me}:{node.lineno}: {ast.unparse(x)}.{node.attr}")
         elif isinstance(node, ast.ImportFrom):
+            target = import_source(me, node)
             for alias in node.names:
-                if _private(alias.name):
-                    if node.level:
-                        package = module_name(ROOT / me).rsplit(".", 1)[0] if not me.endswith("__init__.py") \
-                            else module_name(ROOT / me)
-                        base = package.split(".")[: len(package.split(".")) - node.level + 1]
-                        target = ".".join(base + ([node.module] if node.module else []))
-                    else:
-                        target = node.module or ""
-                    if target.split(".")[0] == "partcal" and not _file_of(f"{target}.{alias.name}"):
-                        out.append(f"{me}:{node.lineno}: from {'.' * node.level}{node.module or ''} import {alias.name}")
+                if _private(alias.name) and target.split(".")[0] == "partcal" and not _file_of(f"{target}.{alias.name}"):
+                    out.append(f"{me}:{node.lineno}: from {'.' * node.level}{node.module or ''} import {alias.name}")
     return sorted(out, key=lambda s: (s.split(":")[0], int(s.split(":")[1])))
 
 

@@ -28,7 +28,8 @@ from ..errors import ConfigError, PartcalError
 from ..robot.description import joint_columns, load_robot, robot_reference
 from ..robot.iso_cube import largest_cube, solve_cube
 from ..robot.kinematics import Robot
-from ..robot.rotations import matrices_from_rotation_vectors, matrix_from_rpy_deg, rpy_deg_from_matrix, xyz_deg_from_matrices
+from ..robot.rotations import (matrices_from_rotation_vectors, matrix_from_rpy_deg, rpy_deg_from_matrix,
+                               xyz_deg_from_matrices)
 from ..robot.trajectories import PATHS, paper_path
 from .formats import TARGET_NAME
 from .measurements import Measurements, write_measurements

@@ -237,7 +237,7 @@ def false_target_poses(predict: Callable[[NDArray[np.float64]], NDArray[np.float
     """
     poses = checked_poses(poses)
     free, settings = robot.free_joints(fixed), ik_settings(tol_mm, max_iter, 10.0, 0.05, tol_deg=tol_deg,
-                                                             length_mm=length_mm)
+                                                            length_mm=length_mm)
     positions, rotations = poses[:, :3, 3], poses[:, :3, :3]
 
     def errors(q):          # the predicted pose errors; a non-finite one moves nothing (and never converges)
@@ -247,8 +247,8 @@ def false_target_poses(predict: Callable[[NDArray[np.float64]], NDArray[np.float
                             f"radians); got shape {e.shape}")
         return np.where(np.isfinite(e).all(axis=1, keepdims=True), e, 0.0)
 
-    q = ik.solve_pose(robot, positions, rotations, robot.checked_seeds(seeds_deg, len(poses)), free, ik.Settings(), 1e-8,
-                      length_mm)[0]
+    q = ik.solve_pose(robot, positions, rotations, robot.checked_seeds(seeds_deg, len(poses)), free, ik.Settings(),
+                      1e-8, length_mm)[0]
     q, iterations = ik.solve_pose(robot, positions, rotations, q, free, settings, tol_deg, length_mm, bias=errors)
     left = np.flatnonzero(iterations >= max_iter)         # near a singularity: the whole equation's slope
     if left.size:
@@ -260,8 +260,8 @@ def false_target_poses(predict: Callable[[NDArray[np.float64]], NDArray[np.float
         finite = np.isfinite(np.asarray(predict(q), dtype=float)).all(axis=1)
     at, turned = ik.biased_pose(nominal[:, :3, 3].T, nominal[:, :3, :3], errors(q))
     residual_mm = np.where(finite, np.linalg.norm(at.T - positions, axis=1), np.inf)
-    residual_deg = np.where(finite, np.degrees(np.linalg.norm(rotation_vectors_from_matrices(rotations @ turned.transpose(0, 2, 1)),
-                                                                axis=1)), np.inf)
+    miss_rotvec = rotation_vectors_from_matrices(rotations @ turned.transpose(0, 2, 1))
+    residual_deg = np.where(finite, np.degrees(np.linalg.norm(miss_rotvec, axis=1)), np.inf)
     converged = (residual_mm <= tol_mm) & (residual_deg <= tol_deg) & robot.within_limits(q)
     singular = np.zeros(len(q), dtype=bool)
     off = np.flatnonzero(~converged)
@@ -315,8 +315,8 @@ def false_target_cartesian_poses(predict: Callable[[NDArray[np.float64]], NDArra
     turn[~ok] = 0.0
     commanded = matrices_from_rotation_vectors(-turn) @ rotations
     real = matrices_from_rotation_vectors(turn) @ commanded            # what the model says the robot reaches
-    residual_deg = np.where(ok, np.degrees(np.linalg.norm(rotation_vectors_from_matrices(rotations @ real.transpose(0, 2, 1)),
-                                                          axis=1)), np.inf)
+    miss_rotvec = rotation_vectors_from_matrices(rotations @ real.transpose(0, 2, 1))
+    residual_deg = np.where(ok, np.degrees(np.linalg.norm(miss_rotvec, axis=1)), np.inf)
     return dataclasses.replace(position, converged=position.converged & ok & (residual_deg <= tol_deg),
                                commanded_rotation=commanded, residual_deg=residual_deg)
 

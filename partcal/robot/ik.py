@@ -225,7 +225,7 @@ def _pose_block(robot, targets, rotations, qT, free, settings: Settings, tol_rad
         p, axes, frames = robot.walk(robot.rotors(qT), record=record)
         reached = np.stack([np.broadcast_to(a, p.shape) for a in axes], axis=1).transpose(2, 0, 1)   # (m, 3, 3)
         at, turned = (p, reached) if bias is None else biased_pose(p, reached, bias(qT.T))
-        turn = rotation_vectors_from_matrices(rotations @ turned.transpose(0, 2, 1)).T                              # (3, m) rad
+        turn = rotation_vectors_from_matrices(rotations @ turned.transpose(0, 2, 1)).T          # (3, m) rad
         err = np.concatenate([targets - at, length * turn])
         keep = ~within_pose_tolerance(err, settings.tol_mm, length * tol_rad)
         if not keep.any():

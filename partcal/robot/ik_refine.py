@@ -103,7 +103,8 @@ def _pose_error(robot, targets, rotations, qT, free, length: float, bias, fd_deg
     reached = np.stack([np.broadcast_to(a, p.shape) for a in axes], axis=1).transpose(2, 0, 1)
     b = None if bias is None else bias(qT.T)
     at, turned = (p, reached) if b is None else biased_pose(p, reached, b)
-    err = np.concatenate([targets - at, length * rotation_vectors_from_matrices(rotations @ turned.transpose(0, 2, 1)).T])
+    turn = rotation_vectors_from_matrices(rotations @ turned.transpose(0, 2, 1)).T                 # (3, m) rad
+    err = np.concatenate([targets - at, length * turn])
     if fd_deg is None:
         return err
     jac = pose_jacobian(robot, p, frames, free, length)                              # (F, 6, m) per degree

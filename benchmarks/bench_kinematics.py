@@ -39,7 +39,7 @@ def sequential_path(robot, targets):
 
 def nested_false_targets(predict, robot, targets, seeds, fixed, tol_mm=1e-4, max_iter=50):
     """partcal 0.1.0's joint false targets: q <- IK(p - e(q)), a full IK (its old solver) per iteration."""
-    free = robot._free_joints(fixed)
+    free = robot.free_joints(fixed)
 
     def ik(p, q):
         return before._solve(robot, p, q.copy(), free, 1e-8, 100, 10.0, 0.05)
@@ -69,7 +69,7 @@ def main() -> None:
                 ["poses", "before poses/s", "ms", "poses/s", ">= 3,000,000/s", "max |diff| mm"], rows)
 
     rows = []
-    free = robot._free_joints((4, 5))
+    free = robot.free_joints((4, 5))
     for name in PATHS:
         targets = paper_path(name)
         t_before = best_time(lambda: before.inverse_path(robot, targets, robot.home_deg.copy(), free), repeat=2,

@@ -69,7 +69,7 @@ from partcal.data.simulate import Tracker, VirtualRobot  # noqa: E402
 from partcal.models import design  # noqa: E402
 from partcal.models.identification import identify, robot_with  # noqa: E402
 from partcal.robot import load_robot  # noqa: E402
-from partcal.robot.kinematics import matrix_from_euler_deg  # noqa: E402
+from partcal.robot.rotations import matrix_from_rpy_deg  # noqa: E402
 from partcal.study import plan  # noqa: E402
 
 COUNTS = (20, 30, 50)
@@ -89,7 +89,7 @@ def virtual_robot(nominal, rng: np.random.Generator) -> VirtualRobot:
                            alpha_deg=nominal.alpha_deg + dev[2], theta_offset_deg=nominal.theta_offset_deg + dev[3],
                            tool_mm=nominal.tool_mm + rng.normal(0, 1.0, 3))
     tracker = Tracker(np.array(TRACKERS[nominal.name]), accuracy_ppm=0.0, repeatability_ppm=10.0, readings=1)
-    return VirtualRobot(nominal, true, matrix_from_euler_deg(rng.normal(0, 0.04, 3)), rng.normal(0, 2.0, 3), (), (),
+    return VirtualRobot(nominal, true, matrix_from_rpy_deg(rng.normal(0, 0.04, 3)), rng.normal(0, 2.0, 3), (), (),
                         tracker, 0.0)
 
 

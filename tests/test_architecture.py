@@ -26,18 +26,12 @@ def module_name(path: Path) -> str:
 
 def imported_modules(me: str, source: str) -> list[tuple[int, str]]:
     """Every partcal module that the file ``me`` (repo-relative) imports anywhere, as ``(line, dotted name)``."""
-    path = ROOT / me
-    package = module_name(path) if path.name == "__init__.py" else module_name(path).rsplit(".", 1)[0]
     out = []
     for node in ast.walk(ast.parse(source)):
         if isinstance(node, ast.Import):
             out += [(node.lineno, a.name) for a in node.names if a.name.split(".")[0] == "partcal"]
         elif isinstance(node, ast.ImportFrom):
-            if node.level:
-                base = package.split(".")[: len(package.split(".")) - node.level + 1]
-                target = ".".join(base + ([node.module] if node.module else []))
-            else:
-                target = node.module or ""
+            target = import_source(me, node)
             if target.split(".")[0] != "partcal":
                 continue
             # "from . import x" may name a module x of that package
@@ -45,6 +39,16 @@ def imported_modules(me: str, source: str) -> list[tuple[int, str]]:
                 candidate = f"{target}.{alias.name}"
                 out.append((node.lineno, candidate if _file_of(candidate) else target))
     return out
+
+
+def import_source(me: str, node: ast.ImportFrom) -> str:
+    """The dotted module that ``from ... import`` in file ``me`` (repo-relative) imports from."""
+    if not node.level:
+        return node.module or ""
+    path = ROOT / me
+    package = module_name(path) if path.name == "__init__.py" else module_name(path).rsplit(".", 1)[0]
+    base = package.split(".")[: len(package.split(".")) - node.level + 1]
+    return ".".join(base + ([node.module] if node.module else []))
 
 
 def _file_of(dotted: str) -> str | None:
@@ -239,3 +243,95 @@ def test_readme_python_example_runs(tmp_path):
     np.testing.assert_array_equal(namespace["targets_mm"], read_measurements(
         ROOT / "data" / "sk120" / "test_rectangle.csv").nominal_mm)
     np.testing.assert_array_equal(namespace["m"].q_deg, m.q_deg)
+
+
+# ---------------------------------------------------------------------- private names stay in their module
+def _private(name: str) -> bool:
+    return name.startswith("_") and not name.startswith("__")
+
+
+def _own_names(tree: ast.AST) -> set[str]:
+    """The names a module defines itself: functions, classes, assigned names, attributes set on self/cls."""
+    out = set()
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+            out.add(node.name)
+        elif isinstance(node, ast.Name) and isinstance(node.ctx, ast.Store):
+            out.add(node.id)
+        elif (isinstance(node, ast.Attribute) and isinstance(node.ctx, (ast.Store, ast.Del))
+              and isinstance(node.value, ast.Name) and node.value.id in ("self", "cls")):
+            out.add(node.attr)
+    return out
+
+
+def private_uses(me: str, source: str) -> list[str]:
+    """The private names (one leading underscore, not a dunder) that file ``me`` takes from another module:
+    ``x._name`` where ``x`` is not ``self``, ``cls`` or ``super()`` and ``_name`` is not defined in the file
+    itself, and ``from partcal.x import _name`` (a private module, such as ``_io``, may be imported: it is the
+    package's own). Each as ``"file:line: what"``."""
+    tree = ast.parse(source)
+    own = _own_names(tree)
+    out = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Attribute) and _private(node.attr) and node.attr not in own:
+            x = node.value
+            if isinstance(x, ast.Name) and x.id in ("self", "cls"):
+                continue
+            if isinstance(x, ast.Call) and isinstance(x.func, ast.Name) and x.func.id == "super":
+                continue
+            out.append(f"{me}:{node.lineno}: {ast.unparse(x)}.{node.attr}")
+        elif isinstance(node, ast.ImportFrom):
+            target = import_source(me, node)
+            for alias in node.names:
+                if _private(alias.name) and target.split(".")[0] == "partcal" and not _file_of(f"{target}.{alias.name}"):
+                    out.append(f"{me}:{node.lineno}: from {'.' * node.level}{node.module or ''} import {alias.name}")
+    return sorted(out, key=lambda s: (s.split(":")[0], int(s.split(":")[1])))
+
+
+# Private names used on purpose from outside partcal: none. (scikit-learn's GP output normalisation is
+# recomputed in models/gp.py rather than read from its private attributes.)
+#
+# TEMPORARY: uses in modules another change is reworking at the same time (the model-kind contract:
+# models/partitioned.py calls a local model's fitting steps; the run config and the model-file reader use
+# the kinds' declared rules and read hook, whose public names belong to models/base.py). As
+# ``(file, name)``; remove each as its module gets the public name. A use not listed here fails.
+KNOWN_PRIVATE_USES = {
+    ("partcal/models/partitioned.py", "_fit"), ("partcal/models/partitioned.py", "_check_params"),
+    ("partcal/models/partitioned.py", "_setup"), ("partcal/models/partitioned.py", "_complete"),
+    ("partcal/models/partitioned.py", "_predict_trusted"),
+    ("partcal/study/config.py", "_parameter_rules"), ("partcal/study/persist.py", "_prepare"),
+}
+
+
+def _file_and_name(use: str) -> tuple[str, str]:
+    """``("partcal/x.py", "_name")`` of a use as :func:`private_uses` writes it."""
+    return use.split(":", 1)[0], use.replace(" ", ".").rsplit(".", 1)[-1]
+
+
+def test_no_private_name_is_used_across_modules():
+    """Objects talk through public names: no module reaches into another's private functions, methods or
+    attributes (tests may)."""
+    uses = [u for me, source in package_sources().items() for u in private_uses(me, source)]
+    assert [u for u in uses if _file_and_name(u) not in KNOWN_PRIVATE_USES] == [], "give these a public name"
+    assert sorted(KNOWN_PRIVATE_USES - {_file_and_name(u) for u in uses}) == [], \
+        "these are fixed: remove them from KNOWN_PRIVATE_USES"
+
+
+def test_the_checker_finds_private_uses():
+    code = textwrap.dedent("""
+        from .ik import _take_step, solve
+        from .. import _io
+        from ._io import write_atomic
+        class Robot:
+            def _walk(self):
+                return self._rows, super()._x, cls._y
+        def f(robot, other):
+            robot._trig(1)
+            other._walk()
+            return robot.__class__, np.random._bit_generator
+    """)
+    assert private_uses("partcal/robot/compensation.py", code) == [
+        "partcal/robot/compensation.py:2: from .ik import _take_step",
+        "partcal/robot/compensation.py:9: robot._trig",
+        "partcal/robot/compensation.py:11: np.random._bit_generator",
+    ]

@@ -18,7 +18,7 @@ from partcal.data.simulate import Compliance, Tracker, VirtualRobot
 from partcal.models.identification import (actual_joints, model_jacobian, model_positions, nominal_values,
                                            parameter_names, robot_with)
 from partcal.models.joint_errors import JointErrors
-from partcal.robot.kinematics import matrix_from_euler_deg
+from partcal.robot.rotations import matrix_from_rpy_deg
 
 @pytest.fixture(autouse=True, scope="module")
 def one_blas_thread():
@@ -54,7 +54,7 @@ def virtual(nominal, free, payload_kg=0.0, seed=0, sigma_mm=0.0, gears=GEARS):
                   Compliance(3, 1, (6, 8, 8), (250.0, 120.0, payload_kg), 8000.0))
     true = robot_with(nominal, own)
     tracker = Tracker(np.array([3500.0, 0, -800]), 0.0, sigma_mm / 3000 * 1e6, 1)
-    return VirtualRobot(nominal, true, matrix_from_euler_deg(values[size - 3:]),
+    return VirtualRobot(nominal, true, matrix_from_rpy_deg(values[size - 3:]),
                         values[size - 6:size - 3], compliance, gears, tracker, 0.0)
 
 

@@ -12,7 +12,7 @@ from scipy.spatial.transform import Rotation
 import partcal
 from partcal import ConfigError, UnreachableError, load_robot
 from partcal.robot.description import parse_theta, robot_from_dict
-from partcal.robot.kinematics import matrix_from_euler_deg
+from partcal.robot.rotations import matrix_from_rpy_deg
 from partcal.robot.trajectories import paper_path
 
 ROBOTS = Path(partcal.__file__).parent / "robot" / "builtin"
@@ -283,15 +283,15 @@ def test_a_twist_just_off_a_right_angle_is_not_rounded(sk120):
     ((90, 0, 0), (1, 0, 0)), ((0, 90, 0), (0, 0, -1)), ((0, 0, 90), (0, 1, 0)),
     ((90, 90, 0), (0, 0, -1)), ((0, 90, 90), (0, 0, -1)), ((90, 0, 90), (0, 1, 0)),
 ])
-def test_matrix_from_euler_turns_about_x_then_y_then_z(angles_deg, x_to):
+def test_matrix_from_rpy_turns_about_x_then_y_then_z(angles_deg, x_to):
     # hand: Ry(90) takes x to -z, Rz(90) takes x to y and leaves z alone, Rx leaves x alone
-    np.testing.assert_allclose(matrix_from_euler_deg(angles_deg) @ [1.0, 0, 0], x_to, atol=1e-15)
+    np.testing.assert_allclose(matrix_from_rpy_deg(angles_deg) @ [1.0, 0, 0], x_to, atol=1e-15)
 
 
 @settings(max_examples=50, deadline=None)
 @given(st.lists(st.floats(-360, 360), min_size=3, max_size=3))
-def test_matrix_from_euler_is_scipys_extrinsic_xyz(angles_deg):
-    rot = matrix_from_euler_deg(angles_deg)
+def test_matrix_from_rpy_is_scipys_extrinsic_xyz(angles_deg):
+    rot = matrix_from_rpy_deg(angles_deg)
     np.testing.assert_allclose(rot, Rotation.from_euler("xyz", angles_deg, degrees=True).as_matrix(), atol=1e-14)
     np.testing.assert_allclose(rot @ rot.T, np.eye(3), atol=1e-14)
 

@@ -7,7 +7,7 @@ import pytest
 from conftest import ROOT
 
 from partcal import load_robot
-from partcal.robot.kinematics import matrix_from_euler_deg
+from partcal.robot.rotations import matrix_from_rpy_deg
 from partcal.study.config import load_config
 from partcal.study.runner import run
 
@@ -33,7 +33,7 @@ def test_noise_free_virtual_ur10_in_a_tracker_frame_is_identified_exactly(tmp_pa
                            alpha_deg=nominal.alpha_deg + rng.normal(0, 0.03, 6),
                            theta_offset_deg=nominal.theta_offset_deg + rng.normal(0, 0.05, 6),
                            tool_mm=np.array(tool_mm))
-    rot, shift = matrix_from_euler_deg([1.0, -2.0, 150.0]), np.array([2500.0, -300.0, -400.0])
+    rot, shift = matrix_from_rpy_deg([1.0, -2.0, 150.0]), np.array([2500.0, -300.0, -400.0])
     header = "q1,q2,q3,q4,q5,q6,x_meas,y_meas,z_meas"
     sets = {"ident": ipa_joints(IPA / "Series_B" / "measurements_joint_configurations.csv", slice(0, 1000, 3)),
             "heldout": ipa_joints(IPA / "Series_B" / "measurements_joint_configurations.csv", slice(1000, None, 5)),

@@ -35,14 +35,14 @@ from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial.transform import Rotation
 
 from .._io import atomic_write
 from .._validation import MAX_PAYLOAD_KG, check_array
 from ..errors import DataError
 from ..metrics import MRAD_PER_DEG
 from ..robot.description import MAX_JOINTS, joint_columns, load_robot
-from ..robot.kinematics import Robot, matrices_from_xyz_deg, xyz_deg_from_matrices
+from ..robot.kinematics import Robot
+from ..robot.rotations import matrices_from_xyz_deg, rotation_vectors_from_matrices, xyz_deg_from_matrices
 from .formats import MeasurementFormat, RowSelection
 from .pose_columns import (ORIENTATION_MEASURED, ORIENTATION_NOMINAL, PRIMARY, check_angles, checked_orientation,
                            checked_targets, orientation_columns, suffixed, target_columns)
@@ -89,7 +89,7 @@ class Measurements:
         Their nominal positions, mm: for every extra target or for none.
     measured_orientation_deg, nominal_orientation_deg : ndarray, shape (n, 3), optional
         The tool's orientation, intrinsic XYZ angles ``(rx, ry, rz)`` degrees
-        (``R = Rx(rx) Ry(ry) Rz(rz)``, :func:`~partcal.robot.kinematics.matrices_from_xyz_deg`),
+        (``R = Rx(rx) Ry(ry) Rz(rz)``, :func:`~partcal.robot.rotations.matrices_from_xyz_deg`),
         measured and nominal; both or neither. ``rx, rz`` lie in [-180, 180] and ``ry`` in [-90, 90].
     """
 
@@ -196,7 +196,7 @@ class Measurements:
             raise DataError(f"{self.name} has no measured orientation (columns rx_meas, ry_meas, rz_meas)")
         turn = matrices_from_xyz_deg(self.measured_orientation_deg) @ \
             matrices_from_xyz_deg(self.nominal_orientation_deg).transpose(0, 2, 1)
-        return Rotation.from_matrix(turn).as_rotvec(degrees=True)
+        return np.degrees(rotation_vectors_from_matrices(turn))
 
     @property
     def pose_errors(self) -> NDArray[np.float64]:

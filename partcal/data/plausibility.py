@@ -41,12 +41,12 @@ from itertools import permutations
 import numpy as np
 from numpy.typing import NDArray
 
-from scipy.spatial.transform import Rotation
 
 from .._validation import check_params, real
 from ..errors import DataError
+from ..metrics import pooled_rms
 from ..robot.frames import kabsch
-from ..robot.kinematics import matrices_from_xyz_deg
+from ..robot.rotations import matrices_from_euler_deg, matrices_from_xyz_deg
 
 _AXES = ("x", "y", "z")
 MIN_POSES = 5                 # fewer poses are no evidence of radians, nor (without a robot) of a workspace
@@ -295,7 +295,7 @@ def orientation_readings(angles_deg, which: str = "meas") -> list[tuple[str, NDA
     for order in _ORDERS:
         kind = "intrinsic" if order.isupper() else "extrinsic (fixed axes)"
         out.append((f"the angles look like {kind} {order} Euler angles; the contract is intrinsic XYZ (R = Rx Ry Rz)",
-                    Rotation.from_euler(order, a, degrees=True).as_matrix()))
+                    matrices_from_euler_deg(order, a)))
     return out
 
 
@@ -340,7 +340,7 @@ def _turn_rms(expected: NDArray[np.float64], got: NDArray[np.float64], rigid: bo
 
 def _spread(p: NDArray[np.float64]) -> float:
     """RMS distance of points from their centroid."""
-    return float(np.sqrt(np.mean(np.sum((p - p.mean(axis=0)) ** 2, axis=1))))
+    return pooled_rms(p - p.mean(axis=0))
 
 
 def _mismatch(expected: NDArray[np.float64], got: NDArray[np.float64], rigid: bool) -> float:
@@ -348,7 +348,7 @@ def _mismatch(expected: NDArray[np.float64], got: NDArray[np.float64], rigid: bo
     if rigid and len(got) >= 3:
         rot, shift = kabsch(got, expected)
         got = got @ rot.T + shift
-    return float(np.sqrt(np.mean(np.sum((got - expected) ** 2, axis=1))))
+    return pooled_rms(got - expected)
 
 
 def _reach_of(nominal_mm) -> float:

@@ -4,7 +4,7 @@ A measurement row may carry further targets on the tool, each as wide columns wi
 name after ``@`` (``x_meas@B, y_meas@B, z_meas@B``, optionally ``x_nom@B, ...``; the unsuffixed
 columns are the primary target, named :data:`PRIMARY`), and the tool's orientation, ``rx_meas,
 ry_meas, rz_meas`` and ``rx_nom, ry_nom, rz_nom``: intrinsic XYZ angles in degrees (``R = Rx Ry Rz``,
-:func:`~partcal.robot.kinematics.matrices_from_xyz_deg`). Here are the header rules for them and
+:func:`~partcal.robot.rotations.matrices_from_xyz_deg`). Here are the header rules for them and
 the checks of their values; :mod:`partcal.data.measurements` reads and writes the file.
 """
 

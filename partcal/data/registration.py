@@ -37,13 +37,14 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
-from scipy.spatial.transform import Rotation
 
 from .._validation import check_array
 from ..errors import DataError
+from ..metrics import pooled_rms
 from ..robot.frames import kabsch
-from ..robot.kinematics import Robot
-from ..robot.kinematics import ORIENTATION_MM_PER_RAD, flange_offset, matrices_from_xyz_deg, xyz_deg_from_matrices
+from ..robot.kinematics import ORIENTATION_MM_PER_RAD, Robot, flange_offset
+from ..robot.rotations import (matrices_from_xyz_deg, matrix_from_rotation_vector, rotation_vector_from_matrix,
+                               rotation_vectors_from_matrices, xyz_deg_from_matrices)
 from .measurements import Measurements
 from .pose_columns import PRIMARY
 from .plausibility import Plausibility, check_orientation_residuals, check_residuals
@@ -105,7 +106,7 @@ class Registration:
     @property
     def rotation_deg(self) -> NDArray[np.float64]:
         """The rotation as a rotation vector (axis times angle), degrees, shape (3,)."""
-        return Rotation.from_matrix(self.rotation).as_rotvec(degrees=True)
+        return np.degrees(rotation_vector_from_matrix(self.rotation))
 
     def to_base(self, tracker_mm) -> NDArray[np.float64]:
         """Points in the tracker frame ``(n, 3)`` mm -> the base frame ``(n, 3)`` mm."""
@@ -127,8 +128,7 @@ class Registration:
             out["targets"] = {name: {"rms_3d": float(rms), "tool_mm": [float(v) for v in self.tool_of(name)]}
                               for name, rms in self.target_rms_3d.items()}
         if self.probe_rotation is not None:
-            out["probe_rotation_deg"] = [float(v) for v in Rotation.from_matrix(self.probe_rotation).as_rotvec(
-                degrees=True)]
+            out["probe_rotation_deg"] = [float(v) for v in np.degrees(rotation_vector_from_matrix(self.probe_rotation))]
             out["orientation_rms_deg"] = float(self.orientation_rms_deg)
         return out
 
@@ -210,7 +210,7 @@ def register_tracker(robot: Robot, q_deg, measured_mm, *, tool_mm=None, fit_tool
     k_tools = 3 * len(tools0) if fit_tool else 0
 
     def unpack(x):
-        rot = Rotation.from_rotvec(x[:3]).as_matrix() @ rot0
+        rot = matrix_from_rotation_vector(x[:3]) @ rot0
         tools = x[6:6 + k_tools].reshape(-1, 3) if fit_tool else tools0
         return rot, x[3:6], tools
 
@@ -228,7 +228,7 @@ def register_tracker(robot: Robot, q_deg, measured_mm, *, tool_mm=None, fit_tool
     resid = position_residuals(sol.x)
     check_residuals(source, resid[0], p_fl + r_fl @ tool0, meas, robot.reach_mm, robot.name,
                     plausibility or Plausibility())
-    _check_mirror(source, meas, p_fl, r_fl, tools0[0], fit_tool, float(np.sqrt(np.mean(np.sum(resid[0]**2, axis=1)))))
+    _check_mirror(source, meas, p_fl, r_fl, tools0[0], fit_tool, pooled_rms(resid[0]))
     if probe is not None:
         check_orientation_residuals(source, np.degrees(np.linalg.norm(probe.turns(rot, sol.x[6 + k_tools:]), axis=1)),
                                     r_fl, orientation_deg, rot, plausibility or Plausibility())
@@ -283,13 +283,13 @@ def _position_rms(measured_mm, p_fl, r_fl, tool_mm, fit_tool: bool) -> float:
     rot0, t0 = kabsch(measured_mm, p_fl + r_fl @ tool_mm)
 
     def residuals(x):
-        rot = Rotation.from_rotvec(x[:3]).as_matrix() @ rot0
+        rot = matrix_from_rotation_vector(x[:3]) @ rot0
         tool = x[6:9] if fit_tool else tool_mm
         return (measured_mm @ rot.T + x[3:6] - p_fl - r_fl @ tool).ravel()
 
     x0 = np.concatenate([np.zeros(3), t0, tool_mm if fit_tool else []])
     sol = least_squares(residuals, x0, method="lm", xtol=1e-12, ftol=1e-12, max_nfev=200 * len(x0))
-    return float(np.sqrt(np.mean(np.sum(sol.fun.reshape(-1, 3) ** 2, axis=1))))
+    return pooled_rms(sol.fun.reshape(-1, 3))
 
 
 def _start_tool(name: str, points: NDArray[np.float64], rot0, t0, flange, given: dict | None, fit_tool: bool,
@@ -306,31 +306,38 @@ def _start_tool(name: str, points: NDArray[np.float64], rot0, t0, flange, given:
 class _Probe:
     """The orientation part of a registration: the probe's rotation on the flange and its residuals.
 
-    The residual is the small turn ``log(R @ R_meas @ probe^T @ R_flange^T)`` (a
-    rotation vector in the base frame, radians) times ``mm_per_rad``.
+    The residual is the small turn ``log(base_R_tracker @ tracker_R_probe @ probe_R_flange @ flange_R_base)``
+    (a rotation vector in the base frame, radians; the identity when all agree) times ``mm_per_rad``.
     """
 
-    def __init__(self, n: int, orientation_deg, rot0, r_fl, mm_per_rad: float, given=None):
+    def __init__(self, n: int, orientation_deg, base_R_tracker0, base_R_flange, mm_per_rad: float, given=None):
         angles = check_array(orientation_deg, "orientation_deg", columns=3)
         if angles.shape[0] != n:
             raise DataError(f"orientation_deg has {angles.shape[0]} rows but q_deg has {n}")
-        self.measured, self.r_fl, self.weight = matrices_from_xyz_deg(angles), r_fl, float(mm_per_rad)
+        self.tracker_R_probe, self.base_R_flange = matrices_from_xyz_deg(angles), base_R_flange
+        self.weight = float(mm_per_rad)
         if given is not None:                  # fixed: no parameter of its own
             self.start, self.size = np.asarray(given, dtype=float).reshape(3, 3), 0
             return
-        u, _, vt = np.linalg.svd(np.mean(r_fl.transpose(0, 2, 1) @ rot0 @ self.measured, axis=0))
+        u, _, vt = np.linalg.svd(np.mean(base_R_flange.transpose(0, 2, 1) @ base_R_tracker0 @ self.tracker_R_probe,
+                                         axis=0))
         self.start, self.size = u @ np.diag([1.0, 1.0, np.linalg.det(u @ vt)]) @ vt, 3     # the mean rotation
 
-    def turns(self, rot, x) -> NDArray[np.float64]:
-        probe = (Rotation.from_rotvec(x).as_matrix() if self.size else np.eye(3)) @ self.start
-        return Rotation.from_matrix(rot @ self.measured @ probe.T @ self.r_fl.transpose(0, 2, 1)).as_rotvec()
+    def flange_R_probe(self, x) -> NDArray[np.float64]:
+        """The probe's rotation on the flange ``(3, 3)`` for the parameters ``x`` (a turn from the start)."""
+        return (matrix_from_rotation_vector(x) if self.size else np.eye(3)) @ self.start
 
-    def residuals(self, rot, x) -> NDArray[np.float64]:
-        return (self.weight * self.turns(rot, x)).ravel()
+    def turns(self, base_R_tracker, x) -> NDArray[np.float64]:
+        flange_R_probe = self.flange_R_probe(x)
+        return rotation_vectors_from_matrices(base_R_tracker @ self.tracker_R_probe @ flange_R_probe.T
+                                              @ self.base_R_flange.transpose(0, 2, 1))
 
-    def result(self, rot, x) -> dict:
-        angles = np.linalg.norm(self.turns(rot, x), axis=1)
-        return {"probe_rotation": (Rotation.from_rotvec(x).as_matrix() if self.size else np.eye(3)) @ self.start,
+    def residuals(self, base_R_tracker, x) -> NDArray[np.float64]:
+        return (self.weight * self.turns(base_R_tracker, x)).ravel()
+
+    def result(self, base_R_tracker, x) -> dict:
+        angles = np.linalg.norm(self.turns(base_R_tracker, x), axis=1)
+        return {"probe_rotation": self.flange_R_probe(x),
                 "orientation_rms_deg": float(np.degrees(np.sqrt(np.mean(angles**2))))}
 
 

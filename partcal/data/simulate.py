@@ -20,7 +20,6 @@ from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial.transform import Rotation
 
 from .._io import check_folder_writable, replace_all
 from .._validation import one_of, safe_name
@@ -28,7 +27,9 @@ from .._yamlio import Section, load_yaml, range_check
 from ..errors import ConfigError, PartcalError
 from ..robot.description import joint_columns, load_robot, robot_reference
 from ..robot.iso_cube import largest_cube, solve_cube
-from ..robot.kinematics import Robot, matrix_from_euler_deg, rpy_deg_from_matrix, xyz_deg_from_matrices
+from ..robot.kinematics import Robot
+from ..robot.rotations import (matrices_from_rotation_vectors, matrix_from_rpy_deg, rpy_deg_from_matrix,
+                               xyz_deg_from_matrices)
 from ..robot.trajectories import PATHS, paper_path
 from .formats import TARGET_NAME
 from .measurements import Measurements, write_measurements
@@ -147,7 +148,7 @@ class VirtualRobot:
         sigma = self.tracker.orientation_noise_deg
         if sigma is None:
             return extra, None
-        turns = Rotation.from_rotvec(rng.standard_normal((len(p_fl), 3)) * sigma, degrees=True).as_matrix()
+        turns = matrices_from_rotation_vectors(np.radians(rng.standard_normal((len(p_fl), 3)) * sigma))
         return extra, xyz_deg_from_matrices(turns @ r_fl)
 
 
@@ -242,7 +243,7 @@ def _true_robot(nominal: Robot, errors: Section, rng: np.random.Generator):
     deviations = rng.standard_normal((4, rows)) * np.array([[length], [length], [twist], [zero]])
     tool = np.asarray(errors.get("tool_mm", "list", check=_vector3), dtype=float)
     base = errors.section("base", required=True)
-    rot = matrix_from_euler_deg(base.get("rotation_deg", "list", check=_vector3))
+    rot = matrix_from_rpy_deg(base.get("rotation_deg", "list", check=_vector3))
     shift = np.asarray(base.get("translation_mm", "list", check=_vector3), dtype=float)
     base.done()
     true = nominal.replace(a_mm=nominal.a_mm + deviations[0], d_mm=nominal.d_mm + deviations[1],
@@ -262,7 +263,7 @@ def _tilted(nominal: Robot, errors: Section):
     out = np.zeros((nominal.alpha_deg.size, 6)) if nominal.origins is None else nominal.origins.copy()
     for joint, angle in tilts.items():
         row = int(np.flatnonzero(nominal.coupling[:, joint - 1])[0])
-        turned = matrix_from_euler_deg(out[row, 3:]) @ matrix_from_euler_deg([0.0, angle, 0.0])
+        turned = matrix_from_rpy_deg(out[row, 3:]) @ matrix_from_rpy_deg([0.0, angle, 0.0])
         out[row, 3:] = rpy_deg_from_matrix(turned)
     return out
 

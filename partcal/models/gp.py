@@ -209,8 +209,9 @@ class GaussianProcessErrorModel(ErrorModelBase):
             Z = self.input_map_.transform(X)
             gpr = self._search(Z, Y) if fixed is None else \
                 _solved(self._kernel_of(fixed["amplitude"], fixed["length_scale"], fixed["noise"]), Z, Y)
-            self.y_mean_ = np.broadcast_to(gpr._y_train_mean, (Y.shape[1],)).astype(float)
-            self.y_std_ = np.broadcast_to(gpr._y_train_std, (Y.shape[1],)).astype(float)
+            mean, std = _output_normalisation(Y)          # what gpr (fitted on Y, normalize_y) divided by
+            self.y_mean_ = np.broadcast_to(mean, (Y.shape[1],)).astype(float)
+            self.y_std_ = np.broadcast_to(std, (Y.shape[1],)).astype(float)
         else:
             self.input_map_ = shared.input_map_
             self.y_mean_, self.y_std_ = shared.y_mean_.copy(), shared.y_std_.copy()
@@ -398,6 +399,11 @@ class GaussianProcessErrorModel(ErrorModelBase):
         X = validate_data(self, X, reset=False, dtype=np.float64)
         return self._shape_output(self._predict_trusted(X))
 
+    def predict_validated(self, X: NDArray[np.float64]) -> NDArray[np.float64]:
+        """:meth:`predict` of inputs already checked as a finite ``(n, d)`` float array, ``(n, outputs)`` mm (the
+        hot path of blends)."""
+        return self._predict_trusted(X)
+
     def _predict_trusted(self, X: NDArray[np.float64]) -> NDArray[np.float64]:
         """Prediction ``(n, n_outputs)`` on validated arrays (the hot path of blends)."""
         augmented, coef, centre = self._cache
@@ -539,6 +545,14 @@ class GaussianProcessErrorModel(ErrorModelBase):
         model.data_bounds_ = r.array("data_bounds", (2, n_in))
         model.n_features_in_, model.n_train_, model._y_1d = n_in, n, False
         return model._prepare()
+
+
+def _output_normalisation(Y: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The mean and scale ``(k,)`` of outputs ``Y`` (n, k) that scikit-learn's GP with ``normalize_y`` takes: the
+    standard deviation, or 1 where it is below ten machine epsilons (a constant output), the same sums."""
+    mean, std = np.mean(Y, axis=0), np.std(Y, axis=0)
+    std[std < 10 * np.finfo(std.dtype).eps] = 1.0
+    return mean, std
 
 
 def _solved(kernel, Z: NDArray[np.float64], Y: NDArray[np.float64]) -> GaussianProcessRegressor:

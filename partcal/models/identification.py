@@ -45,12 +45,13 @@ import numpy as np
 import scipy.linalg
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
-from scipy.spatial.transform import Rotation
 
 from .._validation import check_array
 from ..errors import DataError
-from ..metrics import held_joints
-from ..robot.kinematics import Robot, matrix_from_euler_deg, rpy_deg_from_matrix
+from ..metrics import held_joints, pooled_rms
+from ..robot.kinematics import Robot
+from ..robot.rotations import (matrix_from_rotation_vector, matrix_from_rpy_deg, rotation_vectors_from_matrices,
+                               rpy_deg_from_matrix)
 from .joint_errors import JointErrors
 from .targets import Extra
 
@@ -121,7 +122,7 @@ def robot_with(nominal: Robot, values: NDArray[np.float64], parametrization: str
     follow its fixed transform: ``E' = E Tr(x, y, z) Rz(rz) Ry(ry) Rx(rx)``.
     """
     rows, size = nominal.alpha_deg.size, geometric_size(nominal, parametrization)
-    turn = matrix_from_euler_deg(values[size - 3:size])
+    turn = matrix_from_rpy_deg(values[size - 3:size])
     moved = dict(tool_mm=values[size - 9:size - 6].copy(), base_rotation=turn @ nominal.base_rotation,
                  base_mm=turn @ nominal.base_mm + values[size - 6:size - 3])
     if parametrization == "complete":
@@ -138,9 +139,9 @@ def _corrected_origins(nominal: Robot, errors: NDArray[np.float64]) -> NDArray[n
     ``(R, 6)`` (xyz mm, rpy deg)."""
     out = np.zeros((errors.shape[0], 6)) if nominal.origins is None else nominal.origins.copy()
     for r in np.flatnonzero(np.any(errors != 0, axis=1)):
-        rot = matrix_from_euler_deg(out[r, 3:])
+        rot = matrix_from_rpy_deg(out[r, 3:])
         out[r, :3] = out[r, :3] + rot @ errors[r, :3]
-        out[r, 3:] = rpy_deg_from_matrix(rot @ matrix_from_euler_deg(errors[r, 3:]))
+        out[r, 3:] = rpy_deg_from_matrix(rot @ matrix_from_rpy_deg(errors[r, 3:]))
     return out
 
 
@@ -180,9 +181,9 @@ def complete_axes(robot: Robot, q_deg: NDArray[np.float64], values: NDArray[np.f
     shifts, axes = np.empty_like(frames), np.empty_like(frames)
     for r in range(rows):
         rx, ry, rz = turns[r]
-        f = frames[:, r] @ matrix_from_euler_deg(turns[r]).T
-        local = np.column_stack([matrix_from_euler_deg([0.0, 0.0, rz]) @ matrix_from_euler_deg([0.0, ry, 0.0])
-                                 @ [1.0, 0, 0], matrix_from_euler_deg([0.0, 0.0, rz]) @ [0, 1.0, 0], [0, 0, 1.0]])
+        f = frames[:, r] @ matrix_from_rpy_deg(turns[r]).T
+        local = np.column_stack([matrix_from_rpy_deg([0.0, 0.0, rz]) @ matrix_from_rpy_deg([0.0, ry, 0.0])
+                                 @ [1.0, 0, 0], matrix_from_rpy_deg([0.0, 0.0, rz]) @ [0, 1.0, 0], [0, 0, 1.0]])
         shifts[:, r], axes[:, r] = f, f @ local
     return origins, shifts, axes
 
@@ -207,8 +208,8 @@ def base_axes(nominal: Robot, values: NDArray[np.float64], parametrization: str 
     """The axes ``(3,)`` the base correction's ``rx, ry, rz`` turn about (``Rz Ry Rx``), in the measurement frame."""
     size = geometric_size(nominal, parametrization)
     _, ry, rz = values[size - 3:size]
-    turn_z = matrix_from_euler_deg(np.array([0.0, 0.0, rz]))
-    return [turn_z @ matrix_from_euler_deg(np.array([0.0, ry, 0.0])) @ [1.0, 0, 0], turn_z @ [0, 1.0, 0],
+    turn_z = matrix_from_rpy_deg(np.array([0.0, 0.0, rz]))
+    return [turn_z @ matrix_from_rpy_deg(np.array([0.0, ry, 0.0])) @ [1.0, 0, 0], turn_z @ [0, 1.0, 0],
             np.array([0, 0, 1.0])]
 
 
@@ -559,11 +560,11 @@ def _target_rms(resid: NDArray[np.float64], n: int, extra: Extra | None) -> tupl
     (degrees, None without one), from the stacked residuals of :func:`identify`."""
     k = 1 + (len(extra.tools_mm) if extra is not None else 0)
     blocks = resid[:3 * n * k].reshape(k, n, 3)
-    rms = [float(np.sqrt(np.mean(np.sum(b**2, axis=1)))) for b in blocks]
+    rms = [pooled_rms(b) for b in blocks]
     if extra is None or extra.rotations is None:
         return rms, None
     turns = resid[3 * n * k:].reshape(n, 3) / extra.mm_per_rad
-    return rms, float(np.degrees(np.sqrt(np.mean(np.sum(turns**2, axis=1)))))
+    return rms, float(np.degrees(pooled_rms(turns)))
 
 
 PLAUSIBLE_ERROR = {"mm": 1.0, "deg": 0.1}
@@ -763,9 +764,9 @@ def _orientation(nominal: Robot, q_actual, design, moves, values, own: int, extr
     """
     size, rows, n = geometric_size(nominal, parametrization), nominal.alpha_deg.size, q_actual.shape[0]
     robot = robot_with(nominal, values[:own], parametrization)
-    model = robot.forward(q_actual)[:, :3, :3] @ Rotation.from_rotvec(values[-3:], degrees=True).as_matrix()
+    model = robot.forward(q_actual)[:, :3, :3] @ matrix_from_rotation_vector(np.radians(values[-3:]))
     weight = extra.mm_per_rad
-    turns = Rotation.from_matrix(model @ extra.rotations.transpose(0, 2, 1)).as_rotvec()
+    turns = rotation_vectors_from_matrices(model @ extra.rotations.transpose(0, 2, 1))
     residuals = weight * turns.ravel()
     if not jacobian:
         return residuals, None

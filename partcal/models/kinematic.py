@@ -15,7 +15,6 @@ from pathlib import PurePath
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial.transform import Rotation
 from sklearn.base import clone
 from sklearn.utils.validation import check_is_fitted, validate_data
 
@@ -24,6 +23,7 @@ from ..errors import DataError, ModelFileError
 from ..metrics import MRAD_PER_DEG, MRAD_PER_RAD, ORIENTATION, POSITION, ExtrapolationWarning, distance_outside_boxes
 from ..robot.description import load_robot, robot_from_dict, robot_to_dict
 from ..robot.kinematics import ORIENTATION_MM_PER_RAD, Robot
+from ..robot.rotations import matrix_from_rotation_vector, rotation_vectors_from_matrices
 from .base import ErrorModelBase, box_points, seed_from
 from .features import varying_inputs
 from .identification import (PARAMETRIZATIONS, PRIMARY_TARGET, STATUSES, Identification, geometric_size, identify,
@@ -306,9 +306,9 @@ class KinematicModel(ErrorModelBase):
             return self.identified_robot_.positions(actual) - self.robot_.positions(X)
         model, nominal = self.identified_robot_.forward(actual), self.robot_.forward(X)
         if self.orientation_:
-            model[:, :3, :3] = model[:, :3, :3] @ Rotation.from_rotvec(self.identification_.value[-3:],
-                                                                      degrees=True).as_matrix()
-        turns = Rotation.from_matrix(model[:, :3, :3] @ nominal[:, :3, :3].transpose(0, 2, 1)).as_rotvec()
+            model[:, :3, :3] = model[:, :3, :3] @ matrix_from_rotation_vector(
+                np.radians(self.identification_.value[-3:]))
+        turns = rotation_vectors_from_matrices(model[:, :3, :3] @ nominal[:, :3, :3].transpose(0, 2, 1))
         return np.hstack([model[:, :3, 3] - nominal[:, :3, 3], turns * MRAD_PER_RAD])
 
     def predict_target(self, X, target: str, payload_kg=None) -> NDArray[np.float64]:

@@ -24,11 +24,11 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial.transform import Rotation
 
 from .._validation import check_array
 from ..errors import DataError
 from ..robot.kinematics import ORIENTATION_MM_PER_RAD, Robot
+from ..robot.rotations import matrices_from_rotation_vectors
 from .joint_errors import JointErrors
 
 PROBE_PARAMETERS = (("probe.rx", "deg"), ("probe.ry", "deg"), ("probe.rz", "deg"))
@@ -115,5 +115,5 @@ def extra_from(robot: Robot, q_deg: NDArray[np.float64], targets: dict | None, o
         turns = check_array(orientation_deg, "orientation_deg", columns=3)
         if turns.shape[0] != n:
             raise DataError(f"orientation_deg has {turns.shape[0]} rows but X has {n}")
-        rotations = Rotation.from_rotvec(turns, degrees=True).as_matrix() @ robot.forward(q_deg)[:, :3, :3]
+        rotations = matrices_from_rotation_vectors(np.radians(turns)) @ robot.forward(q_deg)[:, :3, :3]
     return Extra(tools, measured, rotations, float(mm_per_rad))

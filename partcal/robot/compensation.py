@@ -36,6 +36,7 @@ from numpy.typing import NDArray
 from ..errors import DataError
 from . import ik, ik_refine
 from .kinematics import Robot, checked_poses, ik_settings
+from .rotations import matrices_from_rotation_vectors, rotation_vectors_from_matrices
 
 
 SINGULAR_CONDITIONING = 1e-3    # a pose Jacobian whose singular values span more than this is at a singularity
@@ -198,11 +199,11 @@ def false_target_joints(predict: Callable[[NDArray[np.float64]], NDArray[np.floa
     full IK per fixed-point iteration. ``iterations`` counts the second
     phase's steps (at most ``max_iter``).
     """
-    free = robot._free_joints(fixed)
+    free = robot.free_joints(fixed)
     q = ik.solve(robot, targets_mm, np.array(seeds_deg, dtype=float), free, ik.Settings())[0]
     q, iterations = ik.solve(robot, targets_mm, q, free, ik.Settings(max_iter=max_iter), bias=predict,
                              tol_mm=tol_mm)
-    reached = robot._positions(q)
+    reached = robot.positions_validated(q)
     with np.errstate(over="ignore", invalid="ignore"):
         residual = np.linalg.norm(reached + predict(q) - targets_mm, axis=1)
     converged = (residual <= tol_mm) & robot.within_limits(q)      # a pose the robot cannot take is no answer
@@ -235,8 +236,8 @@ def false_target_poses(predict: Callable[[NDArray[np.float64]], NDArray[np.float
     posture take the compensated pose.
     """
     poses = checked_poses(poses)
-    free, settings = robot._free_joints(fixed), ik_settings(tol_mm, max_iter, 10.0, 0.05, tol_deg=tol_deg,
-                                                             length_mm=length_mm)
+    free, settings = robot.free_joints(fixed), ik_settings(tol_mm, max_iter, 10.0, 0.05, tol_deg=tol_deg,
+                                                            length_mm=length_mm)
     positions, rotations = poses[:, :3, 3], poses[:, :3, :3]
 
     def errors(q):          # the predicted pose errors; a non-finite one moves nothing (and never converges)
@@ -246,8 +247,8 @@ def false_target_poses(predict: Callable[[NDArray[np.float64]], NDArray[np.float
                             f"radians); got shape {e.shape}")
         return np.where(np.isfinite(e).all(axis=1, keepdims=True), e, 0.0)
 
-    q = ik.solve_pose(robot, positions, rotations, robot._seeds(seeds_deg, len(poses)), free, ik.Settings(), 1e-8,
-                      length_mm)[0]
+    q = ik.solve_pose(robot, positions, rotations, robot.checked_seeds(seeds_deg, len(poses)), free, ik.Settings(),
+                      1e-8, length_mm)[0]
     q, iterations = ik.solve_pose(robot, positions, rotations, q, free, settings, tol_deg, length_mm, bias=errors)
     left = np.flatnonzero(iterations >= max_iter)         # near a singularity: the whole equation's slope
     if left.size:
@@ -259,8 +260,8 @@ def false_target_poses(predict: Callable[[NDArray[np.float64]], NDArray[np.float
         finite = np.isfinite(np.asarray(predict(q), dtype=float)).all(axis=1)
     at, turned = ik.biased_pose(nominal[:, :3, 3].T, nominal[:, :3, :3], errors(q))
     residual_mm = np.where(finite, np.linalg.norm(at.T - positions, axis=1), np.inf)
-    residual_deg = np.where(finite, np.degrees(np.linalg.norm(ik.rotation_vectors(rotations @ turned.transpose(0, 2, 1)),
-                                                                axis=1)), np.inf)
+    miss_rotvec = rotation_vectors_from_matrices(rotations @ turned.transpose(0, 2, 1))
+    residual_deg = np.where(finite, np.degrees(np.linalg.norm(miss_rotvec, axis=1)), np.inf)
     converged = (residual_mm <= tol_mm) & (residual_deg <= tol_deg) & robot.within_limits(q)
     singular = np.zeros(len(q), dtype=bool)
     off = np.flatnonzero(~converged)
@@ -297,8 +298,6 @@ def false_target_cartesian_poses(predict: Callable[[NDArray[np.float64]], NDArra
     >>> np.degrees(np.arctan2(r.commanded_rotation[0, 1, 0], r.commanded_rotation[0, 0, 0])).round(4)
     np.float64(-0.573)
     """
-    from scipy.spatial.transform import Rotation
-
     poses = checked_poses(poses)
     rotations = poses[:, :3, :3]
 
@@ -314,10 +313,10 @@ def false_target_cartesian_poses(predict: Callable[[NDArray[np.float64]], NDArra
         turn = errors(position.commanded_mm)[:, 3:]
     ok = np.isfinite(turn).all(axis=1) & np.isfinite(position.residual_mm)
     turn[~ok] = 0.0
-    commanded = Rotation.from_rotvec(-turn).as_matrix() @ rotations
-    real = Rotation.from_rotvec(turn).as_matrix() @ commanded            # what the model says the robot reaches
-    residual_deg = np.where(ok, np.degrees(np.linalg.norm(ik.rotation_vectors(rotations @ real.transpose(0, 2, 1)),
-                                                          axis=1)), np.inf)
+    commanded = matrices_from_rotation_vectors(-turn) @ rotations
+    real = matrices_from_rotation_vectors(turn) @ commanded            # what the model says the robot reaches
+    miss_rotvec = rotation_vectors_from_matrices(rotations @ real.transpose(0, 2, 1))
+    residual_deg = np.where(ok, np.degrees(np.linalg.norm(miss_rotvec, axis=1)), np.inf)
     return dataclasses.replace(position, converged=position.converged & ok & (residual_deg <= tol_deg),
                                commanded_rotation=commanded, residual_deg=residual_deg)
 

@@ -20,7 +20,8 @@ from numpy.typing import NDArray
 
 from .._yamlio import load_yaml
 from ..errors import ConfigError, DataError
-from .kinematics import Robot, matrix_from_euler_deg, rpy_deg_from_matrix
+from .kinematics import Robot
+from .rotations import matrix_from_rpy_deg, rpy_deg_from_matrix
 from .urdf import UrdfReference, is_urdf, robot_from_urdf
 
 MAX_JOINTS = 12
@@ -158,7 +159,7 @@ def robot_from_dict(spec: dict, source: str = "robot", lines: dict[str, int] | N
     return Robot(name=str(spec["name"]), n_joints=n, alpha_deg=alpha, d_mm=d, a_mm=a,
                  theta_offset_deg=off, coupling=coupling, tool_mm=tool, limits_deg=limits,
                  home_deg=home, constraints=constraints, origins=origins, prismatic=prismatic,
-                 base_rotation=matrix_from_euler_deg(base[3:]), base_mm=base[:3], floor_mm=floor)
+                 base_rotation=matrix_from_rpy_deg(base[3:]), base_mm=base[:3], floor_mm=floor)
 
 
 class _Reader:

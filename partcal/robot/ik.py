@@ -39,7 +39,9 @@ from typing import Callable
 import numpy as np
 from numpy.typing import NDArray
 
-_CHUNK = 4096          # targets per block: the working arrays stay in cache
+from .rotations import matrices_from_rotation_vectors, rotation_vectors_from_matrices
+
+CHUNK = 4096           # targets per block: the working arrays stay in cache
 _SEGMENT = 256         # path points per chain: keeps the correction accurate on long paths
 _PASSES = 12
 _I1, _I2 = [1, 2, 0], [2, 0, 1]
@@ -84,8 +86,8 @@ def solve(robot, targets: NDArray[np.float64], q: NDArray[np.float64], free: NDA
     out = np.array(q, dtype=float)
     iterations = np.zeros(len(out), dtype=np.int64)
     jac = np.empty((len(free), 3, len(out))) if seed_jacobian else None
-    for start in range(0, len(out), _CHUNK):
-        block = slice(start, start + _CHUNK)
+    for start in range(0, len(out), CHUNK):
+        block = slice(start, start + CHUNK)
         qT, its = _solve_block(robot, targets[block].T, out[block].T, free, settings, bias,
                                settings.tol_mm if tol_mm is None else tol_mm,
                                None if jac is None else jac[:, :, block])
@@ -100,36 +102,35 @@ def _solve_block(robot, targets, qT, free, settings: Settings, bias, tol, seed_j
     """
     qT, targets = qT.copy(), np.ascontiguousarray(targets)
     m = qT.shape[1]
-    rows = robot._rows
-    record = robot._moving(free)
+    record = robot.moving_rows(free)
     moving = set(record)
-    still = {r for r in range(len(rows)) if r not in moving}
-    fixed_trig = robot._trig(qT, rows=still)          # rows that no free joint turns: once per block
+    still = {r for r in range(robot.n_rows) if r not in moving}
+    fixed_trig = robot.rotors(qT, rows=still)          # rows that no free joint turns: once per block
     lo, hi = robot.limits_deg[free, 0][:, None], robot.limits_deg[free, 1][:, None]
     done_q, iterations = qT, np.zeros(m, dtype=np.int64)
     idx = np.arange(m)
     for _ in range(settings.max_iter):
-        moved = robot._trig(qT, rows=moving)
-        trig = [fixed_trig[r] if r in still else moved[r] for r in range(len(rows))]
-        p, _, frames = robot._walk(trig, record=record)
+        moved = robot.rotors(qT, rows=moving)
+        trig = [fixed_trig[r] if r in still else moved[r] for r in range(robot.n_rows)]
+        p, _, frames = robot.walk(trig, record=record)
         err = targets - p
         if bias is not None:
             err -= bias(qT.T).T
         keep = (err[0] * err[0] + err[1] * err[1] + err[2] * err[2]) > tol * tol
         going = np.count_nonzero(keep)
         if seed_jac is not None:
-            jac = seed_jac[...] = robot._jacobian(p, frames, free)
+            jac = seed_jac[...] = robot.walk_jacobian(p, frames, free)
         if not going:
             break
         if seed_jac is None:
-            jac = robot._jacobian(p, frames, free)
+            jac = robot.walk_jacobian(p, frames, free)
         seed_jac = None
         if going < keep.size:                          # drop the converged targets
             done_q[:, idx[~keep]] = qT[:, ~keep]
             idx, qT, targets, err, jac = idx[keep], qT[:, keep], targets[:, keep], err[:, keep], jac[:, :, keep]
             fixed_trig = [t[keep] if isinstance(t, np.ndarray) else (t[0], t[1][keep]) if isinstance(t, tuple) else t
                           for t in fixed_trig]
-        _take_step(qT, free, _dls_step(jac, err, settings.damping), settings, lo, hi)
+        take_step(qT, free, _dls_step(jac, err, settings.damping), settings, lo, hi)
         iterations[idx] += 1
     done_q[:, idx] = qT
     return done_q, iterations
@@ -143,13 +144,14 @@ def within_pose_tolerance(err: NDArray[np.float64], tol_mm: float, tol_length: f
 def pose_jacobian(robot, p, frames, free: NDArray[np.intp], length: float) -> NDArray[np.float64]:
     """The forward kinematics' pose Jacobian (F, 6, m) per degree of the walked chain: the position's rows, then
     the turn's times ``length``."""
-    return np.concatenate([robot._jacobian(p, frames, free), length * robot._jacobian(p, frames, free, True)],
+    return np.concatenate([robot.walk_jacobian(p, frames, free), length * robot.walk_jacobian(p, frames, free, True)],
                           axis=1)
 
 
-def _take_step(qT, free, step, settings: Settings, lo, hi) -> None:
-    """Move the free joints of ``qT`` (N, m) by ``step`` (F, m), each target's step capped at
-    ``max_step_deg`` for its largest joint, and clipped to the joint limits ``lo, hi`` (F, 1)."""
+def take_step(qT, free, step, settings: Settings, lo, hi) -> None:
+    """Move the free joints of ``qT`` (N, m) degrees in place by ``step`` (F, m) degrees (changed too), each
+    target's step capped at ``settings.max_step_deg`` for its largest joint, and clipped to the joint limits
+    ``lo, hi`` (F, 1) degrees of the joints ``free`` (0-based)."""
     biggest = np.abs(step).max(axis=0)
     np.maximum(biggest, 1e-300, out=biggest)
     step *= np.minimum(1.0, settings.max_step_deg / biggest)
@@ -200,8 +202,8 @@ def solve_pose(robot, positions: NDArray[np.float64], rotations: NDArray[np.floa
     out = np.array(q, dtype=float)
     iterations = np.zeros(len(out), dtype=np.int64)
     tol_rad = np.radians(tol_deg)
-    for start in range(0, len(out), _CHUNK):
-        block = slice(start, start + _CHUNK)
+    for start in range(0, len(out), CHUNK):
+        block = slice(start, start + CHUNK)
         out[block], iterations[block] = _pose_block(robot, positions[block].T, rotations[block], out[block].T,
                                                     free, settings, tol_rad, length_mm, bias)
     return out, iterations
@@ -209,23 +211,21 @@ def solve_pose(robot, positions: NDArray[np.float64], rotations: NDArray[np.floa
 
 def biased_pose(p: NDArray[np.float64], reached: NDArray[np.float64], error: NDArray[np.float64]) -> tuple:
     """The pose ``(p (3, m), R (m, 3, 3))`` moved by a pose error ``(m, 6)``: position mm, rotation vector rad."""
-    from scipy.spatial.transform import Rotation
-
-    return p + error[:, :3].T, Rotation.from_rotvec(error[:, 3:]).as_matrix() @ reached
+    return p + error[:, :3].T, matrices_from_rotation_vectors(error[:, 3:]) @ reached
 
 
 def _pose_block(robot, targets, rotations, qT, free, settings: Settings, tol_rad: float, length: float, bias=None):
     """:func:`solve_pose` on one block: ``targets`` (3, m), ``rotations`` (m, 3, 3), ``qT`` (N, m)."""
     qT = qT.copy()
-    record = robot._moving(free)
+    record = robot.moving_rows(free)
     lo, hi = robot.limits_deg[free, 0][:, None], robot.limits_deg[free, 1][:, None]
     idx, done_q = np.arange(qT.shape[1]), qT
     iterations = np.zeros(qT.shape[1], dtype=np.int64)
     for _ in range(settings.max_iter):
-        p, axes, frames = robot._walk(robot._trig(qT), record=record)
+        p, axes, frames = robot.walk(robot.rotors(qT), record=record)
         reached = np.stack([np.broadcast_to(a, p.shape) for a in axes], axis=1).transpose(2, 0, 1)   # (m, 3, 3)
         at, turned = (p, reached) if bias is None else biased_pose(p, reached, bias(qT.T))
-        turn = rotation_vectors(rotations @ turned.transpose(0, 2, 1)).T                              # (3, m) rad
+        turn = rotation_vectors_from_matrices(rotations @ turned.transpose(0, 2, 1)).T          # (3, m) rad
         err = np.concatenate([targets - at, length * turn])
         keep = ~within_pose_tolerance(err, settings.tol_mm, length * tol_rad)
         if not keep.any():
@@ -238,17 +238,10 @@ def _pose_block(robot, targets, rotations, qT, free, settings: Settings, tol_rad
         J = jac.transpose(2, 1, 0)                                                              # (m, 6, F)
         A = J @ J.transpose(0, 2, 1) + settings.damping ** 2 * np.eye(6)
         step = (J.transpose(0, 2, 1) @ np.linalg.solve(A, err.T[:, :, None]))[:, :, 0].T        # (F, m)
-        _take_step(qT, free, step, settings, lo, hi)
+        take_step(qT, free, step, settings, lo, hi)
         iterations[idx] += 1
     done_q[:, idx] = qT
     return done_q.T, iterations
-
-
-def rotation_vectors(R: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Rotation vectors (axis times angle, radians) of rotation matrices ``(n, 3, 3)``, shape (n, 3)."""
-    from scipy.spatial.transform import Rotation
-
-    return Rotation.from_matrix(R).as_rotvec()
 
 
 # ---------------------------------------------------------------------- paths

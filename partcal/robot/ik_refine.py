@@ -15,7 +15,8 @@ from typing import Callable
 import numpy as np
 from numpy.typing import NDArray
 
-from .ik import _CHUNK, Settings, _take_step, biased_pose, pose_jacobian, rotation_vectors, within_pose_tolerance
+from .ik import CHUNK, Settings, biased_pose, pose_jacobian, take_step, within_pose_tolerance
+from .rotations import rotation_vectors_from_matrices
 
 RESTARTS_DEG = (30.0, -30.0, 90.0, -90.0, 180.0, -180.0)   # along the weakest direction, from where the solve stuck
 
@@ -51,8 +52,8 @@ def refine_pose(robot, positions: NDArray[np.float64], rotations: NDArray[np.flo
 
     def lm(rows, start):
         q_out, its = np.array(start, dtype=float), np.zeros(len(rows), dtype=np.int64)
-        for k in range(0, len(rows), _CHUNK):
-            block, part = slice(k, k + _CHUNK), rows[k:k + _CHUNK]
+        for k in range(0, len(rows), CHUNK):
+            block, part = slice(k, k + CHUNK), rows[k:k + CHUNK]
             q_out[block], its[block] = _lm_block(robot, positions[part].T, rotations[part], q_out[block].T, free,
                                                  settings, tol_rad, length_mm, bias, fd_deg)
         return q_out, its
@@ -89,7 +90,7 @@ def refine_pose(robot, positions: NDArray[np.float64], rotations: NDArray[np.flo
 def conditioning(robot, q: NDArray[np.float64], free: NDArray[np.intp], length_mm: float) -> NDArray[np.float64]:
     """The ratio of the smallest to the largest singular value of the free joints' pose Jacobian at joints
     ``q`` (n, N) degrees (orientation rows times ``length_mm``), shape (n,): 0 at a singularity."""
-    p, _, frames = robot._walk(robot._trig(np.asarray(q, dtype=float).T), record=robot._moving(free))
+    p, _, frames = robot.walk(robot.rotors(np.asarray(q, dtype=float).T), record=robot.moving_rows(free))
     s = np.linalg.svd(pose_jacobian(robot, p, frames, free, length_mm).transpose(2, 1, 0), compute_uv=False)
     return s[:, -1] / np.maximum(s[:, 0], 1e-300)
 
@@ -97,12 +98,13 @@ def conditioning(robot, q: NDArray[np.float64], free: NDArray[np.intp], length_m
 def _pose_error(robot, targets, rotations, qT, free, length: float, bias, fd_deg: float | None = None):
     """The pose error (6, m), mm and ``length`` x rad, of joints ``qT`` (N, m); with ``fd_deg`` also the
     Jacobian of the whole equation ``d error / d q`` (m, 6, F) per degree."""
-    record = robot._moving(free) if fd_deg is not None else ()
-    p, axes, frames = robot._walk(robot._trig(qT), record=record)
+    record = robot.moving_rows(free) if fd_deg is not None else ()
+    p, axes, frames = robot.walk(robot.rotors(qT), record=record)
     reached = np.stack([np.broadcast_to(a, p.shape) for a in axes], axis=1).transpose(2, 0, 1)
     b = None if bias is None else bias(qT.T)
     at, turned = (p, reached) if b is None else biased_pose(p, reached, b)
-    err = np.concatenate([targets - at, length * rotation_vectors(rotations @ turned.transpose(0, 2, 1)).T])
+    turn = rotation_vectors_from_matrices(rotations @ turned.transpose(0, 2, 1)).T                 # (3, m) rad
+    err = np.concatenate([targets - at, length * turn])
     if fd_deg is None:
         return err
     jac = pose_jacobian(robot, p, frames, free, length)                              # (F, 6, m) per degree
@@ -142,7 +144,7 @@ def _lm_block(robot, targets, rotations, qT, free, settings: Settings, tol_rad: 
         A = JT @ jac + mu[:, None, None] * eye
         step = -np.linalg.solve(A, (JT @ err.T[:, :, None]))[:, :, 0].T                 # (F, m)
         trial = qT.copy()
-        _take_step(trial, free, step, settings, lo, hi)
+        take_step(trial, free, step, settings, lo, hi)
         new = _pose_error(robot, targets, rotations, trial, free, length, bias)
         new_cost = np.sum(new * new, axis=0)
         better = new_cost < cost

@@ -30,6 +30,11 @@ from numpy.typing import NDArray
 from .._validation import check_array
 from ..errors import DataError, UnreachableError
 from . import ik
+from .rotations import matrices_from_xyz_deg, rpy_deg_from_matrix, xyz_deg_from_matrices  # noqa: F401 - as before
+from .rotations import matrix_from_rpy_deg, rotation_vectors_from_matrices
+
+#: :func:`~partcal.robot.rotations.matrix_from_rpy_deg` by its name before rotations.py held every convention.
+matrix_from_euler_deg = matrix_from_rpy_deg
 
 _CHUNK = 8192
 _I1, _I2 = [1, 2, 0], [2, 0, 1]          # cross product: (a x b)_k = a_{k+1} b_{k+2} - a_{k+2} b_{k+1}
@@ -45,83 +50,10 @@ def _cos_sin_deg(angle_deg: NDArray[np.float64]) -> tuple[NDArray[np.float64], N
     return c, s
 
 
-def matrix_from_euler_deg(angles_deg) -> NDArray[np.float64]:
-    """The rotation ``Rz(rz) Ry(ry) Rx(rx)`` from angles ``(rx, ry, rz)`` in degrees, shape ``(3, 3)``.
-
-    Turns about the fixed x, then y, then z axes: the convention of the virtual
-    robot's base (``errors.base.rotation_deg``) and of the kinematic model's base
-    correction.
-
-    >>> (matrix_from_euler_deg([0.0, 0.0, 90.0]) @ [1.0, 0.0, 0.0]).round(12) + 0.0
-    array([0., 1., 0.])
-    """
-    rad = np.radians(np.asarray(angles_deg, dtype=float))
-    cx, cy, cz = np.cos(rad)
-    sx, sy, sz = np.sin(rad)
-    rot_x = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
-    rot_y = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
-    rot_z = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
-    return rot_z @ rot_y @ rot_x
-
-
-def rpy_deg_from_matrix(rotation) -> NDArray[np.float64]:
-    """Roll, pitch, yaw ``(3,)`` degrees of a rotation ``(3, 3)``: the inverse of :func:`matrix_from_euler_deg`
-    (a URDF origin's ``rpy``), pitch in [-90, 90].
-
-    Accurate near a pitch of +-90 degrees too: the yaw is taken first, then pitch and roll from what is
-    left after turning it back, ``Rz(-yaw) R = Ry(pitch) Rx(roll)``, whose entries are all of order one.
-
-    >>> rpy_deg_from_matrix(matrix_from_euler_deg([10.0, -20.0, 30.0])).round(12).tolist()
-    [10.0, -20.0, 30.0]
-    """
-    rot = np.asarray(rotation, dtype=float)
-    yaw = np.arctan2(rot[1, 0], rot[0, 0])
-    c, s = np.cos(yaw), np.sin(yaw)
-    left = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]]) @ rot
-    pitch = np.arctan2(-left[2, 0], left[0, 0])
-    roll = np.arctan2(-left[1, 2], left[1, 1])
-    return np.degrees([roll, pitch, yaw])
-
-
 ORIENTATION_MM_PER_RAD = 200.0
 """How many mm an orientation residual of one radian counts as beside position residuals (registration,
 identification): the displacement a turn causes 200 mm from its axis, about a tool plate's size. For a
 tracker's 0.02-0.03 mm and a 6-D probe's 0.005-0.01 degrees, this weighs each roughly by its noise."""
-
-
-def matrices_from_xyz_deg(angles_deg) -> NDArray[np.float64]:
-    """Rotations ``Rx(rx) Ry(ry) Rz(rz)`` from intrinsic XYZ angles ``(n, 3)`` degrees, shape ``(n, 3, 3)``.
-
-    Turns about the moving x, then the new y, then the newest z axis (the
-    same rotation as turns about the fixed z, y, then x axes). The convention
-    of the measured orientation columns ``rx_meas, ry_meas, rz_meas`` and of a
-    Leica T-Mac's export; :func:`matrix_from_euler_deg` is the other order.
-
-    >>> (matrices_from_xyz_deg([[90.0, 0.0, 90.0]])[0] @ [1.0, 0.0, 0.0]).round(12) + 0.0   # x: to y, then to z
-    array([0., 0., 1.])
-    """
-    rad = np.radians(np.atleast_2d(np.asarray(angles_deg, dtype=float)))
-    cx, cy, cz = np.cos(rad).T
-    sx, sy, sz = np.sin(rad).T
-    out = np.empty((rad.shape[0], 3, 3))
-    out[:, 0] = np.stack([cy * cz, -cy * sz, sy], axis=1)
-    out[:, 1] = np.stack([cx * sz + sx * sy * cz, cx * cz - sx * sy * sz, -sx * cy], axis=1)
-    out[:, 2] = np.stack([sx * sz - cx * sy * cz, sx * cz + cx * sy * sz, cx * cy], axis=1)
-    return out
-
-
-def xyz_deg_from_matrices(rotations) -> NDArray[np.float64]:
-    """Intrinsic XYZ angles ``(n, 3)`` degrees of rotations ``(n, 3, 3)``: the inverse of
-    :func:`matrices_from_xyz_deg`, with ``rx, rz`` in [-180, 180] and ``ry`` in [-90, 90].
-
-    >>> xyz_deg_from_matrices(matrices_from_xyz_deg([[10.0, -20.0, 30.0]])).round(12).tolist()
-    [[10.0, -20.0, 30.0]]
-    """
-    rot = np.asarray(rotations, dtype=float).reshape(-1, 3, 3)
-    ry = np.arcsin(np.clip(rot[:, 0, 2], -1.0, 1.0))
-    rx = np.arctan2(-rot[:, 1, 2], rot[:, 2, 2])
-    rz = np.arctan2(-rot[:, 0, 1], rot[:, 0, 0])
-    return np.degrees(np.stack([rx, ry, rz], axis=1))
 
 
 @dataclass(frozen=True, eq=False)
@@ -216,6 +148,15 @@ class Robot:
         return ok
 
     # ------------------------------------------------------------------ kinematics
+    # The walk is the robot layer's own geometry, public so that solvers (IK, identification) can walk the chain
+    # once per iteration: ``p, axes, frames = robot.walk(robot.rotors(qT), record=robot.moving_rows(free))``,
+    # then ``robot.walk_jacobian(p, frames, free)``. Joints enter transposed, ``qT`` (N, n) degrees, and
+    # vectors leave as (3, n): every operation then runs over contiguous runs of the n poses.
+    @property
+    def n_rows(self) -> int:
+        """The number of rows ``R`` of the chain (joint turns or slides, each with its fixed transform)."""
+        return len(self.alpha_deg)
+
     @functools.cached_property
     def _rows(self) -> tuple["_Row", ...]:
         """The DH rows compiled for the walk (built once per robot)."""
@@ -229,16 +170,25 @@ class Robot:
         """Row ``row``'s transform ``E`` as ``(rotation (3, 3), translation (3,) mm)`` of floats, None if identity."""
         if self.origins is None or not np.any(self.origins[row]):
             return None
-        rot = matrix_from_euler_deg(self.origins[row, 3:])
+        rot = matrix_from_rpy_deg(self.origins[row, 3:])
         return tuple(tuple(float(v) for v in line) for line in rot), tuple(float(v) for v in self.origins[row, :3])
 
-    def _trig(self, qT: NDArray[np.float64], rows=None) -> list:
-        """The rotor ``exp(-i theta)`` of each DH row (all, or those in ``rows``), for joints ``qT`` (N, n).
+    def rotors(self, qT: NDArray[np.float64], rows=None) -> list:
+        """The rotor ``exp(-i theta)`` of each row, the input of :meth:`walk`.
 
-        Constant rows give a Python complex, rows not asked for ``None``, a
-        sliding row the pair ``(rotor, slide (n,) mm)``. Every operation is
-        elementwise in the poses, so a pose gets the same bits alone or in any
-        batch.
+        Parameters
+        ----------
+        qT : ndarray, shape (N, n)
+            Joint angles in degrees (mm for a slide), one column per pose: the transpose of ``q_deg``.
+        rows : collection of int, optional
+            Only these rows (0-based); the others are ``None`` (a solver fills them from an earlier call).
+
+        Returns
+        -------
+        list of length R
+            Per row a complex array ``(n,)`` (its turn ``theta`` varies with the joints), a Python complex
+            (constant), ``None`` (not asked for), or for a sliding row the pair ``(rotor, slide (n,) mm)``.
+            Every operation is elementwise in the poses, so a pose gets the same bits alone or in any batch.
         """
         out: list = [None] * len(self._rows)
         varying = []
@@ -261,15 +211,29 @@ class Robot:
                 out[r] = rotors[k]
         return out
 
-    def _walk(self, trig: list, record=()) -> tuple:
-        """Walk the chain for the rows' rotors; return the tool position and frames.
+    def walk(self, trig: list, record=()) -> tuple:
+        """Walk the chain from the base to the tool for the rows' rotors (:meth:`rotors`).
 
         A frame is kept as ``w = x + i y`` (3, n) complex and ``z`` (3, n): the
         turn by ``theta`` about ``z`` is one complex product, ``w exp(-i theta)``.
-        Vectors are ``(3, n)``, so every operation runs over contiguous runs of
-        ``n`` values. Returns ``p`` (3, n), the last frame's axes ``(x, y, z)``
-        and, for each row in ``record``, the axis ``z`` and origin ``o`` (3, n)
-        it turns about.
+
+        Parameters
+        ----------
+        trig : list of length R
+            The rotors of every row, as :meth:`rotors` gives them.
+        record : collection of int
+            Rows (0-based; ``R`` for the frame after the last row) whose axis and origin to keep.
+
+        Returns
+        -------
+        p : ndarray, shape (3, n)
+            Tool positions in the base frame, mm.
+        axes : tuple of three ndarrays, shape (3, n) or (3, 1)
+            The tool frame's ``x, y, z`` axes in the base frame (unit vectors; an axis no joint turns
+            comes back as one column).
+        frames : dict
+            ``{row: (z (3, n), o (3, n) mm)}`` for each row in ``record``: the axis the row turns about
+            and its origin, in the base frame.
         """
         n = next((e.shape[-1] for e in (t[1] if isinstance(t, tuple) else t for t in trig)
                   if isinstance(e, np.ndarray)), 1)
@@ -374,7 +338,7 @@ class Robot:
         Frame 0 is the first DH frame (the base); frame ``k`` follows row ``k``.
         """
         qT = self.check_joints(q_deg).T
-        _, _, frames = self._walk(self._trig(qT), record=range(len(self._rows) + 1))
+        _, _, frames = self.walk(self.rotors(qT), record=range(len(self._rows) + 1))
         keys = sorted(frames)
         return (np.stack([frames[k][1].T for k in keys], axis=1), np.stack([frames[k][0].T for k in keys], axis=1))
 
@@ -402,20 +366,21 @@ class Robot:
         >>> robot.positions([[0, -90, -180, 0, 0, 0]]).round(2).tolist()
         [[1857.65, 0.0, 1555.32]]
         """
-        return self._positions(self.check_joints(q_deg))
+        return self.positions_validated(self.check_joints(q_deg))
 
-    def _positions(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
-        """:meth:`positions` on validated joints (n, N), in cache-sized blocks."""
+    def positions_validated(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
+        """:meth:`positions` of joint angles already checked as a float ``(n, N)`` array in degrees (as
+        :meth:`check_joints` returns them; nothing is checked here), shape ``(n, 3)`` mm, in cache-sized blocks."""
         out = np.empty((q.shape[0], 3))
         for start in range(0, q.shape[0], _CHUNK):  # cache-sized blocks: ~2x faster on big batches
             qT = q[start:start + _CHUNK].T
-            out[start:start + _CHUNK] = self._walk(self._trig(qT))[0].T
+            out[start:start + _CHUNK] = self.walk(self.rotors(qT))[0].T
         return out
 
     def forward(self, q_deg) -> NDArray[np.float64]:
         """Tool poses as homogeneous transforms, shape ``(n, 4, 4)`` (mm)."""
         q = self.check_joints(q_deg)
-        p, axes, _ = self._walk(self._trig(q.T))
+        p, axes, _ = self.walk(self.rotors(q.T))
         out = np.zeros((q.shape[0], 4, 4))
         n = q.shape[0]      # an axis that no joint turns (a planar arm's z) comes back as one column
         out[:, :3, :3] = np.stack([np.broadcast_to(a, (3, n)).T for a in axes], axis=-1)
@@ -435,26 +400,42 @@ class Robot:
         coupling matrix.
         """
         qT = self.check_joints(q_deg).T
-        _, jac = self._position_jacobian(self._trig(qT), np.arange(self.n_joints))
+        _, jac = self._position_jacobian(self.rotors(qT), np.arange(self.n_joints))
         return jac.transpose(2, 1, 0)
 
     def _position_jacobian(self, trig: list, free: NDArray[np.intp]):
         """Tool position (3, n) mm and Jacobian ``(F, 3, n)`` mm/deg for the joints ``free``."""
-        moving = self._moving(free)
-        p, _, frames = self._walk(trig, record=moving)
-        return p, self._jacobian(p, frames, free)
+        moving = self.moving_rows(free)
+        p, _, frames = self.walk(trig, record=moving)
+        return p, self.walk_jacobian(p, frames, free)
 
-    def _moving(self, free) -> list[int]:
-        """The DH rows that some joint in ``free`` turns."""
+    def moving_rows(self, free) -> list[int]:
+        """The rows (0-based, ascending) that some joint in ``free`` (0-based joint indices) turns or slides:
+        the ``record`` a :meth:`walk` needs for :meth:`walk_jacobian`."""
         free = {int(j) for j in free}
         return [r for r, row in enumerate(self._rows) if any(j in free for j, _ in row.terms)]
 
-    def _jacobian(self, p: NDArray[np.float64], frames: dict, free, angular: bool = False) -> NDArray[np.float64]:
-        """The Jacobian ``(F, 3, n)`` mm/deg from a walk that recorded the rows :meth:`_moving` gives; with
-        ``angular``, that of the tool's orientation instead (rad/deg: the axes the joints turn about).
+    def walk_jacobian(self, p: NDArray[np.float64], frames: dict, free, angular: bool = False) -> NDArray[np.float64]:
+        """The Jacobian of the walked tool position (or orientation) by the joints ``free``.
 
-        Sums run in a fixed order, elementwise in the poses: a pose gets the
-        same bits alone or in any batch (batched path IK relies on it).
+        Parameters
+        ----------
+        p : ndarray, shape (3, n)
+            Tool positions (mm) from :meth:`walk`.
+        frames : dict
+            The ``frames`` of that walk, which recorded at least the rows :meth:`moving_rows` gives for ``free``.
+        free : sequence of int, length F
+            0-based joints, in the order of the Jacobian's columns.
+        angular : bool
+            The orientation's Jacobian instead: the axes the joints turn the tool about, rad per degree
+            (zero for a slide).
+
+        Returns
+        -------
+        ndarray, shape (F, 3, n)
+            ``d p / d q`` in mm per degree (mm per mm for a slide), base frame. Sums run in a fixed order,
+            elementwise in the poses: a pose gets the same bits alone or in any batch (batched path IK
+            relies on it).
         """
         moving, plan = self._jacobian_plan(tuple(int(j) for j in free))
         jac = np.zeros((len(free), 3, p.shape[1]))
@@ -485,7 +466,7 @@ class Robot:
         plan = self._plans.get(free)
         if plan is None:
             where = {j: f for f, j in enumerate(free)}
-            moving = self._moving(free)
+            moving = self.moving_rows(free)
             plan = self._plans[free] = (moving, [(k, where[j], c) for k, r in enumerate(moving)
                                                  for j, c in self._rows[r].terms if j in where])
         return plan
@@ -554,9 +535,9 @@ class Robot:
         seeds = self.home_deg if seeds_deg is None else seeds_deg
         q = np.array(np.broadcast_to(np.asarray(seeds, dtype=float), (n, self.n_joints)))
         q = self.check_joints(q, "seeds_deg")
-        free = self._free_joints(fixed)
+        free = self.free_joints(fixed)
         q = ik.solve(self, targets, q, free, ik.Settings(tol_mm, max_iter, max_step_deg, damping))[0]
-        dist = np.linalg.norm(targets - self._positions(q), axis=1)
+        dist = np.linalg.norm(targets - self.positions_validated(q), axis=1)
         return IKResult(q_deg=q, error_mm=dist, success=(dist <= tol_mm) & self.within_limits(q))
 
     def inverse_pose(
@@ -587,14 +568,21 @@ class Robot:
             others end at the least-squares compromise and are not a success.
         """
         poses = checked_poses(poses)
-        q, free = self._seeds(seeds_deg, len(poses)), self._free_joints(fixed)
+        q, free = self.checked_seeds(seeds_deg, len(poses)), self.free_joints(fixed)
         settings = ik_settings(tol_mm, max_iter, max_step_deg, damping, tol_deg=tol_deg, length_mm=length_mm)
         q = ik.solve_pose(self, poses[:, :3, 3], poses[:, :3, :3], q, free, settings, tol_deg, length_mm)[0]
         error_mm, error_deg = pose_errors(self.forward(q), poses)
         return IKResult(q_deg=q, error_mm=error_mm, error_deg=error_deg,
                         success=(error_mm <= tol_mm) & (error_deg <= tol_deg) & self.within_limits(q))
 
-    def _free_joints(self, fixed) -> NDArray[np.intp]:
+    def free_joints(self, fixed) -> NDArray[np.intp]:
+        """The 0-based joints that move, ``(F,)`` ascending, when the 1-based joints ``fixed`` are held.
+
+        Raises
+        ------
+        DataError
+            A ``fixed`` entry that is not a joint number, or ``fixed`` holding every joint.
+        """
         bad = [j for j in fixed if not (isinstance(j, (int, np.integer)) and 1 <= j <= self.n_joints)]
         if bad:
             raise DataError(f"fixed joints must be in 1..{self.n_joints}; got {bad[0]!r}")
@@ -603,8 +591,9 @@ class Robot:
             raise DataError(f"fixed holds every joint of {self.name} (1..{self.n_joints}): nothing is left to move")
         return free
 
-    def _seeds(self, seeds_deg, n: int) -> NDArray[np.float64]:
-        """IK seeds ``(n, N)`` degrees from one seed (``(N,)`` or ``(1, N)``), one per target, or None (home)."""
+    def checked_seeds(self, seeds_deg, n: int) -> NDArray[np.float64]:
+        """IK seeds ``(n, N)`` degrees for ``n`` targets from ``seeds_deg``: one seed ``(N,)`` or ``(1, N)``
+        for all, one per target ``(n, N)``, or None (the home pose); checked finite, a bad shape refused."""
         seeds = np.asarray(self.home_deg if seeds_deg is None else seeds_deg, dtype=float)
         if seeds.shape not in ((self.n_joints,), (1, self.n_joints), (n, self.n_joints)):
             raise DataError(f"Expected seeds_deg with shape ({self.n_joints},) or ({n}, {self.n_joints}) (degrees), "
@@ -627,9 +616,9 @@ class Robot:
         """
         targets = check_array(targets_mm, "targets_mm", columns=3, min_rows=1)
         seed = self.check_joints(self.home_deg if seed_deg is None else seed_deg, "seed_deg")[0]
-        free = self._free_joints(fixed)
+        free = self.free_joints(fixed)
         q = ik.solve_path(self, targets, seed, free, ik.Settings(tol_mm))
-        errors = np.linalg.norm(targets - self._positions(q), axis=1)
+        errors = np.linalg.norm(targets - self.positions_validated(q), axis=1)
         ok = (errors <= tol_mm) & self.within_limits(q)
         if not ok.all():
             bad = np.flatnonzero(~ok)
@@ -765,10 +754,10 @@ def ik_settings(tol_mm, max_iter, max_step_deg, damping, *, tol_deg=0.0, length_
     return ik.Settings(float(tol_mm), int(max_iter), float(max_step_deg), float(damping))
 
 
-def flange_offset(flange: NDArray[np.float64], points_mm: NDArray[np.float64]) -> NDArray[np.float64]:
-    """The offset in the flange frame (3,) mm that best puts the tool on ``points_mm`` (n, 3) from flange poses
-    ``(n, 4, 4)``: the mean over the poses of ``R^T (p - o)``."""
-    return np.einsum("nji,nj->i", flange[:, :3, :3], points_mm - flange[:, :3, 3]) / len(points_mm)
+def flange_offset(base_T_flange: NDArray[np.float64], points_mm: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The offset in the flange frame (3,) mm that best puts the tool on ``points_mm`` (n, 3, base frame) from
+    flange poses ``base_T_flange`` ``(n, 4, 4)``: the mean over the poses of ``R^T (p - o)``."""
+    return np.einsum("nji,nj->i", base_T_flange[:, :3, :3], points_mm - base_T_flange[:, :3, 3]) / len(points_mm)
 
 
 def pose_errors(reached: NDArray[np.float64], wanted: NDArray[np.float64]
@@ -776,5 +765,5 @@ def pose_errors(reached: NDArray[np.float64], wanted: NDArray[np.float64]
     """Position error (mm) and orientation error (deg: the angle of ``R_wanted R_reached^T``) of poses
     ``(n, 4, 4)``, each shape (n,)."""
     dist = np.linalg.norm(wanted[:, :3, 3] - reached[:, :3, 3], axis=1)
-    return dist, np.degrees(np.linalg.norm(ik.rotation_vectors(wanted[:, :3, :3] @ reached[:, :3, :3]
+    return dist, np.degrees(np.linalg.norm(rotation_vectors_from_matrices(wanted[:, :3, :3] @ reached[:, :3, :3]
                                                                .transpose(0, 2, 1)), axis=1))

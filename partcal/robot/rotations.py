@@ -1,11 +1,19 @@
-"""Changes of representation of rotations and poses, named from -> to, batched.
+"""Changes of representation of rotations and poses, named from -> to: the one home of partcal's rotation
+conventions, each named for the format or vendor that writes it.
 
-The conventions of the robot vendors' programs (docs/predictor.md, "Robot programs"):
-
+- URDF's ``rpy`` (roll, pitch, yaw) in degrees: ``R = Rz(yaw) Ry(pitch) Rx(roll)``, turns about the fixed
+  x, then y, then z axes. partcal's robot YAML (``origin``, ``base``), the virtual robot's base
+  (``errors.base.rotation_deg``) and the kinematic model's base correction write rotations so.
+- The measurement CSV's orientation columns (``rx_meas, ry_meas, rz_meas``; a Leica T-Mac's export):
+  intrinsic X-Y-Z angles in degrees, ``R = Rx(rx) Ry(ry) Rz(rz)``.
 - KUKA ``A, B, C``: Z-Y-X Euler angles in degrees, ``R = Rz(A) Ry(B) Rx(C)`` (turns about the moving z,
-  then the new y, then the newest x; the same as turns about the fixed x, y, then z axes).
+  then the new y, then the newest x; the same as turns about the fixed x, y, then z axes): URDF's ``rpy``
+  written backwards.
 - ABB quaternions ``[q1, q2, q3, q4]``: scalar first, ``q1 = cos(angle / 2)``.
-- Universal Robots' rotation vectors ``[rx, ry, rz]``: axis times angle, radians.
+- Universal Robots' rotation vectors ``[rx, ry, rz]``: axis times angle, radians (and the rotation vectors
+  of pose errors and residuals).
+- Any other Euler order, as scipy names it (:func:`matrices_from_euler_deg`), for telling a file's
+  convention from its numbers.
 
 Each ``*_from_matrices`` function takes an optional ``near``: the representation the rotation had before
 (one per row). A rotation has several writings (``q`` and ``-q``; a rotation vector of angle near pi and
@@ -20,14 +28,103 @@ from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
 
+def matrices_from_rpy_deg(rpy_deg) -> NDArray[np.float64]:
+    """Rotations ``Rz(yaw) Ry(pitch) Rx(roll)`` ``(n, 3, 3)`` from URDF angles ``(n, 3)`` degrees ``roll, pitch, yaw``.
+
+    Turns about the fixed x, then y, then z axes (a URDF origin's ``rpy``).
+
+    >>> (matrices_from_rpy_deg([[0.0, 0.0, 90.0]])[0] @ [1.0, 0.0, 0.0]).round(12) + 0.0
+    array([0., 1., 0.])
+    """
+    rad = np.radians(np.asarray(rpy_deg, dtype=float).reshape(-1, 3))
+    c, s = np.cos(rad), np.sin(rad)
+    turns = np.zeros((3, len(rad), 3, 3))            # Rx, Ry, Rz of every row
+    for k, (i, j) in enumerate(((1, 2), (2, 0), (0, 1))):
+        turns[k, :, k, k] = 1.0
+        turns[k, :, i, i] = turns[k, :, j, j] = c[:, k]
+        turns[k, :, i, j], turns[k, :, j, i] = -s[:, k], s[:, k]
+    return turns[2] @ turns[1] @ turns[0]
+
+
+def matrix_from_rpy_deg(rpy_deg) -> NDArray[np.float64]:
+    """The rotation ``Rz(yaw) Ry(pitch) Rx(roll)`` ``(3, 3)`` from one URDF ``rpy`` ``(3,)`` degrees: the one
+    row of :func:`matrices_from_rpy_deg`.
+
+    >>> (matrix_from_rpy_deg([0.0, 0.0, 90.0]) @ [1.0, 0.0, 0.0]).round(12) + 0.0
+    array([0., 1., 0.])
+    """
+    return matrices_from_rpy_deg(rpy_deg)[0]
+
+
+def rpy_deg_from_matrix(rotation) -> NDArray[np.float64]:
+    """URDF roll, pitch, yaw ``(3,)`` degrees of a rotation ``(3, 3)``: the inverse of :func:`matrix_from_rpy_deg`,
+    pitch in [-90, 90].
+
+    Accurate near a pitch of +-90 degrees too: the yaw is taken first, then pitch and roll from what is
+    left after turning it back, ``Rz(-yaw) R = Ry(pitch) Rx(roll)``, whose entries are all of order one.
+
+    >>> rpy_deg_from_matrix(matrix_from_rpy_deg([10.0, -20.0, 30.0])).round(12).tolist()
+    [10.0, -20.0, 30.0]
+    """
+    rot = np.asarray(rotation, dtype=float)
+    yaw = np.arctan2(rot[1, 0], rot[0, 0])
+    c, s = np.cos(yaw), np.sin(yaw)
+    left = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]]) @ rot
+    pitch = np.arctan2(-left[2, 0], left[0, 0])
+    roll = np.arctan2(-left[1, 2], left[1, 1])
+    return np.degrees([roll, pitch, yaw])
+
+
+def matrices_from_xyz_deg(angles_deg) -> NDArray[np.float64]:
+    """Rotations ``Rx(rx) Ry(ry) Rz(rz)`` from intrinsic XYZ angles ``(n, 3)`` degrees, shape ``(n, 3, 3)``.
+
+    Turns about the moving x, then the new y, then the newest z axis (the
+    same rotation as turns about the fixed z, y, then x axes). The convention
+    of the measured orientation columns ``rx_meas, ry_meas, rz_meas`` and of a
+    Leica T-Mac's export; :func:`matrices_from_rpy_deg` is the other order.
+
+    >>> (matrices_from_xyz_deg([[90.0, 0.0, 90.0]])[0] @ [1.0, 0.0, 0.0]).round(12) + 0.0   # x: to y, then to z
+    array([0., 0., 1.])
+    """
+    rad = np.radians(np.atleast_2d(np.asarray(angles_deg, dtype=float)))
+    cx, cy, cz = np.cos(rad).T
+    sx, sy, sz = np.sin(rad).T
+    out = np.empty((rad.shape[0], 3, 3))
+    out[:, 0] = np.stack([cy * cz, -cy * sz, sy], axis=1)
+    out[:, 1] = np.stack([cx * sz + sx * sy * cz, cx * cz - sx * sy * sz, -sx * cy], axis=1)
+    out[:, 2] = np.stack([sx * sz - cx * sy * cz, sx * cz + cx * sy * sz, cx * cy], axis=1)
+    return out
+
+
+def xyz_deg_from_matrices(rotations) -> NDArray[np.float64]:
+    """Intrinsic XYZ angles ``(n, 3)`` degrees of rotations ``(n, 3, 3)``: the inverse of
+    :func:`matrices_from_xyz_deg`, with ``rx, rz`` in [-180, 180] and ``ry`` in [-90, 90].
+
+    >>> xyz_deg_from_matrices(matrices_from_xyz_deg([[10.0, -20.0, 30.0]])).round(12).tolist()
+    [[10.0, -20.0, 30.0]]
+    """
+    rot = np.asarray(rotations, dtype=float).reshape(-1, 3, 3)
+    ry = np.arcsin(np.clip(rot[:, 0, 2], -1.0, 1.0))
+    rx = np.arctan2(-rot[:, 1, 2], rot[:, 2, 2])
+    rz = np.arctan2(-rot[:, 0, 1], rot[:, 0, 0])
+    return np.degrees(np.stack([rx, ry, rz], axis=1))
+
+
+def matrices_from_euler_deg(order: str, angles_deg) -> NDArray[np.float64]:
+    """Rotations ``(n, 3, 3)`` from Euler angles ``(n, 3)`` degrees in scipy's ``order`` (``"XYZ"`` upper case:
+    intrinsic, turns about the moving axes; ``"xyz"`` lower case: extrinsic, about the fixed axes)."""
+    return Rotation.from_euler(order, np.atleast_2d(np.asarray(angles_deg, dtype=float)),
+                               degrees=True).as_matrix().reshape(-1, 3, 3)
+
+
 def matrices_from_kuka_abc(abc_deg) -> NDArray[np.float64]:
-    """Rotations ``Rz(A) Ry(B) Rx(C)`` ``(n, 3, 3)`` from KUKA angles ``(n, 3)`` degrees ``A, B, C``.
+    """Rotations ``Rz(A) Ry(B) Rx(C)`` ``(n, 3, 3)`` from KUKA angles ``(n, 3)`` degrees ``A, B, C``: URDF's
+    ``rpy`` backwards (:func:`matrices_from_rpy_deg` of ``C, B, A``).
 
     >>> (matrices_from_kuka_abc([[90.0, 0.0, 0.0]])[0] @ [1.0, 0.0, 0.0]).round(12) + 0.0   # A turns about z
     array([0., 1., 0.])
     """
-    abc = np.atleast_2d(np.asarray(abc_deg, dtype=float))
-    return Rotation.from_euler("ZYX", abc, degrees=True).as_matrix().reshape(-1, 3, 3)
+    return matrices_from_rpy_deg(np.asarray(abc_deg, dtype=float).reshape(-1, 3)[:, ::-1])
 
 
 def kuka_abc_from_matrices(rotations, near=None) -> NDArray[np.float64]:
@@ -77,6 +174,16 @@ def quaternions_from_matrices(rotations, near=None) -> NDArray[np.float64]:
 def matrices_from_rotation_vectors(rotvecs_rad) -> NDArray[np.float64]:
     """Rotations ``(n, 3, 3)`` from rotation vectors ``(n, 3)`` (axis times angle, radians)."""
     return Rotation.from_rotvec(np.atleast_2d(np.asarray(rotvecs_rad, dtype=float))).as_matrix().reshape(-1, 3, 3)
+
+
+def matrix_from_rotation_vector(rotvec_rad) -> NDArray[np.float64]:
+    """The rotation ``(3, 3)`` of one rotation vector ``(3,)`` (axis times angle, radians)."""
+    return matrices_from_rotation_vectors(rotvec_rad)[0]
+
+
+def rotation_vector_from_matrix(rotation) -> NDArray[np.float64]:
+    """The rotation vector ``(3,)`` radians (angle in [0, pi]) of one rotation ``(3, 3)``."""
+    return rotation_vectors_from_matrices(rotation)[0]
 
 
 def rotation_vectors_from_matrices(rotations, near=None) -> NDArray[np.float64]:

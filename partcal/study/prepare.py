@@ -25,7 +25,7 @@ from ..data.measurements import Measurements, read_measurements
 from ..data.registration import Registration, register_measurements, registered
 from ..data.simulate import load_study
 from ..errors import ConfigError, DataError
-from ..metrics import HELD_TOLERANCE_DEG, pose_groups, repeat_scatter_mm
+from ..metrics import HELD_TOLERANCE_DEG, pooled_rms, pose_groups, repeat_scatter_mm
 from ..models.features import varying_inputs
 from ..robot.kinematics import Robot
 from .config import ModelSpec, RunConfig
@@ -130,7 +130,7 @@ def _register(config: RunConfig, data: dict[str, Measurements], robot: Robot):
     robot = robot.replace(tool_mm=shared.tool_mm.copy())
     out = {name: registered(m, robot, regs[name]) for name, m in data.items()}
     for name, m in out.items():
-        rms = float(np.sqrt(np.mean(np.sum(m.errors_mm**2, axis=1))))
+        rms = pooled_rms(m.errors_mm)
         if regs[name] is shared and name != "identification" and rms > 10 * max(shared.rms_3d, 0.01):
             log.warning("test set %r: %.3g mm 3-D RMS after the identification set's registration (%.3g mm there): "
                         "was the tracker moved? Then give it 'registration: own'", name, rms, shared.rms_3d)

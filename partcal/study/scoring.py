@@ -16,14 +16,14 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial.transform import Rotation
 
 from ..data.measurements import Measurements
 from ..metrics import MRAD_PER_DEG, MRAD_PER_RAD, ORIENTATION, POSITION, orientation_summary, pooled_rms, summary
 from ..models.features import varying_inputs
 from ..robot.compensation import CompensationWarning
 from ..robot.frames import kabsch
-from ..robot.kinematics import Robot, matrices_from_xyz_deg
+from ..robot.kinematics import Robot
+from ..robot.rotations import matrices_from_rotation_vectors, matrices_from_xyz_deg, rotation_vectors_from_matrices
 from .config import RunConfig
 from .predictor import Predictor, pose_matrices
 from .results import ModelResult
@@ -117,9 +117,9 @@ def errors_left(m: Measurements, predicted: NDArray[np.float64], own_frame: bool
         position = m.measured_mm - (model_mm @ rot.T + shift)
     if predicted.shape[1] < 6:
         return position, None
-    measured = Rotation.from_rotvec(m.orientation_errors_deg, degrees=True)
-    model = Rotation.from_matrix(rot) * Rotation.from_rotvec(predicted[:, ORIENTATION] / MRAD_PER_RAD)
-    return position, (measured * model.inv()).as_rotvec() * MRAD_PER_RAD
+    measured = matrices_from_rotation_vectors(np.radians(m.orientation_errors_deg))
+    model = rot @ matrices_from_rotation_vectors(predicted[:, ORIENTATION] / MRAD_PER_RAD)
+    return position, rotation_vectors_from_matrices(measured @ model.transpose(0, 2, 1)) * MRAD_PER_RAD
 
 
 def verify_compensation(result: ModelResult, data: dict[str, Measurements], robot: Robot, virtual,
@@ -192,4 +192,4 @@ def _turn_reached(virtual, q_deg: NDArray[np.float64], m: Measurements, rng: np.
     seen = virtual.measure_more(q_deg, rng)[1]
     reached = matrices_from_xyz_deg(seen) if seen is not None else virtual.true_flange(q_deg)[1]
     wanted = matrices_from_xyz_deg(m.nominal_orientation_deg)
-    return Rotation.from_matrix(reached @ wanted.transpose(0, 2, 1)).as_rotvec() * MRAD_PER_RAD
+    return rotation_vectors_from_matrices(reached @ wanted.transpose(0, 2, 1)) * MRAD_PER_RAD

@@ -434,13 +434,16 @@ def test_a_tracker_run_recovers_the_known_frame_and_writes_reusable_base_frame_d
     # p_base = R_ref (rot p + t) + t_ref: the known frame composed with the base-frame data's own registration
     expected_rot = ref_reg.rotation @ rot
     np.testing.assert_allclose(Rotation.from_rotvec(reg["rotation_deg"], degrees=True).as_matrix(), expected_rot,
-                               atol=1e-9)
-    np.testing.assert_allclose(reg["translation_mm"], ref_reg.rotation @ t + ref_reg.translation_mm, atol=1e-6)
-    np.testing.assert_allclose(reg["tool_mm"], ref_reg.tool_mm, atol=1e-6)
+                               atol=1e-6)
+    # Two fits by finite differences, each as exact as its steps allow: on some BLAS kernels and versions their
+    # frames differ by 2e-7 in the rotation, 5e-4 mm at the origin 3.5 m away, 7e-5 mm in the tool and up to
+    # 3e-4 mm in the registered errors.
+    np.testing.assert_allclose(reg["translation_mm"], ref_reg.rotation @ t + ref_reg.translation_mm, atol=1e-3)
+    np.testing.assert_allclose(reg["tool_mm"], ref_reg.tool_mm, atol=1e-3)
     assert reg["shared_by"] == ["identification", "rectangle"] and "own" not in reg and reg["n"] == 85
-    assert reg["rms_3d"] == pytest.approx(ref_reg.rms_3d, abs=1e-9) and reg["condition"] < 100
+    assert reg["rms_3d"] == pytest.approx(ref_reg.rms_3d, abs=1e-6) and reg["condition"] < 100
     for name, m in result.datasets.items():      # same optimum, up to the solver's tolerance
-        np.testing.assert_allclose(m.errors_mm, ref.datasets[name].errors_mm, atol=1e-5)
+        np.testing.assert_allclose(m.errors_mm, ref.datasets[name].errors_mm, atol=1e-3)
     assert np.all(np.abs(result.datasets["rectangle"].errors_mm).max(axis=0) < 50)     # mm, not metres
     assert result.robot.tool_mm.tolist() == list(reg["tool_mm"])
     assert json.loads((out / "models" / "sdp-ai.json").read_text())["robot"]["tool_mm"] == reg["tool_mm"]

@@ -136,9 +136,9 @@ def combine_generic(models, kernel_region, Xb, kernels, weights, n_outputs: int)
     for region, w in zip(regions.tolist(), W):
         keep = np.flatnonzero(w)
         if 2 * keep.size > w.size:        # most rows: evaluate all, cheaper than gathering
-            out += w[:, None] * models[region]._predict_trusted(Xb)
+            out += w[:, None] * models[region].predict_validated(Xb)
         elif keep.size:
-            out[keep] += w[keep, None] * models[region]._predict_trusted(Xb[keep])
+            out[keep] += w[keep, None] * models[region].predict_validated(Xb[keep])
     return out
 
 

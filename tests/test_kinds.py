@@ -256,3 +256,24 @@ def test_what_only_some_kinds_answer_is_asked_through_the_table(offset_kind):
     for name in ("equations", "swarm_runs", "pso_rms_ratio", "regions_model", "identification", "run_summary",
                  "is_physical", "reads_targets", "takes_residual", "fits_pose_errors", "own_prior"):
         assert not hasattr(ErrorModelBase, name), name
+
+
+def test_the_contract_documented_is_the_base_class_and_its_table_columns():
+    """docs/architecture.md lists ErrorModelBase's public members and the table's columns: exactly those."""
+    import dataclasses
+    import re
+
+    from partcal.models.kindtable import Kind as Row
+
+    text = (ROOT / "docs" / "architecture.md").read_text()
+    section = text[text.index("## Adding a model kind"):]
+    members_table = section[section.index("| group | members |"):section.index("(`set_score_request`")]
+    rows = [line for line in members_table.splitlines()[2:] if line.startswith("| ")]
+    documented = {name for line in rows for name in re.findall(r"`(\w+)`", line.split("|")[2])}
+    public = {n for n in vars(ErrorModelBase) if not n.startswith("_")} - {"set_score_request"}
+    assert documented == public
+    assert f"({len(public)} names besides scikit-learn's own" in section
+    columns_table = section[section.index("| column | default |"):]
+    columns = {re.findall(r"`(\w+)`", line.split("|")[1])[0] for line in columns_table.splitlines()[2:]
+               if line.startswith("| `")}
+    assert columns == {f.name for f in dataclasses.fields(Row)} - {"name", "estimator"}

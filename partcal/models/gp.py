@@ -571,7 +571,7 @@ def fit_regions(local: GaussianProcessErrorModel, models: list, data: list[tuple
 
 
 def _fit_region(model: GaussianProcessErrorModel, X, Y, weights, shared) -> GaussianProcessErrorModel:
-    model._check_rules()
+    """One region's fit (its rules were checked on the partition's local model, whose clone it is)."""
     return model._fit(X, Y, weights, shared=shared)
 
 

@@ -29,7 +29,8 @@ from sklearn.base import clone  # noqa: E402
 
 from partcal.models.threads import one_blas_thread  # noqa: E402
 from partcal.models.partition import KMeansPartition, Octree  # noqa: E402
-from partcal.models.partitioned import PartitionedErrorModel, _fit_regions  # noqa: E402
+from partcal.models.partitioned import PartitionedErrorModel  # noqa: E402
+from partcal.models.series import fit_regions  # noqa: E402
 from partcal.models.series import ErrorModel, fit_swarms  # noqa: E402
 
 LOW, HIGH = np.array([-1000.0, -1000, -500]), np.array([1000.0, 1000, 1500])
@@ -130,10 +131,11 @@ def regional_swarms() -> None:
             problems = [mm._setup(*d, trusted=True) for mm, d in zip(models, data)]
 
             def one_by_one():
-                return [clone(local).set_params(random_state=s)._fit(*d) for s, d in zip(seeds, data)]
+                return [clone(local).set_params(random_state=s).fit(d[0], d[1], sample_weight=d[2])
+                        for s, d in zip(seeds, data)]
 
             def batched():
-                return _fit_regions([clone(local).set_params(random_state=s) for s in seeds], data, None)
+                return fit_regions(local, [clone(local).set_params(random_state=s) for s in seeds], data, None)
 
             t_solo = best_time(one_by_one, repeat=2, clock=time.process_time)
             t_batch = best_time(batched, repeat=2, clock=time.process_time)

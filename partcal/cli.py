@@ -459,10 +459,11 @@ def _write_table(path, header, values, atomic_write, flags=None, texts=None, sig
 
 def _cmd_equations(args) -> int:
     from .errors import ModelFileError
+    from .models.kinds import equations_of
     from .study.predictor import load_predictor
 
     predictor = load_predictor(args.model)
-    lines = predictor.model.equations(precision=args.digits)
+    lines = equations_of(predictor.model, precision=args.digits)
     if lines is None:
         raise ModelFileError(f"{args.model}: a {predictor.document['kind']} model has no single equation per "
                              "axis; equations are printed for global series models")

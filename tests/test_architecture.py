@@ -288,33 +288,13 @@ def private_uses(me: str, source: str) -> list[str]:
     return sorted(out, key=lambda s: (s.split(":")[0], int(s.split(":")[1])))
 
 
-# Private names used on purpose from outside partcal: none. (scikit-learn's GP output normalisation is
-# recomputed in models/gp.py rather than read from its private attributes.)
-#
-# TEMPORARY: uses in modules another change is reworking at the same time (the model-kind contract:
-# models/partitioned.py calls a local model's fitting steps; the run config and the model-file reader use
-# the kinds' declared rules and read hook, whose public names belong to models/base.py). As
-# ``(file, name)``; remove each as its module gets the public name. A use not listed here fails.
-KNOWN_PRIVATE_USES = {
-    ("partcal/models/partitioned.py", "_fit"), ("partcal/models/partitioned.py", "_check_params"),
-    ("partcal/models/partitioned.py", "_setup"), ("partcal/models/partitioned.py", "_complete"),
-    ("partcal/models/partitioned.py", "_predict_trusted"),
-    ("partcal/study/config.py", "_parameter_rules"), ("partcal/study/persist.py", "_prepare"),
-}
-
-
-def _file_and_name(use: str) -> tuple[str, str]:
-    """``("partcal/x.py", "_name")`` of a use as :func:`private_uses` writes it."""
-    return use.split(":", 1)[0], use.replace(" ", ".").rsplit(".", 1)[-1]
 
 
 def test_no_private_name_is_used_across_modules():
     """Objects talk through public names: no module reaches into another's private functions, methods or
     attributes (tests may)."""
     uses = [u for me, source in package_sources().items() for u in private_uses(me, source)]
-    assert [u for u in uses if _file_and_name(u) not in KNOWN_PRIVATE_USES] == [], "give these a public name"
-    assert sorted(KNOWN_PRIVATE_USES - {_file_and_name(u) for u in uses}) == [], \
-        "these are fixed: remove them from KNOWN_PRIVATE_USES"
+    assert uses == [], "give these a public name"
 
 
 def test_the_checker_finds_private_uses():

@@ -60,7 +60,19 @@ KINEMATIC_FAILURES = {
 }
 
 
+GP_WEIGHTS = ("a Gaussian process fits the samples of positive weight (a partition's region takes those within its "
+              "reach); the sizes of the weights do not matter to it, so weight 2 is not a repeated sample")
+
+
+SERIES_WEIGHTS = ("the check fits 30 inputs (31 terms per output) on 27 repeated samples: fewer samples than "
+                  "coefficients is refused (test_models.py checks the weights on data a series model can fit)")
+
+
 def _expected_failures(estimator) -> dict:
+    if isinstance(estimator, GaussianProcessErrorModel):
+        return {"check_sample_weight_equivalence_on_dense_data": GP_WEIGHTS}
+    if isinstance(estimator, ErrorModel):
+        return {"check_sample_weight_equivalence_on_dense_data": SERIES_WEIGHTS}
     return KINEMATIC_FAILURES if isinstance(estimator, KinematicModel) else {}
 
 

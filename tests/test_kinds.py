@@ -36,15 +36,18 @@ class ConstantOffset(ErrorModelBase):
         self.gain = gain
         self.random_state = random_state
 
-    def fit(self, X, y):
-        self._check_rules()
+    def fit(self, X, y, sample_weight=None):          # no _check_rules(): the base runs the declared rules
         X, y = validate_data(self, X, y, multi_output=True, y_numeric=True, dtype=np.float64)
         self._y_1d = y.ndim == 1
         Y = y.reshape(len(y), -1)
-        self.offset_ = self.gain * Y.mean(axis=0)
+        w = np.ones(len(Y)) if sample_weight is None else np.asarray(sample_weight, dtype=float)
+        self.offset_ = self.gain * (w @ Y) / w.sum()
         self.n_outputs_ = Y.shape[1]
-        self.data_bounds_ = np.stack([X.min(axis=0), X.max(axis=0)])
+        self.data_bounds_ = np.stack([X[w > 0].min(axis=0), X[w > 0].max(axis=0)])
         return self
+
+    def region_minimum(self, n_active):               # what a partition asks of a kind registered regions=True
+        return 2, "2 samples for a mean", "partition"
 
     def predict(self, X):
         check_is_fitted(self, "offset_")
@@ -73,6 +76,13 @@ class ConstantOffset(ErrorModelBase):
 @pytest.fixture
 def offset_kind():
     kind = register_kind(Kind("constant_offset", ConstantOffset))
+    yield kind
+    unregister_kind("constant_offset")
+
+
+@pytest.fixture
+def regional_offset_kind():
+    kind = register_kind(Kind("constant_offset", ConstantOffset, regions=True))
     yield kind
     unregister_kind("constant_offset")
 
@@ -174,3 +184,96 @@ def test_a_kind_registered_as_a_residual_runs_as_a_hybrids_residual(offset_kind,
     with pytest.raises(ValueError, match="may be a residual"):
         KinematicModel(robot="motoman_sk120", residual=KinematicModel(robot="motoman_sk120")).fit(
             ident.q_deg, ident.errors_mm)
+
+
+def test_a_kind_registered_with_regions_runs_partitioned_in_a_run(regional_offset_kind, tmp_path):
+    """A kind whose row says ``regions=True`` is a partition's local model through its public ``fit`` (with
+    ``sample_weight``) and ``region_minimum``: nothing in partcal names it. Hard blend of an octree of depth 1:
+    every octant of the identification data's box predicts its own samples' mean error, times the gain."""
+    config = run_config(tmp_path, "  - {name: Offset regions, kind: constant_offset, gain: 0.5, "
+                                  "partition: {method: octree, max_depth: 1, min_samples: 2}, "
+                                  "blend: {method: hard}}\n")
+    assert main(["run", str(config), "-q"]) == 0
+    ident = read_measurements(DATA / "identification.csv")
+    P, E = ident.nominal_mm, ident.errors_mm
+    lo, hi = P.min(axis=0), P.max(axis=0)
+    octant = ((P >= (lo + hi) / 2) * [1, 2, 4]).sum(axis=1)              # the octree's one split, written here
+    expected = np.empty_like(E)
+    for k in np.unique(octant):
+        expected[octant == k] = 0.5 * E[octant == k].mean(axis=0)
+
+    metrics = json.loads((tmp_path / "out" / "metrics.json").read_text())
+    entry = metrics["models"]["Offset regions"]
+    assert entry["kind"] == "constant_offset" and entry["regions"] == len(np.unique(octant)) > 1
+    np.testing.assert_allclose(entry["identification"]["rms"], np.sqrt(np.mean((E - expected) ** 2, axis=0)),
+                               rtol=1e-12)
+    predictor = load_predictor(tmp_path / "out" / "models" / "offset-regions.json")
+    assert predictor.document["kind"] == "partitioned" and predictor.document["local_kind"] == "constant_offset"
+    np.testing.assert_allclose(predictor.predict(positions=P), expected, atol=1e-9)
+    html = (tmp_path / "out" / "index.html").read_text()
+    assert "a constant offset (0.5 times the mean error) in each of" in html
+
+
+def test_a_kinds_declared_rules_are_checked_on_every_fit_without_the_kind_asking(offset_kind):
+    """``ConstantOffset.fit`` never calls ``_check_rules()``; the base checks the declared rules before it runs,
+    in a partition's regions too."""
+    from partcal.models.partition import Octree
+    from partcal.models.partitioned import PartitionedErrorModel
+
+    X, y = np.random.default_rng(0).normal(size=(20, 3)), np.zeros((20, 3))
+    with pytest.raises(PartcalError, match=r"The 'gain' parameter of ConstantOffset must be a real number in "
+                                           r"\[0\.0, 1\.0\]\. Got 7 instead\."):
+        ConstantOffset(gain=7).fit(X, y)
+    with pytest.raises(PartcalError, match=r"The 'inputs' parameter of ConstantOffset must be one of"):
+        ConstantOffset(inputs="polar").fit(X, y, sample_weight=np.ones(20))
+    unregister_kind("constant_offset")
+    register_kind(Kind("constant_offset", ConstantOffset, regions=True))
+    with pytest.raises(PartcalError, match=r"The 'gain' parameter of ConstantOffset must be a real number"):
+        PartitionedErrorModel(partition=Octree(max_depth=1, min_samples=2), local=ConstantOffset(gain=-1),
+                              blend="hard").fit(X, y)
+
+
+def test_a_kind_not_registered_for_regions_is_refused_as_a_local_model(offset_kind):
+    from partcal.models.partitioned import PartitionedErrorModel
+
+    with pytest.raises(PartcalError, match=r"The 'local' parameter of PartitionedErrorModel must be .*"
+                                           r"\(series, gaussian_process\)"):
+        PartitionedErrorModel(local=ConstantOffset()).fit(np.zeros((20, 3)), np.zeros((20, 3)))
+
+
+def test_what_only_some_kinds_answer_is_asked_through_the_table(offset_kind):
+    """The toy kind states no swarm, equations, regions or identification; the table answers for it."""
+    from partcal.models.kinds import (equations_of, identification_of, is_physical, pso_rms_ratio, regions_of,
+                                      run_summary, swarm_runs)
+    from partcal.models.series import ErrorModel
+
+    X = read_measurements(DATA / "identification.csv")
+    toy = ConstantOffset().fit(X.nominal_mm, X.errors_mm)
+    assert (equations_of(toy), regions_of(toy), identification_of(toy), pso_rms_ratio(toy)) == (None,) * 4
+    assert swarm_runs(toy) == [] and run_summary(toy) == {} and is_physical(toy) is False
+    series = ErrorModel(solver="lstsq").fit(X.nominal_mm, X.errors_mm)
+    assert len(equations_of(series)) == 3 and pso_rms_ratio(series) is None and regions_of(series) is None
+    for name in ("equations", "swarm_runs", "pso_rms_ratio", "regions_model", "identification", "run_summary",
+                 "is_physical", "reads_targets", "takes_residual", "fits_pose_errors", "own_prior"):
+        assert not hasattr(ErrorModelBase, name), name
+
+
+def test_the_contract_documented_is_the_base_class_and_its_table_columns():
+    """docs/architecture.md lists ErrorModelBase's public members and the table's columns: exactly those."""
+    import dataclasses
+    import re
+
+    from partcal.models.kindtable import Kind as Row
+
+    text = (ROOT / "docs" / "architecture.md").read_text()
+    section = text[text.index("## Adding a model kind"):]
+    members_table = section[section.index("| group | members |"):section.index("(`set_score_request`")]
+    rows = [line for line in members_table.splitlines()[2:] if line.startswith("| ")]
+    documented = {name for line in rows for name in re.findall(r"`(\w+)`", line.split("|")[2])}
+    public = {n for n in vars(ErrorModelBase) if not n.startswith("_")} - {"set_score_request"}
+    assert documented == public
+    assert f"({len(public)} names besides scikit-learn's own" in section
+    columns_table = section[section.index("| column | default |"):]
+    columns = {re.findall(r"`(\w+)`", line.split("|")[1])[0] for line in columns_table.splitlines()[2:]
+               if line.startswith("| `")}
+    assert columns == {f.name for f in dataclasses.fields(Row)} - {"name", "estimator"}

@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 from conftest import ROOT
+from sklearn.base import clone
 from sklearn.utils.estimator_checks import parametrize_with_checks
 
 from partcal import PartcalError, read_measurements
@@ -17,10 +18,34 @@ PAPER_MODELS = {
 
 
 def _expected_failures(estimator):
+    # the check fits 30 inputs (31 or more terms per output) on 27 repeated samples: the model refuses
+    # (test_sample_weights_equal_repeated_and_dropped_samples checks the weights on data it can fit)
+    weights = {"check_sample_weight_equivalence_on_dense_data": "fewer samples than coefficients is refused"}
     if estimator.basis == "fourier":
         # 11 samples with 10 inputs cannot determine 21 Fourier terms: the model refuses, never guesses
-        return {"check_regressor_multioutput": "fewer samples than coefficients is refused"}
-    return {}
+        return {"check_regressor_multioutput": "fewer samples than coefficients is refused", **weights}
+    return weights
+
+
+@pytest.mark.parametrize("basis", ["polynomial", "fourier"])
+def test_sample_weights_equal_repeated_and_dropped_samples(basis):
+    rng = np.random.default_rng(5)
+    X, y = rng.uniform(-500, 500, (40, 3)), rng.normal(size=(40, 3))
+    w = rng.integers(0, 4, 40).astype(float)
+    w[:3] = 0.0                                     # three samples left out, one of them the lowest x
+    X[0, 0] = -900.0
+    model = ErrorModel(basis=basis, degree=2, harmonics=1, solver="lstsq")
+    weighted = clone(model).fit(X, y, sample_weight=w)
+    rows = np.repeat(np.arange(40), w.astype(int))
+    repeated = clone(model).fit(X[rows], y[rows])
+    Xq = rng.uniform(-400, 400, (7, 3))
+    np.testing.assert_allclose(weighted.predict(Xq), repeated.predict(Xq), rtol=1e-9, atol=1e-9)
+    np.testing.assert_array_equal(weighted.data_bounds_, repeated.data_bounds_)
+    with pytest.raises(PartcalError, match=r"The 'sample_weight' parameter of ErrorModel must be finite weights "
+                                           r">= 0\. Got \[-1\.0\] instead\."):
+        clone(model).fit(X, y, sample_weight=np.r_[-1.0, np.ones(39)])
+    with pytest.raises(PartcalError, match=r"must be 40 numbers \(one weight per sample\)"):
+        clone(model).fit(X, y, sample_weight=np.ones(39))
 
 
 @parametrize_with_checks([ErrorModel(), ErrorModel(solver="lstsq", cross_terms=True),

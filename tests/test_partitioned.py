@@ -282,7 +282,7 @@ def test_regional_swarms_in_one_batch_equal_solo_fits(fitness):
     groups = model._training_groups(model.partition_, X)
     seeds = np.random.SeedSequence(3).spawn(model.partition_.n_regions)   # the documented seed rule
     for region, ((rows, w), s) in enumerate(zip(groups, seeds)):
-        solo = clone(local).set_params(random_state=int(s.generate_state(1)[0]))._fit(X[rows], y[rows], w)
+        solo = clone(local).set_params(random_state=int(s.generate_state(1)[0])).fit(X[rows], y[rows], sample_weight=w)
         batched = model.models_[region]
         assert np.array_equal(solo.coef_, batched.coef_), region
         assert [r.nit for r in solo.swarm_results_] == [r.nit for r in batched.swarm_results_]

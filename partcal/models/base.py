@@ -1,19 +1,32 @@
-"""What partcal's estimators share: scikit-learn tags for x, y, z outputs, the distance to the
-training inputs, ``_prepare`` (what reads need, built once, so that reads store nothing), one seed
-rule, and what every model kind offers the rest of partcal.
+"""The contract every model kind implements, and what partcal's estimators share.
 
-A *model kind* is one estimator class. Besides ``fit`` and ``predict`` it
-declares its parameters once (``_parameter_rules``, ``_requirements``: the
-estimator's own check, the run-config reader and the model-file reader apply
-the same rules), reads and writes its own section of a model file
-(:meth:`ErrorModelBase.file_section`, :meth:`ErrorModelBase.from_file_section`)
-and answers what a batch run and its report ask (:meth:`ErrorModelBase.min_samples`,
-:meth:`ErrorModelBase.describe`, ...). The defaults here serve a simple kind;
-``partcal.models.kinds`` is the table that names them all.
+A *model kind* is one estimator class, a subclass of :class:`ErrorModelBase`,
+and one row of the table of kinds (:mod:`partcal.models.kinds`). The contract
+here is what every kind has:
+
+- ``fit(X, y, ...)`` (returns self; the declared parameter rules,
+  ``_parameter_rules`` and ``_requirements``, are checked before it runs,
+  whatever the kind's ``fit`` does), ``predict(X)``, ``distance_to_data(X)``;
+- the spread: ``predict_with_std`` (a kind with one implements
+  ``std_validated`` and ``spread_problem``; the default says it has none) and
+  the calibrated spread the estimator keeps (``set_spread``,
+  ``spread_scale_``, ``spread_depth_``);
+- its section of a model file (``file_section``, ``from_file_section``,
+  ``check_section``);
+- its rules as a run config reads them (``params_from_config``,
+  ``from_params``, ``config_keys``, ``input_space``);
+- what a run and its report ask of every model, each with a default a simple
+  kind keeps (``min_samples``, ``describe``, ``family``, ...).
+
+What only some kinds can answer (swarm runs, equations, an identification, the
+partitioned model within, ...) is not here: the kind's row states it and
+callers ask through the table (:mod:`partcal.models.kindtable`).
+``_prepare`` builds what reads need, once, so that reads store nothing.
 """
 
 from __future__ import annotations
 
+import functools
 from numbers import Integral
 from typing import TYPE_CHECKING, Any, ClassVar
 
@@ -23,7 +36,7 @@ from scipy.spatial import cKDTree
 from sklearn.base import BaseEstimator, RegressorMixin
 from sklearn.utils import check_random_state
 
-from .._validation import Requirement, Rule, check_params
+from .._validation import Requirement, Rule, check_params, param_error
 from ..metrics import warn_far
 
 if TYPE_CHECKING:
@@ -32,8 +45,8 @@ if TYPE_CHECKING:
 
 
 class ErrorModelBase(RegressorMixin, BaseEstimator):
-    """Base of every error model: multi-output tags, 1-D targets kept 1-D on the way out, and the
-    defaults of what a model kind offers (see the module docstring)."""
+    """Base of every error model: the contract every kind implements (see the module docstring),
+    multi-output tags, and 1-D targets kept 1-D on the way out."""
 
     kind: ClassVar[str] = ""                       # its name in run configs (``kind:``) and the table of kinds
     file_kind: ClassVar[str] = ""                  # its name in model files (default: ``kind``)
@@ -41,12 +54,40 @@ class ErrorModelBase(RegressorMixin, BaseEstimator):
     _parameter_rules: ClassVar[dict[str, Rule]] = {}       # parameter -> what it accepts (and its default)
     _requirements: ClassVar[tuple[Requirement, ...]] = ()  # rules that tie parameters together
 
+    def __init_subclass__(cls, **kwargs):
+        """Every ``fit`` a kind defines checks the declared parameters first (scikit-learn's ``_fit_context``):
+        no kind has to remember to."""
+        super().__init_subclass__(**kwargs)
+        fit = cls.__dict__.get("fit")
+        if fit is not None and not getattr(fit, "checks_rules", False):
+            cls.fit = _checking_rules(fit)
+
+    # ------------------------------------------------------------------ the estimator
+    def fit(self, X, y):
+        """Fit to errors ``y`` (n, outputs) at inputs ``X`` (n, d) in contract units; returns self. A kind whose
+        row says ``regions=True`` also takes ``sample_weight`` (n,)."""
+        raise NotImplementedError(f"{type(self).__name__} does not implement fit")
+
+    def predict(self, X) -> NDArray[np.float64]:
+        """Predicted errors, shape (n, outputs) (1-D if fitted on a 1-D ``y``)."""
+        raise NotImplementedError(f"{type(self).__name__} does not implement predict")
+
+    def distance_to_data(self, X) -> NDArray[np.float64]:
+        """Distance from each input to the training data, shape (n,), input units (mm or degrees)."""
+        raise NotImplementedError(f"{type(self).__name__} does not implement distance_to_data")
+
     # ------------------------------------------------------------------ parameters
     def _check_rules(self) -> dict[str, Any]:
         """Check the declared parameters (one message format); return them by name."""
         params = {name: getattr(self, name) for name in self._parameter_rules}
         check_params(type(self).__name__, self._parameter_rules, self._requirements, params)
         return params
+
+    @classmethod
+    def parameter_rule(cls, name: str) -> Rule:
+        """The declared rule of parameter ``name`` (what it accepts, its default), for a reader that reads the
+        parameter from a section of its own (the partition's ``blend:`` of a run config)."""
+        return cls._parameter_rules[name]
 
     @classmethod
     def params_from_config(cls, sec: "Section", context: dict) -> dict[str, Any]:
@@ -64,11 +105,7 @@ class ErrorModelBase(RegressorMixin, BaseEstimator):
     @classmethod
     def config_keys(cls) -> set[str]:
         """The keys of this kind's entry in a run config (besides ``name``, ``kind`` and the table's)."""
-        return set(cls._parameter_rules) | ({"residual"} if cls.takes_residual else set())
-
-    takes_residual: ClassVar[bool] = False       # a config entry may give a ``residual`` model (kinematic)
-    fits_pose_errors: ClassVar[bool] = False     # fits (n, 6) pose errors as one model (kinematic); others are
-                                                 # fitted twice in a run of pose errors (models/pose.py)
+        return set(cls._parameter_rules)
 
     @classmethod
     def input_space(cls, params: dict[str, Any]) -> str:
@@ -76,15 +113,6 @@ class ErrorModelBase(RegressorMixin, BaseEstimator):
         return params.get("inputs", "cartesian")
 
     # ------------------------------------------------------------------ model files
-    def to_file(self) -> dict[str, Any]:
-        """The fields of a model file beside ``kind``, ``inputs``, ``n_inputs`` and ``n_outputs``."""
-        return {"model": self.file_section()}
-
-    @classmethod
-    def from_file(cls, r: "FieldReader", inputs: str, n_in: int, n_out: int) -> "ErrorModelBase":
-        """The fitted model from the fields :meth:`to_file` wrote (``r`` reads the file's top level)."""
-        return cls.from_file_section(r.sub("model"), inputs, n_in, n_out)
-
     def file_section(self) -> dict[str, Any]:
         """This model's fitted numbers as plain JSON values (its ``model`` section)."""
         raise NotImplementedError(f"{type(self).__name__} does not write model files")
@@ -93,10 +121,6 @@ class ErrorModelBase(RegressorMixin, BaseEstimator):
     def from_file_section(cls, r: "FieldReader", inputs: str, n_in: int, n_out: int) -> "ErrorModelBase":
         """The fitted model from its section, every field checked (failing through ``r``)."""
         raise NotImplementedError(f"{cls.__name__} does not read model files")
-
-    def check_file(self, r: "FieldReader") -> None:
-        """Checks of a loaded model as a whole (``r`` reads the fields :meth:`to_file` wrote)."""
-        self.check_section(r.sub("model"))
 
     def check_section(self, r: "FieldReader", limit_mm: float = 1e6) -> None:
         """Refuse a loaded model that predicts non-finite errors, or errors over ``limit_mm``, at the
@@ -123,19 +147,8 @@ class ErrorModelBase(RegressorMixin, BaseEstimator):
         return float("nan")
 
     @property
-    def reads_targets(self) -> bool:
-        """Whether ``fit`` takes further targets and the orientation of each pose (a kinematic model's
-        ``all_targets``, ``use_orientation``)."""
-        return False
-
-    @property
     def reads_payload(self) -> bool:
         """Whether ``fit`` and ``predict`` take a payload per pose (``payload_kg=``) that changes the errors."""
-        return False
-
-    def is_physical(self) -> bool:
-        """Whether every parameter is physical (a kinematic model without a data-driven residual): a run
-        prefers such a model when its CV score is within a standard error of the best."""
         return False
 
     def fit_notes(self) -> list[str]:
@@ -147,9 +160,14 @@ class ErrorModelBase(RegressorMixin, BaseEstimator):
         itself when there is nothing to keep."""
         return self
 
-    def peak_fit_bytes(self, n: int, n_joints: int) -> tuple[float, str]:
-        """Estimated peak memory of a fit on ``n`` poses (``n_joints`` joints), bytes, and what it assumes.
-        Small by default (arrays of ``n x terms``): 0."""
+    def search_gap(self, other: "ErrorModelBase") -> str | None:
+        """How far the hyperparameters this fit searched lie from ``other``'s (another fit of the same entry: a CV
+        fold's against the final fit), in words, when markedly; None when they do not, or nothing was searched."""
+        return None
+
+    def peak_fit_bytes(self, n: int, n_joints: int, regions: int = 1) -> tuple[float, str]:
+        """Estimated peak memory of a fit on ``n`` poses (``n_joints`` joints), as a global model or the local
+        model of ``regions`` regions, bytes, and what it assumes. Small by default (arrays of ``n x terms``): 0."""
         return 0.0, ""
 
     def setting_problem(self, n_inputs: int) -> tuple[str, str] | None:
@@ -164,37 +182,12 @@ class ErrorModelBase(RegressorMixin, BaseEstimator):
     @property
     def solver_name(self) -> str:
         """How the model is fitted (metrics.json ``solver``)."""
-        return getattr(self, "solver", "-")
+        return "-"
 
     def family(self) -> str:
         """The report's family of this model (models of one family are compared in one sentence)."""
         inputs = "Cartesian-input" if self.input_space(self.get_params(deep=False)) == "cartesian" else "joint-input"
         return f"Global {inputs} {self.family_noun}"
-
-    def pso_rms_ratio(self) -> float | None:
-        """RMS of a particle-swarm fit over the least-squares RMS (1.0 optimal); None if no swarm ran."""
-        return None
-
-    def swarm_runs(self) -> list[tuple[np.ndarray, float]]:
-        """``(best fitness per iteration, least-squares RMS)`` of every swarm of the fit (none by default)."""
-        return []
-
-    def equations(self, input_names=None, output_names=("dx", "dy", "dz"), precision: int | None = None
-                  ) -> list[str] | None:
-        """The fitted functions, one line per output; None for kinds without one equation per axis."""
-        return None
-
-    def regions_model(self) -> "ErrorModelBase | None":
-        """The partitioned model in this model (itself, or a hybrid's residual); None if there is none."""
-        return None
-
-    def identification(self):
-        """The identified parameter table of a kinematic model; None for other kinds."""
-        return None
-
-    def run_summary(self) -> dict[str, Any]:
-        """Extra fields of this model's entry in metrics.json (none by default)."""
-        return {}
 
     def n_outputs(self) -> int:
         """Outputs per prediction (3: x, y, z)."""
@@ -209,6 +202,19 @@ class ErrorModelBase(RegressorMixin, BaseEstimator):
         return np.asarray(self.predict(X)).reshape(len(X), -1)
 
     # ------------------------------------------------------------------ spread
+    #: The calibrated spread (:func:`partcal.study.spread.calibrate_spread`, or a model file's): one scale per
+    #: output and the growth with the inputs' depth (:class:`~partcal.models.depth.DepthSpread`); None when the
+    #: spread is the model's own.
+    spread_scale_: NDArray[np.float64] | None = None
+    spread_depth_: Any = None
+
+    def set_spread(self, scale, depth=None) -> "ErrorModelBase":
+        """Keep a calibrated spread: ``scale`` (one per output, or None) and ``depth`` (a ``DepthSpread`` or
+        None); :meth:`std_scaled` and :meth:`predict_with_std` apply them from now on. Returns self."""
+        self.spread_scale_ = None if scale is None else np.asarray(scale, dtype=float)
+        self.spread_depth_ = depth
+        return self
+
     def predict_with_std(self, X, **per_row) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Predicted errors and the standard deviation of each, both ``(n, outputs)`` (mm; mrad for a pose
         model's orientation).
@@ -231,8 +237,7 @@ class ErrorModelBase(RegressorMixin, BaseEstimator):
         with the inputs' depth ``spread_depth_`` (:class:`~partcal.models.depth.DepthSpread`), with the held
         inputs' prior added, when the model has them (:func:`partcal.study.spread.calibrate_spread`)."""
         mean, std = self.std_validated(X, **per_row)
-        scale = getattr(self, "spread_scale_", None)
-        depth = getattr(self, "spread_depth_", None)
+        scale, depth = self.spread_scale_, self.spread_depth_
         if depth is not None:                               # std is (n, outputs), as std_validated's
             std = std * depth.factor(X)[:, None]
         if scale is not None:
@@ -241,10 +246,6 @@ class ErrorModelBase(RegressorMixin, BaseEstimator):
         if prior is not None:
             std = np.sqrt(std ** 2 + prior)
         return mean, std
-
-    #: Whether the model's own spread already holds a prior for what its data left unknown (a kinematic
-    #: model's unidentified parameters): then a calibration adds no held inputs' prior (models/depth.py).
-    own_prior = False
 
     def std_validated(self, X: NDArray[np.float64], **per_row) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """:meth:`predict_with_std` of inputs already checked as a finite ``(n, d)`` float array."""
@@ -265,6 +266,11 @@ class ErrorModelBase(RegressorMixin, BaseEstimator):
 
     def _shape_output(self, out: NDArray[np.float64]) -> NDArray[np.float64]:
         return out[:, 0] if self._y_1d else out
+
+    def prepared(self):
+        """The model with what its reads need built from its fitted attributes (:meth:`_prepare`); for code that
+        set those attributes itself, as the model-file reader does (``fit`` builds them already)."""
+        return self._prepare()
 
     def _prepare(self):
         """Build what reads need from the fitted attributes; returns self.
@@ -291,6 +297,33 @@ class ErrorModelBase(RegressorMixin, BaseEstimator):
         tags.target_tags.multi_output = True
         tags.target_tags.single_output = True
         return tags
+
+
+def _checking_rules(fit):
+    """``fit`` with the estimator's declared parameters checked before it runs."""
+    @functools.wraps(fit)
+    def checked_fit(self, *args, **kwargs):
+        self._check_rules()
+        return fit(self, *args, **kwargs)
+
+    checked_fit.checks_rules = True
+    return checked_fit
+
+
+def check_sample_weight(owner: str, sample_weight, n: int) -> NDArray[np.float64]:
+    """``sample_weight`` as a float array ``(n,)`` of finite values >= 0, not all 0, or one clear refusal."""
+    try:
+        w = np.asarray(sample_weight, dtype=float)
+        w = np.full(n, float(w)) if w.ndim == 0 else w
+    except (TypeError, ValueError):
+        raise param_error(owner, "sample_weight", f"{n} numbers (one weight per sample)", sample_weight) from None
+    if w.shape != (n,):
+        raise param_error(owner, "sample_weight", f"{n} numbers (one weight per sample)", f"shape {w.shape}")
+    if not np.all(np.isfinite(w) & (w >= 0)):
+        raise param_error(owner, "sample_weight", "finite weights >= 0", w[~(np.isfinite(w) & (w >= 0))][:5].tolist())
+    if not w.sum() > 0:
+        raise param_error(owner, "sample_weight", "weights not all zero", "every weight zero")
+    return w
 
 
 def box_points(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:

@@ -37,13 +37,15 @@ from sklearn.base import clone
 from sklearn.exceptions import ConvergenceWarning
 from sklearn.gaussian_process import GaussianProcessRegressor
 from sklearn.gaussian_process.kernels import RBF, ConstantKernel, Matern, WhiteKernel
+from joblib import Parallel, delayed
 from sklearn.utils.validation import check_is_fitted, validate_data
 
 from .._validation import FieldReader, integer, one_of, real
 from ..metrics import distance_outside_boxes
 from . import likelihood
 from .angles import InputMap
-from .base import ErrorModelBase, seed_from
+from .base import ErrorModelBase, check_sample_weight, seed_from
+from .kindtable import RegionFit
 from .threads import one_blas_thread
 
 log = logging.getLogger(__name__)
@@ -177,17 +179,21 @@ class GaussianProcessErrorModel(ErrorModelBase):
     }
     _damage_field = "dual_coef"
 
-    def _check_params(self) -> None:
+    def region_minimum(self, n_active: int) -> tuple[int, str, str]:
+        """Smallest region a partition may give this model, why (for messages), and the config key that sets it."""
         self._check_rules()
-
-    def region_minimum(self, n_active: int) -> tuple[int, str]:
-        """Smallest region a partition may give this model, and why (for messages)."""
-        return SAMPLES_PER_INPUT * max(n_active, 1), f"{SAMPLES_PER_INPUT} per varying input"
+        return SAMPLES_PER_INPUT * max(n_active, 1), f"{SAMPLES_PER_INPUT} per varying input", "partition"
 
     # ------------------------------------------------------------------ fitting
-    def fit(self, X, y):
-        """Fit the GP to errors ``y`` (n, 3) mm at inputs ``X`` (n, d). Returns self."""
-        return self._fit(X, y, None)
+    def fit(self, X, y, sample_weight=None):
+        """Fit the GP to errors ``y`` (n, 3) mm at inputs ``X`` (n, d). Returns self.
+
+        ``sample_weight`` (n,): only the samples of positive weight are fitted (a partition's region takes
+        the samples within its reach); the weights' sizes do not matter to a Gaussian process.
+        """
+        if sample_weight is not None:
+            sample_weight = check_sample_weight(type(self).__name__, sample_weight, len(np.asarray(X)))
+        return self._fit(X, y, sample_weight)
 
     def _fit(self, X, y, sample_weight, shared: "GaussianProcessErrorModel | None" = None):
         """Fit; in a partition, the samples of weight 0 (outside the region's reach) are left out.
@@ -196,7 +202,6 @@ class GaussianProcessErrorModel(ErrorModelBase):
         kernel this one takes as they are (a partition's shared
         hyperparameters); only the dual coefficients are solved for.
         """
-        self._check_params()
         X, y = validate_data(self, X, y, multi_output=True, y_numeric=True, dtype=np.float64)
         self._y_1d = y.ndim == 1
         Y = y.reshape(len(y), -1)
@@ -239,6 +244,7 @@ class GaussianProcessErrorModel(ErrorModelBase):
         keeps every input's smallest and largest value, so the input map, and
         with it the meaning of the length scales, is that of all of ``X``.
         """
+        self._check_rules()
         X, Y = np.asarray(X, dtype=float), np.asarray(Y, dtype=float)
         low, high = SHARED_HYPER_SAMPLES
         subset = _search_subset(X, int(self.hyper_samples or min(max(len(X) // 10, low), high)),
@@ -361,7 +367,7 @@ class GaussianProcessErrorModel(ErrorModelBase):
                          "(set noise_floor_mm to the measurement scatter)")
         return notes
 
-    def optimum_gap(self, other: "GaussianProcessErrorModel") -> str | None:
+    def optimum_gap(self, other: ErrorModelBase) -> str | None:
         """How far this fit's hyperparameters lie from ``other``'s (another fit of the same entry: a CV fold's
         against the final fit), in words, when markedly: a noise variance (normalised outputs) or a geometric
         mean of the length scales :data:`OPTIMUM_RATIO` times larger or smaller; None otherwise."""
@@ -371,6 +377,13 @@ class GaussianProcessErrorModel(ErrorModelBase):
             return None
         return (f"noise variance {self.noise_:.3g} against {other.noise_:.3g}, length scales x{scales:.3g} (geometric "
                 "mean)")
+
+    def search_gap(self, other: ErrorModelBase) -> str | None:
+        """:meth:`optimum_gap` when both fits searched their hyperparameters (no ``fixed_kernel``)."""
+        if not isinstance(other, GaussianProcessErrorModel) or self.fixed_kernel is not None \
+                or other.fixed_kernel is not None:
+            return None
+        return self.optimum_gap(other)
 
     def _neighbour_correlation(self) -> float:
         """Median kernel correlation of a training input with its nearest other training input."""
@@ -400,12 +413,11 @@ class GaussianProcessErrorModel(ErrorModelBase):
         return self._shape_output(self._predict_trusted(X))
 
     def predict_validated(self, X: NDArray[np.float64]) -> NDArray[np.float64]:
-        """:meth:`predict` of inputs already checked as a finite ``(n, d)`` float array, ``(n, outputs)`` mm (the
-        hot path of blends)."""
+        """Prediction ``(n, n_outputs)`` on validated arrays (the hot path of blends)."""
         return self._predict_trusted(X)
 
     def _predict_trusted(self, X: NDArray[np.float64]) -> NDArray[np.float64]:
-        """Prediction ``(n, n_outputs)`` on validated arrays (the hot path of blends)."""
+        """Prediction ``(n, n_outputs)`` on validated arrays."""
         augmented, coef, centre = self._cache
         A = self.input_map_.transform(X) / self.length_scale_ - centre
         out = np.empty((A.shape[0], coef.shape[1]))
@@ -553,6 +565,36 @@ def _output_normalisation(Y: NDArray[np.float64]) -> tuple[NDArray[np.float64], 
     mean, std = np.mean(Y, axis=0), np.std(Y, axis=0)
     std[std < 10 * np.finfo(std.dtype).eps] = 1.0
     return mean, std
+
+
+def fit_regions(local: GaussianProcessErrorModel, models: list, data: list[tuple], n_jobs, X, Y, seed
+                ) -> list[GaussianProcessErrorModel]:
+    """Fit every region's GP to its ``(X, Y, weights)``, in parallel; with ``hyperparameters="shared"`` the
+    hyperparameters are first searched once on all of ``X, Y`` (seeded by ``seed``) and every region only
+    solves with them (the Gaussian-process row's :class:`~partcal.models.kindtable.RegionFit`)."""
+    shared = None
+    if local.hyperparameters == "shared":
+        shared = clone(local).set_params(random_state=seed).fit_shared(X, Y)
+        log.info("shared GP hyperparameters: %s", shared.sklearn_kernel())
+    return Parallel(n_jobs=n_jobs)(delayed(_fit_region)(m, *d, shared) for m, d in zip(models, data))
+
+
+def _fit_region(model: GaussianProcessErrorModel, X, Y, weights, shared) -> GaussianProcessErrorModel:
+    """One region's fit (its rules were checked on the partition's local model, whose clone it is)."""
+    return model._fit(X, Y, weights, shared=shared)
+
+
+def _freeze(local: GaussianProcessErrorModel, X, Y, seed) -> GaussianProcessErrorModel | None:
+    """``local`` with the shared hyperparameters searched on ``X, Y`` fixed; None unless its regions share a
+    search that is not fixed already."""
+    if local.hyperparameters != "shared" or local.fixed_kernel is not None:
+        return None
+    shared = clone(local).set_params(random_state=seed).fit_shared(X, Y)
+    return clone(local).set_params(fixed_kernel=shared.learnt_kernel())
+
+
+GP_REGIONS = RegionFit(fit_all=fit_regions, overlap=lambda local: float(local.region_overlap),
+                       shares=lambda local: local.hyperparameters == "shared", freeze=_freeze)
 
 
 def _solved(kernel, Z: NDArray[np.float64], Y: NDArray[np.float64]) -> GaussianProcessRegressor:

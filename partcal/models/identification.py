@@ -61,7 +61,30 @@ _DEG = np.pi / 180.0
 ROW_PARAMETERS = (("theta", "deg"), ("d", "mm"), ("a", "mm"), ("alpha", "deg"))
 COMPLETE_ROW_PARAMETERS = (("theta", "deg"), ("x", "mm"), ("y", "mm"), ("z", "mm"), ("rx", "deg"), ("ry", "deg"),
                            ("rz", "deg"))
-PARAMETRIZATIONS = {"dh": ROW_PARAMETERS, "complete": COMPLETE_ROW_PARAMETERS}
+
+
+@dataclass(frozen=True)
+class Parametrization:
+    """One way of writing a chain's rows as parameters (a row of :data:`PARAMETRIZATIONS`).
+
+    Attributes
+    ----------
+    name : str
+        Its name in run configs and model files (``parametrization:``).
+    row_parameters : tuple of (name, unit)
+        Each row's parameters, in the table's order.
+    origins : bool
+        A row's errors follow its general fixed transform (``complete``: a joint offset, then three shifts and
+        three turns) rather than its four DH parameters.
+    """
+
+    name: str
+    row_parameters: tuple[tuple[str, str], ...]
+    origins: bool
+
+
+PARAMETRIZATIONS = {p.name: p for p in (Parametrization("dh", ROW_PARAMETERS, origins=False),
+                                        Parametrization("complete", COMPLETE_ROW_PARAMETERS, origins=True))}
 TOOL_PARAMETERS = (("tool.x", "mm"), ("tool.y", "mm"), ("tool.z", "mm"))
 BASE_PARAMETERS = (("base.x", "mm"), ("base.y", "mm"), ("base.z", "mm"),
                    ("base.rx", "deg"), ("base.ry", "deg"), ("base.rz", "deg"))
@@ -92,7 +115,7 @@ def parameter_names(robot: Robot, errors: JointErrors | None = None, parametriza
     ['theta[1]', 'x[1]', 'y[1]', 'z[1]', 'rx[1]', 'ry[1]', 'rz[1]', 'theta[2]']
     """
     rows = [(f"{p}[{r + 1}]", unit) for r in range(robot.alpha_deg.size)
-            for p, unit in PARAMETRIZATIONS[parametrization]]
+            for p, unit in PARAMETRIZATIONS[parametrization].row_parameters]
     return rows + list(TOOL_PARAMETERS) + list(BASE_PARAMETERS) + (errors.names() if errors is not None else [])
 
 
@@ -100,7 +123,7 @@ def nominal_values(robot: Robot, errors: JointErrors | None = None, parametrizat
                    ) -> NDArray[np.float64]:
     """The robot's own parameter values, shape ``(G [+ P],)`` (:func:`geometric_size`): rows, tool, a zero base
     correction, and zero joint errors. A complete row's six errors are nominally zero."""
-    if parametrization == "complete":
+    if PARAMETRIZATIONS[parametrization].origins:
         zeros = np.zeros((robot.alpha_deg.size, 6))
         rows = np.column_stack([robot.theta_offset_deg, zeros]).ravel()
     else:
@@ -111,7 +134,7 @@ def nominal_values(robot: Robot, errors: JointErrors | None = None, parametrizat
 def geometric_size(robot: Robot, parametrization: str = "dh") -> int:
     """Number of geometric parameters ``G``: ``4 R + 9`` (``dh``) or ``7 R + 9`` (``complete``); the joint
     errors' follow them. The tool's three and the base's six are the last nine."""
-    return len(PARAMETRIZATIONS[parametrization]) * robot.alpha_deg.size + 9
+    return len(PARAMETRIZATIONS[parametrization].row_parameters) * robot.alpha_deg.size + 9
 
 
 def robot_with(nominal: Robot, values: NDArray[np.float64], parametrization: str = "dh") -> Robot:
@@ -125,7 +148,7 @@ def robot_with(nominal: Robot, values: NDArray[np.float64], parametrization: str
     turn = matrix_from_rpy_deg(values[size - 3:size])
     moved = dict(tool_mm=values[size - 9:size - 6].copy(), base_rotation=turn @ nominal.base_rotation,
                  base_mm=turn @ nominal.base_mm + values[size - 6:size - 3])
-    if parametrization == "complete":
+    if PARAMETRIZATIONS[parametrization].origins:
         table = values[:7 * rows].reshape(rows, 7)
         return nominal.replace(theta_offset_deg=table[:, 0].copy(), origins=_corrected_origins(nominal, table[:, 1:]),
                                **moved)
@@ -154,7 +177,7 @@ def identification_jacobian(nominal: Robot, q_deg: NDArray[np.float64], values: 
     robot = robot_with(nominal, values, parametrization)
     p, chain = robot.parameter_jacobian(q_deg)
     size = geometric_size(nominal, parametrization)
-    if parametrization == "complete":
+    if PARAMETRIZATIONS[parametrization].origins:
         chain = _complete_columns(robot, q_deg, p, chain, values)
     lever = p - values[size - 6:size - 3]                # about the shifted base origin
     base = np.empty((p.shape[0], 3, 6))
@@ -222,7 +245,7 @@ def actual_joints(nominal: Robot, errors: JointErrors | None, q_deg: NDArray[np.
     if errors is None or errors.empty:
         return q_deg, None, None
     size = geometric_size(nominal, parametrization)
-    motions = complete_motions(values) if parametrization == "complete" else None
+    motions = complete_motions(values) if PARAMETRIZATIONS[parametrization].origins else None
     return errors.design(own_geometry(nominal, values, parametrization), q_deg, values[size:size + errors.size],
                          payload_kg, derivatives, motions)
 
@@ -772,7 +795,7 @@ def _orientation(nominal: Robot, q_actual, design, moves, values, own: int, extr
         return residuals, None
     _, xs, zs = robot.frame_axes(q_actual)                                # (n, R + 1, 3)
     omega = np.zeros((n, 3, values.size))
-    if parametrization == "complete":
+    if PARAMETRIZATIONS[parametrization].origins:
         omega[:, :, 0:7 * rows:7] = zs[:, :rows].transpose(0, 2, 1) * _DEG     # theta of each row
         axes = complete_axes(robot, q_actual, values)[2]                      # (n, R, 3, 3)
         for r in range(rows):

@@ -30,7 +30,7 @@ from .identification import (PARAMETRIZATIONS, PRIMARY_TARGET, STATUSES, Identif
                              model_jacobian, nominal_values, own_geometry, parameter_names, prior_variance,
                              resolved_parametrization, robot_with)
 from .joint_errors import JointErrors, compliance_problem, harmonics_problem
-from .kindtable import body_of, may_be_residual, model_from_body, residual_kinds
+from .kindtable import body_of, check_body, may_be_residual, model_from_body, regions_of, residual_kinds
 from .pose import PoseErrorModel
 from .targets import added_names, added_nominal, extra_from
 
@@ -118,10 +118,7 @@ class KinematicModel(ErrorModelBase):
         self.random_state = random_state
 
     kind = "kinematic"
-    own_prior = True        # the unidentified parameters' prior: no held inputs' prior of a calibration on top
     file_kind = "kinematic"
-    takes_residual = True
-    fits_pose_errors = True
     _parameter_rules = {"base": boolean(True), "tool": boolean(True),
                         "rcond": real(0.0, 1.0, default=1e-6, low_open=True),
                         "parametrization": one_of("auto", *PARAMETRIZATIONS, default="auto"),
@@ -140,7 +137,6 @@ class KinematicModel(ErrorModelBase):
         if not isinstance(self.robot, (Robot, str, PurePath)):
             raise param_error(own, "robot", "a Robot, a built-in robot name or a robot YAML path", self.robot)
         robot = load_robot(self.robot)
-        self._check_rules()
         for name, (_, problem) in self._joint_rules.items():
             expected = problem(getattr(self, name), robot.n_joints)
             if expected is not None:
@@ -520,7 +516,7 @@ class KinematicModel(ErrorModelBase):
             model.residual = model.residual_ if n_out == 3 else model.residual_.model
         return model
 
-    def check_file(self, r: FieldReader) -> None:
+    def check_section(self, r: FieldReader, limit_mm: float = 1e6) -> None:
         """The identified robot moves the tool by less than the robot's reach from where the nominal robot
         puts it, at the corners and centre of the joint box of the data; a residual model is checked too."""
         poses = box_points(*self.data_bounds_)
@@ -530,11 +526,11 @@ class KinematicModel(ErrorModelBase):
         reach = self.robot_.reach_mm
         if not np.all(np.isfinite(shift)) or shift.max() > reach:
             worst = f"{shift.max():.4g} mm" if np.all(np.isfinite(shift)) else "a non-finite distance"
-            r.sub("model").sub("identification").fail(
+            r.sub("identification").fail(
                 "value", f"the identified robot moves the tool by {worst} within the joint box of its data, more "
                          f"than the robot's reach ({reach:.0f} mm): the identified values are damaged")
         if self.residual_ is not None:
-            self.residual_.check_file(r.sub("model").sub("residual"))
+            check_body(self.residual_, r.sub("residual"))
 
     def n_outputs(self) -> int:
         return int(getattr(self, "n_outputs_", 3))
@@ -581,6 +577,12 @@ class KinematicModel(ErrorModelBase):
                          "which the positions do not determine (use_orientation: true identifies from it)")
         return notes + (self.residual_.fit_notes() if self.residual_ is not None else [])
 
+    def search_gap(self, other: ErrorModelBase) -> str | None:
+        """The residual's (:meth:`ErrorModelBase.search_gap`): the kinematic part searches nothing."""
+        if self.residual_ is None or not isinstance(other, KinematicModel) or other.residual_ is None:
+            return None
+        return self.residual_.search_gap(other.residual_)
+
     def is_physical(self) -> bool:
         return self.residual is None
 
@@ -605,10 +607,17 @@ class KinematicModel(ErrorModelBase):
         return clone(self).set_params(residual=residual.frozen(inputs, leftover))
 
     def regions_model(self):
-        return self.residual_.regions_model() if getattr(self, "residual_", None) is not None else None
+        """The partitioned model of the residual, if it has one (the table's ``holds_regions``)."""
+        return regions_of(self.residual_) if self.residual_ is not None else None
 
     def identification(self) -> Identification:
+        """The identified parameter table (the table's ``identified``)."""
         return self.identification_
+
+    def parameter_rows(self) -> tuple[int, tuple[tuple[str, str], ...]]:
+        """The chain's rows and each row's parameters with their units (the identified table's first
+        ``rows x len(parameters)`` entries, row by row, then tool, base and joint errors)."""
+        return int(self.robot_.alpha_deg.size), PARAMETRIZATIONS[self.parametrization_].row_parameters
 
     def run_summary(self) -> dict:
         table = self.identification_

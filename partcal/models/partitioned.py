@@ -28,14 +28,12 @@ from .angles import InputMap
 from .base import ErrorModelBase, seed_from
 from .features import varying_inputs
 from .combine import BlendWeights, FrameCombiner, combine_generic, region_weights
-from .gp import GaussianProcessErrorModel
+from .kindtable import KINDS, Kind, RegionFit, pso_rms_ratio, regions_kinds, swarm_runs
 from .partition import BLEND_WIDTH, KMeansPartition, Octree, Partition, partition_from_file
-from .series import ErrorModel, fit_swarms
+from .series import ErrorModel
 from .threads import one_blas_thread
 
 log = logging.getLogger(__name__)
-MIN_SAMPLES_PER_TERM = 3
-LOCAL_KINDS = {cls.kind: cls for cls in (ErrorModel, GaussianProcessErrorModel)}    # what a region may hold
 
 
 class PartitionedErrorModel(ErrorModelBase):
@@ -46,8 +44,10 @@ class PartitionedErrorModel(ErrorModelBase):
     partition : Octree or KMeansPartition, optional
         Default ``Octree()`` for Cartesian inputs, ``KMeansPartition()`` for
         joint angles.
-    local : ErrorModel or GaussianProcessErrorModel, optional
-        The model fitted in every region (default ``ErrorModel()``). Its
+    local : estimator, optional
+        The model fitted in every region (default ``ErrorModel()``): any estimator of a kind whose
+        row in the table of kinds says ``regions=True`` (``ErrorModel``,
+        ``GaussianProcessErrorModel``, or a kind registered so). Its
         ``random_state`` is replaced by a per-region child of this model's
         ``random_state``. With joint-angle inputs the regions and blend
         kernels live in scaled joint space (each joint's training range is
@@ -65,7 +65,7 @@ class PartitionedErrorModel(ErrorModelBase):
     Attributes
     ----------
     partition_ : Partition
-    models_ : list of ErrorModel or GaussianProcessErrorModel, one per region
+    models_ : list of estimators of the local model's kind, one per region
     input_map_ : InputMap or None
         Joint-angle inputs: how they are wrapped and scaled for the partition.
     min_samples_ : int
@@ -94,14 +94,15 @@ class PartitionedErrorModel(ErrorModelBase):
         """What the local models read: ``cartesian`` or ``joint``."""
         return (self.local if self.local is not None else ErrorModel()).inputs
 
-    def _resolved(self) -> tuple[ErrorModel | GaussianProcessErrorModel, Octree | KMeansPartition]:
+    def _resolved(self) -> tuple[ErrorModelBase, Octree | KMeansPartition]:
         own = type(self).__name__
         self._check_rules()
         if self.n_jobs is not None and not isinstance(self.n_jobs, Integral):
             raise param_error(own, "n_jobs", "an int or None", self.n_jobs)
         local = ErrorModel() if self.local is None else self.local
-        if not isinstance(local, (ErrorModel, GaussianProcessErrorModel)):
-            raise param_error(own, "local", "an ErrorModel or a GaussianProcessErrorModel", local)
+        if _local_kind(local) is None:
+            raise param_error(own, "local", "an ErrorModel or a GaussianProcessErrorModel, or an estimator of "
+                              f"another kind that may be a local model ({', '.join(regions_kinds())})", local)
         partition = self.partition
         if partition is None:
             partition = Octree() if local.inputs == "cartesian" else KMeansPartition()
@@ -116,12 +117,13 @@ class PartitionedErrorModel(ErrorModelBase):
     def fit(self, X, y):
         """Partition the inputs, then fit one weighted local model per region. Returns self."""
         local, spec = self._resolved()
+        fitter = _region_fit(local)
         X, y = validate_data(self, X, y, multi_output=True, y_numeric=True, dtype=np.float64)
         self._y_1d = y.ndim == 1
         Y = y.reshape(len(y), -1)
         self.input_map_ = InputMap.fit(X, angles=True) if local.inputs == "joint" else None
         X, S = self._coordinates(X)
-        need, why = region_minimum(local, int(varying_inputs(X).sum()))
+        need, why, _ = local.region_minimum(int(varying_inputs(X).sum()))
         min_samples = spec.min_samples or need
         if X.shape[0] < min_samples:
             raise PartcalError(f"{type(self).__name__}: a region needs at least {min_samples} samples "
@@ -129,16 +131,13 @@ class PartitionedErrorModel(ErrorModelBase):
         seed = seed_from(self.random_state)
         partition = spec.build(S, min_samples, seed, self.blend_width)
         self._weights, self._combiner = BlendWeights(partition), None
-        reach = local.region_overlap if isinstance(local, GaussianProcessErrorModel) else 1.0
         with one_blas_thread():
-            groups = self._training_groups(partition, S, reach)
+            groups = self._training_groups(partition, S, fitter.overlap(local))
         seeds = np.random.SeedSequence(seed).spawn(partition.n_regions)
         models = [clone(local).set_params(random_state=int(s.generate_state(1)[0])) for s in seeds]
-        shared = None
-        if isinstance(local, GaussianProcessErrorModel) and local.hyperparameters == "shared":
-            shared = self._shared_search(local, X, Y)
-            log.info("shared GP hyperparameters: %s", shared.sklearn_kernel())
-        self.models_ = _fit_regions(models, [(X[idx], Y[idx], w) for idx, w in groups], self.n_jobs, shared)
+        search_seed = seed_from(self.random_state) if fitter.shares(local) else None
+        self.models_ = fitter.fit_all(local, models, [(X[idx], Y[idx], w) for idx, w in groups], self.n_jobs,
+                                      X, Y, search_seed)
         self.partition_ = partition
         self.min_samples_ = int(min_samples)
         self.n_outputs_ = Y.shape[1]
@@ -243,7 +242,7 @@ class PartitionedErrorModel(ErrorModelBase):
             labels = self.partition_.assign(S)
             for region in np.unique(labels).tolist():
                 rows = np.flatnonzero(labels == region)
-                out[rows] = self.models_[region]._predict_trusted(X[rows])
+                out[rows] = self.models_[region].predict_validated(X[rows])
             return out
         weights, combiner = self._blend_caches(fast and S is X)
         plan, Ss, blocks = weights.blocks(S)
@@ -331,8 +330,9 @@ class PartitionedErrorModel(ErrorModelBase):
 
 
     # ------------------------------------------------------------------ the kind: files, run, report
-    def to_file(self) -> dict:
-        """A partitioned model's fields stand at the file's top level (as partcal 0.1 wrote them)."""
+    def file_section(self) -> dict:
+        """A partitioned model's fields (at the file's top level, as partcal 0.1 wrote them: its row's
+        ``flat_file``)."""
         imap = getattr(self, "input_map_", None)
         local = self.models_[0]
         return dict(local_kind=local.kind, input_map=imap.to_dict() if imap is not None else None,
@@ -342,11 +342,12 @@ class PartitionedErrorModel(ErrorModelBase):
                     regions=[m.file_section() for m in self.models_])
 
     @classmethod
-    def from_file(cls, r: FieldReader, inputs: str, n_in: int, n_out: int) -> "PartitionedErrorModel":
+    def from_file_section(cls, r: FieldReader, inputs: str, n_in: int, n_out: int) -> "PartitionedErrorModel":
         blend = r.sub("blend")
         model = cls(blend=blend.rule("method", cls._parameter_rules["blend"]),
                     blend_width=blend.rule("width", cls._parameter_rules["blend_width"]))
-        local_cls = LOCAL_KINDS[r.choice("local_kind", tuple(LOCAL_KINDS))] if "local_kind" in r.doc else ErrorModel
+        local_kinds = {name: KINDS[name].estimator for name in regions_kinds()}
+        local_cls = local_kinds[r.choice("local_kind", tuple(local_kinds))] if "local_kind" in r.doc else ErrorModel
         model.input_map_ = InputMap.from_file(r.sub("input_map"), n_in) if r.doc.get("input_map") is not None else None
         p = r.sub("partition")
         m = p.integer("n_regions", 1)
@@ -371,40 +372,34 @@ class PartitionedErrorModel(ErrorModelBase):
         if np.any(model.region_counts_ < 0):
             r.fail("region_counts", "counts must be >= 0")
         model.n_features_in_, model.n_outputs_, model._y_1d = n_in, n_out, False
-        model.local = clone(model.models_[0]) if local_cls is GaussianProcessErrorModel else ErrorModel(inputs=inputs)
+        model.local = clone(model.models_[0])
         return model
 
-    def check_file(self, r: FieldReader) -> None:
+    def check_section(self, r: FieldReader, limit_mm: float = 1e6) -> None:
         """Every region's model is checked on the box of its own data."""
         for k, (local, item) in enumerate(zip(self.models_, r.doc["regions"])):
             local.check_section(r.sub(f"regions[{k}]", item))
 
     def min_samples(self, n_inputs: int) -> tuple[int, str, str]:
         local, spec = self._resolved()
-        need, why = region_minimum(local, n_inputs)
-        if isinstance(local, ErrorModel):
-            why, key = f"{why} ({n_inputs} varying {local.inputs} inputs)", local.min_samples(n_inputs)[2]
-        else:
-            why, key = f"{why} of the Gaussian process", "partition"
+        need, why, key = local.region_minimum(n_inputs)
         need = spec.min_samples or need
-        return need, f"one region of {need} samples ({why})", key
+        return need, f"one region of {need} samples ({why} ({n_inputs} varying {local.inputs} inputs))", key
 
-    def peak_fit_bytes(self, n: int, n_joints: int) -> tuple[float, str]:
+    def peak_fit_bytes(self, n: int, n_joints: int, regions: int = 1) -> tuple[float, str]:
         """The local model's fit with the fewest regions the partition may make (an octree of depth ``t``
         counted as ``2^t`` regions, a k-means one as its ``n_regions``): the largest regions."""
         local, spec = self._resolved()
-        if not isinstance(local, GaussianProcessErrorModel):
-            return local.peak_fit_bytes(n, n_joints)
         regions = 2**spec.max_depth if isinstance(spec, Octree) else spec.n_regions
         return local.peak_fit_bytes(n, n_joints, regions=regions)
 
     def setting_problem(self, n_inputs: int) -> tuple[str, str] | None:
-        """A region of series models may not be set smaller than the local model's terms per output."""
+        """A region may not be set smaller than the fewest samples a fit of the local model needs."""
         local, spec = self._resolved()
-        if isinstance(local, ErrorModel) and spec.min_samples is not None:
-            terms = local.min_samples(n_inputs)[0]
-            if spec.min_samples < terms:
-                return "partition.min_samples", (f"must be at least the local model's {terms} terms per output; "
+        if spec.min_samples is not None:
+            need, why, _ = local.min_samples(n_inputs)
+            if spec.min_samples < need:
+                return "partition.min_samples", (f"must be at least the local model's {why.split(' (')[0]}; "
                                                  f"got {spec.min_samples}")
         return None
 
@@ -427,37 +422,33 @@ class PartitionedErrorModel(ErrorModelBase):
         """The regions' own, summed (the blend shares them between regions: an upper bound); Gaussian
         processes with shared hyperparameters share one output mean too, counted once."""
         total = float(sum(m.effective_parameters() for m in self.models_))
-        local = self.local
-        if isinstance(local, GaussianProcessErrorModel) and local.hyperparameters == "shared":
+        local = self._resolved()[0]
+        if _region_fit(local).shares(local):
             total -= (len(self.models_) - 1) * self.n_outputs_
         return total
 
     def fit_notes(self) -> list[str]:
         return sorted({note for m in self.models_ for note in m.fit_notes()})
 
-    def _shared_search(self, local: GaussianProcessErrorModel, X, Y) -> GaussianProcessErrorModel:
-        """The hyperparameters the regions share, searched on the local models' inputs ``X``."""
-        return clone(local).set_params(random_state=seed_from(self.random_state)).fit_shared(X, Y)
-
     def frozen(self, X, y) -> "PartitionedErrorModel":
-        """With Gaussian-process regions sharing hyperparameters: those learnt on ``X, y`` kept
-        (see :meth:`GaussianProcessErrorModel.frozen`); otherwise itself."""
+        """With regions that share one search (Gaussian processes with shared hyperparameters): what it
+        learns on ``X, y`` kept (the local kind's ``RegionFit.freeze``); otherwise itself."""
         local, _ = self._resolved()
-        if not isinstance(local, GaussianProcessErrorModel) or local.hyperparameters != "shared" \
-                or local.fixed_kernel is not None:
+        fitter = _region_fit(local)
+        if not fitter.shares(local):
             return self
         X, y = np.asarray(X, dtype=float), np.asarray(y, dtype=float)
         Y = y.reshape(len(y), -1)
         coords = InputMap.fit(X, angles=True).wrap(X) if local.inputs == "joint" else X     # as fit() does
-        shared = self._shared_search(local, coords, Y)
-        return clone(self).set_params(local=clone(local).set_params(fixed_kernel=shared.learnt_kernel()))
+        kept = fitter.freeze(local, coords, Y, seed_from(self.random_state))
+        return self if kept is None else clone(self).set_params(local=kept)
 
     def pso_rms_ratio(self) -> float | None:
-        ratios = [m.pso_rms_ratio() for m in self.models_]
+        ratios = [pso_rms_ratio(m) for m in self.models_]
         return None if any(v is None for v in ratios) else float(max(ratios))
 
     def swarm_runs(self) -> list[tuple[np.ndarray, float]]:
-        return [run for m in self.models_ for run in m.swarm_runs()]
+        return [run for m in self.models_ for run in swarm_runs(m)]
 
     def regions_model(self) -> "PartitionedErrorModel":
         return self
@@ -480,43 +471,27 @@ class PartitionedErrorModel(ErrorModelBase):
         return self.predict(X).reshape(len(X), -1)
 
 
-def _fit_regions(models: list, data: list[tuple], n_jobs, shared=None) -> list:
-    """Fit every region's model to its ``(X, Y, weights)``; swarms of all regions in one batch.
-
-    PSO fits run their swarms together (:func:`fit_swarms`: one vectorised loop
-    for all regions and outputs, grouped by dimension), in ``n_jobs`` slices of
-    regions when asked. Every region keeps its own seed, so each model is
-    exactly the one a solo fit gives, whatever ``n_jobs``. ``shared``: the
-    hyperparameters Gaussian-process regions share (see ``GaussianProcessErrorModel``).
-    """
-    if not all(isinstance(m, ErrorModel) and m.solver == "pso" for m in models):   # no swarms: region by region
-        extra = {} if shared is None else {"shared": shared}
-        return Parallel(n_jobs=n_jobs)(delayed(_fit_one)(m, *d, **extra) for m, d in zip(models, data))
-    workers = max(1, min(len(models), effective_n_jobs(n_jobs)))
-    cuts = np.linspace(0, len(models), workers + 1).round().astype(int)
-    slices = [(models[a:b], data[a:b]) for a, b in zip(cuts[:-1], cuts[1:]) if b > a]
-    if len(slices) == 1:
-        return _fit_batch(*slices[0])
-    return [m for part in Parallel(n_jobs=n_jobs)(delayed(_fit_batch)(*sl) for sl in slices) for m in part]
+def _local_kind(local) -> Kind | None:
+    """The row of a local model's kind if that kind may be a partition's local model (its ``regions``)."""
+    kind = KINDS.get(type(local).kind) if isinstance(local, ErrorModelBase) else None
+    return kind if kind is not None and isinstance(local, kind.estimator) and kind.regions else None
 
 
-def _fit_one(model, X, Y, weights, **extra):
-    return model._fit(X, Y, weights, **extra)
+def _region_fit(local: ErrorModelBase) -> RegionFit:
+    """How the local model's regions are fitted: its kind's ``region_fit``, or each region by its public ``fit``."""
+    return _local_kind(local).region_fit or EACH_REGION
 
 
-def region_minimum(local, n_active: int) -> tuple[int, str]:
-    """Default smallest region for a local model, and the reason (for the message)."""
-    if isinstance(local, GaussianProcessErrorModel):
-        local._check_params()
-        return local.region_minimum(n_active)
-    terms = local._check_params()[0].n_terms(n_active)
-    return MIN_SAMPLES_PER_TERM * terms, f"{terms} terms per output"
+def _fit_each(local, models: list, data: list[tuple], n_jobs, X=None, Y=None, seed=None) -> list:
+    """Every region's model fitted on its ``(X, Y, weights)`` by its public ``fit``, in parallel."""
+    return Parallel(n_jobs=n_jobs)(delayed(_fit_one)(m, *d) for m, d in zip(models, data))
 
 
-def _fit_batch(models: list[ErrorModel], data: list[tuple]) -> list[ErrorModel]:
-    problems = [m._setup(*d, trusted=True) for m, d in zip(models, data)]
-    results = fit_swarms(list(zip(models, problems)))
-    return [m._complete(p, r) for m, p, r in zip(models, problems, results)]
+def _fit_one(model, X, Y, weights):
+    return model.fit(X, Y, sample_weight=weights)
+
+
+EACH_REGION = RegionFit(fit_all=_fit_each)
 
 
 def fold_regions(models: list[PartitionedErrorModel]) -> list[int]:

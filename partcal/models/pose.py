@@ -22,7 +22,7 @@ from sklearn.utils.validation import check_is_fitted
 from ..errors import DataError
 from ..metrics import ORIENTATION, POSITION
 from .base import ErrorModelBase
-from .kindtable import body_of, model_from_body
+from .kindtable import body_of, check_body, equations_of, model_from_body, pso_rms_ratio, regions_of, swarm_runs
 
 if TYPE_CHECKING:
     from .._validation import FieldReader
@@ -155,20 +155,21 @@ class PoseErrorModel(ErrorModelBase):
     def solver_name(self) -> str:
         return self.position_.solver_name
 
+    # ------------------------------------------------------------------ what its parts answer (the table's columns)
     def pso_rms_ratio(self) -> float | None:
-        return self.position_.pso_rms_ratio()
+        return pso_rms_ratio(self.position_)
 
     def swarm_runs(self) -> list[tuple[np.ndarray, float]]:
-        return self.position_.swarm_runs() + self.orientation_.swarm_runs()
+        return swarm_runs(self.position_) + swarm_runs(self.orientation_)
 
     def equations(self, input_names=None, output_names=("dx", "dy", "dz"), precision: int | None = None
                   ) -> list[str] | None:
-        position = self.position_.equations(input_names, output_names[:3], precision)
-        turn = self.orientation_.equations(input_names, ("drx", "dry", "drz"), precision)
+        position = equations_of(self.position_, input_names, output_names[:3], precision)
+        turn = equations_of(self.orientation_, input_names, ("drx", "dry", "drz"), precision)
         return None if position is None or turn is None else position + turn
 
     def regions_model(self):
-        return self.position_.regions_model()
+        return regions_of(self.position_)
 
     def n_outputs(self) -> int:
         return 6
@@ -198,4 +199,4 @@ class PoseErrorModel(ErrorModelBase):
     def check_section(self, r: "FieldReader", limit_mm: float = 1e6) -> None:
         """Each part's own checks, on its section."""
         for name, part in zip(PARTS, self._parts()):
-            part.check_file(r.sub(name))
+            check_body(part, r.sub(name))

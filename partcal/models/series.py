@@ -23,12 +23,14 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+from joblib import Parallel, delayed, effective_n_jobs
 from sklearn.utils.validation import check_is_fitted, validate_data
 
 from .._validation import FieldReader, Requirement, boolean, integer, is_int, one_of, param_error
 from ..errors import DataError, PartcalError
 from ..metrics import distance_outside_boxes
-from .base import ErrorModelBase, seed_from
+from .base import ErrorModelBase, check_sample_weight, seed_from
+from .kindtable import RegionFit
 from .features import Basis, Scaling, SeriesPlan, column_bounds
 from .polynomials import coef_centred, coef_from_scaled, lowered_terms
 from .swarm import RULES, TOPOLOGIES, SwarmConfig, SwarmResult, minimize_batch
@@ -46,6 +48,7 @@ FITNESSES = ("rms", "max", "mae")
 SWARM_KEYS = {"particles": "int", "iterations": "int", "c1": "float", "c2": "float", "rule": "str",
               "topology": "str", "neighbours": "int", "inertia": "list", "vmax": "float",
               "bound_scale": "float", "stop_fitness": "float", "patience": "int", "ftol": "float"}
+MIN_SAMPLES_PER_TERM = 3           # a partition's default smallest region: 3 samples a term
 _DEFAULT_SWARM = SwarmConfig()      # frozen: one validated instance instead of a new one per call
 
 
@@ -136,11 +139,16 @@ class ErrorModel(ErrorModelBase):
         return Basis(self.basis, self.inputs, order, bool(self.cross_terms)), self.pso or _DEFAULT_SWARM
 
     # ------------------------------------------------------------------ fitting
-    def fit(self, X, y):
-        """Fit the coefficients to errors ``y`` (n, 3) mm at inputs ``X`` (n, d). Returns self."""
+    def fit(self, X, y, sample_weight=None):
+        """Fit the coefficients to errors ``y`` (n, 3) mm at inputs ``X`` (n, d), each sample weighted by
+        ``sample_weight`` (n,) (weighted least squares, a weighted fitness for the swarm; a partition's
+        region). Returns self."""
         X, y = validate_data(self, X, y, multi_output=True, y_numeric=True, dtype=np.float64)   # once, with y
-        self._fit(X, y, None, trusted=True)
-        self.train_inputs_ = np.array(X, copy=True)
+        if sample_weight is not None:
+            sample_weight = check_sample_weight(type(self).__name__, sample_weight, len(X))
+        self._fit(X, y, sample_weight, trusted=True)
+        kept = X if sample_weight is None else X[sample_weight > 0]
+        self.train_inputs_ = np.array(kept, copy=True)
         return self._prepare()
 
     def _fit(self, X, y, sample_weight, trusted: bool = False):
@@ -161,15 +169,16 @@ class ErrorModel(ErrorModelBase):
             X, y = validate_data(self, X, y, multi_output=True, y_numeric=True, dtype=np.float64)
         self._y_1d = y.ndim == 1
         Y = y.reshape(len(y), -1)
-        bounds = column_bounds(X)
-        scaling = Scaling.fit(X, bounds)
+        weights = np.ones(len(X)) if sample_weight is None else np.asarray(sample_weight, dtype=float)
+        held = X if sample_weight is None else X[weights > 0]       # samples of weight 0 do not set the scaling
+        bounds = column_bounds(held)
+        scaling = Scaling.fit(held, bounds)
         terms = basis.terms(scaling)
         n, m = X.shape[0], len(terms)
         if n < m:
             raise PartcalError(
                 f"{type(self).__name__} with {m} terms per output ({self.describe()}) needs at least "
                 f"{m} samples; got {n} sample{'s' if n != 1 else ''}")
-        weights = np.ones(n) if sample_weight is None else np.asarray(sample_weight, dtype=float)
         phi = basis.transform(X, scaling, terms)
         sqrt_w = np.sqrt(weights)
         Yw = Y * sqrt_w[:, None]
@@ -437,6 +446,16 @@ class ErrorModel(ErrorModelBase):
         return terms, f"{terms} terms per output ({n_inputs} varying {self.inputs} inputs)", (
             "degree" if self.basis == "polynomial" else "harmonics")
 
+    def region_minimum(self, n_active: int) -> tuple[int, str, str]:
+        """Smallest region a partition may give this model (``MIN_SAMPLES_PER_TERM`` samples a term), why,
+        and the config key that sets it."""
+        terms, _, key = self.min_samples(n_active)
+        return MIN_SAMPLES_PER_TERM * terms, f"{terms} terms per output", key
+
+    @property
+    def solver_name(self) -> str:
+        return self.solver
+
     @classmethod
     def config_keys(cls) -> set[str]:
         return {"inputs", "basis", "degree", "harmonics", "cross_terms", "solver"}
@@ -592,6 +611,40 @@ def fit_swarms(jobs: list[tuple[ErrorModel, _Problem]]) -> list[list[SwarmResult
         for j, res in zip(owner, results):
             out[members[j]].append(res)
     return out
+
+
+def fit_regions(local: ErrorModel, models: list[ErrorModel], data: list[tuple], n_jobs, X=None, Y=None, seed=None
+                ) -> list[ErrorModel]:
+    """Fit every region's model to its ``(X, Y, weights)``; swarms of all regions in one batch (the series
+    row's :class:`~partcal.models.kindtable.RegionFit`).
+
+    PSO fits run their swarms together (:func:`fit_swarms`: one vectorised loop
+    for all regions and outputs, grouped by dimension), in ``n_jobs`` slices of
+    regions when asked. Every region keeps its own seed, so each model is
+    exactly the one a solo fit gives, whatever ``n_jobs``. ``X, Y, seed`` (all
+    the samples, the partition's seed) are not needed here.
+    """
+    if not all(m.solver == "pso" for m in models):              # no swarms: region by region
+        return Parallel(n_jobs=n_jobs)(delayed(_fit_region)(m, *d) for m, d in zip(models, data))
+    workers = max(1, min(len(models), effective_n_jobs(n_jobs)))
+    cuts = np.linspace(0, len(models), workers + 1).round().astype(int)
+    slices = [(models[a:b], data[a:b]) for a, b in zip(cuts[:-1], cuts[1:]) if b > a]
+    if len(slices) == 1:
+        return _fit_batch(*slices[0])
+    return [m for part in Parallel(n_jobs=n_jobs)(delayed(_fit_batch)(*sl) for sl in slices) for m in part]
+
+
+def _fit_region(model: ErrorModel, X, Y, weights) -> ErrorModel:
+    return model._fit(X, Y, weights)
+
+
+def _fit_batch(models: list[ErrorModel], data: list[tuple]) -> list[ErrorModel]:
+    problems = [m._setup(*d, trusted=True) for m, d in zip(models, data)]
+    results = fit_swarms(list(zip(models, problems)))
+    return [m._complete(p, r) for m, p, r in zip(models, problems, results)]
+
+
+SERIES_REGIONS = RegionFit(fit_all=fit_regions)
 
 
 def _rms_fitness(problems: list[_Problem]):

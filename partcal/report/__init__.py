@@ -23,7 +23,8 @@ import numpy as np
 
 from .. import __version__
 from ..metrics import MRAD_PER_DEG
-from ..models.identification import BASE_PARAMETERS, PARAMETRIZATIONS, TOOL_PARAMETERS
+from ..models.identification import BASE_PARAMETERS, TOOL_PARAMETERS
+from ..models.kinds import equations_of, identification_of, regions_of, run_summary
 from ..models.targets import added_names
 from ..study.results import ModelResult, RunResult
 from ..study.scoring import Outputs, errors_left
@@ -59,8 +60,8 @@ def context(result: RunResult) -> dict:
     by_name = {r.spec.name: r for r in result.models}
     best = by_name[result.best]
     ranked = sorted(result.models, key=lambda r: r.score(cfg.rank_by))
-    global_best = next((r for r in ranked if r.model.regions_model() is None), None)
-    part_best = next((r for r in ranked if r.model.regions_model() is not None), None)
+    global_best = next((r for r in ranked if regions_of(r.model) is None), None)
+    part_best = next((r for r in ranked if regions_of(r.model) is not None), None)
     shown = [r for r in (global_best, part_best) if r is not None]
     outputs = Outputs.of(cfg)
     scenes, captions = scene_specs(result)
@@ -89,7 +90,7 @@ def context(result: RunResult) -> dict:
         "spread": spread_rows(result),
         "convergence_svg": _optional_b64(figures.convergence({r.spec.name: r.model for r in result.models})),
         "equations": [{"name": r.spec.name, "lines": lines} for r in result.models
-                      if (lines := r.model.equations()) is not None],
+                      if (lines := equations_of(r.model)) is not None],
         "kinematic": kinematic_tables(result),
         **compensation_entries(result),
         "registration": registration_rows(result),
@@ -144,8 +145,7 @@ def spread_rows(result: RunResult) -> dict | None:
         for n in names:
             s = r.metrics[n].get("spread")
             cells.append("-" if s is None else f"{100 * s['coverage_95']:.1f}% ({np.mean(s['std_mean']):.3f})")
-        scale = getattr(r.model, "spread_scale_", None)
-        depth = getattr(r.model, "spread_depth_", None)
+        scale, depth = r.model.spread_scale_, r.model.spread_depth_
         rows.append({"name": r.spec.name, "cells": cells,
                      "scale": "own" if scale is None else " ".join(f"{v:.2f}" for v in scale[:3]),
                      "beta": "-" if scale is None else f"{depth.beta if depth is not None else 0.0:.3g}"})
@@ -405,7 +405,7 @@ def kinematic_tables(result: RunResult) -> list[dict]:
     """
     out, seen = [], []
     for r in result.models:
-        table = r.model.identification()
+        table = identification_of(r.model)
         if table is None:
             continue
         same = next((name for name, other in seen if np.array_equal(other.value, table.value)
@@ -415,9 +415,8 @@ def kinematic_tables(result: RunResult) -> list[dict]:
             out.append({"name": r.spec.name, "same_as": same})
             continue
         cells = {row["name"]: _parameter_cell(row) for row in table.rows()}
-        n_rows = r.model.robot_.alpha_deg.size
-        row_parameters = PARAMETRIZATIONS[getattr(r.model, "parametrization_", "dh")]
-        targets = identified_targets(r.model.run_summary()["kinematic"])
+        n_rows, row_parameters = r.model.parameter_rows()
+        targets = identified_targets(run_summary(r.model)["kinematic"])
         added = targets["added"] if targets else []
         own = len(table.names) - len(added)         # a one-target model's parameters, then the added ones
         if targets:
@@ -475,7 +474,7 @@ def scene_specs(result: RunResult) -> tuple[dict[str, dict], dict[str, str]]:
     tests = {n: m for n, m in result.datasets.items() if n != "identification"}
     specs, captions = {}, {}
     for r in result.models:
-        model = r.model.regions_model()
+        model = regions_of(r.model)
         if model is None:
             continue
         part = model.partition_

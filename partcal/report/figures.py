@@ -15,6 +15,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from ..models.kinds import regions_of, swarm_runs  # noqa: E402
+
 
 plt.rcParams.update({"svg.fonttype": "none", "font.size": 9, "axes.grid": True, "grid.alpha": 0.3,
                      "axes.spines.top": False, "axes.spines.right": False, "svg.hashsalt": "partcal"})
@@ -156,9 +158,9 @@ def convergence(models: dict[str, object]) -> str | None:
     """
     curves = {}
     for label, model in models.items():
-        runs = [history / max(lstsq_rms, 1e-12) for history, lstsq_rms in model.swarm_runs()]
+        runs = [history / max(lstsq_rms, 1e-12) for history, lstsq_rms in swarm_runs(model)]
         if runs:
-            curves[label] = (runs, model.regions_model() is not None)
+            curves[label] = (runs, regions_of(model) is not None)
     if not curves:
         return None
     fig, ax = plt.subplots(figsize=(8, 3.4))

@@ -19,7 +19,7 @@ from .._yamlio import Section, load_yaml
 from ..data.formats import MeasurementFormat, RowSelection
 from ..data.plausibility import Plausibility
 from ..errors import PartcalError
-from ..models.kinds import KINDS, config_kinds
+from ..models.kinds import KINDS, config_kinds, fits_pose_errors
 from ..models.partition import PARTITIONS
 from ..models.partitioned import PartitionedErrorModel
 from ..models.pose import PoseErrorModel
@@ -101,7 +101,7 @@ class ModelSpec:
             p = self.partition
             model = PartitionedErrorModel(partition=p.build(size if size is not None else p.sizes[0]), local=model,
                                           blend=p.blend, blend_width=p.blend_width, random_state=random_state)
-        return PoseErrorModel(model) if self.pose and not model.fits_pose_errors else model
+        return PoseErrorModel(model) if self.pose and not fits_pose_errors(model) else model
 
     def with_robot(self, robot: Robot) -> "ModelSpec":
         """This entry (and its residual) with ``robot`` as the robot of every kind that takes one (a ``robot``
@@ -402,7 +402,7 @@ def _model(sec: Section, robot: Robot | None, parent: str | None = None) -> Mode
     partition = _partition(sec, kind.estimator.input_space(sec.data)) if kind.regions else None
     params = kind.estimator.params_from_config(sec, {"robot": robot, "partitioned": partition is not None})
     residual = None
-    if kind.estimator.takes_residual and sec.has("residual"):
+    if kind.takes_residual and sec.has("residual"):
         sub = sec.section("residual")
         if not sub.data:
             sec.fail(sec.path("residual"), "must be a model entry, e.g. {inputs: joint, degree: 2}")
@@ -448,8 +448,8 @@ def _partition(sec: Section, inputs: str) -> PartitionSpec | None:
     min_samples = part.rule("min_samples", integer(1, none=True))
     part.done()
     blend = sec.section("blend")
-    rules = PartitionedErrorModel._parameter_rules
-    method_b, width = blend.rule("method", rules["blend"]), blend.rule("width", rules["blend_width"])
+    method_b = blend.rule("method", PartitionedErrorModel.parameter_rule("blend"))
+    width = blend.rule("width", PartitionedErrorModel.parameter_rule("blend_width"))
     blend.done()
     return PartitionSpec(method, tuple(sizes), min_samples, method_b, width)
 

@@ -27,6 +27,7 @@ from joblib import Parallel, delayed, parallel_config
 from ..data.measurements import Measurements
 from ..errors import ConfigError, held_warnings
 from ..metrics import rms_standard_error
+from ..models.kinds import pso_rms_ratio, reads_targets, regions_of
 from ..models.partitioned import fold_regions
 from ..robot.kinematics import Robot, flange_offset
 from .config import ModelSpec, SpreadOptions
@@ -59,7 +60,7 @@ def per_row_arguments(model, m: Measurements, robot: Robot | None = None, *, fit
     (:data:`partcal.study.selection.FIT_ONLY`: a prediction reads neither, so a test set need not have them).
     ``robot`` (the run's, registered) places each further target on the flange."""
     args = {"payload_kg": m.payload_kg} if m.payload_kg is not None and model.reads_payload else {}
-    if not (fitting and model.reads_targets):
+    if not (fitting and reads_targets(model)):
         return args
     if model.all_targets:              # each target's offset in the flange frame, from its nominal columns
         flange = robot.flange(m.q_deg)
@@ -193,15 +194,15 @@ def _fit_model(spec, seed, data, cv, robot, own_frame, lines, outputs, n_jobs=1,
                                                       progress=fold_done, per_row=rows, n_jobs=n_jobs, final=True,
                                                       on_final=final_done)
         cv_seconds = time.perf_counter() - start - fit_seconds
-        if estimator.regions_model() is not None:
-            cv_regions = fold_regions([m.regions_model() for m in fold_fits])
+        if regions_of(estimator) is not None:
+            cv_regions = fold_regions([regions_of(m) for m in fold_fits])
         _note_other_optima(fold_fits, estimator)
     start = time.perf_counter()
     calibrated = run_spread(spread, estimator, X, y, cv_folds=cv.folds, fold_fits=fold_fits, per_row=rows)
     if calibrated is not None:
         calibrated.apply(estimator)
     spread_seconds = time.perf_counter() - start
-    part = estimator.regions_model()
+    part = regions_of(estimator)
     if cv_regions is not None and cv_regions[0] < part.partition_.n_regions:
         log.warning("fitted on all the identification data it has %d regions, but on the cross-validation "
                     "folds %s, so its CV score is that of a coarser model", part.partition_.n_regions,
@@ -218,7 +219,7 @@ def _fit_model(spec, seed, data, cv, robot, own_frame, lines, outputs, n_jobs=1,
     for name, std in spreads.items():
         metrics[name]["spread"] = spread_summary(data[name], predictions[name], std, name in own_frame)
     return ModelResult(spec, estimator, fit_seconds, outputs.score(resid), metrics, predictions,
-                       estimator.pso_rms_ratio(), granularity, cv_seconds=cv_seconds, nested=nested,
+                       pso_rms_ratio(estimator), granularity, cv_seconds=cv_seconds, nested=nested,
                        cv_regions=cv_regions, cv_se=rms_standard_error(outputs.ranked(resid), cv.groups),
                        effective_parameters=estimator.effective_parameters(), rank_on=outputs.rank_on,
                        spreads=spreads, spread_seconds=spread_seconds)
@@ -238,17 +239,8 @@ def spreads_of(estimator, spec: ModelSpec, data: dict[str, Measurements], robot:
 def _note_other_optima(fold_fits: list, estimator) -> None:
     """Warn about CV folds whose Gaussian process (the model, or a hybrid's residual) found hyperparameters far
     from the final fit's: its CV score is then that of another optimum than the model written."""
-    def gp_of(model):
-        for candidate in (model, getattr(model, "residual_", None)):
-            if hasattr(candidate, "optimum_gap") and getattr(candidate, "fixed_kernel", None) is None:
-                return candidate
-        return None
-
-    final = gp_of(estimator)
-    if final is None:
-        return
     for k, fold in enumerate(fold_fits):
-        gap = gp_of(fold).optimum_gap(final) if gp_of(fold) is not None else None
+        gap = fold.search_gap(estimator)
         if gap is not None:
             log.warning("cross-validation fold %d of %d: its Gaussian process found another optimum than the final "
                         "fit's (%s): the CV score is partly that of other hyperparameters", k + 1, len(fold_fits), gap)

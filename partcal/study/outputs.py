@@ -21,6 +21,7 @@ import yaml
 from .. import __version__
 from ..data.measurements import write_measurements
 from ..errors import PartcalError
+from ..models.kinds import is_physical, run_summary
 from ..robot.description import joint_columns, robot_to_dict
 from .config import RunConfig
 from .persist import save_model
@@ -132,8 +133,7 @@ def _spread_calibration(cfg, r, rows: int) -> dict:
     (None: the model's own spread; the seconds it took are the entry's ``spread_seconds``) and ``depth_beta``,
     how fast it grows with the inputs' depth (0: not at all; None without a calibration). ``folds`` is the
     number of blocks cut from the ``rows`` identification rows: at most one a row."""
-    scale = getattr(r.model, "spread_scale_", None)
-    depth = getattr(r.model, "spread_depth_", None)
+    scale, depth = r.model.spread_scale_, r.model.spread_depth_
     opts = cfg.spread
     return {"method": opts.calibration, "coverage": opts.coverage, "depth": opts.depth,
             **({"folds": min(opts.folds, rows)} if opts.calibration in ("contiguous", "forward") else {}),
@@ -161,8 +161,8 @@ def metrics_document(result: RunResult) -> dict:
             entry["notes"] = r.notes
         entry["inputs"], entry["solver"], entry["regions"] = r.spec.inputs, r.model.solver_name, r.n_regions
         entry["kind"] = r.spec.kind if r.spec.residual is None else f"{r.spec.kind} + {r.spec.residual.kind}"
-        entry["physical"] = r.model.is_physical()
-        entry.update(r.model.run_summary())
+        entry["physical"] = is_physical(r.model)
+        entry.update(run_summary(r.model))
         if r.rms_ratio is not None:
             entry["pso_rms_ratio"] = r.rms_ratio
         if r.granularity is not None:

@@ -31,7 +31,7 @@ from .._validation import FieldReader
 from .._io import atomic_write
 from ..errors import ModelFileError, PartcalError
 from ..models.depth import BETA_MAX, DepthSpread
-from ..models.kinds import body_of, model_from_body
+from ..models.kinds import body_of, check_body, model_from_body, own_prior
 from ..robot.description import robot_from_dict, robot_to_dict
 from ..robot.kinematics import Robot
 
@@ -47,9 +47,9 @@ def model_to_dict(model, *, name: str = "", robot: Robot | None = None, extra: d
     out.update(body_of(model))
     if getattr(model, "train_inputs_", None) is not None:
         out["train_inputs"] = model.train_inputs_.tolist()
-    if getattr(model, "spread_scale_", None) is not None:      # a calibrated spread (study/spread.py)
+    if model.spread_scale_ is not None:                        # a calibrated spread (study/spread.py)
         out["spread_scale"] = np.asarray(model.spread_scale_, dtype=float).tolist()
-    if getattr(model, "spread_depth_", None) is not None:      # its growth with the depth (models/depth.py)
+    if model.spread_depth_ is not None:                        # its growth with the depth (models/depth.py)
         out["spread_depth"] = model.spread_depth_.to_dict()
     out["fit"] = extra or {}
     return out
@@ -142,14 +142,13 @@ def model_from_dict(doc: Any, source: str = "model") -> Any:
                                f"got {r.doc.get('n_inputs')!r}")
     model = model_from_body(r)
     model.train_inputs_ = r.array("train_inputs", (None, model.n_features_in_)) if "train_inputs" in r.doc else None
-    if "spread_scale" in r.doc:
-        model.spread_scale_ = r.array("spread_scale", (model.n_outputs(),))
-        if np.any(model.spread_scale_ <= 0):
-            r.fail("spread_scale", "the calibrated scales of the spread must be > 0")
-    model.spread_depth_ = (_spread_depth(r, model.n_features_in_, model.n_outputs(), model.own_prior)
-                           if "spread_depth" in r.doc else None)
-    model.check_file(r)
-    return model._prepare()
+    scale = r.array("spread_scale", (model.n_outputs(),)) if "spread_scale" in r.doc else None
+    if scale is not None and np.any(scale <= 0):
+        r.fail("spread_scale", "the calibrated scales of the spread must be > 0")
+    model.set_spread(scale, _spread_depth(r, model.n_features_in_, model.n_outputs(), own_prior(model))
+                     if "spread_depth" in r.doc else None)
+    check_body(model, r)
+    return model.prepared()
 
 
 def _spread_depth(r: FieldReader, n_inputs: int, n_outputs: int, own_prior: bool) -> DepthSpread:

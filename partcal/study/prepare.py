@@ -196,13 +196,13 @@ def _feasible(config: RunConfig, i: int, entry: ModelSpec, ident: Measurements, 
         what = "joint angle" if entry.inputs == "joint" else "nominal coordinate"
         config.fail(_key(config, i, "inputs"), f"every {what} of the identification set "
                                                 f"{config.identification} is constant: nothing to fit")
-    built = entry.build(None)
-    if getattr(built, "all_targets", False) and not any(ident.nominal_of(t) is not None for t in ident.target_names[1:]):
+    entry.build(None)                  # what building an estimator checks (a swarm's settings) is refused here
+    if entry.params.get("all_targets") and not any(ident.nominal_of(t) is not None for t in ident.target_names[1:]):
         config.fail(_key(config, i, "all_targets"), f"the identification set {config.identification} measures one "
                                                      "target; all_targets needs further ones with their nominal "
                                                      "positions (columns x_meas@B, ..., x_nom@B, ..., or a tracker "
                                                      "registration)")
-    if getattr(built, "use_orientation", False) and not ident.has_orientation:
+    if entry.params.get("use_orientation") and not ident.has_orientation:
         config.fail(_key(config, i, "use_orientation"), f"the identification set {config.identification} has no "
                                                          "measured orientation (columns rx_meas, ry_meas, rz_meas)")
     sizes, notes = list(entry.sizes), []

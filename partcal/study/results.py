@@ -16,6 +16,7 @@ from numpy.typing import NDArray
 
 from ..data.measurements import Measurements
 from ..data.registration import Registration
+from ..models.kinds import is_physical, regions_of
 from ..robot.kinematics import Robot
 from .config import ModelSpec, RunConfig
 from .plan import run_indices
@@ -55,7 +56,7 @@ class ModelResult:
 
     @property
     def n_regions(self) -> int:
-        part = self.model.regions_model()
+        part = regions_of(self.model)
         return part.partition_.n_regions if part is not None else 1
 
 
@@ -126,4 +127,4 @@ class RunResult:
     def best_reason(self) -> str:
         """Which rule chose ``best``, in words (metrics.json, the report and the printed table say it)."""
         best = next(r for r in self.models if r.spec.name == self.best)
-        return rank_reason(self.config, self.plan.cv if self.plan else None, best.model.is_physical())
+        return rank_reason(self.config, self.plan.cv if self.plan else None, is_physical(best.model))

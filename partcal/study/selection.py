@@ -29,6 +29,7 @@ from sklearn.base import clone
 from .._validation import check_int
 from ..data.measurements import Measurements
 from ..metrics import HELD_TOLERANCE_DEG, labels_as_groups, pooled_rms, pose_groups
+from ..models.kinds import is_physical, regions_of
 from ..models.partitioned import fold_regions
 from ..models.threads import one_blas_thread
 
@@ -313,8 +314,7 @@ def choose_simplest(scores, errors, sizes, physical) -> int:
 
 
 def _frozen(model, X, y, rows: dict):
-    freeze = getattr(model, "frozen", None)
-    return freeze(X, y, **rows) if freeze is not None else model
+    return model.frozen(X, y, **rows)
 
 
 
@@ -323,7 +323,7 @@ def choose_granularity(candidates: Sequence, granularities: Sequence[int], X, y,
                        n_jobs: int = 1) -> tuple[object, list[dict]]:
     """Choose among unfitted partitioned ``candidates`` (one per granularity) by cross-validation on ``folds``.
 
-    A candidate is a partitioned model or any model whose ``regions_model()``
+    A candidate is a partitioned model or any model that holds one (``regions_of``,
     is one (a hybrid with a partitioned residual). Returns the best candidate
     fitted on all of ``X, y`` (the first of equal scores) and a row per
     candidate: ``granularity``, ``cv_rms_3d`` (``score`` of its held-out
@@ -338,8 +338,8 @@ def choose_granularity(candidates: Sequence, granularities: Sequence[int], X, y,
     fold_models: list = []
     best, scores, fitted, seconds = select_by_cv(list(candidates), X, y, folds=folds, fold_models=fold_models,
                                                  per_row=per_row, score=score, n_jobs=n_jobs)
-    table = [{"granularity": int(size), "cv_rms_3d": s, "regions": int(f.regions_model().partition_.n_regions),
-              "cv_regions": fold_regions([m.regions_model() for m in folded]), "fit_seconds": t}
+    table = [{"granularity": int(size), "cv_rms_3d": s, "regions": int(regions_of(f).partition_.n_regions),
+              "cv_regions": fold_regions([regions_of(m) for m in folded]), "fit_seconds": t}
              for size, s, f, folded, t in zip(granularities, scores, fitted, fold_models, seconds)]
     return fitted[best], table
 
@@ -447,7 +447,7 @@ def choose_best(results: list, rank_by: str) -> str:
         return min(results, key=lambda r: r.score(rank_by)).spec.name
     sizes = [r.effective_parameters if np.isfinite(r.effective_parameters) else np.inf for r in results]
     return results[choose_simplest([r.cv_rms_3d for r in results], [r.cv_se for r in results], sizes,
-                                   [r.model.is_physical() for r in results])].spec.name
+                                   [is_physical(r.model) for r in results])].spec.name
 
 
 def rank_reason(config: "RunConfig", cv: CVPlan | None, physical: bool) -> str:

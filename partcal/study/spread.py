@@ -33,6 +33,7 @@ from sklearn.base import clone
 
 from ..errors import DataError, PartcalError, held_warnings
 from ..models.depth import BETA_MAX, DepthSpread
+from ..models.kinds import own_prior
 from .selection import rows_of
 
 log = logging.getLogger(__name__)
@@ -192,15 +193,14 @@ class CalibratedSpread:
     depth: DepthSpread | None = None
 
     def apply(self, model):
-        """Give ``model`` this spread (``spread_scale_``, ``spread_depth_``); returns it."""
-        model.spread_scale_, model.spread_depth_ = self.scale, self.depth
-        return model
+        """Give ``model`` this spread (its :meth:`~partcal.models.base.ErrorModelBase.set_spread`); returns it."""
+        return model.set_spread(self.scale, self.depth)
 
 
 def calibrated(scores, X, folds, coverage: float, depth: bool = True, y=None) -> CalibratedSpread:
     """The spread the held-out ``scores`` of ``folds`` call for: growing with the depth (``beta`` > 0) only when
     they show it, and only with ``depth``; with the training errors ``y`` (of a model without a prior of its
-    own, :attr:`~partcal.models.base.ErrorModelBase.own_prior`) also the prior of inputs the data held still."""
+    own, the row's ``own_prior`` in the table of kinds) also the prior of inputs the data held still."""
     if not depth:
         return CalibratedSpread(scale_from_scores(scores, coverage))
     beta, scale = depth_from_scores(scores, held_out_depths(X, folds), coverage)   # beta 0: scale_from_scores's
@@ -234,7 +234,7 @@ def calibrate_spread(model, X, y, *, folds: int = 5, coverage: float = 0.95, per
     blocks = contiguous_folds(len(X), folds)
     scores = held_out_scores(model, X, y, blocks, per_row)
     model.fit(X, y, **(per_row or {}))
-    return calibrated(scores, X, blocks, coverage, depth, None if model.own_prior else y).apply(model)
+    return calibrated(scores, X, blocks, coverage, depth, None if own_prior(model) else y).apply(model)
 
 
 def run_spread(options, model, X, y, *, cv_folds: list, fold_fits: list | None = None,
@@ -266,4 +266,4 @@ def run_spread(options, model, X, y, *, cv_folds: list, fold_fits: list | None =
         log.warning("the spread could not be calibrated (no held-out block could be predicted with a spread): "
                     "the model's own spread is kept")
         return None
-    return calibrated(scores, X, folds, options.coverage, options.depth, None if model.own_prior else y)
+    return calibrated(scores, X, folds, options.coverage, options.depth, None if own_prior(model) else y)

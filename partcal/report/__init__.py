@@ -106,13 +106,16 @@ def error_figures(result: RunResult, shown: list[ModelResult]) -> list[dict]:
     """Per data set: a path's errors along it with each shown model's 95% band, or, for poses scattered over
     the workspace, predicted against measured errors as points; and the residual histogram."""
     out = []
+    own = result.config.data_options.own_frame
     for n, m in result.datasets.items():
         predicted = _positions(shown, n)
         spreads = {r.spec.name: r.spreads[n][:, :3] for r in shown if n in r.spreads}
         path = figures.is_path(m.nominal_mm)
         draw = figures.errors_along_path if path else figures.errors_scattered
+        left = {"uncompensated": errors_left(m, np.zeros((len(m), 3)), n in own)[0]}
+        left.update({label: errors_left(m, p, n in own)[0] for label, p in predicted.items()})
         out.append({"name": n, "path": path, "path_svg": _b64(draw(n, m.errors_mm, predicted, spreads)),
-                    "hist_svg": _b64(figures.residual_histogram(n, m.errors_mm, predicted))})
+                    "hist_svg": _b64(figures.residual_histogram(n, left, rigid_fit=n in own))})
     return out
 
 

@@ -132,11 +132,11 @@ def orientation_along_path(name: str, angles_mrad: dict[str, np.ndarray]) -> str
     return _svg(fig)
 
 
-def residual_histogram(name: str, measured: np.ndarray, predictions: dict[str, np.ndarray]) -> str:
-    """Distribution of the 3-D error left by each model, against the uncompensated one."""
+def residual_histogram(name: str, left: dict[str, np.ndarray], rigid_fit: bool = False) -> str:
+    """Distribution of the 3-D error left (``left``: label -> (n, 3) mm, ``uncompensated`` first) by each model,
+    as the run's metrics count it: for a set in its own tracker frame, after the rigid fit (``rigid_fit``)."""
     fig, ax = plt.subplots(figsize=(8, 2.6))
-    series = {"uncompensated": np.linalg.norm(measured, axis=1)}
-    series.update({label: np.linalg.norm(measured - p, axis=1) for label, p in predictions.items()})
+    series = {label: np.linalg.norm(errors, axis=1) for label, errors in left.items()}
     top = max(v.max() for v in series.values())
     bins = np.linspace(0, top, 40)
     for k, (label, values) in enumerate(series.items()):
@@ -145,7 +145,8 @@ def residual_histogram(name: str, measured: np.ndarray, predictions: dict[str, n
                 color=colour, lw=1.4, label=f"{label} (RMS {np.sqrt(np.mean(values**2)):.2f} mm)")
     ax.set_xlabel("3-D error |e| (mm)")
     ax.set_ylabel("points")
-    ax.set_title(f"{name}: residual error")
+    ax.set_title(f"{name}: residual error" + (" after the rigid fit to its own frame, as the table scores it"
+                                              if rigid_fit else ""))
     ax.legend(fontsize=8, frameon=False)
     return _svg(fig)
 

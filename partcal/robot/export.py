@@ -38,8 +38,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import PartcalError
-from .kinematics import Robot, matrix_from_euler_deg, rpy_deg_from_matrix
-from .rotations import rotation_vectors_from_matrices
+from .kinematics import Robot
+from .rotations import matrix_from_rpy_deg, rotation_vectors_from_matrices, rpy_deg_from_matrix
 
 UR_JOINTS = ("shoulder", "upper_arm", "forearm", "wrist_1", "wrist_2", "wrist_3")
 _MM_TO_M = 1e-3
@@ -55,12 +55,12 @@ def fixed_transforms(robot: Robot) -> NDArray[np.float64]:
     rows = robot.alpha_deg.size
     out = np.tile(np.eye(4), (rows, 1, 1))
     for r in range(rows):
-        out[r, :3, :3] = matrix_from_euler_deg([robot.alpha_deg[r], 0.0, 0.0])
+        out[r, :3, :3] = matrix_from_rpy_deg([robot.alpha_deg[r], 0.0, 0.0])
         slide = robot.prismatic is not None and robot.prismatic[r]
         out[r, :3, 3] = [robot.a_mm[r], 0.0, 0.0 if slide else robot.d_mm[r]]
         if robot.origins is not None:
             extra = np.eye(4)
-            extra[:3, :3] = matrix_from_euler_deg(robot.origins[r, 3:])
+            extra[:3, :3] = matrix_from_rpy_deg(robot.origins[r, 3:])
             extra[:3, 3] = robot.origins[r, :3]
             out[r] = out[r] @ extra
     return out
@@ -77,7 +77,7 @@ def transform(rotation=None, translation=None) -> NDArray[np.float64]:
 
 
 def rz(angle_deg: float) -> NDArray[np.float64]:
-    return transform(matrix_from_euler_deg([0.0, 0.0, angle_deg]))
+    return transform(matrix_from_rpy_deg([0.0, 0.0, angle_deg]))
 
 
 def _row_joints(robot: Robot) -> list[tuple[int, float] | None]:
@@ -242,7 +242,7 @@ def ur_kinematics_from_robot(robot: Robot, tool_rotation: NDArray[np.float64] | 
     for r, name in enumerate(UR_JOINTS):
         rotation = fixed[r, :3, :3]
         gamma = float(rpy_deg_from_matrix(rotation)[2])
-        ahead = transform(matrix_from_euler_deg([0.0, 0.0, gamma]), [0.0, 0.0, fixed[r, 2, 3]])   # Tz(h) Rz(gamma)
+        ahead = transform(matrix_from_rpy_deg([0.0, 0.0, gamma]), [0.0, 0.0, fixed[r, 2, 3]])   # Tz(h) Rz(gamma)
         origin = rest @ rz(robot.theta_offset_deg[r]) @ ahead
         rest = np.linalg.inv(ahead) @ fixed[r]
         roll, pitch, yaw = (math.radians(float(v)) for v in rpy_deg_from_matrix(origin[:3, :3]))

@@ -32,7 +32,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import RobotFileError
-from .kinematics import Robot, rpy_deg_from_matrix
+from .kinematics import Robot
+from .rotations import rpy_deg_from_matrix
 
 MOVING = ("revolute", "continuous", "prismatic")
 JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed", "floating", "planar")

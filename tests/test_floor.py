@@ -236,3 +236,18 @@ def test_a_cells_own_measured_poses_are_taken_as_candidates(tmp_path):
         assert "over the 1495 poses of" in err
     code, _, err = cli("plan", "universal_robots_ur10", *args, "--floor-mm", 0)
     assert code == 2 and f"; {below} of 1495 poses are below)" in err
+
+
+def test_a_robot_built_in_python_without_a_floor_has_none():
+    """A floor not stated is not assumed, in Python as in a description: a Robot given no floor_mm keeps every
+    pose a plan may take, below its base plane too; given one, poses below it are not above the floor."""
+    from dataclasses import replace
+
+    ur10 = load_robot("universal_robots_ur10")
+    fields = {f: getattr(ur10, f) for f in ur10.__dataclass_fields__ if f != "floor_mm"}
+    bare = type(ur10)(**fields)
+    assert bare.floor_mm is None and robot_floor(bare) is None
+    low = np.array([[0.0, 30.0, 0.0, 0.0, 90.0, 0.0]])              # the arm reaching down: the tool at z = -620 mm
+    assert bare.positions(low)[0, 2] < -600 and above_floor(bare, low, robot_floor(bare)).all()
+    floored = replace(bare, floor_mm=0.0)
+    assert not above_floor(floored, low, robot_floor(floored)).any()

@@ -92,8 +92,9 @@ class Robot:
         identity for every row (a plain DH chain).
     floor_mm : float or None
         Height of the floor in the base frame, mm (0: the base frame stands on
-        it); None for an arm not standing on a floor (ceiling, wall) or one whose
-        mounting height is not known. ``partcal plan`` keeps every pose above it
+        it); None (the default: a floor not stated is not assumed) for an arm not
+        standing on a floor (ceiling, wall, pedestal) or one whose mounting
+        height is not known. ``partcal plan`` keeps every pose above it
         (:mod:`partcal.robot.floor`).
     """
 
@@ -112,7 +113,7 @@ class Robot:
     constraints: tuple = ()
     origins: NDArray[np.float64] | None = None
     prismatic: NDArray[np.bool_] | None = None
-    floor_mm: float | None = 0.0
+    floor_mm: float | None = None
 
     def replace(self, **changes) -> "Robot":
         """Return a copy with some fields changed (used to build perturbed robots)."""

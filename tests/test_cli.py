@@ -671,3 +671,28 @@ def test_a_run_warns_in_one_format_once_and_progress_has_its_own_lines(tmp_path,
     assert len(warned) == 1 and warned[0].startswith("partcal: warning: Oct: fitted on all the identification data")
     progress = [line for line in err if line.startswith("partcal: [1/1] Oct: CV RMS")]
     assert len(progress) == 1 and ", cross-validated in " in progress[0]
+
+
+def test_program_and_parametrization_choices_are_read_from_their_tables(monkeypatch, capsys):
+    """--program takes the names of the dialect table and --parametrization 'auto' and the names of the
+    parametrization table: a row added to a table is a choice, and a refusal lists the table."""
+    from partcal.cli import build_parser
+    from partcal.data import programs
+    from partcal.models import identification
+
+    monkeypatch.setitem(programs.DIALECTS, "toy", programs.DIALECTS["krl"])
+    monkeypatch.setitem(identification.PARAMETRIZATIONS, "toy", identification.PARAMETRIZATIONS["dh"])
+    parser = build_parser()
+    for name in programs.DIALECTS:
+        assert parser.parse_args(["compensate", "m.json", "p.src", "-o", "o", "--program", name]).program == name
+    for name in ("auto", *identification.PARAMETRIZATIONS):
+        assert parser.parse_args(["plan", "ur10", "--parametrization", name]).parametrization == name
+    with pytest.raises(SystemExit) as stop:
+        parser.parse_args(["compensate", "m.json", "p.src", "-o", "o", "--program", "vb6"])
+    assert stop.value.code == 2
+    assert capsys.readouterr().err == (
+        "partcal: error: partcal compensate: argument --program: invalid choice: 'vb6' (choose from 'urscript', "
+        "'krl', 'rapid', 'joints', 'toy') (see 'partcal compensate --help')\n")
+    with pytest.raises(SystemExit):
+        parser.parse_args(["plan", "ur10", "--parametrization", "mdh"])
+    assert "(choose from 'auto', 'dh', 'complete', 'toy')" in capsys.readouterr().err

@@ -16,6 +16,7 @@ joints     ``.csv`` with ``q1..qN``       one row per time step (deg)
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 from ..errors import DataError
@@ -25,8 +26,10 @@ from .program_text import BOM, Dialect, Program, ProgramSyntaxError, Target, Unk
 DIALECTS: dict[str, Dialect] = {d.name: d for d in (program_urscript.DIALECT, program_krl.DIALECT,
                                                      program_rapid.DIALECT, program_joints.DIALECT)}
 
-__all__ = ["DIALECTS", "Program", "ProgramSyntaxError", "Target", "UnknownFrameError", "program_kind",
-           "read_program"]
+__all__ = ["DIALECTS", "Program", "ProgramSyntaxError", "Target", "UnknownFrameError", "frame_option",
+           "program_kind", "read_program"]
+_NAMED = re.compile(r"\s*([$A-Za-z_][\w$]*(?:\[\s*\d+\s*\])?)\s*=(?!=)(.*)$", re.DOTALL)
+_KRL_SYSTEM_FRAMES = ("BASE_DATA[", "TOOL_DATA[")     # KRL names are caseless; targets name these in capitals
 
 
 def program_kind(path: str | Path) -> str | None:
@@ -83,3 +86,17 @@ def read_program(path: str | Path, dialect: str | None = None) -> Program:
     targets, frames = DIALECTS[name].parse(text, str(path))
     DIALECTS[name].fill(text, targets)
     return Program(str(path), text, DIALECTS[name], targets, frames)
+
+
+def frame_option(value: str, dialect: Dialect, option: str = "--frame") -> tuple[str | None, object]:
+    """A frame or tool given on the command line, ``NAME=VALUE`` or ``VALUE`` (the default: targets that name
+    none), VALUE in ``dialect``'s own syntax: its name (None for the default) and pose (4, 4) mm.
+
+    KUKA's ``base_data[1]`` and ``tool_data[1]`` are named in capitals, as the targets of a program name
+    them (``BASE_DATA[1]``).
+    """
+    m = _NAMED.match(value)
+    name, text = (m.group(1).replace(" ", ""), m.group(2)) if m else (None, value)
+    if name is not None and name.upper().startswith(_KRL_SYSTEM_FRAMES):
+        name = name.upper()
+    return name, dialect.frame(text, f"{option} {value!r}")

@@ -29,6 +29,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .._io import atomic_write
+from ..data.formats import load_format
+from ..data.measurements import read_measurements
 from ..errors import PartcalError
 from ..metrics import pooled_rms
 from ..models.identification import geometric_size, own_geometry
@@ -50,6 +52,15 @@ class Exported:
     skipped: dict = field(default_factory=dict)
     not_carried: str = ""
     tcp_mm: NDArray[np.float64] | None = None
+
+    def lines(self) -> list[str]:
+        """What ``partcal export`` prints: each file written or not, the UR tool centre point, what is not
+        carried."""
+        out = [f"{fmt}: {path}" for fmt, path in self.files.items()]
+        out += [f"{fmt}: not written: {why}" for fmt, why in self.skipped.items()]
+        if self.tcp_mm is not None:
+            out.append("ur: tool centre point in tool0 (mm): " + " ".join(f"{v:.6f}" for v in self.tcp_mm))
+        return out + ([self.not_carried] if self.not_carried else [])
 
 
 def calibrated_geometry(model: KinematicModel) -> tuple[Robot, NDArray[np.float64]]:
@@ -132,6 +143,18 @@ def export_model(model_path, output: Path, formats=FORMATS, q_deg=None, errors_m
         note += (f" (on the {len(q_deg)} poses given: 3-D RMS left {pooled_rms(errors_mm - geometry):.3f} mm by the "
                  f"exported geometry, {pooled_rms(errors_mm - full):.3f} mm by the full model)")
     return Exported(files, skipped, note, tcp)
+
+
+def export_files(model_path, output: str | Path, formats=None, *, data=None, fmt=None) -> Exported:
+    """``partcal export``: :func:`export_model` (``formats`` None: all of :data:`FORMATS`) with the poses and
+    errors of the measurement file ``data`` (its format YAML ``fmt``), read against the model's robot, when
+    one is given."""
+    q = errors = None
+    if data:
+        robot = load_model(model_path)[0].robot_
+        measured = read_measurements(data, robot, fmt=load_format(fmt) if fmt else None)
+        q, errors = measured.q_deg, measured.errors_mm
+    return export_model(model_path, Path(output), FORMATS if formats is None else tuple(formats), q, errors)
 
 
 def _robot_yaml(robot: Robot, stamp: str) -> str:

@@ -696,3 +696,28 @@ def test_program_and_parametrization_choices_are_read_from_their_tables(monkeypa
     with pytest.raises(SystemExit):
         parser.parse_args(["plan", "ur10", "--parametrization", "mdh"])
     assert "(choose from 'auto', 'dh', 'complete', 'toy')" in capsys.readouterr().err
+
+
+def test_predict_and_compensate_are_one_call_each_from_python(tmp_path):
+    """partcal.study's predict_points and compensate_file write what the commands write, and say it in their
+    Outcome; the predicted errors are the predictor's."""
+    from partcal import load_predictor
+    from partcal.study import compensate_file, predict_points
+
+    model, data = ROOT / "tests" / "fixtures" / "v0.1_sdp-ci.json", DATA / "test_rectangle.csv"
+    nominal = read_measurements(data).nominal_mm
+    for command, call, columns in (("predict", predict_points, ["dx", "dy", "dz"]),
+                                   ("compensate", compensate_file, ["x_cmd", "y_cmd", "z_cmd"])):
+        res = run(command, str(model), str(data), "-o", str(tmp_path / f"{command}_cli.csv"))
+        done = call(model, data, tmp_path / f"{command}_py.csv")
+        assert res.returncode == 0 and res.stderr == "", res.stderr
+        assert (tmp_path / f"{command}_py.csv").read_bytes() == (tmp_path / f"{command}_cli.csv").read_bytes()
+        assert done.n == len(nominal) and done.failure == "" and done.warnings == ()
+        assert res.stdout == "\n".join(done.lines).replace("_py.csv", "_cli.csv") + "\n"
+        with open(tmp_path / f"{command}_py.csv") as handle:
+            written = np.array([[float(r[c]) for c in columns] for r in csv.DictReader(handle)])
+        if command == "predict":
+            np.testing.assert_allclose(written, load_predictor(model).predict(positions=nominal), atol=5e-7)
+        else:
+            np.testing.assert_allclose(written + load_predictor(model).predict(positions=written), nominal,
+                                       atol=1e-3)

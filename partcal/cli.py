@@ -202,7 +202,7 @@ def _add_run_commands(sub) -> None:
     run.set_defaults(func=_cmd_run)
 
 
-def _add_model_commands(sub) -> None:
+def _add_predict(sub) -> None:
     pred = sub.add_parser("predict", help="predict errors with a model file")
     pred.add_argument("model", help="model file (models/<name>.json of a run)")
     pred.add_argument("input", help="CSV with x,y,z (mm) for Cartesian models or q1..qN (deg) for joint models")
@@ -356,7 +356,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"partcal {__version__}")
     parser.add_argument("-v", "--verbose", action="store_true", help="show debug messages")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
-    for add in (_add_run_commands, _add_model_commands, _add_compensate, _add_file_commands, _add_iso9283,
+    for add in (_add_run_commands, _add_predict, _add_compensate, _add_file_commands, _add_iso9283,
                 _add_plan):
         add(sub)
     return parser

@@ -28,8 +28,7 @@ from ..data.registration import Registration, register_measurements, registered
 from ..data.simulate import load_study, simulate, write_study
 from ..errors import PartcalError
 from ..metrics import pooled_rms
-from ..robot.description import load_robot
-from .config import load_config
+from .config import load_config, robot_named
 from .outputs import (check_writable, registration_comment, replace_folder, write_datasets,
                       write_robot_yaml)
 from .prepare import load_datasets
@@ -82,7 +81,7 @@ def import_file(source: str | Path, output: str | Path, *, robot: str | Path | N
         raise PartcalError("import: --tool-mm is the target offset of a tracker registration; it needs --frame "
                            "tracker (in the base frame the measured positions already include the tool)")
     selection = RowSelection.parse(rows, every) if (rows or every != 1) else None
-    arm = load_robot(robot) if robot else None
+    arm = robot_named(robot) if robot else None
     m = read_measurements(source, arm, fmt=load_format(format_path) if format_path else fmt, rows=selection,
                           frame=frame)
     lines = [f"imported from {source} by partcal {__version__}: degrees, mm"]

@@ -26,7 +26,8 @@ from ..data import iso9283
 from ..data.formats import load_format
 from ..data.measurements import Measurements, read_measurements, read_text_column
 from ..errors import DataError
-from ..robot.description import joint_columns, load_robot
+from ..robot.description import joint_columns
+from .config import robot_named
 from .predictor import load_predictor
 from .scoring import errors_left
 
@@ -372,7 +373,7 @@ def iso_report(data: str | Path, *, robot: str | Path | None = None, model: str 
     :func:`read_iso_data`'s (``fmt``: the file's format YAML).
     """
     refuse_input_as_output(output, "iso9283", [("data file", data), ("format file", fmt), ("model file", model)])
-    arm = load_robot(robot) if robot else None
+    arm = robot_named(robot) if robot else None
     predictor = None
     if model:
         predictor = load_predictor(model)

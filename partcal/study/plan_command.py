@@ -24,10 +24,11 @@ from ..data.formats import load_format
 from ..data.measurements import read_columns
 from ..errors import PartcalError
 from ..models import design
-from ..robot.description import joint_columns, load_robot
+from ..robot.description import joint_columns
 from ..robot.floor import Floor, robot_floor
 from ..robot.kinematics import Robot
 from . import plan
+from .config import robot_named
 
 
 @dataclass(frozen=True)
@@ -97,7 +98,7 @@ def run_plan(robot: str | Path, options: PlanOptions, *, say: Callable[[str], No
         raise PartcalError(f"plan: --noise-mm must be a positive number of mm; got {o.noise_mm!r}")
     refuse_input_as_output(o.output, "plan", [("candidate file", o.candidates), ("format file", o.format),
                                               ("evaluated file", o.evaluate), ("robot file", robot)])
-    arm = load_robot(robot)
+    arm = robot_named(robot)
     floor = plan_floor(arm, o)
     start = time.perf_counter()
     harmonics = o.joint_harmonics or (0,)
@@ -179,7 +180,7 @@ def _iso9283(robot: str | Path, o: PlanOptions, show) -> None:
         raise PartcalError("plan --iso9283: give -o POSES.csv (and optionally --cube CX CY CZ EDGE, --cycles N), "
                            "without -n, --evaluate or --curve")
     refuse_input_as_output(o.output, "plan", [("robot file", robot)])
-    arm = load_robot(robot)
+    arm = robot_named(robot)
     floor = plan_floor(arm, o)
     cycles = 30 if o.cycles is None else o.cycles
     cube = plan.iso_cube_plan(arm, o.output, cube=o.cube, cycles=cycles, random_state=o.seed, floor=floor,

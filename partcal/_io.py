@@ -78,3 +78,18 @@ def replace_all(pairs: list[tuple[Path, Path]]) -> None:
             os.replace(tmp, path)
         except OSError as exc:
             raise PartcalError(f"{path}: cannot write ({exc.strerror or exc})") from None
+
+
+def refuse_input_as_output(output, command: str, inputs) -> None:
+    """Refuse an output ``-o`` naming one of the command's input files (``inputs``: pairs of what it is and
+    its path).
+
+    Writing there would replace the input (a raw export, the model file) with
+    the output; the same file under another name (a link) counts too.
+    """
+    if output is None or not Path(output).exists():
+        return
+    for what, path in inputs:
+        if path is not None and Path(path).exists() and os.path.samefile(output, path):
+            raise PartcalError(f"{command}: -o {output} is the {what} ({path}); writing there would replace an "
+                               "input, so name another file")

@@ -12,6 +12,9 @@ from __future__ import annotations
 
 import math
 import re
+import warnings
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from numbers import Integral, Real
 from typing import Any, Callable
@@ -22,6 +25,16 @@ from numpy.typing import NDArray
 from .errors import DataError, ModelFileError, PartcalError
 
 MAX_PAYLOAD_KG = 1e5        # a payload at the tool point, kg: data columns, model parameters, predictions
+
+
+@contextmanager
+def numbers_checked() -> Iterator[None]:
+    """A block whose numbers partcal checks itself, never warned about: numpy's floating-point errors and
+    Python's ``RuntimeWarning`` silenced (the command line runs each command in one); other warnings are
+    restored on leaving it."""
+    with np.errstate(all="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        yield
 
 
 def check_array(

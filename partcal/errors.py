@@ -4,12 +4,14 @@ User errors (bad files, bad parameters, bad arrays) subclass ``ValueError`` so
 that code written for scikit-learn conventions keeps working; the command
 line turns any of them into exit code 2 and one line on stderr.
 :func:`held_warnings` holds a block's warnings so that a run says each once, in
-its own words.
+its own words; :func:`log_to_stderr` prints partcal's messages in one format, each once (the command
+line's choice of what is shown).
 """
 
 from __future__ import annotations
 
 import logging
+import sys
 import warnings
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -79,3 +81,39 @@ def held_warnings(*, exclusive: bool = False) -> Iterator[list[str]]:
         said += [str(w.message) for w in caught]
     finally:
         logger.handlers, logger.propagate = handlers, propagate
+
+
+class _Stderr(logging.StreamHandler):
+    """partcal's messages on stderr in one format (``partcal: warning: ...``), each once: a warning repeated by
+    every fold or data set is said one time."""
+
+    def __init__(self):
+        super().__init__()
+        self.seen: set[str] = set()
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        text = record.getMessage()
+        if text in self.seen:
+            return False
+        self.seen.add(text)
+        return super().filter(record)
+
+    def format(self, record: logging.LogRecord) -> str:
+        where = f" {record.name}" if record.levelno < logging.WARNING else ""
+        return f"partcal: {record.levelname.lower()}{where}: {record.getMessage()}"
+
+
+_HANDLER = _Stderr()
+
+
+def log_to_stderr(level: int) -> None:
+    """Log records at ``level`` and above on stderr (the one at the time of the call), each message once
+    (``partcal: warning: ...``); other libraries' debug chatter stays at INFO and above."""
+    _HANDLER.stream = sys.stderr
+    _HANDLER.seen.clear()
+    root = logging.getLogger()
+    if _HANDLER not in root.handlers:
+        root.addHandler(_HANDLER)
+    root.setLevel(level)
+    for name in ("matplotlib", "PIL", "asyncio", "urllib3"):
+        logging.getLogger(name).setLevel(max(level, logging.INFO))

@@ -315,3 +315,35 @@ def test_the_checker_finds_private_uses():
         "partcal/robot/compensation.py:9: robot._trig",
         "partcal/robot/compensation.py:11: np.random._bit_generator",
     ]
+
+
+NUMERIC = ("numpy", "scipy", "pandas", "sklearn")
+
+
+def numeric_imports(source: str) -> list[str]:
+    """The numeric libraries a file imports anywhere (functions included), as ``line: name``."""
+    out = []
+    for node in ast.walk(ast.parse(source)):
+        names = ([a.name for a in node.names] if isinstance(node, ast.Import) else
+                 [node.module or ""] if isinstance(node, ast.ImportFrom) and not node.level else [])
+        out += [f"{node.lineno}: {n}" for n in names if n.split(".")[0] in NUMERIC]
+    return out
+
+
+def test_the_command_line_parses_and_calls_the_layer_below():
+    """cli.py parses arguments, calls the study layer and maps errors to exit codes: it stays under 400 lines,
+    imports no numeric library, and building its parser (every subcommand, the choices read from their
+    tables) loads none either (a table's module is read when its option is used)."""
+    source = (PACKAGE / "cli.py").read_text()
+    assert len(source.splitlines()) < 400
+    assert numeric_imports(source) == []
+    code = ("import sys; from partcal.cli import build_parser; build_parser(); "
+            f"print(sorted(m for m in sys.modules if m.split('.')[0] in {NUMERIC!r}))")
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT)
+    assert res.returncode == 0 and res.stdout.strip() == "[]", res.stderr + res.stdout
+
+
+def test_the_numeric_import_check_finds_them():
+    code = "import argparse\ndef f():\n    import numpy as np\n    from scipy.optimize import least_squares\n"
+    assert numeric_imports(code) == ["3: numpy", "4: scipy.optimize"]
+    assert numeric_imports("from .metrics import pooled_rms\nimport numbers\n") == []

@@ -673,3 +673,80 @@ def test_a_run_warns_in_one_format_once_and_progress_has_its_own_lines(tmp_path,
     assert len(warned) == 1 and warned[0].startswith("partcal: warning: Oct: fitted on all the identification data")
     progress = [line for line in err if line.startswith("partcal: [1/1] Oct: CV RMS")]
     assert len(progress) == 1 and ", cross-validated in " in progress[0]
+
+
+def test_program_and_parametrization_choices_are_read_from_their_tables(monkeypatch, capsys):
+    """--program takes the names of the dialect table and --parametrization 'auto' and the names of the
+    parametrization table: a row added to a table is a choice, and a refusal lists the table."""
+    from partcal.cli import build_parser
+    from partcal.data import programs
+    from partcal.models import identification
+
+    monkeypatch.setitem(programs.DIALECTS, "toy", programs.DIALECTS["krl"])
+    monkeypatch.setitem(identification.PARAMETRIZATIONS, "toy", identification.PARAMETRIZATIONS["dh"])
+    parser = build_parser()
+    for name in programs.DIALECTS:
+        assert parser.parse_args(["compensate", "m.json", "p.src", "-o", "o", "--program", name]).program == name
+    for name in ("auto", *identification.PARAMETRIZATIONS):
+        assert parser.parse_args(["plan", "ur10", "--parametrization", name]).parametrization == name
+    with pytest.raises(SystemExit) as stop:
+        parser.parse_args(["compensate", "m.json", "p.src", "-o", "o", "--program", "vb6"])
+    assert stop.value.code == 2
+    assert capsys.readouterr().err == (
+        "partcal: error: partcal compensate: argument --program: invalid choice: 'vb6' (choose from 'urscript', "
+        "'krl', 'rapid', 'joints', 'toy') (see 'partcal compensate --help')\n")
+    with pytest.raises(SystemExit):
+        parser.parse_args(["plan", "ur10", "--parametrization", "mdh"])
+    assert "(choose from 'auto', 'dh', 'complete', 'toy')" in capsys.readouterr().err
+
+
+def test_predict_and_compensate_are_one_call_each_from_python(tmp_path):
+    """partcal.study's predict_points and compensate_file write what the commands write, and say it in their
+    Outcome; the predicted errors are the predictor's."""
+    from partcal import load_predictor
+    from partcal.study import compensate_file, predict_points
+
+    model, data = ROOT / "tests" / "fixtures" / "v0.1_sdp-ci.json", DATA / "test_rectangle.csv"
+    nominal = read_measurements(data).nominal_mm
+    for command, call, columns in (("predict", predict_points, ["dx", "dy", "dz"]),
+                                   ("compensate", compensate_file, ["x_cmd", "y_cmd", "z_cmd"])):
+        res = run(command, str(model), str(data), "-o", str(tmp_path / f"{command}_cli.csv"))
+        done = call(model, data, tmp_path / f"{command}_py.csv")
+        assert res.returncode == 0 and res.stderr == "", res.stderr
+        assert (tmp_path / f"{command}_py.csv").read_bytes() == (tmp_path / f"{command}_cli.csv").read_bytes()
+        assert done.n == len(nominal) and done.failure == "" and done.warnings == ()
+        assert res.stdout == "\n".join(done.lines).replace("_py.csv", "_cli.csv") + "\n"
+        with open(tmp_path / f"{command}_py.csv") as handle:
+            written = np.array([[float(r[c]) for c in columns] for r in csv.DictReader(handle)])
+        if command == "predict":
+            np.testing.assert_allclose(written, load_predictor(model).predict(positions=nominal), atol=5e-7)
+        else:
+            np.testing.assert_allclose(written + load_predictor(model).predict(positions=written), nominal,
+                                       atol=1e-3)
+
+
+def test_a_terminated_run_exits_143_and_leaves_no_half_written_output(tmp_path):
+    """SIGTERM (a scheduler or a cell controller stopping a run) while a run works: exit 143, and no hidden
+    temporary file or folder beside the outputs, wherever in the run the signal lands."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    cfg = tmp_path / "configs" / "t.yaml"
+    cfg.parent.mkdir()
+    cfg.write_text(f"""name: t
+data:
+  identification: {DATA / 'identification.csv'}
+  tests: {{rectangle: {DATA / 'test_rectangle.csv'}}}
+models:
+  - {{name: GP(AI), kind: gaussian_process, inputs: joint}}
+  - {{name: SDP(AI), inputs: joint, degree: 2}}
+""")
+    child = subprocess.Popen([sys.executable, "-m", "partcal", "run", str(cfg)], stderr=subprocess.PIPE, text=True)
+    child.stderr.readline()                                   # the run has started
+    time.sleep(1.0)
+    child.send_signal(signal.SIGTERM)
+    assert child.wait(timeout=60) == 143
+    hidden = [p for p in tmp_path.rglob(".*") if p.name != ".partcal-output"]
+    assert hidden == []

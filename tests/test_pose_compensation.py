@@ -369,8 +369,6 @@ def test_predict_command_writes_the_rotation_vector_of_a_pose_model(pose_files, 
 
 def test_each_target_row_is_compensated_at_its_own_payload():
     """``compensate`` groups rows by their payload_kg: a row's command is that of compensate_pose at its payload."""
-    from partcal.cli import _compensated
-
     class Sagging(ErrorModel):          # the joint pose model, sagging 0.01 mm per kg in z
         @property
         def reads_payload(self):
@@ -388,7 +386,7 @@ def test_each_target_row_is_compensated_at_its_own_payload():
     wanted = NOMINAL.forward(q)
     targets, angles = wanted[:, :3, 3], xyz_deg_from_matrices(wanted[:, :3, :3])
     payload = np.array([0.0, 20.0, 0.0, 50.0])
-    result = _compensated(p, targets, q, payload, angles)
+    result = p.compensate_rows(targets, angles, q, payload_kg=payload)
     for k, kg in enumerate(payload):
         alone = p.compensate_pose(targets[k:k + 1], angles[k:k + 1], q[k:k + 1], payload_kg=kg)
         np.testing.assert_allclose(result.joints_deg[k], alone.joints_deg[0], atol=1e-9)

@@ -33,8 +33,10 @@ log = logging.getLogger(__name__)
 DIALECTS: dict[str, Dialect] = {d.name: d for d in (program_urscript.DIALECT, program_krl.DIALECT,
                                                      program_rapid.DIALECT, program_joints.DIALECT)}
 
-__all__ = ["DIALECTS", "Left", "Program", "ProgramSyntaxError", "Target", "UnknownFrameError", "program_kind",
-           "read_program"]
+__all__ = ["DIALECTS", "Left", "Program", "ProgramSyntaxError", "Target", "UnknownFrameError", "frame_option",
+           "program_kind", "read_program"]
+_NAMED = re.compile(r"\s*([$A-Za-z_][\w$]*(?:\[\s*\d+\s*\])?)\s*=(?!=)(.*)$", re.DOTALL)
+_KRL_SYSTEM_FRAMES = ("BASE_DATA[", "TOOL_DATA[")     # KRL names are caseless; targets name these in capitals
 
 
 _SNIFF = (("rapid", re.compile(r"^[ \t]*MODULE[ \t]+\w+", re.IGNORECASE | re.MULTILINE)),
@@ -124,3 +126,17 @@ def read_program(path: str | Path, dialect: str | None = None) -> Program:
     for item in kept:
         log.warning("%s: left as written: %s", item.where(str(path)), item.reason)
     return Program(str(path), text, DIALECTS[name], targets, frames, kept)
+
+
+def frame_option(value: str, dialect: Dialect, option: str = "--frame") -> tuple[str | None, object]:
+    """A frame or tool given on the command line, ``NAME=VALUE`` or ``VALUE`` (the default: targets that name
+    none), VALUE in ``dialect``'s own syntax: its name (None for the default) and pose (4, 4) mm.
+
+    KUKA's ``base_data[1]`` and ``tool_data[1]`` are named in capitals, as the targets of a program name
+    them (``BASE_DATA[1]``).
+    """
+    m = _NAMED.match(value)
+    name, text = (m.group(1).replace(" ", ""), m.group(2)) if m else (None, value)
+    if name is not None and name.upper().startswith(_KRL_SYSTEM_FRAMES):
+        name = name.upper()
+    return name, dialect.frame(text, f"{option} {value!r}")

@@ -234,6 +234,12 @@ class RunConfig:
         return out
 
 
+def robot_named(reference) -> Robot:
+    """The robot a run config or a command names (a built-in name, a robot YAML, a URDF reference): the one
+    place the study resolves a robot's name; every later stage gets the object."""
+    return load_robot(reference)
+
+
 def load_config(path: str | Path) -> RunConfig:
     """Read and validate a batch-run YAML (see ``docs/config.md``)."""
     path = Path(path)
@@ -245,7 +251,7 @@ def load_config(path: str | Path) -> RunConfig:
     if robot is not None:
         try:
             robot = robot_reference(robot, base)
-            nominal = load_robot(robot)
+            nominal = robot_named(robot)
         except PartcalError as exc:
             top.fail("robot", str(exc))
     seed = top.get("seed", "int", default=0, check=integer(0, 2**32 - 1).problem)

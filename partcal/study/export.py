@@ -31,6 +31,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .._io import atomic_write
+from ..data.formats import load_format
+from ..data.measurements import read_measurements
 from ..errors import PartcalError
 from ..metrics import pooled_rms
 from ..models.identification import geometric_size, own_geometry
@@ -54,6 +56,16 @@ class Exported:
     not_carried: str = ""
     tcp_mm: NDArray[np.float64] | None = None
     tcp_text: str = ""            # the UR TCP, position and rotation, as the controller takes it (one line)
+
+    def lines(self) -> list[str]:
+        """What ``partcal export`` prints: each file written or not, the UR tool centre point, what is not
+        carried."""
+        out = [f"{fmt}: {path}" for fmt, path in self.files.items()]
+        out += [f"{fmt}: not written: {why}" for fmt, why in self.skipped.items()]
+        if self.tcp_text:
+            out.append("ur: the kinematics file has no tool; set the tool centre point in tool0 on the controller: "
+                       f"{self.tcp_text}")
+        return out + ([self.not_carried] if self.not_carried else [])
 
 
 def calibrated_geometry(model: KinematicModel) -> tuple[Robot, NDArray[np.float64]]:
@@ -157,6 +169,18 @@ def export_model(model_path, output: Path, formats=FORMATS, q_deg=None, errors_m
                                           f"{' and '.join(files[f].name for f in pointless)} (a tool point only; "
                                           "the URDF and the UR TCP carry it)")
     return Exported(files, skipped, note, tcp, tcp_text)
+
+
+def export_files(model_path, output: str | Path, formats=None, *, data=None, fmt=None) -> Exported:
+    """``partcal export``: :func:`export_model` (``formats`` None: all of :data:`FORMATS`) with the poses and
+    errors of the measurement file ``data`` (its format YAML ``fmt``), read against the model's robot, when
+    one is given."""
+    q = errors = None
+    if data:
+        robot = load_model(model_path)[0].robot_
+        measured = read_measurements(data, robot, fmt=load_format(fmt) if fmt else None)
+        q, errors = measured.q_deg, measured.errors_mm
+    return export_model(model_path, Path(output), FORMATS if formats is None else tuple(formats), q, errors)
 
 
 def _robot_yaml(robot: Robot, stamp: str) -> str:

@@ -12,16 +12,23 @@ compensated robot reaches, to first order), scored as a run scores the set
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 from numpy.typing import NDArray
 
+from .. import __version__
+from .._io import atomic_write, refuse_input_as_output
 from ..data import iso9283
+from ..data.formats import load_format
 from ..data.measurements import Measurements, read_measurements, read_text_column
 from ..errors import DataError
 from ..robot.description import joint_columns
+from .config import robot_named
+from .predictor import load_predictor
 from .scoring import errors_left
 
 CYCLE_COLUMN = "cycle"
@@ -347,3 +354,47 @@ def table_lines(figures: iso9283.PoseFigures, distance: iso9283.DistanceFigures 
         out.append(f"path: AT {path.at_mm:.4f} mm (point {path.at_point + 1}), RT {_cell(path.rt_mm, 0)} mm "
                    f"(point {path.rt_point + 1})")
     return out
+
+
+def _quiet(text: str) -> None:
+    """The default of ``show``: nothing."""
+
+
+def iso_report(data: str | Path, *, robot: str | Path | None = None, model: str | Path | None = None,
+               fmt: str | Path | None = None, tol_deg: float = iso9283.DEFAULT_TOLERANCE_DEG,
+               own_frame: bool = False, distance: tuple[int, int] | None = None, path: bool = False,
+               repeatability: bool = False, output: str | Path | None = None,
+               show: Callable[[str], None] = _quiet) -> IsoFigures:
+    """``partcal iso9283 DATA``: the figures of a measurement file (after ``model``'s correction when given),
+    their lines to ``show``, and with ``output`` the figures of every pose as JSON.
+
+    ``robot`` (default: the model's) gives nominal positions and orientations
+    by forward kinematics; the other parameters are :func:`iso_figures`' and
+    :func:`read_iso_data`'s (``fmt``: the file's format YAML).
+    """
+    refuse_input_as_output(output, "iso9283", [("data file", data), ("format file", fmt), ("model file", model)])
+    arm = robot_named(robot) if robot else None
+    predictor = None
+    if model:
+        predictor = load_predictor(model)
+        arm = arm or predictor.robot        # the data are checked against the robot the model corrects
+    read = read_iso_data(data, arm, fmt=load_format(fmt) if fmt else None, tol_deg=tol_deg)
+    predicted, name = None, None
+    if predictor is not None:
+        m = read.measurements
+        predicted = (predictor.predict(joints=m.q_deg) if predictor.inputs == "joint"
+                     else predictor.predict(positions=m.nominal_mm))
+        name = predictor.name or Path(model).stem
+    figures = iso_figures(read, predicted, own_frame=own_frame, distance=distance, path=path,
+                          repeatability=repeatability)
+    show(describe(read) + (f"; after model {name!r}" if name else ""))
+    show("\n".join(figures.lines()))
+    if output:
+        doc = {"partcal_version": __version__, "data": str(data), "model": None if model is None else str(model),
+               "tolerance_deg": tol_deg, "cycles_from": "column" if read.by_column else "joints",
+               **figures.to_dict(pose_lines(read))}
+        with atomic_write(output) as handle:
+            json.dump(doc, handle, indent=1)
+            handle.write("\n")
+        show(f"wrote {output}")
+    return figures

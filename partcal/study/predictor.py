@@ -32,7 +32,7 @@ from ..errors import DataError
 from ..metrics import MRAD_PER_RAD, warn_far
 from ..models.features import varying_inputs
 from ..robot.compensation import (CompensationResult, false_target, false_target_cartesian_poses,
-                                  false_target_joints, false_target_poses, reachable, reachable_poses)
+                                  false_target_joints, false_target_poses, merged, reachable, reachable_poses)
 from ..robot.description import robot_from_dict
 from ..robot.kinematics import Robot, checked_poses, ik_settings, matrices_from_xyz_deg
 from .persist import load_model
@@ -249,6 +249,30 @@ class Predictor:
                                          max_iter=max_iter)
         result.warn_unconverged(tol_mm, robot=self.robot, targets_mm=targets, source=self._label)
         return result
+
+    def compensate_rows(self, targets_mm, orientations_deg=None, joints=None, *, payload_kg=None,
+                        tol_mm: float = 1e-4, tol_deg: float = 1e-5) -> CompensationResult:
+        """:meth:`compensate_full` of every target (:meth:`compensate_pose` with ``orientations_deg``), each at
+        its own payload.
+
+        ``payload_kg`` is None or one number per row (kg): the rows of one
+        payload are compensated together and the results put back in row
+        order. ``orientations_deg`` (n, 3) intrinsic XYZ degrees and ``joints``
+        (n, N) degrees (seeds) are per row too.
+        """
+        def solve(rows, kg):
+            def some(v):
+                return v if rows is None or v is None else v[rows]
+
+            if orientations_deg is None:
+                return self.compensate_full(some(targets_mm), some(joints), payload_kg=kg, tol_mm=tol_mm)
+            return self.compensate_pose(some(targets_mm), some(orientations_deg), some(joints), payload_kg=kg,
+                                        tol_mm=tol_mm, tol_deg=tol_deg)
+
+        if payload_kg is None:
+            return solve(None, None)
+        groups = [payload_kg == kg for kg in np.unique(payload_kg)]
+        return merged([(rows, solve(rows, float(payload_kg[rows][0]))) for rows in groups])
 
     def compensate_pose(self, positions_mm, orientations_deg, joints=None, *, payload_kg: float | None = None,
                         tol_mm: float = 1e-4, tol_deg: float = 1e-5, max_iter: int = 50) -> CompensationResult:

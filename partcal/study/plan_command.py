@@ -1,0 +1,193 @@
+"""``partcal plan`` in one call: the options checked, the floor, the candidate pool, then a pose set planned,
+evaluated, or the pose-count curve; or the ISO 9283 cube's test poses.
+
+The options are the command line's (:class:`PlanOptions`, one field per option); progress lines go to
+``say`` and the lines the command prints to ``show``::
+
+    from partcal.study.plan_command import PlanOptions, run_plan
+
+    run_plan("universal_robots_ur10", PlanOptions(n=40, output="poses.csv"), show=print)
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, fields
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from .. import __version__
+from .._io import refuse_input_as_output
+from ..data.formats import load_format
+from ..data.measurements import read_columns
+from ..errors import PartcalError
+from ..models import design
+from ..robot.description import joint_columns
+from ..robot.floor import Floor, robot_floor
+from ..robot.kinematics import Robot
+from . import plan
+from .config import robot_named
+
+
+@dataclass(frozen=True)
+class PlanOptions:
+    """The options of ``partcal plan`` (docs/plan.md), each with the command line's default.
+
+    ``n`` poses into ``output``, ``evaluate`` a pose set, ``curve`` up to ``curve_max`` poses; the pool from
+    ``candidates`` (a CSV, in the ``format`` of a YAML), a ``box`` (xmin, ymin, zmin, xmax, ymax, zmax mm) or
+    ``pool`` poses within the limits; the planned model (``no_base``, ``no_tool``, ``compliance`` joints,
+    ``joint_harmonics`` (one K, or one per joint), ``payload_kg``, ``parametrization``); ``iso9283`` with
+    ``cube`` (cx, cy, cz, edge mm) and ``cycles``; the floor (``floor_mm``, ``clearance_mm``, ``no_floor``).
+    """
+
+    n: int | None = None
+    output: str | Path | None = None
+    evaluate: str | Path | None = None
+    curve: bool = False
+    curve_max: int | None = None
+    candidates: str | Path | None = None
+    box: tuple[float, ...] | None = None
+    format: str | Path | None = None
+    pool: int = plan.DEFAULT_POOL
+    noise_mm: float = plan.DEFAULT_NOISE_MM
+    seed: int = 0
+    no_base: bool = False
+    no_tool: bool = False
+    compliance: tuple[int, ...] | None = None
+    joint_harmonics: tuple[int, ...] | None = None
+    payload_kg: float = 0.0
+    parametrization: str = "auto"
+    iso9283: bool = False
+    cube: tuple[float, float, float, float] | None = None
+    cycles: int | None = None
+    floor_mm: float | None = None
+    clearance_mm: float | None = None
+    no_floor: bool = False
+
+    @classmethod
+    def from_args(cls, args) -> "PlanOptions":
+        """The options from an object with one attribute per field (the command line's parsed arguments)."""
+        return cls(**{f.name: getattr(args, f.name) for f in fields(cls)})
+
+
+def _quiet(text: str) -> None:
+    """The default of ``say`` and ``show``: nothing."""
+
+
+def run_plan(robot: str | Path, options: PlanOptions, *, say: Callable[[str], None] = _quiet,
+             show: Callable[[str], None] = _quiet) -> None:
+    """``partcal plan ROBOT``: what ``options`` ask, for the robot ``robot`` (built-in name, YAML or URDF)."""
+    o = options
+    if o.iso9283:
+        return _iso9283(robot, o, show)
+    planning = o.n is not None
+    if o.cube is not None or o.cycles is not None:
+        raise PartcalError("plan: --cube and --cycles go with --iso9283")
+    if not (planning or o.evaluate or o.curve):
+        raise PartcalError("plan: give -n N -o POSES.csv (plan poses), --evaluate DATA.csv (judge a pose set) or "
+                           "--curve (predicted uncertainty against the number of poses)")
+    if planning != (o.output is not None):
+        raise PartcalError("plan: -n N and -o POSES.csv go together (how many poses, and the CSV to write)")
+    if planning and o.evaluate:
+        raise PartcalError("plan: give either -n N -o POSES.csv or --evaluate DATA.csv, not both")
+    if o.candidates and o.box:
+        raise PartcalError("plan: give either --candidates FILE.csv or --box, not both")
+    if not (o.noise_mm > 0 and np.isfinite(o.noise_mm)):
+        raise PartcalError(f"plan: --noise-mm must be a positive number of mm; got {o.noise_mm!r}")
+    refuse_input_as_output(o.output, "plan", [("candidate file", o.candidates), ("format file", o.format),
+                                              ("evaluated file", o.evaluate), ("robot file", robot)])
+    arm = robot_named(robot)
+    floor = plan_floor(arm, o)
+    start = time.perf_counter()
+    harmonics = o.joint_harmonics or (0,)
+    model = design.PlannedModel(base=not o.no_base, tool=not o.no_tool, compliance=o.compliance or (),
+                                joint_harmonics=harmonics[0] if len(harmonics) == 1 else harmonics,
+                                payload_kg=o.payload_kg, parametrization=o.parametrization).check(arm)
+    evaluated = plan.check_candidates(arm, _joints(arm, o.evaluate, o), str(o.evaluate)) if o.evaluate else None
+    if o.candidates:
+        stated = o.floor_mm is not None or o.clearance_mm is not None    # a cell's own poses: the cell's to vouch for
+        q = plan.check_candidates(arm, _joints(arm, o.candidates, o), str(o.candidates), floor if stated else None)
+        space, where = plan.workspace(arm, q, model=model), f"the {len(q)} poses of {o.candidates}"
+    else:
+        box = None if o.box is None else np.array(o.box, dtype=float).reshape(2, 3)
+        if box is not None and np.any(box[0] >= box[1]):
+            raise PartcalError(f"plan: --box takes XMIN YMIN ZMIN XMAX YMAX ZMAX (mm) with each min below its max; "
+                               f"got {o.box}")
+        space = plan.workspace(arm, random_state=o.seed, n_poses=o.pool, box_mm=box, floor=floor, model=model)
+        where = (f"{o.pool} random poses within the joint limits" + (" and the box" if box is not None else "")
+                 + (f", every link above the floor ({floor.describe()})" if floor is not None else ", no floor"))
+    if planning or o.curve:                             # bad input gets its one line before any progress
+        plan.check_count(arm, o.n if planning else plan.min_poses(space.structural.size), space)
+    say(f"{arm.name}, {model.describe(arm)}: {space.structural.size} identifiable parameters over {where} "
+        f"({time.perf_counter() - start:.1f} s)")
+    if o.evaluate:
+        show(f"{o.evaluate}: {len(evaluated)} poses of {arm.name}")
+        show("\n".join(plan.evaluate_poses(arm, evaluated, space=space, noise_mm=o.noise_mm).lines()))
+    if planning:
+        _planned(arm, o, space, model, where, start, say, show)
+    if o.curve:
+        largest = o.curve_max or max(3 * space.structural.size, o.n or 0)
+        counts = plan.curve_counts(space.structural.size, min(largest, len(space.q_deg)))
+        rows = plan.pose_curve(arm, counts, space=space, noise_mm=o.noise_mm, random_state=o.seed,
+                               callback=lambda k, total, row: say(f"curve [{k}/{total}] {row['n']} poses"))
+        show("\n".join(plan.curve_lines(rows, o.noise_mm)))
+
+
+def _joints(robot: Robot, path, o: PlanOptions) -> np.ndarray:
+    """The joint columns of a pose file (candidates or a set to evaluate), deg."""
+    return read_columns(path, [joint_columns(robot.n_joints)], fmt=load_format(o.format) if o.format else None)[1]
+
+
+def _planned(robot: Robot, o: PlanOptions, space, model, where: str, start: float, say, show) -> None:
+    """``-n N -o POSES.csv``: the D-optimal pose set written, its evaluation shown."""
+    def progress(k: int, logdet: float) -> None:
+        if k % 10 == 0:
+            say(f"DETMAX exchange {k}: log det {logdet:.4f}")
+
+    result = plan.plan_poses(robot, o.n, space=space, noise_mm=o.noise_mm, random_state=o.seed, callback=progress)
+    plan.write_plan(robot, result.q_deg, o.output, comment=(
+        f"Pose list planned by partcal {__version__} for {robot.name} ({model.describe(robot)}): {o.n} of "
+        f"{where}, D-optimal (DETMAX), seed {o.seed}.\nJoint angles in degrees, nominal tool positions in "
+        f"mm. Measure these poses; the tracker's positions become x_meas,y_meas,z_meas (mm).\n"
+        f"{result.evaluation.indices.text()}"))
+    show("\n".join(result.evaluation.lines()))
+    show(f"wrote {o.n} poses to {o.output} ({result.exchange.exchanges} exchanges, log det "
+         f"{result.exchange.start_logdet:.3f} -> {result.exchange.logdet:.3f}, "
+         f"{time.perf_counter() - start:.1f} s)")
+
+
+def plan_floor(robot: Robot, options: PlanOptions) -> Floor | None:
+    """The floor a plan keeps every pose above (None: none), from the options ``floor_mm``, ``clearance_mm``
+    and ``no_floor`` (default: the robot's own)."""
+    floor_mm, clearance_mm = options.floor_mm, options.clearance_mm
+    if floor_mm is not None and not np.isfinite(floor_mm):
+        raise PartcalError(f"plan: --floor-mm must be a finite number of mm (the floor's height in the base frame); "
+                           f"got {floor_mm!r}")
+    if clearance_mm is not None and not (np.isfinite(clearance_mm) and clearance_mm >= 0):
+        raise PartcalError(f"plan: --clearance-mm must be a number of mm >= 0; got {clearance_mm!r}")
+    if options.no_floor and (floor_mm is not None or clearance_mm is not None):
+        raise PartcalError("plan: --no-floor goes without --floor-mm and --clearance-mm")
+    if clearance_mm is not None and floor_mm is None and robot.floor_mm is None:
+        raise PartcalError(f"plan: --clearance-mm needs a floor, and {robot.name} is described without one "
+                           "(floor_mm: null): give --floor-mm too")
+    return robot_floor(robot, floor_mm, clearance_mm, off=options.no_floor)
+
+
+def _iso9283(robot: str | Path, o: PlanOptions, show) -> None:
+    """``--iso9283 -o POSES.csv``: the test poses P1..P5 of a cube, in cycles."""
+    if o.output is None or o.n is not None or o.evaluate or o.curve:
+        raise PartcalError("plan --iso9283: give -o POSES.csv (and optionally --cube CX CY CZ EDGE, --cycles N), "
+                           "without -n, --evaluate or --curve")
+    refuse_input_as_output(o.output, "plan", [("robot file", robot)])
+    arm = robot_named(robot)
+    floor = plan_floor(arm, o)
+    cycles = 30 if o.cycles is None else o.cycles
+    cube = plan.iso_cube_plan(arm, o.output, cube=o.cube, cycles=cycles, random_state=o.seed, floor=floor,
+                              comment=f"ISO 9283 test poses planned by partcal {__version__} for {arm.name}. "
+                                      "Joint angles in degrees, nominal tool positions in mm.")
+    for k, (p, q) in enumerate(zip(cube.points_mm, cube.q_deg)):
+        show(f"P{k + 1}: {np.round(p, 3).tolist()} mm, joints {np.round(q, 3).tolist()} deg")
+    show(f"wrote {len(cube.q_deg) * cycles} poses ({cycles} cycles of P1..P5; cube centre "
+         f"{np.round(cube.centre_mm, 3).tolist()} mm, edge {cube.edge_mm:g} mm) to {o.output}")

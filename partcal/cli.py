@@ -144,7 +144,8 @@ class _Parser(argparse.ArgumentParser):
         self._negative_number_matcher = _NEGATIVE_NUMBER
 
     def error(self, message: str):
-        self.exit(2, f"partcal: error: {self.prog}: {message} (see '{self.prog} --help')\n")
+        where = "" if self.prog == "partcal" else f"{self.prog}: "     # 'partcal: error: partcal:' said it twice
+        self.exit(2, f"partcal: error: {where}{message} (see '{self.prog} --help')\n")
 
 
 _NEGATIVE_NUMBER = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?$")

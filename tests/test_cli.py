@@ -750,3 +750,9 @@ models:
     assert child.wait(timeout=60) == 143
     hidden = [p for p in tmp_path.rglob(".*") if p.name != ".partcal-output"]
     assert hidden == []
+
+
+def test_an_option_before_the_command_is_refused_naming_partcal_once():
+    res = run("-q", "run", "configs/paper_sk120.yaml")
+    assert res.returncode == 2
+    assert res.stderr == "partcal: error: unrecognized arguments: -q (see 'partcal --help')\n"

@@ -231,3 +231,22 @@ def test_a_robot_description_given_as_a_virtual_robot_is_named_as_such(tmp_path)
     with pytest.raises(ConfigError, match=r"run\.yaml: verify\.virtual_robot: .*motoman_sk120\.yaml: a robot "
                                           r"description"):
         prepare(load_config(config))
+
+
+def test_the_paper_column_is_printed_for_the_papers_robot_only():
+    """`partcal simulate` sets the paper's Table 2 beside the virtual SK120's figures, not beside a UR10's."""
+    from types import SimpleNamespace
+
+    from partcal.study.tables import simulation_table
+
+    class Errors(SimpleNamespace):
+        def __len__(self):
+            return len(self.errors_mm)
+
+    data = {"identification": Errors(errors_mm=np.array([[3.0, 0.0, 4.0], [-3.0, 0.0, -4.0]]))}
+    for name, paper in (("motoman_sk120", True), ("universal_robots_ur10", False)):
+        study = SimpleNamespace(robot=SimpleNamespace(nominal=SimpleNamespace(name=name)), seed=0)
+        lines = simulation_table(study, data)
+        assert ("paper Table 2" in lines[1]) == paper
+        assert lines[2].split()[:5] == ["identification", "2", "3.00", "0.00", "4.00"]
+        assert lines[2].endswith("8.0 / 7.5 / 17.9") == paper

@@ -1066,3 +1066,13 @@ def test_a_krl_inline_form_sets_the_base_and_tool_of_the_motions_after_it(tmp_pa
         ("XP1", "BASE_DATA[3]", "TOOL_DATA[2]")]
     assert [(t.name, t.line, t.frame, t.tool) for t in read_program(tmp_path / "folded.src").targets] == [
         ("LIN", 9, "BASE_DATA[3]", "TOOL_DATA[2]")]
+
+
+def test_a_joint_target_outside_the_limits_names_each_joint_beyond_its_range(tmp_path):
+    """The SK120's joint 3 runs -250 to -110 degrees and joint 6 -360 to 360: a trajectory row asking 100 and 400
+    names both, with their ranges; a row inside the limits is compensated."""
+    path = tmp_path / "sk120.csv"
+    path.write_text("q1,q2,q3,q4,q5,q6\n10,-90,100,0,30,400\n10,-90,-150,0,30,40\n")
+    result = compensated(constant_model(SK120, [0.3, -0.2, 0.1]), path, keep_unconverged=True)
+    assert [(target.line, why) for target, why in result.failures] == [(2, (
+        "is outside the joint limits: joint 3 at 100 deg (range -250 to -110), joint 6 at 400 deg (range -360 to 360)"))]

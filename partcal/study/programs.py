@@ -272,6 +272,17 @@ def _lookup(program: Program, target: Target, name: str | None, given: dict, wha
                             "docs/predictor.md); nothing written")
 
 
+def _outside_limits(robot, q_deg: NDArray[np.float64]) -> str:
+    """Why a joint target ``q_deg`` (N,) degrees is outside the robot's limits: each joint beyond its range,
+    or the coupled constraint it breaks."""
+    low, high = robot.limits_deg[:, 0], robot.limits_deg[:, 1]
+    beyond = np.flatnonzero((q_deg < low) | (q_deg > high))
+    if beyond.size:
+        return "is outside the joint limits: " + ", ".join(
+            f"joint {j + 1} at {q_deg[j]:g} deg (range {low[j]:g} to {high[j]:g})" for j in beyond)
+    return "is outside the joint limits: it breaks a coupled constraint between the joints"
+
+
 def _intended_joints(robot, program: Program, wanted, q_given, joints, failures: dict) -> NDArray[np.float64]:
     """Joints (n, N) degrees at which the nominal robot has each wanted pose, on the branch the target names.
 
@@ -280,6 +291,8 @@ def _intended_joints(robot, program: Program, wanted, q_given, joints, failures:
     """
     n = len(joints)
     q0 = q_given.copy()
+    for k in np.flatnonzero(joints & ~robot.within_limits(q_given)):
+        failures[k] = _outside_limits(robot, q_given[k])
     todo = np.flatnonzero(~joints)
     if todo.size == 0:
         return q0

@@ -306,3 +306,22 @@ def test_an_export_that_writes_nothing_exits_2_naming_the_format_and_why(complet
     done = partcal_cli("export", str(path), "-o", str(out), "--formats", formats)
     assert done.returncode == 2 and done.stderr.count("\n") == 1, done.stderr
     assert re.search(message, done.stderr) and not out.exists()
+
+
+def test_a_dh_export_with_data_gives_the_rms_it_leaves_and_warns_when_worse_than_none(sk120, tmp_path, paper_data):
+    """A plain DH model carries all its geometry into the files: on data the line gives the 3-D RMS that geometry
+    (the identified robot, base correction included) leaves beside the uncompensated one; errors the geometry
+    makes worse are said."""
+    model = KinematicModel(robot=sk120).fit(paper_data.q_deg, paper_data.errors_mm)
+    path = tmp_path / "dh.json"
+    save_model(model, path, name="dh", robot=sk120)
+    q, errors = paper_data.q_deg, paper_data.errors_mm
+    result = export_model(path, tmp_path / "out", q_deg=q, errors_mm=errors)
+    moved = model.identified_robot_.positions(q) - sk120.positions(q)
+    rms = lambda e: np.sqrt(np.mean(np.sum(e**2, axis=1)))       # noqa: E731
+    assert result.not_carried == (f"on the 85 poses given: 3-D RMS left {rms(errors - moved):.3f} mm by the exported "
+                                  f"geometry, {rms(errors):.3f} mm uncompensated")
+    assert rms(errors - moved) < 0.1 * rms(errors)
+    worse = export_model(path, tmp_path / "again", q_deg=q, errors_mm=-moved).not_carried    # turned the wrong way
+    assert worse.endswith("the exported geometry alone makes these poses worse than no calibration: use the full "
+                          "model (partcal compensate), not the exported files")

@@ -49,7 +49,8 @@ FORMATS = ("urdf", "ur", "dh", "yaml")
 @dataclass(frozen=True)
 class Exported:
     """What :func:`export_model` wrote (``files``: format -> path), what it could not (``skipped``: format ->
-    why), and what the geometry leaves out (``not_carried``: one line, empty when nothing)."""
+    why), and what the geometry leaves out and, with data, what it leaves on them (``not_carried``: one line,
+    empty when there is nothing to say)."""
 
     files: dict = field(default_factory=dict)
     skipped: dict = field(default_factory=dict)
@@ -157,11 +158,8 @@ def export_model(model_path, output: Path, formats=FORMATS, q_deg=None, errors_m
             handle.write(text)
         files[fmt] = output / filename
     note = left_out(model)
-    if note and q_deg is not None:
-        geometry = model.identified_robot_.positions(q_deg) - model.robot_.positions(q_deg)
-        full = model.predict(q_deg)[:, :3]
-        note += (f" (on the {len(q_deg)} poses given: 3-D RMS left {pooled_rms(errors_mm - geometry):.3f} mm by the "
-                 f"exported geometry, {pooled_rms(errors_mm - full):.3f} mm by the full model)")
+    if q_deg is not None:
+        note = _on_data(model, note, q_deg, errors_mm)
     pointless = [f for f in ("yaml", "dh") if f in files]
     if turn is not None and pointless:        # their tool is a point: say what they leave out
         angle = np.degrees(np.arccos(np.clip((np.trace(turn) - 1.0) / 2.0, -1.0, 1.0)))
@@ -169,6 +167,22 @@ def export_model(model_path, output: Path, formats=FORMATS, q_deg=None, errors_m
                                           f"{' and '.join(files[f].name for f in pointless)} (a tool point only; "
                                           "the URDF and the UR TCP carry it)")
     return Exported(files, skipped, note, tcp, tcp_text)
+
+
+def _on_data(model: KinematicModel, note: str, q_deg, errors_mm) -> str:
+    """The line on what the exported geometry leaves on a data set (joints (n, N) deg, measured errors (n, 3)
+    mm): its 3-D RMS beside the full model's (when the geometry leaves something out, ``note``) and the
+    uncompensated one, with a warning where the geometry alone is worse than no calibration."""
+    geometry = model.identified_robot_.positions(q_deg) - model.robot_.positions(q_deg)
+    left, before = pooled_rms(errors_mm - geometry), pooled_rms(errors_mm)
+    figures = f"on the {len(q_deg)} poses given: 3-D RMS left {left:.3f} mm by the exported geometry"
+    if note:
+        figures += f", {pooled_rms(errors_mm - model.predict(q_deg)[:, :3]):.3f} mm by the full model"
+    figures += f", {before:.3f} mm uncompensated"
+    if left > before:
+        figures += ("; the exported geometry alone makes these poses worse than no calibration: use the full model "
+                    "(partcal compensate), not the exported files")
+    return f"{note} ({figures})" if note else figures
 
 
 def export_files(model_path, output: str | Path, formats=None, *, data=None, fmt=None) -> Exported:

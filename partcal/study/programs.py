@@ -35,6 +35,17 @@ from ..robot.rotations import inverse_poses, poses_from
 from .predictor import Predictor
 
 BOUNDARY_DEG = 1e-6       # a joint this close to a configuration's boundary is in both
+SINGULAR_DET = 1e-6
+"""The determinant of the reach-scaled Jacobian below which a pose counts as on a singularity, whose sign
+means nothing. On the SK120's rectangle the determinant is about 2e-4 times axis 5 in degrees: a wrist written
+at axis 5 = 0 to micrometres lies 1e-4 degrees off it (2e-8), where the sign is the rounding's (1e-9 counted
+three of ten such targets as flips); 1e-6 holds axis 5 within 0.005 degrees as on the singularity."""
+EXACT_MM, EXACT_DEG = 1e-6, 1e-6
+IK_TOL_MM, IK_TOL_DEG = 1e-4, 1e-5
+"""How closely the joints of a target's pose are solved: to :data:`EXACT_MM` and :data:`EXACT_DEG` first (so that
+a zero model writes every digit back), then, where that stalls, to what a controller's 32-bit reals carry (about
+1e-4 mm at a metre). At a singular wrist (axes 4 and 5 at 0, the paper's rectangle) the solve stalls near 4e-5 mm
+and 3e-6 degrees: 1e-6 alone refused 6 of 10 such targets as unreachable."""
 SEED_TRIES = 40            # seeds for a pose target's intended joints: the one before it, then spread ones
 
 
@@ -199,7 +210,7 @@ def _solved(predictor: Predictor, program: Program, wanted, q0, failures: dict, 
     if r.joints_deg is not None:
         q1[idx] = r.joints_deg
     else:                        # the controller solves the command on the target's branch
-        ik = robot.inverse_pose(commanded[idx], q0[idx], tol_mm=min(tol_mm, 1e-6), tol_deg=min(tol_deg, 1e-6))
+        ik = _inverse_pose(robot, commanded[idx], q0[idx], min(tol_mm, IK_TOL_MM), min(tol_deg, IK_TOL_DEG))
         q1[idx] = ik.q_deg
         converged &= ik.success
     singular = r.singular if r.singular is not None else np.zeros(len(idx), dtype=bool)
@@ -272,6 +283,20 @@ def _lookup(program: Program, target: Target, name: str | None, given: dict, wha
                             "docs/predictor.md); nothing written")
 
 
+def _inverse_pose(robot, poses, seeds, tol_mm: float, tol_deg: float):
+    """The robot's pose IK of ``poses`` (n, 4, 4) from ``seeds``: to :data:`EXACT_MM` / :data:`EXACT_DEG`, the
+    poses where that fails solved again to ``tol_mm`` / ``tol_deg``."""
+    ik = robot.inverse_pose(poses, seeds, tol_mm=min(tol_mm, EXACT_MM), tol_deg=min(tol_deg, EXACT_DEG))
+    again = np.flatnonzero(~ik.success)
+    if again.size and (tol_mm > EXACT_MM or tol_deg > EXACT_DEG):
+        seeds = np.broadcast_to(seeds, (len(poses), robot.n_joints))
+        retry = robot.inverse_pose(poses[again], seeds[again], tol_mm=tol_mm, tol_deg=tol_deg)
+        ik.q_deg[again], ik.success[again], ik.error_mm[again] = retry.q_deg, retry.success, retry.error_mm
+        if ik.error_deg is not None:
+            ik.error_deg[again] = retry.error_deg
+    return ik
+
+
 def _outside_limits(robot, q_deg: NDArray[np.float64]) -> str:
     """Why a joint target ``q_deg`` (N,) degrees is outside the robot's limits: each joint beyond its range,
     or the coupled constraint it breaks."""
@@ -316,7 +341,7 @@ def _intended_joints(robot, program: Program, wanted, q_given, joints, failures:
         if rows.size == 0:
             break
         start = seed if np.ndim(seed) == 1 else seed[~found[todo]]
-        ik = robot.inverse_pose(wanted[rows], start, tol_mm=1e-6, tol_deg=1e-6)
+        ik = _inverse_pose(robot, wanted[rows], start, IK_TOL_MM, IK_TOL_DEG)
         ok = ik.success & _matches(program, [program.targets[k] for k in rows], ik.q_deg)
         q0[rows[ok]] = ik.q_deg[ok]
         found[rows[ok]] = True
@@ -370,7 +395,7 @@ def _configurations(program: Program, q0, q1) -> str:
 
 def _branch(robot, q: NDArray[np.float64], step_deg: float = 1e-4) -> NDArray[np.float64]:
     """Sign of the 6 x 6 Jacobian's determinant (position mm, rotation vector rad; by central differences),
-    0 within 1e-9 of a singularity (relative to the arm's reach)."""
+    0 within :data:`SINGULAR_DET` of a singularity (relative to the arm's reach)."""
     n, N = q.shape
     if n == 0 or N != 6:
         return np.zeros(n)
@@ -385,4 +410,4 @@ def _branch(robot, q: NDArray[np.float64], step_deg: float = 1e-4) -> NDArray[np
                   axis=-1) / 2.0
     J = np.concatenate([dp, dr], axis=2) / (2 * np.radians(step_deg))       # (n, 6 joints, 6)
     det = np.linalg.det(J)
-    return np.where(np.abs(det) > 1e-9, np.sign(det), 0.0)
+    return np.where(np.abs(det) > SINGULAR_DET, np.sign(det), 0.0)

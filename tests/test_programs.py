@@ -1103,3 +1103,19 @@ def test_targets_at_a_singular_wrist_are_compensated_as_their_csv_is(tmp_path):
     written = np.array([t.position_mm for t in read_program(path).targets])
     commanded = np.array([t.position_mm for t in read_program(tmp_path / "out.script").targets])
     np.testing.assert_allclose(commanded, predictor.compensate(written), atol=1e-3)      # the file's micrometres
+
+
+def test_every_unknown_tool_and_base_of_a_program_is_named_in_one_refusal(tmp_path):
+    """Three points of a KRL .dat in tools and bases the cell did not give: one refusal names each, with the
+    first target that uses it, so that one rerun with every --tool and --frame suffices."""
+    text = (FIXTURES / "pallet.dat").read_bytes().replace(b"TOOL_NO 0,BASE_NO 0", b"TOOL_NO 2,BASE_NO 0")
+    text = text.replace(b"DECL POS XP3=", b'DECL FDAT FP2={TOOL_NO 3,BASE_NO 1,IPO_FRAME #BASE,POINT2[] " "}\r\n'
+                                          b"DECL POS XP3=")
+    dat = tmp_path / "pallet.dat"
+    dat.write_bytes(text)
+    with pytest.raises(UnknownFrameError) as refused:
+        compensated(constant_model(SK120, np.zeros(3)), dat)
+    message = str(refused.value)
+    assert "it is given in the tool 'TOOL_DATA[2]', which is unknown" in message
+    assert "unknown too: " in message and "tool 'TOOL_DATA[3]'" in message and "frame 'BASE_DATA[1]'" in message
+    assert message.endswith("; nothing written") and "\n" not in message

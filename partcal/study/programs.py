@@ -260,27 +260,39 @@ def _result(program, targets, frame, tool, tool_model, wanted, commanded, q1, fa
 
 
 def _frames(program: Program, given: ProgramFrames) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """The frame and the tool (n, 4, 4) mm of every target (identity for joint targets)."""
+    """The frame and the tool (n, 4, 4) mm of every target (identity for joint targets); every frame or tool
+    that is neither given nor in the program is named in one refusal, with the first target that uses it."""
     n = len(program.targets)
     frame, tool = np.tile(np.eye(4), (n, 1, 1)), np.tile(np.eye(4), (n, 1, 1))
+    unknown: dict[tuple[str, str], Target] = {}
     for k, t in enumerate(program.targets):
         if t.kind == "pose":
-            frame[k] = _lookup(program, t, t.frame, given.frames, "frame")
-            tool[k] = _lookup(program, t, t.tool, given.tools, "tool")
+            for what, name, given_poses, out in (("frame", t.frame, given.frames, frame),
+                                                 ("tool", t.tool, given.tools, tool)):
+                pose = _lookup(program, name, given_poses)
+                if pose is None:
+                    unknown.setdefault((what, name), t)
+                else:
+                    out[k] = pose
+    if unknown:
+        (what, name), first = next(iter(unknown.items()))
+        others = [f"{w} {nm!r} ({tg.where(program.path)})" for (w, nm), tg in list(unknown.items())[1:]]
+        option = "--frame" if what == "frame" else "--tool"
+        raise UnknownFrameError(f"{first.where(program.path)}: it is given in the {what} {name!r}, which is unknown: "
+                                f"give it with {option} '{name}=VALUE' (VALUE in the program's own syntax, "
+                                "docs/predictor.md)" + (f"; unknown too: {', '.join(others)}" if others else "")
+                                + "; nothing written")
     return frame, tool
 
 
-def _lookup(program: Program, target: Target, name: str | None, given: dict, what: str) -> NDArray[np.float64]:
+def _lookup(program: Program, name: str | None, given: dict) -> NDArray[np.float64] | None:
+    """The pose (4, 4) mm of a frame or tool named ``name`` (None: the default), given on the command line or
+    declared in the program; None when it is neither."""
     if name is None:
         return given.get(None, np.eye(4))
     if name in given:
         return given[name]
-    if name in program.frames:
-        return program.frames[name]
-    option = "--frame" if what == "frame" else "--tool"
-    raise UnknownFrameError(f"{target.where(program.path)}: it is given in the {what} {name!r}, which is unknown: "
-                            f"give it with {option} '{name}=VALUE' (VALUE in the program's own syntax, "
-                            "docs/predictor.md); nothing written")
+    return program.frames.get(name)
 
 
 def _inverse_pose(robot, poses, seeds, tol_mm: float, tol_deg: float):

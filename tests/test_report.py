@@ -521,6 +521,7 @@ def test_a_figure_legend_covers_no_axis_label_tick_label_or_curve(monkeypatch):
     figures.errors_scattered("C", measured, {"SDP(AI)": predicted}, {"SDP(AI)": spread})
     figures.errors_along_path("rectangle", measured, {"SDP(AI)": predicted, "GP": 0.5 * predicted},
                               {"SDP(AI)": spread})
+    figures.residual_histogram("rectangle", {"uncompensated": measured, "SDP(AI)": measured - predicted})
     for fig in kept:
         renderer = fig.canvas.get_renderer()
         legends = [*fig.legends, *(ax.get_legend() for ax in fig.axes if ax.get_legend() is not None)]

@@ -68,7 +68,7 @@ def _legend_below(fig, axes, handles, labels, ncol: int) -> None:
     renderer = fig.canvas.get_renderer()
     bottom = min(ax.get_tightbbox(renderer).y0 for ax in axes)           # display units
     y = fig.transFigure.inverted().transform((0, bottom))[1]
-    fig.legend(handles, labels, loc="upper center", ncol=ncol, fontsize=8, frameon=False,
+    fig.legend(handles, labels, loc="upper center", ncol=ncol, fontsize=8, frameon=False, markerscale=2.5,
                bbox_to_anchor=(0.5, y - 0.01), bbox_transform=fig.transFigure)
 
 
@@ -171,7 +171,7 @@ def residual_histogram(name: str, left: dict[str, np.ndarray], rigid_fit: bool =
     ax.set_ylabel("points")
     ax.set_title(f"{name}: residual error" + (" after the rigid fit to its own frame, as the table scores it"
                                               if rigid_fit else ""))
-    ax.legend(fontsize=8, frameon=False)
+    _legend_below(fig, [ax], *ax.get_legend_handles_labels(), ncol=2)          # not over the bars
     return _svg(fig)
 
 
@@ -204,7 +204,7 @@ def convergence(models: dict[str, object]) -> str | None:
     ax.set_xlabel("iteration")
     ax.set_ylabel("best RMS / least-squares RMS")
     ax.set_title("Particle swarm convergence (1 = the least-squares optimum)")
-    ax.legend(fontsize=7, frameon=False, ncol=3)
+    _legend_below(fig, [ax], *ax.get_legend_handles_labels(), ncol=4)          # not over the curves
     return _svg(fig)
 
 

@@ -133,7 +133,7 @@ def _draw(spec: dict, path: Path) -> None:
     plotter.camera.zoom(0.85)
     plotter.subplot(0, 1)                          # beside the scene: nothing drawn over an axis
     entries = legend_entries(labels)
-    plotter.add_legend(entries, bcolor="white", size=(0.95, min(0.045 * len(entries), 0.5)), loc="upper left",
+    plotter.add_legend(entries, bcolor="white", size=(0.6, min(0.035 * len(entries), 0.45)), loc="upper left",
                        face="circle")
     if mapper is not None:
         plotter.add_scalar_bar("test sets: residual (mm)", mapper=mapper, vertical=True, color="black",

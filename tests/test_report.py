@@ -370,6 +370,17 @@ data: {frame: tracker, identification: ../data/tracker_identification.csv,
         shared, own = stats["test"]["orientation"]["rms_angle"], stats["own"]["orientation"]["rms_angle"]
         # FDP(AI) leaves 2 mm: the rigid fit of its positions to the set turns its orientation too (1.40 / 1.58)
         assert own == pytest.approx(shared, rel=0.05 if r is None or r.spec.kind == "kinematic" else 0.2)
+    # The residual histogram draws what the table scores: on the set in its own frame, after the rigid fit.
+    import base64
+
+    from partcal.report import error_figures
+
+    figure = next(f for f in error_figures(result, result.models) if f["name"] == "own")
+    svg = base64.b64decode(figure["hist_svg"]).decode()
+    assert "after the rigid fit to its own frame" in svg
+    for r in [None, *result.models]:
+        label, stats = ("uncompensated", result.uncompensated) if r is None else (r.spec.name, r.metrics)
+        assert f"{label} (RMS {stats['own']['rms_3d']:.2f} mm)" in svg
 
 
 def test_scattered_poses_are_drawn_as_points_with_the_share_inside_each_models_interval():
@@ -472,17 +483,6 @@ def test_a_scatter_of_many_poses_draws_an_evenly_spaced_share_and_says_so():
     few = figures.errors_scattered("small", measured[:figures.MAX_SCATTERED], {"M": 0.9 * measured[:5000]})
     assert "(5,000 of 12,000 poses drawn, evenly spaced)" in many and "poses drawn" not in few
     assert len(many) < 1.2 * len(few)
-    # The residual histogram draws what the table scores: on the set in its own frame, after the rigid fit.
-    import base64
-
-    from partcal.report import error_figures
-
-    figure = next(f for f in error_figures(result, result.models) if f["name"] == "own")
-    svg = base64.b64decode(figure["hist_svg"]).decode()
-    assert "after the rigid fit to its own frame" in svg
-    for r in [None, *result.models]:
-        label, stats = ("uncompensated", result.uncompensated) if r is None else (r.spec.name, r.metrics)
-        assert f"{label} (RMS {stats['own']['rms_3d']:.2f} mm)" in svg
 
 
 def test_one_warning_of_several_models_is_one_bullet_naming_them(report, tmp_path):

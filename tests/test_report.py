@@ -603,5 +603,30 @@ def test_every_table_fits_the_page_width(report, tmp_path):
     from partcal.report.browser import open_report
 
     _, out = report
-    check = open_report(out / "index.html", width=1000)
-    assert "spread" not in check.wider_than_page
+    check = open_report(out / "index.html", width=800)
+    assert "spread" not in check.wider_than_page              # its headers wrap: nothing cut in a screenshot
+
+
+def test_a_partition_picture_names_its_regions_beside_the_scene():
+    import io
+
+    import matplotlib.colors as mcolors
+    import matplotlib.image as mpimg
+
+    from partcal.report.scene import SCENE_SHARE, legend_entries, region_colour, render_scenes
+
+    rng = np.random.default_rng(0)
+    points = rng.uniform(0, 1000, (90, 3))
+    labels = (points[:, 0] // 334).astype(int)                     # three slabs along x
+    path = np.c_[np.linspace(100, 900, 50), np.full(50, 500.0), np.full(50, 500.0)]
+    spec = {"points": points, "labels": labels, "boxes": np.zeros((0, 2, 3)), "n_paths": 1, "path0": path,
+            "residual0": np.linspace(0, 2, 50), "joined0": np.asarray(True), "residual_max": 2.0}
+    pngs, problem = render_scenes({"m": spec})
+    if problem:
+        pytest.skip(f"no 3-D rendering here: {problem}")
+    image = mpimg.imread(io.BytesIO(pngs["m"]), format="png")[:, :, :3]
+    side = image[:, int(SCENE_SHARE * image.shape[1]) + 2:]         # the column beside the scene
+    assert [text for text, _ in legend_entries(labels)] == ["region 1", "region 2", "region 3"]
+    for k in range(3):                                             # each region's colour in the legend
+        colour = np.array(mcolors.to_rgb(region_colour(k)))
+        assert (np.abs(side - colour).max(axis=2) < 0.08).sum() > 20, k

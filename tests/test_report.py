@@ -508,6 +508,16 @@ def _captured(monkeypatch):
     return figures, kept
 
 
+def _drawn_texts(ax):
+    """The axis labels and the tick labels matplotlib draws (those of ticks within the view limits)."""
+    def drawn(labels, limits, coordinate):
+        low, high = sorted(limits)
+        return [t for t in labels if low - 1e-9 <= t.get_position()[coordinate] <= high + 1e-9]
+    texts = [ax.xaxis.label, ax.yaxis.label, *drawn(ax.get_xticklabels(), ax.get_xlim(), 0),
+             *drawn(ax.get_yticklabels(), ax.get_ylim(), 1)]
+    return [t for t in texts if t.get_visible() and t.get_text()]
+
+
 def _overlap(a, b) -> bool:
     return a.x0 < b.x1 and b.x0 < a.x1 and a.y0 < b.y1 and b.y0 < a.y1
 
@@ -529,16 +539,12 @@ def test_a_figure_legend_covers_no_axis_label_tick_label_or_curve(monkeypatch):
         for legend in legends:
             box = legend.get_window_extent(renderer)
             for ax in fig.axes:
-                texts = [ax.xaxis.label, ax.yaxis.label, *ax.get_xticklabels(), *ax.get_yticklabels()]
-                for t in texts:
-                    if t.get_visible() and t.get_text():
-                        assert not _overlap(box, t.get_window_extent(renderer)), t.get_text()
+                for t in _drawn_texts(ax):
+                    assert not _overlap(box, t.get_window_extent(renderer)), t.get_text()
                 assert not _overlap(box, ax.get_window_extent(renderer))          # not over the data
-        for ax in fig.axes:                  # the tick labels of one axis never touch each other
-            for labels in (ax.get_xticklabels(), ax.get_yticklabels()):
-                boxes = [t.get_window_extent(renderer) for t in labels if t.get_visible() and t.get_text()]
-                boxes = [b for b in boxes if fig.bbox.overlaps(b)]
-                assert not any(_overlap(a, b) for i, a in enumerate(boxes) for b in boxes[i + 1:])
+        for ax in fig.axes:                  # the labels of one axes never touch each other
+            boxes = [t.get_window_extent(renderer) for t in _drawn_texts(ax)]
+            assert not any(_overlap(a, b) for i, a in enumerate(boxes) for b in boxes[i + 1:])
 
 
 def test_poses_measured_in_clusters_are_scattered_poses_drawn_as_points(monkeypatch):
@@ -630,3 +636,21 @@ def test_a_partition_picture_names_its_regions_beside_the_scene():
     for k in range(3):                                             # each region's colour in the legend
         colour = np.array(mcolors.to_rgb(region_colour(k)))
         assert (np.abs(side - colour).max(axis=2) < 0.08).sum() > 20, k
+
+
+def test_the_scatter_panels_keep_their_tick_labels_apart(monkeypatch):
+    figures, kept = _captured(monkeypatch)
+    rng = np.random.default_rng(2)
+    measured = rng.normal([-0.5, 0.8, -0.2], [0.5, 0.5, 0.4], size=(2773, 3))     # the IPA UR10's random poses
+    predicted = measured * 0.6 + rng.normal(0, 0.3, size=(2773, 3))
+    figures.errors_scattered("random_poses", measured, {"DH + GP(AI)": predicted, "k-means": predicted + 0.01})
+    fig = kept[0]
+    renderer = fig.canvas.get_renderer()
+
+    def texts(ax):
+        return [t.get_window_extent(renderer) for t in _drawn_texts(ax)]
+    for a in fig.axes:
+        for b in fig.axes:
+            if a is not b:                   # one panel's labels never run into the next panel or its labels
+                assert not any(_overlap(t, a.get_window_extent(renderer)) for t in texts(b))
+                assert not any(_overlap(s, t) for s in texts(a) for t in texts(b))

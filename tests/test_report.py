@@ -1,5 +1,6 @@
 """The HTML report, opened in headless Chromium as an engineer would open it."""
 
+import html
 import json
 import re
 import shutil
@@ -482,3 +483,174 @@ def test_a_scatter_of_many_poses_draws_an_evenly_spaced_share_and_says_so():
     few = figures.errors_scattered("small", measured[:figures.MAX_SCATTERED], {"M": 0.9 * measured[:5000]})
     assert "(5,000 of 12,000 poses drawn, evenly spaced)" in many and "poses drawn" not in few
     assert len(many) < 1.2 * len(few)
+
+
+def test_one_warning_of_several_models_is_one_bullet_naming_them(report, tmp_path):
+    import dataclasses
+
+    result, _ = report
+    shared = "theta[5] comes out beyond 1 deg from nominal: kept nominal and the rest refitted"
+    models = [dataclasses.replace(r, notes=[shared] + (["its own warning"] if k == 1 else []))
+              for k, r in enumerate(result.models)]
+    page = render_report(dataclasses.replace(result, models=models), tmp_path).read_text()
+    block = page[page.index('id="fit-warnings"'):]
+    bullets = [html.unescape(b) for b in re.findall(r"<li>(.*?)</li>", block[:block.index("</ul>")], flags=re.S)]
+    names = [r.spec.name for r in result.models]
+    assert bullets == [f"{', '.join(names)}: {shared}", f"{names[1]}: its own warning"]
+
+
+def _captured(monkeypatch):
+    """Figures as matplotlib keeps them (the SVG writer replaced), laid out as the SVG would be."""
+    from partcal.report import figures
+
+    kept = []
+    monkeypatch.setattr(figures, "_svg", lambda fig: kept.append(fig) or "")
+    return figures, kept
+
+
+def _drawn_texts(ax):
+    """The axis labels and the tick labels matplotlib draws (those of ticks within the view limits)."""
+    def drawn(labels, limits, coordinate):
+        low, high = sorted(limits)
+        return [t for t in labels if low - 1e-9 <= t.get_position()[coordinate] <= high + 1e-9]
+    texts = [ax.xaxis.label, ax.yaxis.label, *drawn(ax.get_xticklabels(), ax.get_xlim(), 0),
+             *drawn(ax.get_yticklabels(), ax.get_ylim(), 1)]
+    return [t for t in texts if t.get_visible() and t.get_text()]
+
+
+def _overlap(a, b) -> bool:
+    return a.x0 < b.x1 and b.x0 < a.x1 and a.y0 < b.y1 and b.y0 < a.y1
+
+
+def test_a_figure_legend_covers_no_axis_label_tick_label_or_curve(monkeypatch):
+    figures, kept = _captured(monkeypatch)
+    rng = np.random.default_rng(0)
+    measured = rng.normal(0, 3, size=(300, 3)) - 20
+    predicted = measured + rng.normal(0, 1, size=(300, 3))
+    spread = np.full((300, 3), 0.8)
+    figures.errors_scattered("C", measured, {"SDP(AI)": predicted}, {"SDP(AI)": spread})
+    figures.errors_along_path("rectangle", measured, {"SDP(AI)": predicted, "GP": 0.5 * predicted},
+                              {"SDP(AI)": spread})
+    figures.residual_histogram("rectangle", {"uncompensated": measured, "SDP(AI)": measured - predicted})
+    for fig in kept:
+        renderer = fig.canvas.get_renderer()
+        legends = [*fig.legends, *(ax.get_legend() for ax in fig.axes if ax.get_legend() is not None)]
+        assert legends
+        for legend in legends:
+            box = legend.get_window_extent(renderer)
+            for ax in fig.axes:
+                for t in _drawn_texts(ax):
+                    assert not _overlap(box, t.get_window_extent(renderer)), t.get_text()
+                assert not _overlap(box, ax.get_window_extent(renderer))          # not over the data
+        for ax in fig.axes:                  # the labels of one axes never touch each other
+            boxes = [t.get_window_extent(renderer) for t in _drawn_texts(ax)]
+            assert not any(_overlap(a, b) for i, a in enumerate(boxes) for b in boxes[i + 1:])
+
+
+def test_poses_measured_in_clusters_are_scattered_poses_drawn_as_points(monkeypatch):
+    # The IPA UR10's series B: each joint configuration measured in a cluster of poses a few mm apart, then a
+    # jump of about 100 mm to the next one: the median step is short, but the way is travelled in the jumps.
+    rng = np.random.default_rng(3)
+    centres = rng.uniform(0, 1000, (100, 3))
+    clusters = np.repeat(centres, 10, axis=0) + rng.uniform(-2, 2, (1000, 3))
+    figures, kept = _captured(monkeypatch)
+    steps = np.linalg.norm(np.diff(clusters, axis=0), axis=1)
+    assert np.median(steps) < 0.05 * np.linalg.norm(np.ptp(clusters, axis=0))     # short steps, mostly
+    assert not figures.is_path(clusters)
+    assert figures.is_path(np.c_[np.linspace(0, 1000, 300), np.zeros(300), np.ones(300)])
+    rect = np.concatenate([np.c_[np.linspace(0, 400, 50), np.zeros(50), np.zeros(50)],
+                           np.c_[np.full(50, 400.0), np.linspace(0, 300, 50), np.zeros(50)]])
+    assert figures.is_path(rect)
+
+
+def test_the_identification_observability_and_the_kinematic_fit_say_how_they_differ(tmp_path):
+    from partcal.report import kept_as_implausible
+
+    (tmp_path / "run.yaml").write_text(f"""name: dh
+robot: motoman_sk120
+cv_folds: 3
+data:
+  identification: {DATA / 'identification.csv'}
+  tests:
+    rectangle: {DATA / 'test_rectangle.csv'}
+models:
+  - {{name: DH, kind: kinematic}}
+""")
+    result = run(load_config(tmp_path / "run.yaml"))
+    page = render_report(result, tmp_path).read_text()
+    ev = result.design
+    table = result.models[0].model.identification_
+    # The plan (at nominal, columns in mm of tool motion) and the fit (unit columns) keep different members of
+    # the groups of parameters with one effect: on the SK120's 85 poses the same count, other names.
+    planned = set(ev.identified)
+    fitted = {n for n, s in zip(table.names, table.status) if s == "identified"}
+    assert len(planned) == len(fitted) == 19 and planned != fitted
+    block = page[page.index('id="design-indices"'):page.index('id="comparison"')]
+    assert f"of its {len(table.names)} parameters they identify {len(planned)}" in block
+    assert len(ev.identified) + len(ev.missing) + len(ev.never) == len(table.names) == 41
+    assert ", ".join(ev.never) in block and "This is the plan, not the fit" in block
+    assert "may keep different members of such a group" in block
+    summary = page[page.index('class="kinematic-summary"'):]
+    summary = summary[:summary.index("</p>")]
+    assert f"{len(fitted)} of {len(table.names)} parameters identified" in summary
+    assert "with unit columns at the identified values" in summary and "beyond a plausible range" not in summary
+    assert f"not identifiable from these data ({len(table.names) - len(fitted) - table.status.count('fixed')})" in summary
+    # A fit that keeps identifiable parameters nominal as implausible names them apart, from its warnings.
+    note = ("{} comes out beyond 1 deg from nominal (10 times a plausible manufacturing error), and the data "
+            "do not fix it (nominal is within 3 standard errors): kept nominal and the rest refitted")
+    fake = type("R", (), {"notes": [note.format("theta[5]"), "spread calibration: ... the first: "
+                                    + note.format("alpha[5]"), note.format("alpha[5]")]})()
+    assert kept_as_implausible(fake, ["theta[5]", "alpha[5]", "d[2]"], 2) == ["theta[5]", "alpha[5]"]
+    assert kept_as_implausible(fake, ["theta[5]", "alpha[5]"], 1) == []        # not exactly the count: none named
+
+
+@needs_chromium
+def test_every_table_fits_the_page_width(report, tmp_path):
+    from partcal.report.browser import open_report
+
+    _, out = report
+    check = open_report(out / "index.html", width=800)
+    assert "spread" not in check.wider_than_page              # its headers wrap: nothing cut in a screenshot
+
+
+def test_a_partition_picture_names_its_regions_beside_the_scene():
+    import io
+
+    import matplotlib.colors as mcolors
+    import matplotlib.image as mpimg
+
+    from partcal.report.scene import SCENE_SHARE, legend_entries, region_colour, render_scenes
+
+    rng = np.random.default_rng(0)
+    points = rng.uniform(0, 1000, (90, 3))
+    labels = (points[:, 0] // 334).astype(int)                     # three slabs along x
+    path = np.c_[np.linspace(100, 900, 50), np.full(50, 500.0), np.full(50, 500.0)]
+    spec = {"points": points, "labels": labels, "boxes": np.zeros((0, 2, 3)), "n_paths": 1, "path0": path,
+            "residual0": np.linspace(0, 2, 50), "joined0": np.asarray(True), "residual_max": 2.0}
+    pngs, problem = render_scenes({"m": spec})
+    if problem:
+        pytest.skip(f"no 3-D rendering here: {problem}")
+    image = mpimg.imread(io.BytesIO(pngs["m"]), format="png")[:, :, :3]
+    side = image[:, int(SCENE_SHARE * image.shape[1]) + 2:]         # the column beside the scene
+    assert [text for text, _ in legend_entries(labels)] == ["region 1", "region 2", "region 3"]
+    for k in range(3):                                             # each region's colour in the legend
+        colour = np.array(mcolors.to_rgb(region_colour(k)))
+        assert (np.abs(side - colour).max(axis=2) < 0.08).sum() > 20, k
+
+
+def test_the_scatter_panels_keep_their_tick_labels_apart(monkeypatch):
+    figures, kept = _captured(monkeypatch)
+    rng = np.random.default_rng(2)
+    measured = rng.normal([-0.5, 0.8, -0.2], [0.5, 0.5, 0.4], size=(2773, 3))     # the IPA UR10's random poses
+    predicted = measured * 0.6 + rng.normal(0, 0.3, size=(2773, 3))
+    figures.errors_scattered("random_poses", measured, {"DH + GP(AI)": predicted, "k-means": predicted + 0.01})
+    fig = kept[0]
+    renderer = fig.canvas.get_renderer()
+
+    def texts(ax):
+        return [t.get_window_extent(renderer) for t in _drawn_texts(ax)]
+    for a in fig.axes:
+        for b in fig.axes:
+            if a is not b:                   # one panel's labels never run into the next panel or its labels
+                assert not any(_overlap(t, a.get_window_extent(renderer)) for t in texts(b))
+                assert not any(_overlap(s, t) for s in texts(a) for t in texts(b))

@@ -14,6 +14,7 @@ from __future__ import annotations
 import base64
 import datetime as _dt
 import logging
+import re
 import time
 from importlib import resources
 from pathlib import Path
@@ -80,7 +81,7 @@ def context(result: RunResult) -> dict:
         "table": comparison_rows(result),
         "descriptions": [{"name": r.spec.name, "text": r.model.describe()} for r in result.models],
         "cv_plan": result.plan.cv.describe() if result.plan else f"{cfg.cv_folds}-fold",
-        "fit_warnings": [{"model": r.spec.name, "text": note} for r in result.models for note in r.notes],
+        "fit_warnings": grouped_warnings(result.models),
         "left_out": list(result.plan.notes) if result.plan else [],
         "granularity": granularity_rows(result),
         "coarser_in_cv": coarser_in_cv(result),
@@ -100,6 +101,21 @@ def context(result: RunResult) -> dict:
     }
     out["scenes"] = scene_entries(rendering, captions)
     return out
+
+
+def grouped_warnings(models: list[ModelResult]) -> list[dict]:
+    """The models' warnings, each text once with the models it concerns, in the order first met.
+
+    Hybrids share their kinematic fit, so a warning of that fit (a parameter kept nominal) comes once per
+    model: one bullet naming them all reads better than one per model.
+    """
+    groups: dict[str, list[str]] = {}
+    for r in models:
+        for note in r.notes:
+            names = groups.setdefault(note, [])
+            if r.spec.name not in names:
+                names.append(r.spec.name)
+    return [{"models": names, "text": text} for text, names in groups.items()]
 
 
 def error_figures(result: RunResult, shown: list[ModelResult]) -> list[dict]:
@@ -181,7 +197,7 @@ def design_summary(result: RunResult) -> dict | None:
         return None
     return {"text": ev.indices.text(), "o1": ev.indices.o1, "condition": ev.indices.condition,
             "poses": ev.indices.n_poses, "parameters": ev.indices.n_parameters, "missing": list(ev.missing),
-            "noise": ev.noise_mm, "position_rms": ev.position_rms_mm}
+            "never": list(ev.never), "total": len(ev.names), "noise": ev.noise_mm, "position_rms": ev.position_rms_mm}
 
 
 def _registrations(result: RunResult) -> list[tuple[object, list[str]]]:
@@ -424,9 +440,12 @@ def kinematic_tables(result: RunResult) -> list[dict]:
         own = len(table.names) - len(added)         # a one-target model's parameters, then the added ones
         if targets:
             targets["own_identified"] = table.status[:own].count("identified")
+        identified = table.status.count("identified")
+        kept = kept_as_implausible(r, table.unidentifiable(), table.rank - identified)
         out.append({"name": r.spec.name, "same_as": None, "condition": table.condition, "n_poses": table.n_poses,
-                    "identified": table.status.count("identified"), "parameters": len(table.names),
-                    "rms": table.rms_mm, "unidentifiable": table.unidentifiable(),
+                    "identified": identified, "parameters": len(table.names), "rank": table.rank,
+                    "rms": table.rms_mm, "implausible": kept, "implausible_count": table.rank - identified,
+                    "unidentifiable": [n for n in table.unidentifiable() if n not in kept],
                     "columns": [f"{'theta offset' if p == 'theta' else p} ({u})" for p, u in row_parameters],
                     "dh": [{"row": k + 1, "cells": [cells[f"{p}[{k + 1}]"] for p, _ in row_parameters]}
                            for k in range(n_rows)],
@@ -434,6 +453,19 @@ def kinematic_tables(result: RunResult) -> list[dict]:
                     "joint_errors": [cells[n] for n in table.names[len(row_parameters) * n_rows + 9:own]],
                     "targets": targets, "added": [cells[n] for n in added]})
     return out
+
+
+IMPLAUSIBLE_NOTE = re.compile(r"(\S+) comes out beyond ")     # the identification's warning (models/identification.py)
+
+
+def kept_as_implausible(r: ModelResult, unidentifiable: list[str], count: int) -> list[str]:
+    """The parameters a kinematic fit kept nominal because it took them beyond a plausible range: identifiable
+    from the data (within the Jacobian's rank, ``count`` of them) but not identified. Their names are those
+    the fit's warnings give; an empty list when the warnings do not name exactly ``count`` of them (the
+    report then gives the count alone)."""
+    named = [m.group(1) for note in r.notes if (m := IMPLAUSIBLE_NOTE.match(note))]
+    named = [n for n in dict.fromkeys(named) if n in unidentifiable]
+    return named if count > 0 and len(named) == count else []
 
 
 def identified_targets(summary: dict) -> dict | None:

@@ -27,6 +27,7 @@ class PageCheck:
     image_widths: list[int] = field(default_factory=list)
     cells: dict[str, dict[str, str]] = field(default_factory=dict)     # model -> {data-key: data-value}
     dialogs: list[str] = field(default_factory=list)                    # alert() & co: must never happen
+    wider_than_page: list[str] = field(default_factory=list)            # tables (id or class) cut at the page's width
     screenshot: Path | None = None
 
 
@@ -37,8 +38,9 @@ def chromium_path() -> str:
     return path
 
 
-def open_report(html: Path, screenshot: Path | None = None) -> PageCheck:
-    """Load ``html`` in headless Chromium; collect errors, requests, images and table cells."""
+def open_report(html: Path, screenshot: Path | None = None, width: int = 1280) -> PageCheck:
+    """Load ``html`` in headless Chromium, ``width`` pixels wide; collect errors, requests, images, table cells
+    and the tables wider than the page's text column (a screenshot cuts them)."""
     try:
         from playwright.sync_api import sync_playwright
     except ImportError:
@@ -46,7 +48,7 @@ def open_report(html: Path, screenshot: Path | None = None) -> PageCheck:
     check = PageCheck()
     with tempfile.TemporaryDirectory(prefix="partcal-chromium-") as profile, sync_playwright() as pw:
         browser = pw.chromium.launch_persistent_context(profile, executable_path=chromium_path(), args=ARGS,
-                                                        headless=True, viewport={"width": 1280, "height": 900})
+                                                        headless=True, viewport={"width": width, "height": 900})
         try:
             page = browser.new_page()
             page.on("console", lambda m: check.console_errors.append(m.text) if m.type == "error" else None)
@@ -64,6 +66,13 @@ def open_report(html: Path, screenshot: Path | None = None) -> PageCheck:
                     out[tr.dataset.model] = row;
                 });
                 return out;
+            }""")
+            check.wider_than_page = page.evaluate("""() => {
+                const main = document.querySelector('main'), style = getComputedStyle(main);
+                const column = main.clientWidth - parseFloat(style.paddingLeft) - parseFloat(style.paddingRight);
+                return Array.from(document.querySelectorAll('table'))
+                    .filter(t => t.getBoundingClientRect().width > column)
+                    .map(t => t.id || t.className || 'table');
             }""")
             if screenshot is not None:
                 page.screenshot(path=str(screenshot), full_page=True)

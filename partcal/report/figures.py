@@ -13,6 +13,7 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
+from matplotlib.ticker import MaxNLocator  # noqa: E402
 import numpy as np  # noqa: E402
 
 from ..models.kinds import regions_of, swarm_runs  # noqa: E402
@@ -33,22 +34,42 @@ def _svg(fig) -> str:
 
 Z95 = 1.959963984540054          # a 95% band is mean +- Z95 std
 MAX_SCATTERED = 5_000           # poses drawn in a scatter of predicted against measured errors
-PATH_STEP = 0.05                 # a data set is a path when its median step is below this share of its extent
+PATH_STEP = 0.05                 # a short step: under this share of the diagonal of the data set's box
 
 
 def is_path(positions_mm: np.ndarray) -> bool:
-    """Whether consecutive points of a data set follow a path (median step under :data:`PATH_STEP` of the
-    diagonal of their box) rather than scatter over the workspace.
+    """Whether consecutive points of a data set follow a path rather than scatter over the workspace.
+
+    A path goes most of its way in short steps (each under :data:`PATH_STEP`
+    of the diagonal of the points' box): its median step is short, and the
+    short steps cover at least half of the length travelled. Poses measured in
+    small clusters (a few poses millimetres apart, then a jump elsewhere, as
+    the IPA UR10's joint configurations) have short median steps but travel in
+    the jumps: they are scattered poses, drawn as points.
 
     >>> line = np.c_[np.arange(100.0), np.zeros(100), np.zeros(100)]
-    >>> is_path(line), is_path(np.random.default_rng(0).uniform(0, 100, (100, 3)))
-    (True, False)
+    >>> centres = np.random.default_rng(0).uniform(0, 100, (20, 3))
+    >>> clusters = np.repeat(centres, 5, axis=0) + 0.2 * np.tile(np.arange(5.0), 20)[:, None]
+    >>> is_path(line), is_path(np.random.default_rng(0).uniform(0, 100, (100, 3))), is_path(clusters)
+    (True, False, False)
     """
     p = np.asarray(positions_mm, dtype=float)
     if len(p) < 3:
         return False
     extent = float(np.linalg.norm(p.max(axis=0) - p.min(axis=0)))
-    return extent > 0 and float(np.median(np.linalg.norm(np.diff(p, axis=0), axis=1))) < PATH_STEP * extent
+    steps = np.linalg.norm(np.diff(p, axis=0), axis=1)
+    if not extent > 0 or float(np.median(steps)) >= PATH_STEP * extent:
+        return False
+    return float(steps[steps < PATH_STEP * extent].sum()) >= 0.5 * float(steps.sum())
+
+
+def _legend_below(fig, axes, handles, labels, ncol: int) -> None:
+    """A figure legend under the lowest axis decoration (tick labels, axis labels), never over them."""
+    renderer = fig.canvas.get_renderer()
+    bottom = min(ax.get_tightbbox(renderer).y0 for ax in axes)           # display units
+    y = fig.transFigure.inverted().transform((0, bottom))[1]
+    fig.legend(handles, labels, loc="upper center", ncol=ncol, fontsize=8, frameon=False, markerscale=2.5,
+               bbox_to_anchor=(0.5, y - 0.01), bbox_transform=fig.transFigure)
 
 
 def errors_along_path(name: str, measured: np.ndarray, predictions: dict[str, np.ndarray],
@@ -70,8 +91,8 @@ def errors_along_path(name: str, measured: np.ndarray, predictions: dict[str, np
                                 label=f"{label}: 95% band" if a == 0 else None)
         ax.set_ylabel(f"d{'xyz'[a]} (mm)")
     axes[0].set_title(f"{name}: measured and predicted error")
-    axes[0].legend(loc="upper right", ncol=3, fontsize=8, frameon=False)
     axes[-1].set_xlabel("point along the data set")
+    _legend_below(fig, axes, *axes[0].get_legend_handles_labels(), ncol=3)      # not over the lines
     return _svg(fig)
 
 
@@ -105,10 +126,13 @@ def errors_scattered(name: str, measured: np.ndarray, predictions: dict[str, np.
         ax.plot([low, high], [low, high], color="black", lw=0.8)
         ax.set_xlabel(f"measured d{'xyz'[a]} (mm)")
         ax.set_aspect("equal", adjustable="datalim")
+        for axis in (ax.xaxis, ax.yaxis):          # a narrow panel: few ticks, so that their labels never touch
+            axis.set_major_locator(MaxNLocator(nbins=4))
     axes[0].set_ylabel("predicted (mm)")
     some = "" if len(shown) == len(measured) else f" ({len(shown):,} of {len(measured):,} poses drawn, evenly spaced)"
     fig.suptitle(f"{name}: predicted against measured error, one point per pose{some}", fontsize=9)
-    fig.legend(loc="lower center", ncol=2, fontsize=8, frameon=False, bbox_to_anchor=(0.5, -0.08))
+    fig.tight_layout()
+    _legend_below(fig, axes, *axes[0].get_legend_handles_labels(), ncol=2)
     return _svg(fig)
 
 
@@ -147,7 +171,7 @@ def residual_histogram(name: str, left: dict[str, np.ndarray], rigid_fit: bool =
     ax.set_ylabel("points")
     ax.set_title(f"{name}: residual error" + (" after the rigid fit to its own frame, as the table scores it"
                                               if rigid_fit else ""))
-    ax.legend(fontsize=8, frameon=False)
+    _legend_below(fig, [ax], *ax.get_legend_handles_labels(), ncol=2)          # not over the bars
     return _svg(fig)
 
 
@@ -180,7 +204,7 @@ def convergence(models: dict[str, object]) -> str | None:
     ax.set_xlabel("iteration")
     ax.set_ylabel("best RMS / least-squares RMS")
     ax.set_title("Particle swarm convergence (1 = the least-squares optimum)")
-    ax.legend(fontsize=7, frameon=False, ncol=3)
+    _legend_below(fig, [ax], *ax.get_legend_handles_labels(), ncol=4)          # not over the curves
     return _svg(fig)
 
 

@@ -1119,3 +1119,23 @@ def test_every_unknown_tool_and_base_of_a_program_is_named_in_one_refusal(tmp_pa
     assert "it is given in the tool 'TOOL_DATA[2]', which is unknown" in message
     assert "unknown too: " in message and "tool 'TOOL_DATA[3]'" in message and "frame 'BASE_DATA[1]'" in message
     assert message.endswith("; nothing written") and "\n" not in message
+
+
+@pytest.mark.parametrize("move", [b"TriggJ p10, v1000, trigg1, z50, tGripper;",
+                                  b"TriggL p10, v1000, trigg1 \\T2:=trigg2, z50, tGripper;"])
+def test_a_trigg_move_takes_the_tool_written_after_its_trigger(tmp_path, move):
+    """RAPID's TriggJ/TriggL write the trigger data between speed and zone: the tool comes one argument later
+    than in MoveJ. p10 moved to by a Trigg with tGripper is compensated as the same MoveJ with tGripper is."""
+    source = (FIXTURES / "pallet.mod").read_bytes()
+    assert source.count(b"MoveJ p10, v1000, z50, tool0;") == 1
+    model = constant_model(SK120, [0.5, -0.3, 0.2])
+    paths = {}
+    for name, line in (("trigg", move), ("movej", b"MoveJ p10, v1000, z50, tGripper;")):
+        paths[name] = tmp_path / f"{name}.mod"
+        paths[name].write_bytes(source.replace(b"MoveJ p10, v1000, z50, tool0;", line))
+    trigg, movej = (compensated(model, paths[name]) for name in ("trigg", "movej"))
+    assert movej.failures == [] and trigg.failures == []
+    (tmp_path / "a.mod").write_bytes(trigg.output)
+    (tmp_path / "b.mod").write_bytes(movej.output)
+    p10 = [next(t for t in read_program(tmp_path / f).targets if t.name == "p10") for f in ("a.mod", "b.mod")]
+    assert p10[0].tool == "tGripper" and np.array_equal(p10[0].position_mm, p10[1].position_mm)

@@ -8,14 +8,14 @@ as written); ``jointtarget`` ``[[j1, .., j6], [eax_a, ..]]`` in degrees. Targets
 inline values as a move's target.
 
 A robtarget is in the work object and with the tool of the moves that use it (``MoveL p10, v100, z10,
-tool1 \\WObj:=wobj1;``, also through ``Offs(p10, ..)`` and ``RelTool(p10, ..)``); ``wobj0`` (the world,
-taken as the robot base) and ``tool0`` (the flange) when no move names others. ``tooldata`` (held by the
-robot) and ``wobjdata`` (a fixed user frame: ``uframe`` then ``oframe``) declared in the module are used;
-others must be given as options. A robtarget used with two different tools or work objects is refused. Names
-are case-insensitive (``WObj0`` is ``wobj0``). ``ConfJ \\Off`` and ``ConfL \\Off`` drop the written
-configuration of the targets of the moves they govern (the controller does not monitor it). A robtarget
-assigned at run time, or moved to with a tool or work object assigned at run time or under ``PDispOn``, is left
-as written and reported.
+tool1 \\WObj:=wobj1;``, ``TriggL p10, v100, trigg1, z10, tool1;``, also through ``Offs(p10, ..)`` and
+``RelTool(p10, ..)``); ``wobj0`` (the world, taken as the robot base) and ``tool0`` (the flange) when no
+move names others. ``tooldata`` (held by the robot) and ``wobjdata`` (a fixed user frame: ``uframe`` then
+``oframe``) declared in the module are used; others must be given as options. A robtarget used with two
+different tools or work objects is refused. Names are case-insensitive (``WObj0`` is ``wobj0``).
+``ConfJ \\Off`` and ``ConfL \\Off`` drop the written configuration of the targets of the moves they govern
+(the controller does not monitor it). A robtarget assigned at run time, or moved to with a tool or work
+object assigned at run time or under ``PDispOn``, is left as written and reported.
 """
 
 from __future__ import annotations
@@ -70,15 +70,16 @@ def parse(text: str, source: str) -> tuple[list[Target], dict, list]:
 
 
 _EVENT = re.compile(r"\bConf(?P<conf>[LJ])\s*\\(?P<on>On|Off)\b|\b(?P<pdisp>PDispOn|PDispSet|PDispOff)\b"
-                    r"|(?P<move>\bMove\w*)\s+(?P<args>[^;]*);", re.IGNORECASE)
+                    r"|(?P<move>\b(?:Move\w*|Trigg[JLC]))\s+(?P<args>[^;]*);", re.IGNORECASE)
 _ASSIGNED = re.compile(r"(?:^|;|\bTHEN\b|\bELSE\b|\bDO\b)[ \t]*(?P<name>[A-Za-z_]\w*)"
                        r"(?P<part>(?:[ \t]*\.[ \t]*\w+|[ \t]*\{[^}\r\n]*\})*)[ \t]*:=", re.IGNORECASE | re.MULTILINE)
 
 
 def _moves(code: str):
-    """Each ``Move*`` instruction in file order, with the state before it: whether its configuration is
-    monitored (``ConfJ`` for ``MoveJ*``, ``ConfL`` for ``MoveL*`` and ``MoveC*``; on until ``\\Off``) and the
-    program displacement (``PDispOn``/``PDispSet`` until ``PDispOff``) in force."""
+    """Each ``Move*`` and ``TriggJ``/``TriggL``/``TriggC`` instruction in file order, with the state before it:
+    whether its configuration is monitored (``ConfJ`` for ``MoveJ*`` and ``TriggJ``, ``ConfL`` for the linear and
+    circular ones; on until ``\\Off``) and the program displacement (``PDispOn``/``PDispSet`` until
+    ``PDispOff``) in force."""
     conf = {"L": True, "J": True}
     displaced = None
     for m in _EVENT.finditer(code):
@@ -88,8 +89,8 @@ def _moves(code: str):
             displaced = None if m.group("pdisp").lower() == "pdispoff" else m.group("pdisp")
         else:
             kind = m.group("move").upper()
-            monitored = conf["J"] if kind.startswith("MOVEJ") else conf["L"] if kind.startswith(("MOVEL", "MOVEC")) \
-                else True
+            monitored = conf["J"] if kind.startswith(("MOVEJ", "TRIGGJ")) else \
+                conf["L"] if kind.startswith(("MOVEL", "MOVEC", "TRIGGL", "TRIGGC")) else True
             yield m, (monitored, displaced)
 
 
@@ -112,12 +113,14 @@ def _use(text, code, source, m, state, names, changed, targets, uses, left) -> N
     monitored, displaced = state
     args = _arguments(code, m.start("args"), m.end("args"))
     plain = [(a, s) for a, s in args if not a.startswith("\\")]
-    n_targets = 2 if m.group("move").upper().startswith("MOVEC") else 1
-    if len(plain) <= n_targets + 2:
+    move = m.group("move").upper()
+    n_targets = 2 if move in ("MOVEC", "TRIGGC") or move.startswith("MOVEC") else 1
+    at = n_targets + (3 if move.startswith("TRIGG") else 2)       # speed, zone (a Trigg: speed, trigger, zone)
+    if len(plain) <= at:
         return
-    tool = re.match(r"[A-Za-z_]\w*", plain[n_targets + 2][0])
+    tool = re.match(r"[A-Za-z_]\w*", plain[at][0])
     wobj = _WOBJ.search(m.group("args"))
-    tool_name = tool.group() if tool else plain[n_targets + 2][0]
+    tool_name = tool.group() if tool else plain[at][0]
     wobj_name = wobj.group(1) if wobj else "wobj0"
     where = (names.setdefault(tool_name.lower(), tool_name), names.setdefault(wobj_name.lower(), wobj_name))
     for arg, start in plain[:n_targets]:

@@ -38,7 +38,8 @@ def _cmd_run(args) -> int:
         print(check_run(config, args.config))
         return 0
     if args.screenshot:
-        _check_browser()                       # before the fits, not after them
+        from .report.browser import check_screenshot_tools
+        check_screenshot_tools()               # before the fits, not after them
     progress = Progress.of_run(config, args.quiet)
 
     def report():           # the renderer, asked after the fits; None without matplotlib and jinja2
@@ -51,18 +52,6 @@ def _cmd_run(args) -> int:
 
     print("\n".join(run_and_write(config, progress, report)))
     return 0
-
-
-def _check_browser() -> None:
-    """``run --screenshot`` needs Chromium and Playwright: refuse before fitting when either is missing."""
-    from .report.browser import chromium_path
-
-    chromium_path()
-    try:
-        import playwright.sync_api  # noqa: F401
-    except ImportError:
-        raise PartcalError("--screenshot needs the Python package 'playwright' (pip install 'partcal[browser]'; it "
-                           "uses the system's chromium)") from None
 
 
 def _said(done) -> int:
@@ -142,6 +131,12 @@ class _Parser(argparse.ArgumentParser):
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
         self._negative_number_matcher = _NEGATIVE_NUMBER
+
+    def parse_known_args(self, args=None, namespace=None):
+        namespace, extra = super().parse_known_args(args, namespace)
+        if extra and self.prog != "partcal":        # a command's own: refused naming the command, not partcal
+            self.error(f"unrecognized arguments: {' '.join(extra)}")
+        return namespace, extra
 
     def error(self, message: str):
         where = "" if self.prog == "partcal" else f"{self.prog}: "     # 'partcal: error: partcal:' said it twice
@@ -355,7 +350,7 @@ def _add_plan(sub) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog="partcal", description=__doc__.splitlines()[0])
+    parser = _Parser(prog="partcal", description="Predict and correct the positioning errors of robot manipulators.")
     parser.add_argument("--version", action="version", version=f"partcal {__version__}")
     parser.add_argument("-v", "--verbose", action="store_true", help="show debug messages")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)

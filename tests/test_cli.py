@@ -744,15 +744,19 @@ models:
   - {{name: SDP(AI), inputs: joint, degree: 2}}
 """)
     child = subprocess.Popen([sys.executable, "-m", "partcal", "run", str(cfg)], stderr=subprocess.PIPE, text=True)
-    child.stderr.readline()                                   # the run has started
-    time.sleep(1.0)
+    child.stderr.readline()                       # the run has started (its handler is set before any line)
+    time.sleep(0.2)
     child.send_signal(signal.SIGTERM)
     assert child.wait(timeout=60) == 143
     hidden = [p for p in tmp_path.rglob(".*") if p.name != ".partcal-output"]
     assert hidden == []
 
 
-def test_an_option_before_the_command_is_refused_naming_partcal_once():
+def test_an_unknown_option_is_refused_by_the_parser_it_belongs_to_naming_partcal_once():
     res = run("-q", "run", "configs/paper_sk120.yaml")
     assert res.returncode == 2
     assert res.stderr == "partcal: error: unrecognized arguments: -q (see 'partcal --help')\n"
+    res = run("equations", "model.json", "--bogus")
+    assert res.returncode == 2
+    assert res.stderr == ("partcal: error: partcal equations: unrecognized arguments: --bogus "
+                          "(see 'partcal equations --help')\n")

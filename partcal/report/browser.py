@@ -31,6 +31,16 @@ class PageCheck:
     screenshot: Path | None = None
 
 
+def check_screenshot_tools() -> None:
+    """``run --screenshot`` needs Chromium and Playwright: refuse (before any fit) when either is missing."""
+    chromium_path()
+    try:
+        import playwright.sync_api  # noqa: F401
+    except ImportError:
+        raise PartcalError("--screenshot needs the Python package 'playwright' (pip install 'partcal[browser]'; it "
+                           "uses the system's chromium)") from None
+
+
 def chromium_path() -> str:
     path = shutil.which("chromium") or shutil.which("chromium-browser")
     if not path:

@@ -98,7 +98,8 @@ class Section:
         if data is None:
             data = {}
         if not isinstance(data, dict):
-            self.fail(where, f"expected a mapping, got {_kind(data)}")
+            self.fail(where, f"expected a mapping, got {_kind(data)}" + ("" if where else (
+                ": is it a YAML config? (a CSV or another file given where a config is expected)")))
         self.data, self._read = data, set()
 
     def path(self, key: str) -> str:
@@ -106,7 +107,7 @@ class Section:
 
     def fail(self, where: str, message: str):
         line = self.lines.get(where)
-        at = f"{where} (line {line})" if line else (where or "top level")
+        at = f"{where or 'top level'} (line {line})" if line else (where or "top level")
         raise ConfigError(f"{self.source}: {at}: {message}")
 
     def has(self, key: str) -> bool:

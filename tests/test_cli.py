@@ -760,3 +760,19 @@ def test_an_unknown_option_is_refused_by_the_parser_it_belongs_to_naming_partcal
     assert res.returncode == 2
     assert res.stderr == ("partcal: error: partcal equations: unrecognized arguments: --bogus "
                           "(see 'partcal equations --help')\n")
+
+
+def test_import_names_its_rows_option_when_the_rows_are_bad(tmp_path):
+    res = run("import", str(DATA / "identification.csv"), "-o", str(tmp_path / "o.csv"), "--rows", "5-2")
+    assert res.returncode == 2 and not (tmp_path / "o.csv").exists()
+    assert res.stderr == ("partcal: error: import: --rows '5-2': expected data rows such as '1-600' or "
+                          "'1-100, 201-300' (1-based, increasing, not overlapping)\n")
+
+
+@pytest.mark.parametrize("command", ["run", "simulate"])
+def test_a_csv_given_for_a_config_is_named_as_such(command):
+    res = run(command, str(DATA / "identification.csv"))
+    assert res.returncode == 2 and res.stderr.count("\n") == 1
+    assert res.stderr.startswith(f"partcal: error: {DATA / 'identification.csv'}: top level (line ")
+    assert res.stderr.rstrip().endswith("expected a mapping, got a text: is it a YAML config? (a CSV or another "
+                                        "file given where a config is expected)")

@@ -46,7 +46,7 @@ JOINT_UNITS = ("deg", "rad")
 LENGTH_UNITS = ("mm", "m")
 ORIENTATION_UNITS = ("deg", "rad")
 _RANGE = re.compile(r"^\s*(\d+)\s*(?:-\s*(\d+)\s*)?$")
-_ROWS = "data rows such as '1-600' or '1-100, 201-300' (1-based, increasing, not overlapping)"
+ROWS_EXPECTED = "data rows such as '1-600' or '1-100, 201-300' (1-based, increasing, not overlapping)"
 
 
 @dataclass(frozen=True)
@@ -289,7 +289,7 @@ class RowSelection:
     @classmethod
     def from_section(cls, sec: Section) -> "RowSelection":
         """Read ``rows`` and ``every`` of a YAML mapping (other keys are the caller's)."""
-        text = sec.get("rows", "str", default=None, check=lambda t: None if _ranges(t) is not None else _ROWS)
+        text = sec.get("rows", "str", default=None, check=lambda t: None if _ranges(t) is not None else ROWS_EXPECTED)
         every = sec.get("every", "int", default=1, check=_every_problem)
         return cls.parse(text, every)
 
@@ -323,4 +323,4 @@ def _ranges(text: str) -> tuple[tuple[int, int], ...] | None:
 
 
 def _bad_rows(text: str | None) -> ConfigError:
-    return ConfigError(f"The 'rows' parameter of RowSelection must be {_ROWS}. Got {text!r} instead.")
+    return ConfigError(f"The 'rows' parameter of RowSelection must be {ROWS_EXPECTED}. Got {text!r} instead.")

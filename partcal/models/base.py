@@ -194,7 +194,11 @@ class ErrorModelBase(RegressorMixin, BaseEstimator):
         return int(getattr(self, "n_outputs_", 3))
 
     def input_bounds(self) -> np.ndarray:
-        """``(2, d)``: the smallest and largest training input per column."""
+        """``(2, d)``: the smallest and largest training input per column (``data_bounds_``, which every kind's
+        ``fit`` sets and its file section restores)."""
+        if not hasattr(self, "data_bounds_"):
+            raise AttributeError(f"{type(self).__name__} has no data_bounds_: a kind's fit sets it and its file "
+                                 "section restores it (docs/architecture.md, 'Adding a model kind')")
         return self.data_bounds_
 
     def predict_validated(self, X: NDArray[np.float64]) -> NDArray[np.float64]:

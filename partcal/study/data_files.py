@@ -22,11 +22,11 @@ from typing import Callable
 
 from .. import __version__
 from .._io import check_folder_writable, refuse_input_as_output
-from ..data.formats import MeasurementFormat, RowSelection, load_format
+from ..data.formats import ROWS_EXPECTED, MeasurementFormat, RowSelection, load_format
 from ..data.measurements import read_measurements, write_measurements
 from ..data.registration import Registration, register_measurements, registered
 from ..data.simulate import load_study, simulate, write_study
-from ..errors import PartcalError
+from ..errors import ConfigError, PartcalError
 from ..metrics import pooled_rms
 from .config import load_config, robot_named
 from .outputs import (check_writable, registration_comment, replace_folder, write_datasets,
@@ -80,7 +80,12 @@ def import_file(source: str | Path, output: str | Path, *, robot: str | Path | N
     if tool_mm is not None and frame != "tracker":
         raise PartcalError("import: --tool-mm is the target offset of a tracker registration; it needs --frame "
                            "tracker (in the base frame the measured positions already include the tool)")
-    selection = RowSelection.parse(rows, every) if (rows or every != 1) else None
+    try:
+        selection = RowSelection.parse(rows, every) if (rows or every != 1) else None
+    except ConfigError:              # the class's own words name its parameters; the command's name its options
+        bad = (f"--every {every!r}: expected a whole number >= 1" if not (isinstance(every, int) and every >= 1)
+               else f"--rows {rows!r}: expected {ROWS_EXPECTED}")
+        raise ConfigError(f"import: {bad}") from None
     arm = robot_named(robot) if robot else None
     m = read_measurements(source, arm, fmt=load_format(format_path) if format_path else fmt, rows=selection,
                           frame=frame)

@@ -186,9 +186,9 @@ def _on_data(model: KinematicModel, note: str, q_deg, errors_mm) -> str:
 
 
 def export_files(model_path, output: str | Path, formats=None, *, data=None, fmt=None) -> Exported:
-    """``partcal export``: :func:`export_model` (``formats`` None: all of :data:`FORMATS`) with the poses and
-    errors of the measurement file ``data`` (its format YAML ``fmt``), read against the model's robot, when
-    one is given."""
+    """``partcal export``: :func:`export_model` (``formats`` None: every one of :data:`FORMATS` the chain
+    allows, the others in ``skipped`` with the reason) with the poses and errors of the measurement file
+    ``data`` (its format YAML ``fmt``), read against the model's robot, when one is given."""
     q = errors = None
     if data:
         robot = load_model(model_path)[0].robot_

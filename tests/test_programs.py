@@ -1139,3 +1139,16 @@ def test_a_trigg_move_takes_the_tool_written_after_its_trigger(tmp_path, move):
     (tmp_path / "b.mod").write_bytes(movej.output)
     p10 = [next(t for t in read_program(tmp_path / f).targets if t.name == "p10") for f in ("a.mod", "b.mod")]
     assert p10[0].tool == "tGripper" and np.array_equal(p10[0].position_mm, p10[1].position_mm)
+
+
+def test_a_move_to_a_pose_a_function_computes_is_reported_not_silently_passed_over(tmp_path):
+    """pick_place.script's 'movel(pose_add(get_actual_tcp_pose(), p[0, 0, 0.05, 0, 0, 0]), ..)' at line 13 is
+    no target: it is reported with the function, and the file is otherwise compensated as before."""
+    program = read_program(FIXTURES / "pick_place.script")
+    relative = [(k.line, k.name, k.reason) for k in program.left if "relative motion" in k.reason]
+    assert relative == [(13, "movel", "a relative motion computed at run time (pose_add(..)): not compensated, "
+                                      "kept as written")]
+    path = tmp_path / "approach.script"
+    path.write_text("movel(pose_add(approach, p[0, 0, 0.1, 0, 0, 0]), a=1.2, v=0.25)\n"
+                    "movel(pose_trans(Plane_1, p[0.1, 0.0, 0.05, 0, 3.1416, 0]), a=1.2, v=0.25)\n")
+    assert [(k.line, k.column) for k in read_program(path).left] == [(1, 7)]      # pose_trans: a frame, not this

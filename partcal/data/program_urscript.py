@@ -15,7 +15,7 @@ joints in radians. Targets are
 ``set_tcp(p[...])`` sets the tool of the moves after it (in file order): a pose variable has the tool of the
 moves that take it, wherever it is assigned (PolyScope declares every waypoint at the top); ``set_tcp`` of
 anything else names a tool that must be given (``--tool``). Relative motions (``pose_add``, ``pose_trans`` of a
-variable) are no targets and stay as written.
+variable) are no targets and stay as written; a move to a pose a function computes is reported.
 """
 
 from __future__ import annotations
@@ -71,7 +71,18 @@ def parse(text: str, source: str) -> tuple[list[Target], dict, list]:
         else:
             targets.append(_pose_target(text, code, source, start, frame, tool, name))
     targets += _joint_targets(text, code, source, left)
+    left += _relative_moves(code)
     return sorted(targets, key=lambda t: t.fields[0].start), tools, left
+
+
+_RELATIVE = re.compile(r"\b(?P<move>" + "|".join(MOVES) + r")\s*\(\s*(?P<call>(?!pose_trans\b)[A-Za-z_]\w*)\s*\(")
+
+
+def _relative_moves(code: str) -> list[tuple[int, str, str]]:
+    """Moves to a pose a function computes at run time (``movel(pose_add(approach, p[0, 0, 0.1, 0, 0, 0]))``):
+    no target, reported with the function, as ``left`` entries (offset, name, why)."""
+    return [(m.start("call"), m.group("move"), f"a relative motion computed at run time ({m.group('call')}(..)): "
+             "not compensated, kept as written") for m in _RELATIVE.finditer(code)]
 
 
 _IDENTIFIER = re.compile(r"(?<![\w.])[A-Za-z_]\w*")

@@ -1152,3 +1152,19 @@ def test_a_move_to_a_pose_a_function_computes_is_reported_not_silently_passed_ov
     path.write_text("movel(pose_add(approach, p[0, 0, 0.1, 0, 0, 0]), a=1.2, v=0.25)\n"
                     "movel(pose_trans(Plane_1, p[0.1, 0.0, 0.05, 0, 3.1416, 0]), a=1.2, v=0.25)\n")
     assert [(k.line, k.column) for k in read_program(path).left] == [(1, 7)]      # pose_trans: a frame, not this
+
+
+def test_a_program_named_in_another_language_than_its_own_is_refused_not_copied(tmp_path):
+    """--program krl on a RAPID module read no targets and wrote the module back uncompensated, exit 0."""
+    from partcal.errors import PartcalError
+    from partcal.study.downstream import compensate_program_file
+
+    predictor = constant_model(SK120, [0.1, 0.0, 0.0])
+    save_model(predictor.model, tmp_path / "m.json", name="m", robot=SK120)
+    out = tmp_path / "out.mod"
+    with pytest.raises(PartcalError, match=r"pallet.mod: holds no targets read as krl, and its name or text says "
+                                           r"rapid: give --program rapid \(or leave --program out\); nothing written"):
+        compensate_program_file(tmp_path / "m.json", FIXTURES / "pallet.mod", out, "krl")
+    assert not out.exists()
+    done = compensate_program_file(tmp_path / "m.json", FIXTURES / "pallet.mod", out, "rapid")
+    assert not done.failure and out.read_bytes() != (FIXTURES / "pallet.mod").read_bytes()

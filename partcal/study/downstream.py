@@ -228,6 +228,10 @@ def compensate_program_file(model: str | Path, program: str | Path, output: str 
     given = ProgramFrames(_named(frames, dialect, "--frame"), _named(tools, dialect, "--tool"))
     predictor = load_predictor(model)
     read = read_program(program, dialect)
+    named = program_kind(program)
+    if not read.targets and named not in (None, dialect):       # --program said one language, the file another
+        raise PartcalError(f"{program}: holds no targets read as {dialect}, and its name or text says {named}: "
+                           f"give --program {named} (or leave --program out); nothing written")
     with warnings.catch_warnings():       # the failure line and the exit code say it instead
         warnings.simplefilter("ignore", CompensationWarning)
         warnings.simplefilter("ignore", ExtrapolationWarning)

@@ -25,7 +25,6 @@ from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial.transform import Rotation
 
 from .._validation import check_array
 from ..errors import DataError
@@ -34,7 +33,8 @@ from ..models.features import varying_inputs
 from ..robot.compensation import (CompensationResult, false_target, false_target_cartesian_poses,
                                   false_target_joints, false_target_poses, merged, reachable, reachable_poses)
 from ..robot.description import robot_from_dict
-from ..robot.kinematics import Robot, checked_poses, ik_settings, matrices_from_xyz_deg
+from ..robot.kinematics import Robot, checked_poses, ik_settings
+from ..robot.rotations import matrices_from_rotation_vectors, matrices_from_xyz_deg
 from .persist import load_model
 
 EXTRAPOLATION_LIMIT = 50.0    # mm (Cartesian models) or degrees (joint models) from the nearest training input
@@ -173,7 +173,7 @@ class Predictor:
         offset = check_array(np.reshape(np.asarray(offset_mm, dtype=float), (1, -1)), "offset_mm", columns=3)[0]
         errors = self._errors(q if self.inputs == "joint" else self.robot.positions(q), payload_kg)
         lever = self.robot.flange(q)[:, :3, :3] @ (offset - self.robot.tool_mm)
-        turn = Rotation.from_rotvec(errors[:, 3:] / MRAD_PER_RAD).as_matrix() - np.eye(3)
+        turn = matrices_from_rotation_vectors(errors[:, 3:] / MRAD_PER_RAD) - np.eye(3)
         return errors[:, :3] + np.einsum("nij,nj->ni", turn, lever)
 
     def _inputs(self, positions, joints) -> NDArray[np.float64]:

@@ -37,6 +37,7 @@ the joint angles the arm actually takes.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import logging
 from dataclasses import dataclass, field
@@ -491,6 +492,29 @@ def identify(robot: Robot, q_deg: NDArray[np.float64], measured_mm: NDArray[np.f
     jac0 = jac_at(v0)[1]
     names = parameter_names(robot, errors, parametrization) + (extra.names() if extra is not None else [])
     units = [unit for _, unit in names]
+    result, resid = fit_parameters(jac_at, v0, jac0, wanted, names, rcond, size, q_deg.shape[0])
+    rms, angle = _target_rms(resid, len(q_deg), extra)
+    more = {} if extra is None else {
+        "target_rms_mm": dict(zip([PRIMARY_TARGET, *extra.tools_mm], rms)), "orientation_rms_deg": angle,
+        "primary_identifiable": _identifiable(jac0[:3 * len(q_deg), :own], wanted[:own], rcond, units[:own])[1]}
+    result = dataclasses.replace(result, rms_mm=rms[0], **more)
+    log.info("identified %d of %d parameters (condition %.3g): RMS %.4f mm", result.status.count("identified"),
+             result.value.size, result.condition, result.rms_mm)
+    return result
+
+
+def fit_parameters(jac_at, v0: NDArray[np.float64], jac0: NDArray[np.float64], wanted: NDArray[np.bool_],
+                   names: list[tuple[str, str]], rcond: float, size: int, n_poses: int
+                   ) -> tuple[Identification, NDArray[np.float64]]:
+    """The rank-checked fit of :func:`identify` over any stacked residuals, and the residuals it leaves.
+
+    ``jac_at(values, jacobian=True)`` gives the residuals and their Jacobian; ``v0`` is the start (the
+    nominal values); ``jac0`` the Jacobian the rank rule reads (at ``v0``, on consistent data);
+    ``wanted`` the parameters asked for; ``names`` every parameter's ``(name, unit)``; ``size`` the number
+    of geometric parameters (the rows', tool and base: the first ``size``). The table's ``rms_mm`` is the
+    3-D RMS of the residuals read as points; callers replace it with their own figure.
+    """
+    units = [unit for _, unit in names]
     free, rank = _identifiable(jac0, wanted, rcond, units)
 
     limits = np.full(v0.size, np.nan)
@@ -522,17 +546,12 @@ def identify(robot: Robot, q_deg: NDArray[np.float64], measured_mm: NDArray[np.f
     status = np.where(wanted, "unidentifiable", "fixed").astype(object)
     status[free] = "identified"
     prior_std, absorbed = _prior(jac, free, status, units, size)
-    rms, angle = _target_rms(resid, len(q_deg), extra)
-    more = {} if extra is None else {
-        "target_rms_mm": dict(zip([PRIMARY_TARGET, *extra.tools_mm], rms)), "orientation_rms_deg": angle,
-        "primary_identifiable": _identifiable(jac0[:3 * len(q_deg), :own], wanted[:own], rcond, units[:own])[1]}
     result = Identification(tuple(n for n, _ in names), tuple(u for _, u in names), v0, v, std_full,
-                            tuple(str(s) for s in status), rank, condition, rms[0], q_deg.shape[0], evaluations,
-                            **more, covariance=covariance, sigma_mm=sigma, prior_std=prior_std,
+                            tuple(str(s) for s in status), rank, condition, pooled_rms(resid[:resid.size // 3 * 3]
+                                                                                       .reshape(-1, 3)),
+                            n_poses, evaluations, covariance=covariance, sigma_mm=sigma, prior_std=prior_std,
                             prior_absorbed=absorbed)
-    log.info("identified %d of %d parameters (condition %.3g): RMS %.4f mm", free.size, v.size, condition,
-             result.rms_mm)
-    return result
+    return result, resid
 
 
 def _prior(jac: NDArray[np.float64], free: NDArray[np.intp], status, units: list[str], size: int
@@ -785,7 +804,7 @@ def _orientation(nominal: Robot, q_actual, design, moves, values, own: int, extr
     row's turns about their axes), the base correction about its axes, a joint error through the
     joint's axes, the probe's turn about the model frame's axes. Lengths turn nothing.
     """
-    size, rows, n = geometric_size(nominal, parametrization), nominal.alpha_deg.size, q_actual.shape[0]
+    n = q_actual.shape[0]
     robot = robot_with(nominal, values[:own], parametrization)
     model = robot.forward(q_actual)[:, :3, :3] @ matrix_from_rotation_vector(np.radians(values[-3:]))
     weight = extra.mm_per_rad
@@ -793,6 +812,23 @@ def _orientation(nominal: Robot, q_actual, design, moves, values, own: int, extr
     residuals = weight * turns.ravel()
     if not jacobian:
         return residuals, None
+    omega = np.zeros((n, 3, values.size))
+    omega[:, :, :own] = turn_columns(nominal, robot, q_actual, design, moves, values[:own], parametrization)
+    omega[:, :, -3:] = model * _DEG                                        # columns: the model frame's axes
+    return residuals, weight * np.einsum("nij,njp->nip", _log_derivative(turns), omega).reshape(-1, values.size)
+
+
+def turn_columns(nominal: Robot, robot: Robot, q_actual: NDArray[np.float64], design, moves,
+                 values: NDArray[np.float64], parametrization: str = "dh") -> NDArray[np.float64]:
+    """How each of the model's own parameters ``values`` (geometry, joint errors) turns the flange: its angular
+    velocity in the base frame per unit (radians per degree; lengths turn nothing), shape ``(n, 3, P)``.
+
+    A row's theta turns about the row's z axis, its alpha about the next frame's x axis (a complete row's
+    turns about their axes), the base correction about its axes, a joint error through the joint's axes.
+    ``robot`` is the nominal robot with ``values``; ``q_actual``, ``design``, ``moves`` as
+    :func:`actual_joints` gives them.
+    """
+    size, rows, n = geometric_size(nominal, parametrization), nominal.alpha_deg.size, q_actual.shape[0]
     _, xs, zs = robot.frame_axes(q_actual)                                # (n, R + 1, 3)
     omega = np.zeros((n, 3, values.size))
     if PARAMETRIZATIONS[parametrization].origins:
@@ -809,9 +845,8 @@ def _orientation(nominal: Robot, q_actual, design, moves, values, own: int, extr
         per_joint = np.einsum("nri,rj->nij", zs[:, :rows], nominal.coupling) * _DEG      # (n, 3, N)
         if moves is not None:
             omega[:, :, :size - 6] += np.einsum("nij,njp->nip", per_joint, moves)
-        omega[:, :, size:own] = np.einsum("nij,njp->nip", per_joint, design)
-    omega[:, :, -3:] = model * _DEG                                        # columns: the model frame's axes
-    return residuals, weight * np.einsum("nij,njp->nip", _log_derivative(turns), omega).reshape(-1, values.size)
+        omega[:, :, size:] = np.einsum("nij,njp->nip", per_joint, design)
+    return omega
 
 
 def _log_derivative(turns: NDArray[np.float64]) -> NDArray[np.float64]:

@@ -1,0 +1,388 @@
+"""The built-in measurement kinds: tracker points, plane contacts, fixed points and distances.
+
+Each is one class registered in :data:`~partcal.models.measures.MEASUREMENT_KINDS` (see
+:mod:`partcal.models.measures` for what a kind answers). Lengths are mm; a plane's normal tilts
+are radians; residuals are mm.
+
+- ``point``: a tracker point of the tool in the base frame; residual ``p - measured`` (three per row).
+- ``plane``: the tool tip touches plane ``feature``: ``n . p - offset`` (one per row); a ``flush``
+  row (a flat face of the tool lies on the plane) adds the tool z axis' two tilts against the
+  normal, as millimetres of the face's rim (:data:`FACE_RADIUS_MM`). Planes are unknown (three
+  unknowns: two tilts of the normal, the offset), started from the given normal and offset or
+  from the nominal robot's touches, or tied to another plane (``parallel_to``: its normal, and its
+  offset plus a known ``spacing_mm``: no unknowns of its own).
+- ``fixed``: the tool tip at fixed point ``feature``: ``p - c`` (three per row); the point unknown
+  (three unknowns, started at the nominal touches' mean), known (``known_mm``), or tied to another
+  by a known distance (``distance_to``, ``distance_mm``: one more residual, the bar's length, of
+  noise :data:`BAR_NOISE_MM`).
+- ``distance``: ``|p - p_to| - distance_mm`` between this row's tip and row ``to``'s, or the
+  point ``to`` of the features (a ballbar's pivot: a fixed point of its own, sharing its unknowns).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..errors import DataError
+from .measures import END_KIND, MeasurementKind, Residuals, Rows, add_measurement_kind
+
+FACE_RADIUS_MM = 50.0
+"""A flush contact's tilt residual: the rise of the rim of a face of this radius, mm per radian."""
+
+BAR_NOISE_MM = 0.001
+"""The stated uncertainty of a known length between two fixed points (a calibrated bar), mm."""
+
+
+def _unit_rows(n: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Three residuals per row: their rows' repeat pattern and the unit gradients."""
+    return np.repeat(np.arange(n), 3), np.tile(np.eye(3), (n, 1))
+
+
+@add_measurement_kind
+class PointKind(MeasurementKind):
+    """A tracker point of the tool, already in the robot's base frame (registered)."""
+
+    name = "point"
+    default_noise_mm = 0.02
+    summary = "a tracker point of the tool in the base frame: 3 residuals (mm)"
+
+    def __init__(self, rows, index, features, noise_mm):
+        super().__init__(rows, index, features, noise_mm)
+        self.measured = np.column_stack([rows.number(c, index) for c in ("x_meas", "y_meas", "z_meas")])
+
+    def residuals(self, positions, rotations, u) -> Residuals:
+        which, grad = _unit_rows(self.index.size)
+        return Residuals((positions[self.index] - self.measured).ravel(), self.index[which], grad,
+                         np.zeros((grad.shape[0], 0)))
+
+    def describe(self) -> str:
+        return f"{self.index.size} tracker points"
+
+
+def _tangents(normal: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Two unit vectors that complete ``normal`` to a right-handed frame."""
+    helper = np.eye(3)[int(np.argmin(np.abs(normal)))]
+    t1 = np.cross(normal, helper)
+    t1 /= np.linalg.norm(t1)
+    return t1, np.cross(normal, t1)
+
+
+@add_measurement_kind
+class PlaneKind(MeasurementKind):
+    """The probe tip on a plane (and, flush, a face of the tool lying on it)."""
+
+    name = "plane"
+    needs_orientation = True
+    summary = "the tool tip touches plane `feature`: its distance to the plane (mm); flush adds two tilts"
+
+    def __init__(self, rows, index, features, noise_mm):
+        super().__init__(rows, index, features, noise_mm)
+        self.plane = rows.text("feature", index)
+        flush = rows.numbers.get("flush")
+        self.flush = np.zeros(index.size, dtype=bool) if flush is None else np.nan_to_num(
+            np.asarray(flush, dtype=float)[index]) > 0.5
+        self.specs = dict((features.get("planes") or {}))
+        self.names = list(dict.fromkeys(self.plane))
+        for name in self.names:
+            spec = self.specs.setdefault(name, {})
+            root = spec.get("parallel_to")
+            if root is not None and root not in self.specs:
+                raise DataError(f"plane {name!r}: parallel_to {root!r} is not a plane of the features")
+        self._check()
+
+    def _check(self) -> None:
+        """Enough touches from more than one orientation on every plane with unknowns."""
+        for name in self.names:
+            mine = self.index[[p == name for p in self.plane]]
+            spec = self.specs[name]
+            need = 0 if "parallel_to" in spec else 3
+            if mine.size < max(need, 1):
+                raise DataError(f"{self.rows.where(mine[0])}: column 'feature': plane {name!r} has {mine.size} "
+                                f"touches; its {need} unknowns (two tilts and an offset) need at least {need}")
+
+    def _root(self, name: str) -> tuple[str, float]:
+        """The plane whose normal and offset ``name`` follows, and the spacing added to the offset."""
+        spacing = 0.0
+        seen = {name}
+        while "parallel_to" in self.specs[name]:
+            spacing += float(self.specs[name].get("spacing_mm", 0.0))
+            name = self.specs[name]["parallel_to"]
+            if name in seen:
+                raise DataError(f"planes: parallel_to makes a cycle through {name!r}")
+            seen.add(name)
+        return name, spacing
+
+    def unknowns(self, positions, rotations):
+        roots = list(dict.fromkeys(self._root(n)[0] for n in self.names))
+        self.frames, names, start = {}, [], []
+        for root in roots:
+            spec = self.specs.get(root, {})
+            members = [n for n in self.names if self._root(n)[0] == root]
+            if "normal" in spec:
+                normal = np.asarray(spec["normal"], dtype=float)
+                normal = normal / np.linalg.norm(normal)
+                offset = float(spec.get("offset_mm", np.nan))
+            else:
+                normal, offset = self._fitted_plane(root, members, positions)
+            if not np.isfinite(offset):
+                tips = positions[self.index[[self._root(p)[0] == root for p in self.plane]]]
+                spacing = np.array([self._root(p)[1] for p in self.plane if self._root(p)[0] == root])
+                offset = float(np.mean(tips @ normal - spacing))
+            self.frames[root] = (normal, *_tangents(normal))
+            names += [(f"plane {root}.tilt1", "rad"), (f"plane {root}.tilt2", "rad"), (f"plane {root}.offset", "mm")]
+            start += [0.0, 0.0, offset]
+        self.roots = roots
+        return names, np.array(start)
+
+    def _fitted_plane(self, root: str, members: list[str], positions) -> tuple[NDArray[np.float64], float]:
+        """The plane through the nominal touches of ``root`` and the planes tied to it (their spacings taken
+        off along the normal, which the fit itself finds: by the smallest principal axis of the touches of
+        the plane with most of them, then the offset)."""
+        counts = {m: sum(p == m for p in self.plane) for m in members}
+        best = max(counts, key=counts.get)
+        tips = positions[self.index[[p == best for p in self.plane]]]
+        centred = tips - tips.mean(axis=0)
+        _, sv, vt = np.linalg.svd(centred, full_matrices=False)
+        where = self.index[[p == best for p in self.plane]][0]
+        if sv.size < 3 or sv[1] < 1e-6 * max(sv[0], 1e-300):
+            raise DataError(f"{self.rows.where(where)}: column 'feature': the touches of plane {best!r} lie on one "
+                            "line or point: they do not fix a plane's normal (give its normal in the features)")
+        normal = vt[2]
+        group = self.index[[self._root(p)[0] == root for p in self.plane]]
+        spacing = np.array([self._root(p)[1] for p in self.plane if self._root(p)[0] == root])
+        if np.any(spacing):             # the side the spacings count along: the one the touches agree with
+            spread = [np.var(positions[group] @ (sign * normal) - spacing) for sign in (1.0, -1.0)]
+            normal = normal if spread[0] <= spread[1] else -normal
+        elif normal @ tips.mean(axis=0) > 0:        # else towards the robot's base origin
+            normal = -normal
+        return normal, np.nan
+
+    def _plane(self, root: str, u: NDArray[np.float64]) -> tuple[NDArray[np.float64], float, tuple]:
+        """Normal, offset and ``d normal / d tilt`` (two vectors) of root plane ``root`` at its unknowns."""
+        k = self.roots.index(root)
+        a, b, offset = u[3 * k:3 * k + 3]
+        n0, t1, t2 = self.frames[root]
+        raw = n0 + a * t1 + b * t2
+        length = np.linalg.norm(raw)
+        normal = raw / length
+        project = np.eye(3) - np.outer(normal, normal)
+        return normal, offset, (project @ t1 / length, project @ t2 / length)
+
+    def residuals(self, positions, rotations, u) -> Residuals:
+        m = self.index.size
+        values, grad, du = np.empty(m), np.empty((m, 3)), np.zeros((m, u.size))
+        extra = []
+        for i, (row, name) in enumerate(zip(self.index, self.plane)):
+            root, spacing = self._root(name)
+            k = self.roots.index(root)
+            normal, offset, tilts = self._plane(root, u)
+            p = positions[row]
+            values[i] = normal @ p - offset - spacing
+            grad[i] = normal
+            du[i, 3 * k:3 * k + 2] = [t @ p for t in tilts]
+            du[i, 3 * k + 2] = -1.0
+            if self.flush[i]:
+                extra.append((row, k, normal, tilts))
+        out = Residuals(values, self.index.copy(), grad, du, turn_grad=np.zeros((m, 3)))
+        if not extra:
+            return out
+        return _with_flush(out, extra, rotations, self.frames, self.roots, u.size)
+
+    def notes(self) -> list[str]:
+        return ["plane: a plane's offset trades against the tool's length along its normal, and touches never "
+                "fix where along a plane the robot is: what the planes leave is held nominal"]
+
+    def describe(self) -> str:
+        flush = int(self.flush.sum())
+        return (f"{self.index.size} touches on {len(self.names)} planes ({', '.join(self.names)})"
+                + (f", {flush} flush" if flush else ""))
+
+
+def _with_flush(out: Residuals, flush: list, rotations, frames: dict, roots: list, k: int) -> Residuals:
+    """``out`` with two tilt residuals per flush row: the tool z axis' components along the plane's start
+    tangents, ``t . (z + s n)`` times :data:`FACE_RADIUS_MM`, ``s`` the side the face meets the plane from."""
+    values, rows, turn, du = [], [], [], []
+    for row, index, normal, tilts in flush:
+        z = rotations[row][:, 2]
+        side = -1.0 if z @ normal > 0 else 1.0         # z and the normal opposed: the face lies on the plane
+        n0, t1, t2 = frames[roots[index]]
+        for j, t in enumerate((t1, t2)):
+            values.append(FACE_RADIUS_MM * t @ (z + side * normal))
+            rows.append(row)
+            turn.append(FACE_RADIUS_MM * np.cross(z, t))
+            d = np.zeros(k)
+            d[3 * index:3 * index + 2] = [FACE_RADIUS_MM * side * t @ tilt for tilt in tilts]
+            du.append(d)
+    m = len(values)
+    return Residuals(np.concatenate([out.values, values]), np.concatenate([out.rows_a, rows]),
+                     np.vstack([out.grad_a, np.zeros((m, 3))]), np.vstack([out.du, du]),
+                     turn_grad=np.vstack([out.turn_grad, turn]))
+
+
+def _point_unknowns(name: str) -> list[tuple[str, str]]:
+    return [(f"point {name}.{c}", "mm") for c in "xyz"]
+
+
+@add_measurement_kind
+class FixedPointKind(MeasurementKind):
+    """The tool tip brought to a fixed point (a sphere's or cone's centre, a nest)."""
+
+    name = "fixed"
+    summary = "the tool tip at fixed point `feature`: 3 residuals (mm)"
+
+    def __init__(self, rows, index, features, noise_mm):
+        super().__init__(rows, index, features, noise_mm)
+        self.point = rows.text("feature", index)
+        self.specs = dict(features.get("points") or {})
+        self.names = list(dict.fromkeys(self.point))
+        for name in self.names:
+            mine = self.index[[p == name for p in self.point]]
+            known = "known_mm" in self.specs.get(name, {})
+            if mine.size < 2 and not known:
+                raise DataError(f"{rows.where(mine[0])}: column 'feature': fixed point {name!r} is reached once; an "
+                                "unknown point needs visits from at least two orientations (three for the robot "
+                                "to learn from it)")
+
+    def unknowns(self, positions, rotations):
+        names, start = [], []
+        self.unknown = [n for n in self.names if "known_mm" not in self.specs.get(n, {})]
+        tied = [n for n, spec in self.specs.items() if "distance_to" in spec and n in self.names]
+        for n in tied:
+            other = self.specs[n]["distance_to"]
+            if other not in self.names and "known_mm" not in self.specs.get(other, {}):
+                raise DataError(f"points: {n!r} is tied to {other!r} by distance_mm, but no row visits {other!r}")
+        for name in self.unknown:
+            names += _point_unknowns(name)
+            start += list(positions[self.index[[p == name for p in self.point]]].mean(axis=0))
+        self.tied = tied
+        return names, np.array(start)
+
+    def centre(self, name: str, u: NDArray[np.float64]) -> tuple[NDArray[np.float64], int | None]:
+        """Point ``name``'s position and the first of its three unknowns (None when known)."""
+        if name in self.unknown:
+            k = 3 * self.unknown.index(name)
+            return u[k:k + 3], k
+        return np.asarray(self.specs[name]["known_mm"], dtype=float), None
+
+    def residuals(self, positions, rotations, u) -> Residuals:
+        m = self.index.size
+        values, du = np.empty((m, 3)), np.zeros((3 * m, u.size))
+        for i, (row, name) in enumerate(zip(self.index, self.point)):
+            c, k = self.centre(name, u)
+            values[i] = positions[row] - c
+            if k is not None:
+                du[3 * i:3 * i + 3, k:k + 3] = -np.eye(3)
+        which, grad = _unit_rows(m)
+        out = Residuals(values.ravel(), self.index[which], grad, du)
+        if not self.tied:
+            return out
+        bars, bar_du = [], []
+        for name in self.tied:
+            other = self.specs[name]["distance_to"]
+            a, ka = self.centre(name, u)
+            b, kb = self.centre(other, u)
+            length = np.linalg.norm(a - b)
+            direction = (a - b) / length
+            scale = self.noise_mm / BAR_NOISE_MM         # weighed as a length known to BAR_NOISE_MM
+            bars.append(scale * (length - float(self.specs[name]["distance_mm"])))
+            d = np.zeros(u.size)
+            if ka is not None:
+                d[ka:ka + 3] += scale * direction
+            if kb is not None:
+                d[kb:kb + 3] -= scale * direction
+            bar_du.append(d)
+        n = len(bars)
+        return Residuals(np.concatenate([out.values, bars]), np.concatenate([out.rows_a, np.full(n, -1)]),
+                         np.vstack([out.grad_a, np.zeros((n, 3))]), np.vstack([out.du, bar_du]))
+
+    def describe(self) -> str:
+        return f"{self.index.size} visits of {len(self.names)} fixed points ({', '.join(self.names)})"
+
+
+@add_measurement_kind
+class DistanceKind(MeasurementKind):
+    """The distance between this row's tool tip and another row's (or a pivot's)."""
+
+    name = "distance"
+    summary = "|tip - tip of row `to` (or pivot `to`)| - distance_mm (mm)"
+
+    def __init__(self, rows, index, features, noise_mm):
+        super().__init__(rows, index, features, noise_mm)
+        self.measured = rows.number("distance_mm", index)
+        targets = rows.text("to", index)
+        where = {name: i for i, name in enumerate(rows.ids)}
+        fixed = rows.of(FixedPointKind.name)
+        points = set(features.get("points") or {}) | (set(rows.text("feature", fixed)) if fixed.size else set())
+        self.other = np.full(index.size, -1, dtype=np.intp)
+        self.pivot: list[str | None] = []
+        for i, (row, to) in enumerate(zip(index, targets)):
+            if to in where:
+                self.other[i] = where[to]
+                self.pivot.append(None)
+            elif to in points:
+                self.pivot.append(to)
+            else:
+                raise DataError(f"{rows.where(row)}: column 'to': {to!r} names no row (column 'id') and no point of "
+                                "the features")
+            if to in where and where[to] == row:
+                raise DataError(f"{rows.where(row)}: column 'to': the row refers to itself")
+        bad = np.flatnonzero(~(self.measured > 0))
+        if bad.size:
+            raise DataError(f"{rows.where(index[bad[0]])}: column 'distance_mm': {self.measured[bad[0]]:g} is not a "
+                            "distance; expected a length above 0 mm")
+        self.specs = dict(features.get("points") or {})
+        self.pivots = [p for p in dict.fromkeys(x for x in self.pivot if x)
+                       if "known_mm" not in self.specs.get(p, {})]
+
+    def unknowns(self, positions, rotations):
+        names, start = [], []
+        for name in self.pivots:
+            mine = np.array([p == name for p in self.pivot])
+            names += _point_unknowns(name)
+            start += list(_sphere_centre(positions[self.index[mine]], self.measured[mine]))
+        return names, np.array(start)
+
+    def residuals(self, positions, rotations, u) -> Residuals:
+        m = self.index.size
+        ends = np.empty((m, 3))
+        du = np.zeros((m, u.size))
+        pivot_cols = np.full(m, -1)
+        for i, (other, pivot) in enumerate(zip(self.other, self.pivot)):
+            if pivot is None:
+                ends[i] = positions[other]
+            elif pivot in self.pivots:
+                k = 3 * self.pivots.index(pivot)
+                ends[i] = u[k:k + 3]
+                pivot_cols[i] = k
+            else:
+                ends[i] = self.specs[pivot]["known_mm"]
+        diff = positions[self.index] - ends
+        length = np.linalg.norm(diff, axis=1)
+        direction = diff / np.where(length > 0, length, 1.0)[:, None]
+        for i in np.flatnonzero(pivot_cols >= 0):
+            du[i, pivot_cols[i]:pivot_cols[i] + 3] = -direction[i]
+        rows_b = np.where(self.other >= 0, self.other, -1)
+        return Residuals(length - self.measured, self.index.copy(), direction, du, rows_b=rows_b,
+                         grad_b=-direction)
+
+    def notes(self) -> list[str]:
+        return ["distance: distances do not fix where the robot stands: the base frame (its place and turn) is "
+                "held nominal, and a model from distances alone is scored after a rigid fit"]
+
+    def describe(self) -> str:
+        pivots = sorted({p for p in self.pivot if p})
+        return f"{self.index.size} distances" + (f" (pivots {', '.join(pivots)})" if pivots else "")
+
+
+def _sphere_centre(points: NDArray[np.float64], radii: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The centre of the sphere through ``points`` at distances ``radii`` (linear least squares:
+    ``2 p . c - |c|^2 = |p|^2 - r^2``); the points' mean where they do not fix it."""
+    a = np.column_stack([2.0 * points, -np.ones(len(points))])
+    b = np.sum(points**2, axis=1) - radii**2
+    if len(points) < 4 or np.linalg.matrix_rank(a) < 4:
+        return points.mean(axis=0)
+    return np.linalg.lstsq(a, b, rcond=None)[0][:3]
+
+
+__all__ = ["PointKind", "PlaneKind", "FixedPointKind", "DistanceKind", "END_KIND", "Rows"]

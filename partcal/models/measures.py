@@ -1,0 +1,469 @@
+"""Kinds of measurement: one identification over whatever a cell measured.
+
+A laser tracker gives 3-D points of the tool in its own frame. Most cells own other instruments: a
+touch probe and a flat plate (the tip's distance to a plane is zero), a reference sphere or a nest
+reached from many orientations (the tip is at one point each time), a ballbar or draw-wire (the
+distance between two tips, or between the tip and a pivot). Each is a **measurement kind**: one
+class that reads its rows, declares its own unknowns (a plane's normal and offset, a point's
+position), and gives its residuals and their derivatives from the chain's positions (and, where it
+needs it, the tool's orientation). :data:`MEASUREMENT_KINDS` lists them; :func:`add_measurement_kind`
+adds one.
+
+:func:`identify_measures` stacks the residuals of every kind present, each divided by its kind's
+stated noise (and multiplied by :data:`REFERENCE_NOISE_MM`, so that they read as millimetres of a
+tracker), and fits the robot's parameters and the kinds' unknowns together with the rank rule and
+Levenberg-Marquardt of :func:`~partcal.models.identification.identify`. The result is the same
+:class:`~partcal.models.identification.Identification`, the kinds' unknowns listed after the robot's.
+
+What the data cannot identify is judged on consistent data: the Jacobian at the nominal robot with
+the kinds' unknowns started from the nominal robot's own positions at the measured poses, so noise
+or a misfit cannot make a null direction look merely weak. A uniform scale of the robot is such a
+direction whenever nothing measures a length (planes and points whose positions are all unknown):
+it is named (:data:`SCALE`), and the rank rule holds one length nominal.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+from dataclasses import dataclass, field
+from typing import ClassVar
+
+import numpy as np
+import scipy.linalg
+from numpy.typing import NDArray
+
+from ..errors import DataError
+from ..robot.kinematics import Robot
+from .identification import (Identification, actual_joints, fit_parameters, geometric_size, model_jacobian,
+                             model_positions, nominal_values, parameter_names, robot_with, turn_columns)
+from .joint_errors import JointErrors
+
+log = logging.getLogger(__name__)
+
+REFERENCE_NOISE_MM = 0.02
+"""Residuals are weighted by this over their kind's noise: a tracker point of 0.02 mm per axis weighs one."""
+
+SCALE = "scale"
+"""The name under which a uniform scale of the robot is reported when nothing in the data measures a length."""
+
+
+@dataclass(frozen=True, eq=False)
+class Rows:
+    """Every row of an identification's data, all kinds together, as the study layer hands them over.
+
+    Attributes
+    ----------
+    q_deg : ndarray, shape (n, N)
+        Commanded joint angles, degrees.
+    kind : tuple of str
+        Each row's kind (a name of :data:`MEASUREMENT_KINDS`, or ``pose``: an end other rows refer to).
+    ids : tuple of str
+        Each row's name (the ``id`` column, or its 1-based data-row number).
+    lines : tuple of int
+        The line of each row in its file (for messages).
+    source : str
+        The file (or files) the rows came from.
+    numbers : dict of str to ndarray (n,)
+        Numeric columns (NaN where a row has none): ``x_meas``, ``distance_mm``, ``flush``, ...
+    texts : dict of str to tuple of str
+        Text columns ("" where empty): ``feature``, ``to``, ...
+    payload_kg : ndarray, shape (n,), optional
+    """
+
+    q_deg: NDArray[np.float64]
+    kind: tuple[str, ...]
+    ids: tuple[str, ...]
+    lines: tuple[int, ...]
+    source: str
+    numbers: dict = field(default_factory=dict)
+    texts: dict = field(default_factory=dict)
+    payload_kg: NDArray[np.float64] | None = None
+
+    def __len__(self) -> int:
+        return self.q_deg.shape[0]
+
+    def of(self, kind: str) -> NDArray[np.intp]:
+        """The indices of the rows of ``kind``."""
+        return np.flatnonzero(np.asarray(self.kind, dtype=object) == kind)
+
+    def where(self, row: int) -> str:
+        """``FILE:LINE`` of row ``row``, for messages."""
+        return f"{self.source}:{self.lines[row]}"
+
+    def number(self, column: str, rows: NDArray[np.intp]) -> NDArray[np.float64]:
+        """Column ``column`` at ``rows``, every value present and finite, else one :class:`DataError`."""
+        values = self.numbers.get(column)
+        if values is None:
+            raise DataError(f"{self.source}: the {self.kind[rows[0]]} rows need a column {column!r}; the file has "
+                            "none")
+        out = np.asarray(values, dtype=float)[rows]
+        bad = np.flatnonzero(~np.isfinite(out))
+        if bad.size:
+            raise DataError(f"{self.where(rows[bad[0]])}: column {column!r}: a {self.kind[rows[bad[0]]]} row needs a "
+                            f"number here, got none")
+        return out
+
+    def text(self, column: str, rows: NDArray[np.intp]) -> list[str]:
+        """Column ``column`` at ``rows``, every value given, else one :class:`DataError`."""
+        values = self.texts.get(column)
+        if values is None:
+            raise DataError(f"{self.source}: the {self.kind[rows[0]]} rows need a column {column!r}; the file has "
+                            "none")
+        out = [values[i] for i in rows]
+        for i, v in zip(rows, out):
+            if not v:
+                raise DataError(f"{self.where(i)}: column {column!r}: a {self.kind[i]} row needs a name here, got "
+                                "none")
+        return out
+
+    def take(self, rows) -> "Rows":
+        """The rows ``rows`` (indices) as rows of their own; ``ids`` kept, so references resolve while both
+        ends are among them."""
+        rows = np.asarray(rows, dtype=np.intp)
+        return Rows(self.q_deg[rows], tuple(self.kind[i] for i in rows), tuple(self.ids[i] for i in rows),
+                    tuple(self.lines[i] for i in rows), self.source,
+                    {k: np.asarray(v)[rows] for k, v in self.numbers.items()},
+                    {k: tuple(v[i] for i in rows) for k, v in self.texts.items()},
+                    None if self.payload_kg is None else self.payload_kg[rows])
+
+
+@dataclass(frozen=True, eq=False)
+class Residuals:
+    """A kind's residuals (mm, before weighting) and what they depend on.
+
+    Attributes
+    ----------
+    values : ndarray, shape (m,)
+    rows_a : ndarray of int, shape (m,)
+        The row whose target each residual reads (an index into the identification's rows); -1: none.
+    grad_a : ndarray, shape (m, 3)
+        ``d value / d position`` of that row's target.
+    rows_b, grad_b : the same for a second row (distances), or None.
+    turn_grad : ndarray, shape (m, 3), optional
+        ``d value / d turn`` of row ``rows_a``'s tool (a small rotation vector in the base frame, radians).
+    du : ndarray, shape (m, k)
+        ``d value / d`` the kind's unknowns (:meth:`MeasurementKind.unknowns`, in their order).
+    """
+
+    values: NDArray[np.float64]
+    rows_a: NDArray[np.intp]
+    grad_a: NDArray[np.float64]
+    du: NDArray[np.float64]
+    rows_b: NDArray[np.intp] | None = None
+    grad_b: NDArray[np.float64] | None = None
+    turn_grad: NDArray[np.float64] | None = None
+
+
+class MeasurementKind:
+    """What every measurement kind answers. A kind is built from all rows and reads those of its own ``name``.
+
+    Class attributes: ``name`` (the CSV's ``kind`` value), ``needs_orientation`` (whether its residuals read
+    the tool's orientation), ``default_noise_mm`` (its stated noise when the cell states none), ``summary``
+    (one line for the report: what one row says).
+    """
+
+    name: ClassVar[str] = ""
+    needs_orientation: ClassVar[bool] = False
+    default_noise_mm: ClassVar[float] = 0.01
+    summary: ClassVar[str] = ""
+
+    def __init__(self, rows: Rows, index: NDArray[np.intp], features: dict, noise_mm: float):
+        self.rows, self.index, self.features, self.noise_mm = rows, index, features, float(noise_mm)
+
+    @classmethod
+    def build(cls, rows: Rows, features: dict) -> "MeasurementKind | None":
+        """The kind over ``rows`` (None when no row is of it), its rows checked; ``features`` as
+        :func:`partcal.data.observations.read_features` gives them."""
+        index = rows.of(cls.name)
+        if index.size == 0:
+            return None
+        noise = (features.get("noise_mm") or {}).get(cls.name, cls.default_noise_mm)
+        return cls(rows, index, features, noise)
+
+    def unknowns(self, positions: NDArray[np.float64], rotations: NDArray[np.float64] | None
+                 ) -> tuple[list[tuple[str, str]], NDArray[np.float64]]:
+        """The kind's own unknowns ``(name, unit)`` and where their fit starts, from the targets' ``positions``
+        (n, 3) mm and tool ``rotations`` (n, 3, 3) of every row at the nominal robot (consistent data). Two
+        kinds declaring an unknown of one name share it (a pivot that is also a fixed point)."""
+        return [], np.zeros(0)
+
+    def residuals(self, positions: NDArray[np.float64], rotations: NDArray[np.float64] | None,
+                  u: NDArray[np.float64]) -> Residuals:
+        """The residuals at the targets' ``positions`` (n, 3) and ``rotations`` of every row, and the
+        unknowns ``u``."""
+        raise NotImplementedError
+
+    def notes(self) -> list[str]:
+        """What this kind can never identify, in words (for the run and the report)."""
+        return []
+
+    def describe(self) -> str:
+        """One line: the rows and what they touch."""
+        return f"{self.index.size} {self.name} rows"
+
+
+MEASUREMENT_KINDS: dict[str, type[MeasurementKind]] = {}
+"""The table of measurement kinds: the CSV's ``kind`` value -> its class (:func:`add_measurement_kind`)."""
+
+END_KIND = "pose"
+"""A row of joints alone: an end other rows' distances refer to; it has no residual of its own."""
+
+
+def add_measurement_kind(kind: type[MeasurementKind]) -> type[MeasurementKind]:
+    """Register ``kind`` under its ``name`` (usable as a class decorator); a name taken is refused."""
+    if not kind.name or kind.name == END_KIND or kind.name in MEASUREMENT_KINDS:
+        raise ValueError(f"a measurement kind needs a name of its own; {kind.name!r} is empty or taken")
+    MEASUREMENT_KINDS[kind.name] = kind
+    return kind
+
+
+def kind_names() -> tuple[str, ...]:
+    """Every name a ``kind`` column may hold: the table's, and :data:`END_KIND`."""
+    return (*MEASUREMENT_KINDS, END_KIND)
+
+
+def built_kinds(rows: Rows, features: dict) -> list[MeasurementKind]:
+    """The kinds present in ``rows``, in the table's order; a row of a kind the table does not list is refused."""
+    known = set(kind_names())
+    for i, k in enumerate(rows.kind):
+        if k not in known:
+            raise DataError(f"{rows.where(i)}: column 'kind': {k!r} is not a measurement kind; expected one of "
+                            f"{', '.join(sorted(known))}")
+    kinds = [k for k in (cls.build(rows, features) for cls in MEASUREMENT_KINDS.values()) if k is not None]
+    if not kinds:
+        raise DataError(f"{rows.source}: no row measures anything (every row is a {END_KIND!r} row)")
+    return kinds
+
+
+# ---------------------------------------------------------------------- the chain, as the kinds see it
+@dataclass(frozen=True, eq=False)
+class Chain:
+    """The model's targets at every row: positions (n, 3) mm, tool rotations (n, 3, 3) when a kind needs
+    them, and their derivatives by the model's own parameters: ``jac`` (n, 3, P), ``omega`` (n, 3, P) the
+    tool's angular velocity (radians per unit)."""
+
+    positions: NDArray[np.float64]
+    rotations: NDArray[np.float64] | None
+    jac: NDArray[np.float64] | None
+    omega: NDArray[np.float64] | None
+
+
+def chain_at(nominal: Robot, errors: JointErrors | None, q_deg: NDArray[np.float64], values: NDArray[np.float64],
+             payload_kg: NDArray[np.float64], parametrization: str, orientation: bool, jacobian: bool) -> Chain:
+    """:class:`Chain` of the model with its own parameters ``values``."""
+    robot = robot_with(nominal, values, parametrization)
+    q_actual, design, moves = actual_joints(nominal, errors, q_deg, values, payload_kg, derivatives=jacobian,
+                                            parametrization=parametrization)
+    rotations = robot.forward(q_actual)[:, :3, :3] if orientation else None
+    if not jacobian:
+        return Chain(model_positions(nominal, errors, q_deg, values, payload_kg, parametrization), rotations,
+                     None, None)
+    p, jac = model_jacobian(nominal, errors, q_deg, values, payload_kg, parametrization)
+    omega = turn_columns(nominal, robot, q_actual, design, moves, values, parametrization) if orientation else None
+    return Chain(p, rotations, jac.reshape(p.shape[0], 3, -1), omega)
+
+
+# ---------------------------------------------------------------------- the stacked problem
+class StackedProblem:
+    """The kinds' residuals stacked and weighted, and their Jacobian by the model's and the kinds' unknowns."""
+
+    def __init__(self, nominal: Robot, errors, rows: Rows, kinds: list[MeasurementKind], payload, parametrization):
+        self.nominal, self.errors, self.rows, self.kinds = nominal, errors, rows, kinds
+        self.payload, self.par = payload, parametrization
+        self.own = nominal_values(nominal, errors, parametrization).size
+        self.orientation = any(k.needs_orientation for k in kinds)
+        v0 = nominal_values(nominal, errors, parametrization)
+        start = chain_at(nominal, errors, rows.q_deg, v0, payload, parametrization, self.orientation, False)
+        self.names: list[tuple[str, str]] = []
+        starts: list[float] = []
+        self.columns: list[NDArray[np.intp]] = []
+        for kind in kinds:
+            names, values = kind.unknowns(start.positions, start.rotations)
+            cols = []
+            for name, value in zip(names, values):
+                if name not in self.names:
+                    self.names.append(name)
+                    starts.append(float(value))
+                cols.append(self.own + self.names.index(name))
+            self.columns.append(np.array(cols, dtype=np.intp))
+        self.start = np.concatenate([v0, np.array(starts)])
+        self.weights = [REFERENCE_NOISE_MM / kind.noise_mm for kind in kinds]
+
+    def split(self, values: NDArray[np.float64]) -> list[NDArray[np.float64]]:
+        return [values[cols] for cols in self.columns]
+
+    def raw(self, values: NDArray[np.float64], measured_only: bool = False) -> list[NDArray[np.float64]]:
+        """Each kind's residuals (mm, unweighted); ``measured_only``: those of rows alone (not a known length
+        between two of a kind's unknowns)."""
+        chain = chain_at(self.nominal, self.errors, self.rows.q_deg, values[:self.own], self.payload, self.par,
+                         self.orientation, False)
+        out = []
+        for kind, u in zip(self.kinds, self.split(values)):
+            r = kind.residuals(chain.positions, chain.rotations, u)
+            out.append(r.values[r.rows_a >= 0] if measured_only else r.values)
+        return out
+
+    def __call__(self, values: NDArray[np.float64], jacobian: bool = True):
+        """The weighted residuals and (with ``jacobian``) their Jacobian, as ``identify``'s ``jac_at``."""
+        chain = chain_at(self.nominal, self.errors, self.rows.q_deg, values[:self.own], self.payload, self.par,
+                         self.orientation, jacobian)
+        out, blocks = [], []
+        for kind, u, cols, w in zip(self.kinds, self.split(values), self.columns, self.weights):
+            r = kind.residuals(chain.positions, chain.rotations, u)
+            out.append(w * r.values)
+            if jacobian:
+                block = np.zeros((r.values.size, values.size))
+                block[:, :self.own] = _through_chain(r, chain)
+                np.add.at(block.T, cols, r.du.T)
+                blocks.append(w * block)
+        return np.concatenate(out), (np.vstack(blocks) if jacobian else None)
+
+
+def _through_chain(r: Residuals, chain: Chain, chunk: int = 20000) -> NDArray[np.float64]:
+    """``d residual / d`` the model's own parameters: each residual's gradients through its rows' targets."""
+    m, p = r.values.size, chain.jac.shape[2]
+    out = np.zeros((m, p))
+    for lo in range(0, m, chunk):
+        part = slice(lo, lo + chunk)
+        for rows, grad in ((r.rows_a, r.grad_a), (r.rows_b, r.grad_b)):
+            if rows is None:
+                continue
+            rows, grad = rows[part], grad[part]
+            live = rows >= 0
+            out[part][live] += np.einsum("mi,mip->mp", grad[live], chain.jac[rows[live]])
+        if r.turn_grad is not None:
+            rows, grad = r.rows_a[part], r.turn_grad[part]
+            live = rows >= 0
+            out[part][live] += np.einsum("mi,mip->mp", grad[live], chain.omega[rows[live]])
+    return out
+
+
+def scale_direction(problem: "StackedProblem") -> NDArray[np.float64]:
+    """The parameter change of a uniform scale of the whole cell by one: the robot's lengths (found as the
+    length parameters' change that moves every row's target ``p`` by ``p``, the base's place included), and
+    every length among the kinds' unknowns by its own value. Zero when the robot's lengths cannot do it."""
+    chain = chain_at(problem.nominal, problem.errors, problem.rows.q_deg, problem.start[:problem.own],
+                     problem.payload, problem.par, False, True)
+    units = [u for _, u in parameter_names(problem.nominal, problem.errors, problem.par)]
+    size = geometric_size(problem.nominal, problem.par)
+    lengths = np.flatnonzero(np.array(units[:size]) == "mm")
+    jac = chain.jac[:, :, lengths].reshape(-1, lengths.size)
+    x = np.linalg.lstsq(jac, chain.positions.ravel(), rcond=None)[0]
+    s = np.zeros(problem.start.size)
+    if np.linalg.norm(jac @ x - chain.positions.ravel()) > 1e-6 * np.linalg.norm(chain.positions):
+        return s
+    s[lengths] = x
+    mine = np.array([u == "mm" for _, u in problem.names], dtype=bool)
+    s[problem.own:][mine] = problem.start[problem.own:][mine]
+    return s
+
+
+def consistent_jacobian(jac0: NDArray[np.float64], resid0: NDArray[np.float64], s: NDArray[np.float64],
+                        rcond: float) -> NDArray[np.float64]:
+    """The Jacobian the rank rule reads: ``jac0`` with its answer to a uniform scale ``s`` made what it would be
+    on consistent data.
+
+    The residuals are homogeneous in the cell's lengths (``r(lambda) = lambda f - L``, ``L`` the known
+    lengths), so ``J s = r + L``; on consistent data ``r = 0`` and ``J s`` is ``L`` alone. At the nominal
+    robot ``r`` is its misfit (millimetres), which made a scale nothing fixes look merely weak. The change is
+    made along ``s`` with the directions ``jac0`` already cannot see (a shift of the whole cell) taken out of
+    it, so that those stay as they are; in unit-column coordinates, as the rank rule reads them.
+    """
+    norms = np.linalg.norm(jac0, axis=0)
+    live = norms > 0
+    if not np.any(s[live]):
+        return jac0
+    unit = jac0[:, live] / norms[live]
+    r = scipy.linalg.qr(unit, mode="r")[0][:unit.shape[1]] if unit.shape[0] > unit.shape[1] else unit
+    _, singular, vt = np.linalg.svd(r, full_matrices=False)
+    null = vt[singular < rcond * singular[0]]
+    t = s[live] * norms[live]
+    t = t - null.T @ (null @ t)
+    out = jac0.copy()
+    out[:, live] = (unit - np.outer(resid0, t) / float(t @ t)) * norms[live]
+    return out
+
+
+def identify_measures(robot: Robot, rows: Rows, features: dict | None = None, *, base: bool = True,
+                      tool: bool = True, rcond: float = 1e-6, errors: JointErrors | None = None,
+                      payload_kg=0.0, parametrization: str = "dh") -> tuple[Identification, list[str]]:
+    """Identify the robot's parameters and the kinds' unknowns from rows of any measurement kinds.
+
+    Parameters
+    ----------
+    robot : Robot
+        The nominal robot.
+    rows : Rows
+        Every row (all kinds).
+    features : dict, optional
+        The cell's planes and points and the kinds' noise (:func:`partcal.data.observations.read_features`).
+    base, tool, rcond, errors, payload_kg, parametrization
+        As :func:`~partcal.models.identification.identify`.
+
+    Returns
+    -------
+    identification : Identification
+        The robot's parameters, then the kinds' unknowns. ``target_rms_mm`` holds each kind's RMS residual
+        (mm) under its name; ``rms_mm`` is the RMS of every residual (mm).
+    notes : list of str
+        What the data cannot identify, in words (a uniform scale, each kind's own blind spots).
+    """
+    features = features or {}
+    kinds = built_kinds(rows, features)
+    q_deg = robot.check_joints(rows.q_deg)
+    payload = np.broadcast_to(np.asarray(payload_kg, dtype=float), (len(q_deg),))
+    problem = StackedProblem(robot, errors, rows, kinds, payload, parametrization)
+    names = parameter_names(robot, errors, parametrization) + problem.names
+    size, own = geometric_size(robot, parametrization), problem.own
+    wanted = np.ones(problem.start.size, dtype=bool)
+    wanted[size - 9:size - 6] = tool
+    wanted[size - 6:size] = base
+    notes = [note for kind in kinds for note in kind.notes()]
+    resid0, jac0 = problem(problem.start)
+    direction = scale_direction(problem)
+    jac0 = consistent_jacobian(jac0, resid0, direction, rcond)
+    if np.any(direction) and _null(jac0, direction, wanted, rcond):
+        notes.insert(0, f"{SCALE}: nothing here measures a length (every plane and point is unknown), so a uniform "
+                        "scale of the robot cannot be identified: one length is held nominal. Give one: a plane's "
+                        "spacing_mm, a point's distance_mm or known_mm, a distance, or tracker points")
+    table = fit_parameters(problem, problem.start, jac0, wanted, names, rcond, size, len(q_deg))[0]
+    raw = problem.raw(table.value, measured_only=True)
+    per_kind = {kind.name: float(np.sqrt(np.mean(r**2))) if r.size else 0.0 for kind, r in zip(kinds, raw)}
+    everything = np.concatenate(raw)
+    table = dataclasses.replace(table, target_rms_mm=per_kind, rms_mm=float(np.sqrt(np.mean(everything**2))))
+    for note in notes:
+        log.warning("%s", note)
+    return table, notes
+
+
+def _null(jac: NDArray[np.float64], direction: NDArray[np.float64], wanted, rcond: float) -> bool:
+    """Whether ``direction`` over the ``wanted`` parameters changes no residual, as the rank rule counts zero:
+    ``|J s|`` below ``rcond`` times the largest singular value, in unit-column coordinates."""
+    norms = np.linalg.norm(jac, axis=0)
+    live = wanted & (norms > 0)
+    scaled = direction[live] * norms[live]
+    if not np.any(scaled):
+        return False
+    t = scaled / np.linalg.norm(scaled)
+    unit = jac[:, live] / norms[live]
+    largest = np.linalg.svd(unit, compute_uv=False)[0]
+    return bool(np.linalg.norm(unit @ t) < np.sqrt(rcond) * largest)
+
+
+def kind_residuals(robot: Robot, rows: Rows, features: dict, table: Identification, *,
+                   errors: JointErrors | None = None, payload_kg=0.0, parametrization: str = "dh"
+                   ) -> dict[str, NDArray[np.float64]]:
+    """Each kind's residuals (mm) on ``rows`` for an identified ``table`` (its kinds' unknowns as fitted; an
+    unknown the table lacks, a plane or point the fit never saw, starts where :meth:`MeasurementKind.unknowns`
+    puts it): what held-out rows of the same kind leave."""
+    kinds = built_kinds(rows, features)
+    payload = np.broadcast_to(np.asarray(payload_kg, dtype=float), (len(rows),))
+    problem = StackedProblem(robot, errors, rows, kinds, payload, parametrization)
+    values = problem.start.copy()
+    values[:problem.own] = table.value[:problem.own]
+    fitted = dict(zip(table.names[problem.own:], table.value[problem.own:]))
+    for k, (name, _) in enumerate(problem.names):
+        if name in fitted:
+            values[problem.own + k] = fitted[name]
+    return {kind.name: r for kind, r in zip(kinds, problem.raw(values, measured_only=True))}

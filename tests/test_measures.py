@@ -1,0 +1,204 @@
+"""Measurement kinds (partcal.models.measures, partcal.models.contacts): residuals, Jacobians against finite
+differences, identification of a virtual UR10 from each kind against its truth, the scale no kind fixes."""
+
+import numpy as np
+import pytest
+
+from partcal import load_robot
+from partcal.errors import DataError
+from partcal.models import contacts  # noqa: F401  (registers the built-in kinds)
+from partcal.models.identification import nominal_values, robot_with
+from partcal.models.joint_errors import JointErrors
+from partcal.models.measures import (MEASUREMENT_KINDS, SCALE, MeasurementKind, Residuals, Rows, StackedProblem,
+                                     add_measurement_kind, identify_measures, kind_residuals)
+
+ROBOT = load_robot("universal_robots_ur10")
+
+
+def _configurations(n, rng):
+    lo = np.array([-90, -150, -140, -180, -150, -180.0])
+    hi = np.array([90, -30, 140, 180, 150, 180.0])
+    return lo + (hi - lo) * rng.random((n, 6))
+
+
+def _true_robot(rng):
+    """The nominal UR10 with DH errors of a few tenths of a mm and hundredths of a degree, a shifted tool."""
+    v = nominal_values(ROBOT)
+    v[:24] += rng.normal(0, 1, 24) * np.tile([0.05, 0.3, 0.3, 0.03], 6)
+    v[24:27] += [0.3, -0.2, 0.4]
+    return robot_with(ROBOT, v)
+
+
+def _newton(true, q, wanted, iters=8):
+    """Commanded joints near ``q`` whose true tip reaches ``wanted(p)`` (a displacement), by joints 1-3."""
+    q = q.copy()
+    for _ in range(iters):
+        p = true.positions(q)
+        jac = true.jacobian(q)[:, :, :3]
+        q[:, :3] += np.linalg.solve(jac, wanted(p)[:, :, None])[:, :, 0]        # jacobian: mm per degree
+    return q
+
+
+def _rows(q, kinds, numbers=None, texts=None):
+    n = len(q)
+    return Rows(q, tuple(kinds), tuple(str(i + 1) for i in range(n)), tuple(range(2, n + 2)), "test.csv",
+                numbers or {}, texts or {})
+
+
+def _mixed_rows(rng):
+    """Rows of every kind at random poses (residuals need not be small to check derivatives)."""
+    q = _configurations(24, rng)
+    kinds = ["plane"] * 8 + ["fixed"] * 6 + ["distance"] * 6 + ["point"] * 4
+    feature = ["top"] * 4 + ["step"] * 4 + ["a"] * 3 + ["b"] * 3 + [""] * 10
+    flush = np.array([1, 0, 1, 0, 0, 1, 0, 0] + [np.nan] * 16)
+    to = [""] * 14 + ["1", "5", "9", "a", "pivot", "pivot"] + [""] * 4
+    dist = np.array([np.nan] * 14 + [500, 700, 900, 800, 1000, 1200] + [np.nan] * 4)
+    x = ROBOT.positions(q) + rng.normal(0, 1, (24, 3))
+    numbers = {"flush": flush, "distance_mm": dist, "x_meas": x[:, 0], "y_meas": x[:, 1], "z_meas": x[:, 2]}
+    features = {"planes": {"top": {"normal": [0.1, 0.0, 1.0], "offset_mm": 300.0},
+                           "step": {"parallel_to": "top", "spacing_mm": -200.0}},
+                "points": {"b": {"distance_to": "a", "distance_mm": 1000.0}, "pivot": {}}}
+    return _rows(q, kinds, numbers, {"feature": tuple(feature), "to": tuple(to)}), features
+
+
+@pytest.mark.parametrize("parametrization", ["dh", "complete"])
+def test_jacobian_of_every_kind_matches_finite_differences(parametrization):
+    rng = np.random.default_rng(5)
+    rows, features = _mixed_rows(rng)
+    errors = JointErrors.for_robot(ROBOT, [2, 3], 0)
+    payload = np.full(len(rows), 5.0)
+    kinds = [cls.build(rows, features) for cls in MEASUREMENT_KINDS.values()]
+    problem = StackedProblem(ROBOT, errors, rows, [k for k in kinds if k is not None], payload, parametrization)
+    v = problem.start + rng.normal(0, 1e-3, problem.start.size) * 1.0
+    r, jac = problem(v)
+    numeric = np.empty_like(jac)
+    for k in range(v.size):
+        step = np.zeros(v.size)
+        step[k] = 1e-6
+        numeric[:, k] = (problem(v + step, jacobian=False)[0] - problem(v - step, jacobian=False)[0]) / 2e-6
+    assert np.all(np.abs(jac - numeric) <= 1e-5 * np.abs(numeric).max(axis=0) + 1e-6)    # central differences
+
+
+def _score(true, model_values, parametrization, rng, rigid):
+    q = _configurations(500, rng)
+    model = robot_with(ROBOT, model_values, parametrization).positions(q)
+    truth = true.positions(q)
+    if rigid:
+        from partcal.robot.frames import kabsch
+        rot, t = kabsch(model, truth)
+        model = model @ rot.T + t
+    return float(np.sqrt(np.mean(np.sum((model - truth) ** 2, axis=1))))
+
+
+def _touches(true, rng, planes, per_plane, noise):
+    """Commanded joints whose true tip lies on each plane (plus a miss of ``noise`` along the normal)."""
+    qs, names = [], []
+    for name, (normal, offset) in planes.items():
+        normal = np.asarray(normal, float) / np.linalg.norm(normal)
+        q = _configurations(3 * per_plane, rng)
+        q = _newton(true, q, lambda p: -np.outer(p @ normal - offset - rng.normal(0, noise, len(p)), normal))
+        ok = np.abs(true.positions(q) @ normal - offset) < 5 * noise + 1e-6
+        qs.append(q[ok][:per_plane])
+        names += [name] * len(qs[-1])
+    return np.vstack(qs), names
+
+
+def test_planes_tied_by_a_known_step_identify_the_robot_and_unknown_planes_name_the_scale():
+    rng = np.random.default_rng(11)
+    true = _true_robot(rng)
+    planes = {"top": ([0, 0, 1], 300.0), "step": ([0, 0, 1], 100.0), "side": ([1, 0, 0], 700.0)}
+    q, names = _touches(true, rng, planes, 120, 0.01)
+    rows = _rows(q, ["plane"] * len(q), texts={"feature": tuple(names)})
+    before = _score(true, nominal_values(ROBOT), "dh", np.random.default_rng(0), rigid=True)
+    tied = {"planes": {"top": {}, "step": {"parallel_to": "top", "spacing_mm": -200.0}, "side": {}}}
+    table, notes = identify_measures(ROBOT, rows, tied)
+    after = _score(true, table.value[:33], "dh", np.random.default_rng(0), rigid=True)
+    assert table.target_rms_mm["plane"] < 0.02
+    assert after < 0.05 < before
+    assert not any(n.startswith(SCALE) for n in notes)
+    loose, notes = identify_measures(ROBOT, rows, {})
+    assert notes[0].startswith(SCALE)
+    # the scale held: the fit is exactly as good on the touches, but lengths stay nominal where the step fixed them
+    assert loose.target_rms_mm["plane"] < 0.02
+    assert _score(true, loose.value[:33], "dh", np.random.default_rng(0), rigid=True) > 3 * after
+
+
+def test_fixed_points_with_a_known_bar_and_their_held_out_residuals():
+    rng = np.random.default_rng(3)
+    true = _true_robot(rng)
+    nests = {"a": np.array([600., -500., 200.]), "c": np.array([500., 400., 500.])}
+    nests["b"] = nests["a"] + 1000 * np.array([0.0, 0.6, 0.8])
+    qs, names = [], []
+    for name, c in nests.items():
+        q = _newton(true, _configurations(60, rng), lambda p: c - p + rng.normal(0, 0.01, p.shape))
+        ok = np.linalg.norm(true.positions(q) - c, axis=1) < 0.1
+        qs.append(q[ok][:30])
+        names += [name] * len(qs[-1])
+    q = np.vstack(qs)
+    rows = _rows(q, ["fixed"] * len(q), texts={"feature": tuple(names)})
+    features = {"points": {"b": {"distance_to": "a", "distance_mm": 1000.0}}}
+    train = np.arange(len(q)) % 5 != 0
+    table, _ = identify_measures(ROBOT, rows.take(np.flatnonzero(train)), features)
+    found = dict(zip(table.names, table.value))
+    where = {name: np.array([found[f"point {name}.{c}"] for c in "xyz"]) for name in nests}
+    assert np.linalg.norm(where["b"] - where["a"]) == pytest.approx(1000.0, abs=0.01)
+    assert np.linalg.norm(where["c"] - where["a"]) == pytest.approx(np.linalg.norm(nests["c"] - nests["a"]), abs=0.05)
+    assert _score(true, table.value[:33], "dh", np.random.default_rng(0), rigid=True) < 0.05
+    held = kind_residuals(ROBOT, rows.take(np.flatnonzero(~train)), features, table)["fixed"]
+    assert held.size == 3 * np.sum(~train)
+    assert 0.005 < np.sqrt(np.mean(held ** 2)) < 0.05      # the visits' own noise, 0.01 mm per axis
+
+
+def test_distances_between_poses_identify_the_shape_and_hold_the_base():
+    rng = np.random.default_rng(8)
+    true = _true_robot(rng)
+    q = _configurations(40, rng)
+    tips = true.positions(q)
+    i, j = np.triu_indices(len(q), 1)
+    measured = np.linalg.norm(tips[i] - tips[j], axis=1) + rng.normal(0, 0.01, i.size)
+    all_q = np.vstack([q, q[i]])
+    kinds = ["pose"] * len(q) + ["distance"] * i.size
+    rows = _rows(all_q, kinds, {"distance_mm": np.concatenate([np.full(len(q), np.nan), measured])},
+                 {"to": tuple([""] * len(q) + [str(k + 1) for k in j])})
+    table, notes = identify_measures(ROBOT, rows, {})
+    base = [s for n, s in zip(table.names, table.status) if n.startswith("base.")]
+    assert base.count("identified") == 0
+    assert _score(true, table.value[:33], "dh", np.random.default_rng(0), rigid=True) < 0.03
+    assert any(n.startswith("distance") for n in notes)
+
+
+def test_bad_rows_are_refused_naming_file_line_and_column():
+    q = _configurations(4, np.random.default_rng(0))
+    with pytest.raises(DataError, match=r"test.csv:2: column 'kind': 'laser'"):
+        identify_measures(ROBOT, _rows(q, ["laser", "plane", "plane", "plane"],
+                                       texts={"feature": ("",) + ("p",) * 3}), {})
+    with pytest.raises(DataError, match=r"test.csv:2: column 'feature': plane 'p' has 2 touches"):
+        identify_measures(ROBOT, _rows(q[:2], ["plane"] * 2, texts={"feature": ("p", "p")}), {})
+    with pytest.raises(DataError, match=r"test.csv:3: column 'to': 'nine' names no row"):
+        identify_measures(ROBOT, _rows(q[:2], ["pose", "distance"], {"distance_mm": np.array([np.nan, 5.0])},
+                                       {"to": ("", "nine")}), {})
+    with pytest.raises(DataError, match=r"test.csv:2: column 'feature': fixed point 'n' is reached once"):
+        identify_measures(ROBOT, _rows(q[:1], ["fixed"], texts={"feature": ("n",)}), {})
+
+
+def test_a_kind_added_elsewhere_joins_the_identification():
+    class Height(MeasurementKind):
+        """A toy kind: the tip's height above the floor, measured."""
+        name = "height_toy"
+
+        def residuals(self, positions, rotations, u):
+            grad = np.tile([0.0, 0.0, 1.0], (self.index.size, 1))
+            return Residuals(positions[self.index, 2] - self.rows.number("z_mm", self.index), self.index.copy(),
+                             grad, np.zeros((self.index.size, 0)))
+
+    add_measurement_kind(Height)
+    try:
+        q = _configurations(60, np.random.default_rng(1))
+        rows = _rows(q, ["height_toy"] * 60, {"z_mm": ROBOT.positions(q)[:, 2] + 0.5})
+        table, _ = identify_measures(ROBOT, rows, {})
+        assert table.target_rms_mm["height_toy"] < 1e-6
+        other = _configurations(10, np.random.default_rng(2))
+        lifted = robot_with(ROBOT, table.value[:33]).positions(other) - ROBOT.positions(other)
+        assert np.allclose(lifted[:, 2], 0.5, atol=1e-6)
+    finally:
+        del MEASUREMENT_KINDS["height_toy"]

@@ -202,3 +202,29 @@ def test_a_kind_added_elsewhere_joins_the_identification():
         assert np.allclose(lifted[:, 2], 0.5, atol=1e-6)
     finally:
         del MEASUREMENT_KINDS["height_toy"]
+
+
+def test_a_kinematic_model_fitted_on_touches_is_the_same_model_file_and_predictor(tmp_path):
+    from partcal.models.kinematic import KinematicModel
+    from partcal.models.measures import Measured
+    from partcal.study.persist import load_model, save_model
+    rng = np.random.default_rng(11)
+    true = _true_robot(rng)
+    planes = {"top": ([0, 0, 1], 300.0), "step": ([0, 0, 1], 100.0), "side": ([1, 0, 0], 700.0)}
+    q, names = _touches(true, rng, planes, 120, 0.01)
+    rows = _rows(q, ["plane"] * len(q), texts={"feature": tuple(names)})
+    tied = {"planes": {"top": {}, "step": {"parallel_to": "top", "spacing_mm": -200.0}, "side": {}}}
+    model = KinematicModel(robot=ROBOT, parametrization="dh").fit(q, None, measures=Measured(rows, tied))
+    table, _ = identify_measures(ROBOT, rows, tied)
+    other = _configurations(50, np.random.default_rng(4))
+    expected = robot_with(ROBOT, table.value[:33]).positions(other) - ROBOT.positions(other)
+    assert np.allclose(model.predict(other), expected, atol=1e-9)
+    assert model.run_summary()["kinematic"]["kinds_rms_mm"]["plane"] == pytest.approx(table.target_rms_mm["plane"])
+    mean, std = model.std_validated(other)
+    assert np.all(np.isfinite(std)) and np.all(std > 0)
+    path = tmp_path / "touches.json"
+    save_model(model, path, robot=ROBOT)
+    assert np.allclose(load_model(path)[0].predict(other), expected, atol=1e-9)
+    with pytest.raises(DataError, match="residual model"):
+        from partcal.models.series import ErrorModel
+        KinematicModel(robot=ROBOT, residual=ErrorModel(solver="lstsq")).fit(q, None, measures=Measured(rows, tied))

@@ -30,6 +30,8 @@ from .identification import (PARAMETRIZATIONS, PRIMARY_TARGET, STATUSES, Identif
                              model_jacobian, nominal_values, own_geometry, parameter_names, prior_variance,
                              resolved_parametrization, robot_with)
 from .joint_errors import JointErrors, compliance_problem, harmonics_problem
+from . import contacts  # noqa: F401  (the built-in measurement kinds join the table)
+from .measures import MEASUREMENT_KINDS, Measured, identify_measures
 from .kindtable import body_of, check_body, may_be_residual, model_from_body, regions_of, residual_kinds
 from .pose import PoseErrorModel
 from .targets import added_names, added_nominal, extra_from
@@ -150,7 +152,8 @@ class KinematicModel(ErrorModelBase):
         """``parametrization``, ``auto`` resolved: ``complete`` for a chain with general origins, ``dh`` otherwise."""
         return resolved_parametrization(self.parametrization, robot)
 
-    def fit(self, X, y, payload_kg=None, *, targets=None, orientation_deg=None, orientation_mm_per_rad=None):
+    def fit(self, X, y, payload_kg=None, *, targets=None, orientation_deg=None, orientation_mm_per_rad=None,
+            measures: Measured | None = None):
         """Identify the parameters from joint angles ``X`` (n, N) deg and errors ``y`` (n, 3) mm. Returns self.
 
         ``payload_kg`` (n,) kg per pose, or a number; default the parameter ``payload_kg``.
@@ -170,8 +173,15 @@ class KinematicModel(ErrorModelBase):
         ``orientation_mm_per_rad`` (one radian counts as that many mm; default the parameter of
         that name, 200: one mrad weighs as 0.2 mm). The prediction stays the
         primary target's (:meth:`predict_target` gives another's).
+
+        ``measures`` (:class:`~partcal.models.measures.Measured`): rows of any measurement kinds (plane
+        contacts, fixed points, distances, tracker points) and the cell's features, identified from instead
+        of ``y`` (which is then ignored; ``X`` are the rows' joints). The model is the same kinematic model;
+        what the data cannot identify is in :meth:`fit_notes`.
         """
         robot = self._check_params()
+        if measures is not None:
+            return self._fit_measures(robot, measures, payload_kg)
         X, y = validate_data(self, X, y, multi_output=True, y_numeric=True, dtype=np.float64)
         if X.shape[1] != robot.n_joints:
             raise DataError(f"{type(self).__name__} for {robot.name} takes {robot.n_joints} joint angles "
@@ -197,6 +207,7 @@ class KinematicModel(ErrorModelBase):
                                         extra=extra, parametrization=self.parametrization_)
         self.targets_ = dict(extra.tools_mm) if extra is not None else {}
         self.orientation_ = extra is not None and extra.rotations is not None
+        self.measures_, self.measure_notes_ = (), []
         self.robot_ = robot
         self._build_robots()
         self.active_ = varying_inputs(X)
@@ -213,6 +224,35 @@ class KinematicModel(ErrorModelBase):
                 self.residual_ = PoseErrorModel(residual) if self.n_outputs_ == 6 else residual   # one per part
             self.residual_.fit(self._residual_inputs(X, nominal), leftover)
         self.covariance_scale_ = self._hybrid_covariance_scale(X, nominal)
+        return self._prepare()
+
+    def _fit_measures(self, robot: Robot, measures: Measured, payload_kg) -> "KinematicModel":
+        """:meth:`fit` from rows of measurement kinds (:func:`~partcal.models.measures.identify_measures`)."""
+        if self.residual is not None:
+            raise DataError("a residual model learns a 3-D error field from tracker points; it cannot be fitted to "
+                            "plane contacts, fixed points or distances: fit the kinematic model alone")
+        X = validate_data(self, measures.rows.q_deg, dtype=np.float64)
+        if X.shape[1] != robot.n_joints:
+            raise DataError(f"{type(self).__name__} for {robot.name} takes {robot.n_joints} joint angles "
+                            f"(degrees) per row; the rows have {X.shape[1]}")
+        self._y_1d, self.n_outputs_ = False, 3
+        self.joint_errors_ = JointErrors.for_robot(robot, list(self.compliance), self.joint_harmonics)
+        self.parametrization_ = self._resolved_parametrization(robot)
+        payload = self._payload(payload_kg if payload_kg is not None else measures.rows.payload_kg, len(X),
+                                fitting=True)
+        self.fitted_payload_kg_ = np.array([payload.min(), payload.max()])
+        ident_payload = payload if np.ptp(payload) > 0 else np.zeros_like(payload)
+        self.identification_, self.measure_notes_ = identify_measures(
+            robot, measures.rows, measures.features, base=bool(self.base), tool=bool(self.tool),
+            rcond=float(self.rcond), errors=self.joint_errors_, payload_kg=ident_payload,
+            parametrization=self.parametrization_)
+        self.targets_, self.orientation_, self.robot_ = {}, False, robot
+        self.measures_ = tuple(dict.fromkeys(k for k in measures.rows.kind if k in MEASUREMENT_KINDS))
+        self._build_robots()
+        self.active_ = varying_inputs(X)
+        self.data_bounds_ = np.stack([X.min(axis=0), X.max(axis=0)])
+        self.residual_ = None
+        self.covariance_scale_ = 1.0
         return self._prepare()
 
     def _hybrid_covariance_scale(self, X: NDArray[np.float64], nominal: NDArray[np.float64]) -> float:
@@ -401,7 +441,7 @@ class KinematicModel(ErrorModelBase):
     def _noise_mm(self) -> float:
         """The fit's residual standard deviation of one coordinate of the primary target, mm."""
         table = self.identification_
-        if not table.target_rms_mm:
+        if PRIMARY_TARGET not in table.target_rms_mm:         # one target, or rows of measurement kinds
             return float(table.sigma_mm)
         n, k = 3 * table.n_poses, table.status.count("identified")
         return float(table.rms_mm / np.sqrt(3.0) * np.sqrt(n / max(n - k, 1)))
@@ -454,6 +494,7 @@ class KinematicModel(ErrorModelBase):
                 "identification": self.identification_.to_dict(),
                 **({"targets": {k: [float(v) for v in t] for k, t in self.targets_.items()},
                     "orientation": bool(self.orientation_)} if self.targets_ or self.orientation_ else {}),
+                **({"measures": list(self.measures_)} if getattr(self, "measures_", ()) else {}),
                 "data_bounds": self.data_bounds_.tolist(), "active": self.active_.tolist(),
                 **({"covariance_scale": self.covariance_scale_} if self.covariance_scale_ != 1.0 else {}),
                 **({"fitted_payload_kg": [float(v) for v in self.fitted_payload_kg_]}
@@ -489,8 +530,12 @@ class KinematicModel(ErrorModelBase):
                 r.fail("parametrization", f"one of {', '.join(PARAMETRIZATIONS)} (what was fitted); got 'auto'")
             model.parametrization = "dh"
         model.parametrization_ = model.parametrization
+        measures = r.doc.get("measures", [])
+        if not (isinstance(measures, list) and all(isinstance(k, str) and k for k in measures)):
+            r.fail("measures", f"the names of the measurement kinds it was fitted on; got {measures!r}"[:200])
+        model.measures_ = tuple(measures)
         table = _identification_from(r.sub("identification"), robot, errors, tools, orientation,
-                                     model.parametrization_)
+                                     model.parametrization_, kind_unknowns=bool(measures))
         model.robot_, model.identification_, model.joint_errors_ = robot, table, errors
         model.targets_, model.orientation_ = tools, orientation
         model._build_robots()
@@ -575,6 +620,7 @@ class KinematicModel(ErrorModelBase):
         if self.n_outputs() == 6 and not self.orientation_:
             notes.append("identified from the positions alone, it predicts the orientation its parameters imply, "
                          "which the positions do not determine (use_orientation: true identifies from it)")
+        notes += list(getattr(self, "measure_notes_", []))
         return notes + (self.residual_.fit_notes() if self.residual_ is not None else [])
 
     def search_gap(self, other: ErrorModelBase) -> str | None:
@@ -654,6 +700,8 @@ def _targets_summary(table: Identification) -> dict:
     """metrics.json fields of a fit on several targets or an orientation (none for one target)."""
     if not table.target_rms_mm:
         return {}
+    if PRIMARY_TARGET not in table.target_rms_mm:           # rows of measurement kinds: each kind's RMS residual
+        return {"kinds_rms_mm": dict(table.target_rms_mm)}
     return {"targets_rms_3d": dict(table.target_rms_mm), "orientation_rms_deg": table.orientation_rms_deg,
             "identifiable_from_primary": table.primary_identifiable}
 
@@ -674,11 +722,17 @@ def _targets_from(r: FieldReader) -> tuple[dict, bool]:
 
 
 def _identification_from(ident: FieldReader, robot: Robot, errors: JointErrors | None = None, tools=None,
-                         orientation: bool = False, parametrization: str = "dh") -> Identification:
+                         orientation: bool = False, parametrization: str = "dh",
+                         kind_unknowns: bool = False) -> Identification:
     """A model file's identified table, which must agree with its robot: the robot's parameter names and
-    nominal values, unidentified parameters kept nominal, standard errors finite and >= 0 (or null)."""
+    nominal values, unidentified parameters kept nominal, standard errors finite and >= 0 (or null). Fitted on
+    measurement kinds (``kind_unknowns``), the kinds' unknowns (a plane, a point) follow the robot's, their
+    start values as nominal."""
     names = [n for n, _ in parameter_names(robot, errors, parametrization) + added_names(tools or {}, orientation)]
-    if ident.get("names", list) != names:
+    given = ident.get("names", list)
+    if kind_unknowns and given[:len(names)] == names and all(isinstance(n, str) for n in given):
+        names = list(given)
+    if given != names:
         ident.fail("names", f"expected the {len(names)} parameters of {robot.name} ({names[0]} ... {names[-1]})")
     status = ident.get("status", list)
     if len(status) != len(names) or any(s not in STATUSES for s in status):
@@ -688,6 +742,7 @@ def _identification_from(ident: FieldReader, robot: Robot, errors: JointErrors |
         ident.fail("std_error", f"expected {len(names)} numbers or nulls")
     nominal, value = ident.array("nominal", (len(names),)), ident.array("value", (len(names),))
     expected = np.concatenate([nominal_values(robot, errors, parametrization), added_nominal(tools or {}, orientation)])
+    expected = np.concatenate([expected, nominal[expected.size:]])          # the kinds' unknowns start anywhere
     off = np.flatnonzero(~np.isclose(nominal, expected, rtol=1e-12, atol=1e-9))
     if off.size:
         k = off[0]

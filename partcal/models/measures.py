@@ -204,7 +204,9 @@ class MeasurementKind:
 
 
 MEASUREMENT_KINDS: dict[str, type[MeasurementKind]] = {}
-"""The table of measurement kinds: the CSV's ``kind`` value -> its class (:func:`add_measurement_kind`)."""
+"""The table of measurement kinds: the CSV's ``kind`` value -> its class (:func:`add_measurement_kind`). The
+built-in rows are those of :mod:`partcal.models.contacts`, registered when it is imported (as
+:mod:`partcal.models.kinematic` does)."""
 
 END_KIND = "pose"
 """A row of joints alone: an end other rows' distances refer to; it has no residual of its own."""
@@ -449,6 +451,15 @@ def _null(jac: NDArray[np.float64], direction: NDArray[np.float64], wanted, rcon
     unit = jac[:, live] / norms[live]
     largest = np.linalg.svd(unit, compute_uv=False)[0]
     return bool(np.linalg.norm(unit @ t) < np.sqrt(rcond) * largest)
+
+
+@dataclass(frozen=True, eq=False)
+class Measured:
+    """What :meth:`KinematicModel.fit <partcal.models.kinematic.KinematicModel.fit>` identifies from instead
+    of position errors: rows of any kinds and the cell's features."""
+
+    rows: Rows
+    features: dict = field(default_factory=dict)
 
 
 def kind_residuals(robot: Robot, rows: Rows, features: dict, table: Identification, *,

@@ -496,7 +496,7 @@ def identify(robot: Robot, q_deg: NDArray[np.float64], measured_mm: NDArray[np.f
     rms, angle = _target_rms(resid, len(q_deg), extra)
     more = {} if extra is None else {
         "target_rms_mm": dict(zip([PRIMARY_TARGET, *extra.tools_mm], rms)), "orientation_rms_deg": angle,
-        "primary_identifiable": _identifiable(jac0[:3 * len(q_deg), :own], wanted[:own], rcond, units[:own])[1]}
+        "primary_identifiable": identifiable_parameters(jac0[:3 * len(q_deg), :own], wanted[:own], rcond, units[:own])[1]}
     result = dataclasses.replace(result, rms_mm=rms[0], **more)
     log.info("identified %d of %d parameters (condition %.3g): RMS %.4f mm", result.status.count("identified"),
              result.value.size, result.condition, result.rms_mm)
@@ -515,7 +515,7 @@ def fit_parameters(jac_at, v0: NDArray[np.float64], jac0: NDArray[np.float64], w
     3-D RMS of the residuals read as points; callers replace it with their own figure.
     """
     units = [unit for _, unit in names]
-    free, rank = _identifiable(jac0, wanted, rcond, units)
+    free, rank = identifiable_parameters(jac0, wanted, rcond, units)
 
     limits = np.full(v0.size, np.nan)
     limits[:size - 9] = [PLAUSIBLE_ERROR[unit] * IMPLAUSIBLE for unit in units[:size - 9]]     # the rows' parameters
@@ -625,10 +625,10 @@ offset and twist wandered 4 to 60 degrees at 0.05 to 0.3 of their standard error
 
 WEAK_LEVER = 0.01
 """A geometric parameter whose plausible error moves the tool by less than this fraction of what the median
-geometric parameter's does is not identified (see :func:`_identifiable`)."""
+geometric parameter's does is not identified (see :func:`identifiable_parameters`)."""
 
 
-def _identifiable(jac0: NDArray[np.float64], wanted: NDArray[np.bool_], rcond: float, units: list[str]
+def identifiable_parameters(jac0: NDArray[np.float64], wanted: NDArray[np.bool_], rcond: float, units: list[str]
                   ) -> tuple[NDArray[np.intp], int]:
     """Indices of the parameters to identify, and the rank, from the Jacobian ``jac0`` at nominal.
 

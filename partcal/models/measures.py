@@ -35,8 +35,8 @@ from numpy.typing import NDArray
 
 from ..errors import DataError
 from ..robot.kinematics import Robot
-from .identification import (Identification, actual_joints, fit_parameters, geometric_size, model_jacobian,
-                             model_positions, nominal_values, parameter_names, robot_with, turn_columns)
+from .identification import (Identification, actual_joints, fit_parameters, geometric_size, identifiable_parameters,
+                             model_jacobian, model_positions, nominal_values, parameter_names, robot_with, turn_columns)
 from .joint_errors import JointErrors
 
 log = logging.getLogger(__name__)
@@ -412,12 +412,29 @@ def identify_measures(robot: Robot, rows: Rows, features: dict | None = None, *,
         What the data cannot identify, in words (a uniform scale, each kind's own blind spots).
     """
     features = features or {}
+    problem, names, wanted, jac0, notes = _prepared(robot, rows, features, base, tool, rcond, errors, payload_kg,
+                                                    parametrization)
+    size, kinds, q_deg = geometric_size(robot, parametrization), problem.kinds, rows.q_deg
+    table = fit_parameters(problem, problem.start, jac0, wanted, names, rcond, size, len(q_deg))[0]
+    raw = problem.raw(table.value, measured_only=True)
+    per_kind = {kind.name: float(np.sqrt(np.mean(r**2))) if r.size else 0.0 for kind, r in zip(kinds, raw)}
+    everything = np.concatenate(raw)
+    table = dataclasses.replace(table, target_rms_mm=per_kind, rms_mm=float(np.sqrt(np.mean(everything**2))))
+    for note in notes:
+        log.warning("%s", note)
+    return table, notes
+
+
+def _prepared(robot: Robot, rows: Rows, features: dict, base: bool, tool: bool, rcond: float, errors, payload_kg,
+              parametrization: str):
+    """The stacked problem at its start, every parameter's name, those asked for, the Jacobian the rank rule
+    reads (on consistent data: :func:`consistent_jacobian`) and what the data cannot identify, in words."""
     kinds = built_kinds(rows, features)
     q_deg = robot.check_joints(rows.q_deg)
     payload = np.broadcast_to(np.asarray(payload_kg, dtype=float), (len(q_deg),))
     problem = StackedProblem(robot, errors, rows, kinds, payload, parametrization)
     names = parameter_names(robot, errors, parametrization) + problem.names
-    size, own = geometric_size(robot, parametrization), problem.own
+    size = geometric_size(robot, parametrization)
     wanted = np.ones(problem.start.size, dtype=bool)
     wanted[size - 9:size - 6] = tool
     wanted[size - 6:size] = base
@@ -429,14 +446,19 @@ def identify_measures(robot: Robot, rows: Rows, features: dict | None = None, *,
         notes.insert(0, f"{SCALE}: nothing here measures a length (every plane and point is unknown), so a uniform "
                         "scale of the robot cannot be identified: one length is held nominal. Give one: a plane's "
                         "spacing_mm, a point's distance_mm or known_mm, a distance, or tracker points")
-    table = fit_parameters(problem, problem.start, jac0, wanted, names, rcond, size, len(q_deg))[0]
-    raw = problem.raw(table.value, measured_only=True)
-    per_kind = {kind.name: float(np.sqrt(np.mean(r**2))) if r.size else 0.0 for kind, r in zip(kinds, raw)}
-    everything = np.concatenate(raw)
-    table = dataclasses.replace(table, target_rms_mm=per_kind, rms_mm=float(np.sqrt(np.mean(everything**2))))
-    for note in notes:
-        log.warning("%s", note)
-    return table, notes
+    return problem, names, wanted, jac0, notes
+
+
+def observability(robot: Robot, rows: Rows, features: dict | None = None, *, base: bool = True, tool: bool = True,
+                  rcond: float = 1e-6, errors: JointErrors | None = None, payload_kg=0.0,
+                  parametrization: str = "dh") -> tuple[list[str], list[str]]:
+    """What rows of measurement kinds cannot identify, without fitting: the notes of :func:`identify_measures`
+    and the parameters its rank rule would hold nominal (judged at the nominal robot, on consistent data)."""
+    _, names, wanted, jac0, notes = _prepared(robot, rows, features or {}, base, tool, rcond, errors, payload_kg,
+                                              parametrization)
+    free = identifiable_parameters(jac0, wanted, rcond, [u for _, u in names])[0]
+    held = [names[i][0] for i in np.flatnonzero(wanted) if i not in set(free.tolist())]
+    return notes, held
 
 
 def _null(jac: NDArray[np.float64], direction: NDArray[np.float64], wanted, rcond: float) -> bool:

@@ -27,17 +27,27 @@ from ..metrics import MRAD_PER_DEG
 from ..models.identification import BASE_PARAMETERS, TOOL_PARAMETERS
 from ..models.kinds import equations_of, identification_of, regions_of, run_summary
 from ..models.targets import added_names
+from ..study.kinds_run import KindsRunResult
 from ..study.results import ModelResult, RunResult
 from ..study.scoring import Outputs, errors_left
 from . import figures
+from .kinds import render_kinds_report
 from .scene import SceneRendering
 
 log = logging.getLogger(__name__)
 
 
 def render_report(result: RunResult, folder: Path, *, screenshot: bool = False) -> Path:
-    """Write ``index.html`` (and ``report.png`` with ``screenshot=True``) into ``folder``."""
+    """Write ``index.html`` (and ``report.png`` with ``screenshot=True``) into ``folder``. A run on measurement
+    kinds gets its own page (:mod:`partcal.report.kinds`)."""
     start = time.perf_counter()
+    if isinstance(result, KindsRunResult):
+        path = render_kinds_report(result, folder)
+        if screenshot:
+            from .browser import open_report
+
+            open_report(path, Path(folder) / "report.png")
+        return path
     env = jinja2.Environment(autoescape=True, undefined=jinja2.StrictUndefined)
     template = env.from_string(resources.files(__package__).joinpath("template.html").read_text())
     html = template.render(**context(result))

@@ -25,7 +25,7 @@ COLOURS = ["#1f77b4", "#d62728", "#2ca02c", "#9467bd"]
 OUTPUT_NAMES = ("x", "y", "z", "rx", "ry", "rz")    # a swarm per output: position, then a pose model's turn
 
 
-def _svg(fig) -> str:
+def svg_of(fig) -> str:
     buf = io.StringIO()
     fig.savefig(buf, format="svg", bbox_inches="tight", metadata={"Date": None})
     plt.close(fig)
@@ -93,7 +93,7 @@ def errors_along_path(name: str, measured: np.ndarray, predictions: dict[str, np
     axes[0].set_title(f"{name}: measured and predicted error")
     axes[-1].set_xlabel("point along the data set")
     _legend_below(fig, axes, *axes[0].get_legend_handles_labels(), ncol=3)      # not over the lines
-    return _svg(fig)
+    return svg_of(fig)
 
 
 def errors_scattered(name: str, measured: np.ndarray, predictions: dict[str, np.ndarray],
@@ -133,7 +133,7 @@ def errors_scattered(name: str, measured: np.ndarray, predictions: dict[str, np.
     fig.suptitle(f"{name}: predicted against measured error, one point per pose{some}", fontsize=9)
     fig.tight_layout()
     _legend_below(fig, axes, *axes[0].get_legend_handles_labels(), ncol=2)
-    return _svg(fig)
+    return svg_of(fig)
 
 
 def orientation_along_path(name: str, angles_mrad: dict[str, np.ndarray]) -> str:
@@ -153,7 +153,7 @@ def orientation_along_path(name: str, angles_mrad: dict[str, np.ndarray]) -> str
     ax.set_ylabel("orientation error (mrad)")
     ax.set_title(f"{name}: angle of the orientation error, uncompensated and left")
     ax.legend(loc="upper right", ncol=2, fontsize=8, frameon=False)
-    return _svg(fig)
+    return svg_of(fig)
 
 
 def residual_histogram(name: str, left: dict[str, np.ndarray], rigid_fit: bool = False) -> str:
@@ -172,7 +172,7 @@ def residual_histogram(name: str, left: dict[str, np.ndarray], rigid_fit: bool =
     ax.set_title(f"{name}: residual error" + (" after the rigid fit to its own frame, as the table scores it"
                                               if rigid_fit else ""))
     _legend_below(fig, [ax], *ax.get_legend_handles_labels(), ncol=2)          # not over the bars
-    return _svg(fig)
+    return svg_of(fig)
 
 
 def convergence(models: dict[str, object]) -> str | None:
@@ -205,7 +205,7 @@ def convergence(models: dict[str, object]) -> str | None:
     ax.set_ylabel("best RMS / least-squares RMS")
     ax.set_title("Particle swarm convergence (1 = the least-squares optimum)")
     _legend_below(fig, [ax], *ax.get_legend_handles_labels(), ncol=4)          # not over the curves
-    return _svg(fig)
+    return svg_of(fig)
 
 
 def compensation_bars(rows: list[tuple[str, str, float, float, float]]) -> str:
@@ -220,4 +220,4 @@ def compensation_bars(rows: list[tuple[str, str, float, float, float]]) -> str:
     ax.set_xlabel("3-D RMS error (mm)")
     ax.set_title("Compensation on the virtual robot")
     ax.legend(fontsize=8, frameon=False, loc="lower right")
-    return _svg(fig)
+    return svg_of(fig)

@@ -139,6 +139,7 @@ class DataOptions:
     fit_tool: bool = True
     plausibility: Plausibility = Plausibility()      # data.checks: the limits of plausible data
     groups: str | None = None                         # data.groups: the column naming each row's pose
+    features: Path | None = None                      # data.features: the cell's planes and points (kinds runs)
 
     @property
     def converted(self) -> bool:
@@ -151,7 +152,7 @@ class DataOptions:
                 "registration": ({"tool_mm": list(self.tool_mm) if self.tool_mm else None, "fit_tool": self.fit_tool}
                                  if self.frame == "tracker" else None),
                 "checks": {name: getattr(self.plausibility, name) for name in Plausibility.rules},
-                "groups": self.groups}
+                "groups": self.groups, **({"features": str(self.features)} if self.features else {})}
 
 
 SPREAD_CALIBRATIONS = ("forward", "contiguous", "folds", "none")
@@ -208,7 +209,8 @@ class RunConfig:
 
     def inputs(self) -> list[Path]:
         """The files this run reads: the config, the data sets, a robot or simulation YAML file."""
-        files = [self.source, self.identification, *self.tests.values(), self.validation, self.virtual_robot]
+        files = [self.source, self.identification, *self.tests.values(), self.validation, self.virtual_robot,
+                 self.data_options.features]
         if self.robot is not None and Path(self.robot).suffix in (".yaml", ".yml"):
             files.append(Path(self.robot))
         elif self.robot is not None and is_urdf(self.robot):
@@ -354,6 +356,7 @@ def _data(data_sec: Section, top: Section, base: Path, *, has_robot: bool
         tests_sec.fail(tests_sec.path(reserved), f"a test set may not be called {reserved!r} (reserved: "
                                                  f"{', '.join(sorted(RESERVED_NAMES))})")
     groups = data_sec.get("groups", "str", default=None, check=lambda v: None if v.strip() else "a column name")
+    features = _existing(data_sec, "features", base) if data_sec.has("features") else None
     checks = data_sec.section("checks")
     plausibility = Plausibility(**{key: checks.rule(key, rule) for key, rule in Plausibility.rules.items()})
     checks.done()
@@ -367,7 +370,8 @@ def _data(data_sec: Section, top: Section, base: Path, *, has_robot: bool
     reg.done()
     return ident, tests, validation, DataOptions(format=fmt, frame=frame, rows={k: v for k, v in rows.items() if v is not None},
                                      own_frame=tuple(own), tool_mm=tuple(float(x) for x in tool) if tool else None,
-                                     fit_tool=fit_tool, plausibility=plausibility, groups=groups)
+                                     fit_tool=fit_tool, plausibility=plausibility, groups=groups,
+                                     features=features)
 
 
 def _data_file(sec: Section, key: str, base: Path, *, tracker: bool | None

@@ -1,0 +1,79 @@
+"""The report of a run on measurement kinds (:mod:`partcal.study.kinds_run`): what each kind measured, what
+each model leaves of it in the fit and held out, the test sets, what the data cannot identify, and the
+best model's parameters."""
+
+from __future__ import annotations
+
+import base64
+from datetime import datetime, timezone
+from importlib import resources
+from pathlib import Path
+
+import jinja2
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from .. import __version__  # noqa: E402
+from ..study.kinds_run import KindsRunResult  # noqa: E402
+from .figures import COLOURS, svg_of  # noqa: E402
+
+
+def render_kinds_report(result: KindsRunResult, folder: Path) -> Path:
+    """Write ``index.html`` of a kinds run into ``folder``."""
+    env = jinja2.Environment(autoescape=True, undefined=jinja2.StrictUndefined)
+    template = env.from_string(resources.files(__package__).joinpath("kinds_template.html").read_text())
+    path = Path(folder) / "index.html"
+    path.write_text(template.render(**kinds_context(result)), encoding="utf-8")
+    return path
+
+
+def kinds_context(result: KindsRunResult) -> dict:
+    """Everything the kinds template shows."""
+    data, cfg = result.data, result.config
+    kinds = list(data.descriptions)
+    best = next(r for r in result.models if r.spec.name == result.best)
+    notes = []
+    for r in result.models:
+        notes += [n for n in r.notes if n not in notes]
+    table = best.model.identification_
+    return {
+        "name": cfg.name, "version": __version__, "seed": cfg.seed, "seconds": result.seconds,
+        "date": datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC"), "config_path": str(cfg.source),
+        "kinds": [{"name": k, "text": data.descriptions[k]} for k in kinds],
+        "models": [{"name": r.spec.name, "best": r.spec.name == result.best,
+                    "fit": [r.fit_rms.get(k) for k in kinds], "cv": [r.cv_rms.get(k) for k in kinds],
+                    "weighted": r.cv_pooled, "identified": r.model.identification_.status.count("identified"),
+                    "parameters": len(r.model.identification_.names), "seconds": r.fit_seconds,
+                    "tests": [_test_text(r.tests[t]) for t in data.tests]} for r in result.models],
+        "kind_names": kinds, "tests": list(data.tests),
+        "uncompensated": [_test_text(result.uncompensated[t]) if t in result.uncompensated else "" for t in data.tests],
+        "rigid": not data.fixes_frame, "notes": notes, "best": result.best,
+        "held": table.unidentifiable(),
+        "parameters": [row for row in table.rows()],
+        "hist_svg": _b64(_histograms(best.cv_residuals, best.spec.name)) if best.cv_residuals else None,
+    }
+
+
+def _test_text(figures: dict) -> str:
+    if "rms_3d" in figures:
+        return f"{figures['rms_3d']:.4f}" + (" (rigid fit)" if figures.get("rigid_fit") else "")
+    return ", ".join(f"{k} {v:.4f}" for k, v in figures["kinds_rms_mm"].items())
+
+
+def _histograms(residuals: dict, name: str) -> str:
+    """The held-out residuals of each kind, one panel each."""
+    fig, axes = plt.subplots(1, len(residuals), figsize=(3.2 * len(residuals) + 1, 2.6), squeeze=False)
+    for k, (ax, (kind, values)) in enumerate(zip(axes[0], residuals.items())):
+        ax.hist(values, bins=40, color=COLOURS[k % len(COLOURS)], alpha=0.8)
+        ax.set_title(f"{kind}: RMS {np.sqrt(np.mean(values**2)):.4f} mm")
+        ax.set_xlabel("held-out residual (mm)")
+    axes[0][0].set_ylabel("rows")
+    fig.suptitle(f"{name}: residuals of rows held out by cross-validation")
+    return svg_of(fig)
+
+
+def _b64(text: str) -> str:
+    return base64.b64encode(text.encode()).decode("ascii")

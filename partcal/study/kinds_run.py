@@ -1,0 +1,345 @@
+"""A run on measurement kinds: plane contacts, fixed points, distances (and tracker points) in one file.
+
+When a run's identification file has a ``kind`` column (docs/data.md, "Measurement kinds"), its rows
+are not 3-D errors and only kinematic models can learn from them: each kinematic entry is identified
+from every kind at once (:func:`partcal.models.measures.identify_measures`), cross-validated on
+held-out rows of the same kinds (their residuals, mm of contact, coincidence or length), and scored on
+the test sets: a kinds file by its residuals, a point CSV by the usual 3-D RMS, after a rigid fit
+when the identification data fix no frame (no tracker points among them). What the data cannot
+identify (a uniform scale, a plane's offset against the tool, the base frame of distances) is named
+in the run's output, ``run --check`` and the report. A model that learns a 3-D error field (series,
+partitioned, Gaussian process, a kinematic model's residual) is refused, naming it: such data carry
+no error field.
+
+The models are the same kinematic models: their files work with ``predict``, ``compensate``,
+``export`` and the predictor unchanged.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import yaml
+from numpy.typing import NDArray
+
+from .. import __version__
+from ..data.measurements import Measurements, read_measurements
+from ..data.observations import ObservationTable, has_kind_column, read_features, read_observations
+from ..errors import ConfigError, PartcalError
+from ..metrics import pooled_rms
+from ..models.contacts import PointKind
+from ..models.kinematic import KinematicModel
+from ..models.identification import resolved_parametrization
+from ..models.joint_errors import JointErrors
+from ..models.measures import (END_KIND, MEASUREMENT_KINDS, REFERENCE_NOISE_MM, SCALE, Measured, Rows, built_kinds,
+                               kind_names, kind_residuals, observability)
+from ..robot.frames import kabsch
+from ..robot.kinematics import Robot
+from .config import ModelSpec, RunConfig
+from .outputs import check_writable, replace_folder
+from .persist import save_model
+
+FOLDS = 5
+"""Cross-validation folds of a kinds run (``cv_folds: auto``): rows of every kind drawn at random."""
+
+
+def uses_kinds(config: RunConfig) -> bool:
+    """Whether the run's identification file is a measurement-kinds file (it has a ``kind`` column)."""
+    return has_kind_column(config.identification, config.data_options.format)
+
+
+def rows_of(table: ObservationTable) -> Rows:
+    """The models' view of a kinds file's rows."""
+    payload = table.numbers.get("payload_kg")
+    return Rows(table.q_deg, table.kind, table.ids, table.lines, table.source, dict(table.numbers),
+                dict(table.texts), None if payload is None or np.isnan(payload).all() else np.nan_to_num(payload))
+
+
+@dataclass(frozen=True, eq=False)
+class KindsData:
+    """What a kinds run reads: the identification rows, the cell's features, the test sets (kinds files or
+    point CSVs), the robot, and the kinematic entries."""
+
+    rows: Rows
+    features: dict
+    tests: dict
+    robot: Robot
+    models: tuple[ModelSpec, ...]
+    descriptions: dict
+    fixes_frame: bool
+
+
+def prepare_kinds(config: RunConfig) -> KindsData:
+    """Read and check everything a kinds run needs (all of ``run --check``); nothing fitted."""
+    robot = config.nominal_robot
+    if robot is None:
+        config.fail("robot", f"the identification file {config.identification} holds measurement kinds, whose "
+                             "residuals come from the robot's forward kinematics: name a robot")
+    opts = config.data_options
+    if opts.frame != "base":
+        config.fail("data.frame", "a measurement-kinds file holds tracker points in the robot's base frame "
+                                  "(register them first: partcal import); got frame: tracker")
+    if opts.rows:
+        config.fail("data", "row subsets (rows:, every:) apply to point CSVs; a kinds file is read whole")
+    features = read_features(opts.features, kinds=kind_names()) if opts.features is not None else {}
+    table = read_observations(config.identification, robot, opts.format, features, kinds=kind_names())
+    rows = rows_of(table)
+    kinds = built_kinds(rows, features)
+    for i, spec in enumerate(config.models):
+        problem = _entry_problem(spec, kinds)
+        if problem is not None:
+            config.fail(f"models[{i}]", problem)
+    tests = {}
+    for name, path in config.tests.items():
+        if has_kind_column(path, opts.format):
+            tests[name] = rows_of(read_observations(path, robot, opts.format, features, kinds=kind_names()))
+            built_kinds(tests[name], features)
+        else:
+            tests[name] = read_measurements(path, robot, fmt=opts.format, name=name)
+    return KindsData(rows, features, tests, robot, config.models, {k.name: k.describe() for k in kinds},
+                     any(isinstance(k, PointKind) for k in kinds))
+
+
+def _entry_problem(spec: ModelSpec, kinds: list) -> str | None:
+    """Why an entry cannot learn from the kinds present (None: it can)."""
+    present = ", ".join(k.name for k in kinds)
+    if spec.estimator_class is not KinematicModel:
+        return (f"model {spec.name!r} (kind {spec.kind!r}) learns a 3-D error field from tracker points; the "
+                f"identification file holds measurement kinds ({present}), which carry no error field: only "
+                "kinematic models learn from them")
+    if spec.residual is not None:
+        return (f"model {spec.name!r}: its residual model learns a 3-D error field from tracker points; the "
+                f"identification file holds measurement kinds ({present}): fit the kinematic model alone")
+    for key in ("all_targets", "use_orientation"):
+        if spec.params.get(key):
+            return f"model {spec.name!r}: {key} reads a point CSV's further targets or orientation; a kinds file has none"
+    return None
+
+
+def check_kinds(config: RunConfig, source: str | Path) -> str:
+    """``partcal run --check`` of a kinds run: the data read and checked, what each kind cannot identify
+    named (judged at the nominal robot, on consistent data); nothing fitted."""
+    data = prepare_kinds(config)
+    check_writable(config.output, config.inputs(), create=False)
+    kinds = "; ".join(data.descriptions.values())
+    lines = [f"{source}: OK: {len(data.models)} kinematic models; identification: {kinds}; "
+             f"cross-validation: {_folds(config, data.rows)} folds; nothing fitted"]
+    for spec in data.models:
+        notes, held = entry_observability(spec, data)
+        lines.append(f"{spec.name}: held nominal (not identifiable from these rows): {', '.join(held) or 'none'}")
+        lines += [f"  {note}" for note in notes]
+    return "\n".join(lines)
+
+
+def entry_observability(spec: ModelSpec, data: KindsData) -> tuple[list[str], list[str]]:
+    """What an entry cannot identify from the run's rows, without fitting (the rank rule at the nominal
+    robot, on consistent data): the notes in words, and the parameters held nominal."""
+    model = spec.with_robot(data.robot).build(None)
+    errors = JointErrors.for_robot(data.robot, list(model.compliance), model.joint_harmonics)
+    return observability(data.robot, data.rows, data.features, base=bool(model.base), tool=bool(model.tool),
+                         rcond=float(model.rcond), errors=errors,
+                         parametrization=resolved_parametrization(model.parametrization, data.robot))
+
+
+# ---------------------------------------------------------------------- fitting and scoring
+@dataclass
+class KindsModelResult:
+    """One kinematic entry of a kinds run: the model, its residuals on the data, its cross-validated ones."""
+
+    spec: ModelSpec
+    model: KinematicModel
+    fit_seconds: float
+    fit_rms: dict
+    cv_rms: dict
+    cv_pooled: float
+    tests: dict
+    notes: list = field(default_factory=list)
+    cv_residuals: dict = field(default_factory=dict)      # kind -> held-out residuals (mm), every fold
+
+
+@dataclass
+class KindsRunResult:
+    """A finished kinds run."""
+
+    config: RunConfig
+    data: KindsData
+    models: list
+    uncompensated: dict
+    best: str
+    seconds: float
+
+
+def subset(rows: Rows, keep: NDArray[np.intp]) -> Rows:
+    """Rows ``keep`` and the rows their distances refer to (those as ends alone, kind ``pose``)."""
+    where = {name: i for i, name in enumerate(rows.ids)}
+    keep = np.unique(keep)
+    to = rows.texts.get("to", ("",) * len(rows))
+    needed = {where[to[i]] for i in keep if to[i] in where} - set(keep.tolist())
+    every = np.array(sorted(set(keep.tolist()) | needed), dtype=np.intp)
+    out = rows.take(every)
+    kinds = tuple(END_KIND if i in needed else k for i, k in zip(every, out.kind))
+    return Rows(out.q_deg, kinds, out.ids, out.lines, out.source, out.numbers, out.texts, out.payload_kg)
+
+
+def _folds(config: RunConfig, rows: Rows) -> int:
+    measuring = int(np.sum(np.asarray(rows.kind, dtype=object) != END_KIND))
+    k = FOLDS if config.cv_folds in ("auto", None) else config.cv_folds
+    return min(measuring, k if isinstance(k, int) else measuring)
+
+
+def _weighted_rms(residuals: dict, features: dict) -> float:
+    """One figure of residuals of several kinds: each divided by its kind's noise, times the reference's
+    (as the fit weighs them), RMS; mm of a tracker's 0.02 mm noise."""
+    noise = features.get("noise_mm") or {}
+    parts = [r * REFERENCE_NOISE_MM / noise.get(k, MEASUREMENT_KINDS[k].default_noise_mm)
+             for k, r in residuals.items()]
+    every = np.concatenate(parts) if parts else np.zeros(0)
+    return float(np.sqrt(np.mean(every**2))) if every.size else float("nan")
+
+
+def _rms(values: NDArray[np.float64]) -> float:
+    return float(np.sqrt(np.mean(values**2))) if values.size else float("nan")
+
+
+def fit_entry(spec: ModelSpec, data: KindsData, seed: int, folds: int) -> KindsModelResult:
+    """Fit one entry on every row, cross-validate it on random folds of the measuring rows, score the tests."""
+    def fitted(rows: Rows) -> KinematicModel:
+        model = spec.with_robot(data.robot).build(seed)
+        return model.fit(rows.q_deg, None, measures=Measured(rows, data.features))
+
+    start = time.process_time()
+    model = fitted(data.rows)
+    seconds = time.process_time() - start
+    kw = dict(errors=model.joint_errors_, parametrization=model.parametrization_)
+    fit_rms = {k: _rms(r) for k, r in kind_residuals(data.robot, data.rows, data.features, model.identification_,
+                                                       **kw).items()}
+    measuring = np.flatnonzero(np.asarray(data.rows.kind, dtype=object) != END_KIND)
+    order = np.random.default_rng(seed).permutation(measuring)
+    held: dict[str, list] = {}
+    for k in range(folds):
+        out = order[k::folds]
+        train = subset(data.rows, np.setdiff1d(measuring, out))
+        test = subset(data.rows, out)
+        part = fitted(train)
+        for name, r in kind_residuals(data.robot, test, data.features, part.identification_, **kw).items():
+            held.setdefault(name, []).append(r)
+    cv = {name: np.concatenate(parts) for name, parts in held.items()}
+    tests = {name: _score(model, test, data) for name, test in data.tests.items()}
+    return KindsModelResult(spec, model, seconds, fit_rms, {k: _rms(r) for k, r in cv.items()},
+                            _weighted_rms(cv, data.features), tests, model.fit_notes(), cv)
+
+
+def _score(model: KinematicModel, test, data: KindsData) -> dict:
+    """A test set's figures: a kinds file's residual RMS per kind; a point CSV's 3-D RMS (after a rigid fit when
+    the identification data fix no frame)."""
+    if isinstance(test, Rows):
+        residuals = kind_residuals(data.robot, test, data.features, model.identification_,
+                                   errors=model.joint_errors_, parametrization=model.parametrization_)
+        return {"kinds_rms_mm": {k: _rms(r) for k, r in residuals.items()}}
+    predicted = test.nominal_mm + model.predict(test.q_deg)
+    return _point_figures(predicted, test, data.fixes_frame)
+
+
+def _point_figures(predicted: NDArray[np.float64], test: Measurements, fixes_frame: bool) -> dict:
+    if fixes_frame:
+        return {"rms_3d": pooled_rms(test.measured_mm - predicted), "rigid_fit": False}
+    rot, t = kabsch(predicted, test.measured_mm)
+    return {"rms_3d": pooled_rms(test.measured_mm - (predicted @ rot.T + t)), "rigid_fit": True}
+
+
+def run_kinds(config: RunConfig, progress: Callable[[int, int, str], None] | None = None) -> KindsRunResult:
+    """Fit, cross-validate and score every kinematic entry of a kinds run; the best by cross-validation."""
+    start = time.perf_counter()
+    data = prepare_kinds(config)
+    folds = _folds(config, data.rows)
+    if progress:
+        progress(0, len(data.models), f"cross-validation: {folds} random folds of the identification rows")
+    results = []
+    for i, spec in enumerate(data.models):
+        try:
+            results.append(fit_entry(spec, data, config.seed, folds))
+        except PartcalError as exc:
+            raise type(exc)(f"model {spec.name!r}: {exc}") from None
+        if progress:
+            progress(i + 1, len(data.models), f"{spec.name}: cross-validated residual "
+                                             f"{results[-1].cv_pooled:.4f} mm (weighted)")
+    uncompensated = {name: _point_figures(test.nominal_mm, test, data.fixes_frame)
+                     for name, test in data.tests.items() if isinstance(test, Measurements)}
+    best = min(results, key=lambda r: r.cv_pooled).spec.name
+    return KindsRunResult(config, data, results, uncompensated, best, time.perf_counter() - start)
+
+
+# ---------------------------------------------------------------------- writing
+def kinds_metrics(result: KindsRunResult) -> dict:
+    """metrics.json of a kinds run."""
+    data = result.data
+    return {"partcal_version": __version__, "run": result.config.name, "kinds": dict(data.descriptions),
+            "frame_fixed": data.fixes_frame, "uncompensated": result.uncompensated, "best": result.best,
+            "seconds": round(result.seconds, 3),
+            "models": {r.spec.name: {"fit_kinds_rms_mm": r.fit_rms, "cv_kinds_rms_mm": r.cv_rms,
+                                     "cv_weighted_rms_mm": r.cv_pooled, "tests": r.tests,
+                                     "fit_seconds": round(r.fit_seconds, 4), "notes": r.notes,
+                                     **r.model.run_summary()}
+                       for r in result.models}}
+
+
+def write_kinds_run(result: KindsRunResult, render: Callable | None = None) -> Path:
+    """Write a kinds run's outputs atomically (metrics.json, model files, resolved config, report)."""
+    cfg = result.config
+
+    def fill(folder: Path) -> None:
+        (folder / "models").mkdir()
+        for r in result.models:
+            save_model(r.model, folder / "models" / f"{r.spec.slug}.json", name=r.spec.name, robot=result.data.robot,
+                       extra={"cv_weighted_rms_mm": r.cv_pooled, "fit_seconds": round(r.fit_seconds, 4),
+                              "seed": cfg.seed, "run": cfg.name})
+        (folder / "metrics.json").write_text(json.dumps(kinds_metrics(result), indent=1) + "\n")
+        resolved = {"partcal_version": __version__, **cfg.resolved()}
+        (folder / "config.resolved.yaml").write_text(yaml.safe_dump(resolved, sort_keys=False))
+        if render is not None:
+            render(result, folder)
+
+    replace_folder(cfg.output, fill)
+    return cfg.output
+
+
+def kinds_table(result: KindsRunResult) -> str:
+    """The lines a kinds run prints: per model the fit's and the held-out residuals of each kind and the
+    test sets' figures, then what the data cannot identify."""
+    lines = []
+    kinds = list(result.data.descriptions)
+    tests = list(result.data.tests)
+    header = ["model", *(f"fit {k}" for k in kinds), *(f"CV {k}" for k in kinds), *tests]
+    rows = []
+    for r in result.models:
+        figures = []
+        for name in tests:
+            t = r.tests[name]
+            figures.append(f"{t['rms_3d']:.4f}" + (" (rigid)" if t.get("rigid_fit") else "") if "rms_3d" in t
+                           else ", ".join(f"{v:.4f}" for v in t["kinds_rms_mm"].values()))
+        rows.append([r.spec.name + (" *" if r.spec.name == result.best else ""),
+                     *(f"{r.fit_rms.get(k, float('nan')):.4f}" for k in kinds),
+                     *(f"{r.cv_rms.get(k, float('nan')):.4f}" for k in kinds), *figures])
+    widths = [max(len(str(x)) for x in col) for col in zip(header, *rows)]
+    for row in [header, *rows]:
+        lines.append("  ".join(str(c).ljust(w) for c, w in zip(row, widths)))
+    lines.append("residuals in mm (RMS); * best by cross-validation" + (
+        "; test sets of points scored after a rigid fit (the identification data fix no frame)"
+        if not result.data.fixes_frame and any(isinstance(t, Measurements) for t in result.data.tests.values())
+        else ""))
+    seen = []
+    for r in result.models:
+        for note in r.notes:
+            if note not in seen:
+                seen.append(note)
+    lines += [f"note: {n}" for n in seen]
+    return "\n".join(lines)
+
+
+__all__ = ["uses_kinds", "prepare_kinds", "check_kinds", "run_kinds", "write_kinds_run", "kinds_metrics",
+           "kinds_table", "KindsRunResult", "KindsModelResult", "SCALE", "ConfigError"]

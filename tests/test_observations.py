@@ -119,6 +119,10 @@ def test_duplicate_ids_and_dangling_references(tmp_path):
 
 
 def test_missing_column_for_a_row_and_bad_header(tmp_path):
+    with pytest.raises(DataError, match=r"h\.csv:2: the header is not followed by any data row"):
+        read_observations(write(tmp_path, "# nothing yet\nq1,kind\n", "h.csv"))
+    with pytest.raises(DataError, match=r"e\.csv: empty file: expected a header line such as"):
+        read_observations(write(tmp_path, "# nothing\n", "e.csv"))
     path = write(tmp_path, "q1,kind\n1,plane\n")
     refused(path, 2, "feature", r"the file has no column 'feature'")
     with pytest.raises(DataError, match=r"g\.csv:1: column 'q3': joint columns must run q1\.\.qN without gaps"):

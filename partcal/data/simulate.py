@@ -31,11 +31,11 @@ from ..robot.kinematics import Robot
 from ..robot.rotations import (matrices_from_rotation_vectors, matrix_from_rpy_deg, rpy_deg_from_matrix,
                                xyz_deg_from_matrices)
 from ..robot.trajectories import PATHS, paper_path
+from .contact_sets import (CONTACT_KEYS, CellFeatures, read_cell_features, read_contact_dataset,
+                           simulate_observations, write_contact_files)
 from .formats import TARGET_NAME
 from .measurements import Measurements, write_measurements
 from .pose_columns import PRIMARY
-from .simulate_contacts import (CONTACT_KEYS, CellFeatures, read_cell_features, read_contact_dataset,
-                                simulate_observations, write_contact_files)
 from .sampling import FARTHEST_POINT_UP_TO, sample_configurations  # noqa: F401 (public here as before)
 
 log = logging.getLogger(__name__)

@@ -12,7 +12,7 @@ from partcal.data.observations import read_features, read_observations
 from partcal.data.simulate import Compliance, load_study, simulate, write_study
 from partcal.data.simulate_contacts import (all_pairs, fixed_point_visits, pair_distances, plane_touches,
                                             random_pairs)
-from partcal.errors import ConfigError, UnreachableError
+from partcal.errors import ConfigError, DataError, UnreachableError
 
 CONFIG = ROOT / "configs" / "ur10_contacts_virtual.yaml"
 PLANES = {"top": ([0.0, 0.0, 1.0], 500.0), "side": (np.array([1.0, 0.0, 0.02]) / np.hypot(1, 0.02), 600.0)}
@@ -108,6 +108,19 @@ def test_pairs():
     assert all_pairs(4).tolist() == [[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]]
     some = random_pairs(50, 300, np.random.default_rng(0))
     assert len({tuple(p) for p in some.tolist()}) == 300 and (some[:, 0] < some[:, 1]).all() and some.max() < 50
+
+
+def test_bad_arguments_are_refused_naming_them(vr):
+    rng = np.random.default_rng(0)
+    with pytest.raises(DataError, match=r"counts names the plane 'floor', which the planes given do not hold "
+                                        r"\(top, side\)"):
+        plane_touches(vr, PLANES, {"floor": 3}, rng, 0.01)
+    with pytest.raises(DataError, match=r"counts\['nest'\] must be a number of rows >= 1; got 0"):
+        fixed_point_visits(vr, POINTS, {"nest": 0}, rng, 0.01)
+    with pytest.raises(DataError, match=r"noise_mm must be a finite number >= 0 \(mm\); got -0.1"):
+        plane_touches(vr, PLANES, {"top": 3}, rng, -0.1)
+    with pytest.raises(DataError, match=r"Expected pairs with shape \(m, 2\) of row indices in \[0, 2\)"):
+        pair_distances(vr, np.zeros((2, 6)), np.array([[0, 2]]), rng, 0.01)
 
 
 def test_a_plane_out_of_reach_is_refused_naming_it(vr):

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from ..errors import UnreachableError
+from ..errors import DataError, UnreachableError
 from ..robot.kinematics import Robot
 from ..robot.rotations import matrices_from_rotation_vectors
 from .sampling import uniform_configurations
@@ -115,6 +115,7 @@ def plane_touches(vr, planes: dict, counts: dict, rng: np.random.Generator, nois
     UnreachableError
         A plane the arm cannot touch ``counts[name]`` times within its ranges (naming the plane).
     """
+    _checked(planes, counts, noise_mm, "plane")
     tib, out_q, out_names = true_robot_in_base(vr), [], []
     for name, count in counts.items():
         normal, offset = _plane_args(planes[name])
@@ -152,6 +153,7 @@ def fixed_point_visits(vr, points: dict, counts: dict, rng: np.random.Generator,
     an unreachable point raises :class:`~partcal.errors.UnreachableError` naming it. Other parameters as
     :func:`plane_touches`.
     """
+    _checked(points, counts, noise_mm, "point")
     tib, out_q, out_names = true_robot_in_base(vr), [], []
     for name, count in counts.items():
         point = np.asarray(points[name], dtype=float)
@@ -171,6 +173,18 @@ def fixed_point_visits(vr, points: dict, counts: dict, rng: np.random.Generator,
         out_q.append(q)
         out_names += [name] * count
     return np.concatenate(out_q), tuple(out_names)
+
+
+def _checked(features: dict, counts: dict, noise_mm: float, what: str) -> None:
+    """Refuse counts naming no feature or not a count >= 1, and a noise that is not a finite number >= 0."""
+    for name, count in counts.items():
+        if name not in features:
+            raise DataError(f"counts names the {what} {name!r}, which the {what}s given do not hold "
+                            f"({', '.join(map(str, features)) or 'none'})")
+        if not isinstance(count, (int, np.integer)) or isinstance(count, bool) or count < 1:
+            raise DataError(f"counts[{name!r}] must be a number of rows >= 1; got {count!r}")
+    if not (isinstance(noise_mm, (int, float, np.integer, np.floating)) and np.isfinite(noise_mm) and noise_mm >= 0):
+        raise DataError(f"noise_mm must be a finite number >= 0 (mm); got {noise_mm!r}")
 
 
 def _visits(vr, tib, count, near, targets, residual, rng, ranges, fixed, what) -> NDArray[np.float64]:
@@ -214,8 +228,13 @@ def pair_distances(vr, q_deg: NDArray[np.float64], pairs: NDArray[np.intp], rng:
                    noise_mm: float) -> NDArray[np.float64]:
     """Measured distances between the TRUE tool tips of pose pairs, mm, ``(m,)``: ``|tip_a - tip_b|`` plus
     ``N(0, noise_mm)``. ``pairs`` ``(m, 2)`` holds 0-based rows of ``q_deg`` ``(n, N)`` (commanded, degrees)."""
+    _checked({}, {}, noise_mm, "")
     tips = vr.true_positions(q_deg)
-    pairs = np.asarray(pairs, dtype=np.intp).reshape(-1, 2)
+    pairs = np.asarray(pairs)
+    if pairs.ndim != 2 or pairs.shape[1] != 2 or not np.issubdtype(pairs.dtype, np.integer) or \
+            (pairs.size and (pairs.min() < 0 or pairs.max() >= len(tips))):
+        raise DataError(f"Expected pairs with shape (m, 2) of row indices in [0, {len(tips)}), got array with "
+                        f"shape {pairs.shape} and dtype {pairs.dtype}")
     d = np.linalg.norm(tips[pairs[:, 0]] - tips[pairs[:, 1]], axis=1)
     return d + (rng.normal(0.0, noise_mm, len(d)) if noise_mm > 0 else 0.0)
 

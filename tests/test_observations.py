@@ -67,10 +67,10 @@ def test_a_file_with_kind_is_told_from_a_point_file(tmp_path):
 
 
 def test_other_columns_are_kept_as_numbers_or_texts(tmp_path):
-    path = write(tmp_path, "q1,kind,gauge_mm,note\n1,pose,2.5,a\n2,pose,,3\n")
+    path = write(tmp_path, "q1,kind,gauge_mm,note,flag\n1,pose,2.5,a,nan\n2,pose,,3,1\n")
     t = read_observations(path)
     np.testing.assert_array_equal(t.numbers["gauge_mm"], [2.5, np.nan])
-    assert t.texts["note"] == ("a", "3")
+    assert t.texts["note"] == ("a", "3") and t.texts["flag"] == ("nan", "1")
 
 
 def test_kinds_are_a_parameter(tmp_path):

@@ -224,11 +224,13 @@ class _Cells:
     def is_numeric(self, column: str) -> bool:
         """Whether every filled cell of a column is a plain number (and at least one is filled)."""
         at = self.seen[column]
-        filled = [cells[at].strip() for _, cells in self.data if cells[at].strip()]
+        filled = [(number, cells[at].strip()) for number, cells in self.data if cells[at].strip()]
         try:
-            return bool(filled) and all(np.isfinite(float(t.replace(self.decimal, "."))) for t in filled)
-        except ValueError:
+            for number, text in filled:
+                parse_number(self.path, number, self.header[at], text, self.decimal)
+        except DataError:
             return False
+        return bool(filled)
 
 
 def _columns(cell: _Cells, seen: dict[str, int], fmt: MeasurementFormat) -> tuple[dict, dict]:

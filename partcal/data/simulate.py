@@ -31,9 +31,12 @@ from ..robot.kinematics import Robot
 from ..robot.rotations import (matrices_from_rotation_vectors, matrix_from_rpy_deg, rpy_deg_from_matrix,
                                xyz_deg_from_matrices)
 from ..robot.trajectories import PATHS, paper_path
+from .contact_sets import (CONTACT_KEYS, CellFeatures, read_cell_features, read_contact_dataset,
+                           simulate_observations, write_contact_files)
 from .formats import TARGET_NAME
 from .measurements import Measurements, write_measurements
 from .pose_columns import PRIMARY
+from .sampling import FARTHEST_POINT_UP_TO, sample_configurations  # noqa: F401 (public here as before)
 
 log = logging.getLogger(__name__)
 GRAVITY_M_S2 = 9.80665
@@ -163,6 +166,8 @@ class Study:
     ranges_deg: dict[int, tuple[float, float]]
     fixed_deg: dict[int, float]
     source: Path
+    features: CellFeatures | None = None            # the cell's true planes and points (``features:``)
+    observations: dict = field(default_factory=dict)  # contact data sets: name -> spec (simulate_contacts)
 
 
 def load_study(path: str | Path) -> Study:
@@ -204,10 +209,11 @@ def load_study(path: str | Path) -> Study:
     ranges = _joint_map(sampling, "ranges_deg", nominal, pairs=True)
     fixed = _joint_map(sampling, "fixed_deg", nominal, pairs=False)
     sampling.done()
-    datasets = _datasets(top.section("datasets", required=True))
+    features = read_cell_features(top.section("features")) if top.has("features") else None
+    datasets, observations = _datasets(top.section("datasets", required=True), features)
     top.done()
     robot = VirtualRobot(nominal, true, base_rot, base_mm, compliance, gear, tracker, scale, targets, repeatability)
-    return Study(robot, seed, output, datasets, ranges, fixed, path)
+    return Study(robot, seed, output, datasets, ranges, fixed, path, features, observations)
 
 
 def _targets(top: Section, nominal: Robot) -> tuple[Robot, dict]:
@@ -317,16 +323,25 @@ def _joint_map(sec: Section, key: str, robot: Robot, pairs: bool) -> dict:
     return out
 
 
-def _datasets(sec: Section) -> dict[str, dict]:
-    out = {}
+def _datasets(sec: Section, features: CellFeatures | None) -> tuple[dict[str, dict], dict[str, dict]]:
+    """The point data sets and the contact data sets (``plane:``, ``fixed:``, ``distance:``) of ``datasets:``."""
+    out, contacts = {}, {}
     for name in list(sec.data):
         problem = safe_name(str(name))
         if problem:
             sec.fail(sec.path(str(name)), f"the data-set name {str(name)!r} must be {problem}")
         item = sec.section(name)
-        if item.has("sample") + item.has("path") + item.has("iso9283") != 1:
+        given = [k for k in ("sample", "path", "iso9283", *CONTACT_KEYS) if item.has(k)]
+        if len(given) != 1:
             item.fail(item.where, "give exactly one of 'sample: N' (sampled configurations), "
-                                  f"'path: NAME' ({', '.join(PATHS)}) or 'iso9283: CYCLES' (the ISO 9283 cube's P1..P5)")
+                                  f"'path: NAME' ({', '.join(PATHS)}), 'iso9283: CYCLES' (the ISO 9283 cube's "
+                                  "P1..P5), or contact data 'plane:', 'fixed:' or 'distance:' (docs/virtual_robot.md)")
+        if given[0] in CONTACT_KEYS:
+            if features is None and given[0] != "distance":
+                item.fail(item.path(given[0]), "needs the cell's planes and points: add a 'features:' section")
+            contacts[name] = read_contact_dataset(item, features)
+            item.done()
+            continue
         if item.has("sample"):
             spec = {"sample": item.get("sample", "int", check=range_check(1, 10**7, integer=True))}
         elif item.has("iso9283"):
@@ -337,74 +352,15 @@ def _datasets(sec: Section) -> dict[str, dict]:
                     "start_mm": item.get("start_mm", "list", default=None, check=_vector3)}
         item.done()
         out[name] = spec
-    if not out:
+    if not out and not contacts:
         sec.fail(sec.where, "lists no data set")
-    return out
+    return out, contacts
 
 
 def _cube(value) -> str | None:
     ok = isinstance(value, list) and len(value) == 4 and all(
         isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v) for v in value)
     return None if ok and value[3] > 0 else "[cx, cy, cz, edge] in mm (the cube's centre and a positive edge)"
-
-
-FARTHEST_POINT_UP_TO = 2000
-"""Sampled data sets of up to this many poses are picked by farthest-point selection (its cost grows as the
-square of the poses: 20,000 took 400 s); larger ones take the first admissible points of a scrambled Sobol
-sequence, as evenly spread and linear in cost (20,000 in under a second)."""
-
-
-def _low_discrepancy(robot: Robot, n: int, lo, hi, fixed_deg: dict, rng: np.random.Generator
-                     ) -> NDArray[np.float64]:
-    """The first ``n`` admissible points of a scrambled Sobol sequence over the ranges (seeded by ``rng``)."""
-    from scipy.stats import qmc
-
-    sobol = qmc.Sobol(robot.n_joints, scramble=True, seed=rng)
-    kept, drawn = [], 0
-    while sum(len(k) for k in kept) < n:
-        batch = 1 << max(10, int(np.ceil(np.log2(n))))
-        if drawn > 64 * n:
-            raise ConfigError(f"fewer than {n} admissible configurations among {drawn} drawn; widen "
-                              "sampling.ranges_deg")
-        q = lo + sobol.random(batch) * (hi - lo)
-        for j, value in fixed_deg.items():
-            q[:, j - 1] = value
-        kept.append(q[robot.within_limits(q)])
-        drawn += batch
-    return np.concatenate(kept)[:n]
-
-
-def sample_configurations(robot: Robot, n: int, ranges_deg: dict, fixed_deg: dict,
-                          rng: np.random.Generator, oversample: int = 20) -> NDArray[np.float64]:
-    """``n`` well-spread joint configurations within ranges, limits and constraints.
-
-    Draws ``oversample * n`` uniform candidates, keeps the admissible ones and
-    picks ``n`` of them by farthest-point selection in range-normalised joint
-    space, so the set covers every active joint's range evenly; above
-    :data:`FARTHEST_POINT_UP_TO` poses, a scrambled Sobol sequence instead.
-    """
-    lo = robot.limits_deg[:, 0].copy()
-    hi = robot.limits_deg[:, 1].copy()
-    for j, (a, b) in ranges_deg.items():
-        lo[j - 1], hi[j - 1] = max(a, lo[j - 1]), min(b, hi[j - 1])
-    if n > FARTHEST_POINT_UP_TO:
-        return _low_discrepancy(robot, n, lo, hi, fixed_deg, rng)
-    cand = rng.uniform(lo, hi, size=(oversample * n, robot.n_joints))
-    for j, value in fixed_deg.items():
-        cand[:, j - 1] = value
-    cand = cand[robot.within_limits(cand)]
-    if cand.shape[0] < n:
-        raise ConfigError(f"only {cand.shape[0]} admissible configurations among {oversample * n} candidates; "
-                         "widen sampling.ranges_deg")
-    span = np.where(hi > lo, hi - lo, 1.0)
-    unit = (cand - lo) / span
-    chosen = [int(np.argmin(np.linalg.norm(unit - 0.5, axis=1)))]
-    dist = np.linalg.norm(unit - unit[chosen[0]], axis=1)
-    for _ in range(n - 1):
-        k = int(np.argmax(dist))
-        chosen.append(k)
-        dist = np.minimum(dist, np.linalg.norm(unit - unit[k], axis=1))
-    return cand[chosen]
 
 
 def simulate(study: Study) -> dict[str, Measurements]:
@@ -456,25 +412,34 @@ def _shown(path: Path) -> str:
         return str(full)
 
 
-def write_study(study: Study, data: dict[str, Measurements]) -> list[Path]:
+def write_study(study: Study, data: dict[str, Measurements], observations: dict | None = None) -> list[Path]:
     """Write each data set to ``<output>/<name>.csv`` and return the paths.
 
-    The files are replaced as a set: all are written to temporary names first
-    and renamed only when every one of them is complete.
+    Contact data sets (``observations``: :func:`~partcal.data.simulate_contacts.simulate_observations` of the
+    study, made here when not given) add ``<name>.csv`` in the measurement-kinds contract, ``<name>.truth.yaml``
+    and the cell's ``features.yaml``. The files are replaced as a set: all are written to temporary names
+    first and renamed only when every one of them is complete.
     """
     check_folder_writable(study.output)
+    if observations is None:
+        observations = simulate_observations(study)
     pending = []
     try:
         for name, m in data.items():
             target = study.output / f"{name}.csv"
-            note = (f"Virtual {study.robot.nominal.name}, data set '{name}', simulated by partcal from "
-                    f"{study.source.name} with seed {study.seed}.\nRegenerate with: partcal simulate "
-                    f"{_shown(study.source)}. Do not edit by hand.")
             tmp = study.output / f".{name}.csv.partial"
-            write_measurements(m, tmp, comment=note)
             pending.append((tmp, target))
+            write_measurements(m, tmp, comment=_note(study, f"data set '{name}'"))
+        if observations:
+            pending += write_contact_files(study, observations, _note)
         replace_all(pending)
     finally:
         for tmp, _ in pending:
             tmp.unlink(missing_ok=True)
     return [target for _, target in pending]
+
+
+def _note(study: Study, what: str) -> str:
+    """The comment heading a simulated file: where it comes from and how to make it again."""
+    return (f"Virtual {study.robot.nominal.name}, {what}, simulated by partcal from {study.source.name} with seed "
+            f"{study.seed}.\nRegenerate with: partcal simulate {_shown(study.source)}. Do not edit by hand.")

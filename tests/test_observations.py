@@ -1,0 +1,223 @@
+"""The measurement-kinds CSV and the features YAML (partcal/data/observations.py, docs/data.md)."""
+
+import re
+
+import numpy as np
+import pytest
+from conftest import write_text
+
+from partcal.data.formats import MeasurementFormat
+from partcal.data.measurements import read_measurements
+from partcal.data.observations import (ObservationTable, has_kind_column, read_features, read_observations,
+                                       write_observations)
+from partcal.errors import ConfigError, DataError
+
+HEADER = "q1,q2,kind,id,feature,flush,distance_mm,to,x_meas,y_meas,z_meas,set"
+ROWS = """\
+# one row of every kind
+1,2,point,,,,,,100,200,300,id
+3,4,plane,,top,1,,,,,,id
+5,6,plane,,top,,,,,,,id
+7,8,fixed,,nest_a,,,,,,,id
+9,10,pose,end,,,,,,,,id
+11,12,distance,,,,812.5,end,,,,id
+13,14,distance,,,,900.25,nest_a,,,,id
+"""
+
+
+def write(tmp_path, text, name="obs.csv"):
+    return write_text(tmp_path, text, name)
+
+
+def refused(path, line, column, pattern, **kwargs):
+    """Reading ``path`` fails naming the file, the line and the column, then ``pattern``."""
+    with pytest.raises(DataError) as info:
+        read_observations(path, **kwargs)
+    message = str(info.value)
+    head = f"{path}:{line}: column '{column}': "
+    assert message.startswith(head), message
+    assert re.search(pattern, message[len(head):]), message
+
+
+def test_every_kind_is_read_into_plain_arrays(tmp_path):
+    path = write(tmp_path, HEADER + "\n" + ROWS)
+    t = read_observations(path, None)
+    assert t.kind == ("point", "plane", "plane", "fixed", "pose", "distance", "distance")
+    assert t.ids == ("1", "2", "3", "4", "end", "6", "7")          # default: the 1-based data-row number
+    assert t.lines == (3, 4, 5, 6, 7, 8, 9)                          # the comment and header lines counted
+    assert t.q_deg.tolist() == [[1, 2], [3, 4], [5, 6], [7, 8], [9, 10], [11, 12], [13, 14]]
+    assert t.texts["feature"] == ("", "top", "top", "nest_a", "", "", "")
+    assert t.texts["to"][5:] == ("end", "nest_a")
+    np.testing.assert_array_equal(t.numbers["flush"], [np.nan, 1, np.nan, np.nan, np.nan, np.nan, np.nan])
+    np.testing.assert_array_equal(t.numbers["distance_mm"][5:], [812.5, 900.25])
+    assert np.isnan(t.numbers["distance_mm"][:5]).all()
+    assert [t.numbers[c][0] for c in ("x_meas", "y_meas", "z_meas")] == [100, 200, 300]
+    assert t.texts["set"] == ("id",) * 7 and t.name == "obs" and t.source == str(path)
+    assert t.rows_of("plane").tolist() == [1, 2] and len(t) == 7
+
+
+def test_a_file_with_kind_is_told_from_a_point_file(tmp_path):
+    kinds = write(tmp_path, HEADER + "\n" + ROWS)
+    points = write(tmp_path, "q1,q2,x_nom,y_nom,z_nom,x_meas,y_meas,z_meas\n1,2,3,4,5,6,7,8\n", "p.csv")
+    assert has_kind_column(kinds) and not has_kind_column(points)
+    assert has_kind_column(write(tmp_path, "q1;kind\n1;pose\n", "semi.csv"), MeasurementFormat(delimiter=";"))
+    assert read_measurements(points).errors_mm.tolist() == [[3, 3, 3]]      # a point file reads as before
+    with pytest.raises(DataError, match=r"p\.csv:1: column 'kind' is missing"):
+        read_observations(points)
+
+
+def test_other_columns_are_kept_as_numbers_or_texts(tmp_path):
+    path = write(tmp_path, "q1,kind,gauge_mm,note,flag\n1,pose,2.5,a,nan\n2,pose,,3,1\n")
+    t = read_observations(path)
+    np.testing.assert_array_equal(t.numbers["gauge_mm"], [2.5, np.nan])
+    assert t.texts["note"] == ("a", "3") and t.texts["flag"] == ("nan", "1")
+
+
+def test_kinds_are_a_parameter(tmp_path):
+    path = write(tmp_path, "q1,kind,angle\n1,inclinometer,0.5\n2,pose,\n")
+    refused(path, 2, "kind", r"one of the kinds point, plane, fixed, distance, pose, got 'inclinometer'")
+    t = read_observations(path, kinds=("pose", "inclinometer"))
+    assert t.kind == ("inclinometer", "pose") and t.numbers["angle"][0] == 0.5
+
+
+@pytest.mark.parametrize("row, line, column, pattern", [
+    ("1,2,laser,,,,,,,,,", 3, "kind", r"one of the kinds point, plane, fixed, distance, pose, got 'laser'"),
+    ("1,2,,,,,,,,,,", 3, "kind", r"one of the kinds .*, got an empty cell"),
+    ("1,2,plane,,,,,,,,,", 3, "feature", r"a value on a plane row \(plane rows read feature\), got an empty cell"),
+    ("1,2,fixed,,,,,,,,,", 3, "feature", r"a value on a fixed row"),
+    ("1,2,distance,,,,,x,,,,", 3, "distance_mm", r"a value on a distance row \(distance rows read distance_mm, to\)"),
+    ("1,2,distance,,,,5,,,,,", 3, "to", r"a value on a distance row"),
+    ("1,2,distance,,,,0,x,,,,", 3, "distance_mm", r"a distance > 0 mm, got '0'"),
+    ("1,2,distance,,,,-3.5,x,,,,", 3, "distance_mm", r"a distance > 0 mm, got '-3.5'"),
+    ("1,2,point,,,,,,1,2,,", 3, "z_meas", r"a value on a point row \(point rows read x_meas, y_meas, z_meas\)"),
+    ("1,2,point,,,,,,1,2,abc,", 3, "z_meas", r"expected a finite number, got 'abc'"),
+    ("1,2,plane,,top,2,,,,,,", 3, "flush", r"0 or 1 .*, got '2'"),
+    ("1,,pose,,,,,,,,,", 3, "q2", r"a number \(it is required on every row\), got an empty cell"),
+    ("1,2,pose,,,,abc,,,,,", 3, "distance_mm", r"expected a finite number, got 'abc'"),
+    ("1,2.5.1,pose,,,,,,,,,", 3, "q2", r"expected a finite number, got '2.5.1'"),
+])
+def test_each_refusal_names_file_line_and_column(tmp_path, row, line, column, pattern):
+    path = write(tmp_path, HEADER + "\n1,2,pose,,,,,,,,,\n" + row + "\n")
+    refused(path, line, column, pattern)
+
+
+def test_duplicate_ids_and_dangling_references(tmp_path):
+    dup = write(tmp_path, "q1,kind,id\n1,pose,a\n2,pose,b\n3,pose,a\n")
+    refused(dup, 4, "id", r"an id of its own \(line 2 has it already.*got 'a'")
+    numbered = write(tmp_path, "q1,kind,id\n1,pose,2\n2,pose,\n", "n.csv")      # row 2's default id is "2"
+    refused(numbered, 3, "id", r"an id of its own \(line 2 has it already.*got '2'")
+    features = {"planes": {}, "points": {"pivot": {}}, "noise_mm": {}}
+    dangling = write(tmp_path, "q1,kind,id,distance_mm,to\n1,pose,a,,\n2,distance,,10,b\n3,distance,,10,pivot\n",
+                     "d.csv")
+    refused(dangling, 3, "to", r"the id of a row of the file or a point of the features \(pivot\), got 'b'",
+            features=features)
+    assert read_observations(dangling).texts["to"] == ("", "b", "pivot")       # without features: not checked
+    own = write(tmp_path, "q1,kind,id,distance_mm,to\n1,distance,a,10,a\n", "own.csv")
+    refused(own, 2, "to", r"another row's id \(a distance from a row to itself\), got 'a'")
+    clash = write(tmp_path, "q1,kind,id\n1,pose,pivot\n", "clash.csv")
+    refused(clash, 2, "id", r"not also a point of the features", features=features)
+
+
+def test_missing_column_for_a_row_and_bad_header(tmp_path):
+    with pytest.raises(DataError, match=r"h\.csv:2: the header is not followed by any data row"):
+        read_observations(write(tmp_path, "# nothing yet\nq1,kind\n", "h.csv"))
+    with pytest.raises(DataError, match=r"e\.csv: empty file: expected a header line such as"):
+        read_observations(write(tmp_path, "# nothing\n", "e.csv"))
+    path = write(tmp_path, "q1,kind\n1,plane\n")
+    refused(path, 2, "feature", r"the file has no column 'feature'")
+    with pytest.raises(DataError, match=r"g\.csv:1: column 'q3': joint columns must run q1\.\.qN without gaps"):
+        read_observations(write(tmp_path, "q1,q3,kind\n1,2,pose\n", "g.csv"))
+    with pytest.raises(DataError, match=r"s\.csv:2: expected 3 cells as in the header, got 2"):
+        read_observations(write(tmp_path, "q1,q2,kind\n1,pose\n", "s.csv"))
+    with pytest.raises(DataError, match=r"r\.csv: the file has 2 joint columns \(q1\.\.q2\) but robot "
+                                        r"'universal_robots_ur10' has 6 joints"):
+        read_observations(write(tmp_path, "q1,q2,kind\n1,2,pose\n", "r.csv"), "universal_robots_ur10")
+    with pytest.raises(DataError, match=r"p\.csv:3: column 'payload_kg': expected a payload mass in \[0, 100000\] "
+                                        r"kg, got '-1'"):
+        read_observations(write(tmp_path, "q1,kind,payload_kg\n1,pose,2\n1,pose,-1\n", "p.csv"))
+
+
+def test_foreign_units_are_converted(tmp_path):
+    path = write(tmp_path, "q1;kind;distance_mm;to;id\n0,5;pose;;;a\n1,0;distance;0,25;a;\n")
+    fmt = MeasurementFormat(delimiter=";", decimal=",", joint_unit="rad", length_unit="m")
+    t = read_observations(path, fmt=fmt)
+    np.testing.assert_allclose(t.q_deg[:, 0], np.degrees([0.5, 1.0]))
+    assert t.numbers["distance_mm"][1] == 250.0
+
+
+def test_write_then_read_gives_the_same_table(tmp_path):
+    table = ObservationTable(
+        q_deg=np.array([[10.5, -20.25], [0.125, 1.0], [3.0, 4.0]]), kind=("plane", "pose", "distance"),
+        ids=("t1", "p,1", "d"), lines=(0, 0, 0), source="mem",
+        numbers={"flush": np.array([1.0, np.nan, np.nan]), "distance_mm": np.array([np.nan, np.nan, 812.123456])},
+        texts={"feature": ("top", "", ""), "to": ("", "", "p,1")}, name="x")
+    path = tmp_path / "x.csv"
+    write_observations(table, path, comment="two\nlines")
+    text = path.read_text()
+    assert text.startswith("# two\n# lines\nq1,q2,kind,id,feature,flush,distance_mm,to\n")
+    back = read_observations(path)
+    np.testing.assert_array_equal(back.q_deg, table.q_deg)
+    assert back.kind == table.kind and back.ids == table.ids and back.texts == table.texts
+    np.testing.assert_array_equal(back.numbers["flush"], table.numbers["flush"])
+    np.testing.assert_array_equal(back.numbers["distance_mm"], table.numbers["distance_mm"])
+    assert back.lines == (4, 5, 6)
+    write_observations(back, tmp_path / "again.csv", comment="two\nlines")
+    assert (tmp_path / "again.csv").read_text() == text
+
+
+FEATURES = """\
+planes:
+  top:  {normal: [0, 0, 2], offset_mm: 800}
+  step: {parallel_to: top, spacing_mm: -200}
+  side: {}
+points:
+  nest_a: {}
+  nest_b: {distance_to: nest_a, distance_mm: 1000}
+  sphere: {known_mm: [900, 0, 300]}
+noise_mm: {plane: 0.01, fixed: 0.02}
+"""
+
+
+def test_features_are_read_with_unit_normals(tmp_path):
+    f = read_features(write(tmp_path, FEATURES, "features.yaml"))
+    assert f == {"planes": {"top": {"normal": [0.0, 0.0, 1.0], "offset_mm": 800.0},
+                            "step": {"parallel_to": "top", "spacing_mm": -200.0}, "side": {}},
+                 "points": {"nest_a": {}, "nest_b": {"distance_to": "nest_a", "distance_mm": 1000.0},
+                            "sphere": {"known_mm": [900.0, 0.0, 300.0]}},
+                 "noise_mm": {"plane": 0.01, "fixed": 0.02}}
+    assert read_features(write(tmp_path, "", "empty.yaml")) == {"planes": {}, "points": {}, "noise_mm": {}}
+
+
+@pytest.mark.parametrize("old, new, pattern", [
+    ("side: {}", "side: {colour: red}", r"planes\.side\.colour \(line 4\): unknown key"),
+    ("[0, 0, 2]", "[0, 0, 0]", r"planes\.top\.normal \(line 2\): must be a direction \(a non-zero vector\); got "
+                               r"\[0\.0, 0\.0, 0\.0\]"),
+    ("[0, 0, 2]", "[0, 0]", r"planes\.top\.normal \(line 2\): must be a list of three finite numbers"),
+    ("offset_mm: 800", "offset_mm: .nan", r"planes\.top\.offset_mm \(line 2\): must be a finite number; got nan"),
+    ("parallel_to: top", "parallel_to: step", r"planes\.step\.parallel_to \(line 3\): must name another feature "
+                                              r"than 'step' itself"),
+    ("parallel_to: top", "parallel_to: floor", r"planes\.step\.parallel_to \(line 3\): must name a feature of "
+                                               r"planes \(top, step, side\); got 'floor'"),
+    ("nest_a: {}", "nest_a: {distance_to: nest_b, distance_mm: 5}",
+     r"points\.nest_a\.distance_to \(line 6\): closes a cycle: nest_a -> nest_b -> nest_a"),
+    ("distance_mm: 1000", "distance_mm: 0", r"points\.nest_b\.distance_mm \(line 7\): must be a finite number > 0"),
+    ("fixed: 0.02", "laser: 0.02", r"noise_mm\.laser \(line 9\): unknown kind; expected one of point, plane"),
+    ("noise_mm", "noise", r"top level|noise \(line 9\): unknown key"),
+    ("side: {}", "'a b': {}", r"planes\.a b \(line 4\): a feature's name is letters"),
+])
+def test_feature_refusals_name_path_and_line(tmp_path, old, new, pattern):
+    path = write(tmp_path, FEATURES.replace(old, new), "features.yaml")
+    with pytest.raises(ConfigError, match=rf"^{re.escape(str(path))}: .*{pattern}"):
+        read_features(path)
+
+
+def test_the_documented_example_reads(tmp_path):
+    from conftest import ROOT
+
+    text = (ROOT / "docs" / "data.md").read_text()
+    block = text[text.index("q1,q2,q3,q4,q5,q6,kind,id"):]
+    path = write(tmp_path, block[:block.index("```")], "example.csv")
+    features = {"planes": {"top": {}}, "points": {"nest_a": {}}, "noise_mm": {}}
+    t = read_observations(path, "universal_robots_ur10", features=features)
+    assert t.kind == ("point", "plane", "plane", "fixed", "pose", "pose", "distance", "distance")
+    assert t.numbers["flush"][2] == 1 and t.texts["to"][-2:] == ("a", "nest_a")

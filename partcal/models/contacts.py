@@ -1,14 +1,14 @@
 """The built-in measurement kinds: tracker points, plane contacts, fixed points and distances.
 
 Each is one class registered in :data:`~partcal.models.measures.MEASUREMENT_KINDS` (see
-:mod:`partcal.models.measures` for what a kind answers). Lengths are mm; a plane's normal tilts
-are radians; residuals are mm.
+:mod:`partcal.models.measures` for what a kind answers). Lengths are mm; a plane's normal slopes
+are plain numbers; residuals are mm.
 
 - ``point``: a tracker point of the tool in the base frame; residual ``p - measured`` (three per row).
 - ``plane``: the tool tip touches plane ``feature``: ``n . p - offset`` (one per row); a ``flush``
   row (a flat face of the tool lies on the plane) adds the tool z axis' two tilts against the
   normal, as millimetres of the face's rim (:data:`FACE_RADIUS_MM`). Planes are unknown (three
-  unknowns: two tilts of the normal, the offset), started from the given normal and offset or
+  unknowns: the normal's two slopes against the coordinate axis nearest it, the offset), started from the given normal and offset or
   from the nominal robot's touches, or tied to another plane (``parallel_to``: its normal, and its
   offset plus a known ``spacing_mm``: no unknowns of its own).
 - ``fixed``: the tool tip at fixed point ``feature``: ``p - c`` (three per row); the point unknown
@@ -58,14 +58,6 @@ class PointKind(MeasurementKind):
 
     def describe(self) -> str:
         return f"{self.index.size} tracker points"
-
-
-def _tangents(normal: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Two unit vectors that complete ``normal`` to a right-handed frame."""
-    helper = np.eye(3)[int(np.argmin(np.abs(normal)))]
-    t1 = np.cross(normal, helper)
-    t1 /= np.linalg.norm(t1)
-    return t1, np.cross(normal, t1)
 
 
 @add_measurement_kind
@@ -129,9 +121,14 @@ class PlaneKind(MeasurementKind):
                 tips = positions[self.index[[self._root(p)[0] == root for p in self.plane]]]
                 spacing = np.array([self._root(p)[1] for p in self.plane if self._root(p)[0] == root])
                 offset = float(np.mean(tips @ normal - spacing))
-            self.frames[root] = (normal, *_tangents(normal))
-            names += [(f"plane {root}.tilt1", "rad"), (f"plane {root}.tilt2", "rad"), (f"plane {root}.offset", "mm")]
-            start += [0.0, 0.0, offset]
+            axis = int(np.argmax(np.abs(normal)))
+            pole = np.sign(normal[axis]) * np.eye(3)[axis]
+            t1, t2 = (np.eye(3)[i] for i in range(3) if i != axis)
+            self.frames[root] = (pole, t1, t2)
+            label = f"{'+' if pole[axis] > 0 else '-'}{'xyz'[axis]}"
+            names += [(f"plane {root}.{'xyz'[i]}/{label}", "1") for i in range(3) if i != axis]
+            names.append((f"plane {root}.offset", "mm"))
+            start += [float(normal @ t1 / (normal @ pole)), float(normal @ t2 / (normal @ pole)), offset]
         self.roots = roots
         return names, np.array(start)
 
@@ -159,7 +156,11 @@ class PlaneKind(MeasurementKind):
         return normal, np.nan
 
     def _plane(self, root: str, u: NDArray[np.float64]) -> tuple[NDArray[np.float64], float, tuple]:
-        """Normal, offset and ``d normal / d tilt`` (two vectors) of root plane ``root`` at its unknowns."""
+        """Normal, offset and ``d normal / d tilt`` (two vectors) of root plane ``root`` at its unknowns.
+
+        The normal is ``pole + a t1 + b t2`` normalised: ``pole`` the coordinate axis (with its sign) nearest the
+        plane's start, ``t1, t2`` the other two axes, ``a, b`` its unknowns (named ``plane P.x/+z``, ...). The
+        unknowns mean the same whatever rows the fit saw, so a fitted plane scores held-out touches."""
         k = self.roots.index(root)
         a, b, offset = u[3 * k:3 * k + 3]
         n0, t1, t2 = self.frames[root]

@@ -1,0 +1,144 @@
+"""``partcal run`` on measurement kinds (partcal/study/kinds_run.py): a virtual UR10 touching a step block,
+visiting fixed points and measured by a ballbar, identified without a tracker and scored against tracker
+points of the same virtual robot; refusals; a kind added by a test module runs through the command."""
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from partcal.cli import main
+from partcal.data.measurements import read_measurements
+from partcal.data.simulate import load_study, simulate, write_study
+from partcal.errors import ConfigError
+from partcal.models.measures import MEASUREMENT_KINDS, MeasurementKind, Residuals, add_measurement_kind
+from partcal.robot.frames import kabsch
+from partcal.study.config import load_config
+from partcal.study.persist import load_model
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+@pytest.fixture(scope="module")
+def cell(tmp_path_factory):
+    """The shipped virtual cell, smaller: its data sets written into a folder of their own."""
+    folder = tmp_path_factory.mktemp("cell")
+    text = (ROOT / "configs" / "ur10_contacts_virtual.yaml").read_text()
+    text = text.replace("output: ../data/ur10_contacts", "output: data")
+    text = text.replace("plane: {top: 300, step: 300, side: 200}", "plane: {top: 100, step: 100, side: 80}")
+    text = text.replace("pairs: all, poses: 100", "pairs: all, poses: 30")
+    (folder / "virtual.yaml").write_text(text)
+    study = load_study(folder / "virtual.yaml")
+    write_study(study, simulate(study))
+    return folder, study
+
+
+def _config(folder: Path, identification: str, features: str | None = "features.yaml", models: str = "", name="r"):
+    text = f"""name: {name}
+robot: universal_robots_ur10
+data:
+  identification: data/{identification}
+{f'  features: data/{features}' if features else ''}
+  tests:
+    test: data/test.csv
+models:
+  - name: complete
+    kind: kinematic
+    parametrization: complete
+{models}output: out_{name}
+"""
+    path = folder / f"{name}.yaml"
+    path.write_text(text)
+    return path
+
+
+def test_a_run_on_touches_identifies_the_robot_and_scores_tracker_points_after_a_rigid_fit(cell, capsys):
+    folder, study = cell
+    path = _config(folder, "touches.csv", name="touches")
+    assert main(["run", "-q", str(path)]) == 0
+    printed = capsys.readouterr().out
+    assert "rigid" in printed
+    metrics = json.loads((folder / "out_touches" / "metrics.json").read_text())
+    entry = metrics["models"]["complete"]
+    assert 0.005 < entry["cv_kinds_rms_mm"]["plane"] < 0.02          # the touches' 0.01 mm noise, held out
+    # the score printed is the model's, after a rigid fit, against the test set: computed here independently
+    model, _ = load_model(folder / "out_touches" / "models" / "complete.json")
+    test = read_measurements(folder / "data" / "test.csv")
+    predicted = test.nominal_mm + model.predict(test.q_deg)
+    rot, t = kabsch(predicted, test.measured_mm)
+    expected = np.sqrt(np.mean(np.sum((predicted @ rot.T + t - test.measured_mm) ** 2, axis=1)))
+    assert entry["tests"]["test"]["rms_3d"] == pytest.approx(expected, rel=1e-9)
+    rot0, t0 = kabsch(test.nominal_mm, test.measured_mm)
+    before = np.sqrt(np.mean(np.sum((test.nominal_mm @ rot0.T + t0 - test.measured_mm) ** 2, axis=1)))
+    assert expected < 0.1 < before                                   # calibrated from touches alone
+    html = (folder / "out_touches" / "index.html").read_text()
+    assert "What these data cannot identify" in html and "plane top" in html
+
+
+def test_check_names_the_scale_when_every_plane_is_unknown(cell, capsys):
+    folder, _ = cell
+    (folder / "data" / "loose.yaml").write_text("planes: {top: {}, step: {}, side: {}}\n")
+    path = _config(folder, "touches.csv", features="loose.yaml", name="loose")
+    assert main(["run", "--check", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "scale: nothing here measures a length" in out
+    tied = _config(folder, "touches.csv", name="tied")
+    assert main(["run", "--check", str(tied)]) == 0
+    assert "scale:" not in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("data", ["nests.csv", "ballbar.csv"])
+def test_fixed_points_and_distances_run_too(cell, data):
+    folder, _ = cell
+    path = _config(folder, data, name=data.split(".")[0])
+    assert main(["run", "-q", str(path)]) == 0
+    metrics = json.loads((folder / f"out_{data.split('.')[0]}" / "metrics.json").read_text())
+    entry = metrics["models"]["complete"]
+    kind = "fixed" if data == "nests.csv" else "distance"
+    assert entry["cv_kinds_rms_mm"][kind] < 0.03
+    assert entry["tests"]["test"]["rms_3d"] < 0.15
+
+
+def test_a_model_of_an_error_field_is_refused_naming_it(cell, capsys):
+    folder, _ = cell
+    path = _config(folder, "touches.csv", name="field", models="  - name: FDP(CI)\n    inputs: cartesian\n"
+                                                              "    basis: polynomial\n    degree: 1\n"
+                                                              "    solver: {method: lstsq}\n")
+    assert main(["run", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "FDP(CI)" in err and "error field" in err and "plane" in err
+
+
+class Height(MeasurementKind):
+    """A toy kind of this test module: the tool tip's height read by a height gauge, ``height_mm``."""
+
+    name = "height_toy"
+    default_noise_mm = 0.01
+
+    def residuals(self, positions, rotations, u):
+        grad = np.tile([0.0, 0.0, 1.0], (self.index.size, 1))
+        return Residuals(positions[self.index, 2] - self.rows.number("height_mm", self.index), self.index.copy(),
+                         grad, np.zeros((self.index.size, 0)))
+
+
+def test_a_kind_registered_here_runs_through_partcal_run(cell, capsys):
+    folder, study = cell
+    vr = study.robot
+    rng = np.random.default_rng(0)
+    q = read_measurements(folder / "data" / "test.csv").q_deg[:120]
+    height = vr.true_positions(q)[:, 2] + rng.normal(0, 0.01, len(q))
+    lines = ["q1,q2,q3,q4,q5,q6,kind,height_mm"] + [
+        ",".join(f"{v:.6f}" for v in row) + f",height_toy,{h:.6f}" for row, h in zip(q, height)]
+    (folder / "data" / "heights.csv").write_text("\n".join(lines) + "\n")
+    add_measurement_kind(Height)
+    try:
+        path = _config(folder, "heights.csv", features=None, name="heights")
+        assert main(["run", "-q", str(path)]) == 0
+        metrics = json.loads((folder / "out_heights" / "metrics.json").read_text())
+        assert metrics["kinds"]["height_toy"] == "120 height_toy rows"
+        assert 0.005 < metrics["models"]["complete"]["cv_kinds_rms_mm"]["height_toy"] < 0.03
+    finally:
+        del MEASUREMENT_KINDS["height_toy"]
+    assert "height_toy" not in load_config(path).source.read_text().split("kind:")[0]

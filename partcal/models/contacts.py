@@ -346,16 +346,14 @@ class DistanceKind(MeasurementKind):
 
     def residuals(self, positions, rotations, u) -> Residuals:
         m = self.index.size
-        ends = np.empty((m, 3))
+        ends = positions[np.maximum(self.other, 0)]
         du = np.zeros((m, u.size))
         pivot_cols = np.full(m, -1)
-        for i, (other, pivot) in enumerate(zip(self.other, self.pivot)):
-            if pivot is None:
-                ends[i] = positions[other]
-            elif pivot in self.pivots:
-                k = 3 * self.pivots.index(pivot)
-                ends[i] = u[k:k + 3]
-                pivot_cols[i] = k
+        for i in np.flatnonzero(self.other < 0):                 # a pivot: a point of its own
+            pivot = self.pivot[i]
+            if pivot in self.pivots:
+                pivot_cols[i] = 3 * self.pivots.index(pivot)
+                ends[i] = u[pivot_cols[i]:pivot_cols[i] + 3]
             else:
                 ends[i] = self.specs[pivot]["known_mm"]
         diff = positions[self.index] - ends

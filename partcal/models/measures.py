@@ -275,8 +275,11 @@ class StackedProblem:
         self.payload, self.par = payload, parametrization
         self.own = nominal_values(nominal, errors, parametrization).size
         self.orientation = any(k.needs_orientation for k in kinds)
+        # the chain once per distinct pose (all pairs of 1,000 poses are 500,000 rows of 1,000 poses)
+        poses, inverse = np.unique(np.column_stack([rows.q_deg, payload]), axis=0, return_inverse=True)
+        self.poses, self.pose_payload, self.inverse = poses[:, :-1], poses[:, -1], inverse.ravel()
         v0 = nominal_values(nominal, errors, parametrization)
-        start = chain_at(nominal, errors, rows.q_deg, v0, payload, parametrization, self.orientation, False)
+        start = self.chain(v0, False)
         self.names: list[tuple[str, str]] = []
         starts: list[float] = []
         self.columns: list[NDArray[np.intp]] = []
@@ -295,11 +298,17 @@ class StackedProblem:
     def split(self, values: NDArray[np.float64]) -> list[NDArray[np.float64]]:
         return [values[cols] for cols in self.columns]
 
+    def chain(self, values: NDArray[np.float64], jacobian: bool) -> Chain:
+        """:class:`Chain` at every row (its derivatives at every distinct pose: index them by ``inverse``)."""
+        chain = chain_at(self.nominal, self.errors, self.poses, values[:self.own], self.pose_payload, self.par,
+                         self.orientation, jacobian)
+        return Chain(chain.positions[self.inverse], None if chain.rotations is None else
+                     chain.rotations[self.inverse], chain.jac, chain.omega)
+
     def raw(self, values: NDArray[np.float64], measured_only: bool = False) -> list[NDArray[np.float64]]:
         """Each kind's residuals (mm, unweighted); ``measured_only``: those of rows alone (not a known length
         between two of a kind's unknowns)."""
-        chain = chain_at(self.nominal, self.errors, self.rows.q_deg, values[:self.own], self.payload, self.par,
-                         self.orientation, False)
+        chain = self.chain(values, False)
         out = []
         for kind, u in zip(self.kinds, self.split(values)):
             r = kind.residuals(chain.positions, chain.rotations, u)
@@ -308,22 +317,23 @@ class StackedProblem:
 
     def __call__(self, values: NDArray[np.float64], jacobian: bool = True):
         """The weighted residuals and (with ``jacobian``) their Jacobian, as ``identify``'s ``jac_at``."""
-        chain = chain_at(self.nominal, self.errors, self.rows.q_deg, values[:self.own], self.payload, self.par,
-                         self.orientation, jacobian)
+        chain = self.chain(values, jacobian)
         out, blocks = [], []
         for kind, u, cols, w in zip(self.kinds, self.split(values), self.columns, self.weights):
             r = kind.residuals(chain.positions, chain.rotations, u)
             out.append(w * r.values)
             if jacobian:
                 block = np.zeros((r.values.size, values.size))
-                block[:, :self.own] = _through_chain(r, chain)
+                block[:, :self.own] = _through_chain(r, chain, self.inverse)
                 np.add.at(block.T, cols, r.du.T)
                 blocks.append(w * block)
         return np.concatenate(out), (np.vstack(blocks) if jacobian else None)
 
 
-def _through_chain(r: Residuals, chain: Chain, chunk: int = 20000) -> NDArray[np.float64]:
-    """``d residual / d`` the model's own parameters: each residual's gradients through its rows' targets."""
+def _through_chain(r: Residuals, chain: Chain, pose_of: NDArray[np.intp], chunk: int = 20000
+                   ) -> NDArray[np.float64]:
+    """``d residual / d`` the model's own parameters: each residual's gradients through its rows' targets
+    (row ``i``'s derivatives are those of pose ``pose_of[i]``)."""
     m, p = r.values.size, chain.jac.shape[2]
     out = np.zeros((m, p))
     for lo in range(0, m, chunk):
@@ -333,11 +343,11 @@ def _through_chain(r: Residuals, chain: Chain, chunk: int = 20000) -> NDArray[np
                 continue
             rows, grad = rows[part], grad[part]
             live = rows >= 0
-            out[part][live] += np.einsum("mi,mip->mp", grad[live], chain.jac[rows[live]])
+            out[part][live] += np.einsum("mi,mip->mp", grad[live], chain.jac[pose_of[rows[live]]])
         if r.turn_grad is not None:
             rows, grad = r.rows_a[part], r.turn_grad[part]
             live = rows >= 0
-            out[part][live] += np.einsum("mi,mip->mp", grad[live], chain.omega[rows[live]])
+            out[part][live] += np.einsum("mi,mip->mp", grad[live], chain.omega[pose_of[rows[live]]])
     return out
 
 
@@ -345,8 +355,8 @@ def scale_direction(problem: "StackedProblem") -> NDArray[np.float64]:
     """The parameter change of a uniform scale of the whole cell by one: the robot's lengths (found as the
     length parameters' change that moves every row's target ``p`` by ``p``, the base's place included), and
     every length among the kinds' unknowns by its own value. Zero when the robot's lengths cannot do it."""
-    chain = chain_at(problem.nominal, problem.errors, problem.rows.q_deg, problem.start[:problem.own],
-                     problem.payload, problem.par, False, True)
+    chain = chain_at(problem.nominal, problem.errors, problem.poses, problem.start[:problem.own],
+                     problem.pose_payload, problem.par, False, True)
     units = [u for _, u in parameter_names(problem.nominal, problem.errors, problem.par)]
     size = geometric_size(problem.nominal, problem.par)
     lengths = np.flatnonzero(np.array(units[:size]) == "mm")

@@ -142,3 +142,39 @@ def test_a_kind_registered_here_runs_through_partcal_run(cell, capsys):
     finally:
         del MEASUREMENT_KINDS["height_toy"]
     assert "height_toy" not in load_config(path).source.read_text().split("kind:")[0]
+
+
+def test_touches_and_tracker_points_in_two_files_in_the_trackers_frame(cell):
+    """Mixed data: 20 tracker points in the tracker's own frame (a point CSV) beside the touches; the tracker's
+    pose is fitted with the robot, and the test set (the same tracker) is scored after a rigid fit."""
+    folder, study = cell
+    vr = study.robot
+    test = read_measurements(folder / "data" / "test.csv")
+    rng = np.random.default_rng(3)
+    turn = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    for name, q in (("points", test.q_deg[:20]), ("tracked", test.q_deg[200:])):
+        seen = (vr.true_positions(q) - [2500.0, 0.0, 0.0]) @ turn + rng.normal(0, 0.02, (len(q), 3))
+        lines = ["q1,q2,q3,q4,q5,q6,x_meas,y_meas,z_meas"] + [",".join(f"{v:.6f}" for v in [*a, *b])
+                                                               for a, b in zip(q, seen)]
+        (folder / "data" / f"{name}.csv").write_text("\n".join(lines) + "\n")
+    path = folder / "mixed.yaml"
+    path.write_text(_config(folder, "touches.csv", name="mixed").read_text()
+                    .replace("identification: data/touches.csv",
+                             "identification: [data/touches.csv, data/points.csv]\n  frame: tracker")
+                    .replace("test: data/test.csv", "test: data/tracked.csv"))
+    assert main(["run", "-q", str(path)]) == 0
+    metrics = json.loads((folder / "out_mixed" / "metrics.json").read_text())
+    entry = metrics["models"]["complete"]
+    assert set(entry["cv_kinds_rms_mm"]) == {"point", "plane"}
+    assert entry["cv_kinds_rms_mm"]["point"] < 0.05 and entry["cv_kinds_rms_mm"]["plane"] < 0.02
+    assert metrics["kinds"]["point"] == "20 tracker points in the tracker's frame"
+    assert entry["tests"]["test"]["rigid_fit"] and entry["tests"]["test"]["rms_3d"] < 0.1
+
+
+def test_a_list_of_point_files_is_refused(cell, capsys):
+    folder, _ = cell
+    path = folder / "points_list.yaml"
+    path.write_text(_config(folder, "test.csv", features=None, name="plist").read_text()
+                    .replace("identification: data/test.csv", "identification: [data/test.csv, data/test.csv]"))
+    assert main(["run", "--check", str(path)]) == 2
+    assert "join them into one file" in capsys.readouterr().err

@@ -6,7 +6,8 @@ import pytest
 
 from partcal import load_robot
 from partcal.errors import DataError
-from partcal.models import contacts  # noqa: F401  (registers the built-in kinds)
+from partcal.models.contacts import TRACKER_FRAME
+from partcal.robot.rotations import matrix_from_rotation_vector
 from partcal.models.identification import nominal_values, robot_with
 from partcal.models.joint_errors import JointErrors
 from partcal.models.measures import (MEASUREMENT_KINDS, SCALE, MeasurementKind, Residuals, Rows, StackedProblem,
@@ -61,10 +62,16 @@ def _mixed_rows(rng):
     return _rows(q, kinds, numbers, {"feature": tuple(feature), "to": tuple(to)}), features
 
 
-@pytest.mark.parametrize("parametrization", ["dh", "complete"])
-def test_jacobian_of_every_kind_matches_finite_differences(parametrization):
+@pytest.mark.parametrize("parametrization, tracker", [("dh", False), ("complete", False), ("dh", True)])
+def test_jacobian_of_every_kind_matches_finite_differences(parametrization, tracker):
     rng = np.random.default_rng(5)
     rows, features = _mixed_rows(rng)
+    if tracker:         # the points in a tracker's frame turned 30 degrees: its pose among the unknowns
+        turn = matrix_from_rotation_vector(np.radians([10.0, -20.0, 15.0]))
+        x = np.column_stack([rows.numbers[c] for c in ("x_meas", "y_meas", "z_meas")]) @ turn + [5.0, -3.0, 2.0]
+        rows = Rows(rows.q_deg, rows.kind, rows.ids, rows.lines, rows.source,
+                    {**rows.numbers, "x_meas": x[:, 0], "y_meas": x[:, 1], "z_meas": x[:, 2]}, rows.texts)
+        features = {**features, TRACKER_FRAME: True}
     errors = JointErrors.for_robot(ROBOT, [2, 3], 0)
     payload = np.full(len(rows), 5.0)
     kinds = [cls.build(rows, features) for cls in MEASUREMENT_KINDS.values()]
@@ -228,3 +235,16 @@ def test_a_kinematic_model_fitted_on_touches_is_the_same_model_file_and_predicto
     with pytest.raises(DataError, match="residual model"):
         from partcal.models.series import ErrorModel
         KinematicModel(robot=ROBOT, residual=ErrorModel(solver="lstsq")).fit(q, None, measures=Measured(rows, tied))
+
+
+def test_tracker_points_in_their_own_frame_are_registered_by_the_fit():
+    rng = np.random.default_rng(21)
+    true = _true_robot(rng)
+    q = _configurations(60, rng)
+    turn = matrix_from_rotation_vector(np.radians([2.0, -5.0, 40.0]))
+    seen = (true.positions(q) - [2000.0, 100.0, -50.0]) @ turn + rng.normal(0, 0.02, (60, 3))  # tracker frame
+    rows = _rows(q, ["point"] * 60, {"x_meas": seen[:, 0], "y_meas": seen[:, 1], "z_meas": seen[:, 2]})
+    table, notes = identify_measures(ROBOT, rows, {TRACKER_FRAME: True})
+    assert table.target_rms_mm["point"] < 0.03
+    assert _score(true, table.value[:33], "dh", np.random.default_rng(0), rigid=True) < 0.03
+    assert any(n.startswith("point: the tracker's frame") for n in notes)

@@ -4,7 +4,9 @@ Each is one class registered in :data:`~partcal.models.measures.MEASUREMENT_KIND
 :mod:`partcal.models.measures` for what a kind answers). Lengths are mm; a plane's normal slopes
 are plain numbers; residuals are mm.
 
-- ``point``: a tracker point of the tool in the base frame; residual ``p - measured`` (three per row).
+- ``point``: a tracker point of the tool in the base frame, residual ``p - measured`` (three per row); or
+  in the tracker's own frame (features ``tracker_frame: true``), the tracker's pose then six unknowns
+  of the kind, fitted with the robot's (:data:`TRACKER_FRAME`).
 - ``plane``: the tool tip touches plane ``feature``: ``n . p - offset`` (one per row); a ``flush``
   row (a flat face of the tool lies on the plane) adds the tool z axis' two tilts against the
   normal, as millimetres of the face's rim (:data:`FACE_RADIUS_MM`). Planes are unknown (three
@@ -25,6 +27,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import DataError
+from ..robot.frames import kabsch
+from ..robot.rotations import matrix_from_rotation_vector, rotation_vector_from_matrix
 from .measures import END_KIND, MeasurementKind, Residuals, Rows, add_measurement_kind
 
 FACE_RADIUS_MM = 50.0
@@ -39,25 +43,75 @@ def _unit_rows(n: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     return np.repeat(np.arange(n), 3), np.tile(np.eye(3), (n, 1))
 
 
+TRACKER_FRAME = "tracker_frame"
+"""The features' key that says the point rows are in the instrument's frame (``True``): the point kind then
+has six unknowns of its own, the instrument's pose in the base frame (``tracker.x, y, z`` mm, ``tracker.rx,
+ry, rz`` a rotation vector in degrees), fitted with the robot's: the registration is part of the fit."""
+
+TRACKER_PARAMETERS = (("tracker.x", "mm"), ("tracker.y", "mm"), ("tracker.z", "mm"), ("tracker.rx", "deg"),
+                      ("tracker.ry", "deg"), ("tracker.rz", "deg"))
+
+
 @add_measurement_kind
 class PointKind(MeasurementKind):
-    """A tracker point of the tool, already in the robot's base frame (registered)."""
+    """A tracker point of the tool, in the robot's base frame (registered), or in the tracker's own frame
+    (features ``tracker_frame: true``: the tracker's pose is then the kind's unknowns)."""
 
     name = "point"
     default_noise_mm = 0.02
-    summary = "a tracker point of the tool in the base frame: 3 residuals (mm)"
+    summary = "a tracker point of the tool: 3 residuals (mm)"
 
     def __init__(self, rows, index, features, noise_mm):
         super().__init__(rows, index, features, noise_mm)
         self.measured = np.column_stack([rows.number(c, index) for c in ("x_meas", "y_meas", "z_meas")])
+        self.own_frame = bool(features.get(TRACKER_FRAME))
+
+    def unknowns(self, positions, rotations):
+        if not self.own_frame:
+            return [], np.zeros(0)
+        if self.index.size < 3:         # too few to place it: the rank rule holds what they do not fix
+            return list(TRACKER_PARAMETERS), np.zeros(6)
+        rotation, shift = kabsch(self.measured, positions[self.index])      # tracker -> base at the nominal robot
+        turn = np.degrees(rotation_vector_from_matrix(rotation))
+        return list(TRACKER_PARAMETERS), np.concatenate([shift, turn])
 
     def residuals(self, positions, rotations, u) -> Residuals:
         which, grad = _unit_rows(self.index.size)
-        return Residuals((positions[self.index] - self.measured).ravel(), self.index[which], grad,
-                         np.zeros((grad.shape[0], 0)))
+        if not self.own_frame:
+            return Residuals((positions[self.index] - self.measured).ravel(), self.index[which], grad,
+                             np.zeros((grad.shape[0], 0)))
+        turn = np.radians(u[3:6])
+        seen = self.measured @ matrix_from_rotation_vector(turn).T          # R x, base frame axes
+        values = positions[self.index] - seen - u[:3]
+        du = np.zeros((self.index.size, 3, 6))
+        du[:, :, :3] = -np.eye(3)
+        # d(R x) = (J_l dr) x (R x): a turn of the rotation vector by dr (radians)
+        du[:, :, 3:] = _skew(seen) @ _left_jacobian(turn) * (np.pi / 180.0)
+        return Residuals(values.ravel(), self.index[which], grad, du.reshape(-1, 6))
+
+    def notes(self) -> list[str]:
+        return ["point: the tracker's frame and the robot's base frame are one unknown: the tracker's pose is "
+                "held where the nominal robot puts it and the base identified"] if self.own_frame else []
 
     def describe(self) -> str:
-        return f"{self.index.size} tracker points"
+        where = "in the tracker's frame" if self.own_frame else "in the base frame"
+        return f"{self.index.size} tracker points {where}"
+
+
+def _skew(v: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``[v]_x`` of each row of ``v`` (n, 3): ``[v]_x w = v x w``, shape (n, 3, 3)."""
+    out = np.zeros((len(v), 3, 3))
+    out[:, 0, 1], out[:, 0, 2], out[:, 1, 2] = -v[:, 2], v[:, 1], -v[:, 0]
+    return out - out.transpose(0, 2, 1)
+
+
+def _left_jacobian(phi: NDArray[np.float64]) -> NDArray[np.float64]:
+    """SO(3)'s left Jacobian at the rotation vector ``phi`` (3,): ``exp(phi + d) = exp(J d) exp(phi)``."""
+    t = float(np.linalg.norm(phi))
+    k = _skew(phi[None])[0]
+    if t < 1e-8:
+        return np.eye(3) + 0.5 * k
+    return np.eye(3) + (1 - np.cos(t)) / t**2 * k + (t - np.sin(t)) / t**3 * k @ k
 
 
 @add_measurement_kind

@@ -69,6 +69,8 @@ class Rows:
     texts : dict of str to tuple of str
         Text columns ("" where empty): ``feature``, ``to``, ...
     payload_kg : ndarray, shape (n,), optional
+    sources : tuple of str, optional
+        Each row's file, when the rows come from several (``source`` names them all).
     """
 
     q_deg: NDArray[np.float64]
@@ -79,6 +81,7 @@ class Rows:
     numbers: dict = field(default_factory=dict)
     texts: dict = field(default_factory=dict)
     payload_kg: NDArray[np.float64] | None = None
+    sources: tuple[str, ...] | None = None
 
     def __len__(self) -> int:
         return self.q_deg.shape[0]
@@ -89,7 +92,7 @@ class Rows:
 
     def where(self, row: int) -> str:
         """``FILE:LINE`` of row ``row``, for messages."""
-        return f"{self.source}:{self.lines[row]}"
+        return f"{self.source if self.sources is None else self.sources[row]}:{self.lines[row]}"
 
     def number(self, column: str, rows: NDArray[np.intp]) -> NDArray[np.float64]:
         """Column ``column`` at ``rows``, every value present and finite, else one :class:`DataError`."""
@@ -125,7 +128,8 @@ class Rows:
                     tuple(self.lines[i] for i in rows), self.source,
                     {k: np.asarray(v)[rows] for k, v in self.numbers.items()},
                     {k: tuple(v[i] for i in rows) for k, v in self.texts.items()},
-                    None if self.payload_kg is None else self.payload_kg[rows])
+                    None if self.payload_kg is None else self.payload_kg[rows],
+                    None if self.sources is None else tuple(self.sources[i] for i in rows))
 
 
 @dataclass(frozen=True, eq=False)

@@ -140,6 +140,7 @@ class DataOptions:
     plausibility: Plausibility = Plausibility()      # data.checks: the limits of plausible data
     groups: str | None = None                         # data.groups: the column naming each row's pose
     features: Path | None = None                      # data.features: the cell's planes and points (kinds runs)
+    more_identification: tuple[Path, ...] = ()        # data.identification: [A, B, ...]: kinds files after the first
 
     @property
     def converted(self) -> bool:
@@ -152,7 +153,9 @@ class DataOptions:
                 "registration": ({"tool_mm": list(self.tool_mm) if self.tool_mm else None, "fit_tool": self.fit_tool}
                                  if self.frame == "tracker" else None),
                 "checks": {name: getattr(self.plausibility, name) for name in Plausibility.rules},
-                "groups": self.groups, **({"features": str(self.features)} if self.features else {})}
+                "groups": self.groups, **({"features": str(self.features)} if self.features else {}),
+                **({"more_identification": [str(p) for p in self.more_identification]}
+                   if self.more_identification else {})}
 
 
 SPREAD_CALIBRATIONS = ("forward", "contiguous", "folds", "none")
@@ -209,8 +212,8 @@ class RunConfig:
 
     def inputs(self) -> list[Path]:
         """The files this run reads: the config, the data sets, a robot or simulation YAML file."""
-        files = [self.source, self.identification, *self.tests.values(), self.validation, self.virtual_robot,
-                 self.data_options.features]
+        files = [self.source, self.identification, *self.data_options.more_identification, *self.tests.values(),
+                 self.validation, self.virtual_robot, self.data_options.features]
         if self.robot is not None and Path(self.robot).suffix in (".yaml", ".yml"):
             files.append(Path(self.robot))
         elif self.robot is not None and is_urdf(self.robot):
@@ -339,7 +342,14 @@ def _data(data_sec: Section, top: Section, base: Path, *, has_robot: bool
         data_sec.fail(data_sec.path("frame"), "tracker needs a robot model (top-level key 'robot') to register "
                                               "the tracker frame")
     rows: dict[str, RowSelection] = {}
-    ident, rows["identification"], _ = _data_file(data_sec, "identification", base, tracker=None)
+    more: tuple[Path, ...] = ()
+    if isinstance(data_sec.data.get("identification"), list):      # several measurement-kinds files
+        files = data_sec.get("identification", "list", check=lambda v: None if v and all(
+            isinstance(f, str) for f in v) else "a file, or a list of files (measurement-kinds files and point CSVs)")
+        paths = [_listed(data_sec, "identification", k, base) for k in range(len(files))]
+        ident, more, rows["identification"] = paths[0], tuple(paths[1:]), None
+    else:
+        ident, rows["identification"], _ = _data_file(data_sec, "identification", base, tracker=None)
     validation = None
     if data_sec.has("validation"):
         validation, rows["validation"], _ = _data_file(data_sec, "validation", base, tracker=None)
@@ -371,7 +381,15 @@ def _data(data_sec: Section, top: Section, base: Path, *, has_robot: bool
     return ident, tests, validation, DataOptions(format=fmt, frame=frame, rows={k: v for k, v in rows.items() if v is not None},
                                      own_frame=tuple(own), tool_mm=tuple(float(x) for x in tool) if tool else None,
                                      fit_tool=fit_tool, plausibility=plausibility, groups=groups,
-                                     features=features)
+                                     features=features, more_identification=more)
+
+
+def _listed(sec: Section, key: str, k: int, base: Path) -> Path:
+    """Entry ``k`` of the list ``key``: an existing file, relative to the config."""
+    target = Path(os.path.normpath(base / sec.data[key][k]))
+    if not target.is_file():
+        sec.fail(f"{sec.path(key)}[{k}]", f"no such file: {target}")
+    return target
 
 
 def _data_file(sec: Section, key: str, base: Path, *, tracker: bool | None

@@ -32,7 +32,7 @@ from ..data.measurements import Measurements, read_measurements
 from ..data.observations import ObservationTable, has_kind_column, read_features, read_observations
 from ..errors import ConfigError, PartcalError
 from ..metrics import pooled_rms
-from ..models.contacts import PointKind
+from ..models.contacts import TRACKER_FRAME, PointKind
 from ..models.kinematic import KinematicModel
 from ..models.identification import resolved_parametrization
 from ..models.joint_errors import JointErrors
@@ -48,9 +48,21 @@ FOLDS = 5
 """Cross-validation folds of a kinds run (``cv_folds: auto``): rows of every kind drawn at random."""
 
 
+def identification_files(config: RunConfig) -> list[Path]:
+    """The run's identification files: one, or the list ``data.identification: [A, B, ...]``."""
+    return [config.identification, *config.data_options.more_identification]
+
+
 def uses_kinds(config: RunConfig) -> bool:
-    """Whether the run's identification file is a measurement-kinds file (it has a ``kind`` column)."""
-    return has_kind_column(config.identification, config.data_options.format)
+    """Whether the run identifies from measurement kinds: an identification file has a ``kind`` column.
+    A list of identification files must hold one (several point CSVs are one file's rows: join them)."""
+    files = identification_files(config)
+    kinds = any(has_kind_column(f, config.data_options.format) for f in files)
+    if len(files) > 1 and not kinds:
+        config.fail("data.identification", "a list of identification files is for measurement kinds (files with "
+                                           "a 'kind' column, and point CSVs beside them); these are all point "
+                                           "CSVs: join them into one file")
+    return kinds
 
 
 def rows_of(table: ObservationTable) -> Rows:
@@ -58,6 +70,40 @@ def rows_of(table: ObservationTable) -> Rows:
     payload = table.numbers.get("payload_kg")
     return Rows(table.q_deg, table.kind, table.ids, table.lines, table.source, dict(table.numbers),
                 dict(table.texts), None if payload is None or np.isnan(payload).all() else np.nan_to_num(payload))
+
+
+def point_rows(m: Measurements, source: str) -> Rows:
+    """A point CSV's rows as rows of kind ``point`` (its primary target); their lines are data-row numbers (the
+    reader has refused whatever a line would be named for)."""
+    n = len(m)
+    x = m.measured_mm
+    return Rows(m.q_deg, ("point",) * n, tuple(str(i + 1) for i in range(n)), tuple(range(1, n + 1)), source,
+                {"x_meas": x[:, 0], "y_meas": x[:, 1], "z_meas": x[:, 2]}, {}, m.payload_kg)
+
+
+def joined(parts: list[Rows]) -> Rows:
+    """The rows of several files as one set: ids (and the ``to`` that name them) prefixed by their file's stem,
+    so that each file's references stay its own; columns a file lacks are empty on its rows."""
+    if len(parts) == 1:
+        return parts[0]
+    names = [Path(p.source).stem for p in parts]
+    numbers = {c for p in parts for c in p.numbers}
+    texts = {c for p in parts for c in p.texts}
+    out_numbers = {c: np.concatenate([p.numbers.get(c, np.full(len(p), np.nan)) for p in parts]) for c in numbers}
+    out_texts = {c: tuple(v for p in parts for v in p.texts.get(c, ("",) * len(p))) for c in texts if c != "to"}
+    ids = tuple(f"{name}:{i}" for name, p in zip(names, parts) for i in p.ids)
+    if "to" in texts:
+        to = []
+        for name, p in zip(names, parts):
+            own = set(p.ids)
+            to += [f"{name}:{t}" if t in own else t for t in p.texts.get("to", ("",) * len(p))]
+        out_texts["to"] = tuple(to)
+    payloads = [p.payload_kg for p in parts]
+    payload = None if all(x is None for x in payloads) else np.concatenate(
+        [x if x is not None else np.zeros(len(p)) for x, p in zip(payloads, parts)])
+    return Rows(np.vstack([p.q_deg for p in parts]), tuple(k for p in parts for k in p.kind), ids,
+                tuple(line for p in parts for line in p.lines), ", ".join(p.source for p in parts), out_numbers,
+                out_texts, payload, tuple(p.source for p in parts for _ in range(len(p))))
 
 
 @dataclass(frozen=True, eq=False)
@@ -81,14 +127,18 @@ def prepare_kinds(config: RunConfig) -> KindsData:
         config.fail("robot", f"the identification file {config.identification} holds measurement kinds, whose "
                              "residuals come from the robot's forward kinematics: name a robot")
     opts = config.data_options
-    if opts.frame != "base":
-        config.fail("data.frame", "a measurement-kinds file holds tracker points in the robot's base frame "
-                                  "(register them first: partcal import); got frame: tracker")
     if opts.rows:
-        config.fail("data", "row subsets (rows:, every:) apply to point CSVs; a kinds file is read whole")
+        config.fail("data", "row subsets (rows:, every:) apply to point CSVs; a kinds run reads its files whole")
     features = read_features(opts.features, kinds=kind_names()) if opts.features is not None else {}
-    table = read_observations(config.identification, robot, opts.format, features, kinds=kind_names())
-    rows = rows_of(table)
+    if opts.frame == "tracker":             # the tracker's pose is the point kind's unknowns, fitted with the robot
+        features = {**features, TRACKER_FRAME: True}
+    parts = []
+    for path in identification_files(config):
+        if has_kind_column(path, opts.format):
+            parts.append(rows_of(read_observations(path, robot, opts.format, features, kinds=kind_names())))
+        else:
+            parts.append(point_rows(read_measurements(path, robot, fmt=opts.format, frame=opts.frame), str(path)))
+    rows = joined(parts)
     kinds = built_kinds(rows, features)
     for i, spec in enumerate(config.models):
         problem = _entry_problem(spec, kinds)
@@ -100,9 +150,9 @@ def prepare_kinds(config: RunConfig) -> KindsData:
             tests[name] = rows_of(read_observations(path, robot, opts.format, features, kinds=kind_names()))
             built_kinds(tests[name], features)
         else:
-            tests[name] = read_measurements(path, robot, fmt=opts.format, name=name)
+            tests[name] = read_measurements(path, robot, fmt=opts.format, name=name, frame=opts.frame)
     return KindsData(rows, features, tests, robot, config.models, {k.name: k.describe() for k in kinds},
-                     any(isinstance(k, PointKind) for k in kinds))
+                     any(isinstance(k, PointKind) for k in kinds) and opts.frame == "base")
 
 
 def _entry_problem(spec: ModelSpec, kinds: list) -> str | None:
@@ -183,7 +233,8 @@ def subset(rows: Rows, keep: NDArray[np.intp]) -> Rows:
     every = np.array(sorted(set(keep.tolist()) | needed), dtype=np.intp)
     out = rows.take(every)
     kinds = tuple(END_KIND if i in needed else k for i, k in zip(every, out.kind))
-    return Rows(out.q_deg, kinds, out.ids, out.lines, out.source, out.numbers, out.texts, out.payload_kg)
+    return Rows(out.q_deg, kinds, out.ids, out.lines, out.source, out.numbers, out.texts, out.payload_kg,
+                out.sources)
 
 
 def _folds(config: RunConfig, rows: Rows) -> int:

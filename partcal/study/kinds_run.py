@@ -135,7 +135,7 @@ def prepare_kinds(config: RunConfig) -> KindsData:
     parts = []
     for path in identification_files(config):
         if has_kind_column(path, opts.format):
-            parts.append(rows_of(read_observations(path, robot, opts.format, features, kinds=kind_names())))
+            parts.append(rows_of(read_observations(path, robot, opts.format, features or None, kinds=kind_names())))
         else:
             parts.append(point_rows(read_measurements(path, robot, fmt=opts.format, frame=opts.frame), str(path)))
     rows = joined(parts)
@@ -147,7 +147,7 @@ def prepare_kinds(config: RunConfig) -> KindsData:
     tests = {}
     for name, path in config.tests.items():
         if has_kind_column(path, opts.format):
-            tests[name] = rows_of(read_observations(path, robot, opts.format, features, kinds=kind_names()))
+            tests[name] = rows_of(read_observations(path, robot, opts.format, features or None, kinds=kind_names()))
             built_kinds(tests[name], features)
         else:
             tests[name] = read_measurements(path, robot, fmt=opts.format, name=name, frame=opts.frame)

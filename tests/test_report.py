@@ -504,7 +504,7 @@ def _captured(monkeypatch):
     from partcal.report import figures
 
     kept = []
-    monkeypatch.setattr(figures, "_svg", lambda fig: kept.append(fig) or "")
+    monkeypatch.setattr(figures, "svg_of", lambda fig: kept.append(fig) or "")
     return figures, kept
 
 

@@ -178,3 +178,46 @@ def test_a_list_of_point_files_is_refused(cell, capsys):
                     .replace("identification: data/test.csv", "identification: [data/test.csv, data/test.csv]"))
     assert main(["run", "--check", str(path)]) == 2
     assert "join them into one file" in capsys.readouterr().err
+
+
+def _edited(folder: Path, source: str, target: str, edit) -> str:
+    """``source`` of the cell's data with its data lines passed through ``edit(lines)``, as ``target``."""
+    lines = (folder / "data" / source).read_text().splitlines()
+    (folder / "data" / target).write_text("\n".join(edit(lines)) + "\n")
+    return target
+
+
+def _refusal(folder, data, capsys, features="features.yaml"):
+    path = _config(folder, data, features=features, name=data.split(".")[0])
+    assert main(["run", "--check", str(path)]) == 2
+    return capsys.readouterr().err
+
+
+def test_bad_rows_are_refused_naming_file_line_and_column(cell, capsys):
+    folder, _ = cell
+    header = 3                  # two comment lines, then the header: data line k is line k + 3
+
+    def relabel(lines):         # data row 5 names the wrong plane: 'side' instead of 'top'
+        out = list(lines)
+        assert out[header + 4].endswith(",top")
+        out[header + 4] = out[header + 4][:-3] + "side"
+        return out
+    err = _refusal(folder, _edited(folder, "touches.csv", "relabelled.csv", relabel), capsys)
+    assert f"relabelled.csv:{header + 5}: column 'feature'" in err and "from plane 'side'" in err
+
+    def metres(lines):          # the first distance in metres
+        out = list(lines)
+        k = next(i for i, line in enumerate(out) if ",distance," in line)
+        cells = out[k].split(",")
+        cells[-2] = f"{float(cells[-2]) / 1000:.6f}"
+        out[k] = ",".join(cells)
+        return out
+    err = _refusal(folder, _edited(folder, "ballbar.csv", "metres.csv", metres), capsys)
+    assert "metres.csv:" in err and "column 'distance_mm'" in err and "metres" in err
+
+    def one_orientation(lines):  # the first visit of nest_a three times: one orientation
+        first = next(line for line in lines if line.endswith(",nest_a"))
+        cells = first.split(",")
+        return lines[:header] + [",".join([*cells[:7], str(k), cells[8]]) for k in (1, 2, 3)]
+    err = _refusal(folder, _edited(folder, "nests.csv", "still.csv", one_orientation), capsys)
+    assert "still.csv:4: column 'feature': fixed point 'nest_a' is reached from one orientation" in err

@@ -29,7 +29,7 @@ from numpy.typing import NDArray
 from ..errors import DataError
 from ..robot.frames import kabsch
 from ..robot.rotations import matrix_from_rotation_vector, rotation_vector_from_matrix
-from .measures import END_KIND, MeasurementKind, Residuals, Rows, add_measurement_kind
+from .measures import END_KIND, NEAR_MM, MeasurementKind, Residuals, Rows, add_measurement_kind
 
 FACE_RADIUS_MM = 50.0
 """A flush contact's tilt residual: the rise of the rim of a face of this radius, mm per radian."""
@@ -128,6 +128,7 @@ class PlaneKind(MeasurementKind):
         flush = rows.numbers.get("flush")
         self.flush = np.zeros(index.size, dtype=bool) if flush is None else np.nan_to_num(
             np.asarray(flush, dtype=float)[index]) > 0.5
+        self.needs_orientation = bool(self.flush.any())         # the tool's turn enters flush rows alone
         self.specs = dict((features.get("planes") or {}))
         self.names = list(dict.fromkeys(self.plane))
         for name in self.names:
@@ -184,7 +185,29 @@ class PlaneKind(MeasurementKind):
             names.append((f"plane {root}.offset", "mm"))
             start += [float(normal @ t1 / (normal @ pole)), float(normal @ t2 / (normal @ pole)), offset]
         self.roots = roots
-        return names, np.array(start)
+        start = np.array(start)
+        self._check_rows(positions, rotations, start)
+        return names, start
+
+    def _check_rows(self, positions, rotations, u) -> None:
+        """Every plane touched from more than one tool orientation, every touch near its plane at the nominal
+        robot (:data:`~partcal.models.measures.NEAR_MM`)."""
+        for name in self.names:
+            mine = self.index[[p == name for p in self.plane]]
+            axes = rotations[mine][:, :, 2]
+            if mine.size > 1 and np.degrees(np.arccos(np.clip(np.min(axes @ axes[0]), -1, 1))) < 1.0:
+                raise DataError(f"{self.rows.where(mine[0])}: column 'feature': plane {name!r} is touched from one "
+                                "orientation of the tool only (its axis turns less than 1 degree over the "
+                                f"{mine.size} touches): such touches cannot tell the tool's offset from the plane's "
+                                "place; touch it with the tool turned")
+        distance = np.abs(self.residuals(positions, rotations, u).values[:self.index.size])
+        far = np.flatnonzero(distance > NEAR_MM)
+        if far.size:
+            i = far[np.argmax(distance[far])]
+            raise DataError(f"{self.rows.where(self.index[i])}: column 'feature': the nominal robot puts this touch "
+                            f"{distance[i]:.1f} mm from plane {self.plane[i]!r} ({far.size} touches beyond "
+                            f"{NEAR_MM:g} mm): expected a touch of that plane (a wrong feature name, or the plane's "
+                            "normal and offset in the features?)")
 
     def _fitted_plane(self, root: str, members: list[str], positions) -> tuple[NDArray[np.float64], float]:
         """The plane through the nominal touches of ``root`` and the planes tied to it (their spacings taken
@@ -239,7 +262,8 @@ class PlaneKind(MeasurementKind):
             du[i, 3 * k + 2] = -1.0
             if self.flush[i]:
                 extra.append((row, k, normal, tilts))
-        out = Residuals(values, self.index.copy(), grad, du, turn_grad=np.zeros((m, 3)))
+        out = Residuals(values, self.index.copy(), grad, du,
+                        turn_grad=np.zeros((m, 3)) if self.needs_orientation else None)
         if not extra:
             return out
         return _with_flush(out, extra, rotations, self.frames, self.roots, u.size)
@@ -309,9 +333,30 @@ class FixedPointKind(MeasurementKind):
                 raise DataError(f"points: {n!r} is tied to {other!r} by distance_mm, but no row visits {other!r}")
         for name in self.unknown:
             names += _point_unknowns(name)
-            start += list(positions[self.index[[p == name for p in self.point]]].mean(axis=0))
+            start += list(np.median(positions[self.index[[p == name for p in self.point]]], axis=0))
         self.tied = tied
-        return names, np.array(start)
+        start = np.array(start)
+        self._check_rows(positions, rotations, start)
+        return names, start
+
+    def _check_rows(self, positions, rotations, u) -> None:
+        """Every point reached from more than one orientation, every visit near its point at the nominal robot."""
+        for name in self.names:
+            mine = self.index[[p == name for p in self.point]]
+            turns = [np.degrees(np.arccos(np.clip((np.trace(rotations[mine[0]].T @ rotations[i]) - 1) / 2, -1, 1)))
+                     for i in mine[1:]]
+            if mine.size > 1 and max(turns) < 1.0:
+                raise DataError(f"{self.rows.where(mine[0])}: column 'feature': fixed point {name!r} is reached from "
+                                f"one orientation of the tool only ({mine.size} visits within 1 degree): visits must "
+                                "turn the tool about the point")
+        distance = np.linalg.norm(self.residuals(positions, rotations, u).values[:3 * self.index.size]
+                                  .reshape(-1, 3), axis=1)
+        far = np.flatnonzero(distance > NEAR_MM)
+        if far.size:
+            i = far[np.argmax(distance[far])]
+            raise DataError(f"{self.rows.where(self.index[i])}: column 'feature': the nominal robot puts this visit "
+                            f"{distance[i]:.1f} mm from point {self.point[i]!r} (the median of its visits, or its "
+                            f"known_mm; {far.size} visits beyond {NEAR_MM:g} mm): expected a visit of that point")
 
     def centre(self, name: str, u: NDArray[np.float64]) -> tuple[NDArray[np.float64], int | None]:
         """Point ``name``'s position and the first of its three unknowns (None when known)."""
@@ -396,7 +441,19 @@ class DistanceKind(MeasurementKind):
             mine = np.array([p == name for p in self.pivot])
             names += _point_unknowns(name)
             start += list(_sphere_centre(positions[self.index[mine]], self.measured[mine]))
-        return names, np.array(start)
+        start = np.array(start)
+        between = self.other >= 0         # a pivot's distance is checked by the fit: its place is unknown here
+        nominal = np.linalg.norm(positions[self.index[between]] - positions[self.other[between]], axis=1)
+        off = np.abs(nominal - self.measured[between])
+        far = np.flatnonzero(off > NEAR_MM)
+        if far.size:
+            i = far[np.argmax(off[far])]
+            row = self.index[between][i]
+            raise DataError(f"{self.rows.where(row)}: column 'distance_mm': {self.measured[between][i]:g} mm, but the "
+                            f"nominal robot puts the two tips {nominal[i]:.3f} mm apart ({far.size} distances off by "
+                            f"more than {NEAR_MM:g} mm): expected the distance in mm (metres? another row's id in "
+                            "'to'?)")
+        return names, start
 
     def residuals(self, positions, rotations, u) -> Residuals:
         m = self.index.size

@@ -44,6 +44,11 @@ log = logging.getLogger(__name__)
 REFERENCE_NOISE_MM = 0.02
 """Residuals are weighted by this over their kind's noise: a tracker point of 0.02 mm per axis weighs one."""
 
+NEAR_MM = 20.0
+"""A row whose target the nominal robot puts farther than this from what the row says (a touch from its plane,
+a visit from its point's other visits, a length from the measured one) is refused as bad input: a robot's
+geometric errors are millimetres, so the row names the wrong feature, or its units are not mm."""
+
 SCALE = "scale"
 """The name under which a uniform scale of the robot is reported when nothing in the data measures a length."""
 
@@ -185,11 +190,13 @@ class MeasurementKind:
         noise = (features.get("noise_mm") or {}).get(cls.name, cls.default_noise_mm)
         return cls(rows, index, features, noise)
 
-    def unknowns(self, positions: NDArray[np.float64], rotations: NDArray[np.float64] | None
+    def unknowns(self, positions: NDArray[np.float64], rotations: NDArray[np.float64]
                  ) -> tuple[list[tuple[str, str]], NDArray[np.float64]]:
         """The kind's own unknowns ``(name, unit)`` and where their fit starts, from the targets' ``positions``
         (n, 3) mm and tool ``rotations`` (n, 3, 3) of every row at the nominal robot (consistent data). Two
-        kinds declaring an unknown of one name share it (a pivot that is also a fixed point)."""
+        kinds declaring an unknown of one name share it (a pivot that is also a fixed point). Rows the nominal
+        robot puts far from what they say (:data:`NEAR_MM`: a touch near no plane, a distance in metres) are
+        refused here."""
         return [], np.zeros(0)
 
     def residuals(self, positions: NDArray[np.float64], rotations: NDArray[np.float64] | None,
@@ -283,7 +290,7 @@ class StackedProblem:
         poses, inverse = np.unique(np.column_stack([rows.q_deg, payload]), axis=0, return_inverse=True)
         self.poses, self.pose_payload, self.inverse = poses[:, :-1], poses[:, -1], inverse.ravel()
         v0 = nominal_values(nominal, errors, parametrization)
-        start = self.chain(v0, False)
+        start = self.chain(v0, False, orientation=True)          # the kinds check their rows' orientations
         self.names: list[tuple[str, str]] = []
         starts: list[float] = []
         self.columns: list[NDArray[np.intp]] = []
@@ -302,10 +309,11 @@ class StackedProblem:
     def split(self, values: NDArray[np.float64]) -> list[NDArray[np.float64]]:
         return [values[cols] for cols in self.columns]
 
-    def chain(self, values: NDArray[np.float64], jacobian: bool) -> Chain:
-        """:class:`Chain` at every row (its derivatives at every distinct pose: index them by ``inverse``)."""
+    def chain(self, values: NDArray[np.float64], jacobian: bool, orientation: bool | None = None) -> Chain:
+        """:class:`Chain` at every row (its derivatives at every distinct pose: index them by ``inverse``); the
+        tool's rotations when a kind reads them (or ``orientation``)."""
         chain = chain_at(self.nominal, self.errors, self.poses, values[:self.own], self.pose_payload, self.par,
-                         self.orientation, jacobian)
+                         self.orientation if orientation is None else orientation, jacobian)
         return Chain(chain.positions[self.inverse], None if chain.rotations is None else
                      chain.rotations[self.inverse], chain.jac, chain.omega)
 

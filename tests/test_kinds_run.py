@@ -137,7 +137,7 @@ def test_a_kind_registered_here_runs_through_partcal_run(cell, capsys):
         path = _config(folder, "heights.csv", features=None, name="heights")
         assert main(["run", "-q", str(path)]) == 0
         metrics = json.loads((folder / "out_heights" / "metrics.json").read_text())
-        assert metrics["kinds"]["height_toy"] == "120 height_toy rows"
+        assert metrics["kinds"]["height_toy"] == "120 height_toy rows; noise 0.01 mm"
         assert 0.005 < metrics["models"]["complete"]["cv_kinds_rms_mm"]["height_toy"] < 0.03
     finally:
         del MEASUREMENT_KINDS["height_toy"]
@@ -167,7 +167,7 @@ def test_touches_and_tracker_points_in_two_files_in_the_trackers_frame(cell):
     entry = metrics["models"]["complete"]
     assert set(entry["cv_kinds_rms_mm"]) == {"point", "plane"}
     assert entry["cv_kinds_rms_mm"]["point"] < 0.05 and entry["cv_kinds_rms_mm"]["plane"] < 0.02
-    assert metrics["kinds"]["point"] == "20 tracker points in the tracker's frame"
+    assert metrics["kinds"]["point"] == "20 tracker points in the tracker's frame; noise 0.02 mm"
     assert entry["tests"]["test"]["rigid_fit"] and entry["tests"]["test"]["rms_3d"] < 0.1
 
 

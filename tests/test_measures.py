@@ -250,3 +250,11 @@ def test_tracker_points_in_their_own_frame_are_registered_by_the_fit():
     assert table.target_rms_mm["point"] < 0.03
     assert _score(true, table.value[:33], "dh", np.random.default_rng(0), rigid=True) < 0.03
     assert any(n.startswith("point: the tracker's frame") for n in notes)
+
+
+def test_the_data_layer_knows_the_kinds_of_the_table():
+    from partcal.data.observations import BUILTIN_KINDS
+    from partcal.models.measures import kind_names
+    assert set(BUILTIN_KINDS) == set(kind_names())
+    for cls in MEASUREMENT_KINDS.values():
+        assert cls.reads and cls.summary, cls.name

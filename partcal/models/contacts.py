@@ -48,6 +48,10 @@ TRACKER_FRAME = "tracker_frame"
 has six unknowns of its own, the instrument's pose in the base frame (``tracker.x, y, z`` mm, ``tracker.rx,
 ry, rz`` a rotation vector in degrees), fitted with the robot's: the registration is part of the fit."""
 
+POINT_FAR_MM = 100.0
+"""A tracker point in the base frame this far from where the nominal robot puts it is refused: metres, or a
+point in another frame."""
+
 TRACKER_PARAMETERS = (("tracker.x", "mm"), ("tracker.y", "mm"), ("tracker.z", "mm"), ("tracker.rx", "deg"),
                       ("tracker.ry", "deg"), ("tracker.rz", "deg"))
 
@@ -58,6 +62,7 @@ class PointKind(MeasurementKind):
     (features ``tracker_frame: true``: the tracker's pose is then the kind's unknowns)."""
 
     name = "point"
+    reads = ("x_meas", "y_meas", "z_meas")
     default_noise_mm = 0.02
     summary = "a tracker point of the tool: 3 residuals (mm)"
 
@@ -68,6 +73,14 @@ class PointKind(MeasurementKind):
 
     def unknowns(self, positions, rotations):
         if not self.own_frame:
+            off = np.linalg.norm(positions[self.index] - self.measured, axis=1)
+            far = np.flatnonzero(off > POINT_FAR_MM)
+            if far.size:
+                i = far[np.argmax(off[far])]
+                raise DataError(f"{self.rows.where(self.index[i])}: columns 'x_meas, y_meas, z_meas': the nominal robot "
+                                f"puts this point {off[i]:.1f} mm away ({far.size} points beyond {POINT_FAR_MM:g} mm): "
+                                "expected tracker points in the robot's base frame, in mm (points in the tracker's "
+                                "own frame: data.frame: tracker)")
             return [], np.zeros(0)
         if self.index.size < 3:         # too few to place it: the rank rule holds what they do not fix
             return list(TRACKER_PARAMETERS), np.zeros(6)
@@ -119,7 +132,7 @@ class PlaneKind(MeasurementKind):
     """The probe tip on a plane (and, flush, a face of the tool lying on it)."""
 
     name = "plane"
-    needs_orientation = True
+    reads = ("feature", "flush")
     summary = "the tool tip touches plane `feature`: its distance to the plane (mm); flush adds two tilts"
 
     def __init__(self, rows, index, features, noise_mm):
@@ -308,6 +321,7 @@ class FixedPointKind(MeasurementKind):
     """The tool tip brought to a fixed point (a sphere's or cone's centre, a nest)."""
 
     name = "fixed"
+    reads = ("feature",)
     summary = "the tool tip at fixed point `feature`: 3 residuals (mm)"
 
     def __init__(self, rows, index, features, noise_mm):
@@ -405,6 +419,7 @@ class DistanceKind(MeasurementKind):
     """The distance between this row's tool tip and another row's (or a pivot's)."""
 
     name = "distance"
+    reads = ("distance_mm", "to")
     summary = "|tip - tip of row `to` (or pivot `to`)| - distance_mm (mm)"
 
     def __init__(self, rows, index, features, noise_mm):

@@ -167,12 +167,14 @@ class Residuals:
 class MeasurementKind:
     """What every measurement kind answers. A kind is built from all rows and reads those of its own ``name``.
 
-    Class attributes: ``name`` (the CSV's ``kind`` value), ``needs_orientation`` (whether its residuals read
-    the tool's orientation), ``default_noise_mm`` (its stated noise when the cell states none), ``summary``
+    Class attributes: ``name`` (the CSV's ``kind`` value), ``reads`` (the columns its rows read beside the
+    joints), ``needs_orientation`` (whether its residuals read the tool's orientation; an instance may say
+    so for its rows alone), ``default_noise_mm`` (its stated noise when the cell states none), ``summary``
     (one line for the report: what one row says).
     """
 
     name: ClassVar[str] = ""
+    reads: ClassVar[tuple[str, ...]] = ()
     needs_orientation: ClassVar[bool] = False
     default_noise_mm: ClassVar[float] = 0.01
     summary: ClassVar[str] = ""

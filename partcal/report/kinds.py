@@ -17,6 +17,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from .. import __version__  # noqa: E402
+from ..models.measures import MEASUREMENT_KINDS  # noqa: E402
 from ..study.kinds_run import KindsRunResult  # noqa: E402
 from .figures import COLOURS, svg_of  # noqa: E402
 
@@ -42,7 +43,8 @@ def kinds_context(result: KindsRunResult) -> dict:
     return {
         "name": cfg.name, "version": __version__, "seed": cfg.seed, "seconds": result.seconds,
         "date": datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC"), "config_path": str(cfg.source),
-        "kinds": [{"name": k, "text": data.descriptions[k]} for k in kinds],
+        "kinds": [{"name": k, "text": data.descriptions[k], "summary": MEASUREMENT_KINDS[k].summary,
+                   "reads": ", ".join(MEASUREMENT_KINDS[k].reads)} for k in kinds],
         "models": [{"name": r.spec.name, "best": r.spec.name == result.best,
                     "fit": [r.fit_rms.get(k) for k in kinds], "cv": [r.cv_rms.get(k) for k in kinds],
                     "weighted": r.cv_pooled, "identified": r.model.identification_.status.count("identified"),

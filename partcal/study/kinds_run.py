@@ -151,7 +151,8 @@ def prepare_kinds(config: RunConfig) -> KindsData:
             built_kinds(tests[name], features)
         else:
             tests[name] = read_measurements(path, robot, fmt=opts.format, name=name, frame=opts.frame)
-    return KindsData(rows, features, tests, robot, config.models, {k.name: k.describe() for k in kinds},
+    return KindsData(rows, features, tests, robot, config.models,
+                     {k.name: f"{k.describe()}; noise {k.noise_mm:g} mm" for k in kinds},
                      any(isinstance(k, PointKind) for k in kinds) and opts.frame == "base")
 
 

@@ -10,9 +10,9 @@ are plain numbers; residuals are mm.
 - ``plane``: the tool tip touches plane ``feature``: ``n . p - offset`` (one per row); a ``flush``
   row (a flat face of the tool lies on the plane) adds the tool z axis' two tilts against the
   normal, as millimetres of the face's rim (:data:`FACE_RADIUS_MM`). Planes are unknown (three
-  unknowns: the normal's two slopes against the coordinate axis nearest it, the offset), started from the given normal and offset or
-  from the nominal robot's touches, or tied to another plane (``parallel_to``: its normal, and its
-  offset plus a known ``spacing_mm``: no unknowns of its own).
+  unknowns: the normal's two slopes against the coordinate axis nearest it, the offset), started
+  from the given normal and offset or from the nominal robot's touches, or tied to another plane
+  (``parallel_to``: its normal, and its offset plus a known ``spacing_mm``: no unknowns of its own).
 - ``fixed``: the tool tip at fixed point ``feature``: ``p - c`` (three per row); the point unknown
   (three unknowns, started at the nominal touches' mean), known (``known_mm``), or tied to another
   by a known distance (``distance_to``, ``distance_mm``: one more residual, the bar's length, of
@@ -77,8 +77,8 @@ class PointKind(MeasurementKind):
             far = np.flatnonzero(off > POINT_FAR_MM)
             if far.size:
                 i = far[np.argmax(off[far])]
-                raise DataError(f"{self.rows.where(self.index[i])}: columns 'x_meas, y_meas, z_meas': the nominal robot "
-                                f"puts this point {off[i]:.1f} mm away ({far.size} points beyond {POINT_FAR_MM:g} mm): "
+                raise DataError(f"{self.rows.where(self.index[i])}: columns 'x_meas, y_meas, z_meas': the nominal "
+                                f"robot puts this point {off[i]:.1f} mm away ({far.size} points beyond {POINT_FAR_MM:g} mm): "
                                 "expected tracker points in the robot's base frame, in mm (points in the tracker's "
                                 "own frame: data.frame: tracker)")
             return [], np.zeros(0)

@@ -496,7 +496,8 @@ def identify(robot: Robot, q_deg: NDArray[np.float64], measured_mm: NDArray[np.f
     rms, angle = _target_rms(resid, len(q_deg), extra)
     more = {} if extra is None else {
         "target_rms_mm": dict(zip([PRIMARY_TARGET, *extra.tools_mm], rms)), "orientation_rms_deg": angle,
-        "primary_identifiable": identifiable_parameters(jac0[:3 * len(q_deg), :own], wanted[:own], rcond, units[:own])[1]}
+        "primary_identifiable": identifiable_parameters(jac0[:3 * len(q_deg), :own], wanted[:own], rcond,
+                                                        units[:own])[1]}
     result = dataclasses.replace(result, rms_mm=rms[0], **more)
     log.info("identified %d of %d parameters (condition %.3g): RMS %.4f mm", result.status.count("identified"),
              result.value.size, result.condition, result.rms_mm)

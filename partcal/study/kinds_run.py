@@ -168,7 +168,8 @@ def _entry_problem(spec: ModelSpec, kinds: list) -> str | None:
                 f"identification file holds measurement kinds ({present}): fit the kinematic model alone")
     for key in ("all_targets", "use_orientation"):
         if spec.params.get(key):
-            return f"model {spec.name!r}: {key} reads a point CSV's further targets or orientation; a kinds file has none"
+            return (f"model {spec.name!r}: {key} reads a point CSV's further targets or orientation; a kinds file "
+                    "has none")
     return None
 
 

@@ -41,6 +41,7 @@ from ..models.measures import (END_KIND, MEASUREMENT_KINDS, REFERENCE_NOISE_MM, 
 from ..robot.frames import kabsch
 from ..robot.kinematics import Robot
 from .config import ModelSpec, RunConfig
+from .fitting import SLOW_SECONDS, FoldLines
 from .outputs import check_writable, replace_folder
 from .persist import save_model
 
@@ -259,8 +260,10 @@ def _rms(values: NDArray[np.float64]) -> float:
     return float(np.sqrt(np.mean(values**2))) if values.size else float("nan")
 
 
-def fit_entry(spec: ModelSpec, data: KindsData, seed: int, folds: int) -> KindsModelResult:
-    """Fit one entry on every row, cross-validate it on random folds of the measuring rows, score the tests."""
+def fit_entry(spec: ModelSpec, data: KindsData, seed: int, folds: int,
+              say: Callable[[str], None] | None = None) -> KindsModelResult:
+    """Fit one entry on every row, cross-validate it on random folds of the measuring rows, score the tests.
+    ``say`` hears of each fold once the entry has taken :data:`~partcal.study.fitting.SLOW_SECONDS`."""
     def fitted(rows: Rows) -> KinematicModel:
         model = spec.with_robot(data.robot).build(seed)
         return model.fit(rows.q_deg, None, measures=Measured(rows, data.features))
@@ -274,7 +277,10 @@ def fit_entry(spec: ModelSpec, data: KindsData, seed: int, folds: int) -> KindsM
     measuring = np.flatnonzero(np.asarray(data.rows.kind, dtype=object) != END_KIND)
     order = np.random.default_rng(seed).permutation(measuring)
     held: dict[str, list] = {}
+    began = time.perf_counter()
     for k in range(folds):
+        if say is not None and time.perf_counter() - began + seconds > SLOW_SECONDS:
+            say(f"{spec.name}: cross-validation fold {k + 1}/{folds} ({time.perf_counter() - began:.0f} s)")
         out = order[k::folds]
         train = subset(data.rows, np.setdiff1d(measuring, out))
         test = subset(data.rows, out)
@@ -315,7 +321,7 @@ def run_kinds(config: RunConfig, progress: Callable[[int, int, str], None] | Non
     results = []
     for i, spec in enumerate(data.models):
         try:
-            results.append(fit_entry(spec, data, config.seed, folds))
+            results.append(fit_entry(spec, data, config.seed, folds, FoldLines() if progress else None))
         except PartcalError as exc:
             raise type(exc)(f"model {spec.name!r}: {exc}") from None
         if progress:

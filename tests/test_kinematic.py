@@ -270,15 +270,15 @@ def test_which_of_exactly_dependent_parameters_is_identified_does_not_depend_on_
     (joint 1's offset and the base's turn about z, among others). Rounding at the level different BLAS kernels
     leave (1e-14 of a column) must not change which of them is kept: the first in the table is, always."""
     from partcal import load_robot
-    from partcal.models.identification import _identifiable, identification_jacobian
+    from partcal.models.identification import identifiable_parameters, identification_jacobian
 
     robot = load_robot("universal_robots_ur10").replace(tool_mm=np.array([0.0, 0.0, 120.0]))
     q = np.random.default_rng(11).uniform(-180, 180, (60, 6))
     full = identification_jacobian(robot, q, nominal_values(robot), "dh")[1]
     wanted = np.ones(full.shape[1], dtype=bool)
     units = ["mm"] * full.shape[1]
-    reference, rank = _identifiable(full, wanted, 1e-10, units)
+    reference, rank = identifiable_parameters(full, wanted, 1e-10, units)
     rng = np.random.default_rng(seed)
     shaken = full * (1 + 1e-14 * rng.standard_normal(full.shape))
-    assert _identifiable(shaken, wanted, 1e-10, units)[0].tolist() == reference.tolist()
+    assert identifiable_parameters(shaken, wanted, 1e-10, units)[0].tolist() == reference.tolist()
     assert rank < np.count_nonzero(np.linalg.norm(full, axis=0) > 0)       # there are dependent columns to choose from

@@ -89,7 +89,8 @@ def run_plan(robot: str | Path, options: PlanOptions, *, say: Callable[[str], No
     o = options
     if o.iso9283:
         return _iso9283(robot, o, show)
-    if o.kind is not None or (o.evaluate and has_kind_column(o.evaluate, load_format(o.format) if o.format else None)):
+    fmt = load_format(o.format) if o.format else None
+    if o.kind is not None or (o.evaluate and has_kind_column(o.evaluate, fmt)):
         return _kinds(robot, o, say, show)
     if o.features is not None:
         raise PartcalError("plan: --features goes with --kind plane|fixed (plan touches or visits) or --evaluate of a "
@@ -113,10 +114,7 @@ def run_plan(robot: str | Path, options: PlanOptions, *, say: Callable[[str], No
     arm = robot_named(robot)
     floor = plan_floor(arm, o)
     start = time.perf_counter()
-    harmonics = o.joint_harmonics or (0,)
-    model = design.PlannedModel(base=not o.no_base, tool=not o.no_tool, compliance=o.compliance or (),
-                                joint_harmonics=harmonics[0] if len(harmonics) == 1 else harmonics,
-                                payload_kg=o.payload_kg, parametrization=o.parametrization).check(arm)
+    model = _planned_model(arm, o)
     evaluated = plan.check_candidates(arm, _joints(arm, o.evaluate, o), str(o.evaluate)) if o.evaluate else None
     if o.candidates:
         stated = o.floor_mm is not None or o.clearance_mm is not None    # a cell's own poses: the cell's to vouch for
@@ -145,6 +143,14 @@ def run_plan(robot: str | Path, options: PlanOptions, *, say: Callable[[str], No
         rows = plan.pose_curve(arm, counts, space=space, noise_mm=o.noise_mm, random_state=o.seed,
                                callback=lambda k, total, row: say(f"curve [{k}/{total}] {row['n']} poses"))
         show("\n".join(plan.curve_lines(rows, o.noise_mm)))
+
+
+def _planned_model(robot: Robot, o: PlanOptions) -> design.PlannedModel:
+    """The model the options plan for (checked against the robot)."""
+    harmonics = o.joint_harmonics or (0,)
+    return design.PlannedModel(base=not o.no_base, tool=not o.no_tool, compliance=o.compliance or (),
+                               joint_harmonics=harmonics[0] if len(harmonics) == 1 else harmonics,
+                               payload_kg=o.payload_kg, parametrization=o.parametrization).check(robot)
 
 
 def _joints(robot: Robot, path, o: PlanOptions) -> np.ndarray:
@@ -185,15 +191,13 @@ def _kinds(robot: str | Path, o: PlanOptions, say, show) -> None:
         raise PartcalError(f"plan: {o.evaluate} holds measurement kinds (a kind column): give --evaluate alone, or "
                            "--kind plane|fixed with -n N -o ROWS.csv to plan rows")
     if others:
-        raise PartcalError(f"plan: {', '.join(others)} go with tracker poses, not with measurement kinds "
+        verb = "goes" if len(others) == 1 else "go"
+        raise PartcalError(f"plan: {', '.join(others)} {verb} with tracker poses, not with measurement kinds "
                            f"({'--kind' if planning else 'a kinds file'}); the candidates of --kind are drawn "
                            "on the features (--pool of them)")
     refuse_input_as_output(o.output, "plan", [("features file", o.features), ("robot file", robot)])
     arm = robot_named(robot)
-    harmonics = o.joint_harmonics or (0,)
-    model = design.PlannedModel(base=not o.no_base, tool=not o.no_tool, compliance=o.compliance or (),
-                                joint_harmonics=harmonics[0] if len(harmonics) == 1 else harmonics,
-                                payload_kg=o.payload_kg, parametrization=o.parametrization).check(arm)
+    model = _planned_model(arm, o)
     features = read_features(o.features, kinds=kind_names()) if o.features is not None else {}
     if not planning:
         table = read_observations(o.evaluate, arm, load_format(o.format) if o.format else None, features or None,
@@ -202,6 +206,11 @@ def _kinds(robot: str | Path, o: PlanOptions, say, show) -> None:
         show("\n".join(plan_kinds.evaluate_kinds(arm, rows_of(table), features, model=model,
                                                   random_state=o.seed).lines()))
         return
+    _kinds_planned(arm, o, model, features, say, show)
+
+
+def _kinds_planned(arm: Robot, o: PlanOptions, model, features: dict, say, show) -> None:
+    """``--kind plane|fixed -n N -o ROWS.csv``: the rows planned, written as a kinds CSV, their evaluation shown."""
     start = time.perf_counter()
     result = plan_kinds.plan_kinds(arm, o.n, features, o.kind, model=model, pool=o.pool, random_state=o.seed,
                                    source=str(o.features), floor=plan_floor(arm, o),

@@ -168,3 +168,15 @@ def test_an_unreachable_plane_is_refused_from_python():
         plan_kinds.touch_candidates(UR10, far, "plane", 10, np.random.default_rng(0))
     with pytest.raises(PartcalError, match=r"--kind must be one of plane, fixed; got 'distance'"):
         plan_kinds.feature_targets(GIVEN, "distance", "cell.yaml")
+
+
+@pytest.mark.parametrize("model", [design.DH, design.PlannedModel(parametrization="complete"),
+                                   design.PlannedModel(base=False), design.PlannedModel(tool=False, joint_harmonics=1)])
+def test_the_design_identifies_what_the_fit_does_not_hold(pool, model):
+    """The planner's identified columns are exactly the parameters asked for that observability does not hold."""
+    d = plan_kinds.stacked_design(UR10, pool, GIVEN, model)
+    names = [n for n, _ in d.names]
+    free = {names[i] for i in d.free}
+    asked = {n for n in names
+             if (model.base or not n.startswith("base.")) and (model.tool or not n.startswith("tool."))}
+    assert free.isdisjoint(d.held) and free | set(d.held) == asked

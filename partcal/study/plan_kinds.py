@@ -82,10 +82,11 @@ class StackedDesign:
 
 def stacked_design(robot: Robot, rows: Rows, features: dict, model: design.PlannedModel = design.DH,
                    rcond: float = 1e-6) -> StackedDesign:
-    """:class:`StackedDesign` of ``rows`` for the planned ``model`` (base, tool, joint errors, payload)."""
+    """:class:`StackedDesign` of ``rows`` for the planned ``model`` (base, tool, joint errors; the rows' own
+    payloads where they carry a ``payload_kg`` column, else the model's)."""
     errors, par = model.joint_errors(robot), model.parametrization_for(robot)
     kinds = built_kinds(rows, features)
-    payload = np.full(len(rows), float(model.payload_kg))
+    payload = np.full(len(rows), float(model.payload_kg)) if rows.payload_kg is None else rows.payload_kg
     problem = StackedProblem(robot, errors, rows, kinds, payload, par)
     resid0, jac0 = problem(problem.start)
     jac = consistent_jacobian(jac0, resid0, scale_direction(problem), rcond)
@@ -96,7 +97,7 @@ def stacked_design(robot: Robot, rows: Rows, features: dict, model: design.Plann
     wanted = np.array([(model.tool or not n.startswith("tool.")) and (model.base or not n.startswith("base."))
                        for n, _ in names])
     notes, held = observability(robot, rows, features, base=model.base, tool=model.tool, rcond=rcond,
-                                errors=errors, payload_kg=model.payload_kg, parametrization=par)
+                                errors=errors, payload_kg=payload, parametrization=par)
     free = identifiable_parameters(jac, wanted, rcond, [u for _, u in names])[0]
     return StackedDesign(names, jac, row_of, wanted, free, notes, held, problem.own)
 

@@ -345,6 +345,10 @@ def _add_plan(sub) -> None:
                      help="how far above the floor the joint origins, flange and tool stay (default 100 mm)")
     pln.add_argument("--no-floor", action="store_true",
                      help="no floor (a ceiling- or wall-mounted robot): poses anywhere within the limits")
+    pln.add_argument("--kind", choices=("plane", "fixed"), help="plan touches of the planes (plane) or visits of "
+                     "the points (fixed) of --features instead of poses, a kinds CSV (with -n -o)")
+    pln.add_argument("--features", metavar="CELL.yaml", help="the cell's planes and points, for --kind and an "
+                     "--evaluate of a kinds file")
     pln.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
     pln.set_defaults(func=_cmd_plan)
 

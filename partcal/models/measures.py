@@ -404,8 +404,10 @@ def consistent_jacobian(jac0: NDArray[np.float64], resid0: NDArray[np.float64], 
     r = scipy.linalg.qr(unit, mode="r")[0][:unit.shape[1]] if unit.shape[0] > unit.shape[1] else unit
     _, singular, vt = np.linalg.svd(r, full_matrices=False)
     null = vt[singular < rcond * singular[0]]
-    t = s[live] * norms[live]
-    t = t - null.T @ (null @ t)
+    whole = s[live] * norms[live]
+    t = whole - null.T @ (null @ whole)
+    if np.linalg.norm(t) <= 1e-9 * np.linalg.norm(whole):
+        return jac0         # the scale is a null direction already: the data are consistent along it (planned rows)
     out = jac0.copy()
     out[:, live] = (unit - np.outer(resid0, t) / float(t @ t)) * norms[live]
     return out

@@ -27,7 +27,10 @@ from ..models import design
 from ..robot.description import joint_columns
 from ..robot.floor import Floor, robot_floor
 from ..robot.kinematics import Robot
-from . import plan
+from ..data.observations import has_kind_column, read_features, read_observations, write_observations
+from ..models.measures import SCALE, kind_names
+from . import plan, plan_kinds
+from .kinds_run import rows_of
 from .config import robot_named
 
 
@@ -39,7 +42,9 @@ class PlanOptions:
     ``candidates`` (a CSV, in the ``format`` of a YAML), a ``box`` (xmin, ymin, zmin, xmax, ymax, zmax mm) or
     ``pool`` poses within the limits; the planned model (``no_base``, ``no_tool``, ``compliance`` joints,
     ``joint_harmonics`` (one K, or one per joint), ``payload_kg``, ``parametrization``); ``iso9283`` with
-    ``cube`` (cx, cy, cz, edge mm) and ``cycles``; the floor (``floor_mm``, ``clearance_mm``, ``no_floor``).
+    ``cube`` (cx, cy, cz, edge mm) and ``cycles``; the floor (``floor_mm``, ``clearance_mm``, ``no_floor``);
+    measurement kinds: ``kind`` rows to plan on the cell's ``features`` (a features YAML), which an evaluated
+    kinds file is read with too.
     """
 
     n: int | None = None
@@ -65,6 +70,8 @@ class PlanOptions:
     floor_mm: float | None = None
     clearance_mm: float | None = None
     no_floor: bool = False
+    features: str | Path | None = None
+    kind: str | None = None
 
     @classmethod
     def from_args(cls, args) -> "PlanOptions":
@@ -82,6 +89,12 @@ def run_plan(robot: str | Path, options: PlanOptions, *, say: Callable[[str], No
     o = options
     if o.iso9283:
         return _iso9283(robot, o, show)
+    fmt = load_format(o.format) if o.format else None
+    if o.kind is not None or (o.evaluate and has_kind_column(o.evaluate, fmt)):
+        return _kinds(robot, o, say, show)
+    if o.features is not None:
+        raise PartcalError("plan: --features goes with --kind plane|fixed (plan touches or visits) or --evaluate of a "
+                           "measurement-kinds file (one with a kind column)")
     planning = o.n is not None
     if o.cube is not None or o.cycles is not None:
         raise PartcalError("plan: --cube and --cycles go with --iso9283")
@@ -101,10 +114,7 @@ def run_plan(robot: str | Path, options: PlanOptions, *, say: Callable[[str], No
     arm = robot_named(robot)
     floor = plan_floor(arm, o)
     start = time.perf_counter()
-    harmonics = o.joint_harmonics or (0,)
-    model = design.PlannedModel(base=not o.no_base, tool=not o.no_tool, compliance=o.compliance or (),
-                                joint_harmonics=harmonics[0] if len(harmonics) == 1 else harmonics,
-                                payload_kg=o.payload_kg, parametrization=o.parametrization).check(arm)
+    model = _planned_model(arm, o)
     evaluated = plan.check_candidates(arm, _joints(arm, o.evaluate, o), str(o.evaluate)) if o.evaluate else None
     if o.candidates:
         stated = o.floor_mm is not None or o.clearance_mm is not None    # a cell's own poses: the cell's to vouch for
@@ -135,6 +145,14 @@ def run_plan(robot: str | Path, options: PlanOptions, *, say: Callable[[str], No
         show("\n".join(plan.curve_lines(rows, o.noise_mm)))
 
 
+def _planned_model(robot: Robot, o: PlanOptions) -> design.PlannedModel:
+    """The model the options plan for (checked against the robot)."""
+    harmonics = o.joint_harmonics or (0,)
+    return design.PlannedModel(base=not o.no_base, tool=not o.no_tool, compliance=o.compliance or (),
+                               joint_harmonics=harmonics[0] if len(harmonics) == 1 else harmonics,
+                               payload_kg=o.payload_kg, parametrization=o.parametrization).check(robot)
+
+
 def _joints(robot: Robot, path, o: PlanOptions) -> np.ndarray:
     """The joint columns of a pose file (candidates or a set to evaluate), deg."""
     return read_columns(path, [joint_columns(robot.n_joints)], fmt=load_format(o.format) if o.format else None)[1]
@@ -156,6 +174,64 @@ def _planned(robot: Robot, o: PlanOptions, space, model, where: str, start: floa
     show(f"wrote {o.n} poses to {o.output} ({result.exchange.exchanges} exchanges, log det "
          f"{result.exchange.start_logdet:.3f} -> {result.exchange.logdet:.3f}, "
          f"{time.perf_counter() - start:.1f} s)")
+
+
+def _kinds(robot: str | Path, o: PlanOptions, say, show) -> None:
+    """``--kind plane|fixed -n N -o ROWS.csv --features CELL.yaml`` (rows planned on the cell's features), or
+    ``--evaluate KINDS.csv [--features CELL.yaml]`` (a kinds file judged): docs/plan.md, "Measurement kinds"."""
+    planning = o.kind is not None
+    others = [flag for flag, on in (("--curve", o.curve), ("--candidates", o.candidates), ("--box", o.box),
+                                    ("--cube", o.cube), ("--cycles", o.cycles)) if on]
+    if planning and o.evaluate:
+        raise PartcalError("plan: give either --kind with -n N -o ROWS.csv or --evaluate DATA.csv, not both")
+    if planning and (o.n is None or o.output is None or o.features is None):
+        raise PartcalError(f"plan --kind {o.kind}: give -n N -o ROWS.csv --features CELL.yaml (how many rows, the "
+                           "kinds CSV to write, and the cell's planes and points)")
+    if not planning and (o.n is not None or o.output is not None):
+        raise PartcalError(f"plan: {o.evaluate} holds measurement kinds (a kind column): give --evaluate alone, or "
+                           "--kind plane|fixed with -n N -o ROWS.csv to plan rows")
+    if others:
+        verb = "goes" if len(others) == 1 else "go"
+        raise PartcalError(f"plan: {', '.join(others)} {verb} with tracker poses, not with measurement kinds "
+                           f"({'--kind' if planning else 'a kinds file'}); the candidates of --kind are drawn "
+                           "on the features (--pool of them)")
+    refuse_input_as_output(o.output, "plan", [("features file", o.features), ("robot file", robot)])
+    arm = robot_named(robot)
+    model = _planned_model(arm, o)
+    features = read_features(o.features, kinds=kind_names()) if o.features is not None else {}
+    if not planning:
+        table = read_observations(o.evaluate, arm, load_format(o.format) if o.format else None, features or None,
+                                  kinds=kind_names())
+        show(f"{o.evaluate}: {len(table)} rows of {arm.name} ({model.describe(arm)})")
+        show("\n".join(plan_kinds.evaluate_kinds(arm, rows_of(table), features, model=model,
+                                                  random_state=o.seed).lines()))
+        return
+    _kinds_planned(arm, o, model, features, say, show)
+
+
+def _kinds_planned(arm: Robot, o: PlanOptions, model, features: dict, say, show) -> None:
+    """``--kind plane|fixed -n N -o ROWS.csv``: the rows planned, written as a kinds CSV, their evaluation shown."""
+    start = time.perf_counter()
+    result = plan_kinds.plan_kinds(arm, o.n, features, o.kind, model=model, pool=o.pool, random_state=o.seed,
+                                   source=str(o.features), floor=plan_floor(arm, o),
+                                   callback=lambda k, logdet: say(f"DETMAX exchange {k}: log det {logdet:.4f}")
+                                   if k % 10 == 0 else None)
+    names = result.rows.texts["feature"]
+    spread = ", ".join(f"{name} {names.count(name)}" for name in dict.fromkeys(names))
+    ev = result.evaluation
+    write_observations(plan_kinds.planned_table(result.rows, Path(o.output).stem), o.output, comment=(
+        f"{o.kind} rows planned by partcal {__version__} for {arm.name} ({model.describe(arm)}) on the features of "
+        f"{o.features}: {o.n} of {len(result.candidates)} candidates (the nominal tool tip on the feature, random "
+        f"orientations), D-optimal (DETMAX), seed {o.seed}.\nJoint angles in degrees. Run each row and touch "
+        f"(or visit) its feature; the rows are the measurement-kinds CSV partcal run reads.\n"
+        f"Not identifiable from these rows (held nominal): {', '.join(ev.held) or 'none'}"))
+    show("\n".join(ev.lines()))
+    scale = any(note.startswith(SCALE) for note in ev.notes)
+    show(f"the plan leaves unidentifiable (held nominal): {', '.join(ev.held) or 'nothing'}"
+         + ("; and the robot's uniform scale: nothing in these rows measures a length (give a plane's spacing_mm or "
+            "a point's known_mm)" if scale else ""))
+    show(f"wrote {o.n} {o.kind} rows ({spread}) to {o.output} ({result.exchange.exchanges} exchanges, log det "
+         f"{result.exchange.start_logdet:.3f} -> {result.exchange.logdet:.3f}, {time.perf_counter() - start:.1f} s)")
 
 
 def plan_floor(robot: Robot, options: PlanOptions) -> Floor | None:

@@ -56,11 +56,15 @@ def _mixed_rows(rng):
     to = [""] * 14 + ["1", "5", "9", "a", "pivot", "pivot"] + [""] * 4
     dist = np.array([np.nan] * 14 + [500, 700, 900, 800, 1000, 1200] + [np.nan] * 4)
     x = ROBOT.positions(q) + rng.normal(0, 1, (24, 3))
-    numbers = {"flush": flush, "distance_mm": dist, "x_meas": x[:, 0], "y_meas": x[:, 1], "z_meas": x[:, 2]}
+    angles = np.full((24, 3), np.nan)
+    angles[20:22] = rng.uniform(-60, 60, (2, 3))        # two point rows with the tool's measured orientation
+    numbers = {"flush": flush, "distance_mm": dist, "x_meas": x[:, 0], "y_meas": x[:, 1], "z_meas": x[:, 2],
+               "rx_meas": angles[:, 0], "ry_meas": angles[:, 1], "rz_meas": angles[:, 2]}
+    target = tuple([""] * 22 + ["B", "B"])              # two of a further target
     features = {"planes": {"top": {"normal": [0.1, 0.0, 1.0], "offset_mm": 300.0},
                            "step": {"parallel_to": "top", "spacing_mm": -200.0}},
                 "points": {"b": {"distance_to": "a", "distance_mm": 1000.0}, "pivot": {}}}
-    return _rows(q, kinds, numbers, {"feature": tuple(feature), "to": tuple(to)}), features
+    return _rows(q, kinds, numbers, {"feature": tuple(feature), "to": tuple(to), "target": target}), features
 
 
 @pytest.mark.parametrize("parametrization, tracker", [("dh", False), ("complete", False), ("dh", True)])
@@ -71,8 +75,9 @@ def test_jacobian_of_every_kind_matches_finite_differences(parametrization, trac
     if tracker:         # the points in a tracker's frame turned 30 degrees: its pose among the unknowns
         turn = matrix_from_rotation_vector(np.radians([10.0, -20.0, 15.0]))
         x = np.column_stack([rows.numbers[c] for c in ("x_meas", "y_meas", "z_meas")]) @ turn + [5.0, -3.0, 2.0]
+        numbers = {k: v for k, v in rows.numbers.items() if not k.startswith("r")}      # no orientation there
         rows = Rows(rows.q_deg, rows.kind, rows.ids, rows.lines, rows.source,
-                    {**rows.numbers, "x_meas": x[:, 0], "y_meas": x[:, 1], "z_meas": x[:, 2]}, rows.texts)
+                    {**numbers, "x_meas": x[:, 0], "y_meas": x[:, 1], "z_meas": x[:, 2]}, rows.texts)
         features = {**features, TRACKER_FRAME: True}
     errors = JointErrors.for_robot(ROBOT, [2, 3], 0)
     payload = np.full(len(rows), 5.0)
@@ -258,3 +263,45 @@ def test_the_data_layer_knows_the_kinds_of_the_table():
     assert set(BUILTIN_KINDS) == set(kind_names())
     for cls in MEASUREMENT_KINDS.values():
         assert cls.reads and cls.summary, cls.name
+
+
+def test_several_targets_and_the_orientation_on_the_seam_agree_with_the_tracker_path():
+    """The virtual UR10 of configs/ur10_targets_virtual.yaml (three reflectors and a T-Mac's orientation):
+    identified by ``identify`` with its targets and orientation, and by ``identify_measures`` from the same
+    data as point rows (a ``target`` column, the orientation on the primary rows): the same robot."""
+    from pathlib import Path
+
+    from partcal.data.simulate import load_study, simulate
+    from partcal.models.identification import identify
+    from partcal.models.targets import extra_from
+    from partcal.robot.kinematics import flange_offset
+    from partcal.study.kinds_run import point_rows
+
+    study = load_study(Path(__file__).resolve().parent.parent / "configs" / "ur10_targets_virtual.yaml")
+    data = simulate(study)["identification"]
+    robot = study.robot.nominal
+    n = len(data)
+    flange = robot.flange(data.q_deg)
+    targets = {t: (flange_offset(flange, data.nominal_of(t)), data.measured_of(t) - data.nominal_of(t))
+               for t in data.target_names[1:]}
+    old = identify(robot, data.q_deg, data.measured_mm,
+                   extra=extra_from(robot, data.q_deg, targets, data.orientation_errors_deg))
+    names = ["", *data.target_names[1:]]
+    rows = point_rows(data, "identification.csv")         # what a kinds run makes of such a point CSV
+    assert rows.texts["target"] == tuple(t for t in names for _ in range(n))
+    assert np.isfinite(rows.numbers["rx_meas"]).sum() == n
+    new, _ = identify_measures(robot, rows, {})
+    assert new.rank == old.rank            # of exactly dependent parameters they may hold different ones
+    other = _configurations(300, np.random.default_rng(1))
+    before = robot_with(robot, old.value[:33]).forward(other)
+    after = robot_with(robot, new.value[:33]).forward(other)
+    assert np.abs(after[:, :3, 3] - before[:, :3, 3]).max() < 1e-6
+    assert np.abs(after[:, :3, :3] - before[:, :3, :3]).max() < 1e-9
+    was, found = dict(zip(old.names, old.value)), dict(zip(new.names, new.value))
+    for t in names[1:]:                 # each further target where both put it
+        tool = np.array([was[f"tool@{t}.{c}"] for c in "xyz"])
+        expected = robot_with(robot, np.concatenate([old.value[:24], tool, old.value[27:33]])).positions(other)
+        offset = np.array([found[f"target {t}.{c}"] for c in "xyz"])
+        assert np.abs(after[:, :3, 3] + after[:, :3, :3] @ offset - expected).max() < 1e-6
+    probe = [found[f"probe.r{c}"] for c in "xyz"]
+    assert np.allclose(probe, old.value[-3:], atol=1e-7)

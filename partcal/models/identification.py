@@ -816,7 +816,7 @@ def _orientation(nominal: Robot, q_actual, design, moves, values, own: int, extr
     omega = np.zeros((n, 3, values.size))
     omega[:, :, :own] = turn_columns(nominal, robot, q_actual, design, moves, values[:own], parametrization)
     omega[:, :, -3:] = model * _DEG                                        # columns: the model frame's axes
-    return residuals, weight * np.einsum("nij,njp->nip", _log_derivative(turns), omega).reshape(-1, values.size)
+    return residuals, weight * np.einsum("nij,njp->nip", log_derivative(turns), omega).reshape(-1, values.size)
 
 
 def turn_columns(nominal: Robot, robot: Robot, q_actual: NDArray[np.float64], design, moves,
@@ -850,7 +850,7 @@ def turn_columns(nominal: Robot, robot: Robot, q_actual: NDArray[np.float64], de
     return omega
 
 
-def _log_derivative(turns: NDArray[np.float64]) -> NDArray[np.float64]:
+def log_derivative(turns: NDArray[np.float64]) -> NDArray[np.float64]:
     """How ``log(exp(w) exp(phi))`` moves with a small turn ``w`` at rotation vectors ``phi`` (n, 3): the
     inverse left Jacobian of SO(3), ``I - [phi]/2 + c [phi]^2`` with ``c = 1/t^2 - (1 + cos t)/(2 t sin t)``,
     ``t = |phi|`` (``c -> 1/12`` as ``t -> 0``), shape (n, 3, 3)."""

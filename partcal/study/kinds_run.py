@@ -74,12 +74,21 @@ def rows_of(table: ObservationTable) -> Rows:
 
 
 def point_rows(m: Measurements, source: str) -> Rows:
-    """A point CSV's rows as rows of kind ``point`` (its primary target); their lines are data-row numbers (the
-    reader has refused whatever a line would be named for)."""
+    """A point CSV's rows as rows of kind ``point``: the primary target's, then each further target's (column
+    ``target``), the measured orientation on the primary rows. Their lines are data-row numbers (the reader has
+    refused whatever a line would be named for)."""
     n = len(m)
-    x = m.measured_mm
-    return Rows(m.q_deg, ("point",) * n, tuple(str(i + 1) for i in range(n)), tuple(range(1, n + 1)), source,
-                {"x_meas": x[:, 0], "y_meas": x[:, 1], "z_meas": x[:, 2]}, {}, m.payload_kg)
+    names = m.target_names
+    x = np.vstack([m.measured_of(t) for t in names])
+    numbers = {"x_meas": x[:, 0], "y_meas": x[:, 1], "z_meas": x[:, 2]}
+    if m.has_orientation:
+        angles = np.vstack([m.measured_orientation_deg, np.full((n * (len(names) - 1), 3), np.nan)])
+        numbers.update({c: angles[:, k] for k, c in enumerate(("rx_meas", "ry_meas", "rz_meas"))})
+    texts = {"target": tuple(t if k else "" for k, t in enumerate(names) for _ in range(n))} if len(names) > 1 else {}
+    ids = tuple(f"{i + 1}" + (f"@{t}" if k else "") for k, t in enumerate(names) for i in range(n))
+    payload = None if m.payload_kg is None else np.tile(m.payload_kg, len(names))
+    return Rows(np.tile(m.q_deg, (len(names), 1)), ("point",) * (n * len(names)), ids,
+                tuple(range(1, n + 1)) * len(names), source, numbers, texts, payload)
 
 
 def joined(parts: list[Rows]) -> Rows:
@@ -169,8 +178,9 @@ def _entry_problem(spec: ModelSpec, kinds: list) -> str | None:
                 f"identification file holds measurement kinds ({present}): fit the kinematic model alone")
     for key in ("all_targets", "use_orientation"):
         if spec.params.get(key):
-            return (f"model {spec.name!r}: {key} reads a point CSV's further targets or orientation; a kinds file "
-                    "has none")
+            return (f"model {spec.name!r}: {key} is for point runs; in a run on measurement kinds every kinematic "
+                    "entry reads the point rows' further targets (column target) and orientation (rx_meas, "
+                    "ry_meas, rz_meas) by itself: leave the key out")
     return None
 
 

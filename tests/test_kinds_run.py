@@ -221,3 +221,41 @@ def test_bad_rows_are_refused_naming_file_line_and_column(cell, capsys):
         return lines[:header] + [",".join([*cells[:7], str(k), cells[8]]) for k in (1, 2, 3)]
     err = _refusal(folder, _edited(folder, "nests.csv", "still.csv", one_orientation), capsys)
     assert "still.csv:4: column 'feature': fixed point 'nest_a' is reached from one orientation" in err
+
+
+@pytest.mark.parametrize("key, text", [
+    ("data.validation", "  validation: data/test.csv\n"),
+    ("data.groups", "  groups: set\n"),
+    ("verify", "verify: {virtual_robot: virtual.yaml}\n"),
+    ("predict", "predict: pose\n"),
+    ("spread", "spread: {coverage: 0.9}\n"),
+])
+def test_a_setting_a_kinds_run_does_not_use_is_refused_naming_its_key(cell, capsys, key, text):
+    folder, _ = cell
+    config = _config(folder, "nests.csv", name="unused").read_text()
+    if key.startswith("data."):
+        config = config.replace("  tests:\n", text + "  tests:\n")
+    else:
+        config = text + config
+    path = folder / "unused.yaml"
+    path.write_text(config)
+    assert main(["run", "--check", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert f"{key} (line " in err and "does not use it" in err
+
+
+def test_a_point_test_set_takes_a_row_subset_and_a_kinds_file_does_not(cell, capsys):
+    from partcal.study.kinds_run import prepare_kinds
+    folder, _ = cell
+    path = folder / "subset.yaml"
+    path.write_text(_config(folder, "nests.csv", name="subset").read_text()
+                    .replace("test: data/test.csv", "test: {file: data/test.csv, rows: 11-40}"))
+    data = prepare_kinds(load_config(path))
+    whole = read_measurements(folder / "data" / "test.csv")
+    assert np.array_equal(data.tests["test"].q_deg, whole.q_deg[10:40])
+    path.write_text(_config(folder, "nests.csv", name="subset").read_text()
+                    .replace("identification: data/nests.csv", "identification: {file: data/nests.csv, rows: 1-50}"))
+    assert main(["run", "--check", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "data.identification (line" in err and "read whole" in err
+

@@ -40,7 +40,7 @@ from ..models.measures import (END_KIND, MEASUREMENT_KINDS, REFERENCE_NOISE_MM, 
                                kind_names, kind_residuals, observability)
 from ..robot.frames import kabsch
 from ..robot.kinematics import Robot
-from .config import ModelSpec, RunConfig
+from .config import ModelSpec, RunConfig, SpreadOptions
 from .fitting import SLOW_SECONDS, FoldLines
 from .outputs import check_writable, replace_folder
 from .persist import save_model
@@ -128,8 +128,7 @@ def prepare_kinds(config: RunConfig) -> KindsData:
         config.fail("robot", f"the identification file {config.identification} holds measurement kinds, whose "
                              "residuals come from the robot's forward kinematics: name a robot")
     opts = config.data_options
-    if opts.rows:
-        config.fail("data", "row subsets (rows:, every:) apply to point CSVs; a kinds run reads its files whole")
+    _refuse_unused(config)
     features = read_features(opts.features, kinds=kind_names()) if opts.features is not None else {}
     if opts.frame == "tracker":             # the tracker's pose is the point kind's unknowns, fitted with the robot
         features = {**features, TRACKER_FRAME: True}
@@ -138,7 +137,8 @@ def prepare_kinds(config: RunConfig) -> KindsData:
         if has_kind_column(path, opts.format):
             parts.append(rows_of(read_observations(path, robot, opts.format, features or None, kinds=kind_names())))
         else:
-            parts.append(point_rows(read_measurements(path, robot, fmt=opts.format, frame=opts.frame), str(path)))
+            parts.append(point_rows(read_measurements(path, robot, fmt=opts.format, frame=opts.frame,
+                                                      plausibility=opts.plausibility), str(path)))
     rows = joined(parts)
     kinds = built_kinds(rows, features)
     for i, spec in enumerate(config.models):
@@ -151,10 +151,33 @@ def prepare_kinds(config: RunConfig) -> KindsData:
             tests[name] = rows_of(read_observations(path, robot, opts.format, features or None, kinds=kind_names()))
             built_kinds(tests[name], features)
         else:
-            tests[name] = read_measurements(path, robot, fmt=opts.format, name=name, frame=opts.frame)
+            tests[name] = read_measurements(path, robot, fmt=opts.format, name=name, frame=opts.frame,
+                                            rows=opts.rows.get(name), plausibility=opts.plausibility)
     return KindsData(rows, features, tests, robot, config.models,
                      {k.name: f"{k.describe()}; noise {k.noise_mm:g} mm" for k in kinds},
                      any(isinstance(k, PointKind) for k in kinds) and opts.frame == "base")
+
+
+def _refuse_unused(config: RunConfig) -> None:
+    """Refuse, naming the key, what a kinds run would otherwise ignore: settings of point runs it has no use for,
+    and row subsets of its kinds files (read whole: a distance's ``to`` names rows by id). A point test set's
+    ``rows``/``every`` apply as in a point run."""
+    opts = config.data_options
+    unused = {"data.validation": config.validation is not None, "verify": config.virtual_robot is not None,
+              "predict": config.predict != "position", "rank_by": config.rank_by != "cv",
+              "data.groups": opts.groups is not None, "spread": config.spread != SpreadOptions(),
+              "dask": config.dask_address is not None,
+              "registration": opts.tool_mm is not None or not opts.fit_tool}
+    for key, given in unused.items():
+        if given:
+            config.fail(key, "a run on measurement kinds does not use it (it identifies kinematic models of tool "
+                             "positions, ranks them by cross-validation on the identification rows and scores the "
+                             "test sets; docs/config.md, 'Runs on measurement kinds'): remove it")
+    for name, selection in opts.rows.items():
+        if name == "identification" or has_kind_column(config.tests[name], opts.format):
+            where = "data.identification" if name == "identification" else f"data.tests.{name}"
+            config.fail(where, "row subsets (rows:, every:) apply to point CSVs; a measurement-kinds file is read "
+                               "whole (a distance's 'to' names rows by id): split the file instead")
 
 
 def _entry_problem(spec: ModelSpec, kinds: list) -> str | None:

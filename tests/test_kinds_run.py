@@ -259,3 +259,16 @@ def test_a_point_test_set_takes_a_row_subset_and_a_kinds_file_does_not(cell, cap
     err = capsys.readouterr().err
     assert "data.identification (line" in err and "read whole" in err
 
+
+@pytest.mark.parametrize("second", ["data/nests.csv", "data/again/nests.csv"])
+def test_identification_files_of_one_name_are_refused(cell, capsys, second):
+    folder, _ = cell
+    (folder / "data" / "again").mkdir(exist_ok=True)
+    shutil.copy(folder / "data" / "nests.csv", folder / "data" / "again" / "nests.csv")
+    path = folder / "twice.yaml"
+    path.write_text(_config(folder, "nests.csv", name="twice").read_text()
+                    .replace("identification: data/nests.csv", f"identification: [data/nests.csv, {second}]"))
+    assert main(["run", "--check", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "data.identification (line" in err and "nests.csv" in err
+    assert ("listed twice" in err) == (second == "data/nests.csv")

@@ -133,6 +133,7 @@ def prepare_kinds(config: RunConfig) -> KindsData:
     if opts.frame == "tracker":             # the tracker's pose is the point kind's unknowns, fitted with the robot
         features = {**features, TRACKER_FRAME: True}
     parts = []
+    _distinct_stems(config)
     for path in identification_files(config):
         if has_kind_column(path, opts.format):
             parts.append(rows_of(read_observations(path, robot, opts.format, features or None, kinds=kind_names())))
@@ -158,6 +159,21 @@ def prepare_kinds(config: RunConfig) -> KindsData:
                      any(isinstance(k, PointKind) for k in kinds) and opts.frame == "base")
 
 
+def _distinct_stems(config: RunConfig) -> None:
+    """Refuse two identification files of one name: the rows of a list are named ``<file stem>:<id>``
+    (:func:`joined`), so one file listed twice would count its rows twice and two files of one stem would give
+    their rows the same ids (and a distance's ``to`` two rows)."""
+    seen: dict[str, Path] = {}
+    for path in identification_files(config):
+        other = seen.setdefault(path.stem, path)
+        if other is not path:
+            what = "is listed twice" if other.resolve() == path.resolve() else f"has the name of {other}"
+            config.fail("data.identification", f"{path} {what}: each file of the list names its rows "
+                                               f"'{path.stem}:<id>', so its rows would be counted twice or their "
+                                               "ids taken for another file's: list each file once, with a name "
+                                               "of its own")
+
+
 def _refuse_unused(config: RunConfig) -> None:
     """Refuse, naming the key, what a kinds run would otherwise ignore: settings of point runs it has no use for,
     and row subsets of its kinds files (read whole: a distance's ``to`` names rows by id). A point test set's
@@ -173,7 +189,7 @@ def _refuse_unused(config: RunConfig) -> None:
             config.fail(key, "a run on measurement kinds does not use it (it identifies kinematic models of tool "
                              "positions, ranks them by cross-validation on the identification rows and scores the "
                              "test sets; docs/config.md, 'Runs on measurement kinds'): remove it")
-    for name, selection in opts.rows.items():
+    for name in opts.rows:
         if name == "identification" or has_kind_column(config.tests[name], opts.format):
             where = "data.identification" if name == "identification" else f"data.tests.{name}"
             config.fail(where, "row subsets (rows:, every:) apply to point CSVs; a measurement-kinds file is read "

@@ -26,6 +26,7 @@ The features YAML (what the cell knows of its planes and points) is read by :fun
 
 from __future__ import annotations
 
+import difflib
 import re
 from collections.abc import Collection, Mapping
 from dataclasses import dataclass, field
@@ -373,8 +374,29 @@ def features_from_section(top: Section, *, kinds: Collection[str] = BUILTIN_KIND
     return out
 
 
+PLANE_FORMS = (("parallel_to", "spacing_mm"), ("normal", "offset_mm"))
+"""The keys of each form of a plane (tied, approximately known); an unknown plane has none."""
+POINT_FORMS = (("distance_to", "distance_mm"), ("known_mm",))
+"""The keys of each form of a fixed point (tied, known); an unknown point has none."""
+
+
+def _form(sec: Section, forms: tuple) -> tuple[str, ...]:
+    """The form whose keys ``sec`` uses (``()``: none); a key outside it is refused as unknown before a key of
+    the form is missed, so that a typo is named (``offset`` for ``offset_mm``) and two forms do not mix."""
+    form = next((keys for keys in forms if any(sec.has(k) for k in keys)), ())
+    known = sorted(form or {k for keys in forms for k in keys})
+    for key in sec.data:
+        if key not in form:
+            close = difflib.get_close_matches(str(key), known, n=1, cutoff=0.6)
+            hint = f"; did you mean {close[0]!r}?" if close else "" if form else f" (known: {', '.join(known)})"
+            of = f" beside {form[0]!r} (that form has {', '.join(form)}; one form per feature)" if form else ""
+            sec.fail(sec.path(str(key)), f"unknown key{of}{hint}")
+    return form
+
+
 def _plane(planes: Section, name) -> dict:
     sec = _named(planes, name)
+    _form(sec, PLANE_FORMS)
     if sec.has("parallel_to") or sec.has("spacing_mm"):
         out = {"parallel_to": sec.get("parallel_to", "str"), "spacing_mm": sec.get("spacing_mm", "float",
                                                                                    check=_finite)}
@@ -388,6 +410,7 @@ def _plane(planes: Section, name) -> dict:
 
 def _point(points: Section, name) -> dict:
     sec = _named(points, name)
+    _form(sec, POINT_FORMS)
     if sec.has("distance_to") or sec.has("distance_mm"):
         out = {"distance_to": sec.get("distance_to", "str"), "distance_mm": sec.get("distance_mm", "float",
                                                                                      check=_positive)}

@@ -238,3 +238,14 @@ def test_a_key_outside_a_features_form_is_named_before_a_missing_one(tmp_path, o
     path = write(tmp_path, FEATURES.replace(old, new), "features.yaml")
     with pytest.raises(ConfigError, match=rf"^{re.escape(str(path))}: {pattern}"):
         read_features(path)
+
+
+def test_with_features_a_row_names_a_plane_or_point_of_them(tmp_path):
+    path = write(tmp_path, HEADER + "\n" + ROWS)
+    refused(path, 4, "feature", r"one of the planes of the features \(side; an unknown one is listed as NAME: "
+                                r"\{\}\), got 'top'", features={"planes": {"side": {}}, "points": {"nest_a": {}}})
+    refused(path, 6, "feature", r"one of the points of the features \(nest_b; .*got 'nest_a'",
+            features={"planes": {"top": {}}, "points": {"nest_b": {}}})
+    t = read_observations(path, features={"planes": {"top": {}}, "points": {"nest_a": {}}})
+    assert t.texts["feature"][1:4] == ("top", "top", "nest_a")
+    assert read_observations(path).texts["feature"][1] == "top"              # without features: any name

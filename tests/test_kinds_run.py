@@ -61,6 +61,7 @@ def test_a_run_on_touches_identifies_the_robot_and_scores_tracker_points_after_a
     printed = capsys.readouterr().out
     assert "rigid" in printed
     metrics = json.loads((folder / "out_touches" / "metrics.json").read_text())
+    assert metrics["seed"] == 0 and metrics["cv"]["folds"] == 5          # the config's seed, cv_folds: auto
     entry = metrics["models"]["complete"]
     assert 0.005 < entry["cv_kinds_rms_mm"]["plane"] < 0.02          # the touches' 0.01 mm noise, held out
     # the score printed is the model's, after a rigid fit, against the test set: computed here independently

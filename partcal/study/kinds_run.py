@@ -376,7 +376,10 @@ def run_kinds(config: RunConfig, progress: Callable[[int, int, str], None] | Non
 def kinds_metrics(result: KindsRunResult) -> dict:
     """metrics.json of a kinds run."""
     data = result.data
-    return {"partcal_version": __version__, "run": result.config.name, "kinds": dict(data.descriptions),
+    folds = _folds(result.config, data.rows)
+    return {"partcal_version": __version__, "run": result.config.name, "seed": result.config.seed,
+            "cv": {"rule": f"{folds} random folds of the measuring rows", "folds": folds},
+            "kinds": dict(data.descriptions),
             "frame_fixed": data.fixes_frame, "uncompensated": result.uncompensated, "best": result.best,
             "seconds": round(result.seconds, 3),
             "models": {r.spec.name: {"fit_kinds_rms_mm": r.fit_rms, "cv_kinds_rms_mm": r.cv_rms,

@@ -74,6 +74,7 @@ def test_a_run_on_touches_identifies_the_robot_and_scores_tracker_points_after_a
     rot0, t0 = kabsch(test.nominal_mm, test.measured_mm)
     before = np.sqrt(np.mean(np.sum((test.nominal_mm @ rot0.T + t0 - test.measured_mm) ** 2, axis=1)))
     assert expected < 0.1 < before                                   # calibrated from touches alone
+    assert f"\nuncompensated {' ' * 2}" in printed and f"{before:.4f} (rigid)" in printed
     html = (folder / "out_touches" / "index.html").read_text()
     assert "What these data cannot identify" in html and "plane top" in html
 
@@ -91,15 +92,20 @@ def test_check_names_the_scale_when_every_plane_is_unknown(cell, capsys):
 
 
 @pytest.mark.parametrize("data", ["nests.csv", "ballbar.csv"])
-def test_fixed_points_and_distances_run_too(cell, data):
+def test_fixed_points_and_distances_run_too(cell, data, capsys):
     folder, _ = cell
     path = _config(folder, data, name=data.split(".")[0])
+    path.write_text(path.read_text().replace("    test: data/test.csv\n", f"    test: data/test.csv\n    again: data/{data}\n"))
     assert main(["run", "-q", str(path)]) == 0
     metrics = json.loads((folder / f"out_{data.split('.')[0]}" / "metrics.json").read_text())
     entry = metrics["models"]["complete"]
     kind = "fixed" if data == "nests.csv" else "distance"
     assert entry["cv_kinds_rms_mm"][kind] < 0.03
     assert entry["tests"]["test"]["rms_3d"] < 0.15
+    # the identification file as a test set: its residuals are the fit's, printed with their kind's name
+    again = entry["tests"]["again"]["kinds_rms_mm"][kind]
+    assert again == pytest.approx(entry["fit_kinds_rms_mm"][kind], rel=1e-9)
+    assert f"{kind} {again:.4f}" in capsys.readouterr().out
 
 
 def test_a_model_of_an_error_field_is_refused_naming_it(cell, capsys):

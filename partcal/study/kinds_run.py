@@ -409,6 +409,13 @@ def write_kinds_run(result: KindsRunResult, render: Callable | None = None) -> P
     return cfg.output
 
 
+def _figure(t: dict) -> str:
+    """A test set's figure as the table prints it: a point set's 3-D RMS, a kinds file's residual RMS per kind."""
+    if "rms_3d" in t:
+        return f"{t['rms_3d']:.4f}" + (" (rigid)" if t.get("rigid_fit") else "")
+    return ", ".join(f"{k} {v:.4f}" for k, v in t["kinds_rms_mm"].items())
+
+
 def kinds_table(result: KindsRunResult) -> str:
     """The lines a kinds run prints: per model the fit's and the held-out residuals of each kind and the
     test sets' figures, then what the data cannot identify."""
@@ -417,15 +424,13 @@ def kinds_table(result: KindsRunResult) -> str:
     tests = list(result.data.tests)
     header = ["model", *(f"fit {k}" for k in kinds), *(f"CV {k}" for k in kinds), *tests]
     rows = []
+    if result.uncompensated:
+        rows.append(["uncompensated", *([""] * (2 * len(kinds))),
+                     *(_figure(result.uncompensated[t]) if t in result.uncompensated else "" for t in tests)])
     for r in result.models:
-        figures = []
-        for name in tests:
-            t = r.tests[name]
-            figures.append(f"{t['rms_3d']:.4f}" + (" (rigid)" if t.get("rigid_fit") else "") if "rms_3d" in t
-                           else ", ".join(f"{v:.4f}" for v in t["kinds_rms_mm"].values()))
         rows.append([r.spec.name + (" *" if r.spec.name == result.best else ""),
                      *(f"{r.fit_rms.get(k, float('nan')):.4f}" for k in kinds),
-                     *(f"{r.cv_rms.get(k, float('nan')):.4f}" for k in kinds), *figures])
+                     *(f"{r.cv_rms.get(k, float('nan')):.4f}" for k in kinds), *(_figure(r.tests[t]) for t in tests)])
     widths = [max(len(str(x)) for x in col) for col in zip(header, *rows)]
     for row in [header, *rows]:
         lines.append("  ".join(str(c).ljust(w) for c, w in zip(row, widths)))

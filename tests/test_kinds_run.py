@@ -187,6 +187,14 @@ def test_a_list_of_point_files_is_refused(cell, capsys):
     assert "join them into one file" in capsys.readouterr().err
 
 
+def test_features_beside_a_point_file_alone_are_refused(cell, capsys):
+    folder, _ = cell
+    path = _config(folder, "test.csv", name="points_features")
+    assert main(["run", "--check", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "data.features (line 5)" in err and "no identification file here has a 'kind' column" in err
+
+
 def _edited(folder: Path, source: str, target: str, edit) -> str:
     """``source`` of the cell's data with its data lines passed through ``edit(lines)``, as ``target``."""
     lines = (folder / "data" / source).read_text().splitlines()

@@ -63,6 +63,10 @@ def uses_kinds(config: RunConfig) -> bool:
         config.fail("data.identification", "a list of identification files is for measurement kinds (files with "
                                            "a 'kind' column, and point CSVs beside them); these are all point "
                                            "CSVs: join them into one file")
+    if not kinds and config.data_options.features is not None:
+        config.fail("data.features", "the cell's planes and points are read by runs on measurement kinds; no "
+                                     "identification file here has a 'kind' column (docs/data.md, 'Measurement "
+                                     "kinds'): remove it, or identify from a kinds file")
     return kinds
 
 

@@ -258,3 +258,14 @@ def test_the_data_layer_knows_the_kinds_of_the_table():
     assert set(BUILTIN_KINDS) == set(kind_names())
     for cls in MEASUREMENT_KINDS.values():
         assert cls.reads and cls.summary, cls.name
+
+
+def test_each_kind_says_how_many_rows_name_each_plane_and_point():
+    from partcal.models.measures import built_kinds
+    q = _configurations(12, np.random.default_rng(4))
+    feature = ["top", "step", "top", "step", "top", "step", "top", "a", "b", "a", "a", "b"]
+    rows = _rows(q, ["plane"] * 7 + ["fixed"] * 5, numbers={"flush": np.array([1, 0, 1] + [np.nan] * 9)},
+                 texts={"feature": tuple(feature)})
+    plane, fixed = built_kinds(rows, {})
+    assert plane.describe() == "7 touches on 2 planes (top 4, step 3), 2 flush"
+    assert fixed.describe() == "5 visits of 2 fixed points (a 3, b 2)"

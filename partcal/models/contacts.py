@@ -287,8 +287,14 @@ class PlaneKind(MeasurementKind):
 
     def describe(self) -> str:
         flush = int(self.flush.sum())
-        return (f"{self.index.size} touches on {len(self.names)} planes ({', '.join(self.names)})"
+        return (f"{self.index.size} touches on {len(self.names)} planes ({_counted(self.plane, self.names)})"
                 + (f", {flush} flush" if flush else ""))
+
+
+def _counted(features, names) -> str:
+    """``top 300, step 300, side 200``: each name and how many rows name it."""
+    features = list(features)
+    return ", ".join(f"{name} {features.count(name)}" for name in names)
 
 
 def _with_flush(out: Residuals, flush: list, rotations, frames: dict, roots: list, k: int) -> Residuals:
@@ -411,7 +417,7 @@ class FixedPointKind(MeasurementKind):
                          np.vstack([out.grad_a, np.zeros((n, 3))]), np.vstack([out.du, bar_du]))
 
     def describe(self) -> str:
-        return f"{self.index.size} visits of {len(self.names)} fixed points ({', '.join(self.names)})"
+        return f"{self.index.size} visits of {len(self.names)} fixed points ({_counted(self.point, self.names)})"
 
 
 @add_measurement_kind

@@ -287,3 +287,23 @@ def test_identification_files_of_one_name_are_refused(cell, capsys, second):
     err = capsys.readouterr().err
     assert "data.identification (line" in err and "nests.csv" in err
     assert ("listed twice" in err) == (second == "data/nests.csv")
+
+
+def _few_side(folder: Path, keep: int) -> str:
+    """touches.csv with only the first ``keep`` touches of plane 'side'."""
+    def edit(lines):
+        side = [i for i, line in enumerate(lines) if line.endswith(",side")]
+        return [line for i, line in enumerate(lines) if i not in side[keep:]]
+    return _edited(folder, "touches.csv", f"side{keep}.csv", edit)
+
+
+def test_held_out_touches_are_scored_however_few_of_a_plane_a_fold_holds(cell, capsys):
+    """A plane of 8 touches: a fold holds out one or two of them (fewer than an identification needs of a
+    plane) and the run scores them all with the planes the training rows fitted."""
+    folder, _ = cell
+    path = _config(folder, _few_side(folder, 8), name="side8")
+    assert main(["run", "-q", str(path)]) == 0, capsys.readouterr().err
+    metrics = json.loads((folder / "out_side8" / "metrics.json").read_text())
+    assert "side 8" in metrics["kinds"]["plane"]
+    assert 0.005 < metrics["models"]["complete"]["cv_kinds_rms_mm"]["plane"] < 0.1      # 0.01 mm touches
+

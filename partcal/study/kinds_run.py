@@ -289,6 +289,16 @@ def _folds(config: RunConfig, rows: Rows) -> int:
     return min(measuring, k if isinstance(k, int) else measuring)
 
 
+def fold_rows(rows: Rows, seed: int, folds: int) -> list[tuple[Rows, NDArray[np.intp]]]:
+    """The cross-validation folds of a kinds run: the measuring rows in ``folds`` random folds (drawn from
+    ``seed``), each as (training rows, the ends their distances name coming along; the held-out rows'
+    indices into ``rows``)."""
+    measuring = np.flatnonzero(np.asarray(rows.kind, dtype=object) != END_KIND)
+    order = np.random.default_rng(seed).permutation(measuring)
+    return [(subset(rows, np.setdiff1d(measuring, order[k::folds])), np.sort(order[k::folds]))
+            for k in range(folds)]
+
+
 def _weighted_rms(residuals: dict, features: dict) -> float:
     """One figure of residuals of several kinds: each divided by its kind's noise, times the reference's
     (as the fit weighs them), RMS; mm of a tracker's 0.02 mm noise."""
@@ -317,18 +327,14 @@ def fit_entry(spec: ModelSpec, data: KindsData, seed: int, folds: int,
     kw = dict(errors=model.joint_errors_, parametrization=model.parametrization_)
     fit_rms = {k: _rms(r) for k, r in kind_residuals(data.robot, data.rows, data.features, model.identification_,
                                                        **kw).items()}
-    measuring = np.flatnonzero(np.asarray(data.rows.kind, dtype=object) != END_KIND)
-    order = np.random.default_rng(seed).permutation(measuring)
     held: dict[str, list] = {}
     began = time.perf_counter()
-    for k in range(folds):
+    for k, (train, out) in enumerate(fold_rows(data.rows, seed, folds)):
         if say is not None and time.perf_counter() - began + seconds > SLOW_SECONDS:
             say(f"{spec.name}: cross-validation fold {k + 1}/{folds} ({time.perf_counter() - began:.0f} s)")
-        out = order[k::folds]
-        train = subset(data.rows, np.setdiff1d(measuring, out))
-        test = subset(data.rows, out)
         part = fitted(train)
-        for name, r in kind_residuals(data.robot, test, data.features, part.identification_, **kw).items():
+        for name, r in kind_residuals(data.robot, data.rows, data.features, part.identification_, only=out,
+                                      **kw).items():
             held.setdefault(name, []).append(r)
     cv = {name: np.concatenate(parts) for name, parts in held.items()}
     tests = {name: _score(model, test, data) for name, test in data.tests.items()}

@@ -307,3 +307,10 @@ def test_held_out_touches_are_scored_however_few_of_a_plane_a_fold_holds(cell, c
     assert "side 8" in metrics["kinds"]["plane"]
     assert 0.005 < metrics["models"]["complete"]["cv_kinds_rms_mm"]["plane"] < 0.1      # 0.01 mm touches
 
+
+def test_check_refuses_folds_that_leave_a_plane_too_few_touches(cell, capsys):
+    folder, _ = cell
+    path = _config(folder, _few_side(folder, 3), name="side3")        # any fold holding one leaves two
+    assert main(["run", "--check", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "cv_folds: cross-validation fold" in err and "plane 'side' has" in err and "fewer folds" in err

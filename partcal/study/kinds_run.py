@@ -30,7 +30,7 @@ from numpy.typing import NDArray
 from .. import __version__
 from ..data.measurements import Measurements, read_measurements
 from ..data.observations import ObservationTable, has_kind_column, read_features, read_observations
-from ..errors import ConfigError, PartcalError
+from ..errors import ConfigError, DataError, PartcalError
 from ..metrics import pooled_rms
 from ..models.contacts import TRACKER_FRAME, PointKind
 from ..models.kinematic import KinematicModel
@@ -221,6 +221,7 @@ def check_kinds(config: RunConfig, source: str | Path) -> str:
     """``partcal run --check`` of a kinds run: the data read and checked, what each kind cannot identify
     named (judged at the nominal robot, on consistent data); nothing fitted."""
     data = prepare_kinds(config)
+    check_folds(config, data)
     check_writable(config.output, config.inputs(), create=False)
     kinds = "; ".join(data.descriptions.values())
     lines = [f"{source}: OK: {len(data.models)} kinematic models; identification: {kinds}; "
@@ -299,6 +300,19 @@ def fold_rows(rows: Rows, seed: int, folds: int) -> list[tuple[Rows, NDArray[np.
             for k in range(folds)]
 
 
+def check_folds(config: RunConfig, data: KindsData) -> None:
+    """Refuse, naming ``cv_folds``, folds whose training rows the kinds refuse (a plane left fewer touches than
+    its unknowns, a point one visit), before anything is fitted."""
+    folds = _folds(config, data.rows)
+    for k, (train, _) in enumerate(fold_rows(data.rows, config.seed, folds)):
+        try:
+            built_kinds(train, data.features)
+        except DataError as exc:
+            config.fail("cv_folds", f"cross-validation fold {k + 1} of {folds} (random, seed {config.seed}) holds "
+                                    f"out rows without which the rest are refused: {exc}; use fewer folds, or more "
+                                    "rows of that feature")
+
+
 def _weighted_rms(residuals: dict, features: dict) -> float:
     """One figure of residuals of several kinds: each divided by its kind's noise, times the reference's
     (as the fit weighs them), RMS; mm of a tracker's 0.02 mm noise."""
@@ -364,6 +378,7 @@ def run_kinds(config: RunConfig, progress: Callable[[int, int, str], None] | Non
     """Fit, cross-validate and score every kinematic entry of a kinds run; the best by cross-validation."""
     start = time.perf_counter()
     data = prepare_kinds(config)
+    check_folds(config, data)
     folds = _folds(config, data.rows)
     if progress:
         progress(0, len(data.models), f"cross-validation: {folds} random folds of the identification rows")

@@ -269,3 +269,20 @@ def test_each_kind_says_how_many_rows_name_each_plane_and_point():
     plane, fixed = built_kinds(rows, {})
     assert plane.describe() == "7 touches on 2 planes (top 4, step 3), 2 flush"
     assert fixed.describe() == "5 visits of 2 fixed points (a 3, b 2)"
+
+
+def test_a_tied_plane_touched_alone_measures_no_length_and_the_scale_is_named():
+    from partcal.models.measures import observability
+    rng = np.random.default_rng(12)
+    true = _true_robot(rng)
+    q, names = _touches(true, rng, {"step": ([0, 0, 1], 100.0), "side": ([1, 0, 0], 700.0)}, 60, 0.01)
+    rows = _rows(q, ["plane"] * len(q), texts={"feature": tuple(names)})
+    tied = {"planes": {"top": {}, "step": {"parallel_to": "top", "spacing_mm": -200.0}, "side": {}}}
+    notes, _ = observability(ROBOT, rows, tied)          # top never touched: the 200 mm is no length measured
+    assert notes[0].startswith(SCALE), notes
+    given = {"planes": {"top": {"normal": [0, 0, 1], "offset_mm": 300.0},
+                        "step": {"parallel_to": "top", "spacing_mm": -200.0}, "side": {}}}
+    assert observability(ROBOT, rows, given)[0][0].startswith(SCALE)   # an approximate top is still fitted
+    q2, names2 = _touches(true, rng, {"top": ([0, 0, 1], 300.0)}, 60, 0.01)
+    both = _rows(np.vstack([q, q2]), ["plane"] * (len(q) + len(q2)), texts={"feature": tuple(names + names2)})
+    assert not any(n.startswith(SCALE) for n in observability(ROBOT, both, tied)[0])

@@ -202,6 +202,17 @@ class PlaneKind(MeasurementKind):
         self._check_rows(positions, rotations, start)
         return names, start
 
+    def scaled_lengths(self, start):
+        """A root plane's offset scales with the planes of its group that are touched: when they are all one plane
+        (one spacing: the plane tied to it touched alone), that plane's offset ``offset + spacing`` scales and
+        the spacing measures no length; touched planes of two spacings make the spacing a known length."""
+        out = np.array(start, dtype=float)
+        for k, root in enumerate(self.roots):
+            spacings = {self._root(n)[1] for n in self.names if self._root(n)[0] == root}
+            if len(spacings) == 1:
+                out[3 * k + 2] += spacings.pop()
+        return out
+
     def _check_rows(self, positions, rotations, u) -> None:
         """Every plane touched from more than one tool orientation, every touch near its plane at the nominal
         robot (:data:`~partcal.models.measures.NEAR_MM`)."""

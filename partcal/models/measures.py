@@ -207,6 +207,12 @@ class MeasurementKind:
         unknowns ``u``."""
         raise NotImplementedError
 
+    def scaled_lengths(self, start: NDArray[np.float64]) -> NDArray[np.float64]:
+        """How the kind's unknowns (at ``start``, in :meth:`unknowns`' order) change per unit of a uniform scale
+        of the whole cell that leaves its rows' residuals as they are: a length by its own value (the default);
+        the entries of unknowns that are not lengths are not read."""
+        return start
+
     def notes(self) -> list[str]:
         """What this kind can never identify, in words (for the run and the report)."""
         return []
@@ -381,7 +387,10 @@ def scale_direction(problem: "StackedProblem") -> NDArray[np.float64]:
         return s
     s[lengths] = x
     mine = np.array([u == "mm" for _, u in problem.names], dtype=bool)
-    s[problem.own:][mine] = problem.start[problem.own:][mine]
+    scaled = problem.start[problem.own:].copy()
+    for kind, cols in zip(problem.kinds, problem.columns):
+        scaled[cols - problem.own] = kind.scaled_lengths(scaled[cols - problem.own])
+    s[problem.own:][mine] = scaled[mine]
     return s
 
 

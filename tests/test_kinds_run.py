@@ -95,7 +95,8 @@ def test_check_names_the_scale_when_every_plane_is_unknown(cell, capsys):
 def test_fixed_points_and_distances_run_too(cell, data, capsys):
     folder, _ = cell
     path = _config(folder, data, name=data.split(".")[0])
-    path.write_text(path.read_text().replace("    test: data/test.csv\n", f"    test: data/test.csv\n    again: data/{data}\n"))
+    path.write_text(path.read_text().replace("    test: data/test.csv\n",
+                                             f"    test: data/test.csv\n    again: data/{data}\n"))
     assert main(["run", "-q", str(path)]) == 0
     metrics = json.loads((folder / f"out_{data.split('.')[0]}" / "metrics.json").read_text())
     entry = metrics["models"]["complete"]
@@ -314,3 +315,25 @@ def test_check_refuses_folds_that_leave_a_plane_too_few_touches(cell, capsys):
     assert main(["run", "--check", str(path)]) == 2
     err = capsys.readouterr().err
     assert "cv_folds: cross-validation fold" in err and "plane 'side' has" in err and "fewer folds" in err
+
+
+def test_a_kinds_test_set_is_scored_with_what_the_identification_fitted(cell):
+    """A test set of visits of nest_b alone (tied to nest_a, which it does not visit; an identification would
+    refuse it) is scored with the points the identification fitted: the 3-D coincidence of the model's tips with
+    nest_b, computed here from the model file."""
+    folder, _ = cell
+    others = (",nest_a", ",sphere", ",cone")
+    nest_b = _edited(folder, "nests.csv", "nest_b.csv", lambda lines: [x for x in lines if not x.endswith(others)])
+    path = _config(folder, "nests.csv", name="nestb")
+    path.write_text(path.read_text().replace("    test: data/test.csv\n",
+                                             f"    test: data/test.csv\n    b: data/{nest_b}\n"))
+    assert main(["run", "-q", str(path)]) == 0
+    metrics = json.loads((folder / "out_nestb" / "metrics.json").read_text())
+    model, _ = load_model(folder / "out_nestb" / "models" / "complete.json")
+    from partcal.data.observations import read_observations
+    rows = read_observations(folder / "data" / nest_b, "universal_robots_ur10")
+    table = model.identification_
+    centre = np.array([table.value[list(table.names).index(f"point nest_b.{c}")] for c in "xyz"])
+    tips = model.robot.positions(rows.q_deg) + model.predict(rows.q_deg)
+    expected = np.sqrt(np.mean((tips - centre) ** 2))
+    assert metrics["models"]["complete"]["tests"]["b"]["kinds_rms_mm"]["fixed"] == pytest.approx(expected, rel=1e-6)

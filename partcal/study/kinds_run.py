@@ -86,12 +86,13 @@ def point_rows(m: Measurements, source: str) -> Rows:
                 {"x_meas": x[:, 0], "y_meas": x[:, 1], "z_meas": x[:, 2]}, {}, m.payload_kg)
 
 
-def joined(parts: list[Rows]) -> Rows:
-    """The rows of several files as one set: ids (and the ``to`` that name them) prefixed by their file's stem,
-    so that each file's references stay its own; columns a file lacks are empty on its rows."""
+def joined(parts: list[Rows], names: list[str] | None = None) -> Rows:
+    """The rows of several files as one set: ids (and the ``to`` that name them) prefixed by their file's stem
+    (or by ``names``), so that each file's references stay its own; columns a file lacks are empty on its
+    rows."""
     if len(parts) == 1:
         return parts[0]
-    names = [Path(p.source).stem for p in parts]
+    names = [Path(p.source).stem for p in parts] if names is None else names
     numbers = {c for p in parts for c in p.numbers}
     texts = {c for p in parts for c in p.texts}
     out_numbers = {c: np.concatenate([p.numbers.get(c, np.full(len(p), np.nan)) for p in parts]) for c in numbers}
@@ -108,7 +109,15 @@ def joined(parts: list[Rows]) -> Rows:
         [x if x is not None else np.zeros(len(p)) for x, p in zip(payloads, parts)])
     return Rows(np.vstack([p.q_deg for p in parts]), tuple(k for p in parts for k in p.kind), ids,
                 tuple(line for p in parts for line in p.lines), ", ".join(p.source for p in parts), out_numbers,
-                out_texts, payload, tuple(p.source for p in parts for _ in range(len(p))))
+                out_texts, payload, tuple(s for p in parts for s in (p.sources or (p.source,) * len(p))))
+
+
+def beside_identification(rows: Rows, test: Rows) -> tuple[Rows, NDArray[np.intp]]:
+    """A kinds test set among the identification rows, and the indices of its rows there: the kinds are built on
+    both (a test set need not hold what an identification needs of its rows, such as three touches per plane or
+    the point a visited one is tied to), and the test rows' residuals picked out."""
+    both = joined([rows, test], names=["identification", "test"])
+    return both, np.arange(len(rows), len(both))
 
 
 @dataclass(frozen=True, eq=False)
@@ -154,7 +163,7 @@ def prepare_kinds(config: RunConfig) -> KindsData:
     for name, path in config.tests.items():
         if has_kind_column(path, opts.format):
             tests[name] = rows_of(read_observations(path, robot, opts.format, features or None, kinds=kind_names()))
-            built_kinds(tests[name], features)
+            built_kinds(beside_identification(rows, tests[name])[0], features)
         else:
             tests[name] = read_measurements(path, robot, fmt=opts.format, name=name, frame=opts.frame,
                                             rows=opts.rows.get(name), plausibility=opts.plausibility)
@@ -360,7 +369,8 @@ def _score(model: KinematicModel, test, data: KindsData) -> dict:
     """A test set's figures: a kinds file's residual RMS per kind; a point CSV's 3-D RMS (after a rigid fit when
     the identification data fix no frame)."""
     if isinstance(test, Rows):
-        residuals = kind_residuals(data.robot, test, data.features, model.identification_,
+        both, only = beside_identification(data.rows, test)
+        residuals = kind_residuals(data.robot, both, data.features, model.identification_, only=only,
                                    errors=model.joint_errors_, parametrization=model.parametrization_)
         return {"kinds_rms_mm": {k: _rms(r) for k, r in residuals.items()}}
     predicted = test.nominal_mm + model.predict(test.q_deg)

@@ -286,3 +286,15 @@ def test_a_tied_plane_touched_alone_measures_no_length_and_the_scale_is_named():
     q2, names2 = _touches(true, rng, {"top": ([0, 0, 1], 300.0)}, 60, 0.01)
     both = _rows(np.vstack([q, q2]), ["plane"] * (len(q) + len(q2)), texts={"feature": tuple(names + names2)})
     assert not any(n.startswith(SCALE) for n in observability(ROBOT, both, tied)[0])
+
+
+def test_a_point_tied_to_one_never_visited_is_refused_naming_file_line_and_column():
+    from partcal.models.measures import observability
+    q = _configurations(4, np.random.default_rng(5))
+    positions = ROBOT.positions(q)
+    q = _newton(ROBOT, q, lambda p: positions[0] - p)               # four orientations, one point
+    rows = _rows(q, ["fixed"] * 4, texts={"feature": ("b",) * 4})
+    features = {"points": {"a": {}, "b": {"distance_to": "a", "distance_mm": 1000.0}}}
+    with pytest.raises(DataError, match=r"^test\.csv:2: column 'feature': fixed point 'b' is tied to 'a' by "
+                                        r"distance_mm .*no row visits 'a'"):
+        observability(ROBOT, rows, features)

@@ -361,7 +361,10 @@ class FixedPointKind(MeasurementKind):
         for n in tied:
             other = self.specs[n]["distance_to"]
             if other not in self.names and "known_mm" not in self.specs.get(other, {}):
-                raise DataError(f"points: {n!r} is tied to {other!r} by distance_mm, but no row visits {other!r}")
+                first = self.index[self.point.index(n)]
+                raise DataError(f"{self.rows.where(first)}: column 'feature': fixed point {n!r} is tied to {other!r} "
+                                f"by distance_mm (points.{n}.distance_to of the features), but no row visits "
+                                f"{other!r}: visit it too, or list {n!r} as unknown ({n}: {{}})")
         for name in self.unknown:
             names += _point_unknowns(name)
             start += list(np.median(positions[self.index[[p == name for p in self.point]]], axis=0))

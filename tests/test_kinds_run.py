@@ -61,6 +61,7 @@ def test_a_run_on_touches_identifies_the_robot_and_scores_tracker_points_after_a
     printed = capsys.readouterr().out
     assert "rigid" in printed
     metrics = json.loads((folder / "out_touches" / "metrics.json").read_text())
+    assert metrics["seed"] == 0 and metrics["cv"]["folds"] == 5          # the config's seed, cv_folds: auto
     entry = metrics["models"]["complete"]
     assert 0.005 < entry["cv_kinds_rms_mm"]["plane"] < 0.02          # the touches' 0.01 mm noise, held out
     # the score printed is the model's, after a rigid fit, against the test set: computed here independently
@@ -73,6 +74,7 @@ def test_a_run_on_touches_identifies_the_robot_and_scores_tracker_points_after_a
     rot0, t0 = kabsch(test.nominal_mm, test.measured_mm)
     before = np.sqrt(np.mean(np.sum((test.nominal_mm @ rot0.T + t0 - test.measured_mm) ** 2, axis=1)))
     assert expected < 0.1 < before                                   # calibrated from touches alone
+    assert f"\nuncompensated {' ' * 2}" in printed and f"{before:.4f} (rigid)" in printed
     html = (folder / "out_touches" / "index.html").read_text()
     assert "What these data cannot identify" in html and "plane top" in html
 
@@ -90,15 +92,21 @@ def test_check_names_the_scale_when_every_plane_is_unknown(cell, capsys):
 
 
 @pytest.mark.parametrize("data", ["nests.csv", "ballbar.csv"])
-def test_fixed_points_and_distances_run_too(cell, data):
+def test_fixed_points_and_distances_run_too(cell, data, capsys):
     folder, _ = cell
     path = _config(folder, data, name=data.split(".")[0])
+    path.write_text(path.read_text().replace("    test: data/test.csv\n",
+                                             f"    test: data/test.csv\n    again: data/{data}\n"))
     assert main(["run", "-q", str(path)]) == 0
     metrics = json.loads((folder / f"out_{data.split('.')[0]}" / "metrics.json").read_text())
     entry = metrics["models"]["complete"]
     kind = "fixed" if data == "nests.csv" else "distance"
     assert entry["cv_kinds_rms_mm"][kind] < 0.03
     assert entry["tests"]["test"]["rms_3d"] < 0.15
+    # the identification file as a test set: its residuals are the fit's, printed with their kind's name
+    again = entry["tests"]["again"]["kinds_rms_mm"][kind]
+    assert again == pytest.approx(entry["fit_kinds_rms_mm"][kind], rel=1e-9)
+    assert f"{kind} {again:.4f}" in capsys.readouterr().out
 
 
 def test_a_model_of_an_error_field_is_refused_naming_it(cell, capsys):
@@ -180,6 +188,14 @@ def test_a_list_of_point_files_is_refused(cell, capsys):
     assert "join them into one file" in capsys.readouterr().err
 
 
+def test_features_beside_a_point_file_alone_are_refused(cell, capsys):
+    folder, _ = cell
+    path = _config(folder, "test.csv", name="points_features")
+    assert main(["run", "--check", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "data.features (line 5)" in err and "no identification file here has a 'kind' column" in err
+
+
 def _edited(folder: Path, source: str, target: str, edit) -> str:
     """``source`` of the cell's data with its data lines passed through ``edit(lines)``, as ``target``."""
     lines = (folder / "data" / source).read_text().splitlines()
@@ -221,3 +237,103 @@ def test_bad_rows_are_refused_naming_file_line_and_column(cell, capsys):
         return lines[:header] + [",".join([*cells[:7], str(k), cells[8]]) for k in (1, 2, 3)]
     err = _refusal(folder, _edited(folder, "nests.csv", "still.csv", one_orientation), capsys)
     assert "still.csv:4: column 'feature': fixed point 'nest_a' is reached from one orientation" in err
+
+
+@pytest.mark.parametrize("key, text", [
+    ("data.validation", "  validation: data/test.csv\n"),
+    ("data.groups", "  groups: set\n"),
+    ("verify", "verify: {virtual_robot: virtual.yaml}\n"),
+    ("predict", "predict: pose\n"),
+    ("spread", "spread: {coverage: 0.9}\n"),
+])
+def test_a_setting_a_kinds_run_does_not_use_is_refused_naming_its_key(cell, capsys, key, text):
+    folder, _ = cell
+    config = _config(folder, "nests.csv", name="unused").read_text()
+    if key.startswith("data."):
+        config = config.replace("  tests:\n", text + "  tests:\n")
+    else:
+        config = text + config
+    path = folder / "unused.yaml"
+    path.write_text(config)
+    assert main(["run", "--check", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert f"{key} (line " in err and "does not use it" in err
+
+
+def test_a_point_test_set_takes_a_row_subset_and_a_kinds_file_does_not(cell, capsys):
+    from partcal.study.kinds_run import prepare_kinds
+    folder, _ = cell
+    path = folder / "subset.yaml"
+    path.write_text(_config(folder, "nests.csv", name="subset").read_text()
+                    .replace("test: data/test.csv", "test: {file: data/test.csv, rows: 11-40}"))
+    data = prepare_kinds(load_config(path))
+    whole = read_measurements(folder / "data" / "test.csv")
+    assert np.array_equal(data.tests["test"].q_deg, whole.q_deg[10:40])
+    path.write_text(_config(folder, "nests.csv", name="subset").read_text()
+                    .replace("identification: data/nests.csv", "identification: {file: data/nests.csv, rows: 1-50}"))
+    assert main(["run", "--check", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "data.identification (line" in err and "read whole" in err
+
+
+@pytest.mark.parametrize("second", ["data/nests.csv", "data/again/nests.csv"])
+def test_identification_files_of_one_name_are_refused(cell, capsys, second):
+    folder, _ = cell
+    (folder / "data" / "again").mkdir(exist_ok=True)
+    shutil.copy(folder / "data" / "nests.csv", folder / "data" / "again" / "nests.csv")
+    path = folder / "twice.yaml"
+    path.write_text(_config(folder, "nests.csv", name="twice").read_text()
+                    .replace("identification: data/nests.csv", f"identification: [data/nests.csv, {second}]"))
+    assert main(["run", "--check", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "data.identification (line" in err and "nests.csv" in err
+    assert ("listed twice" in err) == (second == "data/nests.csv")
+
+
+def _few_side(folder: Path, keep: int) -> str:
+    """touches.csv with only the first ``keep`` touches of plane 'side'."""
+    def edit(lines):
+        side = [i for i, line in enumerate(lines) if line.endswith(",side")]
+        return [line for i, line in enumerate(lines) if i not in side[keep:]]
+    return _edited(folder, "touches.csv", f"side{keep}.csv", edit)
+
+
+def test_held_out_touches_are_scored_however_few_of_a_plane_a_fold_holds(cell, capsys):
+    """A plane of 8 touches: a fold holds out one or two of them (fewer than an identification needs of a
+    plane) and the run scores them all with the planes the training rows fitted."""
+    folder, _ = cell
+    path = _config(folder, _few_side(folder, 8), name="side8")
+    assert main(["run", "-q", str(path)]) == 0, capsys.readouterr().err
+    metrics = json.loads((folder / "out_side8" / "metrics.json").read_text())
+    assert "side 8" in metrics["kinds"]["plane"]
+    assert 0.005 < metrics["models"]["complete"]["cv_kinds_rms_mm"]["plane"] < 0.1      # 0.01 mm touches
+
+
+def test_check_refuses_folds_that_leave_a_plane_too_few_touches(cell, capsys):
+    folder, _ = cell
+    path = _config(folder, _few_side(folder, 3), name="side3")        # any fold holding one leaves two
+    assert main(["run", "--check", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "cv_folds: cross-validation fold" in err and "plane 'side' has" in err and "fewer folds" in err
+
+
+def test_a_kinds_test_set_is_scored_with_what_the_identification_fitted(cell):
+    """A test set of visits of nest_b alone (tied to nest_a, which it does not visit; an identification would
+    refuse it) is scored with the points the identification fitted: the 3-D coincidence of the model's tips with
+    nest_b, computed here from the model file."""
+    folder, _ = cell
+    others = (",nest_a", ",sphere", ",cone")
+    nest_b = _edited(folder, "nests.csv", "nest_b.csv", lambda lines: [x for x in lines if not x.endswith(others)])
+    path = _config(folder, "nests.csv", name="nestb")
+    path.write_text(path.read_text().replace("    test: data/test.csv\n",
+                                             f"    test: data/test.csv\n    b: data/{nest_b}\n"))
+    assert main(["run", "-q", str(path)]) == 0
+    metrics = json.loads((folder / "out_nestb" / "metrics.json").read_text())
+    model, _ = load_model(folder / "out_nestb" / "models" / "complete.json")
+    from partcal.data.observations import read_observations
+    rows = read_observations(folder / "data" / nest_b, "universal_robots_ur10")
+    table = model.identification_
+    centre = np.array([table.value[list(table.names).index(f"point nest_b.{c}")] for c in "xyz"])
+    tips = model.robot.positions(rows.q_deg) + model.predict(rows.q_deg)
+    expected = np.sqrt(np.mean((tips - centre) ** 2))
+    assert metrics["models"]["complete"]["tests"]["b"]["kinds_rms_mm"]["fixed"] == pytest.approx(expected, rel=1e-6)

@@ -305,3 +305,43 @@ def test_several_targets_and_the_orientation_on_the_seam_agree_with_the_tracker_
         assert np.abs(after[:, :3, 3] + after[:, :3, :3] @ offset - expected).max() < 1e-6
     probe = [found[f"probe.r{c}"] for c in "xyz"]
     assert np.allclose(probe, old.value[-3:], atol=1e-7)
+
+
+def test_each_kind_says_how_many_rows_name_each_plane_and_point():
+    from partcal.models.measures import built_kinds
+    q = _configurations(12, np.random.default_rng(4))
+    feature = ["top", "step", "top", "step", "top", "step", "top", "a", "b", "a", "a", "b"]
+    rows = _rows(q, ["plane"] * 7 + ["fixed"] * 5, numbers={"flush": np.array([1, 0, 1] + [np.nan] * 9)},
+                 texts={"feature": tuple(feature)})
+    plane, fixed = built_kinds(rows, {})
+    assert plane.describe() == "7 touches on 2 planes (top 4, step 3), 2 flush"
+    assert fixed.describe() == "5 visits of 2 fixed points (a 3, b 2)"
+
+
+def test_a_tied_plane_touched_alone_measures_no_length_and_the_scale_is_named():
+    from partcal.models.measures import observability
+    rng = np.random.default_rng(12)
+    true = _true_robot(rng)
+    q, names = _touches(true, rng, {"step": ([0, 0, 1], 100.0), "side": ([1, 0, 0], 700.0)}, 60, 0.01)
+    rows = _rows(q, ["plane"] * len(q), texts={"feature": tuple(names)})
+    tied = {"planes": {"top": {}, "step": {"parallel_to": "top", "spacing_mm": -200.0}, "side": {}}}
+    notes, _ = observability(ROBOT, rows, tied)          # top never touched: the 200 mm is no length measured
+    assert notes[0].startswith(SCALE), notes
+    given = {"planes": {"top": {"normal": [0, 0, 1], "offset_mm": 300.0},
+                        "step": {"parallel_to": "top", "spacing_mm": -200.0}, "side": {}}}
+    assert observability(ROBOT, rows, given)[0][0].startswith(SCALE)   # an approximate top is still fitted
+    q2, names2 = _touches(true, rng, {"top": ([0, 0, 1], 300.0)}, 60, 0.01)
+    both = _rows(np.vstack([q, q2]), ["plane"] * (len(q) + len(q2)), texts={"feature": tuple(names + names2)})
+    assert not any(n.startswith(SCALE) for n in observability(ROBOT, both, tied)[0])
+
+
+def test_a_point_tied_to_one_never_visited_is_refused_naming_file_line_and_column():
+    from partcal.models.measures import observability
+    q = _configurations(4, np.random.default_rng(5))
+    positions = ROBOT.positions(q)
+    q = _newton(ROBOT, q, lambda p: positions[0] - p)               # four orientations, one point
+    rows = _rows(q, ["fixed"] * 4, texts={"feature": ("b",) * 4})
+    features = {"points": {"a": {}, "b": {"distance_to": "a", "distance_mm": 1000.0}}}
+    with pytest.raises(DataError, match=r"^test\.csv:2: column 'feature': fixed point 'b' is tied to 'a' by "
+                                        r"distance_mm .*no row visits 'a'"):
+        observability(ROBOT, rows, features)

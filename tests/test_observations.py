@@ -221,3 +221,31 @@ def test_the_documented_example_reads(tmp_path):
     t = read_observations(path, "universal_robots_ur10", features=features)
     assert t.kind == ("point", "plane", "plane", "fixed", "pose", "pose", "distance", "distance")
     assert t.numbers["flush"][2] == 1 and t.texts["to"][-2:] == ("a", "nest_a")
+
+
+@pytest.mark.parametrize("old, new, pattern", [
+    ("offset_mm: 800", "offset: 800", r"planes\.top\.offset \(line 2\): unknown key beside 'normal' .*did you mean "
+                                      r"'offset_mm'\?"),
+    ("spacing_mm: -200", "spacing_mm: -200, normal: [0, 0, 1]",
+     r"planes\.step\.normal \(line 3\): unknown key beside 'parallel_to' \(that form has parallel_to, spacing_mm; "
+     r"one form per feature\)"),
+    ("known_mm: [900, 0, 300]", "known: [900, 0, 300]", r"points\.sphere\.known \(line 8\): unknown key; did you "
+                                                        r"mean 'known_mm'\?"),
+    ("distance_mm: 1000", "distance_mm: 1000, known_mm: [1, 2, 3]",
+     r"points\.nest_b\.known_mm \(line 7\): unknown key beside 'distance_to'"),
+])
+def test_a_key_outside_a_features_form_is_named_before_a_missing_one(tmp_path, old, new, pattern):
+    path = write(tmp_path, FEATURES.replace(old, new), "features.yaml")
+    with pytest.raises(ConfigError, match=rf"^{re.escape(str(path))}: {pattern}"):
+        read_features(path)
+
+
+def test_with_features_a_row_names_a_plane_or_point_of_them(tmp_path):
+    path = write(tmp_path, HEADER + "\n" + ROWS)
+    refused(path, 4, "feature", r"one of the planes of the features \(side; an unknown one is listed as NAME: "
+                                r"\{\}\), got 'top'", features={"planes": {"side": {}}, "points": {"nest_a": {}}})
+    refused(path, 6, "feature", r"one of the points of the features \(nest_b; .*got 'nest_a'",
+            features={"planes": {"top": {}}, "points": {"nest_b": {}}})
+    t = read_observations(path, features={"planes": {"top": {}}, "points": {"nest_a": {}}})
+    assert t.texts["feature"][1:4] == ("top", "top", "nest_a")
+    assert read_observations(path).texts["feature"][1] == "top"              # without features: any name

@@ -26,6 +26,7 @@ The features YAML (what the cell knows of its planes and points) is read by :fun
 
 from __future__ import annotations
 
+import difflib
 import re
 from collections.abc import Collection, Mapping
 from dataclasses import dataclass, field
@@ -54,6 +55,8 @@ TEXT = ("feature", "to", "set")
 READS = {"point": MEASURED, "plane": ("feature",), "fixed": ("feature",), "distance": ("distance_mm", "to"),
          "pose": ()}
 """The columns each built-in kind requires on its rows."""
+FEATURE_OF = {"plane": "planes", "fixed": "points"}
+"""The section of the features YAML that a row's ``feature`` names, by kind."""
 FEATURE_NAME = re.compile(r"^[A-Za-z0-9_.-]+$")
 _EXAMPLE = "q1,...,q6,kind,feature,distance_mm,to"
 
@@ -145,7 +148,8 @@ def read_observations(path: str | Path, robot: str | Robot | None = None, fmt: M
         Delimiter, decimal mark, column mapping and units of a foreign file (``length_unit: m`` converts
         ``distance_mm`` too).
     features : dict, optional
-        What :func:`read_features` returns: a distance row's ``to`` must then name a row's ``id`` or one of
+        What :func:`read_features` returns: a plane row's ``feature`` must then be one of its ``planes``, a
+        fixed row's one of its ``points``, and a distance row's ``to`` must name a row's ``id`` or one of
         its ``points`` (without features, a ``to`` naming no row is taken for a point defined elsewhere).
     kinds : collection of str
         The kind names accepted (the study layer passes its table's names).
@@ -156,7 +160,8 @@ def read_observations(path: str | Path, robot: str | Robot | None = None, fmt: M
     ------
     DataError
         One message naming the file, line, column, the bad value and what was expected: an unknown kind, a
-        duplicate id, a ``to`` naming nothing, a non-numeric number, an empty joint cell, a plane or fixed
+        duplicate id, a ``to`` naming nothing, a plane or fixed row's ``feature`` that the features (given)
+        do not list, a non-numeric number, an empty joint cell, a plane or fixed
         row without ``feature``, a distance row without ``distance_mm`` or ``to`` or with a distance <= 0,
         a ``flush`` other than 0 or 1, a point row without ``x_meas, y_meas, z_meas``, a payload out of range.
     """
@@ -277,6 +282,13 @@ def _check_rows(cell: _Cells, kind: tuple, numbers: dict, texts: dict, ids: tupl
             empty = texts[column][r] == "" if column in texts else np.isnan(numbers[column][r])
             if empty:
                 cell.fail(r, column, "", f"a value on a {k} row ({k} rows read {', '.join(READS[k])})")
+        section = FEATURE_OF.get(k)
+        if section is not None and features is not None and section in features:
+            names = features[section]
+            if texts["feature"][r] not in names:
+                listed = ", ".join(names) or "none"
+                cell.fail(r, "feature", texts["feature"][r], f"one of the {section} of the features ({listed}; an "
+                                                             "unknown one is listed as NAME: {})")
         if k == "plane" and "flush" in numbers and not np.isnan(flush := numbers["flush"][r]) and flush not in (0, 1):
             cell.fail(r, "flush", f"{flush:g}", "0 or 1 (1: a flat face of the tool lies on the plane), or empty")
         if k == "distance":
@@ -373,8 +385,29 @@ def features_from_section(top: Section, *, kinds: Collection[str] = BUILTIN_KIND
     return out
 
 
+PLANE_FORMS = (("parallel_to", "spacing_mm"), ("normal", "offset_mm"))
+"""The keys of each form of a plane (tied, approximately known); an unknown plane has none."""
+POINT_FORMS = (("distance_to", "distance_mm"), ("known_mm",))
+"""The keys of each form of a fixed point (tied, known); an unknown point has none."""
+
+
+def _form(sec: Section, forms: tuple) -> tuple[str, ...]:
+    """The form whose keys ``sec`` uses (``()``: none); a key outside it is refused as unknown before a key of
+    the form is missed, so that a typo is named (``offset`` for ``offset_mm``) and two forms do not mix."""
+    form = next((keys for keys in forms if any(sec.has(k) for k in keys)), ())
+    known = sorted(form or {k for keys in forms for k in keys})
+    for key in sec.data:
+        if key not in form:
+            close = difflib.get_close_matches(str(key), known, n=1, cutoff=0.6)
+            hint = f"; did you mean {close[0]!r}?" if close else "" if form else f" (known: {', '.join(known)})"
+            of = f" beside {form[0]!r} (that form has {', '.join(form)}; one form per feature)" if form else ""
+            sec.fail(sec.path(str(key)), f"unknown key{of}{hint}")
+    return form
+
+
 def _plane(planes: Section, name) -> dict:
     sec = _named(planes, name)
+    _form(sec, PLANE_FORMS)
     if sec.has("parallel_to") or sec.has("spacing_mm"):
         out = {"parallel_to": sec.get("parallel_to", "str"), "spacing_mm": sec.get("spacing_mm", "float",
                                                                                    check=_finite)}
@@ -388,6 +421,7 @@ def _plane(planes: Section, name) -> dict:
 
 def _point(points: Section, name) -> dict:
     sec = _named(points, name)
+    _form(sec, POINT_FORMS)
     if sec.has("distance_to") or sec.has("distance_mm"):
         out = {"distance_to": sec.get("distance_to", "str"), "distance_mm": sec.get("distance_mm", "float",
                                                                                      check=_positive)}

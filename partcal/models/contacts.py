@@ -296,6 +296,17 @@ class PlaneKind(MeasurementKind):
         self._check_rows(positions, rotations, start)
         return names, start
 
+    def scaled_lengths(self, start):
+        """A root plane's offset scales with the planes of its group that are touched: when they are all one plane
+        (one spacing: the plane tied to it touched alone), that plane's offset ``offset + spacing`` scales and
+        the spacing measures no length; touched planes of two spacings make the spacing a known length."""
+        out = np.array(start, dtype=float)
+        for k, root in enumerate(self.roots):
+            spacings = {self._root(n)[1] for n in self.names if self._root(n)[0] == root}
+            if len(spacings) == 1:
+                out[3 * k + 2] += spacings.pop()
+        return out
+
     def _check_rows(self, positions, rotations, u) -> None:
         """Every plane touched from more than one tool orientation, every touch near its plane at the nominal
         robot (:data:`~partcal.models.measures.NEAR_MM`)."""
@@ -381,8 +392,14 @@ class PlaneKind(MeasurementKind):
 
     def describe(self) -> str:
         flush = int(self.flush.sum())
-        return (f"{self.index.size} touches on {len(self.names)} planes ({', '.join(self.names)})"
+        return (f"{self.index.size} touches on {len(self.names)} planes ({_counted(self.plane, self.names)})"
                 + (f", {flush} flush" if flush else ""))
+
+
+def _counted(features, names) -> str:
+    """``top 300, step 300, side 200``: each name and how many rows name it."""
+    features = list(features)
+    return ", ".join(f"{name} {features.count(name)}" for name in names)
 
 
 def _with_flush(out: Residuals, flush: list, rotations, frames: dict, roots: list, k: int) -> Residuals:
@@ -438,7 +455,10 @@ class FixedPointKind(MeasurementKind):
         for n in tied:
             other = self.specs[n]["distance_to"]
             if other not in self.names and "known_mm" not in self.specs.get(other, {}):
-                raise DataError(f"points: {n!r} is tied to {other!r} by distance_mm, but no row visits {other!r}")
+                first = self.index[self.point.index(n)]
+                raise DataError(f"{self.rows.where(first)}: column 'feature': fixed point {n!r} is tied to {other!r} "
+                                f"by distance_mm (points.{n}.distance_to of the features), but no row visits "
+                                f"{other!r}: visit it too, or list {n!r} as unknown ({n}: {{}})")
         for name in self.unknown:
             names += _point_unknowns(name)
             start += list(np.median(positions[self.index[[p == name for p in self.point]]], axis=0))
@@ -505,7 +525,7 @@ class FixedPointKind(MeasurementKind):
                          np.vstack([out.grad_a, np.zeros((n, 3))]), np.vstack([out.du, bar_du]))
 
     def describe(self) -> str:
-        return f"{self.index.size} visits of {len(self.names)} fixed points ({', '.join(self.names)})"
+        return f"{self.index.size} visits of {len(self.names)} fixed points ({_counted(self.point, self.names)})"
 
 
 @add_measurement_kind

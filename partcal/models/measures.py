@@ -207,6 +207,12 @@ class MeasurementKind:
         unknowns ``u``."""
         raise NotImplementedError
 
+    def scaled_lengths(self, start: NDArray[np.float64]) -> NDArray[np.float64]:
+        """How the kind's unknowns (at ``start``, in :meth:`unknowns`' order) change per unit of a uniform scale
+        of the whole cell that leaves its rows' residuals as they are: a length by its own value (the default);
+        the entries of unknowns that are not lengths are not read."""
+        return start
+
     def notes(self) -> list[str]:
         """What this kind can never identify, in words (for the run and the report)."""
         return []
@@ -381,7 +387,10 @@ def scale_direction(problem: "StackedProblem") -> NDArray[np.float64]:
         return s
     s[lengths] = x
     mine = np.array([u == "mm" for _, u in problem.names], dtype=bool)
-    s[problem.own:][mine] = problem.start[problem.own:][mine]
+    scaled = problem.start[problem.own:].copy()
+    for kind, cols in zip(problem.kinds, problem.columns):
+        scaled[cols - problem.own] = kind.scaled_lengths(scaled[cols - problem.own])
+    s[problem.own:][mine] = scaled[mine]
     return s
 
 
@@ -511,11 +520,13 @@ class Measured:
 
 
 def kind_residuals(robot: Robot, rows: Rows, features: dict, table: Identification, *,
-                   errors: JointErrors | None = None, payload_kg=0.0, parametrization: str = "dh"
-                   ) -> dict[str, NDArray[np.float64]]:
+                   errors: JointErrors | None = None, payload_kg=0.0, parametrization: str = "dh",
+                   only: NDArray[np.intp] | None = None) -> dict[str, NDArray[np.float64]]:
     """Each kind's residuals (mm) on ``rows`` for an identified ``table`` (its kinds' unknowns as fitted; an
     unknown the table lacks, a plane or point the fit never saw, starts where :meth:`MeasurementKind.unknowns`
-    puts it): what held-out rows of the same kind leave."""
+    puts it): what held-out rows of the same kind leave. ``only`` (indices into ``rows``): the residuals of
+    those rows alone, the kinds built on every row (held-out rows need not satisfy what an identification
+    needs of its rows, such as three touches per plane); a kind none of them reads is left out."""
     kinds = built_kinds(rows, features)
     payload = np.broadcast_to(np.asarray(payload_kg, dtype=float), (len(rows),))
     problem = StackedProblem(robot, errors, rows, kinds, payload, parametrization)
@@ -525,4 +536,13 @@ def kind_residuals(robot: Robot, rows: Rows, features: dict, table: Identificati
     for k, (name, _) in enumerate(problem.names):
         if name in fitted:
             values[problem.own + k] = fitted[name]
-    return {kind.name: r for kind, r in zip(kinds, problem.raw(values, measured_only=True))}
+    if only is None:
+        return {kind.name: r for kind, r in zip(kinds, problem.raw(values, measured_only=True))}
+    chain = problem.chain(values, False)
+    out = {}
+    for kind, u in zip(kinds, problem.split(values)):
+        r = kind.residuals(chain.positions, chain.rotations, u)
+        keep = np.isin(r.rows_a, only) & (r.rows_a >= 0)
+        if keep.any():
+            out[kind.name] = r.values[keep]
+    return out

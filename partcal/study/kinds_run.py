@@ -30,7 +30,7 @@ from numpy.typing import NDArray
 from .. import __version__
 from ..data.measurements import Measurements, read_measurements
 from ..data.observations import ObservationTable, has_kind_column, read_features, read_observations
-from ..errors import ConfigError, PartcalError
+from ..errors import ConfigError, DataError, PartcalError
 from ..metrics import pooled_rms
 from ..models.contacts import TRACKER_FRAME, PointKind
 from ..models.kinematic import KinematicModel
@@ -40,7 +40,7 @@ from ..models.measures import (END_KIND, MEASUREMENT_KINDS, REFERENCE_NOISE_MM, 
                                kind_names, kind_residuals, observability)
 from ..robot.frames import kabsch
 from ..robot.kinematics import Robot
-from .config import ModelSpec, RunConfig
+from .config import ModelSpec, RunConfig, SpreadOptions
 from .fitting import SLOW_SECONDS, FoldLines
 from .outputs import check_writable, replace_folder
 from .persist import save_model
@@ -63,6 +63,10 @@ def uses_kinds(config: RunConfig) -> bool:
         config.fail("data.identification", "a list of identification files is for measurement kinds (files with "
                                            "a 'kind' column, and point CSVs beside them); these are all point "
                                            "CSVs: join them into one file")
+    if not kinds and config.data_options.features is not None:
+        config.fail("data.features", "the cell's planes and points are read by runs on measurement kinds; no "
+                                     "identification file here has a 'kind' column (docs/data.md, 'Measurement "
+                                     "kinds'): remove it, or identify from a kinds file")
     return kinds
 
 
@@ -91,12 +95,13 @@ def point_rows(m: Measurements, source: str) -> Rows:
                 tuple(range(1, n + 1)) * len(names), source, numbers, texts, payload)
 
 
-def joined(parts: list[Rows]) -> Rows:
-    """The rows of several files as one set: ids (and the ``to`` that name them) prefixed by their file's stem,
-    so that each file's references stay its own; columns a file lacks are empty on its rows."""
+def joined(parts: list[Rows], names: list[str] | None = None) -> Rows:
+    """The rows of several files as one set: ids (and the ``to`` that name them) prefixed by their file's stem
+    (or by ``names``), so that each file's references stay its own; columns a file lacks are empty on its
+    rows."""
     if len(parts) == 1:
         return parts[0]
-    names = [Path(p.source).stem for p in parts]
+    names = [Path(p.source).stem for p in parts] if names is None else names
     numbers = {c for p in parts for c in p.numbers}
     texts = {c for p in parts for c in p.texts}
     out_numbers = {c: np.concatenate([p.numbers.get(c, np.full(len(p), np.nan)) for p in parts]) for c in numbers}
@@ -113,7 +118,15 @@ def joined(parts: list[Rows]) -> Rows:
         [x if x is not None else np.zeros(len(p)) for x, p in zip(payloads, parts)])
     return Rows(np.vstack([p.q_deg for p in parts]), tuple(k for p in parts for k in p.kind), ids,
                 tuple(line for p in parts for line in p.lines), ", ".join(p.source for p in parts), out_numbers,
-                out_texts, payload, tuple(p.source for p in parts for _ in range(len(p))))
+                out_texts, payload, tuple(s for p in parts for s in (p.sources or (p.source,) * len(p))))
+
+
+def beside_identification(rows: Rows, test: Rows) -> tuple[Rows, NDArray[np.intp]]:
+    """A kinds test set among the identification rows, and the indices of its rows there: the kinds are built on
+    both (a test set need not hold what an identification needs of its rows, such as three touches per plane or
+    the point a visited one is tied to), and the test rows' residuals picked out."""
+    both = joined([rows, test], names=["identification", "test"])
+    return both, np.arange(len(rows), len(both))
 
 
 @dataclass(frozen=True, eq=False)
@@ -137,17 +150,18 @@ def prepare_kinds(config: RunConfig) -> KindsData:
         config.fail("robot", f"the identification file {config.identification} holds measurement kinds, whose "
                              "residuals come from the robot's forward kinematics: name a robot")
     opts = config.data_options
-    if opts.rows:
-        config.fail("data", "row subsets (rows:, every:) apply to point CSVs; a kinds run reads its files whole")
+    _refuse_unused(config)
     features = read_features(opts.features, kinds=kind_names()) if opts.features is not None else {}
     if opts.frame == "tracker":             # the tracker's pose is the point kind's unknowns, fitted with the robot
         features = {**features, TRACKER_FRAME: True}
     parts = []
+    _distinct_stems(config)
     for path in identification_files(config):
         if has_kind_column(path, opts.format):
             parts.append(rows_of(read_observations(path, robot, opts.format, features or None, kinds=kind_names())))
         else:
-            parts.append(point_rows(read_measurements(path, robot, fmt=opts.format, frame=opts.frame), str(path)))
+            parts.append(point_rows(read_measurements(path, robot, fmt=opts.format, frame=opts.frame,
+                                                      plausibility=opts.plausibility), str(path)))
     rows = joined(parts)
     kinds = built_kinds(rows, features)
     for i, spec in enumerate(config.models):
@@ -158,12 +172,50 @@ def prepare_kinds(config: RunConfig) -> KindsData:
     for name, path in config.tests.items():
         if has_kind_column(path, opts.format):
             tests[name] = rows_of(read_observations(path, robot, opts.format, features or None, kinds=kind_names()))
-            built_kinds(tests[name], features)
+            built_kinds(beside_identification(rows, tests[name])[0], features)
         else:
-            tests[name] = read_measurements(path, robot, fmt=opts.format, name=name, frame=opts.frame)
+            tests[name] = read_measurements(path, robot, fmt=opts.format, name=name, frame=opts.frame,
+                                            rows=opts.rows.get(name), plausibility=opts.plausibility)
     return KindsData(rows, features, tests, robot, config.models,
                      {k.name: f"{k.describe()}; noise {k.noise_mm:g} mm" for k in kinds},
                      any(isinstance(k, PointKind) for k in kinds) and opts.frame == "base")
+
+
+def _distinct_stems(config: RunConfig) -> None:
+    """Refuse two identification files of one name: the rows of a list are named ``<file stem>:<id>``
+    (:func:`joined`), so one file listed twice would count its rows twice and two files of one stem would give
+    their rows the same ids (and a distance's ``to`` two rows)."""
+    seen: dict[str, Path] = {}
+    for path in identification_files(config):
+        other = seen.setdefault(path.stem, path)
+        if other is not path:
+            what = "is listed twice" if other.resolve() == path.resolve() else f"has the name of {other}"
+            config.fail("data.identification", f"{path} {what}: each file of the list names its rows "
+                                               f"'{path.stem}:<id>', so its rows would be counted twice or their "
+                                               "ids taken for another file's: list each file once, with a name "
+                                               "of its own")
+
+
+def _refuse_unused(config: RunConfig) -> None:
+    """Refuse, naming the key, what a kinds run would otherwise ignore: settings of point runs it has no use for,
+    and row subsets of its kinds files (read whole: a distance's ``to`` names rows by id). A point test set's
+    ``rows``/``every`` apply as in a point run."""
+    opts = config.data_options
+    unused = {"data.validation": config.validation is not None, "verify": config.virtual_robot is not None,
+              "predict": config.predict != "position", "rank_by": config.rank_by != "cv",
+              "data.groups": opts.groups is not None, "spread": config.spread != SpreadOptions(),
+              "dask": config.dask_address is not None,
+              "registration": opts.tool_mm is not None or not opts.fit_tool}
+    for key, given in unused.items():
+        if given:
+            config.fail(key, "a run on measurement kinds does not use it (it identifies kinematic models of tool "
+                             "positions, ranks them by cross-validation on the identification rows and scores the "
+                             "test sets; docs/config.md, 'Runs on measurement kinds'): remove it")
+    for name in opts.rows:
+        if name == "identification" or has_kind_column(config.tests[name], opts.format):
+            where = "data.identification" if name == "identification" else f"data.tests.{name}"
+            config.fail(where, "row subsets (rows:, every:) apply to point CSVs; a measurement-kinds file is read "
+                               "whole (a distance's 'to' names rows by id): split the file instead")
 
 
 def _entry_problem(spec: ModelSpec, kinds: list) -> str | None:
@@ -188,6 +240,7 @@ def check_kinds(config: RunConfig, source: str | Path) -> str:
     """``partcal run --check`` of a kinds run: the data read and checked, what each kind cannot identify
     named (judged at the nominal robot, on consistent data); nothing fitted."""
     data = prepare_kinds(config)
+    check_folds(config, data)
     check_writable(config.output, config.inputs(), create=False)
     kinds = "; ".join(data.descriptions.values())
     lines = [f"{source}: OK: {len(data.models)} kinematic models; identification: {kinds}; "
@@ -256,6 +309,29 @@ def _folds(config: RunConfig, rows: Rows) -> int:
     return min(measuring, k if isinstance(k, int) else measuring)
 
 
+def fold_rows(rows: Rows, seed: int, folds: int) -> list[tuple[Rows, NDArray[np.intp]]]:
+    """The cross-validation folds of a kinds run: the measuring rows in ``folds`` random folds (drawn from
+    ``seed``), each as (training rows, the ends their distances name coming along; the held-out rows'
+    indices into ``rows``)."""
+    measuring = np.flatnonzero(np.asarray(rows.kind, dtype=object) != END_KIND)
+    order = np.random.default_rng(seed).permutation(measuring)
+    return [(subset(rows, np.setdiff1d(measuring, order[k::folds])), np.sort(order[k::folds]))
+            for k in range(folds)]
+
+
+def check_folds(config: RunConfig, data: KindsData) -> None:
+    """Refuse, naming ``cv_folds``, folds whose training rows the kinds refuse (a plane left fewer touches than
+    its unknowns, a point one visit), before anything is fitted."""
+    folds = _folds(config, data.rows)
+    for k, (train, _) in enumerate(fold_rows(data.rows, config.seed, folds)):
+        try:
+            built_kinds(train, data.features)
+        except DataError as exc:
+            config.fail("cv_folds", f"cross-validation fold {k + 1} of {folds} (random, seed {config.seed}) holds "
+                                    f"out rows without which the rest are refused: {exc}; use fewer folds, or more "
+                                    "rows of that feature")
+
+
 def _weighted_rms(residuals: dict, features: dict) -> float:
     """One figure of residuals of several kinds: each divided by its kind's noise, times the reference's
     (as the fit weighs them), RMS; mm of a tracker's 0.02 mm noise."""
@@ -284,18 +360,14 @@ def fit_entry(spec: ModelSpec, data: KindsData, seed: int, folds: int,
     kw = dict(errors=model.joint_errors_, parametrization=model.parametrization_)
     fit_rms = {k: _rms(r) for k, r in kind_residuals(data.robot, data.rows, data.features, model.identification_,
                                                        **kw).items()}
-    measuring = np.flatnonzero(np.asarray(data.rows.kind, dtype=object) != END_KIND)
-    order = np.random.default_rng(seed).permutation(measuring)
     held: dict[str, list] = {}
     began = time.perf_counter()
-    for k in range(folds):
+    for k, (train, out) in enumerate(fold_rows(data.rows, seed, folds)):
         if say is not None and time.perf_counter() - began + seconds > SLOW_SECONDS:
             say(f"{spec.name}: cross-validation fold {k + 1}/{folds} ({time.perf_counter() - began:.0f} s)")
-        out = order[k::folds]
-        train = subset(data.rows, np.setdiff1d(measuring, out))
-        test = subset(data.rows, out)
         part = fitted(train)
-        for name, r in kind_residuals(data.robot, test, data.features, part.identification_, **kw).items():
+        for name, r in kind_residuals(data.robot, data.rows, data.features, part.identification_, only=out,
+                                      **kw).items():
             held.setdefault(name, []).append(r)
     cv = {name: np.concatenate(parts) for name, parts in held.items()}
     tests = {name: _score(model, test, data) for name, test in data.tests.items()}
@@ -307,7 +379,8 @@ def _score(model: KinematicModel, test, data: KindsData) -> dict:
     """A test set's figures: a kinds file's residual RMS per kind; a point CSV's 3-D RMS (after a rigid fit when
     the identification data fix no frame)."""
     if isinstance(test, Rows):
-        residuals = kind_residuals(data.robot, test, data.features, model.identification_,
+        both, only = beside_identification(data.rows, test)
+        residuals = kind_residuals(data.robot, both, data.features, model.identification_, only=only,
                                    errors=model.joint_errors_, parametrization=model.parametrization_)
         return {"kinds_rms_mm": {k: _rms(r) for k, r in residuals.items()}}
     predicted = test.nominal_mm + model.predict(test.q_deg)
@@ -325,6 +398,7 @@ def run_kinds(config: RunConfig, progress: Callable[[int, int, str], None] | Non
     """Fit, cross-validate and score every kinematic entry of a kinds run; the best by cross-validation."""
     start = time.perf_counter()
     data = prepare_kinds(config)
+    check_folds(config, data)
     folds = _folds(config, data.rows)
     if progress:
         progress(0, len(data.models), f"cross-validation: {folds} random folds of the identification rows")
@@ -347,7 +421,10 @@ def run_kinds(config: RunConfig, progress: Callable[[int, int, str], None] | Non
 def kinds_metrics(result: KindsRunResult) -> dict:
     """metrics.json of a kinds run."""
     data = result.data
-    return {"partcal_version": __version__, "run": result.config.name, "kinds": dict(data.descriptions),
+    folds = _folds(result.config, data.rows)
+    return {"partcal_version": __version__, "run": result.config.name, "seed": result.config.seed,
+            "cv": {"rule": f"{folds} random folds of the measuring rows", "folds": folds},
+            "kinds": dict(data.descriptions),
             "frame_fixed": data.fixes_frame, "uncompensated": result.uncompensated, "best": result.best,
             "seconds": round(result.seconds, 3),
             "models": {r.spec.name: {"fit_kinds_rms_mm": r.fit_rms, "cv_kinds_rms_mm": r.cv_rms,
@@ -377,6 +454,13 @@ def write_kinds_run(result: KindsRunResult, render: Callable | None = None) -> P
     return cfg.output
 
 
+def _figure(t: dict) -> str:
+    """A test set's figure as the table prints it: a point set's 3-D RMS, a kinds file's residual RMS per kind."""
+    if "rms_3d" in t:
+        return f"{t['rms_3d']:.4f}" + (" (rigid)" if t.get("rigid_fit") else "")
+    return ", ".join(f"{k} {v:.4f}" for k, v in t["kinds_rms_mm"].items())
+
+
 def kinds_table(result: KindsRunResult) -> str:
     """The lines a kinds run prints: per model the fit's and the held-out residuals of each kind and the
     test sets' figures, then what the data cannot identify."""
@@ -385,15 +469,13 @@ def kinds_table(result: KindsRunResult) -> str:
     tests = list(result.data.tests)
     header = ["model", *(f"fit {k}" for k in kinds), *(f"CV {k}" for k in kinds), *tests]
     rows = []
+    if result.uncompensated:
+        rows.append(["uncompensated", *([""] * (2 * len(kinds))),
+                     *(_figure(result.uncompensated[t]) if t in result.uncompensated else "" for t in tests)])
     for r in result.models:
-        figures = []
-        for name in tests:
-            t = r.tests[name]
-            figures.append(f"{t['rms_3d']:.4f}" + (" (rigid)" if t.get("rigid_fit") else "") if "rms_3d" in t
-                           else ", ".join(f"{v:.4f}" for v in t["kinds_rms_mm"].values()))
         rows.append([r.spec.name + (" *" if r.spec.name == result.best else ""),
                      *(f"{r.fit_rms.get(k, float('nan')):.4f}" for k in kinds),
-                     *(f"{r.cv_rms.get(k, float('nan')):.4f}" for k in kinds), *figures])
+                     *(f"{r.cv_rms.get(k, float('nan')):.4f}" for k in kinds), *(_figure(r.tests[t]) for t in tests)])
     widths = [max(len(str(x)) for x in col) for col in zip(header, *rows)]
     for row in [header, *rows]:
         lines.append("  ".join(str(c).ljust(w) for c, w in zip(row, widths)))

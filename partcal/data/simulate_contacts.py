@@ -122,8 +122,8 @@ def plane_touches(vr, planes: dict, counts: dict, rng: np.random.Generator, nois
 
         def near(tips, qa):
             ok = np.abs(tips @ normal - offset) < NEAR_PLANE_MM
-            if flush:
-                ok &= np.abs(tib.forward(qa)[:, :3, 2] @ normal) > np.cos(np.radians(45.0))
+            if flush:               # the tool's face comes down onto the plane: its z axis against the normal
+                ok &= tib.forward(qa)[:, :3, 2] @ normal < -np.cos(np.radians(45.0))
             return ok
 
         def targets(tips, qa, k):
@@ -214,9 +214,10 @@ def _visits(vr, tib, count, near, targets, residual, rng, ranges, fixed, what) -
 
 
 def _flush_rotations(rotations: NDArray[np.float64], normal: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Each orientation turned by the smallest rotation that lays its z axis along ``+-normal`` (the nearer)."""
+    """Each orientation turned by the smallest rotation that lays its z axis along ``-normal``: the tool's face
+    down on the plane, whose normal points out of the material."""
     z = rotations[:, :, 2]
-    want = np.where((z @ normal)[:, None] >= 0, normal, -normal)
+    want = np.broadcast_to(-normal, z.shape)
     axis = np.cross(z, want)
     sin = np.linalg.norm(axis, axis=1)
     angle = np.arctan2(sin, np.einsum("ij,ij->i", z, want))

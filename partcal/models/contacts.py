@@ -205,6 +205,12 @@ class PointKind(MeasurementKind):
         return f"{self.index.size} tracker points {where}{more}"
 
 
+def _largest_turn_deg(rotations: NDArray[np.float64]) -> float:
+    """The largest angle (degrees) between the first of ``rotations`` (n, 3, 3) and the others."""
+    cos = (np.einsum("ij,nij->n", rotations[0], rotations[1:]) - 1.0) / 2.0
+    return float(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))).max(initial=0.0))
+
+
 def _skew(v: NDArray[np.float64]) -> NDArray[np.float64]:
     """``[v]_x`` of each row of ``v`` (n, 3): ``[v]_x w = v x w``, shape (n, 3, 3)."""
     out = np.zeros((len(v), 3, 3))
@@ -312,12 +318,11 @@ class PlaneKind(MeasurementKind):
         robot (:data:`~partcal.models.measures.NEAR_MM`)."""
         for name in self.names:
             mine = self.index[[p == name for p in self.plane]]
-            axes = rotations[mine][:, :, 2]
-            if mine.size > 1 and np.degrees(np.arccos(np.clip(np.min(axes @ axes[0]), -1, 1))) < 1.0:
+            if mine.size > 1 and _largest_turn_deg(rotations[mine]) < 1.0:
                 raise DataError(f"{self.rows.where(mine[0])}: column 'feature': plane {name!r} is touched from one "
-                                "orientation of the tool only (its axis turns less than 1 degree over the "
+                                "orientation of the tool only (it turns less than 1 degree over the "
                                 f"{mine.size} touches): such touches cannot tell the tool's offset from the plane's "
-                                "place; touch it with the tool turned")
+                                "place; touch it with the tool turned (flush: spun about its axis)")
         distance = np.abs(self.residuals(positions, rotations, u).values[:self.index.size])
         far = np.flatnonzero(distance > NEAR_MM)
         if far.size:
@@ -471,9 +476,7 @@ class FixedPointKind(MeasurementKind):
         """Every point reached from more than one orientation, every visit near its point at the nominal robot."""
         for name in self.names:
             mine = self.index[[p == name for p in self.point]]
-            turns = [np.degrees(np.arccos(np.clip((np.trace(rotations[mine[0]].T @ rotations[i]) - 1) / 2, -1, 1)))
-                     for i in mine[1:]]
-            if mine.size > 1 and max(turns) < 1.0:
+            if mine.size > 1 and _largest_turn_deg(rotations[mine]) < 1.0:
                 raise DataError(f"{self.rows.where(mine[0])}: column 'feature': fixed point {name!r} is reached from "
                                 f"one orientation of the tool only ({mine.size} visits within 1 degree): visits must "
                                 "turn the tool about the point")

@@ -43,6 +43,10 @@ class Progress:
         return cls(quiet, f"partcal {__version__}: run {config.name!r}, {len(config.models)} models, "
                           f"{1 + len(config.tests)} data sets, seed {config.seed}")
 
+    def __bool__(self) -> bool:
+        """False when quiet: stages that print their own progress (a slow model's folds) ask this."""
+        return not self.quiet
+
     def __call__(self, done: int, total: int, text: str) -> None:
         if self.quiet:
             return

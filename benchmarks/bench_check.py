@@ -71,7 +71,7 @@ def fitted_model(train, robot):
 
 def b_table(model, own, B, count: int | None) -> None:
     """The unchanged and shifted windows of B 1001-1495."""
-    rows, held = [], {"calibrated": 0, "own": 0}
+    rows, held, first = [], {"calibrated": 0, "own": 0}, {0.05: 0, -0.05: 0}
     for sl in windows(len(B.q_deg), count):
         q, errors = B.q_deg[sl], B.errors_mm[sl]
         same, by_own = check_arrays(model, q, errors), check_arrays(own, q, errors)
@@ -84,12 +84,15 @@ def b_table(model, own, B, count: int | None) -> None:
             moved[:, 1] += shift
             result = check_arrays(model, moved, B.measured_mm[sl] - model.robot_.positions(moved))   # as read
             joint2 = next(e for e in result.explanations if e.name == JOINT2)
-            first = result.explanations[0]
+            best = result.explanations[0]
+            first[shift] += best.name == JOINT2 and not result.holds
             cells += ["holds" if result.holds else "moved", "/".join(map(str, ranks(result))),
-                      f"{joint2.change[0]:+.4f}", "" if first.name == JOINT2 else first.name]
+                      f"{joint2.change[0]:+.4f}", "" if best.name == JOINT2 else f"{best.name} ({best.evidence:.0f} "
+                      f"against {joint2.evidence:.0f})"]
         rows.append(cells)
     title = (f"B's DH model against {'five' if count else 'all nine'} 50-pose windows of B 1001-1495 "
-             f"(holds: {held['calibrated']} with the calibrated spread, {held['own']} with the fit's own)")
+             f"(holds: {held['calibrated']} with the calibrated spread, {held['own']} with the fit's own; joint 2 "
+             f"moved and first: {first[0.05]} at +0.05, {first[-0.05]} at -0.05)")
     print_table(title, ["rows", "mean z2", "p", "verdict", "own spread", "+0.05", "rank j2", "fitted deg", "first",
                         "-0.05", "rank j2", "fitted deg", "first"], rows)
 

@@ -12,6 +12,7 @@ from partcal.data.measurements import Measurements, read_measurements, write_mea
 from partcal.data.sampling import sample_configurations
 from partcal.data.simulate import load_study
 from partcal.models.kinematic import KinematicModel
+from partcal.models.series import ErrorModel
 from partcal.study.check import check_file
 from partcal.study.persist import load_model, save_model
 from partcal.study.spread import calibrate_spread
@@ -140,3 +141,22 @@ def test_bad_inputs_are_refused_naming_file_and_field(cell, tmp_path):
     assert unmeasured.returncode == 2 and "bare.csv" in unmeasured.stderr and "x_meas" in unmeasured.stderr
     for run in (missing, wrong, unmeasured):
         assert "Traceback" not in run.stderr and run.stdout == ""
+
+
+def test_a_model_without_robot_parameters_is_judged_without_explanations(cell):
+    """A Cartesian series model (the robot from its file) is judged by its calibrated spread at the nominal
+    positions; there is nothing to explain with."""
+    model_path, measure, virtual, folder = cell
+    rng = np.random.default_rng(5)
+    q = sample_configurations(virtual.nominal, 150, {1: (-90, 90), 2: (-150, -30), 3: (-140, 140)}, {}, rng)
+    nominal = virtual.nominal.positions(q)
+    series = calibrate_spread(ErrorModel(inputs="cartesian", degree=2, solver="lstsq"), nominal,
+                              virtual.measure(q, rng) - nominal, folds=5)
+    path = folder / "sdp.json"
+    save_model(series, path, name="SDP(CI)", robot=virtual.nominal)
+    csv, _ = measure("series", read_offset_deg=np.array([0, 0.05, 0, 0, 0, 0]))
+    result, data = check_file(path, csv), read_measurements(csv)
+    mean, std = series.predict_with_std(virtual.nominal.positions(data.q_deg))
+    z = (data.measured_mm - virtual.nominal.positions(data.q_deg) - mean) / std
+    assert result.mean_z2 == pytest.approx(np.mean(z ** 2), rel=1e-9) and result.explanations == ()
+    assert "no explanations tried" in "\n".join(result.lines())

@@ -48,7 +48,7 @@ from ..models.identification import geometric_size, model_jacobian
 from ..models.kindtable import identification_of
 from ..robot.frames import kabsch
 from ..robot.rotations import rotation_vector_from_matrix
-from .persist import load_model
+from .predictor import load_predictor
 
 ALPHA = 0.01
 """The verdict is ``moved`` below this p-value: one false alarm in a hundred checks of an unchanged robot
@@ -135,7 +135,9 @@ class CheckResult:
         top = np.argsort(-norms)[:worst]
         out.append("largest standardised residuals (pose: |z|): " + ", ".join(f"{k + 1}: {norms[k]:.2f}"
                                                                                  for k in top))
-        if self.explanations:
+        if not self.explanations:
+            out.append("no explanations tried: the model identifies no robot parameters (kind kinematic does)")
+        else:
             out.append("explanations, likeliest first (evidence: 2 ln Bayes factor against nothing moved, "
                        "prior of a change 0.1 deg or 1 mm per parameter):")
             width = max(len(e.name) for e in self.explanations)
@@ -195,11 +197,19 @@ def explain(z: NDArray[np.float64], std: NDArray[np.float64], candidates, dof: i
     return tuple(sorted(found, key=lambda e: -e.evidence))
 
 
-def check_arrays(model, q_deg, errors_mm, *, payload_kg=None, registered: bool = False, alpha: float = ALPHA,
-                 model_name: str = "model", data_name: str = "data", registration=None) -> CheckResult:
-    """Check measured errors ``errors_mm`` (n, 3) mm (measured minus the model robot's nominal positions) at
-    joints ``q_deg`` (n, N) deg against a fitted ``model`` with a spread. ``registered``: the data's frame was
-    fitted to them (6 coordinates fewer, no base-frame explanation)."""
+def model_inputs(model, robot, q_deg: NDArray[np.float64]) -> NDArray[np.float64]:
+    """What ``model`` reads at joints ``q_deg`` (n, N) deg: the joints, or for a Cartesian model the nominal
+    positions of ``robot`` (mm)."""
+    return q_deg if model.inputs == "joint" else robot.positions(q_deg)
+
+
+def check_arrays(model, q_deg, errors_mm, *, robot=None, payload_kg=None, registered: bool = False,
+                 alpha: float = ALPHA, model_name: str = "model", data_name: str = "data", registration=None
+                 ) -> CheckResult:
+    """Check measured errors ``errors_mm`` (n, 3) mm (measured minus ``robot``'s nominal positions; default
+    robot the model's own, ``model.robot_``) at joints ``q_deg`` (n, N) deg against a fitted ``model`` with a
+    spread (any kind; explanations for a kind that identifies robot parameters). ``registered``: the data's
+    frame was fitted to them (6 coordinates fewer, no base-frame explanation)."""
     problem = model.spread_problem()
     if problem is not None:
         raise ModelFileError(f"{model_name}: {problem}")
@@ -207,9 +217,9 @@ def check_arrays(model, q_deg, errors_mm, *, payload_kg=None, registered: bool =
         raise ConfigError(f"check: alpha must lie in (0, 1); got {alpha!r}")
     q = np.asarray(q_deg, dtype=float)
     errors = np.asarray(errors_mm, dtype=float)[:, :3]
-    kw = {} if payload_kg is None else {"payload_kg": payload_kg}
-    mean, std = model.predict_with_std(q, **kw)
-    mean, std = mean[:, :3], std[:, :3]
+    kw = {} if payload_kg is None or not model.reads_payload else {"payload_kg": payload_kg}
+    mean, std = model.predict_with_std(model_inputs(model, robot or model.robot_, q), **kw)
+    mean, std = np.asarray(mean).reshape(len(q), -1)[:, :3], np.asarray(std).reshape(len(q), -1)[:, :3]
     z = (errors - mean) / std
     dof = z.size - (6 if registered else 0)
     if dof < 1:
@@ -223,12 +233,14 @@ def check_arrays(model, q_deg, errors_mm, *, payload_kg=None, registered: bool =
                        model_name, data_name)
 
 
-def registered_on_model(model, q_deg, tracker_mm, payload_kg=None) -> tuple[NDArray[np.float64], tuple]:
+def registered_on_model(model, q_deg, tracker_mm, payload_kg=None, robot=None) -> tuple[NDArray[np.float64], tuple]:
     """Points measured in a tracker's frame ``tracker_mm`` (n, 3) mm carried into the model's base frame by the
     rigid fit (Kabsch) onto the positions the model predicts at ``q_deg`` (nominal plus its predicted error);
     returns them and ``(rotation vector deg, translation mm, 3-D RMS mm)`` of the fit."""
-    kw = {} if payload_kg is None else {"payload_kg": payload_kg}
-    predicted = model.robot_.positions(q_deg) + model.predict(q_deg, **kw)[:, :3]
+    kw = {} if payload_kg is None or not model.reads_payload else {"payload_kg": payload_kg}
+    robot = robot or model.robot_
+    predicted = robot.positions(q_deg) + np.asarray(model.predict(model_inputs(model, robot, q_deg), **kw)
+                                                    ).reshape(len(q_deg), -1)[:, :3]
     rot, shift = kabsch(tracker_mm, predicted)
     moved = np.asarray(tracker_mm, dtype=float) @ rot.T + shift
     rms = float(np.sqrt(np.mean(np.sum((moved - predicted) ** 2, axis=1))))
@@ -240,11 +252,12 @@ def check_file(model_path: str | Path, data_path: str | Path, *, fmt: str | Path
     """``partcal check``: the measurement file ``data_path`` (its format ``fmt``, the data rows ``rows``)
     against the model file ``model_path``. ``frame="tracker"``: the measured positions are in a tracker's
     frame, registered (a rigid fit) onto the positions the model predicts before they are judged."""
-    model = load_model(model_path)[0]
-    robot = getattr(model, "robot_", None)
-    if robot is None or model.inputs != "joint":
-        raise ModelFileError(f"{model_path}: check needs a model of joint inputs with its robot (kind kinematic, "
-                             f"or a joint model fitted with one); got a {model.describe()}")
+    predictor = load_predictor(model_path)
+    model = predictor.model
+    robot = getattr(model, "robot_", None) or predictor.robot       # a kinematic model's own, else the file's
+    if robot is None:
+        raise ModelFileError(f"{model_path}: the model file carries no robot: check needs one for the nominal "
+                             "positions the errors are taken from (a model file of 'partcal run' with a robot)")
     if frame not in ("base", "tracker"):
         raise ConfigError(f"check: --frame must be base or tracker; got {frame!r}")
     try:
@@ -261,6 +274,7 @@ def check_file(model_path: str | Path, data_path: str | Path, *, fmt: str | Path
     if frame == "tracker":
         if len(m) < 3:
             raise DataError(f"{data_path}: registering a tracker frame needs at least 3 poses; got {len(m)}")
-        measured, registration = registered_on_model(model, m.q_deg, measured, m.payload_kg)
-    return check_arrays(model, m.q_deg, measured - nominal, payload_kg=m.payload_kg, registered=frame == "tracker",
+        measured, registration = registered_on_model(model, m.q_deg, measured, m.payload_kg, robot)
+    return check_arrays(model, m.q_deg, measured - nominal, robot=robot, payload_kg=m.payload_kg,
+                        registered=frame == "tracker",
                         alpha=alpha, model_name=str(model_path), data_name=str(data_path), registration=registration)

@@ -50,7 +50,7 @@ def windows(n: int, count: int | None) -> list[slice]:
 def ranks(result) -> tuple[int, int, int]:
     """Joint 2's offset's rank by evidence, by BIC and by the raw drop of sum z^2 (1 = first)."""
     total = result.mean_z2 * result.dof
-    drop = {e.name: total - e.mean_z2 * result.dof for e in result.explanations}
+    drop = {e.name: total - e.mean_z2 * (result.dof - len(e.parameters)) for e in result.explanations}
     bic = {e.name: drop[e.name] - len(e.parameters) * np.log(result.dof) for e in result.explanations}
     order = [e.name for e in result.explanations]
     return (order.index(JOINT2) + 1, sorted(bic, key=lambda k: -bic[k]).index(JOINT2) + 1,

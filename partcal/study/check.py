@@ -67,7 +67,7 @@ class Explanation:
 
     ``parameters`` and ``units`` name its parameters, ``change`` their fitted change (mm, degrees);
     ``evidence`` is ``2 ln`` of its Bayes factor against nothing moved (larger is likelier);
-    ``mean_z2`` and ``p_value`` the statistic left after it.
+    ``mean_z2`` and ``p_value`` the statistic left after it (over the coordinates less its parameters).
     """
 
     name: str
@@ -192,8 +192,8 @@ def explain(z: NDArray[np.float64], std: NDArray[np.float64], candidates, dof: i
         left = zv - B @ d
         fit = float(left @ left + d @ d)
         evidence = total - fit - float(np.linalg.slogdet(gram)[1])
-        sse = float(left @ left)
-        found.append(Explanation(name, params, units, d * s, evidence, sse / dof, float(chi2.sf(sse, dof))))
+        sse, free = float(left @ left), max(dof - len(s), 1)          # the coordinates its parameters leave
+        found.append(Explanation(name, params, units, d * s, evidence, sse / free, float(chi2.sf(sse, free))))
     return tuple(sorted(found, key=lambda e: -e.evidence))
 
 

@@ -1,8 +1,7 @@
 """The ``partcal`` command line: argument parsing, progress output and exit codes.
 
-Exit codes: 0 success, 2 bad input (one line on stderr, no traceback),
-3 compensation left targets unconverged or unreachable (the output marks
-them), 1 internal failure.
+Exit codes: 0 success, 2 bad input (one line on stderr, no traceback), 3 compensation left targets
+unconverged or unreachable (the output marks them), 1 internal failure.
 """
 
 from __future__ import annotations
@@ -32,7 +31,6 @@ def _cmd_simulate(args) -> int:
 def _cmd_run(args) -> int:
     from .study.config import load_config
     from .study.run_command import Progress, check_run, run_and_write
-
     config = load_config(args.config)
     if args.check:
         print(check_run(config, args.config))
@@ -86,6 +84,12 @@ def _cmd_equations(args) -> int:
     return 0
 
 
+def _cmd_check(args) -> int:
+    from .study.check import check_file
+    print("\n".join(check_file(args.model, args.data, fmt=args.format, frame=args.frame, rows=args.rows).lines()))
+    return 0
+
+
 def _cmd_import(args) -> int:
     if (args.input is None) == (args.config is None):
         raise PartcalError("import: give either an input file or --config RUN.yaml (not both)")
@@ -93,7 +97,6 @@ def _cmd_import(args) -> int:
         raise PartcalError("import --config: give the output folder with -o FOLDER" if args.config else
                            "import: give the CSV to write with -o OUT.csv")
     from .study.data_files import import_file, import_run
-
     print("\n".join(import_run(args.config, args.output, show=print) if args.config else import_file(
         args.input, args.output, robot=args.robot, fmt=args.format, rows=args.rows, every=args.every,
         frame=args.frame, tool_mm=args.tool_mm, show=print).lines()))
@@ -102,7 +105,6 @@ def _cmd_import(args) -> int:
 
 def _cmd_plan(args) -> int:
     from .study.plan_command import PlanOptions, run_plan
-
     say = (lambda text: None) if args.quiet else (lambda text: print(f"partcal: plan: {text}", file=sys.stderr))
     run_plan(args.robot, PlanOptions.from_args(args), say=say, show=print)
     return 0
@@ -147,9 +149,8 @@ _NEGATIVE_NUMBER = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?$")
 
 
 class _Names(Sequence):
-    """The names of a table that defines an option's choices (``module.table``, after ``first``), read when
-    argparse first needs them (a value to check, a help page), so that the command line starts without the
-    table's module. Give the option a ``metavar``: argparse reads the choices to make one."""
+    """An option's choices, the names of ``module.table`` after ``first``, read when argparse first needs them (the
+    command line starts without the table's module). Give the option a ``metavar``: argparse reads them for one."""
 
     def __init__(self, module: str, table: str, first: tuple[str, ...] = ()):
         self.module, self.table, self.first = module, table, first
@@ -199,7 +200,7 @@ def _add_run_commands(sub) -> None:
     run.set_defaults(func=_cmd_run)
 
 
-def _add_predict(sub) -> None:
+def _add_downstream(sub) -> None:
     pred = sub.add_parser("predict", help="predict errors with a model file")
     pred.add_argument("model", help="model file (models/<name>.json of a run)")
     pred.add_argument("input", help="CSV with x,y,z (mm) for Cartesian models or q1..qN (deg) for joint models")
@@ -209,9 +210,6 @@ def _add_predict(sub) -> None:
     pred.add_argument("--std", action="store_true", help="also the standard deviation of each predicted error: "
                                                          "sdx,sdy,sdz (mm; pose models also sdrx,sdry,sdrz, mrad)")
     pred.set_defaults(func=_cmd_predict)
-
-
-def _add_compensate(sub) -> None:
     comp = sub.add_parser("compensate", help="false targets that make the robot reach the given targets")
     comp.add_argument("model", help="model file (models/<name>.json of a run)")
     comp.add_argument("targets", help="CSV with x,y,z (or x_nom,y_nom,z_nom) in mm; joint models also read q1..qN "
@@ -276,9 +274,17 @@ def _add_file_commands(sub) -> None:
                                                         "geometry and the full model leave on it")
     _format_option(exp, "the data's")
     exp.set_defaults(func=_cmd_export)
+    chk = sub.add_parser("check", help="do new measurements agree with a model's calibrated spread? if not, what moved")
+    chk.add_argument("model", help="model file (models/<name>.json of a run)")
+    chk.add_argument("data", help="measurement CSV of the new poses (q1..qN deg; x_meas,y_meas,z_meas mm)")
+    _format_option(chk, "the data's")
+    chk.add_argument("--frame", choices=("base", "tracker"), default="base",
+                     help="tracker: the data are in a tracker's frame, registered on them first")
+    chk.add_argument("--rows", help="data rows to check, e.g. '1-50' or '1-20, 41-70'")
+    chk.set_defaults(func=_cmd_check)
 
 
-def _add_iso9283(sub) -> None:
+def _add_plan(sub) -> None:
     iso = sub.add_parser("iso9283", help="ISO 9283 figures of measured cycles: pose accuracy and repeatability (AP, "
                                          "RP), distance (AD, RD), path (AT, RT)")
     iso.add_argument("data", help="measurement CSV (commanded joints, nominal and measured positions; optional "
@@ -299,9 +305,6 @@ def _add_iso9283(sub) -> None:
                      help="refuse a pose measured in a single cycle (its RP is otherwise left out)")
     iso.add_argument("-o", "--output", metavar="REPORT.json", help="write the figures of every pose as JSON")
     iso.set_defaults(func=_cmd_iso9283)
-
-
-def _add_plan(sub) -> None:
     pln = sub.add_parser("plan", help="choose the poses to measure (D-optimal), or judge a pose set's observability")
     pln.add_argument("robot", help="built-in robot name, robot YAML, or a URDF as FILE.urdf#base=LINK&tip=LINK")
     pln.add_argument("-n", type=_positive_int, help="number of poses to plan")
@@ -358,8 +361,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"partcal {__version__}")
     parser.add_argument("-v", "--verbose", action="store_true", help="show debug messages")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
-    for add in (_add_run_commands, _add_predict, _add_compensate, _add_file_commands, _add_iso9283,
-                _add_plan):
+    for add in (_add_run_commands, _add_downstream, _add_file_commands, _add_plan):
         add(sub)
     return parser
 
@@ -374,7 +376,6 @@ def main(argv: list[str] | None = None) -> int:
     exit_cleanly_on_sigterm()           # a terminated command removes what it half wrote (exit 143)
     try:
         from ._validation import numbers_checked
-
         with numbers_checked():             # numbers are checked, never warned about; other warnings: one line, once
             warnings.showwarning = lambda message, *where, **more: log.warning("%s", message)
             return args.func(args)

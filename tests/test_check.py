@@ -1,0 +1,162 @@
+"""``partcal check`` on a virtual UR10: unchanged data hold, a moved joint offset and a changed tool are found and
+ranked first, the statistic and its p-value against an independent computation, bad inputs refused."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+from conftest import partcal_cli, write_text
+from scipy.stats import chi2
+
+from partcal.data.measurements import Measurements, read_measurements, write_measurements
+from partcal.data.sampling import sample_configurations
+from partcal.data.simulate import load_study
+from partcal.models.kinematic import KinematicModel
+from partcal.models.series import ErrorModel
+from partcal.study.check import check_file
+from partcal.study.persist import load_model, save_model
+from partcal.study.spread import calibrate_spread
+
+STUDY = """robot: universal_robots_ur10
+seed: 41
+output: out
+targets:
+  A: [0, 0, 120]
+errors:
+  dh_sigma: {length_mm: 0.5, twist_deg: 0.03, zero_offset_deg: 0.05}
+  tool_mm: [0.3, -0.2, 0.4]
+  base: {rotation_deg: [0.02, -0.03, 0.04], translation_mm: [1.0, -0.5, 0.8]}
+tracker: {position_mm: [2500, 0, 0], accuracy_ppm: 0, repeatability_ppm: 10, readings: 1}
+sampling:
+  ranges_deg: {q1: [-90, 90], q2: [-150, -30], q3: [-140, 140], q4: [-180, 180], q5: [-150, 150], q6: [-180, 180]}
+datasets:
+  identification: {sample: 10}
+"""
+
+
+@pytest.fixture(scope="module")
+def cell(tmp_path_factory):
+    """A virtual UR10, its DH model identified from 150 poses with a calibrated spread (a model file), and a
+    function measuring new poses on it into a CSV."""
+    folder = tmp_path_factory.mktemp("check")
+    study = load_study(write_text(folder, STUDY, "virtual.yaml"))
+    virtual, rng = study.robot, np.random.default_rng(41)
+    q = sample_configurations(virtual.nominal, 190, study.ranges_deg, {}, rng)
+    train, new = q[:150], q[150:]
+    measured = virtual.measure(train, rng)
+    model = KinematicModel(robot=virtual.nominal)
+    calibrate_spread(model, train, measured - virtual.nominal.positions(train), folds=5)
+    path = folder / "dh.json"
+    save_model(model, path, name="DH", robot=virtual.nominal)
+
+    def measure(name, robot=virtual, read_offset_deg=np.zeros(6)):
+        """The 40 new poses measured on ``robot``, the joints written as read (true plus ``read_offset_deg``)."""
+        data = Measurements(new + read_offset_deg, virtual.nominal.positions(new + read_offset_deg),
+                            robot.measure(new, np.random.default_rng(7)))
+        out = folder / f"{name}.csv"
+        write_measurements(data, out)
+        return out, data
+    return path, measure, virtual, folder
+
+
+def independent_statistic(model_path, csv):
+    """The mean squared standardised residual and its p-value, from the model's own prediction and spread."""
+    model, data = load_model(model_path)[0], read_measurements(csv)
+    mean, std = model.predict_with_std(data.q_deg)
+    z = (data.measured_mm - model.robot_.positions(data.q_deg) - mean) / std
+    return float(np.mean(z ** 2)), float(chi2.sf(np.sum(z ** 2), z.size))
+
+
+def test_unchanged_robot_holds_with_the_independent_statistic(cell):
+    model_path, measure, _, _ = cell
+    csv, data = measure("same")
+    result = check_file(model_path, csv)
+    mean_z2, p = independent_statistic(model_path, csv)
+    assert result.dof == 3 * len(data)
+    assert result.mean_z2 == pytest.approx(mean_z2, rel=1e-12)
+    assert result.p_value == pytest.approx(p, rel=1e-9)
+    assert p >= 0.01 and result.holds
+    code, out = (lambda r: (r.returncode, r.stdout))(partcal_cli("check", str(model_path), str(csv)))
+    assert code == 0
+    assert out.startswith(f"holds: mean squared standardised residual {mean_z2:.3f} over {3 * len(data)} "
+                          f"coordinates, p = {p:.3g}")
+
+
+@pytest.mark.parametrize("shift", [0.05, -0.05])
+def test_a_joint_offset_moved_by_five_hundredths_of_a_degree_is_found_and_ranked_first(cell, shift):
+    model_path, measure, _, _ = cell
+    csv, data = measure(f"q2{shift}", read_offset_deg=np.array([0, shift, 0, 0, 0, 0]))
+    result = check_file(model_path, csv)
+    mean_z2, p = independent_statistic(model_path, csv)
+    assert result.mean_z2 == pytest.approx(mean_z2, rel=1e-12) and p < 1e-6
+    assert not result.holds
+    best = result.explanations[0]
+    assert best.name == "joint 2's offset"
+    assert best.change[0] == pytest.approx(-shift, abs=0.005)    # the true angle is the reading minus the shift
+    assert best.mean_z2 < 2.0 and best.evidence > result.explanations[1].evidence
+
+
+def test_a_tool_change_is_found_as_the_tool(cell):
+    model_path, measure, virtual, _ = cell
+    change = np.array([0.6, -0.4, 0.5])
+    retooled = dataclasses.replace(virtual, true=virtual.true.replace(tool_mm=virtual.true.tool_mm + change))
+    csv, _ = measure("tool", robot=retooled)
+    result = check_file(model_path, csv)
+    assert not result.holds
+    assert result.explanations[0].name == "the tool offset"
+    np.testing.assert_allclose(result.explanations[0].change, change, atol=0.05)
+    run = partcal_cli("check", str(model_path), str(csv))
+    assert run.returncode == 0 and run.stdout.startswith("moved:") and "most likely the tool offset" in run.stdout
+
+
+def test_data_in_a_tracker_frame_are_registered_first_and_hold(cell):
+    model_path, measure, _, folder = cell
+    _, data = measure("base")
+    angle = np.radians(30.0)
+    turn = np.array([[np.cos(angle), -np.sin(angle), 0], [np.sin(angle), np.cos(angle), 0], [0, 0, 1]])
+    tracker = data.measured_mm @ turn.T + [2500.0, -300.0, 100.0]
+    csv = folder / "tracker.csv"
+    header = "q1,q2,q3,q4,q5,q6,x_meas,y_meas,z_meas"
+    np.savetxt(csv, np.hstack([data.q_deg, tracker]), delimiter=",", header=header, comments="", fmt="%.9f")
+    result = check_file(model_path, csv, frame="tracker")
+    assert result.holds and result.dof == 3 * len(data) - 6
+    assert all(e.name != "the base frame" for e in result.explanations)
+    assert abs(result.registration[0][2]) == pytest.approx(30.0, abs=0.05)     # the turn about z undone
+    run = partcal_cli("check", str(model_path), str(csv), "--frame", "tracker", "--rows", "1-20")
+    assert run.returncode == 0 and "over 54 coordinates" in run.stdout
+    assert "tracker frame was registered on these poses first" in run.stdout
+
+
+def test_bad_inputs_are_refused_naming_file_and_field(cell, tmp_path):
+    model_path, measure, _, _ = cell
+    csv, _ = measure("ok")
+    missing = partcal_cli("check", str(tmp_path / "none.json"), str(csv))
+    assert missing.returncode == 2 and "none.json" in missing.stderr and "no such model file" in missing.stderr
+    five = write_text(tmp_path, "q1,q2,q3,q4,q5,x_meas,y_meas,z_meas\n0,-90,90,0,0,1,2,3\n", "five.csv")
+    wrong = partcal_cli("check", str(model_path), str(five))
+    assert wrong.returncode == 2 and "five.csv" in wrong.stderr and "5 joint columns (q1..q5)" in wrong.stderr
+    assert "has 6 joints" in wrong.stderr
+    bare = write_text(tmp_path, "q1,q2,q3,q4,q5,q6\n0,-90,90,0,0,0\n", "bare.csv")
+    unmeasured = partcal_cli("check", str(model_path), str(bare))
+    assert unmeasured.returncode == 2 and "bare.csv" in unmeasured.stderr and "x_meas" in unmeasured.stderr
+    for run in (missing, wrong, unmeasured):
+        assert "Traceback" not in run.stderr and run.stdout == ""
+
+
+def test_a_model_without_robot_parameters_is_judged_without_explanations(cell):
+    """A Cartesian series model (the robot from its file) is judged by its calibrated spread at the nominal
+    positions; there is nothing to explain with."""
+    model_path, measure, virtual, folder = cell
+    rng = np.random.default_rng(5)
+    q = sample_configurations(virtual.nominal, 150, {1: (-90, 90), 2: (-150, -30), 3: (-140, 140)}, {}, rng)
+    nominal = virtual.nominal.positions(q)
+    series = calibrate_spread(ErrorModel(inputs="cartesian", degree=2, solver="lstsq"), nominal,
+                              virtual.measure(q, rng) - nominal, folds=5)
+    path = folder / "sdp.json"
+    save_model(series, path, name="SDP(CI)", robot=virtual.nominal)
+    csv, _ = measure("series", read_offset_deg=np.array([0, 0.05, 0, 0, 0, 0]))
+    result, data = check_file(path, csv), read_measurements(csv)
+    mean, std = series.predict_with_std(virtual.nominal.positions(data.q_deg))
+    z = (data.measured_mm - virtual.nominal.positions(data.q_deg) - mean) / std
+    assert result.mean_z2 == pytest.approx(np.mean(z ** 2), rel=1e-9) and result.explanations == ()
+    assert "no explanations tried" in "\n".join(result.lines())

@@ -337,3 +337,30 @@ def test_a_kinds_test_set_is_scored_with_what_the_identification_fitted(cell):
     tips = model.robot.positions(rows.q_deg) + model.predict(rows.q_deg)
     expected = np.sqrt(np.mean((tips - centre) ** 2))
     assert metrics["models"]["complete"]["tests"]["b"]["kinds_rms_mm"]["fixed"] == pytest.approx(expected, rel=1e-6)
+
+
+def test_a_test_set_of_planes_the_identification_never_saw_places_them_on_its_own_rows(cell):
+    """Identified from nests alone, scored on touches: the planes are fitted on the touches with the robot held
+    (and the metrics say so); left at their starting values they scored 5 mm for a 0.17 mm model."""
+    folder, _ = cell
+    path = folder / "unseen.yaml"
+    path.write_text(_config(folder, "nests.csv", name="unseen").read_text()
+                    .replace("test: data/test.csv", "touches: data/touches.csv"))
+    assert main(["run", "-q", str(path)]) == 0
+    entry = json.loads((folder / "out_unseen" / "metrics.json").read_text())["models"]["complete"]
+    touches = entry["tests"]["touches"]
+    assert touches["fitted_on_test"] == ["plane side", "plane top"]
+    assert touches["kinds_rms_mm"]["plane"] < 0.05
+
+
+def test_a_model_from_kinds_that_fix_no_frame_says_so_when_loaded(cell, caplog):
+    folder, _ = cell
+    path = _config(folder, "touches.csv", name="frame")
+    assert main(["run", "-q", str(path)]) == 0
+    model_file = folder / "out_frame" / "models" / "complete.json"
+    doc = json.loads(model_file.read_text())
+    assert doc["model"]["frame_fixed"] is False
+    with caplog.at_level("WARNING"):
+        model, _ = load_model(model_file)
+    assert "fix no frame" in caplog.text and str(model_file) in caplog.text
+    assert any("fix no frame" in note for note in model.fit_notes())

@@ -31,6 +31,7 @@ from .identification import (PARAMETRIZATIONS, PRIMARY_TARGET, STATUSES, Identif
                              resolved_parametrization, robot_with)
 from .joint_errors import JointErrors, compliance_problem, harmonics_problem
 from . import contacts  # noqa: F401  (the built-in measurement kinds join the table)
+from .contacts import TRACKER_FRAME
 from .measures import MEASUREMENT_KINDS, Measured, identify_measures
 from .kindtable import body_of, check_body, may_be_residual, model_from_body, regions_of, residual_kinds
 from .pose import PoseErrorModel
@@ -207,7 +208,7 @@ class KinematicModel(ErrorModelBase):
                                         extra=extra, parametrization=self.parametrization_)
         self.targets_ = dict(extra.tools_mm) if extra is not None else {}
         self.orientation_ = extra is not None and extra.rotations is not None
-        self.measures_, self.measure_notes_ = (), []
+        self.measures_, self.measure_notes_, self.frame_fixed_ = (), [], True
         self.robot_ = robot
         self._build_robots()
         self.active_ = varying_inputs(X)
@@ -248,6 +249,7 @@ class KinematicModel(ErrorModelBase):
             parametrization=self.parametrization_)
         self.targets_, self.orientation_, self.robot_ = {}, False, robot
         self.measures_ = tuple(dict.fromkeys(k for k in measures.rows.kind if k in MEASUREMENT_KINDS))
+        self.frame_fixed_ = "point" in self.measures_ and not measures.features.get(TRACKER_FRAME)
         self._build_robots()
         self.active_ = varying_inputs(X)
         self.data_bounds_ = np.stack([X.min(axis=0), X.max(axis=0)])
@@ -494,7 +496,8 @@ class KinematicModel(ErrorModelBase):
                 "identification": self.identification_.to_dict(),
                 **({"targets": {k: [float(v) for v in t] for k, t in self.targets_.items()},
                     "orientation": bool(self.orientation_)} if self.targets_ or self.orientation_ else {}),
-                **({"measures": list(self.measures_)} if getattr(self, "measures_", ()) else {}),
+                **({"measures": list(self.measures_), "frame_fixed": bool(self.frame_fixed_)}
+                   if getattr(self, "measures_", ()) else {}),
                 "data_bounds": self.data_bounds_.tolist(), "active": self.active_.tolist(),
                 **({"covariance_scale": self.covariance_scale_} if self.covariance_scale_ != 1.0 else {}),
                 **({"fitted_payload_kg": [float(v) for v in self.fitted_payload_kg_]}
@@ -534,6 +537,9 @@ class KinematicModel(ErrorModelBase):
         if not (isinstance(measures, list) and all(isinstance(k, str) and k for k in measures)):
             r.fail("measures", f"the names of the measurement kinds it was fitted on; got {measures!r}"[:200])
         model.measures_ = tuple(measures)
+        model.frame_fixed_ = bool(r.rule("frame_fixed", boolean(True))) if "frame_fixed" in r.doc else True
+        if not model.frame_fixed_:
+            log.warning("%s: %s", r.source, model.frame_note())
         table = _identification_from(r.sub("identification"), robot, errors, tools, orientation,
                                      model.parametrization_, kind_unknowns=bool(measures))
         model.robot_, model.identification_, model.joint_errors_ = robot, table, errors
@@ -621,7 +627,15 @@ class KinematicModel(ErrorModelBase):
             notes.append("identified from the positions alone, it predicts the orientation its parameters imply, "
                          "which the positions do not determine (use_orientation: true identifies from it)")
         notes += list(getattr(self, "measure_notes_", []))
+        if not getattr(self, "frame_fixed_", True):
+            notes.append(self.frame_note())
         return notes + (self.residual_.fit_notes() if self.residual_ is not None else [])
+
+    def frame_note(self) -> str:
+        """What a model identified from kinds that fix no frame (planes, points, distances) predicts."""
+        return (f"identified from {', '.join(self.measures_)} rows, which fix no frame: the base frame is the "
+                "nominal one, so absolute positions (and compensated targets) carry the base's error; after a rigid "
+                "fit they hold. Tracker points or a fixed point known in the base frame fix it")
 
     def search_gap(self, other: ErrorModelBase) -> str | None:
         """The residual's (:meth:`ErrorModelBase.search_gap`): the kinematic part searches nothing."""

@@ -521,21 +521,32 @@ class Measured:
 
 def kind_residuals(robot: Robot, rows: Rows, features: dict, table: Identification, *,
                    errors: JointErrors | None = None, payload_kg=0.0, parametrization: str = "dh",
-                   only: NDArray[np.intp] | None = None) -> dict[str, NDArray[np.float64]]:
-    """Each kind's residuals (mm) on ``rows`` for an identified ``table`` (its kinds' unknowns as fitted; an
-    unknown the table lacks, a plane or point the fit never saw, starts where :meth:`MeasurementKind.unknowns`
-    puts it): what held-out rows of the same kind leave. ``only`` (indices into ``rows``): the residuals of
-    those rows alone, the kinds built on every row (held-out rows need not satisfy what an identification
-    needs of its rows, such as three touches per plane); a kind none of them reads is left out."""
+                   only: NDArray[np.intp] | None = None, fitted_here: list | None = None
+                   ) -> dict[str, NDArray[np.float64]]:
+    """Each kind's residuals (mm) on ``rows`` for an identified ``table``: what held-out rows of the same kind
+    leave. The kinds' unknowns are the table's; an unknown the table lacks (a plane or point the fit never saw)
+    is fitted on these rows with everything else held, and its name appended to ``fitted_here`` (a list, when
+    given). ``only`` (indices into ``rows``): the residuals of those rows alone, the kinds built on every row
+    (held-out rows need not satisfy what an identification needs of its rows, such as three touches per
+    plane); a kind none of them reads is left out."""
     kinds = built_kinds(rows, features)
     payload = np.broadcast_to(np.asarray(payload_kg, dtype=float), (len(rows),))
     problem = StackedProblem(robot, errors, rows, kinds, payload, parametrization)
     values = problem.start.copy()
     values[:problem.own] = table.value[:problem.own]
     fitted = dict(zip(table.names[problem.own:], table.value[problem.own:]))
+    missing = np.zeros(values.size, dtype=bool)
     for k, (name, _) in enumerate(problem.names):
         if name in fitted:
             values[problem.own + k] = fitted[name]
+        else:
+            missing[problem.own + k] = True
+    if missing.any():                  # features the fit never saw: placed on these rows, the robot held
+        names = parameter_names(robot, errors, parametrization) + problem.names
+        size = geometric_size(robot, parametrization)
+        values = fit_parameters(problem, values, problem(values)[1], missing, names, 1e-6, size, len(rows))[0].value
+        if fitted_here is not None:
+            fitted_here += [n for (n, _), m in zip(names, missing) if m]
     if only is None:
         return {kind.name: r for kind, r in zip(kinds, problem.raw(values, measured_only=True))}
     chain = problem.chain(values, False)

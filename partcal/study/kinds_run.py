@@ -380,9 +380,12 @@ def _score(model: KinematicModel, test, data: KindsData) -> dict:
     the identification data fix no frame)."""
     if isinstance(test, Rows):
         both, only = beside_identification(data.rows, test)
+        placed: list[str] = []
         residuals = kind_residuals(data.robot, both, data.features, model.identification_, only=only,
-                                   errors=model.joint_errors_, parametrization=model.parametrization_)
-        return {"kinds_rms_mm": {k: _rms(r) for k, r in residuals.items()}}
+                                   errors=model.joint_errors_, parametrization=model.parametrization_,
+                                   fitted_here=placed)
+        return {"kinds_rms_mm": {k: _rms(r) for k, r in residuals.items()},
+                **({"fitted_on_test": sorted({n.split(".")[0] for n in placed})} if placed else {})}
     predicted = test.nominal_mm + model.predict(test.q_deg)
     return _point_figures(predicted, test, data.fixes_frame)
 

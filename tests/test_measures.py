@@ -345,3 +345,39 @@ def test_a_point_tied_to_one_never_visited_is_refused_naming_file_line_and_colum
     with pytest.raises(DataError, match=r"^test\.csv:2: column 'feature': fixed point 'b' is tied to 'a' by "
                                         r"distance_mm .*no row visits 'a'"):
         observability(ROBOT, rows, features)
+
+
+def test_each_kind_moves_its_unknowns_with_the_cell_as_its_residuals_say():
+    """A rigid motion of the whole cell (the robot's base, every kind's unknowns by ``moved``) leaves the residuals
+    that do not turn unchanged, and turns the x, y, z triples that do: checked by finite differences. (A flush
+    touch's tilts, read against fixed axes, do neither: their part is left out of the consistent Jacobian as
+    the tilts of consistent data are small; this test has none.)"""
+    from partcal.models.measures import rigid_directions
+    rng = np.random.default_rng(9)
+    rows, features = _mixed_rows(rng)
+    features = {**features, TRACKER_FRAME: True}
+    numbers = {k: v for k, v in rows.numbers.items() if not k.startswith("r") and k != "flush"}
+    rows = Rows(rows.q_deg, rows.kind, rows.ids, rows.lines, rows.source, numbers, rows.texts)
+    kinds = [k for k in (cls.build(rows, features) for cls in MEASUREMENT_KINDS.values()) if k is not None]
+    contacts.NEAR_MM, saved = 1e9, contacts.NEAR_MM
+    try:
+        problem = StackedProblem(ROBOT, None, rows, kinds, np.zeros(len(rows)), "dh")
+    finally:
+        contacts.NEAR_MM = saved
+    directions = rigid_directions(problem)
+    base = problem(problem.start, jacobian=False)[0]
+    chain = problem.chain(problem.start, False)
+    turning = np.concatenate([
+        k.residuals(chain.positions, chain.rotations, u).turning if
+        k.residuals(chain.positions, chain.rotations, u).turning is not None else
+        np.zeros(k.residuals(chain.positions, chain.rotations, u).values.size, dtype=bool)
+        for k, u in zip(problem.kinds, problem.split(problem.start))])
+    for g in range(6):
+        step = 1e-6
+        moved = problem(problem.start + step * directions[:, g], jacobian=False)[0]
+        change = (moved - base) / step
+        expected = np.zeros_like(base)
+        if g >= 3:                  # a triple that turns: e_k x r
+            at = np.flatnonzero(turning)
+            expected[at] = np.cross(np.eye(3)[g - 3], base[at].reshape(-1, 3)).ravel()
+        assert np.allclose(change, expected, atol=2e-3 * (1 + np.abs(base).max())), g

@@ -172,7 +172,8 @@ class PointKind(MeasurementKind):
             turn_grad[mine] = -_skew(lever)          # d(R d) = w x (R d)
             k += 3
         out = Residuals((tips - seen).ravel(), self.index[which], grad, du.reshape(3 * n, -1),
-                        turn_grad=None if turn_grad is None else turn_grad.reshape(3 * n, 3))
+                        turn_grad=None if turn_grad is None else turn_grad.reshape(3 * n, 3),
+                        turning=np.ones(3 * n, dtype=bool))
         if not self.turned.size:
             return out
         return self._with_orientation(out, rotations, u[k:k + 3], k)
@@ -192,7 +193,16 @@ class PointKind(MeasurementKind):
         return Residuals(np.concatenate([out.values, weight * turns.ravel()]),
                          np.concatenate([out.rows_a, np.repeat(rows, 3)]), np.vstack([out.grad_a, np.zeros((m, 3))]),
                          np.vstack([out.du, du.reshape(m, -1)]),
-                         turn_grad=np.vstack([out.turn_grad, slope.reshape(m, 3)]))
+                         turn_grad=np.vstack([out.turn_grad, slope.reshape(m, 3)]),
+                         scaled=np.concatenate([np.ones(out.values.size, dtype=bool), np.zeros(m, dtype=bool)]),
+                         turning=np.ones(out.values.size + m, dtype=bool))      # an angle turns, does not scale
+
+    def moved(self, u, omega, shift):
+        out = np.zeros_like(u)
+        if self.own_frame:              # the tracker turns and shifts with the cell: exp(w) R, w x T + t
+            out[:3] = np.cross(omega, u[:3]) + shift
+            out[3:6] = np.degrees(log_derivative(np.radians(u[3:6])[None])[0] @ omega)
+        return out
 
     def notes(self) -> list[str]:
         return ["point: the tracker's frame and the robot's base frame are one unknown: the tracker's pose is "
@@ -302,6 +312,19 @@ class PlaneKind(MeasurementKind):
         self._check_rows(positions, rotations, start)
         return names, start
 
+    def moved(self, u, omega, shift):
+        """A root plane's normal turns with the cell (its slopes change accordingly) and its offset shifts by the
+        shift's part along the normal (a turn about the origin changes no offset)."""
+        out = np.zeros_like(u)
+        for k, root in enumerate(self.roots):
+            normal = self._plane(root, u)[0]
+            pole, t1, t2 = self.frames[root]
+            turned, across = np.cross(omega, normal), normal @ pole
+            for j, t in enumerate((t1, t2)):
+                out[3 * k + j] = turned @ t / across - (normal @ t) * (turned @ pole) / across**2
+            out[3 * k + 2] = normal @ shift
+        return out
+
     def scaled_lengths(self, start):
         """A root plane's offset scales with the planes of its group that are touched: when they are all one plane
         (one spacing: the plane tied to it touched alone), that plane's offset ``offset + spacing`` scales and
@@ -386,7 +409,7 @@ class PlaneKind(MeasurementKind):
             if self.flush[i]:
                 extra.append((row, k, normal, tilts))
         out = Residuals(values, self.index.copy(), grad, du,
-                        turn_grad=np.zeros((m, 3)) if self.needs_orientation else None)
+                        turn_grad=np.zeros((m, 3)) if self.needs_orientation else None, scaled=np.ones(m, dtype=bool))
         if not extra:
             return out
         return _with_flush(out, extra, rotations, self.frames, self.roots, u.size)
@@ -425,7 +448,8 @@ def _with_flush(out: Residuals, flush: list, rotations, frames: dict, roots: lis
     m = len(values)
     return Residuals(np.concatenate([out.values, values]), np.concatenate([out.rows_a, rows]),
                      np.vstack([out.grad_a, np.zeros((m, 3))]), np.vstack([out.du, du]),
-                     turn_grad=np.vstack([out.turn_grad, turn]))
+                     turn_grad=np.vstack([out.turn_grad, turn]),
+                     scaled=np.concatenate([out.scaled, np.zeros(m, dtype=bool)]))    # a tilt does not scale
 
 
 def _point_unknowns(name: str) -> list[tuple[str, str]]:
@@ -505,7 +529,7 @@ class FixedPointKind(MeasurementKind):
             if k is not None:
                 du[3 * i:3 * i + 3, k:k + 3] = -np.eye(3)
         which, grad = _unit_rows(m)
-        out = Residuals(values.ravel(), self.index[which], grad, du)
+        out = Residuals(values.ravel(), self.index[which], grad, du, turning=np.ones(3 * m, dtype=bool))
         if not self.tied:
             return out
         bars, bar_du = [], []
@@ -525,7 +549,12 @@ class FixedPointKind(MeasurementKind):
             bar_du.append(d)
         n = len(bars)
         return Residuals(np.concatenate([out.values, bars]), np.concatenate([out.rows_a, np.full(n, -1)]),
-                         np.vstack([out.grad_a, np.zeros((n, 3))]), np.vstack([out.du, bar_du]))
+                         np.vstack([out.grad_a, np.zeros((n, 3))]), np.vstack([out.du, bar_du]),
+                         turning=np.concatenate([out.turning, np.zeros(n, dtype=bool)]))     # a length does not turn
+
+    def moved(self, u, omega, shift):
+        points = u.reshape(-1, 3)
+        return (np.cross(omega, points) + shift).ravel()
 
     def describe(self) -> str:
         return f"{self.index.size} visits of {len(self.names)} fixed points ({_counted(self.point, self.names)})"
@@ -607,6 +636,10 @@ class DistanceKind(MeasurementKind):
         rows_b = np.where(self.other >= 0, self.other, -1)
         return Residuals(length - self.measured, self.index.copy(), direction, du, rows_b=rows_b,
                          grad_b=-direction)
+
+    def moved(self, u, omega, shift):
+        points = u.reshape(-1, 3)           # the pivots
+        return (np.cross(omega, points) + shift).ravel()
 
     def notes(self) -> list[str]:
         return ["distance: distances do not fix where the robot stands: the base frame (its place and turn) is "

@@ -151,6 +151,11 @@ class Residuals:
     rows_b, grad_b : the same for a second row (distances), or None.
     turn_grad : ndarray, shape (m, 3), optional
         ``d value / d turn`` of row ``rows_a``'s tool (a small rotation vector in the base frame, radians).
+    scaled : ndarray of bool, shape (m,), optional
+        The residuals that are lengths (they scale with the cell; None: all). An angle is not.
+    turning : ndarray of bool, shape (m,), optional
+        The residuals that come as x, y, z triples of a vector that turns with the cell (a point's miss, an
+        orientation's; None: none). A distance to a plane or between two points does not turn.
     du : ndarray, shape (m, k)
         ``d value / d`` the kind's unknowns (:meth:`MeasurementKind.unknowns`, in their order).
     """
@@ -162,6 +167,8 @@ class Residuals:
     rows_b: NDArray[np.intp] | None = None
     grad_b: NDArray[np.float64] | None = None
     turn_grad: NDArray[np.float64] | None = None
+    scaled: NDArray[np.bool_] | None = None
+    turning: NDArray[np.bool_] | None = None
 
 
 class MeasurementKind:
@@ -212,6 +219,13 @@ class MeasurementKind:
         of the whole cell that leaves its rows' residuals as they are: a length by its own value (the default);
         the entries of unknowns that are not lengths are not read."""
         return start
+
+    def moved(self, u: NDArray[np.float64], omega: NDArray[np.float64], shift: NDArray[np.float64]
+              ) -> NDArray[np.float64]:
+        """How the kind's unknowns ``u`` change, to first order, when the whole cell turns by the small rotation
+        vector ``omega`` (radians) about the base frame's origin and shifts by ``shift`` (mm): a point turns and
+        shifts with it, a plane's normal turns and its offset shifts. Default: unknowns that do not move."""
+        return np.zeros_like(u)
 
     def notes(self) -> list[str]:
         """What this kind can never identify, in words (for the run and the report)."""
@@ -394,31 +408,72 @@ def scale_direction(problem: "StackedProblem") -> NDArray[np.float64]:
     return s
 
 
-def consistent_jacobian(jac0: NDArray[np.float64], resid0: NDArray[np.float64], s: NDArray[np.float64],
-                        rcond: float) -> NDArray[np.float64]:
-    """The Jacobian the rank rule reads: ``jac0`` with its answer to a uniform scale ``s`` made what it would be
-    on consistent data.
+def rigid_directions(problem: "StackedProblem") -> NDArray[np.float64]:
+    """The parameter changes of the six rigid motions of the whole cell (shifts along, then turns about the base
+    frame's axes, through its origin), as columns ``(P, 6)``: the base correction (its shift, its turn) and the
+    kinds' unknowns as each kind moves them (:meth:`MeasurementKind.moved`)."""
+    size = geometric_size(problem.nominal, problem.par)
+    out = np.zeros((problem.start.size, 6))
+    for k in range(3):
+        out[size - 6 + k, k] = 1.0                           # base.x, y, z: mm
+        out[size - 3 + k, 3 + k] = np.degrees(1.0)           # base.rx, ry, rz: degrees per radian
+    seen: set[int] = set()
+    for kind, cols in zip(problem.kinds, problem.columns):
+        u = problem.start[cols]
+        new = np.array([c not in seen for c in cols], dtype=bool)      # a shared unknown moves once
+        for k in range(6):
+            motion = np.eye(6)[k]
+            out[cols[new], k] = kind.moved(u, motion[3:], motion[:3])[new]
+        seen.update(cols.tolist())
+    return out
 
-    The residuals are homogeneous in the cell's lengths (``r(lambda) = lambda f - L``, ``L`` the known
-    lengths), so ``J s = r + L``; on consistent data ``r = 0`` and ``J s`` is ``L`` alone. At the nominal
-    robot ``r`` is its misfit (millimetres), which made a scale nothing fixes look merely weak. The change is
-    made along ``s`` with the directions ``jac0`` already cannot see (a shift of the whole cell) taken out of
-    it, so that those stay as they are; in unit-column coordinates, as the rank rule reads them.
+
+def misfit_parts(problem: "StackedProblem", values: NDArray[np.float64]) -> NDArray[np.float64]:
+    """What the residuals' misfit adds to the Jacobian's answer to a scale and to the three turns of the cell,
+    columns ``(m, 4)`` (weighted as the stacked residuals): the residuals are homogeneous in the cell's lengths
+    (``J s = r + L``, ``L`` the known lengths, for the residuals that are lengths) and a vector residual turns
+    with the cell (``J s_k = e_k x r + ...``), so on consistent data (``r = 0``) these parts are nil."""
+    chain = problem.chain(values, False)
+    parts = []
+    for kind, u, w in zip(problem.kinds, problem.split(values), problem.weights):
+        r = kind.residuals(chain.positions, chain.rotations, u)
+        m = np.zeros((r.values.size, 4))
+        m[:, 0] = r.values if r.scaled is None else np.where(r.scaled, r.values, 0.0)
+        if r.turning is not None and r.turning.any():
+            at = np.flatnonzero(r.turning)
+            triples = r.values[at].reshape(-1, 3)
+            for k in range(3):
+                m[at, 1 + k] = np.cross(np.eye(3)[k], triples).ravel()
+        parts.append(w * m)
+    return np.vstack(parts)
+
+
+def consistent_jacobian(jac0: NDArray[np.float64], misfit: NDArray[np.float64], directions: NDArray[np.float64],
+                        rcond: float) -> NDArray[np.float64]:
+    """The Jacobian the rank rule reads: ``jac0`` with its answers to the cell's symmetries made what they would
+    be on consistent data.
+
+    ``directions`` (P, k) are parameter changes of a uniform scale and of turns of the whole cell; ``misfit``
+    (m, k) what the residuals' misfit adds to ``jac0``'s answer to each (:func:`misfit_parts`). At the nominal
+    robot the residuals are its misfit (millimetres), which made a scale or a turn about a known point that
+    nothing fixes look merely weak. ``jac0`` is changed along those directions alone, with the directions it
+    already cannot see (a shift of the whole cell) taken out of them, so that those stay as they are; in
+    unit-column coordinates, as the rank rule reads them. Directions ``jac0`` already cannot see are left.
     """
     norms = np.linalg.norm(jac0, axis=0)
     live = norms > 0
-    if not np.any(s[live]):
-        return jac0
     unit = jac0[:, live] / norms[live]
     r = scipy.linalg.qr(unit, mode="r")[0][:unit.shape[1]] if unit.shape[0] > unit.shape[1] else unit
     _, singular, vt = np.linalg.svd(r, full_matrices=False)
     null = vt[singular < rcond * singular[0]]
-    whole = s[live] * norms[live]
+    whole = directions[live] * norms[live][:, None]
     t = whole - null.T @ (null @ whole)
-    if np.linalg.norm(t) <= 1e-9 * np.linalg.norm(whole):
-        return jac0         # the scale is a null direction already: the data are consistent along it (planned rows)
+    keep = np.linalg.norm(t, axis=0) > 1e-9 * np.maximum(np.linalg.norm(whole, axis=0), 1e-300)
+    if not keep.any():
+        return jac0         # each is a null direction already: the data are consistent along it (planned rows)
+    t, misfit = t[:, keep], misfit[:, keep]
     out = jac0.copy()
-    out[:, live] = (unit - np.outer(resid0, t) / float(t @ t)) * norms[live]
+    out[:, live] = (unit - misfit @ np.linalg.pinv(t)) * norms[live]
     return out
 
 
@@ -460,6 +515,20 @@ def identify_measures(robot: Robot, rows: Rows, features: dict | None = None, *,
     return table, notes
 
 
+def rank_jacobian(problem: StackedProblem, wanted: NDArray[np.bool_], rcond: float
+                  ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The Jacobian the rank rule reads, at the problem's start on consistent data (:func:`consistent_jacobian`
+    along a uniform scale and the three turns of the cell, the turns when the base is asked for), and the
+    scale's direction."""
+    jac0 = problem(problem.start)[1]
+    direction = scale_direction(problem)
+    rigid = rigid_directions(problem)
+    turns = rigid[:, 3:] if not np.any(rigid[~wanted, 3:]) else np.zeros((rigid.shape[0], 0))   # base held: none
+    directions = np.column_stack([direction, turns])
+    misfit = misfit_parts(problem, problem.start)[:, :directions.shape[1]]
+    return consistent_jacobian(jac0, misfit, directions, rcond), direction
+
+
 def _prepared(robot: Robot, rows: Rows, features: dict, base: bool, tool: bool, rcond: float, errors, payload_kg,
               parametrization: str):
     """The stacked problem at its start, every parameter's name, those asked for, the Jacobian the rank rule
@@ -474,9 +543,7 @@ def _prepared(robot: Robot, rows: Rows, features: dict, base: bool, tool: bool, 
     wanted[size - 9:size - 6] = tool
     wanted[size - 6:size] = base
     notes = [note for kind in kinds for note in kind.notes()]
-    resid0, jac0 = problem(problem.start)
-    direction = scale_direction(problem)
-    jac0 = consistent_jacobian(jac0, resid0, direction, rcond)
+    jac0, direction = rank_jacobian(problem, wanted, rcond)
     if np.any(direction) and _null(jac0, direction, wanted, rcond):
         notes.insert(0, f"{SCALE}: nothing here measures a length (every plane and point is unknown), so a uniform "
                         "scale of the robot cannot be identified: one length is held nominal. Give one: a plane's "

@@ -37,8 +37,7 @@ from ..models import contacts  # noqa: F401  (registers the built-in kinds)
 from ..models import design
 from ..models.base import seed_from
 from ..models.identification import identifiable_parameters, parameter_names
-from ..models.measures import (REFERENCE_NOISE_MM, Rows, StackedProblem, built_kinds, consistent_jacobian,
-                               observability, scale_direction)
+from ..models.measures import REFERENCE_NOISE_MM, Rows, StackedProblem, built_kinds, observability, rank_jacobian
 from ..robot.floor import above_floor
 from ..robot.kinematics import Robot
 from . import plan
@@ -58,7 +57,8 @@ class StackedDesign:
         The robot's parameters, then the kinds' unknowns.
     jac : ndarray, shape (m, P)
         The weighted residuals' Jacobian (each kind's rows times ``REFERENCE_NOISE_MM / noise``), its answer
-        to a uniform scale made that of consistent data (:func:`~partcal.models.measures.consistent_jacobian`).
+        to a uniform scale and the cell's turns made that of consistent data
+        (:func:`~partcal.models.measures.rank_jacobian`).
     row_of : ndarray of int, shape (m,)
         The row each residual reads (-1: none, a known length between two unknowns).
     wanted, free : which parameters are asked for, and which the rows identify (the fit's rank rule).
@@ -88,14 +88,13 @@ def stacked_design(robot: Robot, rows: Rows, features: dict, model: design.Plann
     kinds = built_kinds(rows, features)
     payload = np.full(len(rows), float(model.payload_kg)) if rows.payload_kg is None else rows.payload_kg
     problem = StackedProblem(robot, errors, rows, kinds, payload, par)
-    resid0, jac0 = problem(problem.start)
-    jac = consistent_jacobian(jac0, resid0, scale_direction(problem), rcond)
     chain = problem.chain(problem.start, False)
     row_of = np.concatenate([k.residuals(chain.positions, chain.rotations, u).rows_a
                              for k, u in zip(kinds, problem.split(problem.start))])
     names = parameter_names(robot, errors, par) + problem.names
     wanted = np.array([(model.tool or not n.startswith("tool.")) and (model.base or not n.startswith("base."))
                        for n, _ in names])
+    jac = rank_jacobian(problem, wanted, rcond)[0]
     notes, held = observability(robot, rows, features, base=model.base, tool=model.tool, rcond=rcond,
                                 errors=errors, payload_kg=payload, parametrization=par)
     free = identifiable_parameters(jac, wanted, rcond, [u for _, u in names])[0]

@@ -220,3 +220,10 @@ def test_noise_model_gives_each_point_its_distance_std():
     p = np.array([[2500.0, 0.0, 0.0], [0.0, 0.0, 0.0], [1000.0, 1000.0, 500.0]])
     expected = 0.005 + 5e-6 * np.array([0.0, 2500.0, np.sqrt(1500.0**2 + 1000.0**2 + 500.0**2)])
     np.testing.assert_allclose(NoiseModel(0.005, 5.0, (2500.0, 0.0, 0.0)).std_of(p), np.repeat(expected[:, None], 3, 1))
+
+
+def test_a_loss_is_refused_on_rows_of_measurement_kinds():
+    from partcal.models.measures import Measured
+    with pytest.raises(PartcalError, match="loss: huber weighs tracker points"):
+        KinematicModel(robot="universal_robots_ur10", loss="huber").fit(np.zeros((5, 6)), None,
+                                                                        measures=Measured(None, None))

@@ -180,3 +180,26 @@ def warn_far(distances: NDArray[np.float64], limit: float, stacklevel: int = 3) 
                       f"nearest training sample (up to {distances.max():.4g}); no data there support their "
                       "predicted errors", ExtrapolationWarning, stacklevel=stacklevel)
     return far
+
+
+ROBUST_LOSSES = ("linear", "huber", "soft_l1", "cauchy")
+"""The losses of robust registration and identification: scipy ``least_squares``' (``linear``: least squares)."""
+
+
+def loss_weights(scaled: NDArray[np.float64], loss: str) -> NDArray[np.float64]:
+    """The weight ``rho'(z**2)`` a loss gives residuals ``z`` (in units of its ``f_scale``): what iteratively
+    reweighted least squares multiplies their squares by.
+
+    Examples
+    --------
+    >>> loss_weights(np.array([0.5, 2.0]), "huber").tolist(), loss_weights(np.array([3.0]), "cauchy").tolist()
+    ([1.0, 0.5], [0.1])
+    """
+    z2 = np.asarray(scaled, dtype=float) ** 2
+    if loss == "huber":
+        return np.where(z2 <= 1.0, 1.0, 1.0 / np.sqrt(np.maximum(z2, 1.0)))
+    if loss == "soft_l1":
+        return 1.0 / np.sqrt(1.0 + z2)
+    if loss == "cauchy":
+        return 1.0 / (1.0 + z2)
+    return np.ones_like(z2)

@@ -39,7 +39,8 @@ from ..robot.description import MAX_JOINTS
 JOINTS = tuple(f"q{j}" for j in range(1, MAX_JOINTS + 1))
 LENGTHS = ("x_nom", "y_nom", "z_nom", "x_meas", "y_meas", "z_meas", "x", "y", "z")
 ORIENTATIONS = ("rx_meas", "ry_meas", "rz_meas", "rx_nom", "ry_nom", "rz_nom")
-CONTRACT_COLUMNS = JOINTS + LENGTHS + ORIENTATIONS + ("set", "payload_kg")
+STDS = ("std_x", "std_y", "std_z")      # the measured position's standard deviation per coordinate (a length)
+CONTRACT_COLUMNS = JOINTS + LENGTHS + ORIENTATIONS + STDS + ("set", "payload_kg")
 TARGET_COLUMN = re.compile(r"^([xyz]_(?:meas|nom))@(.*)$")
 TARGET_NAME = re.compile(r"^[A-Za-z0-9_]+$")
 JOINT_UNITS = ("deg", "rad")
@@ -187,7 +188,8 @@ def _format_problem(delimiter: Any, decimal: Any, columns: Any, joint_unit: Any,
             close = difflib.get_close_matches(str(key), CONTRACT_COLUMNS, n=1, cutoff=0.6)
             return _Problem("columns", key, f"a contract column (q1..q{MAX_JOINTS}, x_nom, y_nom, z_nom, x_meas, "
                                             "y_meas, z_meas, x_meas@NAME.., rx_meas, ry_meas, rz_meas, rx_nom, "
-                                            "ry_nom, rz_nom, x, y, z, set, payload_kg)", key,
+                                            "ry_nom, rz_nom, x, y, z, std_x, std_y, std_z, set, "
+                                            "payload_kg)", key,
                             f" (did you mean {close[0]!r}?)" if close else "")
         if not isinstance(value, str) or not value.strip():
             return _Problem("columns", key, "a non-empty file column name", value)
@@ -209,7 +211,7 @@ def is_contract_column(name: Any) -> bool:
 def _is_length(name: str) -> bool:
     """A position column: ``x_meas``, ``x``, ``y_nom@B`` ..."""
     target = TARGET_COLUMN.match(name)
-    return name in LENGTHS or target is not None
+    return name in LENGTHS or name in STDS or target is not None
 
 
 def _mapping_problem(columns: Mapping[str, str]) -> _Problem | None:

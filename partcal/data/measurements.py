@@ -5,7 +5,9 @@ One row per pose, one header line, ``#`` comment lines allowed. Columns:
 position, mm; optional when a robot model is given), ``x_meas, y_meas,
 z_meas`` (measured position, mm), an optional text column ``set`` and an
 optional ``payload_kg`` (the payload at the tool point when the pose was
-measured, kg). Other columns are accepted and ignored. Errors are
+measured, kg) and optional ``std_x, std_y, std_z`` (the measured position's
+standard deviation per coordinate, mm, all three or none: they weigh the
+rows in registration and identification). Other columns are accepted and ignored. Errors are
 ``measured - nominal``.
 
 A pose may carry more: further targets on the tool, each as wide columns with
@@ -43,7 +45,7 @@ from ..metrics import MRAD_PER_DEG
 from ..robot.description import MAX_JOINTS, joint_columns, load_robot
 from ..robot.kinematics import Robot
 from ..robot.rotations import matrices_from_xyz_deg, rotation_vectors_from_matrices, xyz_deg_from_matrices
-from .formats import MeasurementFormat, RowSelection
+from .formats import STDS, MeasurementFormat, RowSelection
 from .pose_columns import (ORIENTATION_MEASURED, ORIENTATION_NOMINAL, PRIMARY, check_angles, checked_orientation,
                            checked_targets, orientation_columns, suffixed, target_columns)
 from .plausibility import Plausibility, check_measured, check_orientation
@@ -104,6 +106,7 @@ class Measurements:
     extra_nominal_mm: dict = field(default_factory=dict)
     measured_orientation_deg: NDArray[np.float64] | None = None
     nominal_orientation_deg: NDArray[np.float64] | None = None
+    std_mm: NDArray[np.float64] | None = None
 
     def __post_init__(self):
         q = check_array(self.q_deg, "q_deg", min_rows=1)
@@ -134,6 +137,13 @@ class Measurements:
                 raise DataError(f"Expected payload_kg as {n} masses in [0, {MAX_PAYLOAD_KG:g}] kg (one per pose), "
                                 f"got {got}")
             object.__setattr__(self, "payload_kg", payload)
+        if self.std_mm is not None:
+            std = check_array(self.std_mm, "std_mm", columns=3)
+            bad = np.flatnonzero(~(std > 0).all(axis=1))
+            if std.shape[0] != n or bad.size:
+                got = f"{std[bad[0]].tolist()} at row {bad[0] + 1}" if bad.size else f"{std.shape[0]} rows"
+                raise DataError(f"Expected std_mm as {n} rows of 3 positive standard deviations (mm), got {got}")
+            object.__setattr__(self, "std_mm", std)
 
     def take(self, rows, name: str | None = None) -> "Measurements":
         """The rows ``rows`` (indices or a boolean mask) as a data set of their own, every column kept."""
@@ -149,7 +159,7 @@ class Measurements:
             payload_kg=some(self.payload_kg), extra_measured_mm={k: v[rows] for k, v in self.extra_measured_mm.items()},
             extra_nominal_mm={k: v[rows] for k, v in self.extra_nominal_mm.items()},
             measured_orientation_deg=some(self.measured_orientation_deg),
-            nominal_orientation_deg=some(self.nominal_orientation_deg))
+            nominal_orientation_deg=some(self.nominal_orientation_deg), std_mm=some(self.std_mm))
 
     def __len__(self) -> int:
         return self.q_deg.shape[0]
@@ -304,10 +314,32 @@ def read_measurements(path: str | Path, robot: str | Robot | None = None, *, nam
                             f"column of each row's pose); the file has {', '.join(h.strip(chr(39)) for h in header)}")
         groups = tuple(data[i][1][seen[group_column]].strip() for i in keep)
     payload = _payloads(path, line, header, data, seen[PAYLOAD], fmt.decimal)[keep] if PAYLOAD in seen else None
+    std = _stds(path, line, header, data, seen, fmt)
     return Measurements(q_deg=q, nominal_mm=nominal, measured_mm=meas,
                         name=name if name is not None else path.stem, labels=labels, groups=groups,
                         payload_kg=payload, extra_measured_mm=extra, extra_nominal_mm=extra_nominal,
-                        measured_orientation_deg=orientation, nominal_orientation_deg=nominal_orientation)
+                        measured_orientation_deg=orientation, nominal_orientation_deg=nominal_orientation,
+                        std_mm=None if std is None else std[keep])
+
+
+def _stds(path: Path, line: int, header: list[str], data: list, seen: dict[str, int], fmt: MeasurementFormat
+          ) -> NDArray[np.float64] | None:
+    """The ``std_x, std_y, std_z`` columns (all three or none), mm, each a positive number; None without them."""
+    present = [c for c in STDS if c in seen]
+    if not present:
+        return None
+    if len(present) < 3:
+        missing = next(c for c in STDS if c not in seen)
+        raise DataError(f"{path}:{line}: column {fmt.file_column(missing)!r} is missing (give all of "
+                        f"{', '.join(fmt.file_column(c) for c in STDS)} or none)")
+    cols = [seen[c] for c in STDS]
+    values = fmt.to_contract(list(STDS), _numbers(path, line, header, data, cols, fmt.decimal))
+    bad = np.argwhere(~(values > 0))
+    if bad.size:
+        r, c = bad[0]
+        raise DataError(f"{path}:{data[r][0]}: column {header[cols[c]]}: expected a standard deviation > 0 (mm), "
+                        f"got {values[r, c]:g}")
+    return values
 
 
 def first_bad_payload(values: NDArray[np.float64]) -> int | None:
@@ -574,6 +606,9 @@ def write_measurements(m: Measurements, path: str | Path, *, comment: str | None
     if m.payload_kg is not None:
         header.append(PAYLOAD)
         blocks.append(m.payload_kg[:, None])
+    if m.std_mm is not None:
+        header += list(STDS)
+        blocks.append(m.std_mm)
     if m.labels is not None:
         header.append("set")
     with atomic_write(path, newline="") as handle:

@@ -40,7 +40,7 @@ from scipy.optimize import least_squares
 
 from .._validation import check_array
 from ..errors import DataError
-from ..metrics import pooled_rms
+from ..metrics import ROBUST_LOSSES, loss_weights, pooled_rms
 from ..robot.frames import kabsch
 from ..robot.kinematics import ORIENTATION_MM_PER_RAD, Robot, flange_offset
 from ..robot.rotations import (matrices_from_xyz_deg, matrix_from_rotation_vector, rotation_vector_from_matrix,
@@ -88,6 +88,9 @@ class Registration:
         reads, in the base frame), when an orientation was measured.
     orientation_rms_deg : float, optional
         RMS angle of the orientation residuals, degrees.
+    robust : dict, optional
+        With a robust loss: ``loss``, ``scale_mm`` and ``downweighted``, the rows (``row`` from 0,
+        ``residual_mm``, ``weight``) the loss weighs below 0.5 (:func:`register_tracker`). None otherwise.
     """
 
     rotation: NDArray[np.float64]
@@ -102,6 +105,7 @@ class Registration:
     target_rms_3d: dict = field(default_factory=dict)
     probe_rotation: NDArray[np.float64] | None = None
     orientation_rms_deg: float | None = None
+    robust: dict | None = None
 
     @property
     def rotation_deg(self) -> NDArray[np.float64]:
@@ -130,6 +134,8 @@ class Registration:
         if self.probe_rotation is not None:
             out["probe_rotation_deg"] = [float(v) for v in np.degrees(rotation_vector_from_matrix(self.probe_rotation))]
             out["orientation_rms_deg"] = float(self.orientation_rms_deg)
+        if self.robust is not None:
+            out["robust"] = self.robust
         return out
 
     def tool_of(self, target: str) -> NDArray[np.float64]:
@@ -141,7 +147,8 @@ def register_tracker(robot: Robot, q_deg, measured_mm, *, tool_mm=None, fit_tool
                      source: str = "registration", max_condition: float = MAX_CONDITION,
                      plausibility: Plausibility | None = None, targets: dict | None = None,
                      target_tools_mm: dict | None = None, orientation_deg=None,
-                     orientation_mm_per_rad: float = ORIENTATION_MM_PER_RAD, probe_rotation=None) -> Registration:
+                     orientation_mm_per_rad: float = ORIENTATION_MM_PER_RAD, probe_rotation=None,
+                     std_mm=None, loss: str = "linear", loss_scale: float = 3.0) -> Registration:
     """Fit the tracker frame (and the tool offsets) to measured poses.
 
     Parameters
@@ -177,6 +184,19 @@ def register_tracker(robot: Robot, q_deg, measured_mm, *, tool_mm=None, fit_tool
     probe_rotation : array-like, shape (3, 3), optional
         The probe's rotation on the flange, given (another registration's, the
         probe not remounted): then only the frame is fitted to the orientation.
+    std_mm : array-like, shape (n, 3), optional
+        The measured points' standard deviations per coordinate (tracker frame), mm: each pose's residuals
+        (every target's) are divided by the root mean square of its three and multiplied by the
+        reference (their root mean square over the poses); the orientation's are not weighted. None: every
+        pose alike (the fit is then the same as before weights existed).
+    loss : {"linear", "huber", "soft_l1", "cauchy"}
+        scipy's ``least_squares`` loss of each weighted residual coordinate (trust-region reflective);
+        ``linear``: least squares by Levenberg-Marquardt.
+    loss_scale : float
+        The loss's ``f_scale`` in standard deviations of a coordinate: of the larger of the reference of
+        ``std_mm`` and the robust spread (1.4826 median absolute residual) of the previous fit, taken again up
+        to 4 times. The nominal robot's own errors (a millimetre) dwarf a tracker's noise: measured against
+        the nominal model, a point's residual is mostly the robot's, so the noise alone would name every row.
 
     Returns
     -------
@@ -223,7 +243,19 @@ def register_tracker(robot: Robot, q_deg, measured_mm, *, tool_mm=None, fit_tool
         return out if probe is None else np.concatenate([out, probe.residuals(unpack(x)[0], x[6 + k_tools:])])
 
     x0 = np.concatenate([np.zeros(3), t0, tools0.ravel() if fit_tool else [], np.zeros(probe.size if probe else 0)])
+    weight, reference = _pose_weights(std_mm, q.shape[0], len(points), probe is not None, source)
+    if weight is not None:
+        plain = residuals
+
+        def residuals(x):
+            return plain(x) * weight
     sol = least_squares(residuals, x0, method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15, max_nfev=200 * n_params)
+    robust = None
+    if loss != "linear":
+        sol, robust = _robust_fit(residuals, sol, loss, loss_scale, reference, q.shape[0], weight, n_params)
+        for row in robust["downweighted"]:
+            log.warning("%s: data row %d: down-weighted by the registration's %s loss (residual %.4g mm, weight "
+                        "%.3g)", source, row["row"] + 1, loss, row["residual_mm"], row["weight"])
     rot, shift, tools = unpack(sol.x)
     resid = position_residuals(sol.x)
     check_residuals(source, resid[0], p_fl + r_fl @ tool0, meas, robot.reach_mm, robot.name,
@@ -248,9 +280,47 @@ def register_tracker(robot: Robot, q_deg, measured_mm, *, tool_mm=None, fit_tool
                        n_poses=q.shape[0], fit_tool=fit_tool,
                        target_tools_mm={name: tools[k + 1].copy() for k, name in enumerate(extra)},
                        target_rms_3d=dict(zip([PRIMARY, *extra], map(float, rms))) if extra else {},
-                       **(probe.result(rot, sol.x[6 + k_tools:]) if probe else {}))
+                       **(probe.result(rot, sol.x[6 + k_tools:]) if probe else {}), robust=robust)
     log.info("%s: registered %d poses, RMS %.4f mm, condition %.1f", source, q.shape[0], reg.rms_3d, condition)
     return reg
+
+
+def _pose_weights(std_mm, n: int, k: int, orientation: bool, source: str):
+    """The weight of every residual of :func:`register_tracker` from the points' standard deviations ``std_mm``
+    (n, 3): ``reference / s`` per pose, ``s`` the root mean square of its three, for each of the ``k`` targets'
+    coordinates (the orientation's 1); and the reference. ``(None, None)`` without them."""
+    if std_mm is None:
+        return None, None
+    std = check_array(std_mm, "std_mm", columns=3)
+    if len(std) != n or not np.all(np.isfinite(std) & (std > 0)):
+        raise DataError(f"{source}: expected std_mm as {n} rows of 3 positive standard deviations (mm); got shape "
+                        f"{std.shape}")
+    per_pose = np.sqrt(np.mean(std**2, axis=1))
+    reference = float(np.sqrt(np.mean(per_pose**2)))
+    weight = np.tile(np.repeat(reference / per_pose, 3), k)
+    return (np.concatenate([weight, np.ones(3 * n)]) if orientation else weight), reference
+
+
+def _robust_fit(residuals, sol, loss: str, loss_scale: float, reference: float | None, n: int, weight, n_params: int):
+    """The robust refit of a registration from the least-squares solution ``sol``, and its ``robust`` entry (the
+    primary target's rows weighed below 0.5, each row's weight its worst coordinate's ``rho'``)."""
+    if loss not in ROBUST_LOSSES:
+        raise DataError(f"loss must be one of {', '.join(ROBUST_LOSSES)}; got {loss!r}")
+    scale = None
+    for _ in range(4):
+        new = loss_scale * max(1.4826 * float(np.median(np.abs(residuals(sol.x)))), reference or 0.0, 1e-12)
+        if scale is not None and abs(new - scale) < 0.05 * scale:
+            break
+        scale = new
+        sol = least_squares(residuals, sol.x, method="trf", loss=loss, f_scale=scale, xtol=1e-15, ftol=1e-15,
+                            gtol=1e-15, max_nfev=200 * n_params)
+    r = residuals(sol.x)[:3 * n]
+    row_weight = loss_weights(r / scale, loss).reshape(n, 3).min(axis=1)
+    plain = (r if weight is None else r / weight[:3 * n]).reshape(n, 3)
+    low = np.flatnonzero(row_weight < 0.5)
+    return sol, {"loss": loss, "scale_mm": float(scale),
+                 "downweighted": [{"row": int(i), "residual_mm": float(np.linalg.norm(plain[i])),
+                                   "weight": float(row_weight[i])} for i in low]}
 
 
 def register_measurements(robot: Robot, m: Measurements, **options) -> Registration:
@@ -259,7 +329,7 @@ def register_measurements(robot: Robot, m: Measurements, **options) -> Registrat
     ``options`` are :func:`register_tracker`'s keywords (``tool_mm``, ``fit_tool``, ``source`` ...).
     """
     return register_tracker(robot, m.q_deg, m.measured_mm, targets=m.extra_measured_mm,
-                            orientation_deg=m.measured_orientation_deg, **options)
+                            orientation_deg=m.measured_orientation_deg, std_mm=m.std_mm, **options)
 
 
 MIRROR_RATIO = 0.5
@@ -393,7 +463,8 @@ def registered(m: Measurements, robot: Robot, reg: Registration) -> Measurements
         turned = reg.rotation @ matrices_from_xyz_deg(m.measured_orientation_deg) @ reg.probe_rotation.T
         orientation = {"measured_orientation_deg": xyz_deg_from_matrices(turned),
                        "nominal_orientation_deg": xyz_deg_from_matrices(r_fl)}
-    return dataclasses.replace(m, nominal_mm=nominal, measured_mm=reg.to_base(m.measured_mm),
+    std = {} if m.std_mm is None else {"std_mm": np.sqrt(m.std_mm**2 @ (reg.rotation**2).T)}   # diag(R S R^T)
+    return dataclasses.replace(m, nominal_mm=nominal, measured_mm=reg.to_base(m.measured_mm), **std,
                                extra_measured_mm={name: reg.to_base(m.extra_measured_mm[name]) for name in kept},
                                extra_nominal_mm={name: p_fl + r_fl @ reg.target_tools_mm[name] for name in kept},
                                **orientation)

@@ -49,7 +49,7 @@ from scipy.optimize import least_squares
 
 from .._validation import check_array
 from ..errors import DataError
-from ..metrics import held_joints, pooled_rms
+from ..metrics import ROBUST_LOSSES, held_joints, loss_weights, pooled_rms
 from ..robot.kinematics import Robot
 from ..robot.rotations import (matrix_from_rotation_vector, matrix_from_rpy_deg, rotation_vectors_from_matrices,
                                rpy_deg_from_matrix)
@@ -352,6 +352,10 @@ class Identification:
         parameters is ``-A u``). A prediction's error from them is ``(J_u(q) - J_i(q) A) u``: nil where
         the identified parameters stand in for them (a base turn for the first joint's offset), growing
         where the data did not go (:func:`prior_variance`).
+    robust : dict, optional
+        With a robust loss (:data:`LOSSES`, not ``linear``): ``loss``, ``scale_mm`` (its ``f_scale``, mm of the
+        weighted residuals) and ``downweighted``, the measurement rows the loss weighs below
+        :data:`DOWNWEIGHTED` (``row`` from 0, ``residual_mm`` its 3-D residual, ``weight``). None otherwise.
     """
 
     names: tuple[str, ...]
@@ -372,6 +376,7 @@ class Identification:
     sigma_mm: float | None = None
     prior_std: NDArray[np.float64] | None = None
     prior_absorbed: NDArray[np.float64] | None = None
+    robust: dict | None = None
 
     @property
     def correction(self) -> NDArray[np.float64]:
@@ -400,7 +405,8 @@ class Identification:
                 **({"covariance": self.covariance.tolist(), "sigma_mm": float(self.sigma_mm)}
                    if self.covariance is not None else {}),
                 **({"prior_std": [None if np.isnan(v) else float(v) for v in self.prior_std],
-                    "prior_absorbed": self.prior_absorbed.tolist()} if self.prior_std is not None else {})}
+                    "prior_absorbed": self.prior_absorbed.tolist()} if self.prior_std is not None else {}),
+                **({"robust": self.robust} if self.robust is not None else {})}
 
     @classmethod
     def from_dict(cls, d: dict) -> "Identification":
@@ -416,7 +422,7 @@ class Identification:
                    None if d.get("prior_std") is None else np.array(
                        [np.nan if v is None else v for v in d["prior_std"]], dtype=float),
                    None if d.get("prior_absorbed") is None else _matrix(
-                       d["prior_absorbed"], sum(s == "identified" for s in d["status"])))
+                       d["prior_absorbed"], sum(s == "identified" for s in d["status"])), d.get("robust"))
 
     def prior_indices(self) -> NDArray[np.intp]:
         """Indices of the parameters with a prior standard deviation (:attr:`prior_std`), in table order."""
@@ -431,7 +437,9 @@ def _matrix(rows: list, n_rows: int) -> NDArray[np.float64]:
 
 def identify(robot: Robot, q_deg: NDArray[np.float64], measured_mm: NDArray[np.float64], *, base: bool = True,
              tool: bool = True, rcond: float = 1e-6, errors: JointErrors | None = None,
-             payload_kg=0.0, extra: Extra | None = None, parametrization: str = "dh") -> Identification:
+             payload_kg=0.0, extra: Extra | None = None, parametrization: str = "dh",
+             std_mm: NDArray[np.float64] | None = None, loss: str = "linear", loss_scale: float = 3.0
+             ) -> Identification:
     """Identify the parameters that bring the model's forward kinematics through measured positions.
 
     Parameters
@@ -461,6 +469,16 @@ def identify(robot: Robot, q_deg: NDArray[np.float64], measured_mm: NDArray[np.f
         The geometric parameters: four DH parameters per row, or each row's
         theta offset and the six errors of its fixed transform (see the module
         notes).
+    std_mm : ndarray, shape (n, 3), optional
+        The standard deviation of each measured coordinate, mm: weighted least squares, each residual
+        divided by its standard deviation and multiplied by their root mean square (the reference), so
+        that the weighted residuals stay mm-like (further targets' rows take their pose's; the orientation's
+        are not weighted). None: every row alike (the same fit as before weights existed).
+    loss : {"linear", "huber", "soft_l1", "cauchy"}
+        scipy's ``least_squares`` loss, applied to each weighted residual coordinate (:func:`fit_parameters`).
+    loss_scale : float
+        The loss's ``f_scale`` in standard deviations of one coordinate: the reference of ``std_mm``, or
+        without it the robust spread (1.4826 times the median absolute residual) of the least-squares fit.
 
     Returns
     -------
@@ -492,7 +510,9 @@ def identify(robot: Robot, q_deg: NDArray[np.float64], measured_mm: NDArray[np.f
     jac0 = jac_at(v0)[1]
     names = parameter_names(robot, errors, parametrization) + (extra.names() if extra is not None else [])
     units = [unit for _, unit in names]
-    result, resid = fit_parameters(jac_at, v0, jac0, wanted, names, rcond, size, q_deg.shape[0])
+    weight, reference = row_weights(std_mm, len(q_deg), extra)
+    result, resid = fit_parameters(jac_at, v0, jac0, wanted, names, rcond, size, q_deg.shape[0], row_weight=weight,
+                                   loss=loss, loss_scale=loss_scale, reference_mm=reference)
     rms, angle = _target_rms(resid, len(q_deg), extra)
     more = {} if extra is None else {
         "target_rms_mm": dict(zip([PRIMARY_TARGET, *extra.tools_mm], rms)), "orientation_rms_deg": angle,
@@ -504,9 +524,45 @@ def identify(robot: Robot, q_deg: NDArray[np.float64], measured_mm: NDArray[np.f
     return result
 
 
+def row_weights(std_mm: NDArray[np.float64] | None, n: int, extra: Extra | None = None
+                ) -> tuple[NDArray[np.float64] | None, float | None]:
+    """The weight of every stacked residual of :func:`identify` from the standard deviations ``std_mm`` (n, 3) mm
+    of the primary target's coordinates: ``reference / std`` with ``reference`` their root mean square
+    (returned too), each further target's rows taking their pose's, the orientation's rows 1. ``(None, None)``
+    without standard deviations.
+
+    Examples
+    --------
+    >>> w, ref = row_weights(np.array([[1.0, 1.0, 2.0], [1.0, 1.0, 2.0]]), 2)
+    >>> round(ref, 6), w.round(6).tolist()
+    (1.414214, [1.414214, 1.414214, 0.707107, 1.414214, 1.414214, 0.707107])
+    """
+    if std_mm is None:
+        return None, None
+    std = check_array(std_mm, "std_mm", columns=3)
+    if len(std) != n or not np.all(np.isfinite(std) & (std > 0)):
+        raise DataError(f"Expected std_mm as {n} rows of 3 positive standard deviations (mm), got shape {std.shape} "
+                        f"with smallest value {np.nanmin(std) if std.size else float('nan'):g}")
+    reference = float(np.sqrt(np.mean(std**2)))
+    weight = (reference / std).ravel()
+    if extra is None:
+        return weight, reference
+    parts = [weight] * (1 + len(extra.tools_mm)) + ([np.ones(3 * n)] if extra.rotations is not None else [])
+    return np.concatenate(parts), reference
+
+
+LOSSES = ROBUST_LOSSES
+"""The losses of robust identification: scipy ``least_squares``' (``linear`` is least squares)."""
+
+DOWNWEIGHTED = 0.5
+"""A measurement row whose worst coordinate the robust loss weighs below this (its ``rho'``) is named as
+down-weighted (:attr:`Identification.robust`)."""
+
+
 def fit_parameters(jac_at, v0: NDArray[np.float64], jac0: NDArray[np.float64], wanted: NDArray[np.bool_],
-                   names: list[tuple[str, str]], rcond: float, size: int, n_poses: int
-                   ) -> tuple[Identification, NDArray[np.float64]]:
+                   names: list[tuple[str, str]], rcond: float, size: int, n_poses: int, *,
+                   row_weight: NDArray[np.float64] | None = None, loss: str = "linear", loss_scale: float = 3.0,
+                   reference_mm: float | None = None) -> tuple[Identification, NDArray[np.float64]]:
     """The rank-checked fit of :func:`identify` over any stacked residuals, and the residuals it leaves.
 
     ``jac_at(values, jacobian=True)`` gives the residuals and their Jacobian; ``v0`` is the start (the
@@ -514,7 +570,19 @@ def fit_parameters(jac_at, v0: NDArray[np.float64], jac0: NDArray[np.float64], w
     ``wanted`` the parameters asked for; ``names`` every parameter's ``(name, unit)``; ``size`` the number
     of geometric parameters (the rows', tool and base: the first ``size``). The table's ``rms_mm`` is the
     3-D RMS of the residuals read as points; callers replace it with their own figure.
+
+    ``row_weight`` (one per residual, :func:`row_weights`) weighs the residuals (weighted least squares: the
+    covariance and ``sigma`` are the weighted residuals'; the residuals returned are not weighted). ``loss``
+    (:data:`LOSSES`) fits by scipy's trust-region reflective method with that loss, its ``f_scale``
+    ``loss_scale`` times ``reference_mm`` (the weighted residuals' stated standard deviation) or, without it,
+    times the robust spread of the least-squares fit's residuals; the covariance then weighs each residual by
+    the loss's weight (:func:`loss_weights`), and the rows it weighs below :data:`DOWNWEIGHTED` are named in
+    the table's ``robust`` (the first ``3 n_poses`` residuals are the measurement rows' coordinates).
     """
+    if loss not in LOSSES:
+        raise DataError(f"loss must be one of {', '.join(LOSSES)}; got {loss!r}")
+    if row_weight is not None:
+        jac_at, jac0 = _weighted(jac_at, row_weight), jac0 * row_weight[:, None]
     units = [unit for _, unit in names]
     free, rank = identifiable_parameters(jac0, wanted, rcond, units)
 
@@ -529,6 +597,9 @@ def fit_parameters(jac_at, v0: NDArray[np.float64], jac0: NDArray[np.float64], w
         if worst is None:
             v, nfev = _solve(jac_at, v0, free)
             evaluations += nfev
+            if loss != "linear":
+                v, nfev = _robust_solve(jac_at, v0, v, free, loss, loss_scale, reference_mm)
+                evaluations += nfev
             worst = _implausible(jac_at, v, v0, free, limits)
             if worst is None:
                 break
@@ -541,7 +612,12 @@ def fit_parameters(jac_at, v0: NDArray[np.float64], jac0: NDArray[np.float64], w
     if free.size == 0:
         v = v0.copy()
     resid, jac = jac_at(v)
-    std, condition, covariance, sigma = _uncertainty(jac[:, free], resid)
+    robust, counted = None, None
+    if loss != "linear":
+        scale = loss_scale * (reference_mm if reference_mm is not None else _robust_spread(jac_at, v))
+        counted = loss_weights(resid / scale, loss)
+        robust = _downweighted(resid, counted, row_weight, n_poses, loss, scale)
+    std, condition, covariance, sigma = _uncertainty(jac[:, free], resid, counted)
     std_full = np.full(v.size, np.nan)
     std_full[free] = std
     status = np.where(wanted, "unidentifiable", "fixed").astype(object)
@@ -551,8 +627,55 @@ def fit_parameters(jac_at, v0: NDArray[np.float64], jac0: NDArray[np.float64], w
                             tuple(str(s) for s in status), rank, condition, pooled_rms(resid[:resid.size // 3 * 3]
                                                                                        .reshape(-1, 3)),
                             n_poses, evaluations, covariance=covariance, sigma_mm=sigma, prior_std=prior_std,
-                            prior_absorbed=absorbed)
-    return result, resid
+                            prior_absorbed=absorbed, robust=robust)
+    return result, (resid if row_weight is None else resid / row_weight)
+
+
+def _weighted(jac_at, row_weight: NDArray[np.float64]):
+    """``jac_at`` with its residuals and Jacobian rows multiplied by ``row_weight``."""
+    def weighted(v, jacobian=True):
+        resid, jac = jac_at(v, jacobian)
+        return resid * row_weight, (None if jac is None else jac * row_weight[:, None])
+    return weighted
+
+
+SCALE_PASSES = 4
+"""Without a stated noise, the robust fit re-estimates its scale from its own residuals at most this many times
+(the least-squares fit's residuals, which the outliers spread, start it), until it changes by less than 5 %."""
+
+
+def _robust_solve(jac_at, v0: NDArray[np.float64], v: NDArray[np.float64], free: NDArray[np.intp], loss: str,
+                  loss_scale: float, reference_mm: float | None) -> tuple[NDArray[np.float64], int]:
+    """The robust fit from the least-squares values ``v``: ``f_scale`` is ``loss_scale`` times the stated
+    standard deviation ``reference_mm``, or, without one, times the robust spread of the residuals, taken
+    again after each fit (:data:`SCALE_PASSES`)."""
+    evaluations, scale = 0, None
+    for _ in range(1 if reference_mm is not None else SCALE_PASSES):
+        new = loss_scale * (reference_mm if reference_mm is not None else _robust_spread(jac_at, v))
+        if scale is not None and abs(new - scale) < 0.05 * scale:
+            break
+        scale = new
+        v, nfev = _solve(jac_at, v0, free, loss=loss, f_scale=scale, start=v)
+        evaluations += nfev
+    return v, evaluations
+
+
+def _robust_spread(jac_at, v: NDArray[np.float64]) -> float:
+    """The robust standard deviation of one residual at ``v``: 1.4826 times the median absolute residual."""
+    spread = 1.4826 * float(np.median(np.abs(jac_at(v, jacobian=False)[0])))
+    return spread if spread > 0 else 1e-12
+
+
+def _downweighted(resid, counted, row_weight, n_poses: int, loss: str, scale: float) -> dict:
+    """The ``robust`` entry of a table: the loss, its scale and the rows it weighs below :data:`DOWNWEIGHTED`
+    (each row's weight its worst coordinate's; its residual the 3-D one, mm, unweighted)."""
+    rows = slice(0, 3 * n_poses)
+    plain = resid[rows] if row_weight is None else resid[rows] / row_weight[rows]
+    weight = counted[rows].reshape(n_poses, 3).min(axis=1)
+    norm = np.linalg.norm(plain.reshape(n_poses, 3), axis=1)
+    low = np.flatnonzero(weight < DOWNWEIGHTED)
+    return {"loss": loss, "scale_mm": float(scale),
+            "downweighted": [{"row": int(i), "residual_mm": float(norm[i]), "weight": float(weight[i])} for i in low]}
 
 
 def _prior(jac: NDArray[np.float64], free: NDArray[np.intp], status, units: list[str], size: int
@@ -706,25 +829,35 @@ def _implausible(jac_at, v: NDArray[np.float64], v0: NDArray[np.float64], free: 
     return int(np.flatnonzero(loose)[np.argmax(beyond[loose])]) if loose.any() else None
 
 
-def _solve(jac_at, v0: NDArray[np.float64], free: NDArray[np.intp]) -> tuple[NDArray[np.float64], int]:
+def _solve(jac_at, v0: NDArray[np.float64], free: NDArray[np.intp], *, loss: str = "linear", f_scale: float = 1.0,
+           start: NDArray[np.float64] | None = None) -> tuple[NDArray[np.float64], int]:
     """The values that minimise the residuals of ``jac_at`` over the parameters ``free`` (the others kept at
-    ``v0``), by Levenberg-Marquardt from ``v0``; and the number of evaluations."""
+    ``v0``), by Levenberg-Marquardt from ``v0`` (with a ``loss`` other than ``linear``: scipy's
+    trust-region reflective method with that loss and ``f_scale``, from ``start``); and the number of
+    evaluations."""
     def values_of(x):
         v = v0.copy()
         v[free] = x
         return v
 
-    sol = least_squares(lambda x: jac_at(values_of(x), jacobian=False)[0], v0[free],
-                        jac=lambda x: jac_at(values_of(x))[1][:, free], method="lm",
+    robust = {} if loss == "linear" else {"method": "trf", "loss": loss, "f_scale": f_scale}
+    x0 = v0[free] if start is None else start[free]
+    sol = least_squares(lambda x: jac_at(values_of(x), jacobian=False)[0], x0,
+                        jac=lambda x: jac_at(values_of(x))[1][:, free], **{"method": "lm", **robust},
                         x_scale="jac", ftol=1e-15, xtol=1e-15, gtol=1e-15, max_nfev=200 * (free.size + 1))
     log.debug("least squares: %s (%d evaluations)", sol.message, sol.nfev)
     return values_of(sol.x), int(sol.nfev)
 
 
-def _uncertainty(jac: NDArray[np.float64], resid: NDArray[np.float64]
+def _uncertainty(jac: NDArray[np.float64], resid: NDArray[np.float64], counted: NDArray[np.float64] | None = None
                  ) -> tuple[NDArray[np.float64], float, NDArray[np.float64], float]:
     """Standard errors ``sqrt(diag(sigma^2 (J^T J)^-1))``, the condition number of the unit-column ``J``, the
-    covariance ``sigma^2 (J^T J)^-1`` itself and ``sigma`` (the residual standard deviation per coordinate)."""
+    covariance ``sigma^2 (J^T J)^-1`` itself and ``sigma`` (the residual standard deviation per coordinate).
+    ``counted`` (a robust loss's weight of each residual, :func:`loss_weights`) multiplies the rows of ``J`` and
+    the residuals by its square root first (iteratively reweighted least squares' covariance)."""
+    if counted is not None and not np.all(counted == 1.0):
+        root = np.sqrt(counted)
+        jac, resid = jac * root[:, None], resid * root
     dof = resid.size - jac.shape[1]
     sigma2 = float(np.sum(resid**2)) / dof if dof > 0 else np.nan
     if jac.shape[1] == 0:

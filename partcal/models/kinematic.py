@@ -26,7 +26,7 @@ from ..robot.kinematics import ORIENTATION_MM_PER_RAD, Robot
 from ..robot.rotations import matrix_from_rotation_vector, rotation_vectors_from_matrices
 from .base import ErrorModelBase, box_points, seed_from
 from .features import varying_inputs
-from .identification import (PARAMETRIZATIONS, PRIMARY_TARGET, STATUSES, Identification, geometric_size, identify,
+from .identification import (LOSSES, PARAMETRIZATIONS, PRIMARY_TARGET, STATUSES, Identification, geometric_size, identify,
                              model_jacobian, nominal_values, own_geometry, parameter_names, prior_variance,
                              resolved_parametrization, robot_with)
 from .joint_errors import JointErrors, compliance_problem, harmonics_problem
@@ -69,6 +69,12 @@ class KinematicModel(ErrorModelBase):
     payload_kg : float >= 0
         The payload at the tool point, kg, of data given without one per
         pose (``fit``, ``predict``: ``payload_kg=`` per pose overrides it).
+    loss : {"linear", "huber", "soft_l1", "cauchy"}
+        The identification's loss (scipy ``least_squares``'): ``linear`` is least squares (the default), the
+        others down-weigh rows far off (named in ``identification_.robust``).
+    loss_scale : float > 0
+        The robust loss's scale in standard deviations of one coordinate: the stated noise
+        (``std_mm`` of :meth:`fit`), or without it the robust spread of the least-squares fit's residuals.
     residual : estimator of a kind that may be a residual (the table of kinds), optional
         Fitted to the errors the identified kinematics leave; its prediction
         is added (a hybrid model). A Cartesian residual reads the nominal
@@ -105,7 +111,8 @@ class KinematicModel(ErrorModelBase):
 
     def __init__(self, *, robot=None, base=True, tool=True, rcond=1e-6, parametrization="auto", compliance=(),
                  joint_harmonics=0, payload_kg=0.0, all_targets=False, use_orientation=False,
-                 orientation_mm_per_rad=ORIENTATION_MM_PER_RAD, residual=None, random_state=None):
+                 orientation_mm_per_rad=ORIENTATION_MM_PER_RAD, loss="linear", loss_scale=3.0, residual=None,
+                 random_state=None):
         self.robot = robot
         self.parametrization = parametrization
         self.all_targets = all_targets
@@ -117,6 +124,8 @@ class KinematicModel(ErrorModelBase):
         self.compliance = compliance
         self.joint_harmonics = joint_harmonics
         self.payload_kg = payload_kg
+        self.loss = loss
+        self.loss_scale = loss_scale
         self.residual = residual
         self.random_state = random_state
 
@@ -127,12 +136,14 @@ class KinematicModel(ErrorModelBase):
                         "parametrization": one_of("auto", *PARAMETRIZATIONS, default="auto"),
                         "payload_kg": real(0.0, MAX_PAYLOAD_KG, default=0.0),
                         "all_targets": boolean(False), "use_orientation": boolean(False),
-                        "orientation_mm_per_rad": real(0.0, 1e6, default=ORIENTATION_MM_PER_RAD, low_open=True)}
+                        "orientation_mm_per_rad": real(0.0, 1e6, default=ORIENTATION_MM_PER_RAD, low_open=True),
+                        "loss": one_of(*LOSSES, default="linear"),
+                        "loss_scale": real(0.0, 1e3, default=3.0, low_open=True)}
     _requirements = (Requirement("orientation_mm_per_rad", f"{ORIENTATION_MM_PER_RAD:g} (its default) unless "
                                  "use_orientation is true: it weighs the orientation in the identification",
                                  lambda p: p["use_orientation"] or p["orientation_mm_per_rad"] == ORIENTATION_MM_PER_RAD),)
     _from_fitted = ("all_targets", "use_orientation")     # a model file keeps what was fitted on instead
-    _OPTIONAL_IN_FILES = ("payload_kg", "orientation_mm_per_rad", "parametrization")   # older files: the default
+    _OPTIONAL_IN_FILES = ("payload_kg", "orientation_mm_per_rad", "parametrization", "loss", "loss_scale")   # older files: the default
     _joint_rules = {"compliance": ((), compliance_problem), "joint_harmonics": (0, harmonics_problem)}
 
     def _check_params(self) -> Robot:
@@ -154,7 +165,7 @@ class KinematicModel(ErrorModelBase):
         return resolved_parametrization(self.parametrization, robot)
 
     def fit(self, X, y, payload_kg=None, *, targets=None, orientation_deg=None, orientation_mm_per_rad=None,
-            measures: Measured | None = None):
+            measures: Measured | None = None, std_mm=None):
         """Identify the parameters from joint angles ``X`` (n, N) deg and errors ``y`` (n, 3) mm. Returns self.
 
         ``payload_kg`` (n,) kg per pose, or a number; default the parameter ``payload_kg``.
@@ -179,6 +190,9 @@ class KinematicModel(ErrorModelBase):
         contacts, fixed points, distances, tracker points) and the cell's features, identified from instead
         of ``y`` (which is then ignored; ``X`` are the rows' joints). The model is the same kinematic model;
         what the data cannot identify is in :meth:`fit_notes`.
+
+        ``std_mm`` (n, 3) mm: the standard deviation of each measured coordinate of the primary target, for a
+        weighted identification (:func:`~partcal.models.identification.identify`); None: every row alike.
         """
         robot = self._check_params()
         if measures is not None:
@@ -205,7 +219,8 @@ class KinematicModel(ErrorModelBase):
         extra = extra_from(robot, X, targets, orientation_deg, weight)
         self.identification_ = identify(robot, X, nominal + y[:, POSITION], base=bool(self.base), tool=bool(self.tool),
                                         rcond=float(self.rcond), errors=self.joint_errors_, payload_kg=ident_payload,
-                                        extra=extra, parametrization=self.parametrization_)
+                                        extra=extra, parametrization=self.parametrization_, std_mm=std_mm,
+                                        loss=self.loss, loss_scale=float(self.loss_scale))
         self.targets_ = dict(extra.tools_mm) if extra is not None else {}
         self.orientation_ = extra is not None and extra.rotations is not None
         self.measures_, self.measure_notes_, self.frame_fixed_ = (), [], True
@@ -229,6 +244,9 @@ class KinematicModel(ErrorModelBase):
 
     def _fit_measures(self, robot: Robot, measures: Measured, payload_kg) -> "KinematicModel":
         """:meth:`fit` from rows of measurement kinds (:func:`~partcal.models.measures.identify_measures`)."""
+        if self.loss != "linear":
+            raise DataError(f"loss: {self.loss} weighs tracker points (a point CSV); rows of measurement kinds are "
+                            "identified by least squares: set loss: linear")
         if self.residual is not None:
             raise DataError("a residual model learns a 3-D error field from tracker points; it cannot be fitted to "
                             "plane contacts, fixed points or distances: fit the kinematic model alone")
@@ -492,6 +510,7 @@ class KinematicModel(ErrorModelBase):
                 "rcond": float(self.rcond), "payload_kg": float(self.payload_kg),
                 **({"parametrization": self.parametrization_} if self.parametrization_ != "dh" else {}),
                 **({"orientation_mm_per_rad": float(self.orientation_mm_per_rad)} if self.orientation_ else {}),
+                **({"loss": self.loss, "loss_scale": float(self.loss_scale)} if self.loss != "linear" else {}),
                 "compliance": list(errors.compliance), "joint_harmonics": list(errors.harmonics),
                 "identification": self.identification_.to_dict(),
                 **({"targets": {k: [float(v) for v in t] for k, t in self.targets_.items()},

@@ -461,7 +461,7 @@ def kinematic_tables(result: RunResult) -> list[dict]:
                            for k in range(n_rows)],
                     "extra": [cells[n] for n, _ in TOOL_PARAMETERS + BASE_PARAMETERS],
                     "joint_errors": [cells[n] for n in table.names[len(row_parameters) * n_rows + 9:own]],
-                    "targets": targets, "added": [cells[n] for n in added]})
+                    "targets": targets, "added": [cells[n] for n in added], "robust": table.robust})
     return out
 
 

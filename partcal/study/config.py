@@ -14,9 +14,10 @@ import re
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-from .._validation import integer, one_of, safe_name
+from .._validation import integer, one_of, real, safe_name
 from .._yamlio import Section, load_yaml
 from ..data.formats import MeasurementFormat, RowSelection
+from ..data.noise import NoiseModel
 from ..data.plausibility import Plausibility
 from ..errors import PartcalError
 from ..models.kinds import KINDS, config_kinds, fits_pose_errors
@@ -129,6 +130,10 @@ class DataOptions:
         ``registration.tool_mm``: the target's offset in the flange frame, mm.
     fit_tool : bool
         ``registration.fit_tool``: fit the tool offset (``tool_mm`` is then the start).
+    noise : NoiseModel or None
+        ``data.noise``: the standard deviations of the points of files without ``std_x, std_y, std_z``.
+    loss, loss_scale : str, float
+        ``registration.loss`` and ``loss_scale``: the registration's robust loss (``linear``: least squares).
     """
 
     format: MeasurementFormat | None = None
@@ -141,6 +146,9 @@ class DataOptions:
     groups: str | None = None                         # data.groups: the column naming each row's pose
     features: Path | None = None                      # data.features: the cell's planes and points (kinds runs)
     more_identification: tuple[Path, ...] = ()        # data.identification: [A, B, ...]: kinds files after the first
+    noise: NoiseModel | None = None                   # data.noise: {constant_mm, ppm, instrument_mm}
+    loss: str = "linear"                              # registration.loss
+    loss_scale: float = 3.0                           # registration.loss_scale
 
     @property
     def converted(self) -> bool:
@@ -155,7 +163,10 @@ class DataOptions:
                 "checks": {name: getattr(self.plausibility, name) for name in Plausibility.rules},
                 "groups": self.groups, **({"features": str(self.features)} if self.features else {}),
                 **({"more_identification": [str(p) for p in self.more_identification]}
-                   if self.more_identification else {})}
+                   if self.more_identification else {}),
+                **({"noise": self.noise.to_dict()} if self.noise is not None else {}),
+                **({"registration_loss": {"loss": self.loss, "loss_scale": self.loss_scale}}
+                   if self.loss != "linear" else {})}
 
 
 SPREAD_CALIBRATIONS = ("forward", "contiguous", "folds", "none")
@@ -370,6 +381,7 @@ def _data(data_sec: Section, top: Section, base: Path, *, has_robot: bool
     checks = data_sec.section("checks")
     plausibility = Plausibility(**{key: checks.rule(key, rule) for key, rule in Plausibility.rules.items()})
     checks.done()
+    noise = _noise(data_sec.section("noise")) if data_sec.has("noise") else None
     data_sec.done()
     reg = top.section("registration")
     if reg.data and frame != "tracker":
@@ -377,11 +389,28 @@ def _data(data_sec: Section, top: Section, base: Path, *, has_robot: bool
     tool = reg.get("tool_mm", "list", default=None, check=lambda v: None if len(v) == 3 and all(
         isinstance(x, (int, float)) and not isinstance(x, bool) for x in v) else "a list of 3 numbers [x, y, z] (mm)")
     fit_tool = reg.get("fit_tool", "bool", default=True)
+    loss = reg.get("loss", "str", default="linear", check=one_of("linear", "huber", "soft_l1", "cauchy").problem)
+    loss_scale = reg.rule("loss_scale", real(0.0, 1e3, default=3.0, low_open=True))
     reg.done()
     return ident, tests, validation, DataOptions(format=fmt, frame=frame, rows={k: v for k, v in rows.items() if v is not None},
                                      own_frame=tuple(own), tool_mm=tuple(float(x) for x in tool) if tool else None,
                                      fit_tool=fit_tool, plausibility=plausibility, groups=groups,
-                                     features=features, more_identification=more)
+                                     features=features, more_identification=more, noise=noise, loss=loss,
+                                     loss_scale=loss_scale)
+
+
+def _noise(sec: Section) -> NoiseModel:
+    """``noise: {constant_mm: 0.01, ppm: 10, instrument_mm: [x, y, z]}``: at least one part > 0; the instrument
+    at the origin of the measured points' frame by default."""
+    constant = sec.rule("constant_mm", real(0.0, 1e3, default=0.0))
+    ppm = sec.rule("ppm", real(0.0, 1e6, default=0.0))
+    at = sec.get("instrument_mm", "list", default=[0.0, 0.0, 0.0], check=lambda v: None if len(v) == 3 and all(
+        isinstance(x, (int, float)) and not isinstance(x, bool) for x in v) else "a list of 3 numbers [x, y, z] (mm)")
+    if constant == 0.0 and ppm == 0.0:
+        sec.fail(sec.path("constant_mm"), "constant_mm or ppm must be > 0 (a standard deviation of 0 weighs a "
+                                          "point infinitely)")
+    sec.done()
+    return NoiseModel(float(constant), float(ppm), tuple(float(x) for x in at))
 
 
 def _listed(sec: Section, key: str, k: int, base: Path) -> Path:

@@ -27,7 +27,7 @@ from joblib import Parallel, delayed, parallel_config
 from ..data.measurements import Measurements
 from ..errors import ConfigError, held_warnings
 from ..metrics import rms_standard_error
-from ..models.kinds import pso_rms_ratio, reads_targets, regions_of
+from ..models.kinds import identification_of, kind_of, pso_rms_ratio, reads_targets, regions_of
 from ..models.partitioned import fold_regions
 from ..robot.kinematics import Robot, flange_offset
 from .config import ModelSpec, SpreadOptions
@@ -57,9 +57,13 @@ def per_row_arguments(model, m: Measurements, robot: Robot | None = None, *, fit
     """Per-pose arguments of the model's ``fit`` (or, not ``fitting``, ``predict``) from a data set: the
     payload of each pose (``payload_kg`` column) for a model that reads one (none otherwise: the model's own
     ``payload_kg``); for a fit on every target and the orientation, those too
-    (:data:`partcal.study.selection.FIT_ONLY`: a prediction reads neither, so a test set need not have them).
+    (:data:`partcal.study.selection.FIT_ONLY`: a prediction reads neither, so a test set need not have them);
+    for an identified model (kinematic), each row's standard deviations (``std_x..std_z`` or ``data.noise``)
+    when the data set has them.
     ``robot`` (the run's, registered) places each further target on the flange."""
     args = {"payload_kg": m.payload_kg} if m.payload_kg is not None and model.reads_payload else {}
+    if fitting and m.std_mm is not None and kind_of(model).identified:       # weighted identification
+        args["std_mm"] = m.std_mm
     if not (fitting and reads_targets(model)):
         return args
     if model.all_targets:              # each target's offset in the flange frame, from its nominal columns
@@ -202,6 +206,7 @@ def _fit_model(spec, seed, data, cv, robot, own_frame, lines, outputs, n_jobs=1,
     if calibrated is not None:
         calibrated.apply(estimator)
     spread_seconds = time.perf_counter() - start
+    _name_downweighted(estimator)
     part = regions_of(estimator)
     if cv_regions is not None and cv_regions[0] < part.partition_.n_regions:
         log.warning("fitted on all the identification data it has %d regions, but on the cross-validation "
@@ -223,6 +228,17 @@ def _fit_model(spec, seed, data, cv, robot, own_frame, lines, outputs, n_jobs=1,
                        cv_regions=cv_regions, cv_se=rms_standard_error(outputs.ranked(resid), cv.groups),
                        effective_parameters=estimator.effective_parameters(), rank_on=outputs.rank_on,
                        spreads=spreads, spread_seconds=spread_seconds)
+
+
+def _name_downweighted(estimator) -> None:
+    """One warning line per identification row a robust loss weighed below 0.5 (its final fit's; the run
+    puts the model's name before it)."""
+    table = identification_of(estimator)
+    if table is None or table.robust is None:
+        return
+    for d in table.robust["downweighted"]:
+        log.warning("identification set, data row %d: down-weighted by the %s loss (residual %.4g mm, weight "
+                    "%.3g)", d["row"] + 1, table.robust["loss"], d["residual_mm"], d["weight"])
 
 
 def spreads_of(estimator, spec: ModelSpec, data: dict[str, Measurements], robot: Robot | None = None

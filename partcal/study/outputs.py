@@ -21,7 +21,7 @@ import yaml
 from .. import __version__
 from ..data.measurements import write_measurements
 from ..errors import PartcalError
-from ..models.kinds import is_physical, run_summary
+from ..models.kinds import identification_of, is_physical, run_summary
 from ..robot.description import joint_columns, robot_to_dict
 from .config import RunConfig
 from .persist import save_model
@@ -163,6 +163,9 @@ def metrics_document(result: RunResult) -> dict:
         entry["kind"] = r.spec.kind if r.spec.residual is None else f"{r.spec.kind} + {r.spec.residual.kind}"
         entry["physical"] = is_physical(r.model)
         entry.update(run_summary(r.model))
+        table = identification_of(r.model)
+        if table is not None and table.robust is not None:        # the rows a robust loss weighed below 0.5
+            entry["robust"] = table.robust
         if r.rms_ratio is not None:
             entry["pso_rms_ratio"] = r.rms_ratio
         if r.granularity is not None:

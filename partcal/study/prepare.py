@@ -73,6 +73,8 @@ def load_datasets(config: RunConfig) -> tuple[dict[str, Measurements], Robot | N
         m = read_measurements(path, robot, name=name, fmt=opts.format, rows=opts.rows.get(name), frame=opts.frame,
                               plausibility=opts.plausibility, group_column=opts.groups if name == "identification"
                               else None)
+        if m.std_mm is None and opts.noise is not None:        # data.noise: for files without std columns
+            m = dataclasses.replace(m, std_mm=opts.noise.std_of(m.measured_mm))
         poses = int(measured_poses(m).max()) + 1
         if poses < len(m):
             log.warning("%s (%s): %d rows measure %d distinct poses (joint angles within %g degrees%s): repeated "
@@ -116,7 +118,8 @@ def _register(config: RunConfig, data: dict[str, Measurements], robot: Robot):
     opts = config.data_options
     ident = data["identification"]
     shared = register_measurements(robot, ident, tool_mm=opts.tool_mm, fit_tool=opts.fit_tool,
-                                   source=f"{config.identification} (identification)", plausibility=opts.plausibility)
+                                   source=f"{config.identification} (identification)", plausibility=opts.plausibility,
+                                   loss=opts.loss, loss_scale=opts.loss_scale)
     regs = {}
     for name, m in data.items():
         if name in opts.own_frame:
@@ -124,7 +127,8 @@ def _register(config: RunConfig, data: dict[str, Measurements], robot: Robot):
                                                target_tools_mm=shared.target_tools_mm,
                                                probe_rotation=shared.probe_rotation,
                                                source=f"{config.tests[name]} ({name}, own tracker frame)",
-                                               plausibility=opts.plausibility)
+                                               plausibility=opts.plausibility, loss=opts.loss,
+                                               loss_scale=opts.loss_scale)
         else:
             regs[name] = shared
     robot = robot.replace(tool_mm=shared.tool_mm.copy())

@@ -106,7 +106,7 @@ def kfold_splits(n: int, folds: int, random_state: int = 0) -> list[tuple[NDArra
     return grouped_splits(np.arange(n), folds, random_state)
 
 
-FIT_ONLY = ("targets", "orientation_deg")    # per-row data a fit reads and a prediction does not
+FIT_ONLY = ("targets", "orientation_deg", "std_mm")    # per-row data a fit reads and a prediction does not
 
 
 def rows_of(per_row: dict | None, rows, *, predicting: bool = False) -> dict:

@@ -54,6 +54,7 @@ from ..robot.kinematics import Robot
 from ..robot.rotations import (matrix_from_rotation_vector, matrix_from_rpy_deg, rotation_vectors_from_matrices,
                                rpy_deg_from_matrix)
 from .joint_errors import JointErrors
+from .prior import Prior
 from .targets import Extra
 
 log = logging.getLogger(__name__)
@@ -431,7 +432,8 @@ def _matrix(rows: list, n_rows: int) -> NDArray[np.float64]:
 
 def identify(robot: Robot, q_deg: NDArray[np.float64], measured_mm: NDArray[np.float64], *, base: bool = True,
              tool: bool = True, rcond: float = 1e-6, errors: JointErrors | None = None,
-             payload_kg=0.0, extra: Extra | None = None, parametrization: str = "dh") -> Identification:
+             payload_kg=0.0, extra: Extra | None = None, parametrization: str = "dh",
+             prior: Prior | None = None) -> Identification:
     """Identify the parameters that bring the model's forward kinematics through measured positions.
 
     Parameters
@@ -461,6 +463,12 @@ def identify(robot: Robot, q_deg: NDArray[np.float64], measured_mm: NDArray[np.f
         The geometric parameters: four DH parameters per row, or each row's
         theta offset and the six errors of its fixed transform (see the module
         notes).
+    prior : Prior, optional
+        A Gaussian prior on some parameters (:mod:`partcal.models.prior`, indices into the table's order):
+        its rows are appended to the residuals, so the fit is MAP. A parameter it holds is identifiable
+        through it (the rank rule reads its row) and is never pruned as implausible (the prior prices its
+        distance from the mean); the standard errors and covariance are the posterior's. Default none:
+        plain least squares.
 
     Returns
     -------
@@ -489,10 +497,18 @@ def identify(robot: Robot, q_deg: NDArray[np.float64], measured_mm: NDArray[np.f
         wanted[own:own + 3 * len(extra.tools_mm)] = tool
         jac_at = functools.partial(stacked, robot, errors, q_deg, payload_kg=payload, measured_mm=measured_mm,
                                    extra=extra, parametrization=parametrization)
+    data_at = jac_at
+    if prior is not None:
+        jac_at = prior.augmented(jac_at)
     jac0 = jac_at(v0)[1]
     names = parameter_names(robot, errors, parametrization) + (extra.names() if extra is not None else [])
     units = [unit for _, unit in names]
-    result, resid = fit_parameters(jac_at, v0, jac0, wanted, names, rcond, size, q_deg.shape[0])
+    if prior is None:
+        result, resid = fit_parameters(jac_at, v0, jac0, wanted, names, rcond, size, q_deg.shape[0])
+    else:
+        result, resid = fit_parameters(jac_at, v0, jac0, wanted, names, rcond, size, q_deg.shape[0],
+                                       held=prior.held(v0.size))
+        resid = data_at(result.value, jacobian=False)[0]
     rms, angle = _target_rms(resid, len(q_deg), extra)
     more = {} if extra is None else {
         "target_rms_mm": dict(zip([PRIMARY_TARGET, *extra.tools_mm], rms)), "orientation_rms_deg": angle,
@@ -505,21 +521,24 @@ def identify(robot: Robot, q_deg: NDArray[np.float64], measured_mm: NDArray[np.f
 
 
 def fit_parameters(jac_at, v0: NDArray[np.float64], jac0: NDArray[np.float64], wanted: NDArray[np.bool_],
-                   names: list[tuple[str, str]], rcond: float, size: int, n_poses: int
-                   ) -> tuple[Identification, NDArray[np.float64]]:
+                   names: list[tuple[str, str]], rcond: float, size: int, n_poses: int,
+                   held: NDArray[np.bool_] | None = None) -> tuple[Identification, NDArray[np.float64]]:
     """The rank-checked fit of :func:`identify` over any stacked residuals, and the residuals it leaves.
 
     ``jac_at(values, jacobian=True)`` gives the residuals and their Jacobian; ``v0`` is the start (the
     nominal values); ``jac0`` the Jacobian the rank rule reads (at ``v0``, on consistent data);
     ``wanted`` the parameters asked for; ``names`` every parameter's ``(name, unit)``; ``size`` the number
     of geometric parameters (the rows', tool and base: the first ``size``). The table's ``rms_mm`` is the
-    3-D RMS of the residuals read as points; callers replace it with their own figure.
+    3-D RMS of the residuals read as points; callers replace it with their own figure. ``held``: the
+    parameters a prior holds (its rows are in ``jac_at``), never pruned as implausible.
     """
     units = [unit for _, unit in names]
     free, rank = identifiable_parameters(jac0, wanted, rcond, units)
 
     limits = np.full(v0.size, np.nan)
     limits[:size - 9] = [PLAUSIBLE_ERROR[unit] * IMPLAUSIBLE for unit in units[:size - 9]]     # the rows' parameters
+    if held is not None:
+        limits[held] = np.nan                                   # the prior prices their distance instead
     v, evaluations = v0.copy(), 0
     resid0 = jac_at(v0, jacobian=False)[0]
     while free.size:

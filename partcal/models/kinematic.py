@@ -34,6 +34,7 @@ from . import contacts  # noqa: F401  (the built-in measurement kinds join the t
 from .measures import MEASUREMENT_KINDS, Measured, identify_measures
 from .kindtable import body_of, check_body, may_be_residual, model_from_body, regions_of, residual_kinds
 from .pose import PoseErrorModel
+from .prior import Prior
 from .targets import added_names, added_nominal, extra_from
 
 log = logging.getLogger(__name__)
@@ -153,7 +154,7 @@ class KinematicModel(ErrorModelBase):
         return resolved_parametrization(self.parametrization, robot)
 
     def fit(self, X, y, payload_kg=None, *, targets=None, orientation_deg=None, orientation_mm_per_rad=None,
-            measures: Measured | None = None):
+            measures: Measured | None = None, prior: Prior | None = None):
         """Identify the parameters from joint angles ``X`` (n, N) deg and errors ``y`` (n, 3) mm. Returns self.
 
         ``payload_kg`` (n,) kg per pose, or a number; default the parameter ``payload_kg``.
@@ -178,6 +179,9 @@ class KinematicModel(ErrorModelBase):
         contacts, fixed points, distances, tracker points) and the cell's features, identified from instead
         of ``y`` (which is then ignored; ``X`` are the rows' joints). The model is the same kinematic model;
         what the data cannot identify is in :meth:`fit_notes`.
+
+        ``prior`` (:class:`~partcal.models.prior.Prior`, indices into the identification table's order): a
+        Gaussian prior on the parameters, the identification MAP (:func:`~partcal.models.identification.identify`).
         """
         robot = self._check_params()
         if measures is not None:
@@ -204,7 +208,7 @@ class KinematicModel(ErrorModelBase):
         extra = extra_from(robot, X, targets, orientation_deg, weight)
         self.identification_ = identify(robot, X, nominal + y[:, POSITION], base=bool(self.base), tool=bool(self.tool),
                                         rcond=float(self.rcond), errors=self.joint_errors_, payload_kg=ident_payload,
-                                        extra=extra, parametrization=self.parametrization_)
+                                        extra=extra, parametrization=self.parametrization_, prior=prior)
         self.targets_ = dict(extra.tools_mm) if extra is not None else {}
         self.orientation_ = extra is not None and extra.rotations is not None
         self.measures_, self.measure_notes_ = (), []

@@ -7,6 +7,7 @@ from scipy.optimize import least_squares
 from partcal import load_robot
 from partcal.models.identification import identify, model_positions, nominal_values, parameter_names
 from partcal.models.prior import Prior, plausible_prior
+from partcal.study.update import DEFAULT_INFLATE, IDENTIFY_LITTLE
 
 
 @pytest.fixture(scope="module")
@@ -94,3 +95,95 @@ def test_a_bad_prior_covariance_is_refused():
         Prior.from_covariance([0, 1], [0.0, 0.0], -np.eye(2), 1.0)
     with pytest.raises(ValueError, match="standard deviations > 0"):
         Prior.from_std([0], [0.0], [0.0], 1.0)
+
+
+# ---------------------------------------------------------------------- partcal update
+def measured_set(robot, truth_values, q, seed, noise=0.01):
+    from partcal.data.measurements import Measurements
+    p = model_positions(robot, None, q, truth_values, np.zeros(len(q)))
+    p = p + np.random.default_rng(seed).normal(scale=noise, size=p.shape)
+    return Measurements(q, robot.positions(q), p)
+
+
+@pytest.fixture(scope="module")
+def calibrated(ur10, tmp_path_factory):
+    """A model file of a virtual UR10 (rows off by 0.5 mm / 0.05 deg), and the robot's true parameters."""
+    from partcal.models.kinematic import KinematicModel
+    from partcal.study.persist import save_model
+    truth = moved(ur10, 11)
+    m = measured_set(ur10, truth, poses(ur10, 150, 12), 13)
+    path = tmp_path_factory.mktemp("update") / "a.json"
+    save_model(KinematicModel(robot=ur10).fit(m.q_deg, m.errors_mm), path, name="robot a", robot=ur10)
+    return path, truth
+
+
+def test_update_moves_the_model_toward_a_shifted_joint_offset_and_records_its_provenance(ur10, calibrated, tmp_path):
+    from partcal.cli import main
+    from partcal.data.measurements import write_measurements
+    from partcal.study.persist import load_model
+    path, truth = calibrated
+    shifted = truth.copy()
+    shifted[4] += 0.05                                        # joint 2's offset moved by 0.05 degrees
+    new = measured_set(ur10, shifted, poses(ur10, 30, 14), 15)
+    write_measurements(new, tmp_path / "new.csv")
+    assert main(["update", str(path), str(tmp_path / "new.csv"), "-o", str(tmp_path / "b.json")]) == 0
+    old, old_doc = load_model(path)
+    updated, doc = load_model(tmp_path / "b.json")
+    info = doc["fit"]["update"]
+    assert info["data"] == str(tmp_path / "new.csv") and info["rows"] == 30 and info["inflate"] == DEFAULT_INFLATE
+    assert info["prior_checksum"] == old_doc["checksum"] and info["prior_name"] == "robot a"
+    assert info["kept_prior"] is False and info["determined"] > IDENTIFY_LITTLE
+    q = poses(ur10, 200, 16)
+    true_errors = model_positions(ur10, None, q, shifted, np.zeros(len(q))) - ur10.positions(q)
+    before = np.sqrt(np.mean(np.sum((old.predict(q) - true_errors) ** 2, axis=1)))
+    after = np.sqrt(np.mean(np.sum((updated.predict(q) - true_errors) ** 2, axis=1)))
+    table, table_old = updated.identification_, old.identification_
+    assert before > 0.5 and after < 0.5 * before
+    assert 0.025 < table.value[4] - table_old.value[4] < 0.06
+
+
+def test_update_from_a_compact_patch_keeps_the_prior_and_says_so(ur10, calibrated, tmp_path):
+    from partcal.data.measurements import write_measurements
+    from partcal.study.persist import load_model
+    from partcal.study.update import update_file
+    path, truth = calibrated
+    q = np.array([30.0, -60.0, 80.0, -100.0, 60.0, 10.0]) + np.random.default_rng(17).uniform(-1.5, 1.5, (20, 6))
+    q[:, 5] = 10.0                                            # a compact patch, joint 6 still
+    new = measured_set(ur10, truth, q, 18)
+    write_measurements(new, tmp_path / "patch.csv")
+    done = update_file(path, tmp_path / "patch.csv", tmp_path / "c.json")
+    assert done.kept_prior and "identify little" in "\n".join(done.lines())
+    old = load_model(path)[0].identification_
+    table = done.model.identification_
+    rows = np.flatnonzero(np.array(old.status[:24]) == "identified")
+    np.testing.assert_allclose(table.value[rows], old.value[rows], atol=1e-3)
+
+
+@pytest.mark.parametrize("case, message", [
+    ("missing", "no such model file"), ("series", "field 'kind': update needs a model of kind 'kinematic'"),
+    ("inflate", "--inflate: expected a positive number"), ("data", "new.csv")])
+def test_update_refuses_bad_input_with_exit_2(ur10, calibrated, tmp_path, capsys, case, message):
+    from partcal import ErrorModel
+    from partcal.cli import main
+    from partcal.study.persist import save_model
+    path, _ = calibrated
+    data = tmp_path / "new.csv"
+    data.write_text("q1,q2,q3,q4,q5,q6,x_meas,y_meas,z_meas\n0,0,0,0,0,0,1,2\n" if case == "data" else
+                    "q1,q2,q3,q4,q5,q6,x_meas,y_meas,z_meas\n" + "0,-90,0,-90,0,0,0,0,0\n")
+    args = [str(path), str(data), "-o", str(tmp_path / "out.json")]
+    if case == "missing":
+        args[0] = str(tmp_path / "nothing.json")
+    if case == "series":
+        q = poses(ur10, 40, 1)
+        save_model(ErrorModel(inputs="joint", degree=1, solver="lstsq").fit(q, np.ones((40, 3))), tmp_path / "s.json",
+                   robot=ur10)
+        args[0] = str(tmp_path / "s.json")
+    if case == "inflate":
+        args += ["--inflate", "-1"]
+    try:
+        code = main(["update", *args])
+    except SystemExit as exc:                                 # argparse refuses a bad option value itself
+        code = exc.code
+    assert code == 2
+    assert message in capsys.readouterr().err
+    assert not (tmp_path / "out.json").exists()

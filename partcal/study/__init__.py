@@ -18,6 +18,7 @@ _COMMANDS = {
     "plan_command": ["PlanOptions", "run_plan"],
     "iso_figures": ["iso_report"],
     "export": ["export_files"],
+    "update": ["update_file", "update_model"],
 }
 _WHERE = {name: module for module, names in _COMMANDS.items() for name in names}
 __all__ = ["Predictor", "load_predictor", *_WHERE]

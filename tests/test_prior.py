@@ -187,3 +187,94 @@ def test_update_refuses_bad_input_with_exit_2(ur10, calibrated, tmp_path, capsys
     assert code == 2
     assert message in capsys.readouterr().err
     assert not (tmp_path / "out.json").exists()
+
+
+# ---------------------------------------------------------------------- priors in a run config
+def run_config(tmp_path, entry, robot="universal_robots_ur10"):
+    from conftest import ROOT
+    data = ROOT / "data" / "sk120"
+    path = tmp_path / "configs" / "run.yaml"
+    path.parent.mkdir(exist_ok=True)
+    path.write_text(f"name: demo\nrobot: {robot}\ndata:\n  identification: {data / 'identification.csv'}\n"
+                    f"models:\n  - {{name: DH, kind: kinematic, {entry}}}\n")
+    return path
+
+
+def test_a_plausible_prior_with_a_list_of_strengths_takes_the_one_of_least_block_cv_error(ur10):
+    from partcal.models.identification import PLAUSIBLE_ERROR, geometric_size
+    from partcal.models.kinematic import KinematicModel
+    q = poses(ur10, 60, 21)
+    measured = model_positions(ur10, None, q, moved(ur10, 22), np.zeros(len(q))) + \
+        np.random.default_rng(23).normal(scale=0.3, size=(len(q), 3))
+    y = measured - ur10.positions(q)
+    strengths = (0.1, 3.0, 30.0)
+    model = KinematicModel(robot=ur10, prior="plausible", prior_strength=strengths).fit(q, y)
+    units = [u for _, u in parameter_names(ur10)]
+    expected = []                                             # the block CV written out
+    for s in strengths:
+        prior = plausible_prior(units, geometric_size(ur10) - 9, nominal_values(ur10), s, PLAUSIBLE_ERROR)
+        left = []
+        for test in np.array_split(np.arange(60), 5):
+            train = np.setdiff1d(np.arange(60), test)
+            fit = KinematicModel(robot=ur10).fit(q[train], y[train], prior=prior)
+            left.append(y[test] - fit.predict(q[test]))
+        expected.append(np.sqrt(np.mean(np.sum(np.vstack(left) ** 2, axis=1))))
+    np.testing.assert_allclose(model.prior_cv_, expected, rtol=1e-9)
+    assert model.prior_strength_ == strengths[int(np.argmin(expected))]
+    assert any("strength" in note for note in model.fit_notes())
+    plain = KinematicModel(robot=ur10, prior="plausible", prior_strength=model.prior_strength_).fit(q, y)
+    np.testing.assert_array_equal(plain.identification_.value, model.identification_.value)
+
+
+def test_run_config_prior_keys(tmp_path, calibrated):
+    import yaml
+    from partcal import ConfigError
+    from partcal.study.config import load_config
+    from partcal.study.persist import load_model
+    cfg = load_config(run_config(tmp_path, "prior: plausible, prior_strength: [0.3, 1, 3]"))
+    assert cfg.models[0].params["prior"] == "plausible" and cfg.models[0].params["prior_strength"] == (0.3, 1.0, 3.0)
+    assert yaml.safe_load(yaml.safe_dump(cfg.resolved()))["models"][0]["params"]["prior_strength"] == [0.3, 1, 3]
+    path, _ = calibrated
+    cfg = load_config(run_config(tmp_path, f"prior: {path}, prior_strength: 2"))
+    prior = cfg.models[0].params["prior"]
+    table = load_model(path)[0].identification_
+    assert prior.source == str(path) and np.array_equal(prior.mean, table.value[prior.index])
+    assert prior.index.tolist() == list(range(24))             # the rows' parameters; tool and frame afresh
+    assert yaml.safe_load(yaml.safe_dump(cfg.resolved()))["models"][0]["params"]["prior"] == str(path)
+    with pytest.raises(ConfigError, match=r"models\[0\]\.prior_strength \(line 6\): applies with a prior only"):
+        load_config(run_config(tmp_path, "prior_strength: 2"))
+    with pytest.raises(ConfigError, match=r"models\[0\]\.prior_strength \(line 6\): must be a number >= 0"):
+        load_config(run_config(tmp_path, "prior: plausible, prior_strength: -1"))
+    with pytest.raises(ConfigError, match=r"models\[0\]\.prior \(line 6\): 'plausible' or a kinematic model file; "
+                                          r"'nothing.json': .*no such model file"):
+        load_config(run_config(tmp_path, "prior: nothing.json"))
+    with pytest.raises(ConfigError, match=r"its robot is 'universal_robots_ur10', the run's 'motoman_sk120'"):
+        load_config(run_config(tmp_path, f"prior: {path}", robot="motoman_sk120"))
+
+
+def test_another_robots_model_as_the_prior_helps_a_few_poses(ur10, calibrated):
+    """Robot B of the same type as A (its rows 0.1 mm / 0.01 deg from A's): 10 poses of B with A's model as the
+    prior (its values, their plausible errors) land nearer B's truth than 10 poses alone, A's model, or the plausible
+    prior about nominal."""
+    from partcal.models.identification import PLAUSIBLE_ERROR
+    from partcal.models.kinematic import KinematicModel
+    from partcal.study.persist import load_model
+    from partcal.study.update import type_prior
+    path, truth_a = calibrated
+    units = np.array([u for _, u in parameter_names(ur10)])
+    truth_b = truth_a + np.random.default_rng(31).normal(size=units.size) * np.where(units == "mm", 0.1, 0.01) \
+        * (np.arange(units.size) < 24)
+    m = measured_set(ur10, truth_b, poses(ur10, 10, 32), 33, noise=0.1)
+    model_a = load_model(path)[0]
+    prior = type_prior(model_a, PLAUSIBLE_ERROR)
+    with_prior = KinematicModel(robot=ur10, prior=prior, prior_strength=1.0).fit(m.q_deg, m.errors_mm)
+    at_nominal = KinematicModel(robot=ur10, prior="plausible", prior_strength=1.0).fit(m.q_deg, m.errors_mm)
+    alone = KinematicModel(robot=ur10).fit(m.q_deg, m.errors_mm)
+    q = poses(ur10, 300, 34)
+    truth = model_positions(ur10, None, q, truth_b, np.zeros(len(q))) - ur10.positions(q)
+
+    def rms(model):
+        return np.sqrt(np.mean(np.sum((model.predict(q) - truth) ** 2, axis=1)))
+    assert rms(with_prior) < 0.75 * rms(alone)                # 0.20 mm against 0.30
+    assert rms(with_prior) < 0.6 * rms(model_a)               # A's model alone: 0.39
+    assert rms(with_prior) < 0.5 * rms(at_nominal)            # the datasheet prior about nominal: 0.48

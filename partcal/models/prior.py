@@ -43,11 +43,18 @@ class Prior:
         Their prior means (mm, degrees).
     root : ndarray, shape (k, k)
         ``W`` of the rows ``W (v[index] - mean)``: ``W^T W = sigma^2 C^-1`` (mm per unit).
+    names : tuple of str, optional
+        The names of the whole parameter vector it was made for (a model file's table), checked against
+        the fit's; None: not checked.
+    source : str, optional
+        Where it came from (a model file's path), for the run's resolved config.
     """
 
     index: NDArray[np.intp]
     mean: NDArray[np.float64]
     root: NDArray[np.float64]
+    names: tuple[str, ...] | None = None
+    source: str | None = None
 
     @property
     def size(self) -> int:
@@ -99,11 +106,31 @@ class Prior:
             return resid, None if jac is None else np.vstack([jac, self.jacobian(values.size)])
         return with_rows
 
+    def check_names(self, names: list[str]) -> None:
+        """Refuse a fit whose parameters (``names``, table order) are not those the prior was made for."""
+        if self.names is not None and tuple(self.names) != tuple(names):
+            raise DataError(f"the prior was made for the parameters {', '.join(self.names)}; this fit has "
+                            f"{', '.join(names)} (another parametrization, compliance or joint harmonics)")
+        if self.index.size and int(self.index.max()) >= len(names):
+            raise DataError(f"the prior holds parameter {int(self.index.max())}; this fit has {len(names)}")
+
     def held(self, n_values: int) -> NDArray[np.bool_]:
         """Which of ``n_values`` parameters the prior holds, shape (n_values,)."""
         mask = np.zeros(n_values, dtype=bool)
         mask[self.index] = True
         return mask
+
+
+def strength_problem(value) -> str | None:
+    """What a ``prior_strength`` must be (a number >= 0, or a non-empty list of them to choose from), or None.
+
+    >>> strength_problem([0.3, 1, 3]) is None, strength_problem(-1)
+    (True, 'a number >= 0 or a non-empty list of them')
+    """
+    values = value if isinstance(value, (list, tuple)) else [value]
+    ok = bool(values) and all(isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v) and v >= 0
+                              for v in values)
+    return None if ok else "a number >= 0 or a non-empty list of them"
 
 
 def plausible_prior(units: list[str], n_rows: int, nominal: NDArray[np.float64], strength: float,

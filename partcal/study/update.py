@@ -19,6 +19,7 @@ benchmarks/bench_update.py), and says so. The new file records its provenance in
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -99,7 +100,22 @@ def model_prior(model: KinematicModel, inflate: float, frame: bool = False, unid
     cov = np.zeros((index.size, index.size))
     cov[:keep.sum(), :keep.sum()] = table.covariance[np.ix_(keep, keep)] * inflate
     cov[keep.sum():, keep.sum():] = np.diag(table.prior_std[plausible] ** 2)
-    return Prior.from_covariance(index, table.value[index], cov, float(table.sigma_mm))
+    prior = Prior.from_covariance(index, table.value[index], cov, float(table.sigma_mm))
+    return Prior(prior.index, prior.mean, prior.root, tuple(table.names))
+
+
+def type_prior(model: KinematicModel, plausible: dict[str, float]) -> Prior:
+    """Another robot's model as the prior of a robot of the same type (``prior: FILE.json`` in a run): each row
+    parameter at that model's value with its plausible error (``plausible``, per unit) as the standard
+    deviation, under a noise of 1 mm (the fit scales the rows by its ``prior_strength``). Not the model's own
+    covariance: that is how well one robot was measured, not how much two robots of a type differ (on a
+    virtual UR10 whose parameters differ from its twin's by 0.1 mm / 0.01 degree, the twin's covariance as the
+    prior left twice the error of a fit without one). The tool and the base frame: identified afresh."""
+    table = model.identification_
+    rows = next((k for k, name in enumerate(table.names) if name.startswith("tool.")), len(table.names))
+    index = np.array([k for k in range(rows) if table.units[k] in plausible], dtype=np.intp)
+    return dataclasses.replace(Prior.from_std(index, table.value[index], [plausible[table.units[k]] for k in index],
+                                              1.0), names=tuple(table.names))
 
 
 def determined_shares(model: KinematicModel, data: Measurements, prior: Prior) -> NDArray[np.float64]:
@@ -135,7 +151,7 @@ def update_model(model: KinematicModel, data: Measurements, inflate: float = DEF
         raise PartcalError(f"update: --inflate must be a number > 0; got {inflate!r}")
     prior = model_prior(model, inflate)
     shares = determined_shares(model, data, model_prior(model, 1.0, unidentified=False))
-    frame_only = _refit(model, data, Prior(prior.index, prior.mean, prior.root * FIRM))
+    frame_only = _refit(model, data, Prior(prior.index, prior.mean, prior.root * FIRM, prior.names))
     kept = shares.sum() < IDENTIFY_LITTLE
     updated = frame_only if kept else _refit(model, data, prior)
     if updated.identification_.names != model.identification_.names:

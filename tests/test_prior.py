@@ -278,3 +278,24 @@ def test_another_robots_model_as_the_prior_helps_a_few_poses(ur10, calibrated):
     assert rms(with_prior) < 0.75 * rms(alone)                # 0.20 mm against 0.30
     assert rms(with_prior) < 0.6 * rms(model_a)               # A's model alone: 0.39
     assert rms(with_prior) < 0.5 * rms(at_nominal)            # the datasheet prior about nominal: 0.48
+
+
+def test_a_robot_files_plausible_error_sets_the_plausible_prior(ur10):
+    from partcal import ConfigError
+    from partcal.models.identification import geometric_size
+    from partcal.models.kinematic import KinematicModel
+    from partcal.robot.description import robot_from_dict, robot_to_dict
+    spec = robot_to_dict(ur10)
+    own = robot_from_dict({**spec, "plausible_error": {"mm": 0.2}})
+    assert own.plausible_error == {"mm": 0.2} and robot_to_dict(own)["plausible_error"] == {"mm": 0.2}
+    q = poses(ur10, 30, 41)
+    y = model_positions(ur10, None, q, moved(ur10, 42), np.zeros(len(q))) - ur10.positions(q)
+    fitted = KinematicModel(robot=own, prior="plausible", prior_strength=2.0).fit(q, y).identification_
+    units = [u for _, u in parameter_names(ur10)]
+    expected = identify(ur10, q, ur10.positions(q) + y, prior=plausible_prior(
+        units, geometric_size(ur10) - 9, nominal_values(ur10), 2.0, {"mm": 0.2, "deg": 0.1}))
+    np.testing.assert_allclose(fitted.value, expected.value, atol=1e-9)
+    with pytest.raises(ConfigError, match=r"plausible_error: expected numbers > 0"):
+        robot_from_dict({**spec, "plausible_error": {"mm": 0}})
+    with pytest.raises(ConfigError, match=r"plausible_error: expected \{mm: LENGTH, deg: ANGLE\}"):
+        robot_from_dict({**spec, "plausible_error": {"m": 1}})

@@ -250,8 +250,8 @@ class KinematicModel(ErrorModelBase):
 
     def _own_prior(self, robot: Robot, X, y, payload_kg) -> Prior | None:
         """The prior of the parameter ``prior`` at ``prior_strength`` (a list: :meth:`_chosen_strength`): the
-        plausible one (:func:`~partcal.models.prior.plausible_prior`, :data:`~partcal.models.identification.PLAUSIBLE_ERROR`
-        about nominal) or a given ``Prior`` (another robot's model, rows of 1 mm noise) with its rows times the strength."""
+        plausible one (:func:`~partcal.models.prior.plausible_prior` about nominal: the robot's
+        ``plausible_error``, else :data:`~partcal.models.identification.PLAUSIBLE_ERROR`) or a given ``Prior`` (another robot's model, rows of 1 mm noise) with its rows times the strength."""
         strengths = np.atleast_1d(np.asarray(self.prior_strength, dtype=float))
         self.prior_cv_ = self._chosen_strength(X, y, payload_kg, strengths) if strengths.size > 1 else None
         self.prior_strength_ = float(strengths[0] if self.prior_cv_ is None else
@@ -263,7 +263,7 @@ class KinematicModel(ErrorModelBase):
         names = parameter_names(robot, self.joint_errors_, self.parametrization_)
         return plausible_prior([u for _, u in names], geometric_size(robot, self.parametrization_) - 9,
                                nominal_values(robot, self.joint_errors_, self.parametrization_),
-                               self.prior_strength_, PLAUSIBLE_ERROR)
+                               self.prior_strength_, {**PLAUSIBLE_ERROR, **(robot.plausible_error or {})})
 
     def _chosen_strength(self, X, y, payload_kg, strengths) -> list[float]:
         """The 3-D RMS of the kinematic part's errors on each of 5 contiguous blocks of the data (measurement

@@ -432,7 +432,8 @@ def _model_prior(sec: Section, text: str, base: Path | None, robot: Robot | None
                                "robot of the same type")
     except PartcalError as exc:
         sec.fail(sec.path("prior"), f"'plausible' or a kinematic model file; {text!r}: {exc}")
-    return dataclasses.replace(type_prior(model, PLAUSIBLE_ERROR), source=str(path))
+    plausible = {**PLAUSIBLE_ERROR, **((robot if robot is not None else model.robot_).plausible_error or {})}
+    return dataclasses.replace(type_prior(model, plausible), source=str(path))
 
 
 def _model(sec: Section, robot: Robot | None, parent: str | None = None, base: Path | None = None) -> ModelSpec:

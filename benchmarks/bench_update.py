@@ -6,7 +6,7 @@ frame on the nominal model. Twenty poses of D update B's model (its covariance i
 prior, the base frame identified afresh: partcal/study/update.py); every model is scored on the other
 poses of D after a rigid fit (as the run scores D), beside B's model alone and a fresh DH fit on the 20
 poses. Twenty poses drawn at random (5 draws, seeds 0-4: the median), and D's first 20 rows (a compact
-patch, joint 6 still). 3-D RMS, mm. Run: .venv/bin/python benchmarks/bench_update.py   (about a minute)
+patch, joint 6 still). 3-D RMS, mm. Run: .venv/bin/python benchmarks/bench_update.py   (about 10 seconds)
 """
 
 import os

@@ -22,12 +22,6 @@ from .errors import PartcalError, log_to_stderr
 log = logging.getLogger("partcal")
 
 
-def _cmd_simulate(args) -> int:
-    from .study.data_files import simulate_files
-    print("\n".join(simulate_files(args.config)))
-    return 0
-
-
 def _cmd_run(args) -> int:
     from .study.config import load_config
     from .study.run_command import Progress, check_run, run_and_write
@@ -50,6 +44,15 @@ def _cmd_run(args) -> int:
 
     print("\n".join(run_and_write(config, progress, report)))
     return 0
+
+
+def _printed(module: str, call):
+    """A command that prints the lines of ``call(study module, args)`` (``partcal.study.<module>``, imported then)."""
+    def command(args) -> int:
+        done = call(importlib.import_module(f"partcal.study.{module}"), args)
+        print("\n".join(done.lines() if hasattr(done, "lines") else done))
+        return 0
+    return command
 
 
 def _said(done) -> int:
@@ -78,18 +81,6 @@ def _cmd_compensate(args) -> int:
                                  tol_deg=args.tol_deg, keep_unconverged=args.keep_unconverged))
 
 
-def _cmd_equations(args) -> int:
-    from .study.downstream import model_equations
-    print("\n".join(model_equations(args.model, args.digits)))
-    return 0
-
-
-def _cmd_check(args) -> int:
-    from .study.check import check_file
-    print("\n".join(check_file(args.model, args.data, fmt=args.format, frame=args.frame, rows=args.rows).lines()))
-    return 0
-
-
 def _cmd_import(args) -> int:
     if (args.input is None) == (args.config is None):
         raise PartcalError("import: give either an input file or --config RUN.yaml (not both)")
@@ -107,13 +98,6 @@ def _cmd_plan(args) -> int:
     from .study.plan_command import PlanOptions, run_plan
     say = (lambda text: None) if args.quiet else (lambda text: print(f"partcal: plan: {text}", file=sys.stderr))
     run_plan(args.robot, PlanOptions.from_args(args), say=say, show=print)
-    return 0
-
-
-def _cmd_export(args) -> int:
-    from .study.export import export_files
-    formats = tuple(args.formats.split(",")) if args.formats else None
-    print("\n".join(export_files(args.model, args.output, formats, data=args.data, fmt=args.format).lines()))
     return 0
 
 
@@ -189,7 +173,7 @@ def _format_option(p, whose: str) -> None:
 def _add_run_commands(sub) -> None:
     sim = sub.add_parser("simulate", help="generate measurement data from a virtual robot config")
     sim.add_argument("config", help="virtual-experiment YAML, e.g. configs/sk120_virtual.yaml")
-    sim.set_defaults(func=_cmd_simulate)
+    sim.set_defaults(func=_printed("data_files", lambda m, a: m.simulate_files(a.config)))
     run = sub.add_parser("run", help="fit and compare the models of a batch-run YAML; write metrics, models, report")
     run.add_argument("config", help="batch-run YAML, e.g. configs/paper_sk120.yaml")
     run.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
@@ -249,7 +233,7 @@ def _add_file_commands(sub) -> None:
     eqs.add_argument("--digits", type=_positive_int, default=None,
                      help="round to this many significant digits (default: full precision, which reproduces "
                           "the model's predictions)")
-    eqs.set_defaults(func=_cmd_equations)
+    eqs.set_defaults(func=_printed("downstream", lambda m, a: m.model_equations(a.model, a.digits)))
     imp = sub.add_parser("import", help="convert a foreign measurement file (or a run's data) into contract CSVs")
     imp.add_argument("input", nargs="?", help="the file to convert (or use --config)")
     imp.add_argument("-o", "--output", help="CSV to write; with --config, the folder for <data set>.csv")
@@ -273,7 +257,18 @@ def _add_file_commands(sub) -> None:
     exp.add_argument("--data", metavar="DATA.csv", help="a measurement CSV (base frame): the RMS the exported "
                                                         "geometry and the full model leave on it")
     _format_option(exp, "the data's")
-    exp.set_defaults(func=_cmd_export)
+    exp.set_defaults(func=_printed("export", lambda m, a: m.export_files(
+        a.model, a.output, tuple(a.formats.split(",")) if a.formats else None, data=a.data, fmt=a.format)))
+    upd = sub.add_parser("update", help="re-identify a kinematic model from new measurements, the model and its "
+                                        "covariance the prior (docs/models.md, \"Updating a calibration\")")
+    upd.add_argument("model", help="model file of kind kinematic (models/<name>.json of a run)")
+    upd.add_argument("data", help="measurement CSV of the new poses (base frame, or near it: the frame is refitted)")
+    upd.add_argument("-o", "--output", required=True, help="model file to write (its provenance in fit.update)")
+    _format_option(upd, "the data's")
+    upd.add_argument("--inflate", type=_positive_float, help="the model's covariance times this (default 30: real "
+                                                             "residuals are correlated, docs/models.md)")
+    upd.set_defaults(func=_printed("update", lambda m, a: m.update_file(a.model, a.data, a.output, fmt=a.format,
+                                                                         inflate=a.inflate)))
     chk = sub.add_parser("check", help="do new measurements agree with a model's calibrated spread? if not, what moved")
     chk.add_argument("model", help="model file (models/<name>.json of a run)")
     chk.add_argument("data", help="measurement CSV of the new poses (q1..qN deg; x_meas,y_meas,z_meas mm)")
@@ -281,7 +276,8 @@ def _add_file_commands(sub) -> None:
     chk.add_argument("--frame", choices=("base", "tracker"), default="base",
                      help="tracker: the data are in a tracker's frame, registered on them first")
     chk.add_argument("--rows", help="data rows to check, e.g. '1-50' or '1-20, 41-70'")
-    chk.set_defaults(func=_cmd_check)
+    chk.set_defaults(func=_printed("check", lambda m, a: m.check_file(a.model, a.data, fmt=a.format, frame=a.frame,
+                                                                       rows=a.rows)))
 
 
 def _add_plan(sub) -> None:

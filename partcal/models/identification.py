@@ -54,6 +54,7 @@ from ..robot.kinematics import Robot
 from ..robot.rotations import (matrix_from_rotation_vector, matrix_from_rpy_deg, rotation_vectors_from_matrices,
                                rpy_deg_from_matrix)
 from .joint_errors import JointErrors
+from .prior import Prior
 from .targets import Extra
 
 log = logging.getLogger(__name__)
@@ -438,8 +439,8 @@ def _matrix(rows: list, n_rows: int) -> NDArray[np.float64]:
 def identify(robot: Robot, q_deg: NDArray[np.float64], measured_mm: NDArray[np.float64], *, base: bool = True,
              tool: bool = True, rcond: float = 1e-6, errors: JointErrors | None = None,
              payload_kg=0.0, extra: Extra | None = None, parametrization: str = "dh",
-             std_mm: NDArray[np.float64] | None = None, loss: str = "linear", loss_scale: float = 3.0
-             ) -> Identification:
+             std_mm: NDArray[np.float64] | None = None, loss: str = "linear", loss_scale: float = 3.0,
+             prior: Prior | None = None) -> Identification:
     """Identify the parameters that bring the model's forward kinematics through measured positions.
 
     Parameters
@@ -479,6 +480,12 @@ def identify(robot: Robot, q_deg: NDArray[np.float64], measured_mm: NDArray[np.f
     loss_scale : float
         The loss's ``f_scale`` in standard deviations of one coordinate: the reference of ``std_mm``, or
         without it the robust spread (1.4826 times the median absolute residual) of the least-squares fit.
+    prior : Prior, optional
+        A Gaussian prior on some parameters (:mod:`partcal.models.prior`, indices into the table's order):
+        its rows are appended to the residuals, so the fit is MAP. A parameter it holds is identifiable
+        through it (the rank rule reads its row) and is never pruned as implausible (the prior prices its
+        distance from the mean); the standard errors and covariance are the posterior's. Default none:
+        plain least squares.
 
     Returns
     -------
@@ -507,12 +514,23 @@ def identify(robot: Robot, q_deg: NDArray[np.float64], measured_mm: NDArray[np.f
         wanted[own:own + 3 * len(extra.tools_mm)] = tool
         jac_at = functools.partial(stacked, robot, errors, q_deg, payload_kg=payload, measured_mm=measured_mm,
                                    extra=extra, parametrization=parametrization)
+    data_at = jac_at
+    if prior is not None:
+        jac_at = prior.augmented(jac_at)
     jac0 = jac_at(v0)[1]
     names = parameter_names(robot, errors, parametrization) + (extra.names() if extra is not None else [])
     units = [unit for _, unit in names]
     weight, reference = row_weights(std_mm, len(q_deg), extra)
-    result, resid = fit_parameters(jac_at, v0, jac0, wanted, names, rcond, size, q_deg.shape[0], row_weight=weight,
-                                   loss=loss, loss_scale=loss_scale, reference_mm=reference)
+    if prior is None:
+        result, resid = fit_parameters(jac_at, v0, jac0, wanted, names, rcond, size, q_deg.shape[0],
+                                       row_weight=weight, loss=loss, loss_scale=loss_scale, reference_mm=reference)
+    else:
+        if weight is not None:          # the prior's rows are weighed as they are
+            weight = np.concatenate([weight, np.ones(jac0.shape[0] - weight.size)])
+        result, resid = fit_parameters(jac_at, v0, jac0, wanted, names, rcond, size, q_deg.shape[0],
+                                       row_weight=weight, loss=loss, loss_scale=loss_scale, reference_mm=reference,
+                                       held=prior.held(v0.size))
+        resid = data_at(result.value, jacobian=False)[0]
     rms, angle = _target_rms(resid, len(q_deg), extra)
     more = {} if extra is None else {
         "target_rms_mm": dict(zip([PRIMARY_TARGET, *extra.tools_mm], rms)), "orientation_rms_deg": angle,
@@ -562,7 +580,8 @@ down-weighted (:attr:`Identification.robust`)."""
 def fit_parameters(jac_at, v0: NDArray[np.float64], jac0: NDArray[np.float64], wanted: NDArray[np.bool_],
                    names: list[tuple[str, str]], rcond: float, size: int, n_poses: int, *,
                    row_weight: NDArray[np.float64] | None = None, loss: str = "linear", loss_scale: float = 3.0,
-                   reference_mm: float | None = None) -> tuple[Identification, NDArray[np.float64]]:
+                   reference_mm: float | None = None, held: NDArray[np.bool_] | None = None
+                   ) -> tuple[Identification, NDArray[np.float64]]:
     """The rank-checked fit of :func:`identify` over any stacked residuals, and the residuals it leaves.
 
     ``jac_at(values, jacobian=True)`` gives the residuals and their Jacobian; ``v0`` is the start (the
@@ -578,6 +597,7 @@ def fit_parameters(jac_at, v0: NDArray[np.float64], jac0: NDArray[np.float64], w
     times the robust spread of the least-squares fit's residuals; the covariance then weighs each residual by
     the loss's weight (:func:`loss_weights`), and the rows it weighs below :data:`DOWNWEIGHTED` are named in
     the table's ``robust`` (the first ``3 n_poses`` residuals are the measurement rows' coordinates).
+    ``held``: the parameters a prior holds (its rows are in ``jac_at``), never pruned as implausible.
     """
     if loss not in LOSSES:
         raise DataError(f"loss must be one of {', '.join(LOSSES)}; got {loss!r}")
@@ -588,6 +608,8 @@ def fit_parameters(jac_at, v0: NDArray[np.float64], jac0: NDArray[np.float64], w
 
     limits = np.full(v0.size, np.nan)
     limits[:size - 9] = [PLAUSIBLE_ERROR[unit] * IMPLAUSIBLE for unit in units[:size - 9]]     # the rows' parameters
+    if held is not None:
+        limits[held] = np.nan                                   # the prior prices their distance instead
     v, evaluations = v0.copy(), 0
     resid0 = jac_at(v0, jacobian=False)[0]
     while free.size:

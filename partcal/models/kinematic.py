@@ -28,13 +28,14 @@ from .base import ErrorModelBase, box_points, seed_from
 from .features import varying_inputs
 from .identification import (LOSSES, PARAMETRIZATIONS, PRIMARY_TARGET, STATUSES, Identification, geometric_size, identify,
                              model_jacobian, nominal_values, own_geometry, parameter_names, prior_variance,
-                             resolved_parametrization, robot_with)
+                             resolved_parametrization, robot_with, PLAUSIBLE_ERROR)
 from .joint_errors import JointErrors, compliance_problem, harmonics_problem
 from . import contacts  # noqa: F401  (the built-in measurement kinds join the table)
 from .contacts import TRACKER_FRAME
 from .measures import MEASUREMENT_KINDS, Measured, identify_measures
 from .kindtable import body_of, check_body, may_be_residual, model_from_body, regions_of, residual_kinds
 from .pose import PoseErrorModel
+from .prior import Prior, plausible_prior, strength_problem
 from .targets import added_names, added_nominal, extra_from
 
 log = logging.getLogger(__name__)
@@ -112,8 +113,11 @@ class KinematicModel(ErrorModelBase):
     def __init__(self, *, robot=None, base=True, tool=True, rcond=1e-6, parametrization="auto", compliance=(),
                  joint_harmonics=0, payload_kg=0.0, all_targets=False, use_orientation=False,
                  orientation_mm_per_rad=ORIENTATION_MM_PER_RAD, loss="linear", loss_scale=3.0, residual=None,
+                 prior=None, prior_strength=1.0,
                  random_state=None):
         self.robot = robot
+        self.prior = prior
+        self.prior_strength = prior_strength
         self.parametrization = parametrization
         self.all_targets = all_targets
         self.use_orientation = use_orientation
@@ -155,6 +159,10 @@ class KinematicModel(ErrorModelBase):
             expected = problem(getattr(self, name), robot.n_joints)
             if expected is not None:
                 raise param_error(own, name, expected, getattr(self, name))
+        if not (self.prior is None or self.prior == "plausible" or isinstance(self.prior, Prior)):
+            raise param_error(own, "prior", "None, 'plausible' or a Prior", self.prior)
+        if strength_problem(self.prior_strength) is not None:
+            raise param_error(own, "prior_strength", strength_problem(self.prior_strength), self.prior_strength)
         if self.residual is not None and not may_be_residual(self.residual):
             raise param_error(own, "residual", f"None or a model of a kind that may be a residual "
                               f"({', '.join(residual_kinds())})", self.residual)
@@ -165,7 +173,7 @@ class KinematicModel(ErrorModelBase):
         return resolved_parametrization(self.parametrization, robot)
 
     def fit(self, X, y, payload_kg=None, *, targets=None, orientation_deg=None, orientation_mm_per_rad=None,
-            measures: Measured | None = None, std_mm=None):
+            measures: Measured | None = None, std_mm=None, prior: Prior | None = None):
         """Identify the parameters from joint angles ``X`` (n, N) deg and errors ``y`` (n, 3) mm. Returns self.
 
         ``payload_kg`` (n,) kg per pose, or a number; default the parameter ``payload_kg``.
@@ -193,9 +201,17 @@ class KinematicModel(ErrorModelBase):
 
         ``std_mm`` (n, 3) mm: the standard deviation of each measured coordinate of the primary target, for a
         weighted identification (:func:`~partcal.models.identification.identify`); None: every row alike.
+        ``prior`` (:class:`~partcal.models.prior.Prior`, indices into the identification table's order): a
+        Gaussian prior on the parameters, the identification MAP (:func:`~partcal.models.identification.identify`);
+        default the parameter ``prior``: ``'plausible'`` (:func:`~partcal.models.prior.plausible_prior` at
+        ``prior_strength``; a list of strengths: the one of least RMS on 5 contiguous blocks of the data held out
+        in turn, :meth:`_chosen_strength`) or a ``Prior`` (another robot's model, ``prior: FILE.json`` in a run:
+        its rows times ``prior_strength`` too).
         """
         robot = self._check_params()
         if measures is not None:
+            if self.prior is not None or prior is not None:
+                raise param_error(type(self).__name__, "prior", "None when fitting on measurement kinds", self.prior)
             return self._fit_measures(robot, measures, payload_kg)
         X, y = validate_data(self, X, y, multi_output=True, y_numeric=True, dtype=np.float64)
         if X.shape[1] != robot.n_joints:
@@ -217,10 +233,15 @@ class KinematicModel(ErrorModelBase):
         ident_payload = payload if np.ptp(payload) > 0 else np.zeros_like(payload)
         weight = self.orientation_mm_per_rad if orientation_mm_per_rad is None else orientation_mm_per_rad
         extra = extra_from(robot, X, targets, orientation_deg, weight)
+        if prior is None and self.prior is not None:
+            prior = self._own_prior(robot, X, y, payload_kg)
+        if prior is not None:
+            prior.check_names([n for n, _ in parameter_names(robot, self.joint_errors_, self.parametrization_)]
+                              + (extra.names() if extra is not None else []))
         self.identification_ = identify(robot, X, nominal + y[:, POSITION], base=bool(self.base), tool=bool(self.tool),
                                         rcond=float(self.rcond), errors=self.joint_errors_, payload_kg=ident_payload,
                                         extra=extra, parametrization=self.parametrization_, std_mm=std_mm,
-                                        loss=self.loss, loss_scale=float(self.loss_scale))
+                                        loss=self.loss, loss_scale=float(self.loss_scale), prior=prior)
         self.targets_ = dict(extra.tools_mm) if extra is not None else {}
         self.orientation_ = extra is not None and extra.rotations is not None
         self.measures_, self.measure_notes_, self.frame_fixed_ = (), [], True
@@ -241,6 +262,40 @@ class KinematicModel(ErrorModelBase):
             self.residual_.fit(self._residual_inputs(X, nominal), leftover)
         self.covariance_scale_ = self._hybrid_covariance_scale(X, nominal)
         return self._prepare()
+
+    def _own_prior(self, robot: Robot, X, y, payload_kg) -> Prior | None:
+        """The prior of the parameter ``prior`` at ``prior_strength`` (a list: :meth:`_chosen_strength`): the
+        plausible one (:func:`~partcal.models.prior.plausible_prior` about nominal: the robot's
+        ``plausible_error``, else :data:`~partcal.models.identification.PLAUSIBLE_ERROR`) or a given ``Prior`` (another robot's model, rows of 1 mm noise) with its rows times the strength."""
+        strengths = np.atleast_1d(np.asarray(self.prior_strength, dtype=float))
+        self.prior_cv_ = self._chosen_strength(X, y, payload_kg, strengths) if strengths.size > 1 else None
+        self.prior_strength_ = float(strengths[0] if self.prior_cv_ is None else
+                                     strengths[int(np.argmin(self.prior_cv_))])
+        if isinstance(self.prior, Prior):
+            return None if self.prior_strength_ == 0 else Prior(
+                self.prior.index, self.prior.mean, self.prior.root * self.prior_strength_, self.prior.names,
+                self.prior.source)
+        names = parameter_names(robot, self.joint_errors_, self.parametrization_)
+        return plausible_prior([u for _, u in names], geometric_size(robot, self.parametrization_) - 9,
+                               nominal_values(robot, self.joint_errors_, self.parametrization_),
+                               self.prior_strength_, {**PLAUSIBLE_ERROR, **(robot.plausible_error or {})})
+
+    def _chosen_strength(self, X, y, payload_kg, strengths) -> list[float]:
+        """The 3-D RMS of the kinematic part's errors on each of 5 contiguous blocks of the data (measurement
+        order: real residuals are correlated, shuffled folds would reward fitting them), held out in turn, for
+        each of ``strengths``; the positions alone (no residual model, no further targets)."""
+        payload = self._payload(payload_kg, len(X), fitting=True)
+        blocks = np.array_split(np.arange(len(X)), min(5, len(X)))
+        out = []
+        for strength in strengths:
+            left = []
+            for test in blocks:
+                train = np.setdiff1d(np.arange(len(X)), test)
+                part = clone(self).set_params(prior_strength=float(strength), residual=None)
+                part.fit(X[train], y[train, :3], payload[train])
+                left.append(y[test, :3] - part.predict_kinematic(X[test], payload[test])[:, :3])
+            out.append(float(np.sqrt(np.mean(np.sum(np.vstack(left) ** 2, axis=1)))))
+        return out
 
     def _fit_measures(self, robot: Robot, measures: Measured, payload_kg) -> "KinematicModel":
         """:meth:`fit` from rows of measurement kinds (:func:`~partcal.models.measures.identify_measures`)."""
@@ -490,11 +545,26 @@ class KinematicModel(ErrorModelBase):
         n_joints = context["robot"].n_joints
         joint = {name: sec.get(name, "any", default=default, check=lambda v, p=problem: p(v, n_joints))
                  for name, (default, problem) in cls._joint_rules.items()}
-        return {"robot": context["robot"], **super().params_from_config(sec, context), **joint}
+        return {"robot": context["robot"], **super().params_from_config(sec, context), **joint,
+                **cls._prior_from_config(sec, context)}
+
+    @classmethod
+    def _prior_from_config(cls, sec, context: dict) -> dict:
+        """``prior``: ``plausible`` or a kinematic model file of another robot of the same type (read by
+        ``context["model_prior"]``, the study layer's: ``(section, path text) -> Prior``), with ``prior_strength``
+        (a number, or a list to choose from). No key: no prior."""
+        kind = sec.get("prior", "str", default=None, check=lambda v: None if v.strip() else "a non-empty text")
+        strength = sec.get("prior_strength", "any", default=1.0, check=strength_problem)
+        if kind is None:
+            if sec.has("prior_strength"):
+                sec.fail(sec.path("prior_strength"), "applies with a prior only (prior: plausible or FILE.json)")
+            return {}
+        return {"prior": "plausible" if kind == "plausible" else context["model_prior"](sec, kind),
+                "prior_strength": tuple(float(v) for v in strength) if isinstance(strength, list) else float(strength)}
 
     @classmethod
     def config_keys(cls) -> set[str]:
-        return super().config_keys() | set(cls._joint_rules)
+        return super().config_keys() | set(cls._joint_rules) | {"prior", "prior_strength"}
 
     @classmethod
     def from_params(cls, params: dict, random_state=None) -> "KinematicModel":
@@ -648,6 +718,10 @@ class KinematicModel(ErrorModelBase):
         notes += list(getattr(self, "measure_notes_", []))
         if not getattr(self, "frame_fixed_", True):
             notes.append(self.frame_note())
+        if getattr(self, "prior_cv_", None) is not None:
+            notes.append(f"plausible prior: strength {self.prior_strength_:g} chosen by 5-block CV (3-D RMS "
+                         + ", ".join(f"{s:g}: {r:.4f} mm" for s, r in zip(np.atleast_1d(self.prior_strength),
+                                                                          self.prior_cv_)) + ")")
         return notes + (self.residual_.fit_notes() if self.residual_ is not None else [])
 
     def frame_note(self) -> str:

@@ -135,7 +135,7 @@ def urdf_reference(spec: dict, base: Path, where: str = "robot") -> str:
 
 
 _ROBOT_KEYS = {"name", "description", "joints", "links", "tool_mm", "limits_deg", "home_deg",
-               "constraints_deg", "base", "floor_mm"}
+               "constraints_deg", "base", "floor_mm", "plausible_error"}
 
 
 def robot_from_dict(spec: dict, source: str = "robot", lines: dict[str, int] | None = None) -> Robot:
@@ -156,10 +156,24 @@ def robot_from_dict(spec: dict, source: str = "robot", lines: dict[str, int] | N
     base = _origin(spec.get("base"), "base", r)
     floor = spec.get("floor_mm")                 # a floor the description does not state is not assumed
     floor = None if floor is None else r.number("floor_mm", floor)
+    plausible = _plausible_error(spec.get("plausible_error"), r)
     return Robot(name=str(spec["name"]), n_joints=n, alpha_deg=alpha, d_mm=d, a_mm=a,
                  theta_offset_deg=off, coupling=coupling, tool_mm=tool, limits_deg=limits,
                  home_deg=home, constraints=constraints, origins=origins, prismatic=prismatic,
-                 base_rotation=matrix_from_rpy_deg(base[3:]), base_mm=base[:3], floor_mm=floor)
+                 base_rotation=matrix_from_rpy_deg(base[3:]), base_mm=base[:3], floor_mm=floor,
+                 plausible_error=plausible)
+
+
+def _plausible_error(spec, r) -> dict | None:
+    """``plausible_error``: ``{mm: ..., deg: ...}`` (either or both, numbers > 0), or None when absent."""
+    if spec is None:
+        return None
+    if not (isinstance(spec, dict) and spec and set(spec) <= {"mm", "deg"}):
+        r.fail("plausible_error", f"expected {{mm: LENGTH, deg: ANGLE}} (either or both); got {spec!r}"[:200])
+    out = {unit: r.number(f"plausible_error.{unit}", value) for unit, value in spec.items()}
+    if any(not value > 0 for value in out.values()):
+        r.fail("plausible_error", f"expected numbers > 0; got {spec!r}"[:200])
+    return out
 
 
 class _Reader:
@@ -310,6 +324,7 @@ def robot_to_dict(robot: Robot) -> dict:
         "constraints_deg": [{"expr": _expression(0.0, c), "range": [lo, hi]} for c, lo, hi in robot.constraints],
         **_base_entry(robot),
         **({} if robot.floor_mm is None else {"floor_mm": robot.floor_mm}),
+        **({} if robot.plausible_error is None else {"plausible_error": dict(robot.plausible_error)}),
     }
 
 

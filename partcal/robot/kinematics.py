@@ -96,6 +96,10 @@ class Robot:
         standing on a floor (ceiling, wall, pedestal) or one whose mounting
         height is not known. ``partcal plan`` keeps every pose above it
         (:mod:`partcal.robot.floor`).
+    plausible_error : dict or None
+        The robot's own plausible error of a geometric parameter per unit (``{"mm": ..., "deg": ...}``, the
+        datasheet's tolerances) for the identification's plausible prior; None: partcal's defaults
+        (:data:`partcal.models.identification.PLAUSIBLE_ERROR`).
     """
 
     name: str
@@ -114,6 +118,7 @@ class Robot:
     origins: NDArray[np.float64] | None = None
     prismatic: NDArray[np.bool_] | None = None
     floor_mm: float | None = None
+    plausible_error: dict | None = None
 
     def replace(self, **changes) -> "Robot":
         """Return a copy with some fields changed (used to build perturbed robots)."""

@@ -19,6 +19,7 @@ _COMMANDS = {
     "iso_figures": ["iso_report"],
     "export": ["export_files"],
     "check": ["check_file"],
+    "update": ["update_file", "update_model"],
 }
 _WHERE = {name: module for module, names in _COMMANDS.items() for name in names}
 __all__ = ["Predictor", "load_predictor", *_WHERE]

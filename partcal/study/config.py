@@ -9,6 +9,7 @@ file. Every problem is reported once as ``FILE: models[2].partition.max_depth
 from __future__ import annotations
 
 import dataclasses
+import functools
 import os
 import re
 from dataclasses import asdict, dataclass, field
@@ -247,6 +248,10 @@ class RunConfig:
             for entry in (m, m["residual"] or {}):
                 if entry.get("partition"):
                     entry["partition"]["sizes"] = list(entry["partition"]["sizes"])
+                if isinstance(entry.get("params", {}).get("prior"), dict):      # a model file's prior: its path
+                    entry["params"]["prior"] = entry["params"]["prior"]["source"]
+                if isinstance(entry.get("params", {}).get("prior_strength"), tuple):
+                    entry["params"]["prior_strength"] = list(entry["params"]["prior_strength"])
         return out
 
 
@@ -287,7 +292,7 @@ def load_config(path: str | Path) -> RunConfig:
     if rank_by == "validation" and validation is None:
         top.fail("rank_by", "'validation' needs data.validation: FILE, a held-out set measured near the task")
     models_raw = top.get("models", "list", check=lambda v: None if v else "a non-empty list")
-    models = tuple(dataclasses.replace(_model(Section(m, f"models[{i}]", lines, str(path)), nominal),
+    models = tuple(dataclasses.replace(_model(Section(m, f"models[{i}]", lines, str(path)), nominal, base=base),
                                        pose=predict == "pose") for i, m in enumerate(models_raw))
     names = [m.name for m in models]
     for i, m in enumerate(models):
@@ -438,7 +443,29 @@ def _data_file(sec: Section, key: str, base: Path, *, tracker: bool | None
     return path, None if selection.is_all else selection, own
 
 
-def _model(sec: Section, robot: Robot | None, parent: str | None = None) -> ModelSpec:
+def _model_prior(sec: Section, text: str, base: Path | None, robot: Robot | None):
+    """``prior: FILE.json`` of a kinematic entry: another robot's model file (of the same type) as the prior
+    (:func:`~partcal.study.update.type_prior`: its row parameters with their plausible errors)."""
+    from .persist import load_model
+    from .update import type_prior
+    from ..models.identification import PLAUSIBLE_ERROR
+    from ..models.kinematic import KinematicModel
+
+    path = Path(text) if base is None or Path(text).is_absolute() else base / text
+    try:
+        model = load_model(path)[0]
+        if not isinstance(model, KinematicModel):
+            raise PartcalError("expected a model file of kind kinematic")
+        if robot is not None and (model.robot_.name != robot.name or model.robot_.n_joints != robot.n_joints):
+            raise PartcalError(f"its robot is {model.robot_.name!r}, the run's {robot.name!r}: a prior from another "
+                               "robot of the same type")
+    except PartcalError as exc:
+        sec.fail(sec.path("prior"), f"'plausible' or a kinematic model file; {text!r}: {exc}")
+    plausible = {**PLAUSIBLE_ERROR, **((robot if robot is not None else model.robot_).plausible_error or {})}
+    return dataclasses.replace(type_prior(model, plausible), source=str(path))
+
+
+def _model(sec: Section, robot: Robot | None, parent: str | None = None, base: Path | None = None) -> ModelSpec:
     """One entry of ``models`` (or the ``residual`` of a kinematic entry, named after its ``parent``).
 
     The kind's estimator reads its own keys (``params_from_config``, by its declared rules); this
@@ -457,7 +484,8 @@ def _model(sec: Section, robot: Robot | None, parent: str | None = None) -> Mode
             sec.fail(sec.path(key), f"applies to kind: {' or '.join(owners)} only; this entry is kind: {kind.name}")
     name = f"{parent} residual" if parent is not None else name
     partition = _partition(sec, kind.estimator.input_space(sec.data)) if kind.regions else None
-    params = kind.estimator.params_from_config(sec, {"robot": robot, "partitioned": partition is not None})
+    params = kind.estimator.params_from_config(sec, {"robot": robot, "partitioned": partition is not None,
+                                                     "model_prior": functools.partial(_model_prior, base=base, robot=robot)})
     residual = None
     if kind.takes_residual and sec.has("residual"):
         sub = sec.section("residual")

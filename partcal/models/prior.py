@@ -1,0 +1,145 @@
+"""Gaussian priors on identified parameters: MAP identification as extra residual rows.
+
+A prior holds some of the parameters (``index``) near a ``mean`` with a covariance ``C``. With the
+measurements' noise ``sigma`` (mm per coordinate), the maximum a posteriori values minimise
+
+    ``|r(v)|^2 / sigma^2 + (v - m)^T C^-1 (v - m)``
+
+which is the least squares of the residuals ``r(v)`` stacked with the rows ``sigma L^-1 (v - m)``
+(``C = L L^T``): rows in the residuals' units (mm), appended to them by :meth:`Prior.augmented`, so
+that every fit (Levenberg-Marquardt, the rank rule, the standard errors) reads them as more
+measurements. A parameter the prior holds is identifiable through it (the rank rule sees its row),
+and its distance from the mean is priced by the prior instead of pruned
+(:func:`~partcal.models.identification.identify`).
+
+Two sources of priors: a datasheet-like one (:func:`plausible_prior`: each row parameter's plausible
+error, :data:`~partcal.models.identification.PLAUSIBLE_ERROR`, with a strength) and an identified
+model (:func:`model_prior`: its values and covariance, inflated).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..errors import DataError
+
+EIGEN_FLOOR = 1e-12
+"""Eigenvalues of a prior covariance below this fraction of the largest are raised to it (a covariance
+read from a file may be singular to rounding; the prior then holds that direction very firmly)."""
+
+
+@dataclass(frozen=True)
+class Prior:
+    """A Gaussian prior on the parameters ``index`` of a parameter vector.
+
+    Attributes
+    ----------
+    index : ndarray of int, shape (k,)
+        Positions of the parameters held, in the parameter vector.
+    mean : ndarray, shape (k,)
+        Their prior means (mm, degrees).
+    root : ndarray, shape (k, k)
+        ``W`` of the rows ``W (v[index] - mean)``: ``W^T W = sigma^2 C^-1`` (mm per unit).
+    names : tuple of str, optional
+        The names of the whole parameter vector it was made for (a model file's table), checked against
+        the fit's; None: not checked.
+    source : str, optional
+        Where it came from (a model file's path), for the run's resolved config.
+    """
+
+    index: NDArray[np.intp]
+    mean: NDArray[np.float64]
+    root: NDArray[np.float64]
+    names: tuple[str, ...] | None = None
+    source: str | None = None
+
+    @property
+    def size(self) -> int:
+        """The number of prior rows."""
+        return int(self.root.shape[0])
+
+    @classmethod
+    def from_std(cls, index, mean, std, noise_mm: float) -> "Prior":
+        """Independent parameters of standard deviations ``std`` (k,) under measurement noise ``noise_mm``.
+
+        >>> Prior.from_std([1], [0.5], [2.0], 0.1).rows(np.array([0.0, 4.5])).tolist()
+        [0.2]
+        """
+        std = np.asarray(std, dtype=float)
+        if not (np.all(np.isfinite(std)) and np.all(std > 0) and noise_mm >= 0):
+            raise DataError(f"a prior needs standard deviations > 0 and a noise >= 0; got {std!r}, {noise_mm!r}")
+        return cls(np.asarray(index, dtype=np.intp), np.asarray(mean, dtype=float), np.diag(noise_mm / std))
+
+    @classmethod
+    def from_covariance(cls, index, mean, covariance, noise_mm: float) -> "Prior":
+        """Parameters of covariance ``covariance`` (k, k) under measurement noise ``noise_mm``."""
+        cov = np.asarray(covariance, dtype=float)
+        k = len(np.atleast_1d(index))
+        if cov.shape != (k, k) or not np.all(np.isfinite(cov)):
+            raise DataError(f"a prior covariance must be a finite ({k}, {k}) matrix; got shape {cov.shape}")
+        cov = (cov + cov.T) / 2.0
+        eig, vec = np.linalg.eigh(cov)
+        if eig.size and eig[-1] <= 0:
+            raise DataError("a prior covariance must be positive definite; got one with no positive eigenvalue")
+        eig = np.maximum(eig, EIGEN_FLOOR * (eig[-1] if eig.size else 1.0))
+        return cls(np.asarray(index, dtype=np.intp), np.asarray(mean, dtype=float),
+                   noise_mm * (vec / np.sqrt(eig)).T)
+
+    def rows(self, values: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The prior rows ``W (v[index] - mean)``, shape (k,), mm."""
+        return self.root @ (values[self.index] - self.mean)
+
+    def jacobian(self, n_values: int) -> NDArray[np.float64]:
+        """The rows' Jacobian over the whole parameter vector, shape (k, n_values)."""
+        jac = np.zeros((self.size, n_values))
+        jac[:, self.index] = self.root
+        return jac
+
+    def augmented(self, jac_at):
+        """``jac_at`` (values, jacobian=True) -> (residuals, Jacobian or None) with the prior rows appended."""
+        def with_rows(values, jacobian=True):
+            resid, jac = jac_at(values, jacobian)
+            resid = np.concatenate([resid, self.rows(values)])
+            return resid, None if jac is None else np.vstack([jac, self.jacobian(values.size)])
+        return with_rows
+
+    def check_names(self, names: list[str]) -> None:
+        """Refuse a fit whose parameters (``names``, table order) are not those the prior was made for."""
+        if self.names is not None and tuple(self.names) != tuple(names):
+            raise DataError(f"the prior was made for the parameters {', '.join(self.names)}; this fit has "
+                            f"{', '.join(names)} (another parametrization, compliance or joint harmonics)")
+        if self.index.size and int(self.index.max()) >= len(names):
+            raise DataError(f"the prior holds parameter {int(self.index.max())}; this fit has {len(names)}")
+
+    def held(self, n_values: int) -> NDArray[np.bool_]:
+        """Which of ``n_values`` parameters the prior holds, shape (n_values,)."""
+        mask = np.zeros(n_values, dtype=bool)
+        mask[self.index] = True
+        return mask
+
+
+def strength_problem(value) -> str | None:
+    """What a ``prior_strength`` must be (a number >= 0, or a non-empty list of them to choose from), or None.
+
+    >>> strength_problem([0.3, 1, 3]) is None, strength_problem(-1)
+    (True, 'a number >= 0 or a non-empty list of them')
+    """
+    values = value if isinstance(value, (list, tuple)) else [value]
+    ok = bool(values) and all(isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v) and v >= 0
+                              for v in values)
+    return None if ok else "a number >= 0 or a non-empty list of them"
+
+
+def plausible_prior(units: list[str], n_rows: int, nominal: NDArray[np.float64], strength: float,
+                    plausible: dict[str, float]) -> Prior | None:
+    """The datasheet-like prior: each of the first ``n_rows`` parameters (the DH or complete rows' ones) of
+    unit ``mm`` or ``deg`` at its ``nominal`` value with its plausible error (``plausible``: per unit) as the
+    standard deviation, rows weighted by ``strength`` (mm: one plausible error off costs as much as a residual
+    of ``strength`` mm in one coordinate). None when ``strength`` is 0 (no prior)."""
+    if strength == 0:
+        return None
+    index = [k for k in range(n_rows) if units[k] in plausible]
+    return Prior.from_std(index, nominal[index], [plausible[units[k]] for k in index], strength)

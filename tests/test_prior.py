@@ -1,0 +1,301 @@
+"""Priors in kinematic identification (MAP) and `partcal update`: a model file as the prior of a new fit."""
+
+import numpy as np
+import pytest
+from scipy.optimize import least_squares
+
+from partcal import load_robot
+from partcal.models.identification import identify, model_positions, nominal_values, parameter_names
+from partcal.models.prior import Prior, plausible_prior
+from partcal.study.update import DEFAULT_INFLATE, IDENTIFY_LITTLE
+
+
+@pytest.fixture(scope="module")
+def ur10():
+    return load_robot("universal_robots_ur10")
+
+
+def poses(robot, n, seed, spread=1.0):
+    rng = np.random.default_rng(seed)
+    lo, hi = robot.limits_deg[:, 0], robot.limits_deg[:, 1]
+    mid = (lo + hi) / 2
+    return mid + spread * rng.uniform(-1, 1, (n, robot.n_joints)) * np.minimum((hi - lo) / 2, 120.0)
+
+
+def moved(robot, seed):
+    """Measured positions of a robot whose rows' parameters are off by about 0.5 mm / 0.05 deg, with noise."""
+    units = np.array([u for _, u in parameter_names(robot)])
+    rng = np.random.default_rng(seed)
+    true = nominal_values(robot) + rng.normal(size=units.size) * np.where(units == "mm", 0.5, 0.05)
+    true[-15:] = nominal_values(robot)[-15:]                  # tool, base: nominal
+    return true
+
+
+def test_map_equals_an_independent_augmented_least_squares(ur10):
+    q = poses(ur10, 25, 1)
+    true = moved(ur10, 2)
+    measured = model_positions(ur10, None, q, true, np.zeros(len(q))) + \
+        np.random.default_rng(3).normal(scale=0.05, size=(len(q), 3))
+    v0 = nominal_values(ur10)
+    index = np.arange(24)                                     # the DH rows' parameters
+    rng = np.random.default_rng(4)
+    a = rng.normal(size=(24, 24)) * 0.05
+    cov = a @ a.T + np.diag(np.where(np.isin(np.arange(24) % 4, (1, 2)), 0.3, 0.03) ** 2)
+    mean = v0[index] + rng.normal(size=24) * 0.1
+    noise = 0.05
+    table = identify(ur10, q, measured, prior=Prior.from_covariance(index, mean, cov, noise))
+    free = np.flatnonzero(np.array(table.status) == "identified")
+    plain = identify(ur10, q, measured)
+    assert np.sum(np.array(plain.status)[:24] == "identified") < 20
+    # the prior makes every row parameter identifiable but the two whose column is nil (the flange's turn
+    # and twist do not move a tool on its axis: the lever rule drops them, with or without a prior)
+    assert set(index) - set(free) == {20, 23}
+    chol = np.linalg.cholesky(cov)
+
+    def resid(x):                                             # written out: |r|^2 + sigma^2 (v-m)^T C^-1 (v-m)
+        v = v0.copy()
+        v[free] = x
+        p = model_positions(ur10, None, q, v, np.zeros(len(q)))
+        return np.concatenate([(p - measured).ravel(), noise * np.linalg.solve(chol, v[index] - mean)])
+
+    x = least_squares(resid, v0[free], jac="3-point", x_scale="jac", xtol=1e-15, ftol=1e-15, gtol=1e-15).x
+    np.testing.assert_allclose(np.sum(resid(table.value[free]) ** 2), np.sum(resid(x) ** 2), rtol=1e-9)
+    np.testing.assert_allclose(table.value[free], x, atol=1e-5)     # the valley is flat to 1e-13 mm^2 there
+
+
+def test_a_strong_prior_returns_its_mean_and_a_zero_one_the_plain_fit(ur10):
+    q = poses(ur10, 40, 5)
+    true = moved(ur10, 6)
+    measured = model_positions(ur10, None, q, true, np.zeros(len(q)))
+    v0 = nominal_values(ur10)
+    units = [u for _, u in parameter_names(ur10)]
+    mean = v0.copy()
+    mean[:24] += np.random.default_rng(7).normal(size=24) * 0.2
+    strong = identify(ur10, q, measured, prior=Prior.from_std(np.arange(24), mean[:24], np.full(24, 1e-3), 1e4))
+    np.testing.assert_allclose(strong.value[:24], mean[:24], atol=1e-6)
+    plain = identify(ur10, q, measured)
+    none = identify(ur10, q, measured, prior=Prior.from_std(np.arange(24), mean[:24], np.ones(24), 0.0))
+    identified = np.array(plain.status) == "identified"
+    assert none.status == plain.status
+    np.testing.assert_allclose(none.value[identified], plain.value[identified], atol=1e-8)
+    assert plausible_prior(units, 24, v0, 0.0, {"mm": 1.0, "deg": 0.1}) is None
+
+
+def test_without_a_prior_the_fit_is_unchanged_bit_for_bit(ur10):
+    q = poses(ur10, 30, 8)
+    measured = model_positions(ur10, None, q, moved(ur10, 9), np.zeros(len(q)))
+    a, b = identify(ur10, q, measured), identify(ur10, q, measured, prior=None)
+    assert np.array_equal(a.value, b.value) and a.status == b.status and a.rms_mm == b.rms_mm
+
+
+def test_a_bad_prior_covariance_is_refused():
+    with pytest.raises(ValueError, match=r"\(2, 2\) matrix"):
+        Prior.from_covariance([0, 1], [0.0, 0.0], np.eye(3), 1.0)
+    with pytest.raises(ValueError, match="positive definite"):
+        Prior.from_covariance([0, 1], [0.0, 0.0], -np.eye(2), 1.0)
+    with pytest.raises(ValueError, match="standard deviations > 0"):
+        Prior.from_std([0], [0.0], [0.0], 1.0)
+
+
+# ---------------------------------------------------------------------- partcal update
+def measured_set(robot, truth_values, q, seed, noise=0.01):
+    from partcal.data.measurements import Measurements
+    p = model_positions(robot, None, q, truth_values, np.zeros(len(q)))
+    p = p + np.random.default_rng(seed).normal(scale=noise, size=p.shape)
+    return Measurements(q, robot.positions(q), p)
+
+
+@pytest.fixture(scope="module")
+def calibrated(ur10, tmp_path_factory):
+    """A model file of a virtual UR10 (rows off by 0.5 mm / 0.05 deg), and the robot's true parameters."""
+    from partcal.models.kinematic import KinematicModel
+    from partcal.study.persist import save_model
+    truth = moved(ur10, 11)
+    m = measured_set(ur10, truth, poses(ur10, 150, 12), 13)
+    path = tmp_path_factory.mktemp("update") / "a.json"
+    save_model(KinematicModel(robot=ur10).fit(m.q_deg, m.errors_mm), path, name="robot a", robot=ur10)
+    return path, truth
+
+
+def test_update_moves_the_model_toward_a_shifted_joint_offset_and_records_its_provenance(ur10, calibrated, tmp_path):
+    from partcal.cli import main
+    from partcal.data.measurements import write_measurements
+    from partcal.study.persist import load_model
+    path, truth = calibrated
+    shifted = truth.copy()
+    shifted[4] += 0.05                                        # joint 2's offset moved by 0.05 degrees
+    new = measured_set(ur10, shifted, poses(ur10, 30, 14), 15)
+    write_measurements(new, tmp_path / "new.csv")
+    assert main(["update", str(path), str(tmp_path / "new.csv"), "-o", str(tmp_path / "b.json")]) == 0
+    old, old_doc = load_model(path)
+    updated, doc = load_model(tmp_path / "b.json")
+    info = doc["fit"]["update"]
+    assert info["data"] == str(tmp_path / "new.csv") and info["rows"] == 30 and info["inflate"] == DEFAULT_INFLATE
+    assert info["prior_checksum"] == old_doc["checksum"] and info["prior_name"] == "robot a"
+    assert info["kept_prior"] is False and info["determined"] > IDENTIFY_LITTLE
+    q = poses(ur10, 200, 16)
+    true_errors = model_positions(ur10, None, q, shifted, np.zeros(len(q))) - ur10.positions(q)
+    before = np.sqrt(np.mean(np.sum((old.predict(q) - true_errors) ** 2, axis=1)))
+    after = np.sqrt(np.mean(np.sum((updated.predict(q) - true_errors) ** 2, axis=1)))
+    table, table_old = updated.identification_, old.identification_
+    assert before > 0.5 and after < 0.5 * before
+    assert 0.025 < table.value[4] - table_old.value[4] < 0.06
+
+
+def test_update_from_a_compact_patch_keeps_the_prior_and_says_so(ur10, calibrated, tmp_path):
+    from partcal.data.measurements import write_measurements
+    from partcal.study.persist import load_model
+    from partcal.study.update import update_file
+    path, truth = calibrated
+    q = np.array([30.0, -60.0, 80.0, -100.0, 60.0, 10.0]) + np.random.default_rng(17).uniform(-1.5, 1.5, (20, 6))
+    q[:, 5] = 10.0                                            # a compact patch, joint 6 still
+    new = measured_set(ur10, truth, q, 18)
+    write_measurements(new, tmp_path / "patch.csv")
+    done = update_file(path, tmp_path / "patch.csv", tmp_path / "c.json")
+    assert done.kept_prior and "identify little" in "\n".join(done.lines())
+    old = load_model(path)[0].identification_
+    table = done.model.identification_
+    rows = np.flatnonzero(np.array(old.status[:24]) == "identified")
+    np.testing.assert_allclose(table.value[rows], old.value[rows], atol=1e-3)
+
+
+@pytest.mark.parametrize("case, message", [
+    ("missing", "no such model file"), ("series", "field 'kind': update needs a model of kind 'kinematic'"),
+    ("inflate", "--inflate: expected a positive number"), ("data", "new.csv")])
+def test_update_refuses_bad_input_with_exit_2(ur10, calibrated, tmp_path, capsys, case, message):
+    from partcal import ErrorModel
+    from partcal.cli import main
+    from partcal.study.persist import save_model
+    path, _ = calibrated
+    data = tmp_path / "new.csv"
+    data.write_text("q1,q2,q3,q4,q5,q6,x_meas,y_meas,z_meas\n0,0,0,0,0,0,1,2\n" if case == "data" else
+                    "q1,q2,q3,q4,q5,q6,x_meas,y_meas,z_meas\n" + "0,-90,0,-90,0,0,0,0,0\n")
+    args = [str(path), str(data), "-o", str(tmp_path / "out.json")]
+    if case == "missing":
+        args[0] = str(tmp_path / "nothing.json")
+    if case == "series":
+        q = poses(ur10, 40, 1)
+        save_model(ErrorModel(inputs="joint", degree=1, solver="lstsq").fit(q, np.ones((40, 3))), tmp_path / "s.json",
+                   robot=ur10)
+        args[0] = str(tmp_path / "s.json")
+    if case == "inflate":
+        args += ["--inflate", "-1"]
+    try:
+        code = main(["update", *args])
+    except SystemExit as exc:                                 # argparse refuses a bad option value itself
+        code = exc.code
+    assert code == 2
+    assert message in capsys.readouterr().err
+    assert not (tmp_path / "out.json").exists()
+
+
+# ---------------------------------------------------------------------- priors in a run config
+def run_config(tmp_path, entry, robot="universal_robots_ur10"):
+    from conftest import ROOT
+    data = ROOT / "data" / "sk120"
+    path = tmp_path / "configs" / "run.yaml"
+    path.parent.mkdir(exist_ok=True)
+    path.write_text(f"name: demo\nrobot: {robot}\ndata:\n  identification: {data / 'identification.csv'}\n"
+                    f"models:\n  - {{name: DH, kind: kinematic, {entry}}}\n")
+    return path
+
+
+def test_a_plausible_prior_with_a_list_of_strengths_takes_the_one_of_least_block_cv_error(ur10):
+    from partcal.models.identification import PLAUSIBLE_ERROR, geometric_size
+    from partcal.models.kinematic import KinematicModel
+    q = poses(ur10, 60, 21)
+    measured = model_positions(ur10, None, q, moved(ur10, 22), np.zeros(len(q))) + \
+        np.random.default_rng(23).normal(scale=0.3, size=(len(q), 3))
+    y = measured - ur10.positions(q)
+    strengths = (0.1, 3.0, 30.0)
+    model = KinematicModel(robot=ur10, prior="plausible", prior_strength=strengths).fit(q, y)
+    units = [u for _, u in parameter_names(ur10)]
+    expected = []                                             # the block CV written out
+    for s in strengths:
+        prior = plausible_prior(units, geometric_size(ur10) - 9, nominal_values(ur10), s, PLAUSIBLE_ERROR)
+        left = []
+        for test in np.array_split(np.arange(60), 5):
+            train = np.setdiff1d(np.arange(60), test)
+            fit = KinematicModel(robot=ur10).fit(q[train], y[train], prior=prior)
+            left.append(y[test] - fit.predict(q[test]))
+        expected.append(np.sqrt(np.mean(np.sum(np.vstack(left) ** 2, axis=1))))
+    np.testing.assert_allclose(model.prior_cv_, expected, rtol=1e-9)
+    assert model.prior_strength_ == strengths[int(np.argmin(expected))]
+    assert any("strength" in note for note in model.fit_notes())
+    plain = KinematicModel(robot=ur10, prior="plausible", prior_strength=model.prior_strength_).fit(q, y)
+    np.testing.assert_array_equal(plain.identification_.value, model.identification_.value)
+
+
+def test_run_config_prior_keys(tmp_path, calibrated):
+    import yaml
+    from partcal import ConfigError
+    from partcal.study.config import load_config
+    from partcal.study.persist import load_model
+    cfg = load_config(run_config(tmp_path, "prior: plausible, prior_strength: [0.3, 1, 3]"))
+    assert cfg.models[0].params["prior"] == "plausible" and cfg.models[0].params["prior_strength"] == (0.3, 1.0, 3.0)
+    assert yaml.safe_load(yaml.safe_dump(cfg.resolved()))["models"][0]["params"]["prior_strength"] == [0.3, 1, 3]
+    path, _ = calibrated
+    cfg = load_config(run_config(tmp_path, f"prior: {path}, prior_strength: 2"))
+    prior = cfg.models[0].params["prior"]
+    table = load_model(path)[0].identification_
+    assert prior.source == str(path) and np.array_equal(prior.mean, table.value[prior.index])
+    assert prior.index.tolist() == list(range(24))             # the rows' parameters; tool and frame afresh
+    assert yaml.safe_load(yaml.safe_dump(cfg.resolved()))["models"][0]["params"]["prior"] == str(path)
+    with pytest.raises(ConfigError, match=r"models\[0\]\.prior_strength \(line 6\): applies with a prior only"):
+        load_config(run_config(tmp_path, "prior_strength: 2"))
+    with pytest.raises(ConfigError, match=r"models\[0\]\.prior_strength \(line 6\): must be a number >= 0"):
+        load_config(run_config(tmp_path, "prior: plausible, prior_strength: -1"))
+    with pytest.raises(ConfigError, match=r"models\[0\]\.prior \(line 6\): 'plausible' or a kinematic model file; "
+                                          r"'nothing.json': .*no such model file"):
+        load_config(run_config(tmp_path, "prior: nothing.json"))
+    with pytest.raises(ConfigError, match=r"its robot is 'universal_robots_ur10', the run's 'motoman_sk120'"):
+        load_config(run_config(tmp_path, f"prior: {path}", robot="motoman_sk120"))
+
+
+def test_another_robots_model_as_the_prior_helps_a_few_poses(ur10, calibrated):
+    """Robot B of the same type as A (its rows 0.1 mm / 0.01 deg from A's): 10 poses of B with A's model as the
+    prior (its values, their plausible errors) land nearer B's truth than 10 poses alone, A's model, or the plausible
+    prior about nominal."""
+    from partcal.models.identification import PLAUSIBLE_ERROR
+    from partcal.models.kinematic import KinematicModel
+    from partcal.study.persist import load_model
+    from partcal.study.update import type_prior
+    path, truth_a = calibrated
+    units = np.array([u for _, u in parameter_names(ur10)])
+    truth_b = truth_a + np.random.default_rng(31).normal(size=units.size) * np.where(units == "mm", 0.1, 0.01) \
+        * (np.arange(units.size) < 24)
+    m = measured_set(ur10, truth_b, poses(ur10, 10, 32), 33, noise=0.1)
+    model_a = load_model(path)[0]
+    prior = type_prior(model_a, PLAUSIBLE_ERROR)
+    with_prior = KinematicModel(robot=ur10, prior=prior, prior_strength=1.0).fit(m.q_deg, m.errors_mm)
+    at_nominal = KinematicModel(robot=ur10, prior="plausible", prior_strength=1.0).fit(m.q_deg, m.errors_mm)
+    alone = KinematicModel(robot=ur10).fit(m.q_deg, m.errors_mm)
+    q = poses(ur10, 300, 34)
+    truth = model_positions(ur10, None, q, truth_b, np.zeros(len(q))) - ur10.positions(q)
+
+    def rms(model):
+        return np.sqrt(np.mean(np.sum((model.predict(q) - truth) ** 2, axis=1)))
+    assert rms(with_prior) < 0.75 * rms(alone)                # 0.20 mm against 0.30
+    assert rms(with_prior) < 0.6 * rms(model_a)               # A's model alone: 0.39
+    assert rms(with_prior) < 0.5 * rms(at_nominal)            # the datasheet prior about nominal: 0.48
+
+
+def test_a_robot_files_plausible_error_sets_the_plausible_prior(ur10):
+    from partcal import ConfigError
+    from partcal.models.identification import geometric_size
+    from partcal.models.kinematic import KinematicModel
+    from partcal.robot.description import robot_from_dict, robot_to_dict
+    spec = robot_to_dict(ur10)
+    own = robot_from_dict({**spec, "plausible_error": {"mm": 0.2}})
+    assert own.plausible_error == {"mm": 0.2} and robot_to_dict(own)["plausible_error"] == {"mm": 0.2}
+    q = poses(ur10, 30, 41)
+    y = model_positions(ur10, None, q, moved(ur10, 42), np.zeros(len(q))) - ur10.positions(q)
+    fitted = KinematicModel(robot=own, prior="plausible", prior_strength=2.0).fit(q, y).identification_
+    units = [u for _, u in parameter_names(ur10)]
+    expected = identify(ur10, q, ur10.positions(q) + y, prior=plausible_prior(
+        units, geometric_size(ur10) - 9, nominal_values(ur10), 2.0, {"mm": 0.2, "deg": 0.1}))
+    np.testing.assert_allclose(fitted.value, expected.value, atol=1e-9)
+    with pytest.raises(ConfigError, match=r"plausible_error: expected numbers > 0"):
+        robot_from_dict({**spec, "plausible_error": {"mm": 0}})
+    with pytest.raises(ConfigError, match=r"plausible_error: expected \{mm: LENGTH, deg: ANGLE\}"):
+        robot_from_dict({**spec, "plausible_error": {"m": 1}})

@@ -30,13 +30,13 @@ from numpy.typing import NDArray
 from .. import __version__
 from ..data.measurements import Measurements, read_measurements
 from ..data.observations import ObservationTable, has_kind_column, read_features, read_observations
-from ..errors import ConfigError, DataError, PartcalError
+from ..errors import DataError, PartcalError
 from ..metrics import pooled_rms
 from ..models.contacts import TRACKER_FRAME, PointKind
 from ..models.kinematic import KinematicModel
 from ..models.identification import resolved_parametrization
 from ..models.joint_errors import JointErrors
-from ..models.measures import (END_KIND, MEASUREMENT_KINDS, REFERENCE_NOISE_MM, SCALE, Measured, Rows, built_kinds,
+from ..models.measures import (END_KIND, MEASUREMENT_KINDS, REFERENCE_NOISE_MM, Measured, Rows, built_kinds,
                                kind_names, kind_residuals, observability)
 from ..robot.frames import kabsch
 from ..robot.kinematics import Robot
@@ -496,4 +496,4 @@ def kinds_table(result: KindsRunResult) -> str:
 
 
 __all__ = ["uses_kinds", "prepare_kinds", "check_kinds", "run_kinds", "write_kinds_run", "kinds_metrics",
-           "kinds_table", "KindsRunResult", "KindsModelResult", "SCALE", "ConfigError"]
+           "kinds_table", "KindsRunResult", "KindsModelResult"]

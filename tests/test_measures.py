@@ -381,3 +381,31 @@ def test_each_kind_moves_its_unknowns_with_the_cell_as_its_residuals_say():
             at = np.flatnonzero(turning)
             expected[at] = np.cross(np.eye(3)[g - 3], base[at].reshape(-1, 3)).ravel()
         assert np.allclose(change, expected, atol=2e-3 * (1 + np.abs(base).max())), g
+
+
+def test_distances_from_a_tool_the_nominal_robot_lacks_are_accepted_and_metres_refused():
+    """A 93 mm reflector on a robot whose nominal tool is nil (the IPA UR10 from distances alone): short distances
+    differ from the nominal ones by tens of mm and are data, not bad input; a long distance in metres is refused."""
+    rng = np.random.default_rng(14)
+    values = nominal_values(ROBOT)
+    values[24:27] = [0.0, 0.0, 93.0]
+    true = robot_with(ROBOT, values)
+    q = _configurations(40, rng)
+    q[1] = q[0] + [0, 0, 0, 0, 20.0, 0]            # two poses whose tips are close: the tool dominates
+    tips = true.positions(q)
+    i, j = np.triu_indices(len(q), 1)
+    measured = np.linalg.norm(tips[i] - tips[j], axis=1)
+    nominal = np.linalg.norm(ROBOT.positions(q)[i] - ROBOT.positions(q)[j], axis=1)
+    assert np.max(np.abs(measured - nominal)) > 20.0          # beyond the touches' NEAR_MM
+    rows = _rows(np.vstack([q, q[i]]), ["pose"] * len(q) + ["distance"] * i.size,
+                 {"distance_mm": np.concatenate([np.full(len(q), np.nan), measured])},
+                 {"to": tuple([""] * len(q) + [str(k + 1) for k in j])})
+    table, _ = identify_measures(ROBOT, rows, {})
+    assert table.target_rms_mm["distance"] < 1e-6
+    long = int(np.argmax(nominal))
+    metres = measured.copy()
+    metres[long] /= 1000.0
+    rows = _rows(rows.q_deg, rows.kind, {"distance_mm": np.concatenate([np.full(len(q), np.nan), metres])},
+                 rows.texts)
+    with pytest.raises(DataError, match=rf"test.csv:{len(q) + long + 2}: column 'distance_mm': .*\(metres\?\)"):
+        identify_measures(ROBOT, rows, {})

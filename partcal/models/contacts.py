@@ -54,6 +54,13 @@ ry, rz`` a rotation vector in degrees), fitted with the robot's: the registratio
 
 ORIENTATION_COLUMNS = ("rx_meas", "ry_meas", "rz_meas")
 
+UNIT_FACTOR = 30.0
+"""A distance this many times shorter or longer than the nominal robot's, where that is at least :data:`LONG_MM`,
+is refused: its unit is not mm."""
+
+LONG_MM = 300.0
+"""... (shorter nominal distances are not judged: a tool the nominal robot lacks changes them by any factor)."""
+
 POINT_FAR_MM = 100.0
 """A tracker point in the base frame this far from where the nominal robot puts it is refused: metres, or a
 point in another frame."""
@@ -605,15 +612,16 @@ class DistanceKind(MeasurementKind):
         start = np.array(start)
         between = self.other >= 0         # a pivot's distance is checked by the fit: its place is unknown here
         nominal = np.linalg.norm(positions[self.index[between]] - positions[self.other[between]], axis=1)
-        off = np.abs(nominal - self.measured[between])
-        far = np.flatnonzero(off > NEAR_MM)
+        # an unknown tool moves short distances by tens of mm (the IPA UR10's 93 mm reflector against a zero
+        # tool: 4.3 mm measured, 37.8 nominal), so only a factor that no tool makes on a long one is refused
+        ratio = self.measured[between] / np.maximum(nominal, 1e-9)
+        far = np.flatnonzero((nominal >= LONG_MM) & ((ratio < 1.0 / UNIT_FACTOR) | (ratio > UNIT_FACTOR)))
         if far.size:
-            i = far[np.argmax(off[far])]
+            i = far[np.argmax(np.abs(np.log(ratio[far])))]
             row = self.index[between][i]
             raise DataError(f"{self.rows.where(row)}: column 'distance_mm': {self.measured[between][i]:g} mm, but the "
                             f"nominal robot puts the two tips {nominal[i]:.3f} mm apart ({far.size} distances off by "
-                            f"more than {NEAR_MM:g} mm): expected the distance in mm (metres? another row's id in "
-                            "'to'?)")
+                            f"a factor beyond {UNIT_FACTOR:g}): expected the distance in mm (metres?)")
         return names, start
 
     def residuals(self, positions, rotations, u) -> Residuals:

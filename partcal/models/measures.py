@@ -46,8 +46,9 @@ REFERENCE_NOISE_MM = 0.02
 
 NEAR_MM = 20.0
 """A row whose target the nominal robot puts farther than this from what the row says (a touch from its plane,
-a visit from its point's other visits, a length from the measured one) is refused as bad input: a robot's
-geometric errors are millimetres, so the row names the wrong feature, or its units are not mm."""
+a visit from its point's other visits) is refused as bad input: a robot's geometric errors are millimetres, so
+the row names the wrong feature. (A distance is refused only by a factor, :data:`~partcal.models.contacts.UNIT_FACTOR`:
+an unknown tool changes short distances by more than this.)"""
 
 SCALE = "scale"
 """The name under which a uniform scale of the robot is reported when nothing in the data measures a length."""
@@ -204,7 +205,7 @@ class MeasurementKind:
         """The kind's own unknowns ``(name, unit)`` and where their fit starts, from the targets' ``positions``
         (n, 3) mm and tool ``rotations`` (n, 3, 3) of every row at the nominal robot (consistent data). Two
         kinds declaring an unknown of one name share it (a pivot that is also a fixed point). Rows the nominal
-        robot puts far from what they say (:data:`NEAR_MM`: a touch near no plane, a distance in metres) are
+        robot puts far from what they say (:data:`NEAR_MM`: a touch near no plane; a distance in metres) are
         refused here."""
         return [], np.zeros(0)
 

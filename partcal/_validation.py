@@ -79,6 +79,22 @@ def check_array(
     return arr
 
 
+def check_std(value: Any, n: int, where: str = "") -> NDArray[np.float64]:
+    """``value`` as ``n`` rows of three standard deviations (mm), each finite and > 0: a weighted fit's
+    ``std_mm``; else one :class:`DataError` naming the first bad row (``where``: the data's source, if any).
+
+    >>> check_std([[0.02, 0.02, 0.03]], 1).shape
+    (1, 3)
+    """
+    std = check_array(value, "std_mm", columns=3)
+    bad = np.flatnonzero(~(std > 0).all(axis=1))
+    if std.shape[0] != n or bad.size:
+        got = f"{std[bad[0]].tolist()} at row {bad[0] + 1}" if bad.size else f"{std.shape[0]} rows"
+        raise DataError(f"{where + ': ' if where else ''}Expected std_mm as {n} rows of 3 positive standard "
+                        f"deviations (mm), got {got}")
+    return std
+
+
 def param_error(owner: str, name: str, expected: str, got: Any) -> PartcalError:
     """The one message format for a bad parameter.
 

@@ -39,7 +39,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .._io import atomic_write
-from .._validation import MAX_PAYLOAD_KG, check_array
+from .._validation import MAX_PAYLOAD_KG, check_array, check_std
 from ..errors import DataError
 from ..metrics import MRAD_PER_DEG
 from ..robot.description import MAX_JOINTS, joint_columns, load_robot
@@ -138,12 +138,7 @@ class Measurements:
                                 f"got {got}")
             object.__setattr__(self, "payload_kg", payload)
         if self.std_mm is not None:
-            std = check_array(self.std_mm, "std_mm", columns=3)
-            bad = np.flatnonzero(~(std > 0).all(axis=1))
-            if std.shape[0] != n or bad.size:
-                got = f"{std[bad[0]].tolist()} at row {bad[0] + 1}" if bad.size else f"{std.shape[0]} rows"
-                raise DataError(f"Expected std_mm as {n} rows of 3 positive standard deviations (mm), got {got}")
-            object.__setattr__(self, "std_mm", std)
+            object.__setattr__(self, "std_mm", check_std(self.std_mm, n))
 
     def take(self, rows, name: str | None = None) -> "Measurements":
         """The rows ``rows`` (indices or a boolean mask) as a data set of their own, every column kept."""

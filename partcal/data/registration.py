@@ -38,7 +38,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
-from .._validation import check_array
+from .._validation import check_array, check_std
 from ..errors import DataError
 from ..metrics import ROBUST_LOSSES, loss_weights, pooled_rms
 from ..robot.frames import kabsch
@@ -291,10 +291,7 @@ def _pose_weights(std_mm, n: int, k: int, orientation: bool, source: str):
     coordinates (the orientation's 1); and the reference. ``(None, None)`` without them."""
     if std_mm is None:
         return None, None
-    std = check_array(std_mm, "std_mm", columns=3)
-    if len(std) != n or not np.all(np.isfinite(std) & (std > 0)):
-        raise DataError(f"{source}: expected std_mm as {n} rows of 3 positive standard deviations (mm); got shape "
-                        f"{std.shape}")
+    std = check_std(std_mm, n, source)
     per_pose = np.sqrt(np.mean(std**2, axis=1))
     reference = float(np.sqrt(np.mean(per_pose**2)))
     weight = np.tile(np.repeat(reference / per_pose, 3), k)

@@ -47,7 +47,7 @@ import scipy.linalg
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
-from .._validation import check_array
+from .._validation import check_array, check_std
 from ..errors import DataError
 from ..metrics import ROBUST_LOSSES, held_joints, loss_weights, pooled_rms
 from ..robot.kinematics import Robot
@@ -557,10 +557,7 @@ def row_weights(std_mm: NDArray[np.float64] | None, n: int, extra: Extra | None 
     """
     if std_mm is None:
         return None, None
-    std = check_array(std_mm, "std_mm", columns=3)
-    if len(std) != n or not np.all(np.isfinite(std) & (std > 0)):
-        raise DataError(f"Expected std_mm as {n} rows of 3 positive standard deviations (mm), got shape {std.shape} "
-                        f"with smallest value {np.nanmin(std) if std.size else float('nan'):g}")
+    std = check_std(std_mm, n)
     reference = float(np.sqrt(np.mean(std**2)))
     weight = (reference / std).ravel()
     if extra is None:

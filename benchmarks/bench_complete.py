@@ -12,7 +12,6 @@ model. Run: .venv/bin/python benchmarks/bench_complete.py   (a few seconds)
 import os
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
@@ -20,23 +19,14 @@ sys.path.insert(0, os.path.dirname(__file__))
 
 from _table import print_table  # noqa: E402
 
-from partcal.data.formats import MeasurementFormat, RowSelection  # noqa: E402
+from _ipa import FORMAT, ROOT, SHARED, SPLIT  # noqa: E402
+
+from partcal.data.formats import RowSelection  # noqa: E402
 from partcal.data.measurements import read_measurements  # noqa: E402
 from partcal.data.simulate import load_study  # noqa: E402
 from partcal.models.kinematic import KinematicModel  # noqa: E402
 
-ROOT = Path(__file__).resolve().parent.parent
-SHARED = ROOT.parent / "shared" / "datasets" / "ipa_ur10"
-if not SHARED.is_dir():     # a git worktree one level deeper
-    SHARED = ROOT.parents[1] / "shared" / "datasets" / "ipa_ur10"
-COLUMNS = {"q1": "shoulder_pan_joint", "q2": "shoulder_lift_joint", "q3": "elbow_joint", "q4": "wrist_1_joint",
-           "q5": "wrist_2_joint", "q6": "wrist_3_joint", "x_meas": "measurement_x", "y_meas": "measurement_y",
-           "z_meas": "measurement_z"}
-FORMAT = MeasurementFormat(delimiter=";", decimal=",", columns=COLUMNS, joint_unit="rad")
-SETS = {"B 1-1000 (identification)": ("Series_B/measurements_joint_configurations.csv", "1-1000"),
-        "B 1001-1495": ("Series_B/measurements_joint_configurations.csv", "1001-1495"),
-        "C": ("Series_C/measurements_random_poses.csv", None),
-        "D": ("Series_D/measurements_iso_cubes.csv", None)}
+SETS = {("B 1-1000 (identification)" if name == "B 1-1000" else name): where for name, where in SPLIT.items()}
 
 
 def rms(a) -> float:

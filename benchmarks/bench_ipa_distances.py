@@ -36,7 +36,6 @@ import multiprocessing  # noqa: E402
 import resource  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
-from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
@@ -44,8 +43,10 @@ sys.path.insert(0, os.path.dirname(__file__))
 
 from _table import print_table  # noqa: E402
 
+from _ipa import FORMAT, SHARED, SPLIT as SETS  # noqa: E402
+
 from partcal import load_robot  # noqa: E402
-from partcal.data.formats import MeasurementFormat, RowSelection  # noqa: E402
+from partcal.data.formats import RowSelection  # noqa: E402
 from partcal.data.measurements import read_measurements  # noqa: E402
 from partcal.data.registration import register_tracker  # noqa: E402
 from partcal.models import contacts  # noqa: E402,F401  (registers the built-in kinds)
@@ -54,18 +55,6 @@ from partcal.models.kinematic import KinematicModel  # noqa: E402
 from partcal.models.measures import Rows, identify_measures  # noqa: E402
 from partcal.robot.frames import kabsch  # noqa: E402
 
-ROOT = Path(__file__).resolve().parent.parent
-SHARED = ROOT.parent / "shared" / "datasets" / "ipa_ur10"
-if not SHARED.is_dir():     # a git worktree one level deeper
-    SHARED = ROOT.parents[1] / "shared" / "datasets" / "ipa_ur10"
-COLUMNS = {"q1": "shoulder_pan_joint", "q2": "shoulder_lift_joint", "q3": "elbow_joint", "q4": "wrist_1_joint",
-           "q5": "wrist_2_joint", "q6": "wrist_3_joint", "x_meas": "measurement_x", "y_meas": "measurement_y",
-           "z_meas": "measurement_z"}
-FORMAT = MeasurementFormat(delimiter=";", decimal=",", columns=COLUMNS, joint_unit="rad")
-SETS = {"B 1-1000": ("Series_B/measurements_joint_configurations.csv", "1-1000"),
-        "B 1001-1495": ("Series_B/measurements_joint_configurations.csv", "1001-1495"),
-        "C": ("Series_C/measurements_random_poses.csv", None),
-        "D": ("Series_D/measurements_iso_cubes.csv", None)}
 TESTS = ("B 1001-1495", "C", "D")
 SEED = 39
 RANDOM_PAIRS = 20000

@@ -29,9 +29,9 @@ from numpy.typing import NDArray
 from ..errors import DataError
 from ..robot.frames import kabsch
 from ..robot.kinematics import ORIENTATION_MM_PER_RAD
-from ..robot.rotations import (matrices_from_xyz_deg, matrix_from_rotation_vector, rotation_vector_from_matrix,
-                               rotation_vectors_from_matrices)
-from .identification import PRIMARY_TARGET, log_derivative
+from ..robot.rotations import (left_jacobian, log_derivative, matrices_from_xyz_deg, matrix_from_rotation_vector,
+                               rotation_vector_from_matrix, rotation_vectors_from_matrices, skew_matrices)
+from .identification import PRIMARY_TARGET
 from .targets import PROBE_PARAMETERS
 from .measures import END_KIND, NEAR_MM, MeasurementKind, Residuals, Rows, add_measurement_kind
 
@@ -164,7 +164,7 @@ class PointKind(MeasurementKind):
             seen = self.measured @ matrix_from_rotation_vector(turn).T          # R x, base frame axes
             du[:, :, :3] = -np.eye(3)
             # d(R x) = (J_l dr) x (R x): a turn of the rotation vector by dr (radians)
-            du[:, :, 3:6] = _skew(seen) @ _left_jacobian(turn) * (np.pi / 180.0)
+            du[:, :, 3:6] = skew_matrices(seen) @ left_jacobian(turn) * (np.pi / 180.0)
             seen, k = seen + u[:3], 6
         else:
             seen = self.measured
@@ -176,7 +176,7 @@ class PointKind(MeasurementKind):
             lever = rot @ u[k:k + 3]
             tips[mine] += lever
             du[mine, :, k:k + 3] = rot
-            turn_grad[mine] = -_skew(lever)          # d(R d) = w x (R d)
+            turn_grad[mine] = -skew_matrices(lever)          # d(R d) = w x (R d)
             k += 3
         out = Residuals((tips - seen).ravel(), self.index[which], grad, du.reshape(3 * n, -1),
                         turn_grad=None if turn_grad is None else turn_grad.reshape(3 * n, 3),
@@ -195,7 +195,7 @@ class PointKind(MeasurementKind):
         slope = weight * log_derivative(turns)                                 # (m, 3, 3): by a turn w of the tool
         du = np.zeros((rows.size, 3, out.du.shape[1]))
         # P(p + dp) = P exp(J_r(p) dp): a turn of the tool by R P J_r(p) dp, J_r(p) = J_l(p)^T
-        du[:, :, k:k + 3] = slope @ (model @ _left_jacobian(np.radians(probe)).T) * (np.pi / 180.0)
+        du[:, :, k:k + 3] = slope @ (model @ left_jacobian(np.radians(probe)).T) * (np.pi / 180.0)
         m = 3 * rows.size
         return Residuals(np.concatenate([out.values, weight * turns.ravel()]),
                          np.concatenate([out.rows_a, np.repeat(rows, 3)]), np.vstack([out.grad_a, np.zeros((m, 3))]),
@@ -226,22 +226,6 @@ def _largest_turn_deg(rotations: NDArray[np.float64]) -> float:
     """The largest angle (degrees) between the first of ``rotations`` (n, 3, 3) and the others."""
     cos = (np.einsum("ij,nij->n", rotations[0], rotations[1:]) - 1.0) / 2.0
     return float(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))).max(initial=0.0))
-
-
-def _skew(v: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``[v]_x`` of each row of ``v`` (n, 3): ``[v]_x w = v x w``, shape (n, 3, 3)."""
-    out = np.zeros((len(v), 3, 3))
-    out[:, 0, 1], out[:, 0, 2], out[:, 1, 2] = -v[:, 2], v[:, 1], -v[:, 0]
-    return out - out.transpose(0, 2, 1)
-
-
-def _left_jacobian(phi: NDArray[np.float64]) -> NDArray[np.float64]:
-    """SO(3)'s left Jacobian at the rotation vector ``phi`` (3,): ``exp(phi + d) = exp(J d) exp(phi)``."""
-    t = float(np.linalg.norm(phi))
-    k = _skew(phi[None])[0]
-    if t < 1e-8:
-        return np.eye(3) + 0.5 * k
-    return np.eye(3) + (1 - np.cos(t)) / t**2 * k + (t - np.sin(t)) / t**3 * k @ k
 
 
 @add_measurement_kind
@@ -459,6 +443,11 @@ def _with_flush(out: Residuals, flush: list, rotations, frames: dict, roots: lis
                      scaled=np.concatenate([out.scaled, np.zeros(m, dtype=bool)]))    # a tilt does not scale
 
 
+def _points_moved(u: NDArray[np.float64], omega, shift) -> NDArray[np.float64]:
+    """How points (x, y, z after x, y, z) move with a small turn ``omega`` and a shift of the cell."""
+    return (np.cross(omega, u.reshape(-1, 3)) + shift).ravel()
+
+
 def _point_unknowns(name: str) -> list[tuple[str, str]]:
     return [(f"point {name}.{c}", "mm") for c in "xyz"]
 
@@ -560,8 +549,7 @@ class FixedPointKind(MeasurementKind):
                          turning=np.concatenate([out.turning, np.zeros(n, dtype=bool)]))     # a length does not turn
 
     def moved(self, u, omega, shift):
-        points = u.reshape(-1, 3)
-        return (np.cross(omega, points) + shift).ravel()
+        return _points_moved(u, omega, shift)
 
     def describe(self) -> str:
         return f"{self.index.size} visits of {len(self.names)} fixed points ({_counted(self.point, self.names)})"
@@ -646,8 +634,7 @@ class DistanceKind(MeasurementKind):
                          grad_b=-direction)
 
     def moved(self, u, omega, shift):
-        points = u.reshape(-1, 3)           # the pivots
-        return (np.cross(omega, points) + shift).ravel()
+        return _points_moved(u, omega, shift)          # the pivots
 
     def notes(self) -> list[str]:
         return ["distance: distances do not fix where the robot stands: the base frame (its place and turn) is "

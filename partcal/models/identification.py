@@ -51,8 +51,8 @@ from .._validation import check_array, check_std
 from ..errors import DataError
 from ..metrics import ROBUST_LOSSES, held_joints, loss_weights, pooled_rms
 from ..robot.kinematics import Robot
-from ..robot.rotations import (matrix_from_rotation_vector, matrix_from_rpy_deg, rotation_vectors_from_matrices,
-                               rpy_deg_from_matrix)
+from ..robot.rotations import (log_derivative, matrix_from_rotation_vector, matrix_from_rpy_deg,
+                               rotation_vectors_from_matrices, rpy_deg_from_matrix)
 from .joint_errors import JointErrors
 from .prior import Prior
 from .targets import Extra
@@ -1000,17 +1000,3 @@ def turn_columns(nominal: Robot, robot: Robot, q_actual: NDArray[np.float64], de
             omega[:, :, :size - 6] += np.einsum("nij,njp->nip", per_joint, moves)
         omega[:, :, size:] = np.einsum("nij,njp->nip", per_joint, design)
     return omega
-
-
-def log_derivative(turns: NDArray[np.float64]) -> NDArray[np.float64]:
-    """How ``log(exp(w) exp(phi))`` moves with a small turn ``w`` at rotation vectors ``phi`` (n, 3): the
-    inverse left Jacobian of SO(3), ``I - [phi]/2 + c [phi]^2`` with ``c = 1/t^2 - (1 + cos t)/(2 t sin t)``,
-    ``t = |phi|`` (``c -> 1/12`` as ``t -> 0``), shape (n, 3, 3)."""
-    t = np.linalg.norm(turns, axis=1)
-    small = t < 1e-6
-    safe = np.where(small, 1.0, t)
-    c = np.where(small, 1.0 / 12.0, 1.0 / safe**2 - (1.0 + np.cos(safe)) / (2.0 * safe * np.sin(safe)))
-    skew = np.zeros((len(turns), 3, 3))
-    skew[:, 0, 1], skew[:, 0, 2], skew[:, 1, 2] = -turns[:, 2], turns[:, 1], -turns[:, 0]
-    skew -= skew.transpose(0, 2, 1)
-    return np.eye(3) - 0.5 * skew + c[:, None, None] * skew @ skew

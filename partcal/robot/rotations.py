@@ -218,3 +218,36 @@ def inverse_poses(poses) -> NDArray[np.float64]:
     T = np.asarray(poses, dtype=float).reshape(-1, 4, 4)
     Rt = T[:, :3, :3].transpose(0, 2, 1)
     return poses_from(-np.einsum("nij,nj->ni", Rt, T[:, :3, 3]), Rt)
+
+
+# ---------------------------------------------------------------------- small turns: derivatives of rotation vectors
+def skew_matrices(v: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``[v]_x`` of each row of ``v`` (n, 3): ``[v]_x w = v x w``, shape (n, 3, 3).
+
+    >>> skew_matrices(np.array([[1.0, 2.0, 3.0]]))[0] @ [0.0, 0.0, 1.0]
+    array([ 2., -1.,  0.])
+    """
+    out = np.zeros((len(v), 3, 3))
+    out[:, 0, 1], out[:, 0, 2], out[:, 1, 2] = -v[:, 2], v[:, 1], -v[:, 0]
+    return out - out.transpose(0, 2, 1)
+
+
+def left_jacobian(phi: NDArray[np.float64]) -> NDArray[np.float64]:
+    """SO(3)'s left Jacobian at the rotation vector ``phi`` (3,) radians: ``exp(phi + d) = exp(J d) exp(phi)``."""
+    t = float(np.linalg.norm(phi))
+    k = skew_matrices(phi[None])[0]
+    if t < 1e-8:
+        return np.eye(3) + 0.5 * k
+    return np.eye(3) + (1 - np.cos(t)) / t**2 * k + (t - np.sin(t)) / t**3 * k @ k
+
+
+def log_derivative(turns: NDArray[np.float64]) -> NDArray[np.float64]:
+    """How ``log(exp(w) exp(phi))`` moves with a small turn ``w`` at rotation vectors ``phi`` (n, 3): the
+    inverse left Jacobian of SO(3), ``I - [phi]/2 + c [phi]^2`` with ``c = 1/t^2 - (1 + cos t)/(2 t sin t)``,
+    ``t = |phi|`` (``c -> 1/12`` as ``t -> 0``), shape (n, 3, 3)."""
+    t = np.linalg.norm(turns, axis=1)
+    small = t < 1e-6
+    safe = np.where(small, 1.0, t)
+    c = np.where(small, 1.0 / 12.0, 1.0 / safe**2 - (1.0 + np.cos(safe)) / (2.0 * safe * np.sin(safe)))
+    skew = skew_matrices(turns)
+    return np.eye(3) - 0.5 * skew + c[:, None, None] * skew @ skew

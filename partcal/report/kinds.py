@@ -5,6 +5,7 @@ best model's parameters."""
 from __future__ import annotations
 
 import base64
+import re
 from datetime import datetime, timezone
 from importlib import resources
 from pathlib import Path
@@ -23,11 +24,13 @@ from .figures import COLOURS, svg_of  # noqa: E402
 
 
 def render_kinds_report(result: KindsRunResult, folder: Path) -> Path:
-    """Write ``index.html`` of a kinds run into ``folder``."""
+    """Write ``index.html`` of a kinds run into ``folder``, in the run report's style (its template's)."""
     env = jinja2.Environment(autoescape=True, undefined=jinja2.StrictUndefined)
-    template = env.from_string(resources.files(__package__).joinpath("kinds_template.html").read_text())
+    files = resources.files(__package__)
+    template = env.from_string(files.joinpath("kinds_template.html").read_text())
+    style = re.search(r"<style>.*?</style>", files.joinpath("template.html").read_text(), re.S).group(0)
     path = Path(folder) / "index.html"
-    path.write_text(template.render(**kinds_context(result)), encoding="utf-8")
+    path.write_text(template.render(style=style, **kinds_context(result)), encoding="utf-8")
     return path
 
 

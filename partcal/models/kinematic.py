@@ -26,9 +26,9 @@ from ..robot.kinematics import ORIENTATION_MM_PER_RAD, Robot
 from ..robot.rotations import matrix_from_rotation_vector, rotation_vectors_from_matrices
 from .base import ErrorModelBase, box_points, seed_from
 from .features import varying_inputs
-from .identification import (LOSSES, PARAMETRIZATIONS, PRIMARY_TARGET, STATUSES, Identification, geometric_size, identify,
-                             model_jacobian, nominal_values, own_geometry, parameter_names, prior_variance,
-                             resolved_parametrization, robot_with, PLAUSIBLE_ERROR)
+from .identification import (LOSSES, PARAMETRIZATIONS, PLAUSIBLE_ERROR, PRIMARY_TARGET, STATUSES, Identification,
+                             geometric_size, identify, model_jacobian, nominal_values, own_geometry, parameter_names,
+                             prior_variance, resolved_parametrization, robot_with)
 from .joint_errors import JointErrors, compliance_problem, harmonics_problem
 from . import contacts  # noqa: F401  (the built-in measurement kinds join the table)
 from .contacts import TRACKER_FRAME
@@ -147,7 +147,8 @@ class KinematicModel(ErrorModelBase):
                                  "use_orientation is true: it weighs the orientation in the identification",
                                  lambda p: p["use_orientation"] or p["orientation_mm_per_rad"] == ORIENTATION_MM_PER_RAD),)
     _from_fitted = ("all_targets", "use_orientation")     # a model file keeps what was fitted on instead
-    _OPTIONAL_IN_FILES = ("payload_kg", "orientation_mm_per_rad", "parametrization", "loss", "loss_scale")   # older files: the default
+    _OPTIONAL_IN_FILES = ("payload_kg", "orientation_mm_per_rad", "parametrization", "loss",
+                          "loss_scale")   # older files: the default
     _joint_rules = {"compliance": ((), compliance_problem), "joint_harmonics": (0, harmonics_problem)}
 
     def _check_params(self) -> Robot:
@@ -224,13 +225,7 @@ class KinematicModel(ErrorModelBase):
         if self.n_outputs_ == 6 and self.use_orientation and orientation_deg is None:
             orientation_deg = y[:, ORIENTATION] / MRAD_PER_DEG
         nominal = robot.positions(X)
-        self.joint_errors_ = JointErrors.for_robot(robot, list(self.compliance), self.joint_harmonics)
-        self.parametrization_ = self._resolved_parametrization(robot)
-        payload = self._payload(payload_kg, len(X), fitting=True)
-        self.fitted_payload_kg_ = np.array([payload.min(), payload.max()])
-        # at one payload a compliance is a sag at the tool point like the lumped masses' ones: its column
-        # (compliance x payload's weight x lever) is held at zero, so it is unidentifiable at any payload
-        ident_payload = payload if np.ptp(payload) > 0 else np.zeros_like(payload)
+        payload, ident_payload = self._fit_settings(robot, payload_kg, len(X))
         weight = self.orientation_mm_per_rad if orientation_mm_per_rad is None else orientation_mm_per_rad
         extra = extra_from(robot, X, targets, orientation_deg, weight)
         if prior is None and self.prior is not None:
@@ -247,8 +242,7 @@ class KinematicModel(ErrorModelBase):
         self.measures_, self.measure_notes_, self.frame_fixed_ = (), [], True
         self.robot_ = robot
         self._build_robots()
-        self.active_ = varying_inputs(X)
-        self.data_bounds_ = np.stack([X.min(axis=0), X.max(axis=0)])
+        self._fitted_inputs(X)
         self.residual_ = None
         if self.residual is not None:
             seed = self._residual_seed()
@@ -266,7 +260,8 @@ class KinematicModel(ErrorModelBase):
     def _own_prior(self, robot: Robot, X, y, payload_kg) -> Prior | None:
         """The prior of the parameter ``prior`` at ``prior_strength`` (a list: :meth:`_chosen_strength`): the
         plausible one (:func:`~partcal.models.prior.plausible_prior` about nominal: the robot's
-        ``plausible_error``, else :data:`~partcal.models.identification.PLAUSIBLE_ERROR`) or a given ``Prior`` (another robot's model, rows of 1 mm noise) with its rows times the strength."""
+        ``plausible_error``, else :data:`~partcal.models.identification.PLAUSIBLE_ERROR`) or a given ``Prior``
+        (another robot's model, rows of 1 mm noise) with its rows times the strength."""
         strengths = np.atleast_1d(np.asarray(self.prior_strength, dtype=float))
         self.prior_cv_ = self._chosen_strength(X, y, payload_kg, strengths) if strengths.size > 1 else None
         self.prior_strength_ = float(strengths[0] if self.prior_cv_ is None else
@@ -297,6 +292,22 @@ class KinematicModel(ErrorModelBase):
             out.append(float(np.sqrt(np.mean(np.sum(np.vstack(left) ** 2, axis=1)))))
         return out
 
+    def _fit_settings(self, robot: Robot, payload_kg, n: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """The fitted settings every fit starts with (joint errors, parametrization, the payloads fitted at); the
+        payload per row, and the payload per row the identification reads."""
+        self.joint_errors_ = JointErrors.for_robot(robot, list(self.compliance), self.joint_harmonics)
+        self.parametrization_ = self._resolved_parametrization(robot)
+        payload = self._payload(payload_kg, n, fitting=True)
+        self.fitted_payload_kg_ = np.array([payload.min(), payload.max()])
+        # at one payload a compliance is a sag at the tool point like the lumped masses' ones: its column
+        # (compliance x payload's weight x lever) is held at zero, so it is unidentifiable at any payload
+        return payload, (payload if np.ptp(payload) > 0 else np.zeros_like(payload))
+
+    def _fitted_inputs(self, X: NDArray[np.float64]) -> None:
+        """What the fit keeps of its joint angles: the joints that moved, and the box of the data."""
+        self.active_ = varying_inputs(X)
+        self.data_bounds_ = np.stack([X.min(axis=0), X.max(axis=0)])
+
     def _fit_measures(self, robot: Robot, measures: Measured, payload_kg) -> "KinematicModel":
         """:meth:`fit` from rows of measurement kinds (:func:`~partcal.models.measures.identify_measures`)."""
         if self.loss != "linear":
@@ -310,12 +321,8 @@ class KinematicModel(ErrorModelBase):
             raise DataError(f"{type(self).__name__} for {robot.name} takes {robot.n_joints} joint angles "
                             f"(degrees) per row; the rows have {X.shape[1]}")
         self._y_1d, self.n_outputs_ = False, 3
-        self.joint_errors_ = JointErrors.for_robot(robot, list(self.compliance), self.joint_harmonics)
-        self.parametrization_ = self._resolved_parametrization(robot)
-        payload = self._payload(payload_kg if payload_kg is not None else measures.rows.payload_kg, len(X),
-                                fitting=True)
-        self.fitted_payload_kg_ = np.array([payload.min(), payload.max()])
-        ident_payload = payload if np.ptp(payload) > 0 else np.zeros_like(payload)
+        ident_payload = self._fit_settings(robot, payload_kg if payload_kg is not None else measures.rows.payload_kg,
+                                           len(X))[1]
         self.identification_, self.measure_notes_ = identify_measures(
             robot, measures.rows, measures.features, base=bool(self.base), tool=bool(self.tool),
             rcond=float(self.rcond), errors=self.joint_errors_, payload_kg=ident_payload,
@@ -324,8 +331,7 @@ class KinematicModel(ErrorModelBase):
         self.measures_ = tuple(dict.fromkeys(k for k in measures.rows.kind if k in MEASUREMENT_KINDS))
         self.frame_fixed_ = "point" in self.measures_ and not measures.features.get(TRACKER_FRAME)
         self._build_robots()
-        self.active_ = varying_inputs(X)
-        self.data_bounds_ = np.stack([X.min(axis=0), X.max(axis=0)])
+        self._fitted_inputs(X)
         self.residual_ = None
         self.covariance_scale_ = 1.0
         return self._prepare()

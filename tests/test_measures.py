@@ -409,3 +409,9 @@ def test_distances_from_a_tool_the_nominal_robot_lacks_are_accepted_and_metres_r
                  rows.texts)
     with pytest.raises(DataError, match=rf"test.csv:{len(q) + long + 2}: column 'distance_mm': .*\(metres\?\)"):
         identify_measures(ROBOT, rows, {})
+
+
+def test_the_data_layer_requires_of_each_kind_what_the_kind_reads():
+    from partcal.data.observations import READS
+    for name, cls in MEASUREMENT_KINDS.items():
+        assert set(READS[name]) <= set(cls.reads), name

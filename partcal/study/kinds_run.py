@@ -357,9 +357,8 @@ def fit_entry(spec: ModelSpec, data: KindsData, seed: int, folds: int,
     start = time.process_time()
     model = fitted(data.rows)
     seconds = time.process_time() - start
-    kw = dict(errors=model.joint_errors_, parametrization=model.parametrization_)
-    fit_rms = {k: _rms(r) for k, r in kind_residuals(data.robot, data.rows, data.features, model.identification_,
-                                                       **kw).items()}
+    kw = dict(errors=model.joint_errors_, parametrization=model.parametrization_, payload_kg=_read_payload(data.rows))
+    fit_rms = dict(model.identification_.target_rms_mm)          # each kind's RMS on the rows it was fitted on
     held: dict[str, list] = {}
     began = time.perf_counter()
     for k, (train, out) in enumerate(fold_rows(data.rows, seed, folds)):
@@ -375,6 +374,13 @@ def fit_entry(spec: ModelSpec, data: KindsData, seed: int, folds: int,
                             _weighted_rms(cv, data.features), tests, model.fit_notes(), cv)
 
 
+def _read_payload(rows: Rows):
+    """The payload per row as a fit on ``rows`` reads it: the rows' own when they differ, else none (at one
+    payload a compliance is not identified: KinematicModel's fit does the same)."""
+    payload = rows.payload_kg
+    return payload if payload is not None and np.ptp(payload) > 0 else 0.0
+
+
 def _score(model: KinematicModel, test, data: KindsData) -> dict:
     """A test set's figures: a kinds file's residual RMS per kind; a point CSV's 3-D RMS (after a rigid fit when
     the identification data fix no frame)."""
@@ -383,7 +389,7 @@ def _score(model: KinematicModel, test, data: KindsData) -> dict:
         placed: list[str] = []
         residuals = kind_residuals(data.robot, both, data.features, model.identification_, only=only,
                                    errors=model.joint_errors_, parametrization=model.parametrization_,
-                                   fitted_here=placed)
+                                   payload_kg=_read_payload(both), fitted_here=placed)
         return {"kinds_rms_mm": {k: _rms(r) for k, r in residuals.items()},
                 **({"fitted_on_test": sorted({n.split(".")[0] for n in placed})} if placed else {})}
     predicted = test.nominal_mm + model.predict(test.q_deg)

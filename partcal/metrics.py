@@ -149,6 +149,22 @@ def rms_standard_error(resid: NDArray[np.float64], groups: NDArray[np.intp]) -> 
     return float(se_mse / (2.0 * np.sqrt(mse))) if mse > 0 else 0.0
 
 
+def within_one_standard_error(scores, errors) -> list[int]:
+    """The indices whose CV score is within one standard error of the lowest one (its own standard error; a NaN
+    one counts as 0, a NaN score is never within): the candidates the one-standard-error rule chooses among,
+    the simplest of them (Hastie, Tibshirani and Friedman, *The Elements of Statistical Learning*, 7.10).
+
+    >>> within_one_standard_error([0.30, 0.28, 0.50, float("nan")], [0.02, 0.03, 0.01, 0.0])
+    [0, 1]
+    """
+    finite = [i for i in range(len(scores)) if np.isfinite(scores[i])]
+    if not finite:
+        return []
+    best = min(finite, key=lambda i: (scores[i], i))
+    se = errors[best] if np.isfinite(errors[best]) else 0.0
+    return [i for i in finite if scores[i] <= scores[best] + se]
+
+
 class ExtrapolationWarning(UserWarning):
     """Predictions were requested far from the data a model was fitted on."""
 

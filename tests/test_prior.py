@@ -200,17 +200,17 @@ def run_config(tmp_path, entry, robot="universal_robots_ur10"):
     return path
 
 
-def test_a_plausible_prior_with_a_list_of_strengths_takes_the_one_of_least_block_cv_error(ur10):
+def test_a_plausible_prior_with_a_list_of_strengths_takes_the_strongest_within_one_se_of_block_cv(ur10):
     from partcal.models.identification import PLAUSIBLE_ERROR, geometric_size
     from partcal.models.kinematic import KinematicModel
     q = poses(ur10, 60, 21)
     measured = model_positions(ur10, None, q, moved(ur10, 22), np.zeros(len(q))) + \
         np.random.default_rng(23).normal(scale=0.3, size=(len(q), 3))
     y = measured - ur10.positions(q)
-    strengths = (0.1, 3.0, 30.0)
+    strengths = (0.1, 0.3, 1.0, 3.0, 30.0)
     model = KinematicModel(robot=ur10, prior="plausible", prior_strength=strengths).fit(q, y)
     units = [u for _, u in parameter_names(ur10)]
-    expected = []                                             # the block CV written out
+    expected, errors = [], []                                 # the block CV written out
     for s in strengths:
         prior = plausible_prior(units, geometric_size(ur10) - 9, nominal_values(ur10), s, PLAUSIBLE_ERROR)
         left = []
@@ -218,9 +218,13 @@ def test_a_plausible_prior_with_a_list_of_strengths_takes_the_one_of_least_block
             train = np.setdiff1d(np.arange(60), test)
             fit = KinematicModel(robot=ur10).fit(q[train], y[train], prior=prior)
             left.append(y[test] - fit.predict(q[test]))
-        expected.append(np.sqrt(np.mean(np.sum(np.vstack(left) ** 2, axis=1))))
-    np.testing.assert_allclose(model.prior_cv_, expected, rtol=1e-9)
-    assert model.prior_strength_ == strengths[int(np.argmin(expected))]
+        sq = np.sum(np.vstack(left) ** 2, axis=1)
+        expected.append(np.sqrt(sq.mean()))
+        errors.append(np.std(sq, ddof=1) / np.sqrt(len(sq)) / (2 * np.sqrt(sq.mean())))   # delta method, per row
+    np.testing.assert_allclose(model.prior_cv_, (expected, errors), rtol=1e-9)
+    best = int(np.argmin(expected))
+    assert model.prior_strength_ == max(s for s, e in zip(strengths, expected) if e <= expected[best] + errors[best])
+    assert model.prior_strength_ > strengths[best]            # not the lowest score: the simplest near it
     assert any("strength" in note for note in model.fit_notes())
     plain = KinematicModel(robot=ur10, prior="plausible", prior_strength=model.prior_strength_).fit(q, y)
     np.testing.assert_array_equal(plain.identification_.value, model.identification_.value)
@@ -299,3 +303,56 @@ def test_a_robot_files_plausible_error_sets_the_plausible_prior(ur10):
         robot_from_dict({**spec, "plausible_error": {"mm": 0}})
     with pytest.raises(ConfigError, match=r"plausible_error: expected \{mm: LENGTH, deg: ANGLE\}"):
         robot_from_dict({**spec, "plausible_error": {"m": 1}})
+
+
+def test_a_run_chooses_the_prior_strength_on_its_own_folds_by_the_one_se_rule(tmp_path):
+    """A list of strengths in a run: each scored on the run's folds (a pose's rows together), the strongest
+    within one standard error of the lowest chosen; the folds and the rule written out here."""
+    from partcal.models.kinematic import KinematicModel
+    from partcal.study.config import load_config
+    from partcal.study.runner import run
+    from partcal.study.selection import grouped_splits, measured_poses
+    strengths = (0.03, 0.1, 0.3, 0.5, 1.0, 10.0)
+    cfg = load_config(run_config(tmp_path, f"prior: plausible, prior_strength: {list(strengths)}", "motoman_sk120"))
+    result = run(cfg)
+    r = result.models[0]
+    ident = result.datasets["identification"]
+    groups = measured_poses(ident)
+    folds = grouped_splits(groups, 5, cfg.seed)
+    scores, errors = [], []
+    for s in strengths:
+        left = np.empty_like(ident.errors_mm)
+        for train, test in folds:
+            fit = KinematicModel(robot=r.model.robot, prior="plausible", prior_strength=s)
+            left[test] = ident.errors_mm[test] - fit.fit(ident.q_deg[train], ident.errors_mm[train]).predict(
+                ident.q_deg[test])
+        per_pose = np.bincount(groups, weights=np.sum(left ** 2, axis=1))
+        rows = np.bincount(groups).astype(float)
+        mse = per_pose.sum() / rows.sum()
+        scores.append(np.sqrt(mse))
+        se_mse = np.sqrt(np.sum((per_pose - mse * rows) ** 2) / (len(rows) * (len(rows) - 1))) / rows.mean()
+        errors.append(se_mse / (2 * np.sqrt(mse)))
+    best = int(np.argmin(scores))
+    chosen = max(s for s, v in zip(strengths, scores) if v <= scores[best] + errors[best])
+    assert chosen != strengths[best]                          # the rule, not the lowest score, decides here
+    assert [row["prior_strength"] for row in r.prior_strength] == list(strengths)
+    np.testing.assert_allclose([row["cv_rms_3d"] for row in r.prior_strength], scores, rtol=1e-9)
+    np.testing.assert_allclose([row["cv_se"] for row in r.prior_strength], errors, rtol=1e-9)
+    assert [row["chosen"] for row in r.prior_strength] == [s == chosen for s in strengths]
+    assert r.model.prior_strength == chosen and r.nested
+    assert any(note.startswith(f"prior strength {chosen:g} chosen by the run's cross-validation") for note in r.notes)
+    plain = KinematicModel(robot=r.model.robot, prior="plausible", prior_strength=chosen).fit(ident.q_deg,
+                                                                                              ident.errors_mm)
+    np.testing.assert_allclose(r.model.identification_.value, plain.identification_.value, rtol=0, atol=1e-12)
+
+
+def test_a_run_refuses_lists_of_both_granularities_and_prior_strengths(tmp_path):
+    from partcal import ConfigError
+    from partcal.study.config import load_config
+    entry = ("prior: plausible, prior_strength: auto, residual: {inputs: joint, degree: 1, solver: {method: lstsq}, "
+             "partition: {method: kmeans, n_regions: [2, 3]}}")
+    with pytest.raises(ConfigError, match=r"models\[0\]\.prior_strength \(line 6\): the run's cross-validation "
+                                          r"chooses one list per entry"):
+        load_config(run_config(tmp_path, entry, "motoman_sk120"))
+    cfg = load_config(run_config(tmp_path, "prior: plausible, prior_strength: auto", "motoman_sk120"))
+    assert cfg.models[0].strengths == (0.1, 0.178, 0.316, 0.562, 1.0, 1.778, 3.162, 5.623, 10.0, 17.783, 31.623)

@@ -20,7 +20,8 @@ from sklearn.utils.validation import check_is_fitted, validate_data
 
 from .._validation import MAX_PAYLOAD_KG, FieldReader, Requirement, boolean, check_array, one_of, param_error, real
 from ..errors import DataError, ModelFileError
-from ..metrics import MRAD_PER_DEG, MRAD_PER_RAD, ORIENTATION, POSITION, ExtrapolationWarning, distance_outside_boxes
+from ..metrics import (MRAD_PER_DEG, MRAD_PER_RAD, ORIENTATION, POSITION, ExtrapolationWarning, distance_outside_boxes,
+                       pooled_rms, rms_standard_error)
 from ..robot.description import load_robot, robot_from_dict, robot_to_dict
 from ..robot.kinematics import ORIENTATION_MM_PER_RAD, Robot
 from ..robot.rotations import matrix_from_rotation_vector, rotation_vectors_from_matrices
@@ -35,7 +36,7 @@ from .contacts import TRACKER_FRAME
 from .measures import MEASUREMENT_KINDS, Measured, identify_measures
 from .kindtable import body_of, check_body, may_be_residual, model_from_body, regions_of, residual_kinds
 from .pose import PoseErrorModel
-from .prior import Prior, plausible_prior, strength_problem
+from .prior import Prior, plausible_prior, strength_problem, strengths_of, strongest_within
 from .targets import added_names, added_nominal, extra_from
 
 log = logging.getLogger(__name__)
@@ -205,9 +206,10 @@ class KinematicModel(ErrorModelBase):
         ``prior`` (:class:`~partcal.models.prior.Prior`, indices into the identification table's order): a
         Gaussian prior on the parameters, the identification MAP (:func:`~partcal.models.identification.identify`);
         default the parameter ``prior``: ``'plausible'`` (:func:`~partcal.models.prior.plausible_prior` at
-        ``prior_strength``; a list of strengths: the one of least RMS on 5 contiguous blocks of the data held out
-        in turn, :meth:`_chosen_strength`) or a ``Prior`` (another robot's model, ``prior: FILE.json`` in a run:
-        its rows times ``prior_strength`` too).
+        ``prior_strength``; a list of strengths, or ``'auto'`` for :data:`~partcal.models.prior.STRENGTH_GRID`:
+        the strongest within one standard error of the lowest RMS on 5 contiguous blocks of the data held out in
+        turn, :meth:`_chosen_strength`; a run chooses on its own folds) or a ``Prior`` (another robot's model,
+        ``prior: FILE.json`` in a run: its rows times ``prior_strength`` too).
         """
         robot = self._check_params()
         if measures is not None:
@@ -262,10 +264,10 @@ class KinematicModel(ErrorModelBase):
         plausible one (:func:`~partcal.models.prior.plausible_prior` about nominal: the robot's
         ``plausible_error``, else :data:`~partcal.models.identification.PLAUSIBLE_ERROR`) or a given ``Prior``
         (another robot's model, rows of 1 mm noise) with its rows times the strength."""
-        strengths = np.atleast_1d(np.asarray(self.prior_strength, dtype=float))
-        self.prior_cv_ = self._chosen_strength(X, y, payload_kg, strengths) if strengths.size > 1 else None
-        self.prior_strength_ = float(strengths[0] if self.prior_cv_ is None else
-                                     strengths[int(np.argmin(self.prior_cv_))])
+        strengths = strengths_of(self.prior_strength)
+        self.prior_cv_ = self._chosen_strength(X, y, payload_kg, strengths) if len(strengths) > 1 else None
+        self.prior_strength_ = (strengths[0] if self.prior_cv_ is None else
+                                strengths[strongest_within(strengths, *self.prior_cv_)])
         if isinstance(self.prior, Prior):
             return None if self.prior_strength_ == 0 else Prior(
                 self.prior.index, self.prior.mean, self.prior.root * self.prior_strength_, self.prior.names,
@@ -275,13 +277,15 @@ class KinematicModel(ErrorModelBase):
                                nominal_values(robot, self.joint_errors_, self.parametrization_),
                                self.prior_strength_, {**PLAUSIBLE_ERROR, **(robot.plausible_error or {})})
 
-    def _chosen_strength(self, X, y, payload_kg, strengths) -> list[float]:
+    def _chosen_strength(self, X, y, payload_kg, strengths) -> tuple[list[float], list[float]]:
         """The 3-D RMS of the kinematic part's errors on each of 5 contiguous blocks of the data (measurement
         order: real residuals are correlated, shuffled folds would reward fitting them), held out in turn, for
-        each of ``strengths``; the positions alone (no residual model, no further targets)."""
+        each of ``strengths``, and its standard error over the rows (what
+        :func:`~partcal.models.prior.strongest_within` chooses by); the positions alone (no residual model, no
+        further targets). A run chooses on its own folds instead (``partcal.study.selection``)."""
         payload = self._payload(payload_kg, len(X), fitting=True)
         blocks = np.array_split(np.arange(len(X)), min(5, len(X)))
-        out = []
+        out, errors = [], []
         for strength in strengths:
             left = []
             for test in blocks:
@@ -289,8 +293,9 @@ class KinematicModel(ErrorModelBase):
                 part = clone(self).set_params(prior_strength=float(strength), residual=None)
                 part.fit(X[train], y[train, :3], payload[train])
                 left.append(y[test, :3] - part.predict_kinematic(X[test], payload[test])[:, :3])
-            out.append(float(np.sqrt(np.mean(np.sum(np.vstack(left) ** 2, axis=1)))))
-        return out
+            out.append(pooled_rms(np.vstack(left)))
+            errors.append(rms_standard_error(np.vstack(left), np.arange(len(X))))
+        return out, errors
 
     def _fit_settings(self, robot: Robot, payload_kg, n: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """The fitted settings every fit starts with (joint errors, parametrization, the payloads fitted at); the
@@ -558,7 +563,7 @@ class KinematicModel(ErrorModelBase):
     def _prior_from_config(cls, sec, context: dict) -> dict:
         """``prior``: ``plausible`` or a kinematic model file of another robot of the same type (read by
         ``context["model_prior"]``, the study layer's: ``(section, path text) -> Prior``), with ``prior_strength``
-        (a number, or a list to choose from). No key: no prior."""
+        (a number, or a list or ``auto`` to choose from). No key: no prior."""
         kind = sec.get("prior", "str", default=None, check=lambda v: None if v.strip() else "a non-empty text")
         strength = sec.get("prior_strength", "any", default=1.0, check=strength_problem)
         if kind is None:
@@ -566,7 +571,8 @@ class KinematicModel(ErrorModelBase):
                 sec.fail(sec.path("prior_strength"), "applies with a prior only (prior: plausible or FILE.json)")
             return {}
         return {"prior": "plausible" if kind == "plausible" else context["model_prior"](sec, kind),
-                "prior_strength": tuple(float(v) for v in strength) if isinstance(strength, list) else float(strength)}
+                "prior_strength": (tuple(float(v) for v in strength) if isinstance(strength, list) else
+                                   strength if isinstance(strength, str) else float(strength))}
 
     @classmethod
     def config_keys(cls) -> set[str]:
@@ -725,9 +731,10 @@ class KinematicModel(ErrorModelBase):
         if not getattr(self, "frame_fixed_", True):
             notes.append(self.frame_note())
         if getattr(self, "prior_cv_", None) is not None:
-            notes.append(f"plausible prior: strength {self.prior_strength_:g} chosen by 5-block CV (3-D RMS "
-                         + ", ".join(f"{s:g}: {r:.4f} mm" for s, r in zip(np.atleast_1d(self.prior_strength),
-                                                                          self.prior_cv_)) + ")")
+            notes.append(f"prior: strength {self.prior_strength_:g} chosen by 5-block CV, the strongest within one "
+                         "standard error of the lowest (3-D RMS " + ", ".join(
+                             f"{s:g}: {r:.4f} +- {e:.4f} mm" for s, r, e in zip(strengths_of(self.prior_strength),
+                                                                                *self.prior_cv_)) + ")")
         return notes + (self.residual_.fit_notes() if self.residual_ is not None else [])
 
     def frame_note(self) -> str:

@@ -25,6 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import DataError
+from ..metrics import within_one_standard_error
 
 EIGEN_FLOOR = 1e-12
 """Eigenvalues of a prior covariance below this fraction of the largest are raised to it (a covariance
@@ -121,16 +122,51 @@ class Prior:
         return mask
 
 
-def strength_problem(value) -> str | None:
-    """What a ``prior_strength`` must be (a number >= 0, or a non-empty list of them to choose from), or None.
+STRENGTH_GRID = tuple(round(0.1 * 10 ** (k / 4), 3) for k in range(11))
+"""``prior_strength: auto``: 0.1 to 31.6, four to a decade (0.1, 0.178, 0.316, 0.562, 1, 1.778, ...)."""
 
-    >>> strength_problem([0.3, 1, 3]) is None, strength_problem(-1)
-    (True, 'a number >= 0 or a non-empty list of them')
+
+def strength_problem(value) -> str | None:
+    """What a ``prior_strength`` must be (a number >= 0, ``auto``, or a non-empty list of numbers to choose
+    from), or None.
+
+    >>> strength_problem([0.3, 1, 3]) is None, strength_problem("auto") is None, strength_problem(-1)
+    (True, True, 'a number >= 0, auto, or a non-empty list of numbers >= 0')
     """
+    if isinstance(value, str) and value == "auto":
+        return None
     values = value if isinstance(value, (list, tuple)) else [value]
     ok = bool(values) and all(isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v) and v >= 0
                               for v in values)
-    return None if ok else "a number >= 0 or a non-empty list of them"
+    return None if ok else "a number >= 0, auto, or a non-empty list of numbers >= 0"
+
+
+def strengths_of(value) -> tuple[float, ...]:
+    """The strengths a ``prior_strength`` names: ``auto`` the grid :data:`STRENGTH_GRID`, a list its numbers
+    (sorted, each once), a number itself.
+
+    >>> strengths_of([3, 1, 3]), strengths_of(0.5), len(strengths_of("auto"))
+    ((1.0, 3.0), (0.5,), 11)
+    """
+    if isinstance(value, str):
+        return STRENGTH_GRID
+    if isinstance(value, (list, tuple)):
+        return tuple(sorted({float(v) for v in value}))
+    return (float(value),)
+
+
+def strongest_within(strengths, scores, errors) -> int:
+    """The index of the strongest prior whose CV score is within one standard error of the lowest (the
+    one-standard-error rule: a stronger prior is a simpler model, fewer parameters effectively free); the
+    lowest score when none is finite enough to compare.
+
+    >>> strongest_within([0.3, 1, 3, 10], [0.4166, 0.4168, 0.4240, 0.4652], [0.0096, 0.0097, 0.0097, 0.0101])
+    2
+    """
+    within = within_one_standard_error(scores, errors)
+    if not within:
+        return int(np.nanargmin(scores)) if np.isfinite(scores).any() else 0
+    return max(within, key=lambda i: (strengths[i], -i))
 
 
 def plausible_prior(units: list[str], n_rows: int, nominal: NDArray[np.float64], strength: float,

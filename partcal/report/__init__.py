@@ -94,6 +94,7 @@ def context(result: RunResult) -> dict:
         "fit_warnings": grouped_warnings(result.models),
         "left_out": list(result.plan.notes) if result.plan else [],
         "granularity": granularity_rows(result),
+        "strengths": strength_rows(result),
         "coarser_in_cv": coarser_in_cv(result),
         "shown_models": [r.spec.name for r in shown],
         "error_figures": error_figures(result, shown),
@@ -266,6 +267,13 @@ def granularity_rows(result: RunResult) -> list[dict]:
                   "cv_regions": _span(g["cv_regions"]), "cv": g["cv_rms_3d"], "chosen": i == chosen}
                  for i, g in enumerate(r.granularity)]
     return rows
+
+
+def strength_rows(result: RunResult) -> list[dict]:
+    """CV score (and its standard error) of every candidate prior strength; the chosen one marked (the
+    strongest within one standard error of the lowest, :func:`~partcal.study.selection.strength_rule`)."""
+    return [{"model": r.spec.name, "strength": row["prior_strength"], "cv": row["cv_rms_3d"], "se": row["cv_se"],
+             "chosen": row["chosen"]} for r in result.models for row in (r.prior_strength or [])]
 
 
 def coarser_in_cv(result: RunResult) -> list[dict]:

@@ -25,6 +25,7 @@ from ..models.kinds import KINDS, config_kinds, fits_pose_errors
 from ..models.partition import PARTITIONS
 from ..models.partitioned import PartitionedErrorModel
 from ..models.pose import PoseErrorModel
+from ..models.prior import strengths_of
 from ..robot.description import load_robot, robot_reference
 from ..robot.kinematics import Robot
 from ..robot.urdf import UrdfReference, is_urdf
@@ -92,11 +93,21 @@ class ModelSpec:
         part = self.partition or (self.residual.partition if self.residual is not None else None)
         return part.sizes if part is not None else ()
 
-    def build(self, random_state: int | None, size: int | None = None):
-        """The estimator, unfitted (``size`` picks one granularity of the partition, or of the residual's); for
-        pose errors a model of one kind for the position and one for the orientation
-        (:class:`~partcal.models.pose.PoseErrorModel`), unless the kind predicts them itself (kinematic)."""
-        model = self.estimator_class.from_params(self.params, random_state)
+    @property
+    def strengths(self) -> tuple[float, ...]:
+        """Candidate strengths of this entry's prior (``prior_strength``: a list or ``auto``), which the run's
+        cross-validation chooses among; () if there is no prior, one if it is a number."""
+        if self.params.get("prior") is None:
+            return ()
+        return strengths_of(self.params.get("prior_strength", 1.0))
+
+    def build(self, random_state: int | None, size: int | None = None, strength: float | None = None):
+        """The estimator, unfitted (``size`` picks one granularity of the partition, or of the residual's;
+        ``strength`` one prior strength); for pose errors a model of one kind for the position and one for the
+        orientation (:class:`~partcal.models.pose.PoseErrorModel`), unless the kind predicts them itself
+        (kinematic)."""
+        params = self.params if strength is None else {**self.params, "prior_strength": float(strength)}
+        model = self.estimator_class.from_params(params, random_state)
         if self.residual is not None:
             model.set_params(residual=self.residual.build(random_state, size))
         if self.partition is not None:
@@ -492,8 +503,12 @@ def _model(sec: Section, robot: Robot | None, parent: str | None = None, base: P
         if not sub.data:
             sec.fail(sec.path("residual"), "must be a model entry, e.g. {inputs: joint, degree: 2}")
         residual = _model(sub, robot, parent=name)
+    spec = ModelSpec(name=name, kind=kind.name, params=params, partition=partition, residual=residual)
+    if len(spec.strengths) > 1 and len(spec.sizes) > 1:
+        sec.fail(sec.path("prior_strength"), "the run's cross-validation chooses one list per entry, and this entry "
+                 "has a list of granularities too; give prior_strength one number")
     sec.done()
-    return ModelSpec(name=name, kind=kind.name, params=params, partition=partition, residual=residual)
+    return spec
 
 
 def _kind_check(allowed: tuple[str, ...], parent: str | None):

@@ -34,7 +34,7 @@ from .config import ModelSpec, SpreadOptions
 from .prepare import PreparedRun, model_inputs
 from .results import ModelResult
 from .scoring import Outputs, spread_summary
-from .selection import CVPlan, choose_granularity, fits_on_folds, nested_residuals
+from .selection import CVPlan, choose_granularity, choose_strength, fits_on_folds, nested_residuals, strength_rule
 from .spread import run_spread
 
 log = logging.getLogger(__name__)
@@ -152,7 +152,24 @@ def fit_model(spec: ModelSpec, seed: int, data: dict[str, Measurements], cv: CVP
     with held_warnings() as said:
         result = _fit_model(spec, seed, data, cv, robot, own_frame, lines, outputs, n_jobs, spread)
     result.notes = list(dict.fromkeys(said + result.model.fit_notes()))      # the run names the model in front
+    if result.prior_strength is not None:
+        result.notes.append(strength_note(result.prior_strength))
     return result
+
+
+def strength_note(table: list[dict]) -> str:
+    """What a run says of the prior strength its folds chose (:func:`~partcal.study.selection.choose_strength`).
+
+    >>> print(strength_note([{"prior_strength": 1.0, "cv_rms_3d": 0.41, "cv_se": 0.01, "chosen": False},
+    ...                      {"prior_strength": 3.0, "cv_rms_3d": 0.415, "cv_se": 0.01, "chosen": True}]))
+    ... # doctest: +NORMALIZE_WHITESPACE
+    prior strength 3 chosen by the run's cross-validation, the strongest within one standard error of the
+    lowest (CV 3-D RMS: 1: 0.4100 +- 0.0100, 3: 0.4150 +- 0.0100)
+    """
+    chosen = next(row["prior_strength"] for row in table if row["chosen"])
+    return (f"prior strength {chosen:g} chosen by the run's cross-validation, the strongest within one standard "
+            "error of the lowest (CV 3-D RMS: " + ", ".join(f"{row['prior_strength']:g}: {row['cv_rms_3d']:.4f} +- "
+                                                          f"{row['cv_se']:.4f}" for row in table) + ")")
 
 
 def _fit_model(spec, seed, data, cv, robot, own_frame, lines, outputs, n_jobs=1,
@@ -161,7 +178,7 @@ def _fit_model(spec, seed, data, cv, robot, own_frame, lines, outputs, n_jobs=1,
     X, y = model_inputs(spec.inputs, ident), outputs.errors(ident)
     candidates = [spec.build(seed, size) for size in spec.sizes] or [spec.build(seed)]   # built once, then cloned
     rows = per_row_arguments(candidates[0], ident, robot)
-    granularity, nested, cv_regions, fold_fits = None, False, None, []
+    granularity, nested, cv_regions, fold_fits, strengths = None, False, None, [], None
     start = time.perf_counter()
 
     def fold_done(done: int, total: int) -> None:
@@ -192,6 +209,14 @@ def _fit_model(spec, seed, data, cv, robot, own_frame, lines, outputs, n_jobs=1,
             row.pop("fit_seconds", None)
         cv_seconds, nested = time.perf_counter() - start - fit_seconds, True
         cv_regions = granularity[chosen]["cv_regions"]
+    elif len(spec.strengths) > 1:
+        candidates = [spec.build(seed, strength=s) for s in spec.strengths]
+        rule = strength_rule(spec.strengths, cv.groups, outputs.score, outputs.ranked)
+        resid = nested_residuals(candidates, X, y, folds=cv.folds, inner=cv.inner, progress=fold_done, per_row=rows,
+                                 score=outputs.score, n_jobs=n_jobs, choose=rule)
+        estimator, strengths, fit_seconds = choose_strength(candidates, spec.strengths, X, y, cv, per_row=rows,
+                                                            score=outputs.score, ranked=outputs.ranked, n_jobs=n_jobs)
+        cv_seconds, nested = time.perf_counter() - start - fit_seconds, True
     else:
         # the folds and the final fit, side by side when n_jobs allows
         resid, estimator, fit_seconds = fits_on_folds(candidates[0], X, y, cv.folds, fitted=fold_fits,
@@ -227,7 +252,7 @@ def _fit_model(spec, seed, data, cv, robot, own_frame, lines, outputs, n_jobs=1,
                        pso_rms_ratio(estimator), granularity, cv_seconds=cv_seconds, nested=nested,
                        cv_regions=cv_regions, cv_se=rms_standard_error(outputs.ranked(resid), cv.groups),
                        effective_parameters=estimator.effective_parameters(), rank_on=outputs.rank_on,
-                       spreads=spreads, spread_seconds=spread_seconds)
+                       spreads=spreads, spread_seconds=spread_seconds, prior_strength=strengths)
 
 
 def _name_downweighted(estimator) -> None:

@@ -170,6 +170,8 @@ def metrics_document(result: RunResult) -> dict:
             entry["pso_rms_ratio"] = r.rms_ratio
         if r.granularity is not None:
             entry["granularity"] = r.granularity
+        if r.prior_strength is not None:
+            entry["prior_strength"] = r.prior_strength
         if r.cv_regions is not None:
             entry["cv"]["regions"] = r.cv_regions
         if r.compensation:

@@ -233,7 +233,7 @@ def _feasible(config: RunConfig, i: int, entry: ModelSpec, ident: Measurements, 
                              f"left out: its regions need {need} samples each, and the smallest inner training "
                              f"fold of nested cross-validation ({cv.describe()}) holds {inner}")
                 sizes = fits
-        train = cv.smallest_train(nested=len(sizes) > 1)
+        train = cv.smallest_train(nested=len(sizes) > 1 or len(entry.strengths) > 1)
         if train < need:
             config.fail(_key(config, i, prefix + (key or "kind")),
                         f"{entry.name!r} needs {why}, but the smallest cross-validation training fold "

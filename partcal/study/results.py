@@ -30,7 +30,7 @@ class ModelResult:
     spec: ModelSpec
     model: object                       # any partcal error model (series, partitioned, GP, kinematic)
     fit_seconds: float                  # the final fit on the identification set, nothing else
-    cv_rms_3d: float                    # on the run's shared folds; nested for granularity lists
+    cv_rms_3d: float                    # on the run's shared folds; nested for lists of granularities or prior strengths
     metrics: dict[str, dict]
     predictions: dict[str, NDArray[np.float64]]
     rms_ratio: float | None = None
@@ -45,6 +45,7 @@ class ModelResult:
     rank_on: str = "position"           # cv_rms_3d and cv_se are of the position (mm) or the orientation (mrad)
     spreads: dict[str, NDArray[np.float64]] = field(default_factory=dict)  # std of each prediction, by data set
     spread_seconds: float = 0.0         # calibrating the spread (config ``spread``): the fits it added
+    prior_strength: list[dict] | None = None   # a list of prior strengths: each one's CV score, the chosen marked
 
     def score(self, rank_by: str) -> float:
         """The number the run ranks by: the CV score, or the RMS on the validation set (3-D, mm; with ``rank_on:

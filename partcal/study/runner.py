@@ -11,7 +11,7 @@ a test set. The stages, each in its module:
    registered once, the folds drawn, the feasible entries kept
    (``partcal run --check`` stops here);
 2. **fit** (:mod:`~partcal.study.fitting`): every entry fitted, cross-validated
-   on the shared folds (nested for granularity lists) and scored;
+   on the shared folds (nested for lists of granularities or prior strengths) and scored;
 3. **verify** (:func:`~partcal.study.scoring.verify_compensation`): with a
    virtual robot, the compensated test targets commanded on the simulated
    true robot;

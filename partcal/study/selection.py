@@ -6,7 +6,10 @@ row, the fold rule, the folds) and scores every model on them by its
 held-out residuals (:func:`held_out_residuals`); a model with a list of
 granularities is scored by nested cross-validation (:func:`nested_residuals`:
 the granularity is chosen inside each outer training fold) and fitted with the
-granularity :func:`choose_granularity` picks on the outer folds. The run's best
+granularity :func:`choose_granularity` picks on the outer folds. A prior's
+list of strengths is chosen the same way, by :func:`strength_rule` (the
+strongest within one standard error of the lowest score) instead of the
+lowest score (:func:`choose_strength`). The run's best
 model is the simplest physical model within one standard error of the lowest
 CV score, else the lowest (:func:`choose_simplest`, :func:`choose_best`), or
 the lowest RMS on a validation set.
@@ -28,9 +31,11 @@ from sklearn.base import clone
 
 from .._validation import check_int
 from ..data.measurements import Measurements
-from ..metrics import HELD_TOLERANCE_DEG, labels_as_groups, pooled_rms, pose_groups
+from ..metrics import (HELD_TOLERANCE_DEG, labels_as_groups, pooled_rms, pose_groups, rms_standard_error,
+                       within_one_standard_error)
 from ..models.kinds import is_physical, regions_of
 from ..models.partitioned import fold_regions
+from ..models.prior import strongest_within
 from ..models.threads import one_blas_thread
 
 if TYPE_CHECKING:
@@ -242,8 +247,8 @@ def select_by_cv(candidates, X, y, *, folds, fold_models: list | None = None, pe
 
 def nested_residuals(candidates, X, y, *, folds, inner: Callable[[NDArray[np.intp]], list],
                      progress: Callable[[int, int], None] | None = None, per_row: dict | None = None,
-                     score: Callable[[NDArray[np.float64]], float] | None = None, n_jobs: int = 1
-                     ) -> NDArray[np.float64]:
+                     score: Callable[[NDArray[np.float64]], float] | None = None, n_jobs: int = 1,
+                     choose: Callable[[list, NDArray[np.intp]], int] | None = None) -> NDArray[np.float64]:
     """Held-out residuals of "choose among ``candidates`` by CV, then fit": the choice is made inside each fold.
 
     For every outer ``(train, test)`` fold the candidate (an unfitted
@@ -256,7 +261,8 @@ def nested_residuals(candidates, X, y, *, folds, inner: Callable[[NDArray[np.int
     the hyperparameters it learns there), so the inner fits only solve; no
     fold learns anything from its held-out rows. ``per_row``: see
     :func:`held_out_residuals`; ``score``: see :func:`select_by_cv`; ``n_jobs``: inner folds fitted at a
-    time.
+    time. ``choose(residuals, rows)``: the rule that picks a candidate from their held-out residuals on the
+    rows ``rows`` of ``X`` (:func:`strength_rule`); default the lowest ``score``.
     """
     score = score or pooled_rms
     X, y = np.asarray(X, dtype=float), np.asarray(y, dtype=float)
@@ -265,8 +271,9 @@ def nested_residuals(candidates, X, y, *, folds, inner: Callable[[NDArray[np.int
         Xt, yt, rows = X[train], y[train], rows_of(per_row, train)
         frozen = [_frozen(c, Xt, yt, rows) for c in candidates]
         splits = inner(train)
-        scores = [score(held_out_residuals(c, Xt, yt, splits, per_row=rows, n_jobs=n_jobs)) for c in frozen]
-        chosen = frozen[min(range(len(scores)), key=scores.__getitem__)]
+        each = [held_out_residuals(c, Xt, yt, splits, per_row=rows, n_jobs=n_jobs) for c in frozen]
+        scores = [score(r) for r in each]
+        chosen = frozen[choose(each, train) if choose is not None else min(range(len(scores)), key=scores.__getitem__)]
         resid[test] = y[test] - clone(chosen).fit(Xt, yt, **rows).predict(X[test], **rows_of(per_row, test,
                                                                                                predicting=True))
         if progress is not None:
@@ -285,6 +292,40 @@ def nested_cross_validated_rms(candidates, X, y, *, folds, inner_folds: int = 5,
         return kfold_splits(len(train), min(inner_folds, len(train)), random_state)
 
     return pooled_rms(nested_residuals(candidates, X, y, folds=folds, inner=inner))
+
+
+def strength_rule(strengths: Sequence[float], groups: NDArray[np.intp],
+                  score: Callable[[NDArray[np.float64]], float] = pooled_rms,
+                  ranked: Callable[[NDArray[np.float64]], NDArray[np.float64]] = lambda r: r
+                  ) -> Callable[[list, NDArray[np.intp]], int]:
+    """The rule that chooses a prior's strength from the held-out residuals of one candidate per strength:
+    the strongest within one standard error of the lowest ``score``
+    (:func:`~partcal.models.prior.strongest_within`, the run's own rule for the simplest model), the standard
+    error over the poses ``groups`` of the rows scored (:func:`~partcal.metrics.rms_standard_error` of
+    ``ranked`` residuals, as a run's CV score has it). ``choose(residuals, rows)`` -> the index."""
+    def choose(residuals: list, rows: NDArray[np.intp]) -> int:
+        poses = labels_as_groups(groups[rows])
+        return strongest_within(strengths, [score(r) for r in residuals],
+                                [rms_standard_error(ranked(r), poses) for r in residuals])
+    return choose
+
+
+def choose_strength(candidates: Sequence, strengths: Sequence[float], X, y, cv: "CVPlan", *,
+                    per_row: dict | None = None, score: Callable[[NDArray[np.float64]], float] = pooled_rms,
+                    ranked: Callable[[NDArray[np.float64]], NDArray[np.float64]] = lambda r: r,
+                    n_jobs: int = 1) -> tuple[object, list[dict], float]:
+    """Choose a prior's strength among unfitted ``candidates`` (one per strength) by the run's folds and
+    :func:`strength_rule`; the chosen candidate fitted on all of ``X, y``, a row per strength
+    (``prior_strength``, ``cv_rms_3d``, ``cv_se``, ``chosen``) and the seconds of the final fit. The score of
+    the chosen strength on the folds that chose it flatters it: :func:`nested_residuals` with the same rule
+    gives the honest one."""
+    each = [held_out_residuals(c, X, y, cv.folds, per_row=per_row, n_jobs=n_jobs) for c in candidates]
+    best = strength_rule(strengths, cv.groups, score, ranked)(each, np.arange(len(X)))
+    begin = time.perf_counter()
+    fitted = clone(candidates[best]).fit(X, y, **(per_row or {}))
+    table = [{"prior_strength": float(s), "cv_rms_3d": score(r), "cv_se": rms_standard_error(ranked(r), cv.groups),
+              "chosen": k == best} for k, (s, r) in enumerate(zip(strengths, each))]
+    return fitted, table, time.perf_counter() - begin
 
 
 def choose_simplest(scores, errors, sizes, physical) -> int:
@@ -308,8 +349,7 @@ def choose_simplest(scores, errors, sizes, physical) -> int:
     1
     """
     best = min(range(len(scores)), key=lambda i: (not np.isfinite(scores[i]), scores[i], i))
-    se = errors[best] if np.isfinite(errors[best]) else 0.0
-    within = [i for i in range(len(scores)) if physical[i] and scores[i] <= scores[best] + se]
+    within = [i for i in within_one_standard_error(scores, errors) if physical[i]]
     return min(within, key=lambda i: (sizes[i], scores[i], i)) if within else best
 
 
@@ -458,7 +498,7 @@ def rank_reason(config: "RunConfig", cv: CVPlan | None, physical: bool) -> str:
     if config.rank_by == "validation":
         return f"lowest {part} on the validation set {config.validation.name} (held out, never fitted)"
     folds = fold_name(cv.rule) if cv is not None else f"{config.cv_folds}-fold"
-    how = ("(the same folds for every model, a pose's rows held out together; nested for granularity lists)")
+    how = ("(the same folds for every model, a pose's rows held out together; nested for lists of granularities or prior strengths)")
     if physical:
         return (f"physical model (kinematic, no data-driven residual) with the fewest parameters whose {folds} "
                 f"cross-validated {part} on the identification set is within one standard error of the lowest {how}")

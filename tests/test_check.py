@@ -1,5 +1,7 @@
 """``partcal check`` on a virtual UR10: unchanged data hold, a moved joint offset and a changed tool are found and
-ranked first, the statistic and its p-value against an independent computation, bad inputs refused."""
+ranked first, the statistic and its p-value against an independent computation, bad inputs refused; a joint offset
+under a drifting frame and a frame change told apart (forward selection where joint 1 moves little), the share of
+an explanation the likeliest reproduces against an independent finite difference."""
 
 import dataclasses
 
@@ -13,7 +15,7 @@ from partcal.data.sampling import sample_configurations
 from partcal.data.simulate import load_study
 from partcal.models.kinematic import KinematicModel
 from partcal.models.series import ErrorModel
-from partcal.study.check import check_file
+from partcal.study.check import check_arrays, check_file
 from partcal.study.persist import load_model, save_model
 from partcal.study.spread import calibrate_spread
 
@@ -160,3 +162,97 @@ def test_a_model_without_robot_parameters_is_judged_without_explanations(cell):
     z = (data.measured_mm - virtual.nominal.positions(data.q_deg) - mean) / std
     assert result.mean_z2 == pytest.approx(np.mean(z ** 2), rel=1e-9) and result.explanations == ()
     assert "no explanations tried" in "\n".join(result.lines())
+
+
+def _rigidly_moved(points_mm, rotvec_deg, shift_mm):
+    """Points carried by a small rigid motion: turned by ``rotvec_deg`` about the base origin, then shifted."""
+    from scipy.spatial.transform import Rotation
+    return Rotation.from_rotvec(np.radians(rotvec_deg)).apply(points_mm) + shift_mm
+
+
+def _window(cell, q1_deg=None, q1_range=(-90, 90), n=50, seed=11):
+    """``n`` new poses of the virtual cell (joint 1 within ``q1_range``, or held at ``q1_deg`` when given), measured
+    on the true robot, and the loaded model."""
+    model_path, _, virtual, _ = cell
+    rng = np.random.default_rng(seed)
+    q = sample_configurations(virtual.nominal, n, {1: q1_range, 2: (-150, -30), 3: (-140, 140)}, {}, rng)
+    if q1_deg is not None:
+        q[:, 0] = q1_deg
+    return load_model(model_path)[0], q, virtual.measure(q, rng), virtual.nominal
+
+
+def test_a_joint_offset_under_a_small_frame_drift_is_still_the_joint(cell):
+    """Joint 2 read 0.05 degree off while the frame drifts by 0.1 mm and 0.01 degree (a tracker's drift), 50 poses
+    spread over joint 1: the joint is ranked first, fitted near the injected change."""
+    model, q, measured, nominal = _window(cell)
+    read = q + [0, 0.05, 0, 0, 0, 0]
+    drifted = _rigidly_moved(measured, [0.01, 0.0, 0.0], [0.1, 0.0, 0.0])
+    result = check_arrays(model, read, drifted - nominal.positions(read))
+    assert not result.holds
+    assert result.explanations[0].name == "joint 2's offset"
+    assert result.explanations[0].change[0] == pytest.approx(-0.05, abs=0.01)
+
+
+def test_a_frame_change_of_the_same_size_is_the_frame(cell):
+    """The frame turned by 0.05 degree and shifted by 0.3 mm (at the reach, as much as joint 2's 0.05 degree moves
+    the tool): the base frame is ranked first, not joint 2."""
+    model, q, measured, nominal = _window(cell)
+    moved = _rigidly_moved(measured, [0.05, 0.0, 0.0], [0.0, -0.3, 0.0])
+    result = check_arrays(model, q, moved - nominal.positions(q))
+    assert not result.holds
+    assert result.explanations[0].name == "the base frame"
+    assert result.explanations[0].mean_z2 < 2.0
+    assert [name for name, _ in result.together] == ["the base frame"]
+
+
+@pytest.mark.parametrize("seed", [11, 12])
+def test_forward_selection_takes_a_joint_offset_beside_a_drifting_frame(cell, seed):
+    """50 poses with joint 1 within 20 degrees (as in a window of a real series): a joint 2 turn is mostly what a
+    frame change does, and with the frame drifting by 0.1 mm and 0.01 degree besides, forward selection takes
+    both (the injected change and the drift), each with positive evidence; the same poses with only the frame
+    changed take the frame alone."""
+    model, q, measured, nominal = _window(cell, q1_range=(30, 50), seed=seed)
+    read = q + [0, 0.05, 0, 0, 0, 0]
+    drifted = _rigidly_moved(measured, [0.01, 0.0, 0.0], [0.1, 0.0, 0.0])
+    both = check_arrays(model, read, drifted - nominal.positions(read))
+    taken = dict(both.together)
+    assert set(taken) == {"joint 2's offset", "the base frame"} and min(taken.values()) > 2.0
+    assert "beyond it" in both.verdict() and "taken together" in "\n".join(both.lines())
+    moved = _rigidly_moved(measured, [0.05, 0.0, 0.0], [0.0, -0.3, 0.0])
+    frame = check_arrays(model, q, moved - nominal.positions(q))
+    assert [name for name, _ in frame.together] == ["the base frame"] and "beyond it" not in frame.verdict()
+
+
+def _share_of_joint2_in_frame(model, q, std):
+    """Independently of the check: the share of a joint 2 turn's standardised effect (a finite difference of the
+    identified robot's positions) that a rigid motion of the frame (three shifts, three turns about the origin)
+    reproduces."""
+    robot = model.identified_robot_
+    step = np.zeros_like(q)
+    step[:, 1] = 1e-4
+    a = ((robot.positions(q + step) - robot.positions(q - step)) / 2e-4 / std).reshape(-1)
+    p = robot.positions(q)
+    turns = [np.cross(axis, p) for axis in np.eye(3)]
+    frame = np.column_stack([(np.broadcast_to(axis, p.shape) / std).reshape(-1) for axis in np.eye(3)]
+                            + [(t / std).reshape(-1) for t in turns])
+    fit = frame @ np.linalg.lstsq(frame, a, rcond=None)[0]
+    return float(fit @ fit / (a @ a))
+
+
+@pytest.mark.parametrize("q1_deg", [None, 30.0])
+def test_the_share_of_an_explanation_the_likeliest_can_reproduce(cell, q1_deg):
+    """A frame change: joint 2's offset's ``shared`` is the share of its effect a frame motion reproduces, computed
+    independently; with joint 1 held still a joint 2 turn is a rigid turn about a fixed axis, all of it."""
+    model, q, measured, nominal = _window(cell, q1_deg=q1_deg)
+    moved = _rigidly_moved(measured, [0.05, 0.0, 0.0], [0.0, -0.3, 0.0])
+    result = check_arrays(model, q, moved - nominal.positions(q))
+    assert result.explanations[0].name == "the base frame" and result.explanations[0].shared == pytest.approx(1.0)
+    joint2 = next(e for e in result.explanations if e.name == "joint 2's offset")
+    _, std = model.predict_with_std(q)
+    expected = _share_of_joint2_in_frame(model, q, std)
+    assert joint2.shared == pytest.approx(expected, abs=1e-4)
+    if q1_deg is not None:
+        assert expected == pytest.approx(1.0, abs=1e-6)
+    else:
+        assert expected < 0.9
+    assert f"shared {joint2.shared:4.2f}" in "\n".join(result.lines())

@@ -23,6 +23,15 @@ data (on the IPA UR10 it flagged 6 of 7 unchanged 50-pose windows of series B).
   much the data can tell about it (the BIC's ``k ln m`` is its large-sample form); the middle term
   penalises a change far beyond a plausible one. The fitted change is the minimiser ``d`` (the true joint
   angle minus the one read, the tool's or base's change), mm and degrees.
+- Each explanation's ``shared``: the share of what its fitted change does to the standardised residuals (of
+  its sum of squares) that the likeliest explanation's parameters can do too. Near 1 these poses can hardly
+  tell the two apart, and what ranks them is the prior (the penalty for parameters) and the data's own
+  misfit, not the change (a joint 2 turn with joint 1 held still is a rigid turn of every measured point
+  about a fixed axis: a base frame change does all of it).
+- Taken together: forward selection by evidence over the same explanations, their columns combined (nested
+  linear-Gaussian models, the same priors): from nothing, the explanation whose addition raises the evidence
+  most, while the gain exceeds :data:`GAIN` (2: "positive" on Kass and Raftery's scale). The first taken is
+  the likeliest single explanation; the verdict names those taken beyond it.
 
 Python::
 
@@ -34,7 +43,7 @@ Python::
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -57,6 +66,11 @@ ALPHA = 0.01
 PLAUSIBLE_CHANGE = {"mm": 1.0, "deg": 0.1}
 """The prior standard deviation of each explanation's parameters: a plausible change, by unit."""
 
+GAIN = 2.0
+"""Forward selection takes a further explanation only when it raises the evidence by more than this: ``2 ln``
+Bayes factor above 2, "positive" evidence on Kass and Raftery's scale (J. Am. Stat. Assoc. 90, 1995, 773-795);
+smaller gains are the fit's noise."""
+
 TOOL = ("tool.x", "tool.y", "tool.z")
 BASE = ("base.x", "base.y", "base.z", "base.rx", "base.ry", "base.rz")
 
@@ -67,7 +81,10 @@ class Explanation:
 
     ``parameters`` and ``units`` name its parameters, ``change`` their fitted change (mm, degrees);
     ``evidence`` is ``2 ln`` of its Bayes factor against nothing moved (larger is likelier);
-    ``mean_z2`` and ``p_value`` the statistic left after it (over the coordinates less its parameters).
+    ``mean_z2`` and ``p_value`` the statistic left after it (over the coordinates less its parameters);
+    ``shared`` the share of what its fitted change does to the standardised residuals (of its sum of squares)
+    that the likeliest explanation's parameters can do too (1 for the likeliest itself; near 1: these poses can
+    hardly tell the two apart, and the prior and the data's own misfit rank them).
     """
 
     name: str
@@ -77,6 +94,7 @@ class Explanation:
     evidence: float
     mean_z2: float
     p_value: float
+    shared: float = 1.0
 
     def values_text(self) -> str:
         """``name change unit`` of each parameter."""
@@ -91,7 +109,8 @@ class CheckResult:
     after a tracker registration); ``mean_z2`` the statistic, ``p_value`` its p-value, ``holds`` the verdict at
     ``alpha``; ``explanations`` ranked, likeliest first (empty for a model without robot parameters);
     ``registration``: ``(rotation vector deg, translation mm, 3-D RMS mm)`` of the tracker frame
-    registered on the new data, or None.
+    registered on the new data, or None; ``together``: ``(name, evidence gain)`` of the explanations forward
+    selection takes together, in the order taken (:func:`forward_selection`).
     """
 
     z: NDArray[np.float64]
@@ -103,6 +122,7 @@ class CheckResult:
     registration: tuple | None = None
     model: str = "model"
     data: str = "data"
+    together: tuple[tuple[str, float], ...] = ()
 
     @property
     def holds(self) -> bool:
@@ -117,6 +137,9 @@ class CheckResult:
         best = next((e for e in self.explanations if e.evidence > 0), None)
         likely = (f"; most likely {best.name} ({best.values_text()})" if best else
                   "; no single explanation tried is likelier than none" if self.explanations else "")
+        beyond = [f"{name} ({gain:+.1f})" for name, gain in self.together[1:]]
+        if best and self.together and self.together[0][0] == best.name and beyond:
+            likely += f"; beyond it, {', '.join(beyond)}"
         return f"moved: {said}, below {self.alpha:g}{likely}"
 
     def lines(self, worst: int = 5) -> list[str]:
@@ -139,11 +162,14 @@ class CheckResult:
             out.append("no explanations tried: the model identifies no robot parameters (kind kinematic does)")
         else:
             out.append("explanations, likeliest first (evidence: 2 ln Bayes factor against nothing moved, "
-                       "prior of a change 0.1 deg or 1 mm per parameter):")
+                       "prior of a change 0.1 deg or 1 mm per parameter; shared: the share of what its change does "
+                       "that the first's parameters do too, near 1 where these poses hardly tell them apart):")
             width = max(len(e.name) for e in self.explanations)
             for rank, e in enumerate(self.explanations, 1):
                 out.append(f"  {rank:2d}. {e.name:<{width}}  evidence {e.evidence:9.1f}  left {e.mean_z2:7.3f} "
-                           f"(p {_p(e.p_value)})  {e.values_text()}")
+                           f"(p {_p(e.p_value)})  shared {e.shared:4.2f}  {e.values_text()}")
+            out.append(f"taken together (forward selection, each step raising the evidence by more than {GAIN:g}): "
+                       + (", ".join(f"{name} ({gain:+.1f})" for name, gain in self.together) or "none"))
         return out
 
 
@@ -178,23 +204,60 @@ def candidate_columns(model, q_deg: NDArray[np.float64], payload_kg, base: bool 
     return out
 
 
-def explain(z: NDArray[np.float64], std: NDArray[np.float64], candidates, dof: int) -> tuple[Explanation, ...]:
+def explain(z: NDArray[np.float64], std: NDArray[np.float64], candidates, dof: int
+            ) -> tuple[tuple[Explanation, ...], tuple[tuple[str, float], ...]]:
     """Each candidate ``(name, parameters, units, columns)`` fitted to the standardised residuals ``z`` (n, 3)
-    (the coordinates' spreads ``std`` (n, 3) mm), with a prior of a plausible change; ranked by evidence."""
+    (the coordinates' spreads ``std`` (n, 3) mm), with a prior of a plausible change; ranked by evidence. Also
+    the candidates taken together by forward selection (:func:`forward_selection`)."""
     zv, w = z.reshape(-1), 1.0 / std.reshape(-1)
-    total = float(zv @ zv)
-    found = []
+    found, signals, spans = [], [], {}
     for name, params, units, cols in candidates:
         s = np.array([PLAUSIBLE_CHANGE[u] for u in units])
         B = cols * w[:, None] * s                                       # standardised, per prior std
-        gram = B.T @ B + np.eye(len(s))
-        d = np.linalg.solve(gram, B.T @ zv)
-        left = zv - B @ d
-        fit = float(left @ left + d @ d)
-        evidence = total - fit - float(np.linalg.slogdet(gram)[1])
+        d, left, evidence = _fitted(zv, B)
         sse, free = float(left @ left), max(dof - len(s), 1)          # the coordinates its parameters leave
         found.append(Explanation(name, params, units, d * s, evidence, sse / free, float(chi2.sf(sse, free))))
-    return tuple(sorted(found, key=lambda e: -e.evidence))
+        signals.append(B @ d)
+        spans[name] = B
+    order = sorted(range(len(found)), key=lambda k: -found[k].evidence)
+    ranked = tuple(replace(found[k], shared=_share_in_span(signals[k], spans[found[order[0]].name])) for k in order)
+    return ranked, forward_selection(zv, spans)
+
+
+def _fitted(zv: NDArray[np.float64], B: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
+    """The change ``d`` (per prior standard deviation) of standardised columns ``B`` fitted to ``zv`` with a
+    unit Gaussian prior, the residuals it leaves and its evidence against nothing (``2 ln`` Bayes factor)."""
+    gram = B.T @ B + np.eye(B.shape[1])
+    d = np.linalg.solve(gram, B.T @ zv)
+    left = zv - B @ d
+    return d, left, float(zv @ zv - left @ left - d @ d - np.linalg.slogdet(gram)[1])
+
+
+def forward_selection(zv: NDArray[np.float64], spans: dict[str, NDArray[np.float64]]) -> tuple[tuple[str, float], ...]:
+    """The candidates taken together: from nothing, the one whose columns (``spans``: standardised, per prior
+    standard deviation) added to those taken raise the evidence most, while the gain exceeds :data:`GAIN`;
+    ``(name, gain)`` in the order taken (the first is the likeliest single explanation)."""
+    taken: list[tuple[str, float]] = []
+    columns, current = np.zeros((len(zv), 0)), 0.0
+    while len(taken) < len(spans):
+        names = [k for k in spans if k not in dict(taken)]
+        gains = [_fitted(zv, np.hstack([columns, spans[k]]))[2] - current for k in names]
+        best = int(np.argmax(gains))
+        if gains[best] <= GAIN:
+            break
+        taken.append((names[best], gains[best]))
+        columns, current = np.hstack([columns, spans[names[best]]]), current + gains[best]
+    return tuple(taken)
+
+
+def _share_in_span(signal: NDArray[np.float64], columns: NDArray[np.float64]) -> float:
+    """The share of ``signal``'s sum of squares that a combination of ``columns`` reproduces (1 for a nil
+    signal: nothing tells it apart)."""
+    total = float(signal @ signal)
+    if total == 0.0:
+        return 1.0
+    fit = columns @ np.linalg.lstsq(columns, signal, rcond=None)[0]
+    return min(float(fit @ fit) / total, 1.0)
 
 
 def model_inputs(model, robot, q_deg: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -226,11 +289,11 @@ def check_arrays(model, q_deg, errors_mm, *, robot=None, payload_kg=None, regist
         raise DataError(f"{data_name}: {len(q)} poses leave no degree of freedom to check"
                         + (" once the tracker frame is registered on them (give at least 3)" if registered else ""))
     total = float((z ** 2).sum())
-    expl = ()
+    expl, together = (), ()
     if identification_of(model) is not None:
-        expl = explain(z, std, candidate_columns(model, q, payload_kg, base=not registered), dof)
+        expl, together = explain(z, std, candidate_columns(model, q, payload_kg, base=not registered), dof)
     return CheckResult(z, dof, total / dof, float(chi2.sf(total, dof)), alpha, expl, registration,
-                       model_name, data_name)
+                       model_name, data_name, together)
 
 
 def registered_on_model(model, q_deg, tracker_mm, payload_kg=None, robot=None) -> tuple[NDArray[np.float64], tuple]:

@@ -51,17 +51,43 @@ def exit_cleanly_on_sigterm() -> None:
 
 
 def check_folder_writable(folder: str | Path) -> None:
-    """Fail early, before long work, if files cannot be created in ``folder`` (created if missing)."""
+    """Fail early, before long work, if files cannot be created in ``folder``; the folders made to find out
+    are removed again (a run refused later leaves no empty folder)."""
+    with made_folder(folder, keep=False):
+        pass
+
+
+@contextmanager
+def made_folder(folder: str | Path, *, keep: bool = True):
+    """``folder`` made (with its missing parents) and probed for writing; the folders made here are removed
+    again if the block raises (or, ``keep=False``, always), as long as they are empty."""
     folder = Path(folder)
     if folder.exists() and not folder.is_dir():
         raise PartcalError(f"{folder}: exists and is not a folder")
+    made = [p for p in (folder, *folder.parents) if not p.exists()]
     try:
-        folder.mkdir(parents=True, exist_ok=True)
-        fd, probe = tempfile.mkstemp(prefix=".probe-", dir=folder)
-        os.close(fd)
-        os.unlink(probe)
-    except OSError as exc:
-        raise PartcalError(f"{folder}: cannot write here ({exc.strerror or exc})") from None
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+            fd, probe = tempfile.mkstemp(prefix=".probe-", dir=folder)
+            os.close(fd)
+            os.unlink(probe)
+        except OSError as exc:
+            raise PartcalError(f"{folder}: cannot write here ({exc.strerror or exc})") from None
+        yield folder
+    except BaseException:
+        _remove_empty(made)
+        raise
+    if not keep:
+        _remove_empty(made)
+
+
+def _remove_empty(folders: list[Path]) -> None:
+    """Remove ``folders`` (deepest first) while they are empty."""
+    for path in folders:
+        try:
+            path.rmdir()
+        except OSError:
+            return
 
 
 def replace_all(pairs: list[tuple[Path, Path]]) -> None:

@@ -199,4 +199,16 @@ def test_a_feature_out_of_reach_is_refused_naming_its_key(tmp_path):
     with pytest.raises(ConfigError, match=rf"^{re.escape(str(path))}: features\.planes\.side \(line \d+\): plane "
                                           r"'side': the arm reached it 0 times of 200 .*\(datasets\.touches asks"):
         write_study(study, simulate(study))
-    assert not (tmp_path / "o" / "touches.csv").exists()
+    assert not (tmp_path / "o").exists()                      # no file, and no empty folder either
+
+
+def test_a_refused_simulation_through_the_command_leaves_no_folder(tmp_path, capsys):
+    from partcal.cli import main
+    path = _config(tmp_path, "offset_mm: 600, given: unknown}", "offset_mm: 4000, given: unknown}")
+    assert main(["simulate", str(path)]) == 2
+    assert "plane 'side': the arm reached it 0 times" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
+    (tmp_path / "o").mkdir()
+    (tmp_path / "o" / "mine.txt").write_text("kept")          # a folder that was there stays, with its files
+    assert main(["simulate", str(path)]) == 2
+    assert (tmp_path / "o" / "mine.txt").read_text() == "kept"

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from .._io import check_folder_writable, replace_all
+from .._io import made_folder, replace_all
 from .._validation import one_of, safe_name
 from .._yamlio import Section, load_yaml, range_check
 from ..errors import ConfigError, PartcalError
@@ -420,22 +420,22 @@ def write_study(study: Study, data: dict[str, Measurements], observations: dict 
     and the cell's ``features.yaml``. The files are replaced as a set: all are written to temporary names
     first and renamed only when every one of them is complete.
     """
-    check_folder_writable(study.output)
     if observations is None:
         observations = simulate_observations(study)
     pending = []
-    try:
-        for name, m in data.items():
-            target = study.output / f"{name}.csv"
-            tmp = study.output / f".{name}.csv.partial"
-            pending.append((tmp, target))
-            write_measurements(m, tmp, comment=_note(study, f"data set '{name}'"))
-        if observations:
-            pending += write_contact_files(study, observations, _note)
-        replace_all(pending)
-    finally:
-        for tmp, _ in pending:
-            tmp.unlink(missing_ok=True)
+    with made_folder(study.output):
+        try:
+            for name, m in data.items():
+                target = study.output / f"{name}.csv"
+                tmp = study.output / f".{name}.csv.partial"
+                pending.append((tmp, target))
+                write_measurements(m, tmp, comment=_note(study, f"data set '{name}'"))
+            if observations:
+                pending += write_contact_files(study, observations, _note)
+            replace_all(pending)
+        finally:
+            for tmp, _ in pending:
+                tmp.unlink(missing_ok=True)
     return [target for _, target in pending]
 
 

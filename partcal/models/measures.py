@@ -571,7 +571,9 @@ def _prepared(robot: Robot, rows: Rows, features: dict, base: bool, tool: bool, 
                                                rcond)
         notes.insert(0, f"{SCALE}: nothing here measures a length (every plane and point is unknown), so a uniform "
                         "scale of the robot cannot be identified: " + (
-                            "the prior holds it (the lengths about their prior means)" if held else
+                            "the prior holds it (the lengths about their prior means, against the residuals' pull "
+                            "towards a smaller robot: what it leaves depends on the strength and the number of rows)"
+                            if held else
                             "one length is held nominal") + ". Give one: a plane's spacing_mm, a point's distance_mm "
                         "or known_mm, a distance, or tracker points")
     if prior is not None:

@@ -363,3 +363,78 @@ def test_a_model_from_kinds_that_fix_no_frame_says_so_when_loaded(cell, caplog):
         model, _ = load_model(model_file)
     assert "fix no frame" in caplog.text and str(model_file) in caplog.text
     assert any("fix no frame" in note for note in model.fit_notes())
+
+
+def test_a_prior_on_a_kinds_run_chooses_its_strength_on_the_runs_folds(cell, capsys):
+    folder, _ = cell
+    path = _config(folder, "nests.csv", name="prior",
+                   models="    prior: plausible\n    prior_strength: [0, 1, 30]\n")
+    assert main(["run", "-q", str(path)]) == 0
+    printed = capsys.readouterr().out
+    out = folder / "out_prior"
+    metrics = json.loads((out / "metrics.json").read_text())
+    table = metrics["models"]["complete"]["prior_strength"]
+    assert [row["prior_strength"] for row in table] == [0.0, 1.0, 30.0]
+    assert set(table[0]) == {"prior_strength", "cv_weighted_rms_mm", "cv_se", "chosen"}
+    scores, errors = [row["cv_weighted_rms_mm"] for row in table], [row["cv_se"] for row in table]
+    best = int(np.argmin(scores))                 # the one-standard-error rule, written out
+    chosen = max(row["prior_strength"] for row in table if row["cv_weighted_rms_mm"] <= scores[best] + errors[best])
+    assert [row["chosen"] for row in table] == [row["prior_strength"] == chosen for row in table]
+    note = next(n for n in metrics["models"]["complete"]["notes"] if n.startswith(f"prior strength {chosen:g} chosen"))
+    assert "CV weighted RMS" in note and f"note: {note}" in printed
+    # the strength 0 entry is the run without a prior: its score is the same entry's CV figure without one
+    plain = _config(folder, "nests.csv", name="noprior")
+    assert main(["run", "-q", str(plain)]) == 0
+    without = json.loads((folder / "out_noprior" / "metrics.json").read_text())["models"]["complete"]
+    assert table[0]["cv_weighted_rms_mm"] == pytest.approx(without["cv_weighted_rms_mm"], rel=1e-12)
+    assert "prior_strength" not in without
+    html = (out / "index.html").read_text()
+    assert "Prior strength chosen by cross-validation" in html and f"{scores[1]:.4f}" in html
+    # another model file (fitted on kinds: its planes' and points' unknowns follow the robot's) as a strong prior:
+    # the row parameters come out at its values
+    other = _config(folder, "nests.csv", name="fileprior",
+                    models="    prior: out_noprior/models/complete.json\n    prior_strength: 10000\n")
+    assert main(["run", "-q", str(other)]) == 0
+    source, _ = load_model(folder / "out_noprior" / "models" / "complete.json")
+    fitted, _ = load_model(folder / "out_fileprior" / "models" / "complete.json")
+    rows = next(k for k, n in enumerate(source.identification_.names) if n.startswith("tool."))
+    np.testing.assert_allclose(fitted.identification_.value[:rows], source.identification_.value[:rows], atol=1e-4)
+    assert np.max(np.abs(source.identification_.correction[:rows])) > 1e-2      # and those are not nominal
+
+
+def test_a_bad_prior_strength_on_a_kinds_run_is_refused_naming_file_line_and_field(cell, capsys):
+    folder, _ = cell
+    path = _config(folder, "nests.csv", name="badprior", models="    prior: plausible\n    prior_strength: -1\n")
+    line = path.read_text().splitlines().index("    prior_strength: -1") + 1
+    assert main(["run", "--check", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert f"{path}: models[0].prior_strength (line {line}): must be a number >= 0, auto" in err and "got -1" in err
+    path = _config(folder, "nests.csv", name="badprior", models="    prior_strength: 3\n")
+    line = path.read_text().splitlines().index("    prior_strength: 3") + 1
+    assert main(["run", "--check", str(path)]) == 2
+    assert f"models[0].prior_strength (line {line}): applies with a prior only" in capsys.readouterr().err
+
+
+def test_check_says_a_prior_holds_the_scale_unknown_planes_leave_free(cell, capsys):
+    folder, _ = cell
+    (folder / "data" / "loose.yaml").write_text("planes: {top: {}, step: {}, side: {}}\n")
+    path = _config(folder, "touches.csv", features="loose.yaml", name="loose_prior",
+                   models="    prior: plausible\n")
+    assert main(["run", "--check", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "scale: nothing here measures a length" in out and "the prior holds it" in out
+    held = next(line for line in out.splitlines() if line.startswith("complete: held nominal"))
+    plain = _config(folder, "touches.csv", features="loose.yaml", name="loose_plain")
+    assert main(["run", "--check", str(plain)]) == 0
+    out = capsys.readouterr().out
+    assert "one length is held nominal" in out
+    held_plain = next(line for line in out.splitlines() if line.startswith("complete: held nominal"))
+    # the prior's rows make the length the scale would have held identifiable: fewer parameters held nominal
+    assert len(held.split(":", 2)[2].split(",")) < len(held_plain.split(":", 2)[2].split(","))
+    # but no cross-validation of such rows can choose a strength (held-out lengths fall as the robot shrinks)
+    listed = _config(folder, "touches.csv", features="loose.yaml", name="loose_list",
+                     models="    prior: plausible\n    prior_strength: auto\n")
+    line = listed.read_text().splitlines().index("    prior_strength: auto") + 1
+    assert main(["run", "--check", str(listed)]) == 2
+    err = capsys.readouterr().err
+    assert f"{listed}: models[0].prior_strength (line {line}): a list of strengths cannot be chosen on these " in err

@@ -33,7 +33,8 @@ from .identification import (LOSSES, PARAMETRIZATIONS, PLAUSIBLE_ERROR, PRIMARY_
 from .joint_errors import JointErrors, compliance_problem, harmonics_problem
 from . import contacts  # noqa: F401  (the built-in measurement kinds join the table)
 from .contacts import TRACKER_FRAME
-from .measures import MEASUREMENT_KINDS, Measured, identify_measures
+from .kinds_cv import FOLDS, SCALE_CHOICE, fold_rows, measuring, scale_free, strength_table
+from .measures import MEASUREMENT_KINDS, Measured, built_kinds, identify_measures
 from .kindtable import body_of, check_body, may_be_residual, model_from_body, regions_of, residual_kinds
 from .pose import PoseErrorModel
 from .prior import Prior, plausible_prior, strength_problem, strengths_of, strongest_within
@@ -209,13 +210,14 @@ class KinematicModel(ErrorModelBase):
         ``prior_strength``; a list of strengths, or ``'auto'`` for :data:`~partcal.models.prior.STRENGTH_GRID`:
         the strongest within one standard error of the lowest RMS on 5 contiguous blocks of the data held out in
         turn, :meth:`_chosen_strength`; a run chooses on its own folds) or a ``Prior`` (another robot's model,
-        ``prior: FILE.json`` in a run: its rows times ``prior_strength`` too).
+        ``prior: FILE.json`` in a run: its rows times ``prior_strength`` too). With ``measures`` the prior is on
+        the robot's parameters alone (never the kinds' unknowns), the fit MAP the same way
+        (:func:`~partcal.models.measures.identify_measures`), and a list of strengths is chosen on 5 random folds of
+        the measuring rows instead (they have no order to keep: :meth:`_measures_strength`).
         """
         robot = self._check_params()
         if measures is not None:
-            if self.prior is not None or prior is not None:
-                raise param_error(type(self).__name__, "prior", "None when fitting on measurement kinds", self.prior)
-            return self._fit_measures(robot, measures, payload_kg)
+            return self._fit_measures(robot, measures, payload_kg, prior)
         X, y = validate_data(self, X, y, multi_output=True, y_numeric=True, dtype=np.float64)
         if X.shape[1] != robot.n_joints:
             raise DataError(f"{type(self).__name__} for {robot.name} takes {robot.n_joints} joint angles "
@@ -268,14 +270,24 @@ class KinematicModel(ErrorModelBase):
         self.prior_cv_ = self._chosen_strength(X, y, payload_kg, strengths) if len(strengths) > 1 else None
         self.prior_strength_ = (strengths[0] if self.prior_cv_ is None else
                                 strengths[strongest_within(strengths, *self.prior_cv_)])
+        return self.prior_at(robot, self.prior_strength_)
+
+    def prior_at(self, robot: Robot, strength: float) -> Prior | None:
+        """The prior of the parameter ``prior`` at one ``strength`` for ``robot`` (None without a prior or at
+        strength 0): the plausible one (:func:`~partcal.models.prior.plausible_prior` about nominal: the
+        robot's ``plausible_error``, else :data:`~partcal.models.identification.PLAUSIBLE_ERROR`) or a given
+        ``Prior`` with its rows times the strength."""
+        if self.prior is None or strength == 0:
+            return None
         if isinstance(self.prior, Prior):
-            return None if self.prior_strength_ == 0 else Prior(
-                self.prior.index, self.prior.mean, self.prior.root * self.prior_strength_, self.prior.names,
-                self.prior.source)
-        names = parameter_names(robot, self.joint_errors_, self.parametrization_)
-        return plausible_prior([u for _, u in names], geometric_size(robot, self.parametrization_) - 9,
-                               nominal_values(robot, self.joint_errors_, self.parametrization_),
-                               self.prior_strength_, {**PLAUSIBLE_ERROR, **(robot.plausible_error or {})})
+            return Prior(self.prior.index, self.prior.mean, self.prior.root * strength, self.prior.names,
+                         self.prior.source)
+        errors = JointErrors.for_robot(robot, list(self.compliance), self.joint_harmonics)
+        parametrization = self._resolved_parametrization(robot)
+        names = parameter_names(robot, errors, parametrization)
+        return plausible_prior([u for _, u in names], geometric_size(robot, parametrization) - 9,
+                               nominal_values(robot, errors, parametrization), strength,
+                               {**PLAUSIBLE_ERROR, **(robot.plausible_error or {})})
 
     def _chosen_strength(self, X, y, payload_kg, strengths) -> tuple[list[float], list[float]]:
         """The 3-D RMS of the kinematic part's errors on each of 5 contiguous blocks of the data (measurement
@@ -313,8 +325,10 @@ class KinematicModel(ErrorModelBase):
         self.active_ = varying_inputs(X)
         self.data_bounds_ = np.stack([X.min(axis=0), X.max(axis=0)])
 
-    def _fit_measures(self, robot: Robot, measures: Measured, payload_kg) -> "KinematicModel":
-        """:meth:`fit` from rows of measurement kinds (:func:`~partcal.models.measures.identify_measures`)."""
+    def _fit_measures(self, robot: Robot, measures: Measured, payload_kg, prior: Prior | None = None
+                      ) -> "KinematicModel":
+        """:meth:`fit` from rows of measurement kinds (:func:`~partcal.models.measures.identify_measures`), MAP
+        with a prior (``prior``, else the parameter's: a list of strengths chosen by :meth:`_measures_strength`)."""
         if self.loss != "linear":
             raise DataError(f"loss: {self.loss} weighs tracker points (a point CSV); rows of measurement kinds are "
                             "identified by least squares: set loss: linear")
@@ -328,10 +342,18 @@ class KinematicModel(ErrorModelBase):
         self._y_1d, self.n_outputs_ = False, 3
         ident_payload = self._fit_settings(robot, payload_kg if payload_kg is not None else measures.rows.payload_kg,
                                            len(X))[1]
+        self.prior_cv_, self.prior_strength_table_ = None, None
+        if prior is None and self.prior is not None:
+            strengths = strengths_of(self.prior_strength)
+            self.prior_strength_ = strengths[0]
+            if len(strengths) > 1:
+                best, self.prior_strength_table_ = self._measures_strength(robot, measures, ident_payload, strengths)
+                self.prior_strength_ = strengths[best]
+            prior = self.prior_at(robot, self.prior_strength_)
         self.identification_, self.measure_notes_ = identify_measures(
             robot, measures.rows, measures.features, base=bool(self.base), tool=bool(self.tool),
             rcond=float(self.rcond), errors=self.joint_errors_, payload_kg=ident_payload,
-            parametrization=self.parametrization_)
+            parametrization=self.parametrization_, prior=prior)
         self.targets_, self.orientation_, self.robot_ = {}, False, robot
         self.measures_ = tuple(dict.fromkeys(k for k in measures.rows.kind if k in MEASUREMENT_KINDS))
         self.frame_fixed_ = "point" in self.measures_ and not measures.features.get(TRACKER_FRAME)
@@ -340,6 +362,30 @@ class KinematicModel(ErrorModelBase):
         self.residual_ = None
         self.covariance_scale_ = 1.0
         return self._prepare()
+
+    def _measures_strength(self, robot: Robot, measures: Measured, payload, strengths) -> tuple[int, list[dict]]:
+        """A list of prior strengths chosen on rows of measurement kinds: :data:`~partcal.models.kinds_cv.FOLDS`
+        random folds of the measuring rows (drawn from ``random_state``), each strength's held-out residuals
+        weighted by their kinds' noise, the strongest within one standard error of the lowest
+        (:func:`~partcal.models.kinds_cv.strength_table`; a kinds run chooses on its own folds the same way)."""
+        rows, features = measures.rows, measures.features
+        built_kinds(rows, features)         # the rows' own faults said as they are, before any fold is cut
+        if scale_free(robot, rows, features, base=bool(self.base), tool=bool(self.tool), rcond=float(self.rcond),
+                      errors=self.joint_errors_, payload_kg=payload, parametrization=self.parametrization_):
+            raise param_error(type(self).__name__, "prior_strength", f"one number here ({SCALE_CHOICE})",
+                              self.prior_strength)
+        folds = fold_rows(rows, seed_from(self.random_state), min(FOLDS, measuring(rows).size))
+
+        def identified_at(strength: float, train) -> Identification:
+            part = clone(self).set_params(prior_strength=float(strength))
+            return part.fit(train.q_deg, None, measures=Measured(train, features)).identification_
+
+        try:
+            return strength_table(identified_at, strengths, robot, rows, features, folds, errors=self.joint_errors_,
+                                  parametrization=self.parametrization_, payload_kg=payload)
+        except DataError as exc:
+            raise DataError(f"prior_strength: choosing among {len(strengths)} strengths on {len(folds)} random folds "
+                            f"of the rows: {exc}; give prior_strength one number") from None
 
     def _hybrid_covariance_scale(self, X: NDArray[np.float64], nominal: NDArray[np.float64]) -> float:
         """What the identified parameters' covariance is multiplied by: 1 alone; with a residual model, the
@@ -730,6 +776,12 @@ class KinematicModel(ErrorModelBase):
         notes += list(getattr(self, "measure_notes_", []))
         if not getattr(self, "frame_fixed_", True):
             notes.append(self.frame_note())
+        if getattr(self, "prior_strength_table_", None) and self.measures_:
+            table = self.prior_strength_table_
+            notes.append(f"prior: strength {self.prior_strength_:g} chosen by {FOLDS}-fold CV of the rows, the "
+                         "strongest within one standard error of the lowest (weighted RMS " + ", ".join(
+                             f"{row['prior_strength']:g}: {row['cv_weighted_rms_mm']:.4f} +- {row['cv_se']:.4f} mm"
+                             for row in table) + ")")
         if getattr(self, "prior_cv_", None) is not None:
             notes.append(f"prior: strength {self.prior_strength_:g} chosen by 5-block CV, the strongest within one "
                          "standard error of the lowest (3-D RMS " + ", ".join(

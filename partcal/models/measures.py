@@ -38,6 +38,7 @@ from ..robot.kinematics import Robot
 from .identification import (Identification, actual_joints, fit_parameters, geometric_size, identifiable_parameters,
                              model_jacobian, model_positions, nominal_values, parameter_names, robot_with, turn_columns)
 from .joint_errors import JointErrors
+from .prior import Prior
 
 log = logging.getLogger(__name__)
 
@@ -480,7 +481,8 @@ def consistent_jacobian(jac0: NDArray[np.float64], misfit: NDArray[np.float64], 
 
 def identify_measures(robot: Robot, rows: Rows, features: dict | None = None, *, base: bool = True,
                       tool: bool = True, rcond: float = 1e-6, errors: JointErrors | None = None,
-                      payload_kg=0.0, parametrization: str = "dh") -> tuple[Identification, list[str]]:
+                      payload_kg=0.0, parametrization: str = "dh", prior: Prior | None = None
+                      ) -> tuple[Identification, list[str]]:
     """Identify the robot's parameters and the kinds' unknowns from rows of any measurement kinds.
 
     Parameters
@@ -493,6 +495,12 @@ def identify_measures(robot: Robot, rows: Rows, features: dict | None = None, *,
         The cell's planes and points and the kinds' noise (:func:`partcal.data.observations.read_features`).
     base, tool, rcond, errors, payload_kg, parametrization
         As :func:`~partcal.models.identification.identify`.
+    prior : Prior, optional
+        A Gaussian prior on the robot's own parameters (indices into the table's first entries, never the
+        kinds' unknowns): MAP as in :func:`~partcal.models.identification.identify`, by the same means (its
+        rows appended to the weighted residuals, which read as millimetres of a 0.02 mm tracker, and to the
+        Jacobian the rank rule reads; the parameters it holds never pruned as implausible; the covariance
+        the posterior's). The kinds' RMS figures are those of the rows alone.
 
     Returns
     -------
@@ -504,9 +512,13 @@ def identify_measures(robot: Robot, rows: Rows, features: dict | None = None, *,
     """
     features = features or {}
     problem, names, wanted, jac0, notes = _prepared(robot, rows, features, base, tool, rcond, errors, payload_kg,
-                                                    parametrization)
+                                                    parametrization, prior)
     size, kinds, q_deg = geometric_size(robot, parametrization), problem.kinds, rows.q_deg
-    table = fit_parameters(problem, problem.start, jac0, wanted, names, rcond, size, len(q_deg))[0]
+    if prior is None:
+        table = fit_parameters(problem, problem.start, jac0, wanted, names, rcond, size, len(q_deg))[0]
+    else:
+        table = fit_parameters(prior.augmented(problem), problem.start, jac0, wanted, names, rcond, size,
+                               len(q_deg), held=prior.held(problem.start.size))[0]
     raw = problem.raw(table.value, measured_only=True)
     per_kind = {kind.name: float(np.sqrt(np.mean(r**2))) if r.size else 0.0 for kind, r in zip(kinds, raw)}
     everything = np.concatenate(raw)
@@ -531,9 +543,10 @@ def rank_jacobian(problem: StackedProblem, wanted: NDArray[np.bool_], rcond: flo
 
 
 def _prepared(robot: Robot, rows: Rows, features: dict, base: bool, tool: bool, rcond: float, errors, payload_kg,
-              parametrization: str):
+              parametrization: str, prior: Prior | None = None):
     """The stacked problem at its start, every parameter's name, those asked for, the Jacobian the rank rule
-    reads (on consistent data: :func:`consistent_jacobian`) and what the data cannot identify, in words."""
+    reads (on consistent data: :func:`consistent_jacobian`; a ``prior``'s rows appended) and what the data
+    cannot identify, in words."""
     kinds = built_kinds(rows, features)
     q_deg = robot.check_joints(rows.q_deg)
     payload = np.broadcast_to(np.asarray(payload_kg, dtype=float), (len(q_deg),))
@@ -545,20 +558,37 @@ def _prepared(robot: Robot, rows: Rows, features: dict, base: bool, tool: bool, 
     wanted[size - 6:size] = base
     notes = [note for kind in kinds for note in kind.notes()]
     jac0, direction = rank_jacobian(problem, wanted, rcond)
+    if prior is not None:
+        own = parameter_names(robot, errors, parametrization)
+        if prior.index.size and int(prior.index.max()) >= len(own):
+            raise DataError(f"the prior holds parameter {int(prior.index.max())}; the robot has {len(own)} (a "
+                            "prior is on the robot's parameters, never on the kinds' unknowns)")
+        robot_names = [n for n, _ in own]   # a prior model fitted on kinds lists its own kinds' unknowns after these
+        dataclasses.replace(prior, names=None if prior.names is None else prior.names[:len(own)]
+                            ).check_names(robot_names)
     if np.any(direction) and _null(jac0, direction, wanted, rcond):
+        held = prior is not None and not _null(np.vstack([jac0, prior.jacobian(jac0.shape[1])]), direction, wanted,
+                                               rcond)
         notes.insert(0, f"{SCALE}: nothing here measures a length (every plane and point is unknown), so a uniform "
-                        "scale of the robot cannot be identified: one length is held nominal. Give one: a plane's "
-                        "spacing_mm, a point's distance_mm or known_mm, a distance, or tracker points")
+                        "scale of the robot cannot be identified: " + (
+                            "the prior holds it (the lengths about their prior means, against the residuals' pull "
+                            "towards a smaller robot: what it leaves depends on the strength and the number of rows)"
+                            if held else
+                            "one length is held nominal") + ". Give one: a plane's spacing_mm, a point's distance_mm "
+                        "or known_mm, a distance, or tracker points")
+    if prior is not None:
+        jac0 = np.vstack([jac0, prior.jacobian(jac0.shape[1])])
     return problem, names, wanted, jac0, notes
 
 
 def observability(robot: Robot, rows: Rows, features: dict | None = None, *, base: bool = True, tool: bool = True,
                   rcond: float = 1e-6, errors: JointErrors | None = None, payload_kg=0.0,
-                  parametrization: str = "dh") -> tuple[list[str], list[str]]:
+                  parametrization: str = "dh", prior: Prior | None = None) -> tuple[list[str], list[str]]:
     """What rows of measurement kinds cannot identify, without fitting: the notes of :func:`identify_measures`
-    and the parameters its rank rule would hold nominal (judged at the nominal robot, on consistent data)."""
+    and the parameters its rank rule would hold nominal (judged at the nominal robot, on consistent data; with
+    a ``prior``, its rows read too)."""
     _, names, wanted, jac0, notes = _prepared(robot, rows, features or {}, base, tool, rcond, errors, payload_kg,
-                                              parametrization)
+                                              parametrization, prior)
     free = identifiable_parameters(jac0, wanted, rcond, [u for _, u in names])[0]
     held = [names[i][0] for i in np.flatnonzero(wanted) if i not in set(free.tolist())]
     return notes, held
@@ -589,14 +619,15 @@ class Measured:
 
 def kind_residuals(robot: Robot, rows: Rows, features: dict, table: Identification, *,
                    errors: JointErrors | None = None, payload_kg=0.0, parametrization: str = "dh",
-                   only: NDArray[np.intp] | None = None, fitted_here: list | None = None
-                   ) -> dict[str, NDArray[np.float64]]:
+                   only: NDArray[np.intp] | None = None, fitted_here: list | None = None,
+                   row_of: dict | None = None) -> dict[str, NDArray[np.float64]]:
     """Each kind's residuals (mm) on ``rows`` for an identified ``table``: what held-out rows of the same kind
     leave. The kinds' unknowns are the table's; an unknown the table lacks (a plane or point the fit never saw)
     is fitted on these rows with everything else held, and its name appended to ``fitted_here`` (a list, when
     given). ``only`` (indices into ``rows``): the residuals of those rows alone, the kinds built on every row
     (held-out rows need not satisfy what an identification needs of its rows, such as three touches per
-    plane); a kind none of them reads is left out."""
+    plane); a kind none of them reads is left out. ``row_of`` (a dict, when given, with ``only``) receives the
+    row (an index into ``rows``) of each residual, per kind."""
     kinds = built_kinds(rows, features)
     payload = np.broadcast_to(np.asarray(payload_kg, dtype=float), (len(rows),))
     problem = StackedProblem(robot, errors, rows, kinds, payload, parametrization)
@@ -624,4 +655,6 @@ def kind_residuals(robot: Robot, rows: Rows, features: dict, table: Identificati
         keep = np.isin(r.rows_a, only) & (r.rows_a >= 0)
         if keep.any():
             out[kind.name] = r.values[keep]
+            if row_of is not None:
+                row_of[kind.name] = r.rows_a[keep]
     return out

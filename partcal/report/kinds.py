@@ -58,6 +58,9 @@ def kinds_context(result: KindsRunResult) -> dict:
         "rigid": not data.fixes_frame, "notes": notes, "best": result.best,
         "held": table.unidentifiable(),
         "parameters": [row for row in table.rows()],
+        "strengths": [{"model": r.spec.name, "strength": row["prior_strength"], "cv": row["cv_weighted_rms_mm"],
+                       "se": row["cv_se"], "chosen": row["chosen"]} for r in result.models
+                      for row in (r.prior_strength or [])],
         "hist_svg": _b64(_histograms(best.cv_residuals, best.spec.name)) if best.cv_residuals else None,
     }
 

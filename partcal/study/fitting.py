@@ -157,8 +157,9 @@ def fit_model(spec: ModelSpec, seed: int, data: dict[str, Measurements], cv: CVP
     return result
 
 
-def strength_note(table: list[dict]) -> str:
-    """What a run says of the prior strength its folds chose (:func:`~partcal.study.selection.choose_strength`).
+def strength_note(table: list[dict], score: str = "cv_rms_3d", label: str = "CV 3-D RMS") -> str:
+    """What a run says of the prior strength its folds chose (:func:`~partcal.study.selection.choose_strength`;
+    a kinds run's table scores ``cv_weighted_rms_mm``: ``score`` and ``label`` name the figure).
 
     >>> print(strength_note([{"prior_strength": 1.0, "cv_rms_3d": 0.41, "cv_se": 0.01, "chosen": False},
     ...                      {"prior_strength": 3.0, "cv_rms_3d": 0.415, "cv_se": 0.01, "chosen": True}]))
@@ -168,8 +169,8 @@ def strength_note(table: list[dict]) -> str:
     """
     chosen = next(row["prior_strength"] for row in table if row["chosen"])
     return (f"prior strength {chosen:g} chosen by the run's cross-validation, the strongest within one standard "
-            "error of the lowest (CV 3-D RMS: " + ", ".join(f"{row['prior_strength']:g}: {row['cv_rms_3d']:.4f} +- "
-                                                          f"{row['cv_se']:.4f}" for row in table) + ")")
+            f"error of the lowest ({label}: " + ", ".join(f"{row['prior_strength']:g}: {row[score]:.4f} +- "
+                                                        f"{row['cv_se']:.4f}" for row in table) + ")")
 
 
 def _fit_model(spec, seed, data, cv, robot, own_frame, lines, outputs, n_jobs=1,

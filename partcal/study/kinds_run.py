@@ -36,17 +36,15 @@ from ..models.contacts import TRACKER_FRAME, PointKind
 from ..models.kinematic import KinematicModel
 from ..models.identification import resolved_parametrization
 from ..models.joint_errors import JointErrors
-from ..models.measures import (END_KIND, MEASUREMENT_KINDS, REFERENCE_NOISE_MM, Measured, Rows, built_kinds,
-                               kind_names, kind_residuals, observability)
+from ..models.kinds_cv import (FOLDS, SCALE_CHOICE, fold_rows, held_out, scale_free, strength_table,
+                                weighted_residuals)
+from ..models.measures import (END_KIND, Measured, Rows, built_kinds, kind_names, kind_residuals, observability)
 from ..robot.frames import kabsch
 from ..robot.kinematics import Robot
 from .config import ModelSpec, RunConfig, SpreadOptions
-from .fitting import SLOW_SECONDS, FoldLines
+from .fitting import SLOW_SECONDS, FoldLines, strength_note
 from .outputs import check_writable, replace_folder
 from .persist import save_model
-
-FOLDS = 5
-"""Cross-validation folds of a kinds run (``cv_folds: auto``): rows of every kind drawn at random."""
 
 
 def identification_files(config: RunConfig) -> list[Path]:
@@ -168,6 +166,8 @@ def prepare_kinds(config: RunConfig) -> KindsData:
         problem = _entry_problem(spec, kinds)
         if problem is not None:
             config.fail(f"models[{i}]", problem)
+        if len(spec.strengths) > 1 and _scale_free(spec, robot, rows, features):
+            config.fail(f"models[{i}].prior_strength", SCALE_CHOICE)
     tests = {}
     for name, path in config.tests.items():
         if has_kind_column(path, opts.format):
@@ -218,6 +218,15 @@ def _refuse_unused(config: RunConfig) -> None:
                                "whole (a distance's 'to' names rows by id): split the file instead")
 
 
+def _scale_free(spec: ModelSpec, robot: Robot, rows: Rows, features: dict) -> bool:
+    """Whether the rows leave the scale free for this entry (:func:`~partcal.models.kinds_cv.scale_free`)."""
+    model = spec.with_robot(robot).build(None)
+    return scale_free(robot, rows, features, base=bool(model.base), tool=bool(model.tool), rcond=float(model.rcond),
+                      errors=JointErrors.for_robot(robot, list(model.compliance), model.joint_harmonics),
+                      payload_kg=_read_payload(rows),
+                      parametrization=resolved_parametrization(model.parametrization, robot))
+
+
 def _entry_problem(spec: ModelSpec, kinds: list) -> str | None:
     """Why an entry cannot learn from the kinds present (None: it can)."""
     present = ", ".join(k.name for k in kinds)
@@ -257,9 +266,10 @@ def entry_observability(spec: ModelSpec, data: KindsData) -> tuple[list[str], li
     robot, on consistent data): the notes in words, and the parameters held nominal."""
     model = spec.with_robot(data.robot).build(None)
     errors = JointErrors.for_robot(data.robot, list(model.compliance), model.joint_harmonics)
+    prior = model.prior_at(data.robot, 1.0)         # any strength > 0 holds the same parameters
     return observability(data.robot, data.rows, data.features, base=bool(model.base), tool=bool(model.tool),
                          rcond=float(model.rcond), errors=errors,
-                         parametrization=resolved_parametrization(model.parametrization, data.robot))
+                         parametrization=resolved_parametrization(model.parametrization, data.robot), prior=prior)
 
 
 # ---------------------------------------------------------------------- fitting and scoring
@@ -276,6 +286,7 @@ class KindsModelResult:
     tests: dict
     notes: list = field(default_factory=list)
     cv_residuals: dict = field(default_factory=dict)      # kind -> held-out residuals (mm), every fold
+    prior_strength: list | None = None   # a list of prior strengths: each one's CV score (run's folds), chosen marked
 
 
 @dataclass
@@ -290,33 +301,10 @@ class KindsRunResult:
     seconds: float
 
 
-def subset(rows: Rows, keep: NDArray[np.intp]) -> Rows:
-    """Rows ``keep`` and the rows their distances refer to (those as ends alone, kind ``pose``)."""
-    where = {name: i for i, name in enumerate(rows.ids)}
-    keep = np.unique(keep)
-    to = rows.texts.get("to", ("",) * len(rows))
-    needed = {where[to[i]] for i in keep if to[i] in where} - set(keep.tolist())
-    every = np.array(sorted(set(keep.tolist()) | needed), dtype=np.intp)
-    out = rows.take(every)
-    kinds = tuple(END_KIND if i in needed else k for i, k in zip(every, out.kind))
-    return Rows(out.q_deg, kinds, out.ids, out.lines, out.source, out.numbers, out.texts, out.payload_kg,
-                out.sources)
-
-
 def _folds(config: RunConfig, rows: Rows) -> int:
     measuring = int(np.sum(np.asarray(rows.kind, dtype=object) != END_KIND))
     k = FOLDS if config.cv_folds in ("auto", None) else config.cv_folds
     return min(measuring, k if isinstance(k, int) else measuring)
-
-
-def fold_rows(rows: Rows, seed: int, folds: int) -> list[tuple[Rows, NDArray[np.intp]]]:
-    """The cross-validation folds of a kinds run: the measuring rows in ``folds`` random folds (drawn from
-    ``seed``), each as (training rows, the ends their distances name coming along; the held-out rows'
-    indices into ``rows``)."""
-    measuring = np.flatnonzero(np.asarray(rows.kind, dtype=object) != END_KIND)
-    order = np.random.default_rng(seed).permutation(measuring)
-    return [(subset(rows, np.setdiff1d(measuring, order[k::folds])), np.sort(order[k::folds]))
-            for k in range(folds)]
 
 
 def check_folds(config: RunConfig, data: KindsData) -> None:
@@ -332,16 +320,6 @@ def check_folds(config: RunConfig, data: KindsData) -> None:
                                     "rows of that feature")
 
 
-def _weighted_rms(residuals: dict, features: dict) -> float:
-    """One figure of residuals of several kinds: each divided by its kind's noise, times the reference's
-    (as the fit weighs them), RMS; mm of a tracker's 0.02 mm noise."""
-    noise = features.get("noise_mm") or {}
-    parts = [r * REFERENCE_NOISE_MM / noise.get(k, MEASUREMENT_KINDS[k].default_noise_mm)
-             for k, r in residuals.items()]
-    every = np.concatenate(parts) if parts else np.zeros(0)
-    return float(np.sqrt(np.mean(every**2))) if every.size else float("nan")
-
-
 def _rms(values: NDArray[np.float64]) -> float:
     return float(np.sqrt(np.mean(values**2))) if values.size else float("nan")
 
@@ -349,29 +327,52 @@ def _rms(values: NDArray[np.float64]) -> float:
 def fit_entry(spec: ModelSpec, data: KindsData, seed: int, folds: int,
               say: Callable[[str], None] | None = None) -> KindsModelResult:
     """Fit one entry on every row, cross-validate it on random folds of the measuring rows, score the tests.
-    ``say`` hears of each fold once the entry has taken :data:`~partcal.study.fitting.SLOW_SECONDS`."""
-    def fitted(rows: Rows) -> KinematicModel:
-        model = spec.with_robot(data.robot).build(seed)
+    ``say`` hears of each fold once the entry has taken :data:`~partcal.study.fitting.SLOW_SECONDS`.
+
+    A list of prior strengths (``prior_strength: [..]`` or ``auto``) is chosen on the run's folds
+    (:func:`~partcal.models.kinds_cv.strength_table`: the strongest within one standard error of the lowest
+    weighted RMS), the chosen strength fitted on every row; the entry's CV figure is then nested: each fold's
+    training rows choose again on folds of their own (the model's choice,
+    :meth:`KinematicModel.fit <partcal.models.kinematic.KinematicModel.fit>`)."""
+    def fitted(rows: Rows, strength: float | None = None) -> KinematicModel:
+        model = spec.with_robot(data.robot).build(seed, strength=strength)
         return model.fit(rows.q_deg, None, measures=Measured(rows, data.features))
 
+    unfitted = spec.with_robot(data.robot).build(seed)
+    kw = dict(errors=JointErrors.for_robot(data.robot, list(unfitted.compliance), unfitted.joint_harmonics),
+              parametrization=resolved_parametrization(unfitted.parametrization, data.robot),
+              payload_kg=_read_payload(data.rows))
+    cuts = fold_rows(data.rows, seed, folds)
+    strengths, table = spec.strengths, None
     start = time.process_time()
-    model = fitted(data.rows)
+    if len(strengths) > 1:
+        best, table = strength_table(lambda s, rows: fitted(rows, s).identification_, strengths, data.robot,
+                                     data.rows, data.features, cuts, **kw)
+        start = time.process_time()
+        model = fitted(data.rows, strengths[best])
+    else:
+        model = fitted(data.rows)
     seconds = time.process_time() - start
-    kw = dict(errors=model.joint_errors_, parametrization=model.parametrization_, payload_kg=_read_payload(data.rows))
     fit_rms = dict(model.identification_.target_rms_mm)          # each kind's RMS on the rows it was fitted on
-    held: dict[str, list] = {}
     began = time.perf_counter()
-    for k, (train, out) in enumerate(fold_rows(data.rows, seed, folds)):
+
+    def before(k: int) -> None:
         if say is not None and time.perf_counter() - began + seconds > SLOW_SECONDS:
             say(f"{spec.name}: cross-validation fold {k + 1}/{folds} ({time.perf_counter() - began:.0f} s)")
-        part = fitted(train)
-        for name, r in kind_residuals(data.robot, data.rows, data.features, part.identification_, only=out,
-                                      **kw).items():
-            held.setdefault(name, []).append(r)
-    cv = {name: np.concatenate(parts) for name, parts in held.items()}
+
+    cv = held_out(lambda rows: fitted(rows).identification_, data.robot, data.rows, data.features, cuts,
+                  before=before, **kw)[0]
     tests = {name: _score(model, test, data) for name, test in data.tests.items()}
+    notes = model.fit_notes() + ([strength_note(table, "cv_weighted_rms_mm", "CV weighted RMS")] if table else [])
     return KindsModelResult(spec, model, seconds, fit_rms, {k: _rms(r) for k, r in cv.items()},
-                            _weighted_rms(cv, data.features), tests, model.fit_notes(), cv)
+                            _weighted_rms(cv, data.features), tests, notes, cv, prior_strength=table)
+
+
+def _weighted_rms(residuals: dict, features: dict) -> float:
+    """One figure of residuals of several kinds (:func:`~partcal.models.kinds_cv.weighted_residuals`), RMS; mm of a
+    tracker's 0.02 mm noise."""
+    every = weighted_residuals(residuals, features)
+    return float(np.sqrt(np.mean(every**2))) if every.size else float("nan")
 
 
 def _read_payload(rows: Rows):
@@ -439,6 +440,7 @@ def kinds_metrics(result: KindsRunResult) -> dict:
             "models": {r.spec.name: {"fit_kinds_rms_mm": r.fit_rms, "cv_kinds_rms_mm": r.cv_rms,
                                      "cv_weighted_rms_mm": r.cv_pooled, "tests": r.tests,
                                      "fit_seconds": round(r.fit_seconds, 4), "notes": r.notes,
+                                     **({"prior_strength": r.prior_strength} if r.prior_strength else {}),
                                      **r.model.run_summary()}
                        for r in result.models}}
 

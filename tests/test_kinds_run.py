@@ -438,3 +438,49 @@ def test_check_says_a_prior_holds_the_scale_unknown_planes_leave_free(cell, caps
     assert main(["run", "--check", str(listed)]) == 2
     err = capsys.readouterr().err
     assert f"{listed}: models[0].prior_strength (line {line}): a list of strengths cannot be chosen on these " in err
+
+
+PROBE = {**{f"q{j}": f"Axis {j}" for j in range(1, 7)}, "kind": "Type", "id": "Name", "distance_mm": "Length",
+         "to": "Ref", "x_nom": "Xn", "y_nom": "Yn", "z_nom": "Zn", "x_meas": "X", "y_meas": "Y", "z_meas": "Z",
+         "set": "Group"}
+PROBE_KINDS = {"pose": "Pose", "distance": "Bar"}
+
+
+def _probe_export(folder: Path, source: str, target: str) -> str:
+    """The cell's ``source`` as a foreign export writes it: PROBE's column names, semicolons, decimal commas,
+    joints in radians, lengths in metres and PROBE_KINDS' kind values (converted here, not by partcal)."""
+    lines = [x for x in (folder / "data" / source).read_text().splitlines() if x and not x.startswith("#")]
+    header = lines[0].split(",")
+    out = [";".join(PROBE[c] for c in header)]
+    for line in lines[1:]:
+        cells = []
+        for column, cell in zip(header, line.split(",")):
+            if cell and column.startswith("q"):
+                cell = repr(float(cell) * np.pi / 180.0)
+            elif cell and column in ("distance_mm", "x_nom", "y_nom", "z_nom", "x_meas", "y_meas", "z_meas"):
+                cell = repr(float(cell) / 1000.0)
+            cells.append(PROBE_KINDS.get(cell, cell) if column == "kind" else cell.replace(".", ","))
+        out.append(";".join(cells))
+    (folder / "data" / target).write_text("\n".join(out) + "\n")
+    return target
+
+
+def test_a_run_reads_a_foreign_kinds_file_and_point_csv_through_one_format(cell):
+    """``data.format`` maps the ballbar's kinds columns and kind values and the tracker test set's columns: the
+    run's figures are those of the same data in the contract."""
+    folder, _ = cell
+    contract = _config(folder, "ballbar.csv", name="bar_contract")
+    foreign = _config(folder, _probe_export(folder, "ballbar.csv", "ballbar_probe.csv"), name="bar_probe")
+    test = _probe_export(folder, "test.csv", "test_probe.csv")
+    columns = ", ".join(f"{k}: '{v}'" for k, v in PROBE.items())
+    kinds = ", ".join(f"{v}: {k}" for k, v in PROBE_KINDS.items())
+    foreign.write_text(foreign.read_text().replace("data/test.csv", f"data/{test}").replace(
+        "data:\n", f"data:\n  format: {{delimiter: ';', decimal: ',', joint_unit: rad, length_unit: m,\n"
+                   f"           columns: {{{columns}}},\n           kinds: {{{kinds}}}}}\n"))
+    assert main(["run", "-q", str(contract)]) == 0 and main(["run", "-q", str(foreign)]) == 0
+    want, got = ((json.loads((folder / f"out_{n}" / "metrics.json").read_text())["models"]["complete"])
+                 for n in ("bar_contract", "bar_probe"))
+    assert got["fit_kinds_rms_mm"]["distance"] == pytest.approx(want["fit_kinds_rms_mm"]["distance"], rel=1e-6)
+    assert got["cv_kinds_rms_mm"]["distance"] == pytest.approx(want["cv_kinds_rms_mm"]["distance"], rel=1e-6)
+    assert got["tests"]["test"]["rms_3d"] == pytest.approx(want["tests"]["test"]["rms_3d"], rel=1e-6)
+    assert want["tests"]["test"]["rms_3d"] < 0.15                      # a calibrated robot, not two failures

@@ -249,3 +249,125 @@ def test_with_features_a_row_names_a_plane_or_point_of_them(tmp_path):
     t = read_observations(path, features={"planes": {"top": {}}, "points": {"nest_a": {}}})
     assert t.texts["feature"][1:4] == ("top", "top", "nest_a")
     assert read_observations(path).texts["feature"][1] == "top"              # without features: any name
+
+
+# ------------------------------------------------------------------ a format maps the kinds columns too
+FOREIGN = {"q1": "Axis 1", "q2": "Axis 2", "kind": "Type", "id": "Name", "feature": "Feature", "flush": "Flat",
+           "distance_mm": "Length", "to": "Ref", "x_meas": "X", "y_meas": "Y", "z_meas": "Z", "set": "Group"}
+
+
+def _foreign_copy(text: str) -> str:
+    """The contract file ``text`` as a touch-probe export would write it: the columns renamed by FOREIGN,
+    semicolons, decimal commas, joints in radians and lengths in metres (computed here from the degrees and
+    millimetres, not by partcal)."""
+    lines = [line for line in text.splitlines() if line and not line.startswith("#")]
+    header = lines[0].split(",")
+    out = [";".join(FOREIGN[c] for c in header)]
+    for line in lines[1:]:
+        cells = []
+        for column, cell in zip(header, line.split(",")):
+            if cell and column in ("q1", "q2"):
+                cell = repr(float(cell) * np.pi / 180.0)
+            elif cell and column in ("distance_mm", "x_meas", "y_meas", "z_meas"):
+                cell = repr(float(cell) / 1000.0)
+            cells.append(cell.replace(".", ","))
+        out.append(";".join(cells))
+    return "\n".join(out) + "\n"
+
+
+def test_a_foreign_kinds_file_reads_through_a_format_as_the_contract(tmp_path):
+    contract = read_observations(write(tmp_path, HEADER + "\n" + ROWS))
+    foreign = write(tmp_path, _foreign_copy(HEADER + "\n" + ROWS), "probe.csv")
+    fmt = MeasurementFormat(delimiter=";", decimal=",", columns=FOREIGN, joint_unit="rad", length_unit="m")
+    assert has_kind_column(foreign, fmt) and not has_kind_column(foreign, MeasurementFormat(delimiter=";"))
+    t = read_observations(foreign, fmt=fmt)
+    np.testing.assert_allclose(t.q_deg, contract.q_deg, rtol=1e-12)
+    assert t.kind == contract.kind and t.ids == contract.ids and t.texts == contract.texts
+    assert t.numbers.keys() == contract.numbers.keys()
+    for column, values in contract.numbers.items():
+        np.testing.assert_allclose(t.numbers[column], values, rtol=1e-12, err_msg=column)
+    np.testing.assert_allclose(t.numbers["distance_mm"][5:], [812.5, 900.25], rtol=1e-12)   # metres -> mm
+
+
+def test_messages_about_a_mapped_kinds_column_name_it_as_the_file_does(tmp_path):
+    fmt = MeasurementFormat(columns={"kind": "Type", "distance_mm": "Length"})
+    path = write(tmp_path, "q1,Type,Length,to\n1,pose,,\n2,lazer,,\n")
+    with pytest.raises(DataError, match=r"obs\.csv:3: column 'Type' \(kind\): expected one of the kinds point, "):
+        read_observations(path, fmt=fmt)
+    path = write(tmp_path, "q1,Type,Length,to,id\n1,pose,,,a\n2,distance,-3,a,\n")
+    with pytest.raises(DataError, match=r"obs\.csv:3: column 'Length' \(distance_mm\): expected a distance > 0 mm, "
+                                        r"got '-3'"):
+        read_observations(path, fmt=fmt)
+
+
+def test_a_mapped_kinds_column_missing_from_the_file_is_named_as_both(tmp_path):
+    fmt = MeasurementFormat(columns={"kind": "Type", "feature": "Feature"})
+    path = write(tmp_path, "q1,Type,feature\n1,plane,top\n")       # the contract's name does not stand in
+    with pytest.raises(DataError, match=r"obs\.csv:1: column 'Feature' is missing \(the format maps feature to "
+                                        r"it\)$"):
+        read_observations(path, fmt=fmt)
+
+
+def test_one_format_serves_a_runs_point_csvs_and_kinds_files(tmp_path):
+    """Each reader looks for the mapped columns it reads: the point CSV has no ``Type``, the kinds file no
+    nominal columns."""
+    fmt = MeasurementFormat(columns={"kind": "Type", "feature": "Feature", "x_nom": "Xn", "x_meas": "X"})
+    points = write(tmp_path, "q1,Xn,y_nom,z_nom,X,y_meas,z_meas\n1,10,20,30,11,22,33\n", "points.csv")
+    kinds = write(tmp_path, "q1,Type,Feature,X,y_meas,z_meas\n1,plane,top,,,\n2,point,,4,5,6\n", "kinds.csv")
+    assert not has_kind_column(points, fmt) and has_kind_column(kinds, fmt)
+    m = read_measurements(points, fmt=fmt)
+    assert m.nominal_mm.tolist() == [[10, 20, 30]] and m.measured_mm.tolist() == [[11, 22, 33]]
+    t = read_observations(kinds, fmt=fmt)
+    assert t.kind == ("plane", "point") and t.texts["feature"] == ("top", "")
+    assert t.numbers["x_meas"][1] == 4 and "x_nom" not in t.numbers
+
+
+@pytest.mark.parametrize("columns, match", [
+    ({"featur": "Feature"}, r"The 'columns' entry 'featur' of MeasurementFormat must be a contract column .* or "
+                            r"a measurement-kinds column \(kind, id, feature, to, target, distance_mm, flush\)\. Got "
+                            r"'featur' \(did you mean 'feature'\?\) instead"),
+    ({"distance": "Length"}, r"Got 'distance' \(did you mean 'distance_mm'\?\) instead"),
+    ({"Kind": "Type"}, r"Got 'Kind' \(did you mean 'kind'\?\) instead"),
+    ({"feature": "to"}, r"The 'columns' entry 'feature' of MeasurementFormat must be a file column that holds no "
+                        r"other contract column\. Got 'to' \(the contract column to is not mapped, so it is read "
+                        r"under its own name: map to too\) instead"),
+])
+def test_a_bad_kinds_key_of_a_format_is_refused_with_a_hint(columns, match):
+    with pytest.raises(ConfigError, match=match):
+        MeasurementFormat(columns=columns)
+
+
+def test_a_point_format_may_map_a_column_named_like_a_kinds_column(tmp_path):
+    """A format that maps no kinds column is a point format: a file column ``id`` holding ``set`` is fine."""
+    fmt = MeasurementFormat(columns={"set": "id"})
+    m = read_measurements(write(tmp_path, "q1,x_nom,y_nom,z_nom,x_meas,y_meas,z_meas,id\n1,1,2,3,1,2,3,run7\n",
+                                "p.csv"), fmt=fmt)
+    assert m.labels == ("run7",)
+
+
+def test_a_format_names_the_files_kind_values(tmp_path):
+    fmt = MeasurementFormat(columns={"kind": "Type"}, kinds={"Plane": "plane", "Sphere": "fixed", "Lazer": "lazer"})
+    path = write(tmp_path, "q1,Type,feature\n1,Plane,top\n2,Sphere,nest\n3,pose,\n")
+    t = read_observations(path, fmt=fmt)
+    assert t.kind == ("plane", "fixed", "pose")          # an unmapped value is read as written
+    assert t.rows_of("fixed").tolist() == [1]
+    with pytest.raises(DataError, match=r"obs\.csv:2: column 'Type' \(kind\): expected one of the kinds point, plane, "
+                                        r"fixed, distance, pose \(the format's kinds name it 'lazer'\), got 'Lazer'$"):
+        read_observations(write(tmp_path, "q1,Type\n1,Lazer\n"), fmt=fmt)
+
+
+def test_a_point_row_without_the_mapped_measured_columns_names_them(tmp_path):
+    """A kinds file need not have the run's mapped ``x_meas``.. (a ballbar file has no point rows), but a point row
+    then is refused naming the mapped column."""
+    fmt = MeasurementFormat(columns={"x_meas": "X", "y_meas": "Y", "z_meas": "Z", "set": "Group"})
+    assert read_observations(write(tmp_path, "q1,kind\n1,pose\n"), fmt=fmt).kind == ("pose",)
+    with pytest.raises(DataError, match=r"obs\.csv:3: column 'X' \(x_meas\): expected a value on a point row, but "
+                                        r"the file has no column 'X' \(x_meas\) \(point rows read x_meas, "):
+        read_observations(write(tmp_path, "q1,kind\n1,pose\n2,point\n"), fmt=fmt)
+
+
+def test_a_mapped_target_column_is_read_as_text_even_when_its_names_are_digits(tmp_path):
+    fmt = MeasurementFormat(columns={"target": "Reflector"})
+    t = read_observations(write(tmp_path, "q1,kind,x_meas,y_meas,z_meas,Reflector\n1,point,1,2,3,2\n"
+                                          "2,point,4,5,6,\n"), fmt=fmt)
+    assert t.texts["target"] == ("2", "") and "Reflector" not in t.texts and "target" not in t.numbers

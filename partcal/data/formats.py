@@ -3,8 +3,11 @@
 A :class:`MeasurementFormat` says how a file differs from the measurement CSV
 contract (``docs/data.md``): its delimiter and decimal mark, which of its
 columns hold the contract's columns, and the units of its joint angles and
-lengths. The reader in :mod:`partcal.data.measurements` applies it, so values
-are converted once, at the boundary, to degrees and millimetres.
+lengths. The readers in :mod:`partcal.data.measurements` and
+:mod:`partcal.data.observations` apply it, so values are converted once, at
+the boundary, to degrees and millimetres. For a measurement-kinds file it also
+maps the kinds columns (``kind``, ``feature``, ``distance_mm``..) and the
+file's kind values (``kinds``).
 
 A :class:`RowSelection` picks data rows of a file (``rows: "1-600"``,
 ``every: 5``), for instance a subset of a large series for identification.
@@ -41,6 +44,12 @@ LENGTHS = ("x_nom", "y_nom", "z_nom", "x_meas", "y_meas", "z_meas", "x", "y", "z
 ORIENTATIONS = ("rx_meas", "ry_meas", "rz_meas", "rx_nom", "ry_nom", "rz_nom")
 STDS = ("std_x", "std_y", "std_z")      # the measured position's standard deviation per coordinate (a length)
 CONTRACT_COLUMNS = JOINTS + LENGTHS + ORIENTATIONS + STDS + ("set", "payload_kg")
+KIND, ID = "kind", "id"
+KINDS_TEXTS = ("feature", "to", "target")
+KINDS_NUMBERS = ("distance_mm", "flush")
+KINDS_COLUMNS = (KIND, ID, *KINDS_TEXTS, *KINDS_NUMBERS)
+"""A measurement-kinds file's columns beyond the point contract's (:mod:`partcal.data.observations` reads
+them with ``q1..qN``, ``x_meas, y_meas, z_meas``, ``set`` and ``payload_kg``)."""
 TARGET_COLUMN = re.compile(r"^([xyz]_(?:meas|nom))@(.*)$")
 TARGET_NAME = re.compile(r"^[A-Za-z0-9_]+$")
 JOINT_UNITS = ("deg", "rad")
@@ -62,15 +71,22 @@ class MeasurementFormat:
         The decimal mark, ``"."`` (default) or ``","``; must differ from ``delimiter``.
     columns : mapping of str to str
         Contract column (``q1``..``q12``, ``x_nom``.., ``x_meas``.., a target's
-        ``x_meas@B``.., ``rx_meas``.., ``rx_nom``.., ``x, y, z``, ``set``) -> the
-        file's column that holds it. Unmapped contract columns are looked up
-        under their own name; unmapped file columns are ignored.
+        ``x_meas@B``.., ``rx_meas``.., ``rx_nom``.., ``x, y, z``, ``set``, and
+        a measurement-kinds file's ``kind, id, feature, to, target,
+        distance_mm, flush``) -> the file's column that holds it. Unmapped contract columns
+        are looked up under their own name; unmapped file columns are ignored.
+        One format may serve a run's point CSVs and kinds files: which mapped
+        columns a file must have is :func:`file_must_have`.
     joint_unit : {"deg", "rad"}
         Unit of the joint columns in the file.
     length_unit : {"mm", "m"}
         Unit of the position columns in the file.
     orientation_unit : {"deg", "rad"}
         Unit of the orientation columns (intrinsic XYZ angles) in the file.
+    kinds : mapping of str to str
+        A measurement-kinds file's ``kind`` values -> partcal's kind names
+        (``{"Plane": "plane", "Sphere": "fixed"}``); an unmapped value is read
+        as written. The reader checks the names against its kinds.
     """
 
     delimiter: str = ","
@@ -79,15 +95,17 @@ class MeasurementFormat:
     joint_unit: str = "deg"
     length_unit: str = "mm"
     orientation_unit: str = "deg"
+    kinds: Mapping[str, str] = field(default_factory=dict)
 
     def __post_init__(self):
         problem = _format_problem(self.delimiter, self.decimal, self.columns, self.joint_unit, self.length_unit,
-                                  self.orientation_unit)
+                                  self.orientation_unit, self.kinds)
         if problem:
             name = f"{problem.key!r} parameter" if problem.entry is None else f"{problem.key!r} entry {problem.entry!r}"
             raise ConfigError(f"The {name} of MeasurementFormat must be {problem.expected}. "
                               f"Got {problem.got!r}{problem.note} instead.")
         object.__setattr__(self, "columns", dict(self.columns))
+        object.__setattr__(self, "kinds", dict(self.kinds))
 
     def file_column(self, contract: str) -> str:
         """The file's name of a contract column (itself when unmapped)."""
@@ -116,10 +134,10 @@ class MeasurementFormat:
         return self == MeasurementFormat()
 
     def to_dict(self) -> dict:
-        """Plain types, as in the YAML."""
+        """Plain types, as in the YAML (``kinds`` only when given)."""
         return {"delimiter": self.delimiter, "decimal": self.decimal, "columns": dict(self.columns),
                 "joint_unit": self.joint_unit, "length_unit": self.length_unit,
-                "orientation_unit": self.orientation_unit}
+                "orientation_unit": self.orientation_unit, **({"kinds": dict(self.kinds)} if self.kinds else {})}
 
     @classmethod
     def from_section(cls, sec: Section) -> "MeasurementFormat":
@@ -133,6 +151,8 @@ class MeasurementFormat:
                    ("orientation_unit", "deg"))}
         cols = sec.section("columns")
         values["columns"] = {str(key): _stripped(cols.get(key, "str")) for key in list(cols.data)}
+        kinds = sec.section("kinds")
+        values["kinds"] = {str(key): _stripped(kinds.get(key, "str")) for key in list(kinds.data)}
         problem = _format_problem(**values)
         if problem:
             where = problem.key if problem.entry is None else f"{problem.key}.{problem.entry}"
@@ -163,7 +183,7 @@ class _Problem(NamedTuple):
 
 
 def _format_problem(delimiter: Any, decimal: Any, columns: Any, joint_unit: Any, length_unit: Any,
-                    orientation_unit: Any = "deg") -> _Problem | None:
+                    orientation_unit: Any = "deg", kinds: Any = None) -> _Problem | None:
     """The first format rule the values break, or None: each rule is checked here and only here.
 
     Both ways of making a format use it: the constructor frames the problem
@@ -184,16 +204,55 @@ def _format_problem(delimiter: Any, decimal: Any, columns: Any, joint_unit: Any,
     if not isinstance(columns, Mapping):
         return _Problem("columns", None, "a mapping of contract column to file column", columns)
     for key, value in columns.items():
-        if not is_contract_column(key):
-            close = difflib.get_close_matches(str(key), CONTRACT_COLUMNS, n=1, cutoff=0.6)
+        if not is_contract_column(key) and key not in KINDS_COLUMNS:
+            close = _close(str(key))
             return _Problem("columns", key, f"a contract column (q1..q{MAX_JOINTS}, x_nom, y_nom, z_nom, x_meas, "
                                             "y_meas, z_meas, x_meas@NAME.., rx_meas, ry_meas, rz_meas, rx_nom, "
                                             "ry_nom, rz_nom, x, y, z, std_x, std_y, std_z, set, "
-                                            "payload_kg)", key,
-                            f" (did you mean {close[0]!r}?)" if close else "")
+                                            f"payload_kg) or a measurement-kinds column ({', '.join(KINDS_COLUMNS)})",
+                            key, f" (did you mean {close[0]!r}?)" if close else "")
         if not isinstance(value, str) or not value.strip():
             return _Problem("columns", key, "a non-empty file column name", value)
-    return _mapping_problem(columns)
+    return _mapping_problem(columns) or _kinds_problem({} if kinds is None else kinds)
+
+
+def _kinds_problem(kinds: Any) -> _Problem | None:
+    """The first broken rule of ``kinds``: a mapping of the file's kind value to a kind name, both non-empty
+    texts (whether the name is a kind is the reader's to say: the data layer does not know the models' kinds)."""
+    if not isinstance(kinds, Mapping):
+        return _Problem("kinds", None, "a mapping of the file's kind value to a kind name", kinds)
+    for key, value in kinds.items():
+        if not isinstance(key, str) or not key.strip():
+            return _Problem("kinds", key, "a non-empty kind value of the file", key)
+        if not isinstance(value, str) or not value.strip():
+            return _Problem("kinds", key, "a non-empty kind name (point, plane, fixed, distance, pose, ...)", value)
+    return None
+
+
+def _close(key: str) -> list[str]:
+    """The mappable column a misspelt key most likely meant (``[]``: none): a point column as always, else a
+    kinds column at a stricter cutoff (so that ``temperature`` is not taken for ``feature``)."""
+    return (difflib.get_close_matches(key, CONTRACT_COLUMNS, n=1, cutoff=0.6)
+            or difflib.get_close_matches(key, KINDS_COLUMNS, n=1, cutoff=0.7))
+
+
+def file_must_have(contract: str, kinds_file: bool) -> bool:
+    """Whether a file must have the column that a format maps ``contract`` to (it is refused naming both when it
+    has not): one format may serve a run's point CSVs and measurement-kinds files.
+
+    A point CSV must have its contract's mapped columns, not a kinds file's (``kind``, ``feature``..); a kinds
+    file its joints and kinds columns, while the point contract's (``x_nom``.., ``x_meas``.., ``rx_meas``..,
+    ``set``, ``payload_kg``) are read when present (a point row without ``x_meas`` is refused naming the mapped
+    column).
+
+    >>> file_must_have("kind", kinds_file=False), file_must_have("x_meas", kinds_file=True)
+    (False, False)
+    >>> file_must_have("x_meas", kinds_file=False), file_must_have("feature", kinds_file=True)
+    (True, True)
+    """
+    if kinds_file:
+        return contract in JOINTS or contract in KINDS_COLUMNS
+    return contract not in KINDS_COLUMNS
 
 
 def is_contract_column(name: Any) -> bool:
@@ -219,16 +278,20 @@ def _mapping_problem(columns: Mapping[str, str]) -> _Problem | None:
 
     Two contract columns mapped to one file column, or mapped to the name of
     a contract column that is not mapped (and so is read under its own name:
-    ``{x_meas: q1}`` would read q1 twice).
+    ``{x_meas: q1}`` would read q1 twice). The kinds file's own columns
+    (``kind``, ``id``, ``feature``..) count as contract columns here only in a
+    format that maps one of them (a format for kinds files), so that a point
+    format mapping, say, ``set`` to a column ``id`` stays valid.
     """
     one = "a file column that holds no other contract column"
+    kinds = any(key in KINDS_COLUMNS for key in columns)
     owner: dict[str, str] = {}
     for key, value in columns.items():
         if value in owner:
             return _Problem("columns", key, one, value, f" (already mapped to {owner[value]})")
         owner[value] = key
     for key, value in columns.items():
-        if is_contract_column(value) and value != key and value not in columns:
+        if (is_contract_column(value) or (kinds and value in KINDS_COLUMNS)) and value != key and value not in columns:
             return _Problem("columns", key, one, value, f" (the contract column {value} is not mapped, so it is "
                                                         f"read under its own name: map {value} too)")
     return None

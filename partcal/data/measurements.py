@@ -45,7 +45,7 @@ from ..metrics import MRAD_PER_DEG
 from ..robot.description import MAX_JOINTS, joint_columns, load_robot
 from ..robot.kinematics import Robot
 from ..robot.rotations import matrices_from_xyz_deg, rotation_vectors_from_matrices, xyz_deg_from_matrices
-from .formats import STDS, MeasurementFormat, RowSelection
+from .formats import STDS, MeasurementFormat, RowSelection, file_must_have
 from .pose_columns import (ORIENTATION_MEASURED, ORIENTATION_NOMINAL, PRIMARY, check_angles, checked_orientation,
                            checked_targets, orientation_columns, suffixed, target_columns)
 from .plausibility import Plausibility, check_measured, check_orientation
@@ -388,11 +388,13 @@ class CsvTable:
         return _payloads(self.path, self.line, self.header, self.data, self.seen[PAYLOAD], self.fmt.decimal)
 
 
-def read_table(path: str | Path, expected: str, fmt: MeasurementFormat | None = None) -> CsvTable:
+def read_table(path: str | Path, expected: str, fmt: MeasurementFormat | None = None, *,
+               kinds_file: bool = False) -> CsvTable:
     """Parse a CSV once (``expected``: a header to suggest when the file is empty); errors name file, line and
-    column."""
+    column. ``kinds_file``: the file is a measurement-kinds file (which mapped columns it must have:
+    :func:`~partcal.data.formats.file_must_have`)."""
     path, fmt = Path(path), fmt or _CONTRACT
-    return CsvTable(path, *_table(path, expected, fmt), fmt)
+    return CsvTable(path, *_table(path, expected, fmt, kinds_file), fmt)
 
 
 def _payloads(path: Path, line: int, header: list[str], data: list, column: int, decimal: str
@@ -443,13 +445,16 @@ def csv_rows(path: Path, delimiter: str = ","):
             raise DataError(f"{path}: not a UTF-8 text file ({exc.reason} at byte {exc.start})") from None
 
 
-def _table(path: Path, expected: str, fmt: MeasurementFormat = _CONTRACT
+def _table(path: Path, expected: str, fmt: MeasurementFormat = _CONTRACT, kinds_file: bool = False
            ) -> tuple[int, list[str], dict[str, int], list]:
     """Header line number, column labels for messages, contract name -> position, and the data rows.
 
-    Refuses empty files, duplicate columns and mapped columns that are missing.
-    File columns that ``fmt`` maps are found under their contract names; an
-    unmapped file column named like a mapped contract column is ignored.
+    Refuses empty files, duplicate columns and mapped columns that are missing
+    (those the file must have: :func:`~partcal.data.formats.file_must_have`, as a
+    run's one format may map both its point CSVs' and kinds files' columns;
+    a mapped column that is absent is then not found). File columns that ``fmt`` maps are found
+    under their contract names; an unmapped file column named like a mapped
+    contract column is ignored.
     """
     rows = list(csv_rows(path, fmt.delimiter))
     if not rows:
@@ -467,6 +472,8 @@ def _table(path: Path, expected: str, fmt: MeasurementFormat = _CONTRACT
     labels = [repr(col) for col in names]
     for contract, column in fmt.columns.items():
         if column not in position:
+            if not file_must_have(contract, kinds_file):
+                continue
             raise DataError(f"{path}:{line}: column {column!r} is missing (the format maps {contract} to it)")
         seen[contract] = position[column]
         labels[position[column]] = fmt.label(contract)

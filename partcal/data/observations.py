@@ -41,16 +41,14 @@ from .._yamlio import Section, load_yaml
 from ..errors import DataError
 from ..robot.description import joint_columns, load_robot
 from ..robot.kinematics import Robot
-from .formats import MeasurementFormat
+from .formats import ID, KIND, KINDS_NUMBERS, KINDS_TEXTS, MeasurementFormat
 from .measurements import MEASURED, PAYLOAD, csv_rows, joint_count, parse_number, read_table
 
 BUILTIN_KINDS = ("point", "plane", "fixed", "distance", "pose")
 """The kinds partcal itself defines (``partcal.models.contacts`` implements them)."""
-KIND = "kind"
-ID = "id"
-NUMERIC = ("distance_mm", "flush", *MEASURED, PAYLOAD)
+NUMERIC = (*KINDS_NUMBERS, *MEASURED, PAYLOAD)
 """The contract's numeric columns (each present one is in :attr:`ObservationTable.numbers`)."""
-TEXT = ("feature", "to", "set")
+TEXT = (*KINDS_TEXTS, "set")
 """The contract's text columns (each present one is in :attr:`ObservationTable.texts`)."""
 READS = {"point": MEASURED, "plane": ("feature",), "fixed": ("feature",), "distance": ("distance_mm", "to"),
          "pose": ()}
@@ -124,13 +122,14 @@ class ObservationTable:
 
 
 def has_kind_column(path: str | Path, fmt: MeasurementFormat | None = None) -> bool:
-    """Whether the CSV's header has a ``kind`` column (a measurement-kinds file, read by
-    :func:`read_observations`; without it the file is a point CSV for ``read_measurements``).
+    """Whether the CSV's header has a ``kind`` column, or the column ``fmt`` maps ``kind`` to (a measurement-kinds
+    file, read by :func:`read_observations`; without it the file is a point CSV for ``read_measurements``).
 
     Only the header line is read; a missing or unreadable file raises :class:`~partcal.errors.DataError`.
     """
-    for _, cells in csv_rows(Path(path), (fmt or MeasurementFormat()).delimiter):
-        return KIND in (c.strip() for c in cells)
+    fmt = fmt or MeasurementFormat()
+    for _, cells in csv_rows(Path(path), fmt.delimiter):
+        return fmt.file_column(KIND) in (c.strip() for c in cells)
     return False
 
 
@@ -145,8 +144,9 @@ def read_observations(path: str | Path, robot: str | Robot | None = None, fmt: M
     robot : str or Robot, optional
         The file's joint columns must be its joints.
     fmt : MeasurementFormat, optional
-        Delimiter, decimal mark, column mapping and units of a foreign file (``length_unit: m`` converts
-        ``distance_mm`` too).
+        Delimiter, decimal mark, column mapping (the kinds columns' too) and units of a foreign file
+        (``length_unit: m`` converts ``distance_mm`` too), and its ``kinds``: the file's kind values ->
+        kind names.
     features : dict, optional
         What :func:`read_features` returns: a plane row's ``feature`` must then be one of its ``planes``, a
         fixed row's one of its ``points``, and a distance row's ``to`` must name a row's ``id`` or one of
@@ -167,7 +167,7 @@ def read_observations(path: str | Path, robot: str | Robot | None = None, fmt: M
     """
     path = Path(path)
     fmt = fmt or MeasurementFormat()
-    table = read_table(path, _EXAMPLE, fmt)
+    table = read_table(path, _EXAMPLE, fmt, kinds_file=True)
     header, seen, data = table.header, table.seen, table.data
     where = f"{path}:{table.line}"
     if KIND not in seen:
@@ -183,14 +183,16 @@ def read_observations(path: str | Path, robot: str | Robot | None = None, fmt: M
     for number, cells in data:
         if len(cells) != len(header):
             raise DataError(f"{path}:{number}: expected {len(header)} cells as in the header, got {len(cells)}")
-    cell = _Cells(path, header, seen, data, fmt.decimal)
+    cell = _Cells(path, header, seen, data, fmt)
     joints = joint_columns(n_q)
     q = fmt.to_contract(joints, np.column_stack([cell.numbers(c, required=True) for c in joints]))
-    kind = cell.texts(KIND)
+    written = cell.texts(KIND)
+    kind = tuple(fmt.kinds.get(k, k) for k in written)
     known = tuple(kinds)
     for r, k in enumerate(kind):
         if k not in known:
-            cell.fail(r, KIND, k, f"one of the kinds {', '.join(known)}")
+            named = f" (the format's kinds name it {k!r})" if k != written[r] else ""
+            cell.fail(r, KIND, written[r], f"one of the kinds {', '.join(known)}{named}")
     numbers, texts = _columns(cell, seen, fmt)
     ids = _ids(cell, features)
     _check_rows(cell, kind, numbers, texts, ids, features)
@@ -202,11 +204,16 @@ def read_observations(path: str | Path, robot: str | Robot | None = None, fmt: M
 class _Cells:
     """One parsed file's cells by contract column, with refusals that name file, line, column and value."""
 
-    def __init__(self, path: Path, header: list[str], seen: dict[str, int], data: list, decimal: str):
-        self.path, self.header, self.seen, self.data, self.decimal = path, header, seen, data, decimal
+    def __init__(self, path: Path, header: list[str], seen: dict[str, int], data: list, fmt: MeasurementFormat):
+        self.path, self.header, self.seen, self.data, self.fmt = path, header, seen, data, fmt
+        self.decimal = fmt.decimal
+
+    def label(self, column: str) -> str:
+        """How messages name a column: ``'Length' (distance_mm)`` when the format maps it, ``'to'`` otherwise."""
+        return self.header[self.seen[column]] if column in self.seen else self.fmt.label(column)
 
     def fail(self, row: int, column: str, value: str, expected: str):
-        label = self.header[self.seen[column]] if column in self.seen else repr(column)
+        label = self.label(column)
         shown = "an empty cell" if value == "" else repr(value)
         raise DataError(f"{self.path}:{self.data[row][0]}: column {label}: expected {expected}, got {shown}")
 
@@ -239,10 +246,13 @@ class _Cells:
 
 
 def _columns(cell: _Cells, seen: dict[str, int], fmt: MeasurementFormat) -> tuple[dict, dict]:
-    """Every column but the joints, ``kind`` and ``id``: numbers (contract units) and texts."""
+    """Every column but the joints, ``kind`` and ``id``: numbers (contract units) and texts. A mapped file column
+    is kept under its contract name only (``seen`` holds it under both)."""
     numbers, texts = {}, {}
+    mapped = {seen[c] for c in fmt.columns if c in seen}
     for column in seen:
-        if column in (KIND, ID) or re.fullmatch(r"q\d+", column):
+        if column in (KIND, ID) or re.fullmatch(r"q\d+", column) or (seen[column] in mapped and
+                                                                     column not in fmt.columns):
             continue
         if column in TEXT or (column not in NUMERIC and not cell.is_numeric(column)):
             texts[column] = cell.texts(column)
@@ -277,8 +287,8 @@ def _check_rows(cell: _Cells, kind: tuple, numbers: dict, texts: dict, ids: tupl
     for r, k in enumerate(kind):
         for column in READS.get(k, ()):
             if column not in texts and column not in numbers:
-                cell.fail(r, column, "", f"a value on a {k} row, but the file has no column {column!r} ({k} rows "
-                                         f"read {', '.join(READS[k])})")
+                cell.fail(r, column, "", f"a value on a {k} row, but the file has no column {cell.label(column)} "
+                                         f"({k} rows read {', '.join(READS[k])})")
             empty = texts[column][r] == "" if column in texts else np.isnan(numbers[column][r])
             if empty:
                 cell.fail(r, column, "", f"a value on a {k} row ({k} rows read {', '.join(READS[k])})")

@@ -81,6 +81,18 @@ def test_a_strong_prior_returns_its_mean_and_a_zero_one_the_plain_fit(ur10):
     assert plausible_prior(units, 24, v0, 0.0, {"mm": 1.0, "deg": 0.1}) is None
 
 
+def test_a_prior_holds_a_fit_on_the_measured_orientation_too(ur10):
+    """The orientation (and further targets) stack more residuals; the prior's rows go below them all."""
+    from partcal.models.kinematic import KinematicModel
+    q = poses(ur10, 30, 31)
+    rng = np.random.default_rng(32)
+    y = np.column_stack([rng.normal(scale=0.5, size=(30, 3)), rng.normal(scale=1.0, size=(30, 3))])   # mm, mrad
+    strong = KinematicModel(robot=ur10, use_orientation=True, prior="plausible", prior_strength=1e5).fit(q, y)
+    np.testing.assert_allclose(strong.identification_.value[:24], nominal_values(ur10)[:24], atol=1e-3)
+    free = KinematicModel(robot=ur10, use_orientation=True).fit(q, y)
+    assert np.abs(free.identification_.value[:24] - nominal_values(ur10)[:24]).max() > 0.1
+
+
 def test_without_a_prior_the_fit_is_unchanged_bit_for_bit(ur10):
     q = poses(ur10, 30, 8)
     measured = model_positions(ur10, None, q, moved(ur10, 9), np.zeros(len(q)))

@@ -45,7 +45,7 @@ from ..metrics import MRAD_PER_DEG
 from ..robot.description import MAX_JOINTS, joint_columns, load_robot
 from ..robot.kinematics import Robot
 from ..robot.rotations import matrices_from_xyz_deg, rotation_vectors_from_matrices, xyz_deg_from_matrices
-from .formats import STDS, MeasurementFormat, RowSelection, file_must_have
+from .formats import KIND, STDS, MeasurementFormat, RowSelection, file_must_have
 from .pose_columns import (ORIENTATION_MEASURED, ORIENTATION_NOMINAL, PRIMARY, check_angles, checked_orientation,
                            checked_targets, orientation_columns, suffixed, target_columns)
 from .plausibility import Plausibility, check_measured, check_orientation
@@ -532,8 +532,11 @@ def _check_header(path: Path, line: int, seen: dict[str, int], fmt: MeasurementF
     n_joints = joint_count(where, seen)
     for col in MEASURED:
         if col not in seen:
+            kinds = (f"; column {fmt.file_column(KIND)!r} makes it a measurement-kinds file, which partcal run and "
+                     "partcal plan --evaluate read (docs/data.md, \"Measurement kinds\"), not this command"
+                     if KIND in seen else "")
             raise DataError(f"{where}: column {fmt.file_column(col)!r} is missing (required: "
-                            f"{', '.join(fmt.file_column(c) for c in MEASURED)})")
+                            f"{', '.join(fmt.file_column(c) for c in MEASURED)}){kinds}")
     present = [c for c in NOMINAL if c in seen]
     if 0 < len(present) < 3:
         missing = next(c for c in NOMINAL if c not in seen)

@@ -102,7 +102,7 @@ class Prior:
     def augmented(self, jac_at):
         """``jac_at`` (values, jacobian=True) -> (residuals, Jacobian or None) with the prior rows appended."""
         def with_rows(values, jacobian=True):
-            resid, jac = jac_at(values, jacobian)
+            resid, jac = jac_at(values, jacobian=jacobian)
             resid = np.concatenate([resid, self.rows(values)])
             return resid, None if jac is None else np.vstack([jac, self.jacobian(values.size)])
         return with_rows
@@ -128,17 +128,28 @@ STRENGTH_GRID = tuple(round(0.1 * 10 ** (k / 4), 3) for k in range(11))
 
 def strength_problem(value) -> str | None:
     """What a ``prior_strength`` must be (a number >= 0, ``auto``, or a non-empty list of numbers to choose
-    from), or None.
+    from, each once), or None; a bad item of a list is named.
 
     >>> strength_problem([0.3, 1, 3]) is None, strength_problem("auto") is None, strength_problem(-1)
     (True, True, 'a number >= 0, auto, or a non-empty list of numbers >= 0')
+    >>> strength_problem([1, -1]), strength_problem([1, 3, 1])
+    ('a non-empty list of numbers >= 0 (item 2 is -1)', 'a list of different numbers (item 3 repeats 1)')
     """
+    def number(v) -> bool:
+        return isinstance(v, (int, float)) and not isinstance(v, bool) and bool(np.isfinite(v)) and v >= 0
+
     if isinstance(value, str) and value == "auto":
         return None
-    values = value if isinstance(value, (list, tuple)) else [value]
-    ok = bool(values) and all(isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v) and v >= 0
-                              for v in values)
-    return None if ok else "a number >= 0, auto, or a non-empty list of numbers >= 0"
+    if not isinstance(value, (list, tuple)):
+        return None if number(value) else "a number >= 0, auto, or a non-empty list of numbers >= 0"
+    if not value:
+        return "a number >= 0, auto, or a non-empty list of numbers >= 0"
+    for k, v in enumerate(value, 1):
+        if not number(v):
+            return f"a non-empty list of numbers >= 0 (item {k} is {v!r})"
+        if v in value[:k - 1]:
+            return f"a list of different numbers (item {k} repeats {v!r})"
+    return None
 
 
 def strengths_of(value) -> tuple[float, ...]:

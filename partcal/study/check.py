@@ -167,7 +167,7 @@ class CheckResult:
             width = max(len(e.name) for e in self.explanations)
             for rank, e in enumerate(self.explanations, 1):
                 out.append(f"  {rank:2d}. {e.name:<{width}}  evidence {e.evidence:9.1f}  left {e.mean_z2:7.3f} "
-                           f"(p {_p(e.p_value)})  shared {e.shared:4.2f}  {e.values_text()}")
+                           f"(p {_p(e.p_value)})  shared {'   -' if rank == 1 else f'{e.shared:4.2f}'}  {e.values_text()}")
             out.append(f"taken together (forward selection, each step raising the evidence by more than {GAIN:g}): "
                        + (", ".join(f"{name} ({gain:+.1f})" for name, gain in self.together) or "none"))
         return out

@@ -494,12 +494,10 @@ def kinds_table(result: KindsRunResult) -> str:
         "; test sets of points scored after a rigid fit (the identification data fix no frame)"
         if not result.data.fixes_frame and any(isinstance(t, Measurements) for t in result.data.tests.values())
         else ""))
-    seen = []
-    for r in result.models:
-        for note in r.notes:
-            if note not in seen:
-                seen.append(note)
-    lines += [f"note: {n}" for n in seen]
+    common = [n for n in dict.fromkeys(result.models[0].notes if result.models else [])
+              if all(n in r.notes for r in result.models)]
+    lines += [f"note: {n}" for n in common]
+    lines += [f"note: {r.spec.name}: {n}" for r in result.models for n in dict.fromkeys(r.notes) if n not in common]
     return "\n".join(lines)
 
 

@@ -257,6 +257,12 @@ def test_run_config_prior_keys(tmp_path, calibrated):
     assert prior.source == str(path) and np.array_equal(prior.mean, table.value[prior.index])
     assert prior.index.tolist() == list(range(24))             # the rows' parameters; tool and frame afresh
     assert yaml.safe_load(yaml.safe_dump(cfg.resolved()))["models"][0]["params"]["prior"] == str(path)
+    with pytest.raises(ConfigError, match=r"models\[0\]\.prior \(line 6\): '.*' was identified with 33 parameters, "
+                                          r"this entry identifies 51 \(parameter 2: d\[1\] there, x\[1\] here\)"):
+        load_config(run_config(tmp_path, f"prior: {path}, parametrization: complete"))
+    with pytest.raises(ConfigError, match=r"models\[0\]\.prior \(line 6\): .*with 33 parameters, this entry "
+                                          r"identifies 39 \(parameter 34: nothing there, sag\[2,f2\] here\)"):
+        load_config(run_config(tmp_path, f"prior: {path}, compliance: [2]"))
     with pytest.raises(ConfigError, match=r"models\[0\]\.prior_strength \(line 6\): applies with a prior only"):
         load_config(run_config(tmp_path, "prior_strength: 2"))
     with pytest.raises(ConfigError, match=r"models\[0\]\.prior_strength \(line 6\): must be a number >= 0"):

@@ -171,6 +171,14 @@ class KinematicModel(ErrorModelBase):
                               f"({', '.join(residual_kinds())})", self.residual)
         return robot
 
+    def robot_parameter_names(self) -> list[str]:
+        """The names of the robot's parameters a fit of these settings identifies, in the identification table's
+        order (rows, joint errors, tool, base; the kinds' and further targets' unknowns come after them), without
+        fitting: what a ``Prior`` must have been made for (:meth:`~partcal.models.prior.Prior.check_names`)."""
+        robot = self._check_params()
+        errors = JointErrors.for_robot(robot, list(self.compliance), self.joint_harmonics)
+        return [name for name, _ in parameter_names(robot, errors, self._resolved_parametrization(robot))]
+
     def _resolved_parametrization(self, robot: Robot) -> str:
         """``parametrization``, ``auto`` resolved: ``complete`` for a chain with general origins, ``dh`` otherwise."""
         return resolved_parametrization(self.parametrization, robot)

@@ -25,7 +25,7 @@ from ..models.kinds import KINDS, config_kinds, fits_pose_errors
 from ..models.partition import PARTITIONS
 from ..models.partitioned import PartitionedErrorModel
 from ..models.pose import PoseErrorModel
-from ..models.prior import strengths_of
+from ..models.prior import Prior, strengths_of
 from ..robot.description import load_robot, robot_reference
 from ..robot.kinematics import Robot
 from ..robot.urdf import UrdfReference, is_urdf
@@ -504,11 +504,29 @@ def _model(sec: Section, robot: Robot | None, parent: str | None = None, base: P
             sec.fail(sec.path("residual"), "must be a model entry, e.g. {inputs: joint, degree: 2}")
         residual = _model(sub, robot, parent=name)
     spec = ModelSpec(name=name, kind=kind.name, params=params, partition=partition, residual=residual)
+    _check_prior_fits(sec, spec)
     if len(spec.strengths) > 1 and len(spec.sizes) > 1:
         sec.fail(sec.path("prior_strength"), "the run's cross-validation chooses one list per entry, and this entry "
                  "has a list of granularities too; give prior_strength one number")
     sec.done()
     return spec
+
+
+def _check_prior_fits(sec: Section, spec: ModelSpec) -> None:
+    """A model file given as ``prior`` must hold the parameters this entry identifies (the same parametrization,
+    compliance and joint harmonics): refused here, naming the key, rather than when the fit starts."""
+    prior = spec.params.get("prior")
+    if not isinstance(prior, Prior) or prior.names is None or spec.params.get("robot") is None:
+        return
+    wanted = spec.build(None).robot_parameter_names()
+    if list(prior.names[:len(wanted)]) != wanted:
+        first = next((k for k, (a, b) in enumerate(zip(prior.names, wanted)) if a != b), min(len(prior.names),
+                                                                                           len(wanted)))
+        theirs = prior.names[first] if first < len(prior.names) else "nothing"
+        ours = wanted[first] if first < len(wanted) else "nothing"
+        sec.fail(sec.path("prior"), f"{Path(prior.source).name!r} was identified with {len(prior.names)} "
+                 f"parameters, this entry identifies {len(wanted)} (parameter {first + 1}: {theirs} there, {ours} "
+                 "here): another parametrization, compliance or joint harmonics; give a model file of this entry's")
 
 
 def _kind_check(allowed: tuple[str, ...], parent: str | None):

@@ -2,6 +2,7 @@
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -125,3 +126,13 @@ def moved_positions(robot, q_deg, k, step):
     shift[(k - 4 * rows - 3) % 3] = step
     p = robot.positions(q_deg)
     return p + shift if k < 4 * rows + 6 else p @ Rotation.from_rotvec(np.radians(shift)).as_matrix().T
+
+
+def random_row_prior(v0, seed: int = 4):
+    """``(index, mean, cov)`` of a Gaussian prior on the 24 DH rows' parameters of a 6-joint robot (nominal values
+    ``v0``): a random full covariance (lengths looser than angles) and a mean off nominal, for MAP tests."""
+    index = np.arange(24)
+    rng = np.random.default_rng(seed)
+    a = rng.normal(size=(24, 24)) * 0.05
+    cov = a @ a.T + np.diag(np.where(np.isin(np.arange(24) % 4, (1, 2)), 0.3, 0.03) ** 2)
+    return index, v0[index] + rng.normal(size=24) * 0.1, cov

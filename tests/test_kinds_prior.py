@@ -7,6 +7,8 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
+from conftest import random_row_prior
+
 from partcal import load_robot
 from partcal.errors import DataError, PartcalError
 from partcal.metrics import within_one_standard_error
@@ -52,12 +54,8 @@ def test_map_with_kinds_equals_an_independent_augmented_least_squares():
     rows, _ = _visits(10, 1)
     q, feature = rows.q_deg, rows.texts["feature"]
     v0 = nominal_values(ROBOT)
-    index = np.arange(24)                                     # the DH rows' parameters
-    rng = np.random.default_rng(4)
-    a = rng.normal(size=(24, 24)) * 0.05
-    cov = a @ a.T + np.diag(np.where(np.isin(np.arange(24) % 4, (1, 2)), 0.3, 0.03) ** 2)
-    mean = v0[index] + rng.normal(size=24) * 0.1
     noise = 0.02
+    index, mean, cov = random_row_prior(v0)                   # on the DH rows' parameters
     table, notes = identify_measures(ROBOT, rows, {}, prior=Prior.from_covariance(index, mean, cov, noise))
     plain, plain_notes = identify_measures(ROBOT, rows, {})
     # every nest unknown: nothing measures a length; without a prior one length is held nominal, with it the prior

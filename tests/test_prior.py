@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from conftest import random_row_prior
 from scipy.optimize import least_squares
 
 from partcal import load_robot
@@ -37,11 +38,7 @@ def test_map_equals_an_independent_augmented_least_squares(ur10):
     measured = model_positions(ur10, None, q, true, np.zeros(len(q))) + \
         np.random.default_rng(3).normal(scale=0.05, size=(len(q), 3))
     v0 = nominal_values(ur10)
-    index = np.arange(24)                                     # the DH rows' parameters
-    rng = np.random.default_rng(4)
-    a = rng.normal(size=(24, 24)) * 0.05
-    cov = a @ a.T + np.diag(np.where(np.isin(np.arange(24) % 4, (1, 2)), 0.3, 0.03) ** 2)
-    mean = v0[index] + rng.normal(size=24) * 0.1
+    index, mean, cov = random_row_prior(v0)                   # on the DH rows' parameters
     noise = 0.05
     table = identify(ur10, q, measured, prior=Prior.from_covariance(index, mean, cov, noise))
     free = np.flatnonzero(np.array(table.status) == "identified")

@@ -160,7 +160,7 @@ def test_a_list_of_strengths_is_chosen_on_random_folds_of_the_rows_by_the_one_st
     within = within_one_standard_error(scores, errors)
     assert model.prior_strength_ == max(strengths[i] for i in within)
     assert [row["chosen"] for row in table] == [s == model.prior_strength_ for s in strengths]
-    assert any(n.startswith(f"prior: strength {model.prior_strength_:g} chosen by 5-fold CV of the rows")
+    assert any(n.startswith(f"prior strength {model.prior_strength_:g} chosen by 5-fold CV of the rows")
                for n in model.fit_notes())
 
 

@@ -230,11 +230,15 @@ def test_a_plausible_prior_with_a_list_of_strengths_takes_the_strongest_within_o
         sq = np.sum(np.vstack(left) ** 2, axis=1)
         expected.append(np.sqrt(sq.mean()))
         errors.append(np.std(sq, ddof=1) / np.sqrt(len(sq)) / (2 * np.sqrt(sq.mean())))   # delta method, per row
-    np.testing.assert_allclose(model.prior_cv_, (expected, errors), rtol=1e-9)
+    table = model.prior_strength_table_
+    assert [row["prior_strength"] for row in table] == list(strengths)
+    np.testing.assert_allclose([row["cv_rms_3d"] for row in table], expected, rtol=1e-9)
+    np.testing.assert_allclose([row["cv_se"] for row in table], errors, rtol=1e-9)
     best = int(np.argmin(expected))
     assert model.prior_strength_ == max(s for s, e in zip(strengths, expected) if e <= expected[best] + errors[best])
     assert model.prior_strength_ > strengths[best]            # not the lowest score: the simplest near it
-    assert any("strength" in note for note in model.fit_notes())
+    assert any(note.startswith(f"prior strength {model.prior_strength_:g} chosen by 5-block CV")
+               for note in model.fit_notes())
     plain = KinematicModel(robot=ur10, prior="plausible", prior_strength=model.prior_strength_).fit(q, y)
     np.testing.assert_array_equal(plain.identification_.value, model.identification_.value)
 

@@ -139,11 +139,11 @@ class PointKind(MeasurementKind):
 
     def _check_near(self, positions, primary) -> None:
         off = np.linalg.norm(positions[self.index[primary]] - self.measured[primary], axis=1)
-        far = np.flatnonzero(off > POINT_FAR_MM)
-        if far.size:
-            i = far[np.argmax(off[far])]
+        worst = _worst_of(off, off > POINT_FAR_MM)
+        if worst is not None:
+            i, count = worst
             raise DataError(f"{self.rows.where(self.index[primary][i])}: columns 'x_meas, y_meas, z_meas': the "
-                            f"nominal robot puts this point {off[i]:.1f} mm away ({far.size} points beyond "
+                            f"nominal robot puts this point {off[i]:.1f} mm away ({count} points beyond "
                             f"{POINT_FAR_MM:g} mm): expected tracker points in the robot's base frame, in mm (points "
                             "in the tracker's own frame: data.frame: tracker)")
 
@@ -220,6 +220,13 @@ class PointKind(MeasurementKind):
         more = (f", targets {', '.join(self.targets)} beside the primary" if self.targets else "") + (
             f", {self.turned.size} with the tool's orientation" if self.turned.size else "")
         return f"{self.index.size} tracker points {where}{more}"
+
+
+def _worst_of(values: NDArray[np.float64], beyond: NDArray[np.bool_]) -> tuple[int, int] | None:
+    """The index of the largest of ``values`` where ``beyond`` holds, and how many hold (what a refusal names:
+    the worst row and the count); None where none does."""
+    far = np.flatnonzero(beyond)
+    return (int(far[np.argmax(values[far])]), int(far.size)) if far.size else None
 
 
 def _largest_turn_deg(rotations: NDArray[np.float64]) -> float:
@@ -338,11 +345,11 @@ class PlaneKind(MeasurementKind):
                                 f"{mine.size} touches): such touches cannot tell the tool's offset from the plane's "
                                 "place; touch it with the tool turned (flush: spun about its axis)")
         distance = np.abs(self.residuals(positions, rotations, u).values[:self.index.size])
-        far = np.flatnonzero(distance > NEAR_MM)
-        if far.size:
-            i = far[np.argmax(distance[far])]
+        worst = _worst_of(distance, distance > NEAR_MM)
+        if worst is not None:
+            i, count = worst
             raise DataError(f"{self.rows.where(self.index[i])}: column 'feature': the nominal robot puts this touch "
-                            f"{distance[i]:.1f} mm from plane {self.plane[i]!r} ({far.size} touches beyond "
+                            f"{distance[i]:.1f} mm from plane {self.plane[i]!r} ({count} touches beyond "
                             f"{NEAR_MM:g} mm): expected a touch of that plane (a wrong feature name, or the plane's "
                             "normal and offset in the features?)")
 
@@ -502,12 +509,12 @@ class FixedPointKind(MeasurementKind):
                                 "turn the tool about the point")
         distance = np.linalg.norm(self.residuals(positions, rotations, u).values[:3 * self.index.size]
                                   .reshape(-1, 3), axis=1)
-        far = np.flatnonzero(distance > NEAR_MM)
-        if far.size:
-            i = far[np.argmax(distance[far])]
+        worst = _worst_of(distance, distance > NEAR_MM)
+        if worst is not None:
+            i, count = worst
             raise DataError(f"{self.rows.where(self.index[i])}: column 'feature': the nominal robot puts this visit "
                             f"{distance[i]:.1f} mm from point {self.point[i]!r} (the median of its visits, or its "
-                            f"known_mm; {far.size} visits beyond {NEAR_MM:g} mm): expected a visit of that point")
+                            f"known_mm; {count} visits beyond {NEAR_MM:g} mm): expected a visit of that point")
 
     def centre(self, name: str, u: NDArray[np.float64]) -> tuple[NDArray[np.float64], int | None]:
         """Point ``name``'s position and the first of its three unknowns (None when known)."""
@@ -603,12 +610,13 @@ class DistanceKind(MeasurementKind):
         # an unknown tool moves short distances by tens of mm (the IPA UR10's 93 mm reflector against a zero
         # tool: 4.3 mm measured, 37.8 nominal), so only a factor that no tool makes on a long one is refused
         ratio = self.measured[between] / np.maximum(nominal, 1e-9)
-        far = np.flatnonzero((nominal >= LONG_MM) & ((ratio < 1.0 / UNIT_FACTOR) | (ratio > UNIT_FACTOR)))
-        if far.size:
-            i = far[np.argmax(np.abs(np.log(ratio[far])))]
+        off = (nominal >= LONG_MM) & ((ratio < 1.0 / UNIT_FACTOR) | (ratio > UNIT_FACTOR))
+        worst = _worst_of(np.abs(np.log(ratio)), off)
+        if worst is not None:
+            i, count = worst
             row = self.index[between][i]
             raise DataError(f"{self.rows.where(row)}: column 'distance_mm': {self.measured[between][i]:g} mm, but the "
-                            f"nominal robot puts the two tips {nominal[i]:.3f} mm apart ({far.size} distances off by "
+                            f"nominal robot puts the two tips {nominal[i]:.3f} mm apart ({count} distances off by "
                             f"a factor beyond {UNIT_FACTOR:g}): expected the distance in mm (metres?)")
         return names, start
 

@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 from ..metrics import rms_standard_error
 from .identification import Identification
 from .measures import END_KIND, MEASUREMENT_KINDS, REFERENCE_NOISE_MM, SCALE, Rows, kind_residuals, observability
-from .prior import strongest_within
+from .prior import strength_rows
 
 FOLDS = 5
 """Cross-validation folds on kinds (a run's ``cv_folds: auto``; a model's own choice of a prior's strength)."""
@@ -126,6 +126,4 @@ def strength_table(identified_at: Callable[[float, Rows], Identification], stren
                                        folds, **kw), features)
         scores.append(score)
         errors.append(se)
-    best = strongest_within(list(strengths), scores, errors)
-    return best, [{"prior_strength": float(s), "cv_weighted_rms_mm": r, "cv_se": e, "chosen": k == best}
-                  for k, (s, r, e) in enumerate(zip(strengths, scores, errors))]
+    return strength_rows(strengths, scores, errors, "cv_weighted_rms_mm")

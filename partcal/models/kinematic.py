@@ -37,7 +37,7 @@ from .kinds_cv import FOLDS, SCALE_CHOICE, fold_rows, measuring, scale_free, str
 from .measures import MEASUREMENT_KINDS, Measured, built_kinds, identify_measures
 from .kindtable import body_of, check_body, may_be_residual, model_from_body, regions_of, residual_kinds
 from .pose import PoseErrorModel
-from .prior import Prior, plausible_prior, strength_problem, strengths_of, strongest_within
+from .prior import Prior, plausible_prior, strength_note, strength_problem, strength_rows, strengths_of
 from .targets import added_names, added_nominal, extra_from
 
 log = logging.getLogger(__name__)
@@ -171,13 +171,18 @@ class KinematicModel(ErrorModelBase):
                               f"({', '.join(residual_kinds())})", self.residual)
         return robot
 
+    def joint_settings(self, robot: Robot) -> tuple[JointErrors, str]:
+        """The joint errors (compliance, harmonics) and the parametrization (``auto`` resolved) a fit of these
+        settings uses for ``robot``: what every identification of this entry is told, fitted or not."""
+        return (JointErrors.for_robot(robot, list(self.compliance), self.joint_harmonics),
+                self._resolved_parametrization(robot))
+
     def robot_parameter_names(self) -> list[str]:
         """The names of the robot's parameters a fit of these settings identifies, in the identification table's
         order (rows, joint errors, tool, base; the kinds' and further targets' unknowns come after them), without
         fitting: what a ``Prior`` must have been made for (:meth:`~partcal.models.prior.Prior.check_names`)."""
         robot = self._check_params()
-        errors = JointErrors.for_robot(robot, list(self.compliance), self.joint_harmonics)
-        return [name for name, _ in parameter_names(robot, errors, self._resolved_parametrization(robot))]
+        return [name for name, _ in parameter_names(robot, *self.joint_settings(robot))]
 
     def _resolved_parametrization(self, robot: Robot) -> str:
         """``parametrization``, ``auto`` resolved: ``complete`` for a chain with general origins, ``dh`` otherwise."""
@@ -240,6 +245,7 @@ class KinematicModel(ErrorModelBase):
         payload, ident_payload = self._fit_settings(robot, payload_kg, len(X))
         weight = self.orientation_mm_per_rad if orientation_mm_per_rad is None else orientation_mm_per_rad
         extra = extra_from(robot, X, targets, orientation_deg, weight)
+        self.prior_strength_table_ = None
         if prior is None and self.prior is not None:
             prior = self._own_prior(robot, X, y, payload_kg)
         if prior is not None:
@@ -275,9 +281,11 @@ class KinematicModel(ErrorModelBase):
         ``plausible_error``, else :data:`~partcal.models.identification.PLAUSIBLE_ERROR`) or a given ``Prior``
         (another robot's model, rows of 1 mm noise) with its rows times the strength."""
         strengths = strengths_of(self.prior_strength)
-        self.prior_cv_ = self._chosen_strength(X, y, payload_kg, strengths) if len(strengths) > 1 else None
-        self.prior_strength_ = (strengths[0] if self.prior_cv_ is None else
-                                strengths[strongest_within(strengths, *self.prior_cv_)])
+        self.prior_strength_, self.prior_strength_table_ = strengths[0], None
+        if len(strengths) > 1:
+            best, self.prior_strength_table_ = strength_rows(strengths, *self._chosen_strength(X, y, payload_kg,
+                                                                                                strengths))
+            self.prior_strength_ = strengths[best]
         return self.prior_at(robot, self.prior_strength_)
 
     def prior_at(self, robot: Robot, strength: float) -> Prior | None:
@@ -290,8 +298,7 @@ class KinematicModel(ErrorModelBase):
         if isinstance(self.prior, Prior):
             return Prior(self.prior.index, self.prior.mean, self.prior.root * strength, self.prior.names,
                          self.prior.source)
-        errors = JointErrors.for_robot(robot, list(self.compliance), self.joint_harmonics)
-        parametrization = self._resolved_parametrization(robot)
+        errors, parametrization = self.joint_settings(robot)
         names = parameter_names(robot, errors, parametrization)
         return plausible_prior([u for _, u in names], geometric_size(robot, parametrization) - 9,
                                nominal_values(robot, errors, parametrization), strength,
@@ -320,8 +327,7 @@ class KinematicModel(ErrorModelBase):
     def _fit_settings(self, robot: Robot, payload_kg, n: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """The fitted settings every fit starts with (joint errors, parametrization, the payloads fitted at); the
         payload per row, and the payload per row the identification reads."""
-        self.joint_errors_ = JointErrors.for_robot(robot, list(self.compliance), self.joint_harmonics)
-        self.parametrization_ = self._resolved_parametrization(robot)
+        self.joint_errors_, self.parametrization_ = self.joint_settings(robot)
         payload = self._payload(payload_kg, n, fitting=True)
         self.fitted_payload_kg_ = np.array([payload.min(), payload.max()])
         # at one payload a compliance is a sag at the tool point like the lumped masses' ones: its column
@@ -350,7 +356,7 @@ class KinematicModel(ErrorModelBase):
         self._y_1d, self.n_outputs_ = False, 3
         ident_payload = self._fit_settings(robot, payload_kg if payload_kg is not None else measures.rows.payload_kg,
                                            len(X))[1]
-        self.prior_cv_, self.prior_strength_table_ = None, None
+        self.prior_strength_table_ = None
         if prior is None and self.prior is not None:
             strengths = strengths_of(self.prior_strength)
             self.prior_strength_ = strengths[0]
@@ -784,17 +790,10 @@ class KinematicModel(ErrorModelBase):
         notes += list(getattr(self, "measure_notes_", []))
         if not getattr(self, "frame_fixed_", True):
             notes.append(self.frame_note())
-        if getattr(self, "prior_strength_table_", None) and self.measures_:
+        if getattr(self, "prior_strength_table_", None):
             table = self.prior_strength_table_
-            notes.append(f"prior: strength {self.prior_strength_:g} chosen by {FOLDS}-fold CV of the rows, the "
-                         "strongest within one standard error of the lowest (weighted RMS " + ", ".join(
-                             f"{row['prior_strength']:g}: {row['cv_weighted_rms_mm']:.4f} +- {row['cv_se']:.4f} mm"
-                             for row in table) + ")")
-        if getattr(self, "prior_cv_", None) is not None:
-            notes.append(f"prior: strength {self.prior_strength_:g} chosen by 5-block CV, the strongest within one "
-                         "standard error of the lowest (3-D RMS " + ", ".join(
-                             f"{s:g}: {r:.4f} +- {e:.4f} mm" for s, r, e in zip(strengths_of(self.prior_strength),
-                                                                                *self.prior_cv_)) + ")")
+            notes.append(strength_note(table, f"{FOLDS}-fold CV of the rows", "cv_weighted_rms_mm", "CV weighted RMS")
+                         if self.measures_ else strength_note(table, "5-block CV"))
         return notes + (self.residual_.fit_notes() if self.residual_ is not None else [])
 
     def frame_note(self) -> str:

@@ -180,6 +180,40 @@ def strongest_within(strengths, scores, errors) -> int:
     return max(within, key=lambda i: (strengths[i], -i))
 
 
+def strength_rows(strengths, scores, errors, score: str = "cv_rms_3d") -> tuple[int, list[dict]]:
+    """The strength :func:`strongest_within` chooses, and a row per strength as runs and fits report them:
+    ``prior_strength``, the CV figure under ``score``, its standard error ``cv_se``, ``chosen``.
+
+    >>> strength_rows([1, 3], [0.41, 0.415], [0.01, 0.01])[1][1]
+    {'prior_strength': 3.0, 'cv_rms_3d': 0.415, 'cv_se': 0.01, 'chosen': True}
+    """
+    best = strongest_within(list(strengths), scores, errors)
+    return best, [{"prior_strength": float(s), score: float(r), "cv_se": float(e), "chosen": k == best}
+                  for k, (s, r, e) in enumerate(zip(strengths, scores, errors))]
+
+
+def strength_note(table: list[dict], chosen_by: str, score: str = "cv_rms_3d", label: str = "CV 3-D RMS") -> str:
+    """What a fit or a run says of the prior strength ``chosen_by`` chose (``table``: :func:`strength_rows`;
+    ``score`` and ``label`` name its CV figure), and whether the lowest score lies at the weakest strength tried.
+
+    >>> table = strength_rows([0.3, 1, 3], [0.412, 0.41, 0.415], [0.01, 0.01, 0.01])[1]
+    >>> print(strength_note(table, "the run's cross-validation"))  # doctest: +NORMALIZE_WHITESPACE
+    prior strength 3 chosen by the run's cross-validation, the strongest within one standard error of the
+    lowest (CV 3-D RMS: 0.3: 0.4120 +- 0.0100, 1: 0.4100 +- 0.0100, 3: 0.4150 +- 0.0100)
+    >>> strength_note(table[1:], "5-block CV").endswith("the lowest is at the weakest strength tried: weaker ones, "
+    ...                                                 "not tried, may do better")
+    True
+    """
+    chosen = next(row["prior_strength"] for row in table if row["chosen"])
+    lowest = min(range(len(table)), key=lambda k: table[k][score])
+    weakest = min(range(len(table)), key=lambda k: table[k]["prior_strength"])
+    return (f"prior strength {chosen:g} chosen by {chosen_by}, the strongest within one standard error of the "
+            f"lowest ({label}: " + ", ".join(f"{row['prior_strength']:g}: {row[score]:.4f} +- {row['cv_se']:.4f}"
+                                              for row in table) + ")"
+            + ("; the lowest is at the weakest strength tried: weaker ones, not tried, may do better"
+               if lowest == weakest and len(table) > 1 and table[weakest]["prior_strength"] > 0 else ""))
+
+
 def plausible_prior(units: list[str], n_rows: int, nominal: NDArray[np.float64], strength: float,
                     plausible: dict[str, float]) -> Prior | None:
     """The datasheet-like prior: each of the first ``n_rows`` parameters (the DH or complete rows' ones) of

@@ -29,6 +29,7 @@ from ..errors import ConfigError, held_warnings
 from ..metrics import rms_standard_error
 from ..models.kinds import identification_of, kind_of, pso_rms_ratio, reads_targets, regions_of
 from ..models.partitioned import fold_regions
+from ..models.prior import strength_note
 from ..robot.kinematics import Robot, flange_offset
 from .config import ModelSpec, SpreadOptions
 from .prepare import PreparedRun, model_inputs
@@ -153,32 +154,8 @@ def fit_model(spec: ModelSpec, seed: int, data: dict[str, Measurements], cv: CVP
         result = _fit_model(spec, seed, data, cv, robot, own_frame, lines, outputs, n_jobs, spread)
     result.notes = list(dict.fromkeys(said + result.model.fit_notes()))      # the run names the model in front
     if result.prior_strength is not None:
-        result.notes.append(strength_note(result.prior_strength))
+        result.notes.append(strength_note(result.prior_strength, "the run's cross-validation"))
     return result
-
-
-def strength_note(table: list[dict], score: str = "cv_rms_3d", label: str = "CV 3-D RMS") -> str:
-    """What a run says of the prior strength its folds chose (:func:`~partcal.study.selection.choose_strength`;
-    a kinds run's table scores ``cv_weighted_rms_mm``: ``score`` and ``label`` name the figure).
-
-    >>> table = [{"prior_strength": 0.3, "cv_rms_3d": 0.412, "cv_se": 0.01, "chosen": False},
-    ...          {"prior_strength": 1.0, "cv_rms_3d": 0.41, "cv_se": 0.01, "chosen": False},
-    ...          {"prior_strength": 3.0, "cv_rms_3d": 0.415, "cv_se": 0.01, "chosen": True}]
-    >>> print(strength_note(table))  # doctest: +NORMALIZE_WHITESPACE
-    prior strength 3 chosen by the run's cross-validation, the strongest within one standard error of the
-    lowest (CV 3-D RMS: 0.3: 0.4120 +- 0.0100, 1: 0.4100 +- 0.0100, 3: 0.4150 +- 0.0100)
-    >>> strength_note(table[1:]).endswith("the lowest is at the weakest strength tried: weaker ones, not tried, "
-    ...                                   "may do better")
-    True
-    """
-    chosen = next(row["prior_strength"] for row in table if row["chosen"])
-    lowest = min(range(len(table)), key=lambda k: table[k][score])
-    weakest = min(range(len(table)), key=lambda k: table[k]["prior_strength"])
-    return (f"prior strength {chosen:g} chosen by the run's cross-validation, the strongest within one standard "
-            f"error of the lowest ({label}: " + ", ".join(f"{row['prior_strength']:g}: {row[score]:.4f} +- "
-                                                        f"{row['cv_se']:.4f}" for row in table) + ")"
-            + ("; the lowest is at the weakest strength tried: weaker ones, not tried, may do better"
-               if lowest == weakest and len(table) > 1 and table[weakest]["prior_strength"] > 0 else ""))
 
 
 def _fit_model(spec, seed, data, cv, robot, own_frame, lines, outputs, n_jobs=1,

@@ -34,15 +34,14 @@ from ..errors import DataError, PartcalError
 from ..metrics import pooled_rms
 from ..models.contacts import TRACKER_FRAME, PointKind
 from ..models.kinematic import KinematicModel
-from ..models.identification import resolved_parametrization
-from ..models.joint_errors import JointErrors
 from ..models.kinds_cv import (FOLDS, SCALE_CHOICE, fold_rows, held_out, scale_free, strength_table,
                                 weighted_residuals)
+from ..models.prior import strength_note
 from ..models.measures import (END_KIND, Measured, Rows, built_kinds, kind_names, kind_residuals, observability)
 from ..robot.frames import kabsch
 from ..robot.kinematics import Robot
 from .config import ModelSpec, RunConfig, SpreadOptions
-from .fitting import SLOW_SECONDS, FoldLines, strength_note
+from .fitting import SLOW_SECONDS, FoldLines
 from .outputs import check_writable, replace_folder
 from .persist import save_model
 
@@ -221,10 +220,9 @@ def _refuse_unused(config: RunConfig) -> None:
 def _scale_free(spec: ModelSpec, robot: Robot, rows: Rows, features: dict) -> bool:
     """Whether the rows leave the scale free for this entry (:func:`~partcal.models.kinds_cv.scale_free`)."""
     model = spec.with_robot(robot).build(None)
+    errors, parametrization = model.joint_settings(robot)
     return scale_free(robot, rows, features, base=bool(model.base), tool=bool(model.tool), rcond=float(model.rcond),
-                      errors=JointErrors.for_robot(robot, list(model.compliance), model.joint_harmonics),
-                      payload_kg=_read_payload(rows),
-                      parametrization=resolved_parametrization(model.parametrization, robot))
+                      errors=errors, payload_kg=_read_payload(rows), parametrization=parametrization)
 
 
 def _entry_problem(spec: ModelSpec, kinds: list) -> str | None:
@@ -265,11 +263,10 @@ def entry_observability(spec: ModelSpec, data: KindsData) -> tuple[list[str], li
     """What an entry cannot identify from the run's rows, without fitting (the rank rule at the nominal
     robot, on consistent data): the notes in words, and the parameters held nominal."""
     model = spec.with_robot(data.robot).build(None)
-    errors = JointErrors.for_robot(data.robot, list(model.compliance), model.joint_harmonics)
+    errors, parametrization = model.joint_settings(data.robot)
     prior = model.prior_at(data.robot, 1.0)         # any strength > 0 holds the same parameters
     return observability(data.robot, data.rows, data.features, base=bool(model.base), tool=bool(model.tool),
-                         rcond=float(model.rcond), errors=errors,
-                         parametrization=resolved_parametrization(model.parametrization, data.robot), prior=prior)
+                         rcond=float(model.rcond), errors=errors, parametrization=parametrization, prior=prior)
 
 
 # ---------------------------------------------------------------------- fitting and scoring
@@ -339,9 +336,8 @@ def fit_entry(spec: ModelSpec, data: KindsData, seed: int, folds: int,
         return model.fit(rows.q_deg, None, measures=Measured(rows, data.features))
 
     unfitted = spec.with_robot(data.robot).build(seed)
-    kw = dict(errors=JointErrors.for_robot(data.robot, list(unfitted.compliance), unfitted.joint_harmonics),
-              parametrization=resolved_parametrization(unfitted.parametrization, data.robot),
-              payload_kg=_read_payload(data.rows))
+    errors, parametrization = unfitted.joint_settings(data.robot)
+    kw = dict(errors=errors, parametrization=parametrization, payload_kg=_read_payload(data.rows))
     cuts = fold_rows(data.rows, seed, folds)
     strengths, table = spec.strengths, None
     start = time.process_time()
@@ -363,7 +359,8 @@ def fit_entry(spec: ModelSpec, data: KindsData, seed: int, folds: int,
     cv = held_out(lambda rows: fitted(rows).identification_, data.robot, data.rows, data.features, cuts,
                   before=before, **kw)[0]
     tests = {name: _score(model, test, data) for name, test in data.tests.items()}
-    notes = model.fit_notes() + ([strength_note(table, "cv_weighted_rms_mm", "CV weighted RMS")] if table else [])
+    notes = model.fit_notes() + ([strength_note(table, "the run's cross-validation", "cv_weighted_rms_mm",
+                                                "CV weighted RMS")] if table else [])
     return KindsModelResult(spec, model, seconds, fit_rms, {k: _rms(r) for k, r in cv.items()},
                             _weighted_rms(cv, data.features), tests, notes, cv, prior_strength=table)
 

@@ -35,7 +35,7 @@ from ..metrics import (HELD_TOLERANCE_DEG, labels_as_groups, pooled_rms, pose_gr
                        within_one_standard_error)
 from ..models.kinds import is_physical, regions_of
 from ..models.partitioned import fold_regions
-from ..models.prior import strongest_within
+from ..models.prior import strength_rows, strongest_within
 from ..models.threads import one_blas_thread
 
 if TYPE_CHECKING:
@@ -320,11 +320,10 @@ def choose_strength(candidates: Sequence, strengths: Sequence[float], X, y, cv: 
     the chosen strength on the folds that chose it flatters it: :func:`nested_residuals` with the same rule
     gives the honest one."""
     each = [held_out_residuals(c, X, y, cv.folds, per_row=per_row, n_jobs=n_jobs) for c in candidates]
-    best = strength_rule(strengths, cv.groups, score, ranked)(each, np.arange(len(X)))
+    best, table = strength_rows(strengths, [score(r) for r in each],
+                                [rms_standard_error(ranked(r), cv.groups) for r in each])
     begin = time.perf_counter()
     fitted = clone(candidates[best]).fit(X, y, **(per_row or {}))
-    table = [{"prior_strength": float(s), "cv_rms_3d": score(r), "cv_se": rms_standard_error(ranked(r), cv.groups),
-              "chosen": k == best} for k, (s, r) in enumerate(zip(strengths, each))]
     return fitted, table, time.perf_counter() - begin
 
 

@@ -26,7 +26,8 @@ from _table import print_table  # noqa: E402
 from partcal import GaussianProcessErrorModel, KinematicModel  # noqa: E402
 from partcal.data.simulate import load_study, sample_configurations, simulate  # noqa: E402
 from partcal.study.selection import cross_validated_rms  # noqa: E402
-from partcal.models.identification import identify, nominal_values  # noqa: E402
+from partcal.calibration.identification import identify
+from partcal.calibration.parameters import nominal_values
 from partcal.models.partition import KMeansPartition, Octree  # noqa: E402
 from partcal.models.partitioned import PartitionedErrorModel
 from partcal.study.selection import select_granularity  # noqa: E402

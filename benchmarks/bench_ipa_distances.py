@@ -49,10 +49,10 @@ from partcal import load_robot  # noqa: E402
 from partcal.data.formats import RowSelection  # noqa: E402
 from partcal.data.measurements import read_measurements  # noqa: E402
 from partcal.data.registration import register_tracker  # noqa: E402
-from partcal.models import contacts  # noqa: E402,F401  (registers the built-in kinds)
-from partcal.models.identification import nominal_values, robot_with  # noqa: E402
+from partcal.calibration.parameters import nominal_values, robot_with
 from partcal.models.kinematic import KinematicModel  # noqa: E402
-from partcal.models.measures import Rows, identify_measures  # noqa: E402
+from partcal.calibration.measurement import Rows
+from partcal.calibration.stacked import identify_measures
 from partcal.robot.frames import kabsch  # noqa: E402
 
 TESTS = ("B 1001-1495", "C", "D")

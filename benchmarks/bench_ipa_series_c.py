@@ -35,8 +35,8 @@ from partcal.data.formats import MeasurementFormat, RowSelection  # noqa: E402
 from partcal.data.measurements import read_measurements  # noqa: E402
 from partcal.data.registration import register_measurements, registered  # noqa: E402
 from partcal.models.kinematic import KinematicModel  # noqa: E402
-from partcal.models.identification import stacked  # noqa: E402
-from partcal.models.targets import Extra  # noqa: E402
+from partcal.calibration.identification import stacked
+from partcal.calibration.targets import Extra
 from partcal.robot.kinematics import matrices_from_xyz_deg  # noqa: E402
 
 SHARED = Path(__file__).resolve().parent.parent.parent / "shared" / "datasets" / "ipa_ur10"

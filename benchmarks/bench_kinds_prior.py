@@ -5,7 +5,7 @@ them (the true robot's tip on a 200 mm step block, 0.01 mm along the normal; nes
 of them 1 m apart on a bar of known length). Each data set is identified with the complete parametrization
 (base and tool identified) by ``KinematicModel(parametrization="complete").fit(..., measures=...)``, without a
 prior, with ``prior: plausible`` at fixed strengths, and with the strength chosen by the model's own 5 random
-folds of the rows (the one-standard-error rule, :mod:`partcal.models.kinds_cv`) among ``CHOICE``. Every model is
+folds of the rows (the one-standard-error rule, :mod:`partcal.calibration.cv`) among ``CHOICE``. Every model is
 scored by the 3-D RMS of its tool positions against the truth on 2,000 random poses of the study's ranges
 after a rigid fit (touches and nests fix no frame), the median of DRAWS draws of poses and noise.
 
@@ -36,9 +36,9 @@ from bench_measures import BAR, TIED, Bench, logging_off, rows_of  # noqa: E402
 
 from partcal.errors import PartcalError  # noqa: E402
 from partcal.models.base import seed_from  # noqa: E402
-from partcal.models.kinds_cv import FOLDS, fold_rows, strength_table  # noqa: E402
+from partcal.calibration.cv import fold_rows, FOLDS, strength_table
 from partcal.models.kinematic import KinematicModel  # noqa: E402
-from partcal.models.measures import Measured  # noqa: E402
+from partcal.calibration.measurement import Measured
 
 DRAWS = 5
 FIXED = (0.01, 0.03, 0.1, 1.0)

@@ -3,7 +3,7 @@
 The virtual UR10 of configs/ur10_tilts_virtual.yaml (DH errors, tilts of 0.03 and -0.02 degrees between
 its parallel axes, a tool offset error, a misaligned base) is identified with the complete
 parametrization (base and tool identified) from each measurement kind of
-:mod:`partcal.models.contacts`, and scored by the 3-D RMS of its tool positions against the truth on
+:mod:`partcal.calibration.registry`, and scored by the 3-D RMS of its tool positions against the truth on
 2,000 poses of the study's ranges (``sample_configurations``). A kind that fixes no frame (planes,
 fixed points, distances: every plane and point unknown) is scored after a rigid fit of the model's
 positions to the truth (``kabsch``); the tracker without one (and, for the record, with one).
@@ -47,10 +47,10 @@ sys.path.insert(0, os.path.dirname(__file__))
 from _table import print_table  # noqa: E402
 
 from partcal.data.simulate import load_study, sample_configurations  # noqa: E402
-from partcal.models import contacts  # noqa: E402,F401  (registers the built-in kinds)
-from partcal.models.identification import nominal_values, robot_with  # noqa: E402
+from partcal.calibration.parameters import nominal_values, robot_with
 from partcal.models.kinematic import KinematicModel  # noqa: E402
-from partcal.models.measures import SCALE, Rows, identify_measures  # noqa: E402
+from partcal.calibration.measurement import Rows, SCALE
+from partcal.calibration.stacked import identify_measures
 from partcal.robot.frames import kabsch  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent

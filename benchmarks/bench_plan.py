@@ -66,8 +66,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _table import print_table  # noqa: E402
 
 from partcal.data.simulate import Tracker, VirtualRobot  # noqa: E402
-from partcal.models import design  # noqa: E402
-from partcal.models.identification import identify, robot_with  # noqa: E402
+from partcal.calibration import design  # noqa: E402
+from partcal.calibration.identification import identify
+from partcal.calibration.parameters import robot_with
 from partcal.robot import load_robot  # noqa: E402
 from partcal.robot.rotations import matrix_from_rpy_deg  # noqa: E402
 from partcal.study import plan  # noqa: E402

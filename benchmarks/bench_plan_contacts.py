@@ -43,10 +43,10 @@ from _table import print_table  # noqa: E402
 
 from partcal.data.simulate import load_study, sample_configurations  # noqa: E402
 from partcal.data.simulate_contacts import plane_touches  # noqa: E402
-from partcal.models import design  # noqa: E402
-from partcal.models.identification import nominal_values, robot_with  # noqa: E402
+from partcal.calibration import design  # noqa: E402
+from partcal.calibration.parameters import nominal_values, robot_with
 from partcal.models.kinematic import KinematicModel  # noqa: E402
-from partcal.models.measures import identify_measures  # noqa: E402
+from partcal.calibration.stacked import identify_measures
 from partcal.robot.frames import kabsch  # noqa: E402
 from partcal.study import plan_kinds  # noqa: E402
 

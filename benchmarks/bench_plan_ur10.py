@@ -28,7 +28,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _table import print_table  # noqa: E402
 
-from partcal.models.identification import identify, nominal_values, robot_with  # noqa: E402
+from partcal.calibration.identification import identify
+from partcal.calibration.parameters import nominal_values, robot_with
 from partcal.study import plan  # noqa: E402
 from partcal.study.config import load_config  # noqa: E402
 from partcal.study.prepare import load_datasets  # noqa: E402

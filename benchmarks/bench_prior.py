@@ -23,7 +23,7 @@ from bench_update import datasets  # noqa: E402
 
 from partcal.metrics import pooled_rms  # noqa: E402
 from partcal.models.kinematic import KinematicModel  # noqa: E402
-from partcal.models.prior import strengths_of  # noqa: E402
+from partcal.calibration.prior import strengths_of
 from partcal.study.scoring import errors_left  # noqa: E402
 from partcal.study.selection import CVPlan, choose_strength, grouped_splits, measured_poses  # noqa: E402
 

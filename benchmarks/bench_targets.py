@@ -28,7 +28,7 @@ sys.path.insert(0, os.path.dirname(__file__))
 from _table import print_table  # noqa: E402
 
 from partcal.data.simulate import load_study, simulate  # noqa: E402
-from partcal.models.design import target_identifiability  # noqa: E402
+from partcal.calibration.design import target_identifiability
 from partcal.models.kinematic import KinematicModel  # noqa: E402
 
 CONFIG = Path(__file__).resolve().parent.parent / "configs" / "ur10_targets_virtual.yaml"

@@ -359,3 +359,16 @@ class FieldReader:
         if kind is float and not np.all(np.isfinite(arr)):
             self.fail(key, "holds a non-finite value (NaN or infinity)")
         return arr
+
+
+def seed_from(random_state) -> int:
+    """One integer seed from None (numpy's global generator), an int, a RandomState or a Generator."""
+    if isinstance(random_state, np.random.Generator):
+        return int(random_state.integers(2**32))
+    if isinstance(random_state, Integral):
+        return int(random_state)
+    if random_state is None:
+        return int(np.random.randint(2**32))
+    if isinstance(random_state, np.random.RandomState):
+        return int(random_state.randint(2**32))
+    raise ValueError(f"random_state must be None, an int, a RandomState or a Generator; got {random_state!r}")

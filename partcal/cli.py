@@ -327,7 +327,7 @@ def _add_plan(sub) -> None:
     pln.add_argument("--payload-kg", type=float, default=0.0,
                      help="the payload the measurement carries at the tool (kg, default 0; with --compliance)")
     pln.add_argument("--parametrization", default="auto", metavar="NAME",
-                     choices=_Names("partcal.models.identification", "PARAMETRIZATIONS", first=("auto",)),
+                     choices=_Names("partcal.calibration.parameters", "PARAMETRIZATIONS", first=("auto",)),
                      help="the geometric parameters planned for, one of %(choices)s (auto: dh for DH rows, complete "
                           "for a URDF's chain)")
     pln.add_argument("--iso9283", action="store_true",

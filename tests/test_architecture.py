@@ -159,11 +159,11 @@ def test_the_checker_refuses_upward_and_sideways_imports():
             import partcal.models.series
     """)
     assert violations("partcal/robot/kinematics.py", code, table) == [
-        "partcal/robot/kinematics.py:4 (layer 1) imports partcal.study.config (layer 3)",
-        "partcal/robot/kinematics.py:5 (layer 1) imports partcal.models.series (layer 2)",
+        "partcal/robot/kinematics.py:4 (layer 1) imports partcal.study.config (layer 4)",
+        "partcal/robot/kinematics.py:5 (layer 1) imports partcal.models.series (layer 3)",
     ]
     sideways = violations("partcal/data/measurements.py", "from ..models.features import varying_inputs\n", table)
-    assert sideways == ["partcal/data/measurements.py:1 (layer 2) imports partcal.models.features (layer 2)"]
+    assert sideways == ["partcal/data/measurements.py:1 (layer 3) imports partcal.models.features (layer 3)"]
     assert violations("partcal/study/config.py", "from ..models import series\nfrom . import persist\n", table) == []
 
 

@@ -9,7 +9,7 @@ from conftest import ROOT, moved_positions
 
 from partcal import load_predictor, load_robot, read_measurements
 from partcal.metrics import summary
-from partcal.models.identification import robot_with
+from partcal.calibration.parameters import robot_with
 from partcal.report import render_report
 from partcal.study.config import load_config
 from partcal.study.outputs import write_run

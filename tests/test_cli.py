@@ -680,7 +680,7 @@ def test_program_and_parametrization_choices_are_read_from_their_tables(monkeypa
     parametrization table: a row added to a table is a choice, and a refusal lists the table."""
     from partcal.cli import build_parser
     from partcal.data import programs
-    from partcal.models import identification
+    from partcal.calibration import parameters as identification
 
     monkeypatch.setitem(programs.DIALECTS, "toy", programs.DIALECTS["krl"])
     monkeypatch.setitem(identification.PARAMETRIZATIONS, "toy", identification.PARAMETRIZATIONS["dh"])

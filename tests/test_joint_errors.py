@@ -15,9 +15,9 @@ from test_kinematic import sk120_poses
 
 from partcal import KinematicModel, PartcalError
 from partcal.data.simulate import Compliance, Tracker, VirtualRobot
-from partcal.models.identification import (actual_joints, model_jacobian, model_positions, nominal_values,
-                                           parameter_names, robot_with)
-from partcal.models.joint_errors import JointErrors
+from partcal.calibration.chain import actual_joints, model_jacobian, model_positions
+from partcal.calibration.parameters import nominal_values, parameter_names, robot_with
+from partcal.calibration.joint_errors import JointErrors
 from partcal.robot.rotations import matrix_from_rpy_deg
 
 @pytest.fixture(autouse=True, scope="module")
@@ -203,7 +203,7 @@ def test_the_analytic_jacobian_matches_central_differences(sk120, parametrizatio
     """Every column, at a point where every parameter (harmonics of all joints, sags, compliances, a payload
     per pose) is off zero: the lever arms move with the rows (DH or complete; DH rows with further origins,
     as a URDF's chain has), the tool and the harmonics."""
-    from partcal.models.identification import geometric_size
+    from partcal.calibration.parameters import geometric_size
 
     q = sk120_poses(sk120, 30, 19)
     if origins:

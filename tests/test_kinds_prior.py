@@ -1,4 +1,4 @@
-"""Priors with measurement kinds (partcal.models.measures.identify_measures(prior=...), partcal.models.kinds_cv,
+"""Priors with measurement kinds (partcal.calibration.stacked.identify_measures(prior=...), partcal.calibration.cv,
 KinematicModel.fit(measures=..., prior...)): MAP against an independently written augmented least squares, the
 fit unchanged without a prior, a strong prior's mean, the scale a prior holds, a list of strengths chosen on
 random folds of the rows by the one-standard-error rule recomputed here."""
@@ -12,11 +12,13 @@ from conftest import random_row_prior
 from partcal import load_robot
 from partcal.errors import DataError, PartcalError
 from partcal.metrics import within_one_standard_error
-from partcal.models.identification import PLAUSIBLE_ERROR, model_positions, nominal_values, robot_with
+from partcal.calibration.chain import model_positions
+from partcal.calibration.parameters import nominal_values, PLAUSIBLE_ERROR, robot_with
 from partcal.models.kinematic import KinematicModel
-from partcal.models.kinds_cv import fold_rows
-from partcal.models.measures import SCALE, Measured, Rows, identify_measures
-from partcal.models.prior import Prior
+from partcal.calibration.cv import fold_rows
+from partcal.calibration.measurement import Measured, Rows, SCALE
+from partcal.calibration.stacked import identify_measures
+from partcal.calibration.prior import Prior
 
 ROBOT = load_robot("universal_robots_ur10")
 NESTS = {"a": np.array([600.0, -500.0, 200.0]), "b": np.array([500.0, 400.0, 500.0]),

@@ -13,7 +13,8 @@ from partcal.cli import main
 from partcal.data.measurements import read_measurements
 from partcal.data.simulate import load_study, simulate, write_study
 from partcal.errors import ConfigError
-from partcal.models.measures import MEASUREMENT_KINDS, MeasurementKind, Residuals, add_measurement_kind
+from partcal.calibration.measurement import MeasurementKind, Residuals
+from partcal.calibration.registry import add_measurement_kind, MEASUREMENT_KINDS
 from partcal.robot.frames import kabsch
 from partcal.study.config import load_config
 from partcal.study.persist import load_model

@@ -6,7 +6,8 @@ from conftest import ROOT, tilted_dh_chain
 from sklearn.base import clone
 
 from partcal import ErrorModel, GaussianProcessErrorModel, KinematicModel, PartcalError, read_measurements
-from partcal.models.identification import identify, nominal_values, parameter_names, robot_with
+from partcal.calibration.identification import identify
+from partcal.calibration.parameters import nominal_values, parameter_names, robot_with
 from partcal.robot.description import robot_from_dict
 
 # A planar arm: two parallel joint axes (alpha = 0) and a tool on the last x axis. Worked out by hand,
@@ -199,7 +200,8 @@ def test_complete_parameter_jacobian_matches_finite_differences():
     """The complete rows' columns (theta, shifts, turns at non-zero values), tool and base, against central
     differences of the forward kinematics of the corrected robot."""
     from partcal import load_robot
-    from partcal.models.identification import geometric_size, identification_jacobian
+    from partcal.calibration.chain import identification_jacobian
+    from partcal.calibration.parameters import geometric_size
 
     ur10 = load_robot("universal_robots_ur10")
     robot = ur10.replace(origins=np.tile([1.0, -2.0, 3.0, 0.5, -1.0, 2.0], (6, 1)))
@@ -243,7 +245,7 @@ def test_joints_held_still_but_read_back_with_jitter_identify_as_held_ones(sk120
     jittered[:, 3:5] += rng.normal(0.0, 0.001, (len(rows), 2))
     measured = paper_data.measured_mm[rows] + rng.normal(0.0, 0.02, (len(rows), 3))
     held = KinematicModel(robot=sk120).fit(exact, measured - sk120.positions(exact))
-    with caplog.at_level("WARNING", logger="partcal.models.identification"):
+    with caplog.at_level("WARNING", logger="partcal.calibration.identification"):
         model = KinematicModel(robot=sk120).fit(jittered, measured - sk120.positions(jittered))
     assert model.identification_.rank == held.identification_.rank == 19
     assert "kept nominal" not in caplog.text                  # no wild value from the jitter had to be pruned
@@ -257,7 +259,7 @@ def test_column_pivoting_without_ties_picks_the_columns_pivoted_qr_picks():
     """Away from ties the greedy choice is QR's column pivoting (scipy's LAPACK geqp3), order included."""
     import scipy.linalg
 
-    from partcal.models.identification import _most_independent
+    from partcal.calibration.identifiability import _most_independent
 
     columns = np.random.default_rng(3).normal(size=(40, 9)) * np.geomspace(1, 20, 9)
     pivots = scipy.linalg.qr(columns, mode="r", pivoting=True)[1]
@@ -270,7 +272,8 @@ def test_which_of_exactly_dependent_parameters_is_identified_does_not_depend_on_
     (joint 1's offset and the base's turn about z, among others). Rounding at the level different BLAS kernels
     leave (1e-14 of a column) must not change which of them is kept: the first in the table is, always."""
     from partcal import load_robot
-    from partcal.models.identification import identifiable_parameters, identification_jacobian
+    from partcal.calibration.chain import identification_jacobian
+    from partcal.calibration.identifiability import identifiable_parameters
 
     robot = load_robot("universal_robots_ur10").replace(tool_mm=np.array([0.0, 0.0, 120.0]))
     q = np.random.default_rng(11).uniform(-180, 180, (60, 6))

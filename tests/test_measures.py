@@ -1,4 +1,4 @@
-"""Measurement kinds (partcal.models.measures, partcal.models.contacts): residuals, Jacobians against finite
+"""Measurement kinds (partcal.calibration.stacked, partcal.calibration.registry): residuals, Jacobians against finite
 differences, identification of a virtual UR10 from each kind against its truth, the scale no kind fixes."""
 
 import numpy as np
@@ -6,13 +6,14 @@ import pytest
 
 from partcal import load_robot
 from partcal.errors import DataError
-from partcal.models import contacts
-from partcal.models.contacts import TRACKER_FRAME
+from partcal.calibration import fixed_points, plane_contacts
+from partcal.calibration.tracker_points import TRACKER_FRAME
 from partcal.robot.rotations import matrix_from_rotation_vector
-from partcal.models.identification import nominal_values, robot_with
-from partcal.models.joint_errors import JointErrors
-from partcal.models.measures import (MEASUREMENT_KINDS, SCALE, MeasurementKind, Residuals, Rows, StackedProblem,
-                                     add_measurement_kind, identify_measures, kind_residuals)
+from partcal.calibration.parameters import nominal_values, robot_with
+from partcal.calibration.joint_errors import JointErrors
+from partcal.calibration.measurement import MeasurementKind, Residuals, Rows, SCALE
+from partcal.calibration.registry import add_measurement_kind, MEASUREMENT_KINDS
+from partcal.calibration.stacked import identify_measures, kind_residuals, StackedProblem
 
 ROBOT = load_robot("universal_robots_ur10")
 
@@ -69,7 +70,8 @@ def _mixed_rows(rng):
 
 @pytest.mark.parametrize("parametrization, tracker", [("dh", False), ("complete", False), ("dh", True)])
 def test_jacobian_of_every_kind_matches_finite_differences(parametrization, tracker, monkeypatch):
-    monkeypatch.setattr(contacts, "NEAR_MM", 1e9)     # random poses: no touch is near its plane
+    for module in (plane_contacts, fixed_points):     # random poses: no touch is near its plane
+        monkeypatch.setattr(module, "NEAR_MM", 1e9)
     rng = np.random.default_rng(5)
     rows, features = _mixed_rows(rng)
     if tracker:         # the points in a tracker's frame turned 30 degrees: its pose among the unknowns
@@ -220,7 +222,7 @@ def test_a_kind_added_elsewhere_joins_the_identification():
 
 def test_a_kinematic_model_fitted_on_touches_is_the_same_model_file_and_predictor(tmp_path):
     from partcal.models.kinematic import KinematicModel
-    from partcal.models.measures import Measured
+    from partcal.calibration.measurement import Measured
     from partcal.study.persist import load_model, save_model
     rng = np.random.default_rng(11)
     true = _true_robot(rng)
@@ -259,7 +261,7 @@ def test_tracker_points_in_their_own_frame_are_registered_by_the_fit():
 
 def test_the_data_layer_knows_the_kinds_of_the_table():
     from partcal.data.observations import BUILTIN_KINDS
-    from partcal.models.measures import kind_names
+    from partcal.calibration.registry import kind_names
     assert set(BUILTIN_KINDS) == set(kind_names())
     for cls in MEASUREMENT_KINDS.values():
         assert cls.reads and cls.summary, cls.name
@@ -272,8 +274,8 @@ def test_several_targets_and_the_orientation_on_the_seam_agree_with_the_tracker_
     from pathlib import Path
 
     from partcal.data.simulate import load_study, simulate
-    from partcal.models.identification import identify
-    from partcal.models.targets import extra_from
+    from partcal.calibration.identification import identify
+    from partcal.calibration.targets import extra_from
     from partcal.robot.kinematics import flange_offset
     from partcal.study.kinds_run import point_rows
 
@@ -308,7 +310,7 @@ def test_several_targets_and_the_orientation_on_the_seam_agree_with_the_tracker_
 
 
 def test_each_kind_says_how_many_rows_name_each_plane_and_point():
-    from partcal.models.measures import built_kinds
+    from partcal.calibration.registry import built_kinds
     q = _configurations(12, np.random.default_rng(4))
     feature = ["top", "step", "top", "step", "top", "step", "top", "a", "b", "a", "a", "b"]
     rows = _rows(q, ["plane"] * 7 + ["fixed"] * 5, numbers={"flush": np.array([1, 0, 1] + [np.nan] * 9)},
@@ -319,7 +321,7 @@ def test_each_kind_says_how_many_rows_name_each_plane_and_point():
 
 
 def test_a_tied_plane_touched_alone_measures_no_length_and_the_scale_is_named():
-    from partcal.models.measures import observability
+    from partcal.calibration.stacked import observability
     rng = np.random.default_rng(12)
     true = _true_robot(rng)
     q, names = _touches(true, rng, {"step": ([0, 0, 1], 100.0), "side": ([1, 0, 0], 700.0)}, 60, 0.01)
@@ -336,7 +338,7 @@ def test_a_tied_plane_touched_alone_measures_no_length_and_the_scale_is_named():
 
 
 def test_a_point_tied_to_one_never_visited_is_refused_naming_file_line_and_column():
-    from partcal.models.measures import observability
+    from partcal.calibration.stacked import observability
     q = _configurations(4, np.random.default_rng(5))
     positions = ROBOT.positions(q)
     q = _newton(ROBOT, q, lambda p: positions[0] - p)               # four orientations, one point
@@ -352,18 +354,19 @@ def test_each_kind_moves_its_unknowns_with_the_cell_as_its_residuals_say():
     that do not turn unchanged, and turns the x, y, z triples that do: checked by finite differences. (A flush
     touch's tilts, read against fixed axes, do neither: their part is left out of the consistent Jacobian as
     the tilts of consistent data are small; this test has none.)"""
-    from partcal.models.measures import rigid_directions
+    from partcal.calibration.identifiability import rigid_directions
     rng = np.random.default_rng(9)
     rows, features = _mixed_rows(rng)
     features = {**features, TRACKER_FRAME: True}
     numbers = {k: v for k, v in rows.numbers.items() if not k.startswith("r") and k != "flush"}
     rows = Rows(rows.q_deg, rows.kind, rows.ids, rows.lines, rows.source, numbers, rows.texts)
     kinds = [k for k in (cls.build(rows, features) for cls in MEASUREMENT_KINDS.values()) if k is not None]
-    contacts.NEAR_MM, saved = 1e9, contacts.NEAR_MM
+    saved = plane_contacts.NEAR_MM, fixed_points.NEAR_MM
+    plane_contacts.NEAR_MM = fixed_points.NEAR_MM = 1e9
     try:
         problem = StackedProblem(ROBOT, None, rows, kinds, np.zeros(len(rows)), "dh")
     finally:
-        contacts.NEAR_MM = saved
+        plane_contacts.NEAR_MM, fixed_points.NEAR_MM = saved
     directions = rigid_directions(problem)
     base = problem(problem.start, jacobian=False)[0]
     chain = problem.chain(problem.start, False)

@@ -10,8 +10,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from partcal.data.measurements import read_columns, read_measurements
-from partcal.models import design
-from partcal.models.identification import parameter_names
+from partcal.calibration import design
+from partcal.calibration.parameters import parameter_names
 from partcal.robot import load_robot
 from partcal.robot.kinematics import Robot
 from partcal.study import plan

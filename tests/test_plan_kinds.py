@@ -8,8 +8,8 @@ import pytest
 
 from partcal.data.observations import read_observations
 from partcal.errors import PartcalError, UnreachableError
-from partcal.models import design
-from partcal.models.measures import SCALE, Rows
+from partcal.calibration import design
+from partcal.calibration.measurement import Rows, SCALE
 from partcal.robot import load_robot
 from partcal.study import plan, plan_kinds
 

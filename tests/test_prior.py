@@ -6,8 +6,10 @@ from conftest import random_row_prior
 from scipy.optimize import least_squares
 
 from partcal import load_robot
-from partcal.models.identification import identify, model_positions, nominal_values, parameter_names
-from partcal.models.prior import Prior, plausible_prior
+from partcal.calibration.chain import model_positions
+from partcal.calibration.identification import identify
+from partcal.calibration.parameters import nominal_values, parameter_names
+from partcal.calibration.prior import plausible_prior, Prior
 from partcal.study.update import DEFAULT_INFLATE, IDENTIFY_LITTLE
 
 
@@ -210,7 +212,7 @@ def run_config(tmp_path, entry, robot="universal_robots_ur10"):
 
 
 def test_a_plausible_prior_with_a_list_of_strengths_takes_the_strongest_within_one_se_of_block_cv(ur10):
-    from partcal.models.identification import PLAUSIBLE_ERROR, geometric_size
+    from partcal.calibration.parameters import geometric_size, PLAUSIBLE_ERROR
     from partcal.models.kinematic import KinematicModel
     q = poses(ur10, 60, 21)
     measured = model_positions(ur10, None, q, moved(ur10, 22), np.zeros(len(q))) + \
@@ -279,7 +281,7 @@ def test_another_robots_model_as_the_prior_helps_a_few_poses(ur10, calibrated):
     """Robot B of the same type as A (its rows 0.1 mm / 0.01 deg from A's): 10 poses of B with A's model as the
     prior (its values, their plausible errors) land nearer B's truth than 10 poses alone, A's model, or the plausible
     prior about nominal."""
-    from partcal.models.identification import PLAUSIBLE_ERROR
+    from partcal.calibration.parameters import PLAUSIBLE_ERROR
     from partcal.models.kinematic import KinematicModel
     from partcal.study.persist import load_model
     from partcal.study.update import type_prior
@@ -305,7 +307,7 @@ def test_another_robots_model_as_the_prior_helps_a_few_poses(ur10, calibrated):
 
 def test_a_robot_files_plausible_error_sets_the_plausible_prior(ur10):
     from partcal import ConfigError
-    from partcal.models.identification import geometric_size
+    from partcal.calibration.parameters import geometric_size
     from partcal.models.kinematic import KinematicModel
     from partcal.robot.description import robot_from_dict, robot_to_dict
     spec = robot_to_dict(ur10)

@@ -107,7 +107,7 @@ def test_kinematic_spread_covers_95_percent_of_new_noisy_poses(noisy_sk120):
 
 
 def test_prior_variance_is_the_unabsorbed_part_of_j_p_jt():
-    from partcal.models.identification import prior_variance
+    from partcal.calibration.fit import prior_variance
 
     J_i = np.array([[1.0, 0.0], [0.0, 2.0], [1.0, 1.0]])        # 3 outputs, 2 identified parameters
     J_u = np.array([[1.0, 3.0], [0.5, 0.0], [2.0, 1.0]])        # 2 parameters the data do not identify
@@ -122,7 +122,7 @@ def test_prior_variance_is_the_unabsorbed_part_of_j_p_jt():
 
 def _fd_jacobian(nominal, values, q, h=1e-5):
     """d positions / d values by central differences, (3 n, P): the forward kinematics alone."""
-    from partcal.models.identification import robot_with
+    from partcal.calibration.parameters import robot_with
 
     cols = []
     for k in range(values.size):
@@ -134,7 +134,7 @@ def _fd_jacobian(nominal, values, q, h=1e-5):
 
 
 def test_unidentified_parameters_add_their_plausible_error_where_the_data_did_not_go(noisy_sk120):
-    from partcal.models.identification import PLAUSIBLE_ERROR
+    from partcal.calibration.parameters import PLAUSIBLE_ERROR
     from partcal.data.simulate import sample_configurations
 
     virtual, draw, ranges = noisy_sk120

@@ -11,11 +11,11 @@ from scipy.spatial.transform import Rotation
 
 from partcal import DataError, ErrorModel, KinematicModel, ModelFileError, load_robot
 from partcal.data.simulate import load_study, simulate, write_study
-from partcal.models.design import target_identifiability
-from partcal.models.identification import nominal_values
-from partcal.models.joint_errors import JointErrors
-from partcal.models.identification import stacked
-from partcal.models.targets import Extra
+from partcal.calibration.design import target_identifiability
+from partcal.calibration.parameters import nominal_values
+from partcal.calibration.joint_errors import JointErrors
+from partcal.calibration.identification import stacked
+from partcal.calibration.targets import Extra
 
 TOOLS = {"B": np.array([100.0, 0.0, 90.0]), "C": np.array([-40.0, 90.0, 90.0])}
 CONFIG = ROOT / "configs" / "ur10_targets_virtual.yaml"

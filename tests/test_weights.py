@@ -17,7 +17,8 @@ from partcal.study.runner import run
 from partcal.data.simulate import load_study
 from partcal.study.persist import load_model, save_model
 from partcal.metrics import loss_weights
-from partcal.models.identification import identify, robot_with
+from partcal.calibration.identification import identify
+from partcal.calibration.parameters import robot_with
 
 
 @pytest.fixture(scope="module")
@@ -223,7 +224,7 @@ def test_noise_model_gives_each_point_its_distance_std():
 
 
 def test_a_loss_is_refused_on_rows_of_measurement_kinds():
-    from partcal.models.measures import Measured
+    from partcal.calibration.measurement import Measured
     with pytest.raises(PartcalError, match="loss: huber weighs tracker points"):
         KinematicModel(robot="universal_robots_ur10", loss="huber").fit(np.zeros((5, 6)), None,
                                                                         measures=Measured(None, None))

@@ -45,7 +45,7 @@ from .formats import ID, KIND, KINDS_NUMBERS, KINDS_TEXTS, MeasurementFormat
 from .measurements import MEASURED, PAYLOAD, csv_rows, joint_count, parse_number, read_table
 
 BUILTIN_KINDS = ("point", "plane", "fixed", "distance", "pose")
-"""The kinds partcal itself defines (``partcal.models.contacts`` implements them)."""
+"""The kinds partcal itself defines (``partcal.calibration.registry`` implements them)."""
 NUMERIC = (*KINDS_NUMBERS, *MEASURED, PAYLOAD)
 """The contract's numeric columns (each present one is in :attr:`ObservationTable.numbers`)."""
 TEXT = (*KINDS_TEXTS, "set")

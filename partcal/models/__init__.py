@@ -7,7 +7,8 @@ errors ``(n, 3)`` in mm, ``predict(X) -> (n, 3)`` mm; a kinematic model and a
 """
 
 from .gp import GaussianProcessErrorModel
-from .identification import Identification, identify
+from ..calibration.identification import identify
+from ..calibration.parameters import Identification
 from .kinematic import KinematicModel
 from .partition import KMeansPartition, Octree
 from .partitioned import PartitionedErrorModel

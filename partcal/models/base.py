@@ -27,14 +27,12 @@ callers ask through the table (:mod:`partcal.models.kindtable`).
 from __future__ import annotations
 
 import functools
-from numbers import Integral
 from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 from sklearn.base import BaseEstimator, RegressorMixin
-from sklearn.utils import check_random_state
 
 from .._validation import Requirement, Rule, check_params, param_error
 from ..metrics import warn_far
@@ -335,12 +333,3 @@ def box_points(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     n_in = lo.size
     corners = lo + (hi - lo) * ((np.arange(2 ** min(n_in, 10))[:, None] >> np.arange(n_in)) & 1)
     return np.vstack([corners, (lo + hi) / 2])
-
-
-def seed_from(random_state) -> int:
-    """One integer seed from None, an int, a RandomState or a Generator."""
-    if isinstance(random_state, np.random.Generator):
-        return int(random_state.integers(2**32))
-    if isinstance(random_state, Integral):
-        return int(random_state)
-    return int(check_random_state(random_state).randint(2**32))

@@ -44,7 +44,8 @@ from .._validation import FieldReader, integer, one_of, real
 from ..metrics import distance_outside_boxes
 from . import likelihood
 from .angles import InputMap
-from .base import ErrorModelBase, check_sample_weight, seed_from
+from .._validation import seed_from
+from .base import ErrorModelBase, check_sample_weight
 from .kindtable import RegionFit
 from .threads import one_blas_thread
 

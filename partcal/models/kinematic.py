@@ -1,4 +1,4 @@
-"""``KinematicModel``: kinematic identification (:mod:`partcal.models.identification`) as an error model.
+"""``KinematicModel``: kinematic identification (:mod:`partcal.calibration.identification`) as an error model.
 
 Its predicted error is ``FK(identified, q_actual) - FK(nominal, q)``; fitted
 on pose errors, the orientation's too. With ``residual=`` another error model
@@ -18,27 +18,29 @@ from numpy.typing import NDArray
 from sklearn.base import clone
 from sklearn.utils.validation import check_is_fitted, validate_data
 
-from .._validation import MAX_PAYLOAD_KG, FieldReader, Requirement, boolean, check_array, one_of, param_error, real
+from .._validation import MAX_PAYLOAD_KG, FieldReader, Requirement, boolean, check_array, one_of, param_error, real, seed_from
 from ..errors import DataError, ModelFileError
 from ..metrics import (MRAD_PER_DEG, MRAD_PER_RAD, ORIENTATION, POSITION, ExtrapolationWarning, distance_outside_boxes,
                        pooled_rms, rms_standard_error)
 from ..robot.description import load_robot, robot_from_dict, robot_to_dict
 from ..robot.kinematics import ORIENTATION_MM_PER_RAD, Robot
 from ..robot.rotations import matrix_from_rotation_vector, rotation_vectors_from_matrices
-from .base import ErrorModelBase, box_points, seed_from
+from .base import ErrorModelBase, box_points
 from .features import varying_inputs
-from .identification import (LOSSES, PARAMETRIZATIONS, PLAUSIBLE_ERROR, PRIMARY_TARGET, STATUSES, Identification,
-                             geometric_size, identify, model_jacobian, nominal_values, own_geometry, parameter_names,
-                             prior_variance, resolved_parametrization, robot_with)
-from .joint_errors import JointErrors, compliance_problem, harmonics_problem
-from . import contacts  # noqa: F401  (the built-in measurement kinds join the table)
-from .contacts import TRACKER_FRAME
-from .kinds_cv import FOLDS, SCALE_CHOICE, fold_rows, measuring, scale_free, strength_table
-from .measures import MEASUREMENT_KINDS, Measured, built_kinds, identify_measures
+from ..calibration.chain import model_jacobian
+from ..calibration.fit import LOSSES, prior_variance
+from ..calibration.identification import identify
+from ..calibration.parameters import geometric_size, Identification, nominal_values, own_geometry, parameter_names, PARAMETRIZATIONS, PLAUSIBLE_ERROR, PRIMARY_TARGET, resolved_parametrization, robot_with, STATUSES
+from ..calibration.joint_errors import compliance_problem, harmonics_problem, JointErrors
+from ..calibration.tracker_points import TRACKER_FRAME
+from ..calibration.cv import fold_rows, FOLDS, measuring, SCALE_CHOICE, scale_free, strength_table
+from ..calibration.measurement import Measured
+from ..calibration.registry import built_kinds, MEASUREMENT_KINDS
+from ..calibration.stacked import identify_measures
 from .kindtable import body_of, check_body, may_be_residual, model_from_body, regions_of, residual_kinds
 from .pose import PoseErrorModel
-from .prior import Prior, plausible_prior, strength_note, strength_problem, strength_rows, strengths_of
-from .targets import added_names, added_nominal, extra_from
+from ..calibration.prior import plausible_prior, Prior, strength_note, strength_problem, strength_rows, strengths_of
+from ..calibration.targets import added_names, added_nominal, extra_from
 
 log = logging.getLogger(__name__)
 
@@ -65,7 +67,7 @@ class KinematicModel(ErrorModelBase):
         default, chosen by measurement): ``dh`` for a robot of DH rows,
         ``complete`` for a chain with general origins (a URDF's).
     compliance : sequence of int
-        1-based joints that yield under gravity (see :mod:`partcal.models.joint_errors`).
+        1-based joints that yield under gravity (see :mod:`partcal.calibration.joint_errors`).
     joint_harmonics : int or sequence of int
         Harmonics of the cyclic transmission error of every joint (an int),
         or of each joint (one int per joint); 0: none.
@@ -180,7 +182,7 @@ class KinematicModel(ErrorModelBase):
     def robot_parameter_names(self) -> list[str]:
         """The names of the robot's parameters a fit of these settings identifies, in the identification table's
         order (rows, joint errors, tool, base; the kinds' and further targets' unknowns come after them), without
-        fitting: what a ``Prior`` must have been made for (:meth:`~partcal.models.prior.Prior.check_names`)."""
+        fitting: what a ``Prior`` must have been made for (:meth:`~partcal.calibration.prior.Prior.check_names`)."""
         robot = self._check_params()
         return [name for name, _ in parameter_names(robot, *self.joint_settings(robot))]
 
@@ -201,7 +203,7 @@ class KinematicModel(ErrorModelBase):
         ``orientation_deg``, the identification reads the orientation from ``y``; without
         ``use_orientation`` it identifies from the positions alone and predicts the orientation
         all the same (a residual model then fits all six). Further targets on the tool and the measured
-        orientation, when given, are identified from too (:mod:`partcal.models.targets`):
+        orientation, when given, are identified from too (:mod:`partcal.calibration.targets`):
         ``targets`` maps a target's name to ``(offset, errors)``, its nominal offset in the
         flange frame (3,) mm and its errors (n, 3) mm; ``orientation_deg`` (n, 3) are the
         orientation errors, rotation vectors from the nominal flange orientation to the
@@ -210,22 +212,22 @@ class KinematicModel(ErrorModelBase):
         that name, 200: one mrad weighs as 0.2 mm). The prediction stays the
         primary target's (:meth:`predict_target` gives another's).
 
-        ``measures`` (:class:`~partcal.models.measures.Measured`): rows of any measurement kinds (plane
+        ``measures`` (:class:`~partcal.calibration.measurement.Measured`): rows of any measurement kinds (plane
         contacts, fixed points, distances, tracker points) and the cell's features, identified from instead
         of ``y`` (which is then ignored; ``X`` are the rows' joints). The model is the same kinematic model;
         what the data cannot identify is in :meth:`fit_notes`.
 
         ``std_mm`` (n, 3) mm: the standard deviation of each measured coordinate of the primary target, for a
-        weighted identification (:func:`~partcal.models.identification.identify`); None: every row alike.
-        ``prior`` (:class:`~partcal.models.prior.Prior`, indices into the identification table's order): a
-        Gaussian prior on the parameters, the identification MAP (:func:`~partcal.models.identification.identify`);
-        default the parameter ``prior``: ``'plausible'`` (:func:`~partcal.models.prior.plausible_prior` at
-        ``prior_strength``; a list of strengths, or ``'auto'`` for :data:`~partcal.models.prior.STRENGTH_GRID`:
+        weighted identification (:func:`~partcal.calibration.identification.identify`); None: every row alike.
+        ``prior`` (:class:`~partcal.calibration.prior.Prior`, indices into the identification table's order): a
+        Gaussian prior on the parameters, the identification MAP (:func:`~partcal.calibration.identification.identify`);
+        default the parameter ``prior``: ``'plausible'`` (:func:`~partcal.calibration.prior.plausible_prior` at
+        ``prior_strength``; a list of strengths, or ``'auto'`` for :data:`~partcal.calibration.prior.STRENGTH_GRID`:
         the strongest within one standard error of the lowest RMS on 5 contiguous blocks of the data held out in
         turn, :meth:`_chosen_strength`; a run chooses on its own folds) or a ``Prior`` (another robot's model,
         ``prior: FILE.json`` in a run: its rows times ``prior_strength`` too). With ``measures`` the prior is on
         the robot's parameters alone (never the kinds' unknowns), the fit MAP the same way
-        (:func:`~partcal.models.measures.identify_measures`), and a list of strengths is chosen on 5 random folds of
+        (:func:`~partcal.calibration.stacked.identify_measures`), and a list of strengths is chosen on 5 random folds of
         the measuring rows instead (they have no order to keep: :meth:`_measures_strength`).
         """
         robot = self._check_params()
@@ -277,8 +279,8 @@ class KinematicModel(ErrorModelBase):
 
     def _own_prior(self, robot: Robot, X, y, payload_kg) -> Prior | None:
         """The prior of the parameter ``prior`` at ``prior_strength`` (a list: :meth:`_chosen_strength`): the
-        plausible one (:func:`~partcal.models.prior.plausible_prior` about nominal: the robot's
-        ``plausible_error``, else :data:`~partcal.models.identification.PLAUSIBLE_ERROR`) or a given ``Prior``
+        plausible one (:func:`~partcal.calibration.prior.plausible_prior` about nominal: the robot's
+        ``plausible_error``, else :data:`~partcal.calibration.parameters.PLAUSIBLE_ERROR`) or a given ``Prior``
         (another robot's model, rows of 1 mm noise) with its rows times the strength."""
         strengths = strengths_of(self.prior_strength)
         self.prior_strength_, self.prior_strength_table_ = strengths[0], None
@@ -290,8 +292,8 @@ class KinematicModel(ErrorModelBase):
 
     def prior_at(self, robot: Robot, strength: float) -> Prior | None:
         """The prior of the parameter ``prior`` at one ``strength`` for ``robot`` (None without a prior or at
-        strength 0): the plausible one (:func:`~partcal.models.prior.plausible_prior` about nominal: the
-        robot's ``plausible_error``, else :data:`~partcal.models.identification.PLAUSIBLE_ERROR`) or a given
+        strength 0): the plausible one (:func:`~partcal.calibration.prior.plausible_prior` about nominal: the
+        robot's ``plausible_error``, else :data:`~partcal.calibration.parameters.PLAUSIBLE_ERROR`) or a given
         ``Prior`` with its rows times the strength."""
         if self.prior is None or strength == 0:
             return None
@@ -308,7 +310,7 @@ class KinematicModel(ErrorModelBase):
         """The 3-D RMS of the kinematic part's errors on each of 5 contiguous blocks of the data (measurement
         order: real residuals are correlated, shuffled folds would reward fitting them), held out in turn, for
         each of ``strengths``, and its standard error over the rows (what
-        :func:`~partcal.models.prior.strongest_within` chooses by); the positions alone (no residual model, no
+        :func:`~partcal.calibration.prior.strongest_within` chooses by); the positions alone (no residual model, no
         further targets). A run chooses on its own folds instead (``partcal.study.selection``)."""
         payload = self._payload(payload_kg, len(X), fitting=True)
         blocks = np.array_split(np.arange(len(X)), min(5, len(X)))
@@ -341,7 +343,7 @@ class KinematicModel(ErrorModelBase):
 
     def _fit_measures(self, robot: Robot, measures: Measured, payload_kg, prior: Prior | None = None
                       ) -> "KinematicModel":
-        """:meth:`fit` from rows of measurement kinds (:func:`~partcal.models.measures.identify_measures`), MAP
+        """:meth:`fit` from rows of measurement kinds (:func:`~partcal.calibration.stacked.identify_measures`), MAP
         with a prior (``prior``, else the parameter's: a list of strengths chosen by :meth:`_measures_strength`)."""
         if self.loss != "linear":
             raise DataError(f"loss: {self.loss} weighs tracker points (a point CSV); rows of measurement kinds are "
@@ -378,10 +380,10 @@ class KinematicModel(ErrorModelBase):
         return self._prepare()
 
     def _measures_strength(self, robot: Robot, measures: Measured, payload, strengths) -> tuple[int, list[dict]]:
-        """A list of prior strengths chosen on rows of measurement kinds: :data:`~partcal.models.kinds_cv.FOLDS`
+        """A list of prior strengths chosen on rows of measurement kinds: :data:`~partcal.calibration.cv.FOLDS`
         random folds of the measuring rows (drawn from ``random_state``), each strength's held-out residuals
         weighted by their kinds' noise, the strongest within one standard error of the lowest
-        (:func:`~partcal.models.kinds_cv.strength_table`; a kinds run chooses on its own folds the same way)."""
+        (:func:`~partcal.calibration.cv.strength_table`; a kinds run chooses on its own folds the same way)."""
         rows, features = measures.rows, measures.features
         built_kinds(rows, features)         # the rows' own faults said as they are, before any fold is cut
         if scale_free(robot, rows, features, base=bool(self.base), tool=bool(self.tool), rcond=float(self.rcond),
@@ -544,7 +546,7 @@ class KinematicModel(ErrorModelBase):
         leave the ranges of the data, plus
         that of the geometric parameters the data did not identify, each with
         the prior standard deviation of its plausible error
-        (:func:`~partcal.models.identification.prior_variance`: nil where the
+        (:func:`~partcal.calibration.fit.prior_variance`: nil where the
         identified ones stand in for it, growing where the data did not go,
         such as a wrist turned that the data held still); to it
         is added the residual model's variance (its own noise included), or,

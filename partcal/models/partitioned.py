@@ -25,7 +25,8 @@ from .._validation import FieldReader, one_of, param_error
 from ..errors import DataError, PartcalError
 from ..metrics import distance_outside_boxes
 from .angles import InputMap
-from .base import ErrorModelBase, seed_from
+from .._validation import seed_from
+from .base import ErrorModelBase
 from .features import varying_inputs
 from .combine import BlendWeights, FrameCombiner, combine_generic, region_weights
 from .kindtable import KINDS, Kind, RegionFit, pso_rms_ratio, regions_kinds, swarm_runs

@@ -29,7 +29,8 @@ from sklearn.utils.validation import check_is_fitted, validate_data
 from .._validation import FieldReader, Requirement, boolean, integer, is_int, one_of, param_error
 from ..errors import DataError, PartcalError
 from ..metrics import distance_outside_boxes
-from .base import ErrorModelBase, check_sample_weight, seed_from
+from .._validation import seed_from
+from .base import ErrorModelBase, check_sample_weight
 from .kindtable import RegionFit
 from .features import Basis, Scaling, SeriesPlan, column_bounds
 from .polynomials import coef_centred, coef_from_scaled, lowered_terms

@@ -24,9 +24,9 @@ import numpy as np
 
 from .. import __version__
 from ..metrics import MRAD_PER_DEG
-from ..models.identification import BASE_PARAMETERS, TOOL_PARAMETERS
+from ..calibration.parameters import BASE_PARAMETERS, TOOL_PARAMETERS
 from ..models.kinds import equations_of, identification_of, regions_of, run_summary
-from ..models.targets import added_names
+from ..calibration.targets import added_names
 from ..study.kinds_run import KindsRunResult
 from ..study.results import ModelResult, RunResult
 from ..study.scoring import Outputs, errors_left

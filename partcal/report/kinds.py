@@ -18,7 +18,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from .. import __version__  # noqa: E402
-from ..models.measures import MEASUREMENT_KINDS  # noqa: E402
+from ..calibration.registry import MEASUREMENT_KINDS
 from ..study.kinds_run import KindsRunResult  # noqa: E402
 from .figures import COLOURS, svg_of  # noqa: E402
 

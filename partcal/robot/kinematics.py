@@ -99,7 +99,7 @@ class Robot:
     plausible_error : dict or None
         The robot's own plausible error of a geometric parameter per unit (``{"mm": ..., "deg": ...}``, the
         datasheet's tolerances) for the identification's plausible prior; None: partcal's defaults
-        (:data:`partcal.models.identification.PLAUSIBLE_ERROR`).
+        (:data:`partcal.calibration.parameters.PLAUSIBLE_ERROR`).
     """
 
     name: str

@@ -53,7 +53,8 @@ from scipy.stats import chi2
 from ..data.formats import ROWS_EXPECTED, MeasurementFormat, RowSelection, load_format
 from ..data.measurements import read_measurements
 from ..errors import ConfigError, DataError, ModelFileError
-from ..models.identification import geometric_size, model_jacobian
+from ..calibration.chain import model_jacobian
+from ..calibration.parameters import geometric_size
 from ..models.kindtable import identification_of
 from ..robot.frames import kabsch
 from ..robot.rotations import rotation_vector_from_matrix

@@ -25,7 +25,7 @@ from ..models.kinds import KINDS, config_kinds, fits_pose_errors
 from ..models.partition import PARTITIONS
 from ..models.partitioned import PartitionedErrorModel
 from ..models.pose import PoseErrorModel
-from ..models.prior import Prior, strengths_of
+from ..calibration.prior import Prior, strengths_of
 from ..robot.description import load_robot, robot_reference
 from ..robot.kinematics import Robot
 from ..robot.urdf import UrdfReference, is_urdf
@@ -459,7 +459,7 @@ def _model_prior(sec: Section, text: str, base: Path | None, robot: Robot | None
     (:func:`~partcal.study.update.type_prior`: its row parameters with their plausible errors)."""
     from .persist import load_model
     from .update import type_prior
-    from ..models.identification import PLAUSIBLE_ERROR
+    from ..calibration.parameters import PLAUSIBLE_ERROR
     from ..models.kinematic import KinematicModel
 
     path = Path(text) if base is None or Path(text).is_absolute() else base / text

@@ -35,7 +35,7 @@ from ..data.formats import load_format
 from ..data.measurements import read_measurements
 from ..errors import PartcalError
 from ..metrics import pooled_rms
-from ..models.identification import geometric_size, own_geometry
+from ..calibration.parameters import geometric_size, own_geometry
 from ..models.kinematic import KinematicModel
 from ..robot.description import robot_to_dict
 from ..robot.export import ExportError, dh_rows, transform, ur_kinematics_from_robot, urdf_from_robot

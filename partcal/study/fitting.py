@@ -29,7 +29,7 @@ from ..errors import ConfigError, held_warnings
 from ..metrics import rms_standard_error
 from ..models.kinds import identification_of, kind_of, pso_rms_ratio, reads_targets, regions_of
 from ..models.partitioned import fold_regions
-from ..models.prior import strength_note
+from ..calibration.prior import strength_note
 from ..robot.kinematics import Robot, flange_offset
 from .config import ModelSpec, SpreadOptions
 from .prepare import PreparedRun, model_inputs

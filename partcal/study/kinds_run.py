@@ -2,7 +2,7 @@
 
 When a run's identification file has a ``kind`` column (docs/data.md, "Measurement kinds"), its rows
 are not 3-D errors and only kinematic models can learn from them: each kinematic entry is identified
-from every kind at once (:func:`partcal.models.measures.identify_measures`), cross-validated on
+from every kind at once (:func:`partcal.calibration.stacked.identify_measures`), cross-validated on
 held-out rows of the same kinds (their residuals, mm of contact, coincidence or length), and scored on
 the test sets: a kinds file by its residuals, a point CSV by the usual 3-D RMS, after a rigid fit
 when the identification data fix no frame (no tracker points among them). What the data cannot
@@ -32,12 +32,13 @@ from ..data.measurements import Measurements, read_measurements
 from ..data.observations import ObservationTable, has_kind_column, read_features, read_observations
 from ..errors import DataError, PartcalError
 from ..metrics import pooled_rms
-from ..models.contacts import TRACKER_FRAME, PointKind
+from ..calibration.tracker_points import PointKind, TRACKER_FRAME
 from ..models.kinematic import KinematicModel
-from ..models.kinds_cv import (FOLDS, SCALE_CHOICE, fold_rows, held_out, scale_free, strength_table,
-                                weighted_residuals)
-from ..models.prior import strength_note
-from ..models.measures import (END_KIND, Measured, Rows, built_kinds, kind_names, kind_residuals, observability)
+from ..calibration.cv import fold_rows, FOLDS, held_out, SCALE_CHOICE, scale_free, strength_table, weighted_residuals
+from ..calibration.prior import strength_note
+from ..calibration.measurement import END_KIND, Measured, Rows
+from ..calibration.registry import built_kinds, kind_names
+from ..calibration.stacked import kind_residuals, observability
 from ..robot.frames import kabsch
 from ..robot.kinematics import Robot
 from .config import ModelSpec, RunConfig, SpreadOptions
@@ -218,7 +219,7 @@ def _refuse_unused(config: RunConfig) -> None:
 
 
 def _scale_free(spec: ModelSpec, robot: Robot, rows: Rows, features: dict) -> bool:
-    """Whether the rows leave the scale free for this entry (:func:`~partcal.models.kinds_cv.scale_free`)."""
+    """Whether the rows leave the scale free for this entry (:func:`~partcal.calibration.cv.scale_free`)."""
     model = spec.with_robot(robot).build(None)
     errors, parametrization = model.joint_settings(robot)
     return scale_free(robot, rows, features, base=bool(model.base), tool=bool(model.tool), rcond=float(model.rcond),
@@ -327,7 +328,7 @@ def fit_entry(spec: ModelSpec, data: KindsData, seed: int, folds: int,
     ``say`` hears of each fold once the entry has taken :data:`~partcal.study.fitting.SLOW_SECONDS`.
 
     A list of prior strengths (``prior_strength: [..]`` or ``auto``) is chosen on the run's folds
-    (:func:`~partcal.models.kinds_cv.strength_table`: the strongest within one standard error of the lowest
+    (:func:`~partcal.calibration.cv.strength_table`: the strongest within one standard error of the lowest
     weighted RMS), the chosen strength fitted on every row; the entry's CV figure is then nested: each fold's
     training rows choose again on folds of their own (the model's choice,
     :meth:`KinematicModel.fit <partcal.models.kinematic.KinematicModel.fit>`)."""
@@ -366,7 +367,7 @@ def fit_entry(spec: ModelSpec, data: KindsData, seed: int, folds: int,
 
 
 def _weighted_rms(residuals: dict, features: dict) -> float:
-    """One figure of residuals of several kinds (:func:`~partcal.models.kinds_cv.weighted_residuals`), RMS; mm of a
+    """One figure of residuals of several kinds (:func:`~partcal.calibration.cv.weighted_residuals`), RMS; mm of a
     tracker's 0.02 mm noise."""
     every = weighted_residuals(residuals, features)
     return float(np.sqrt(np.mean(every**2))) if every.size else float("nan")

@@ -3,9 +3,9 @@
 ``plan_poses`` draws a candidate pool (joint-limit poses, poses whose tool is
 inside a Cartesian box, or the user's own list of reachable and safe poses)
 and keeps the ``n`` that make the kinematic model (a
-:class:`~partcal.models.design.PlannedModel`: geometry, and the joint
+:class:`~partcal.calibration.design.PlannedModel`: geometry, and the joint
 compliance and harmonics of ``kind: kinematic``) best identifiable
-(D-optimal, DETMAX; see :mod:`partcal.models.design`). ``evaluate_poses`` reports
+(D-optimal, DETMAX; see :mod:`partcal.calibration.design`). ``evaluate_poses`` reports
 the observability indices of any pose set, the parameters it cannot
 identify, the predicted standard error of each parameter and the predicted
 position uncertainty of the identified robot over the workspace, for a given
@@ -27,8 +27,8 @@ from numpy.typing import NDArray
 from .._io import atomic_write
 from ..data.plausibility import check_joint_units
 from ..errors import DataError, PartcalError
-from ..models import design
-from ..models.base import seed_from
+from ..calibration import design
+from .._validation import seed_from
 from ..robot.description import joint_columns
 from ..robot.floor import Floor, above_floor, below_floor_text, robot_floor
 from ..robot.kinematics import Robot
@@ -120,7 +120,7 @@ class Evaluation:
     Attributes
     ----------
     indices : Indices
-        Over the parameters the set identifies (scaled columns, see :mod:`partcal.models.design`).
+        Over the parameters the set identifies (scaled columns, see :mod:`partcal.calibration.design`).
     names, units : tuple of str, length P
         Every parameter of the model.
     identified : tuple of str
@@ -198,7 +198,7 @@ def workspace(robot: Robot, q_deg=None, *, model: design.PlannedModel = design.D
               n_poses: int = WORKSPACE_POSES, box_mm=None, floor=ROBOT_FLOOR, rcond: float = 1e-6) -> Workspace:
     """The workspace a pose set is judged on: ``q_deg`` (candidates), else joint-limit poses (seeded).
 
-    ``model`` is the kinematic model planned for (:class:`~partcal.models.design.PlannedModel`: base,
+    ``model`` is the kinematic model planned for (:class:`~partcal.calibration.design.PlannedModel`: base,
     tool, compliance, joint harmonics, payload). Drawn poses keep above ``floor`` (see :func:`floor_of`;
     default the robot's own floor); ``q_deg`` are taken as given (:func:`check_candidates` checks them).
     """

@@ -23,12 +23,13 @@ from .._io import refuse_input_as_output
 from ..data.formats import load_format
 from ..data.measurements import read_columns
 from ..errors import PartcalError
-from ..models import design
+from ..calibration import design
 from ..robot.description import joint_columns
 from ..robot.floor import Floor, robot_floor
 from ..robot.kinematics import Robot
 from ..data.observations import has_kind_column, read_features, read_observations, write_observations
-from ..models.measures import SCALE, kind_names
+from ..calibration.measurement import SCALE
+from ..calibration.registry import kind_names
 from . import plan, plan_kinds
 from .kinds_run import rows_of
 from .config import robot_named

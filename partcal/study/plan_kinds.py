@@ -3,8 +3,8 @@
 A kinds file (a ``kind`` column, docs/data.md "Measurement kinds") is judged as a tracker's pose set is
 (:func:`evaluate_kinds`): at the nominal robot, on consistent data (the kinds' unknowns started from
 the nominal robot's own positions at the measured poses), from the stacked Jacobian of every kind,
-each row weighted by its kind's stated noise (:class:`~partcal.models.measures.StackedProblem`). It
-names what the data cannot identify (:func:`~partcal.models.measures.observability`: a uniform scale
+each row weighted by its kind's stated noise (:class:`~partcal.calibration.stacked.StackedProblem`). It
+names what the data cannot identify (:func:`~partcal.calibration.stacked.observability`: a uniform scale
 where nothing measures a length, each kind's blind spots, the parameters held nominal) and gives the
 indices, each identified parameter's predicted standard error and the predicted position uncertainty
 of the identified robot over the workspace.
@@ -14,7 +14,7 @@ points (``kind="fixed"``): candidates from many tool orientations, each put on i
 nominal robot (the contact simulator's generators run on the nominal robot: uniform joint samples
 near the feature, inverse kinematics and Newton steps onto it, within the joint limits), then the
 ``n`` of them that maximise the determinant of the stacked, noise-weighted information of the robot's
-and the kinds' unknowns (the points planner's DETMAX, :func:`~partcal.models.design.detmax`). A plane
+and the kinds' unknowns (the points planner's DETMAX, :func:`~partcal.calibration.design.detmax`). A plane
 is planned for when its geometry is given (``normal`` and ``offset_mm``, or ``parallel_to`` a plane
 that has them, offset plus ``spacing_mm``); a fixed point when its position is (``known_mm``): an
 unknown nest is planned for at its approximate position given as ``known_mm`` in the features read
@@ -33,11 +33,13 @@ from ..data.observations import ObservationTable
 from ..data.simulate import Tracker, VirtualRobot
 from ..data.simulate_contacts import fixed_point_visits, plane_touches
 from ..errors import PartcalError, UnreachableError
-from ..models import contacts  # noqa: F401  (registers the built-in kinds)
-from ..models import design
-from ..models.base import seed_from
-from ..models.identification import identifiable_parameters, parameter_names
-from ..models.measures import REFERENCE_NOISE_MM, Rows, StackedProblem, built_kinds, observability, rank_jacobian
+from ..calibration import design
+from .._validation import seed_from
+from ..calibration.identifiability import identifiable_parameters
+from ..calibration.parameters import parameter_names
+from ..calibration.measurement import REFERENCE_NOISE_MM, Rows
+from ..calibration.registry import built_kinds
+from ..calibration.stacked import observability, rank_jacobian, StackedProblem
 from ..robot.floor import above_floor
 from ..robot.kinematics import Robot
 from . import plan
@@ -58,7 +60,7 @@ class StackedDesign:
     jac : ndarray, shape (m, P)
         The weighted residuals' Jacobian (each kind's rows times ``REFERENCE_NOISE_MM / noise``), its answer
         to a uniform scale and the cell's turns made that of consistent data
-        (:func:`~partcal.models.measures.rank_jacobian`).
+        (:func:`~partcal.calibration.stacked.rank_jacobian`).
     row_of : ndarray of int, shape (m,)
         The row each residual reads (-1: none, a known length between two unknowns).
     wanted, free : which parameters are asked for, and which the rows identify (the fit's rank rule).

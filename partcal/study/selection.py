@@ -35,7 +35,7 @@ from ..metrics import (HELD_TOLERANCE_DEG, labels_as_groups, pooled_rms, pose_gr
                        within_one_standard_error)
 from ..models.kinds import is_physical, regions_of
 from ..models.partitioned import fold_regions
-from ..models.prior import strength_rows, strongest_within
+from ..calibration.prior import strength_rows, strongest_within
 from ..models.threads import one_blas_thread
 
 if TYPE_CHECKING:
@@ -300,7 +300,7 @@ def strength_rule(strengths: Sequence[float], groups: NDArray[np.intp],
                   ) -> Callable[[list, NDArray[np.intp]], int]:
     """The rule that chooses a prior's strength from the held-out residuals of one candidate per strength:
     the strongest within one standard error of the lowest ``score``
-    (:func:`~partcal.models.prior.strongest_within`, the run's own rule for the simplest model), the standard
+    (:func:`~partcal.calibration.prior.strongest_within`, the run's own rule for the simplest model), the standard
     error over the poses ``groups`` of the rows scored (:func:`~partcal.metrics.rms_standard_error` of
     ``ranked`` residuals, as a run's CV score has it). ``choose(residuals, rows)`` -> the index."""
     def choose(residuals: list, rows: NDArray[np.intp]) -> int:

@@ -1,7 +1,7 @@
 """``partcal update``: a kinematic model re-identified from new measurements, with itself as the prior.
 
 The model's identified parameters and their covariance (``Identification.covariance``, inflated by
-``inflate``: the robot may have changed since) are a Gaussian prior (:mod:`partcal.models.prior`) on
+``inflate``: the robot may have changed since) are a Gaussian prior (:mod:`partcal.calibration.prior`) on
 the new identification, which is then MAP. The base frame's six parameters are left out of the prior
 and identified afresh: new measurements come with their own setup (a tracker moved, a cell rebuilt).
 What the new poses say is judged against the prior (:func:`determined_shares`): per direction of the
@@ -31,9 +31,9 @@ from ..data.formats import load_format
 from ..data.measurements import Measurements, read_measurements
 from ..errors import ModelFileError, PartcalError
 from ..metrics import pooled_rms
-from ..models.identification import model_jacobian
+from ..calibration.chain import model_jacobian
 from ..models.kinematic import KinematicModel
-from ..models.prior import Prior
+from ..calibration.prior import Prior
 from .persist import checksum, load_model, save_model
 
 DEFAULT_INFLATE = 30.0
@@ -125,7 +125,7 @@ def determined_shares(model: KinematicModel, data: Measurements, prior: Prior) -
     model's values with the base frame profiled out, ``sigma`` the model's noise). Their sum is the number of
     the prior's directions the poses determine.
 
-    >>> from partcal.models.prior import Prior
+    >>> from partcal.calibration.prior import Prior
     """
     table = model.identification_
     _, jac = model_jacobian(model.robot_, model.joint_errors_, data.q_deg, table.value, np.zeros(len(data.q_deg)),

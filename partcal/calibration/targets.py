@@ -29,7 +29,6 @@ from .._validation import check_array
 from ..errors import DataError
 from ..robot.kinematics import ORIENTATION_MM_PER_RAD, Robot
 from ..robot.rotations import matrices_from_rotation_vectors
-from .joint_errors import JointErrors
 
 PROBE_PARAMETERS = (("probe.rx", "deg"), ("probe.ry", "deg"), ("probe.rz", "deg"))
 

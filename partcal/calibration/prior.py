@@ -10,10 +10,10 @@ which is the least squares of the residuals ``r(v)`` stacked with the rows ``sig
 that every fit (Levenberg-Marquardt, the rank rule, the standard errors) reads them as more
 measurements. A parameter the prior holds is identifiable through it (the rank rule sees its row),
 and its distance from the mean is priced by the prior instead of pruned
-(:func:`~partcal.models.identification.identify`).
+(:func:`~partcal.calibration.identification.identify`).
 
 Two sources of priors: a datasheet-like one (:func:`plausible_prior`: each row parameter's plausible
-error, :data:`~partcal.models.identification.PLAUSIBLE_ERROR`, with a strength) and an identified
+error, :data:`~partcal.calibration.parameters.PLAUSIBLE_ERROR`, with a strength) and an identified
 model (:func:`model_prior`: its values and covariance, inflated).
 """
 

@@ -40,13 +40,15 @@ import numpy as np
 import scipy.linalg
 from numpy.typing import NDArray
 
+from .._validation import seed_from
 from ..errors import PartcalError
 from ..robot.kinematics import Robot
-from .base import seed_from
 from .joint_errors import GRAVITY_M_S2, JointErrors, compliance_problem, harmonics_problem
-from .identification import (PARAMETRIZATIONS, held_still, identification_jacobian, nominal_values, parameter_names,
-                             resolved_parametrization, stacked)
-from .identification import model_jacobian as kinematic_jacobian
+from .chain import identification_jacobian
+from .fit import held_still
+from .identification import stacked
+from .parameters import nominal_values, parameter_names, PARAMETRIZATIONS, resolved_parametrization
+from .chain import model_jacobian as kinematic_jacobian
 from .targets import Extra
 
 log = logging.getLogger(__name__)
@@ -62,7 +64,7 @@ class PlannedModel:
     base, tool : bool
         Whether the base pose and the tool offset are identified.
     compliance : tuple of int
-        1-based joints that yield under gravity (:mod:`partcal.models.joint_errors`).
+        1-based joints that yield under gravity (:mod:`partcal.calibration.joint_errors`).
     joint_harmonics : int or tuple of int
         Harmonics of every joint's transmission error, or one count per joint.
     payload_kg : float

@@ -3,7 +3,7 @@
 Rows of plane touches, fixed points and distances have no poses to group and no order to keep: the
 measuring rows are cut into random folds (:func:`fold_rows`; a distance's other end comes along as an
 end), each held-out row is scored by its own kind's residual with the planes and points as the training
-rows fitted them (:func:`~partcal.models.measures.kind_residuals`), and the kinds are put on one scale
+rows fitted them (:func:`~partcal.calibration.stacked.kind_residuals`), and the kinds are put on one scale
 by their stated noise (:func:`weighted_residuals`: millimetres of a 0.02 mm tracker, as the fit weighs
 them). A kinds run (:mod:`partcal.study.kinds_run`) cross-validates its entries this way on its folds;
 :meth:`KinematicModel.fit <partcal.models.kinematic.KinematicModel.fit>` on kinds chooses a list of prior
@@ -19,8 +19,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..metrics import rms_standard_error
-from .identification import Identification
-from .measures import END_KIND, MEASUREMENT_KINDS, REFERENCE_NOISE_MM, SCALE, Rows, kind_residuals, observability
+from .parameters import Identification
+from .measurement import END_KIND, REFERENCE_NOISE_MM, SCALE, Rows
+from .registry import MEASUREMENT_KINDS
+from .stacked import kind_residuals, observability
 from .prior import strength_rows
 
 FOLDS = 5
@@ -37,9 +39,9 @@ SCALE_CHOICE = ("a list of strengths cannot be chosen on these rows: nothing her
 
 def scale_free(robot, rows: Rows, features: dict, **kw) -> bool:
     """Whether the rows leave a uniform scale of the robot free (nothing measures a length:
-    :func:`~partcal.models.measures.observability` names :data:`~partcal.models.measures.SCALE`). Then no
+    :func:`~partcal.calibration.stacked.observability` names :data:`~partcal.calibration.measurement.SCALE`). Then no
     cross-validation of these rows can choose a prior's strength (:data:`SCALE_CHOICE`). ``kw``: as
-    :func:`~partcal.models.measures.observability`, without a prior."""
+    :func:`~partcal.calibration.stacked.observability`, without a prior."""
     notes = observability(robot, rows, features, **kw)[0]
     return bool(notes) and notes[0].startswith(SCALE)
 
@@ -72,7 +74,7 @@ def fold_rows(rows: Rows, seed: int, folds: int) -> list[tuple[Rows, NDArray[np.
 
 def weighted_residuals(residuals: dict, features: dict) -> NDArray[np.float64]:
     """Residuals of several kinds (kind -> mm) on one scale: each divided by its kind's noise and multiplied by
-    :data:`~partcal.models.measures.REFERENCE_NOISE_MM` (as the fit weighs them), concatenated in the dict's
+    :data:`~partcal.calibration.measurement.REFERENCE_NOISE_MM` (as the fit weighs them), concatenated in the dict's
     order."""
     noise = features.get("noise_mm") or {}
     parts = [np.asarray(r, dtype=float) * REFERENCE_NOISE_MM / noise.get(k, MEASUREMENT_KINDS[k].default_noise_mm)
@@ -117,7 +119,7 @@ def strength_table(identified_at: Callable[[float, Rows], Identification], stren
                    features: dict, folds: list, **kw) -> tuple[int, list[dict]]:
     """Choose a prior's strength among ``strengths`` on ``folds`` of rows of measurement kinds: each strength's
     held-out weighted RMS (:func:`cv_score`; ``identified_at(strength, training rows)`` fits), the strongest
-    within one standard error of the lowest (:func:`~partcal.models.prior.strongest_within`, the rule of a point
+    within one standard error of the lowest (:func:`~partcal.calibration.prior.strongest_within`, the rule of a point
     run). Returns its index and a row per strength: ``prior_strength``, ``cv_weighted_rms_mm``, ``cv_se``,
     ``chosen``. ``kw``: as :func:`held_out`."""
     scores, errors = [], []

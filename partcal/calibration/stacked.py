@@ -1,0 +1,270 @@
+"""One identification over every measurement kind present: the kinds' residuals stacked and weighted by
+their stated noise (:class:`StackedProblem`), the robot's parameters and the kinds' unknowns fitted together
+(:func:`identify_measures`), what the rows cannot identify (:func:`observability`), held-out residuals
+(:func:`kind_residuals`)."""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..errors import DataError
+from ..robot.kinematics import Robot
+from .chain import Chain, chain_at
+from .fit import fit_parameters
+from .identifiability import consistent_jacobian, identifiable_parameters, misfit_parts, null_direction, rigid_directions, scale_direction
+from .joint_errors import JointErrors
+from .measurement import REFERENCE_NOISE_MM, SCALE, MeasurementKind, Residuals, Rows
+from .parameters import Identification, geometric_size, nominal_values, parameter_names
+from .prior import Prior
+from .registry import built_kinds
+
+log = logging.getLogger(__name__)
+
+
+# ---------------------------------------------------------------------- the stacked problem
+class StackedProblem:
+    """The kinds' residuals stacked and weighted, and their Jacobian by the model's and the kinds' unknowns."""
+
+    def __init__(self, nominal: Robot, errors, rows: Rows, kinds: list[MeasurementKind], payload, parametrization):
+        self.nominal, self.errors, self.rows, self.kinds = nominal, errors, rows, kinds
+        self.payload, self.par = payload, parametrization
+        self.own = nominal_values(nominal, errors, parametrization).size
+        self.orientation = any(k.needs_orientation for k in kinds)
+        # the chain once per distinct pose (all pairs of 1,000 poses are 500,000 rows of 1,000 poses)
+        poses, inverse = np.unique(np.column_stack([rows.q_deg, payload]), axis=0, return_inverse=True)
+        self.poses, self.pose_payload, self.inverse = poses[:, :-1], poses[:, -1], inverse.ravel()
+        v0 = nominal_values(nominal, errors, parametrization)
+        start = self.chain(v0, False, orientation=True)          # the kinds check their rows' orientations
+        self.names: list[tuple[str, str]] = []
+        starts: list[float] = []
+        self.columns: list[NDArray[np.intp]] = []
+        for kind in kinds:
+            names, values = kind.unknowns(start.positions, start.rotations)
+            cols = []
+            for name, value in zip(names, values):
+                if name not in self.names:
+                    self.names.append(name)
+                    starts.append(float(value))
+                cols.append(self.own + self.names.index(name))
+            self.columns.append(np.array(cols, dtype=np.intp))
+        self.start = np.concatenate([v0, np.array(starts)])
+        self.weights = [REFERENCE_NOISE_MM / kind.noise_mm for kind in kinds]
+
+    def split(self, values: NDArray[np.float64]) -> list[NDArray[np.float64]]:
+        return [values[cols] for cols in self.columns]
+
+    def chain(self, values: NDArray[np.float64], jacobian: bool, orientation: bool | None = None) -> Chain:
+        """:class:`Chain` at every row (its derivatives at every distinct pose: index them by ``inverse``); the
+        tool's rotations when a kind reads them (or ``orientation``)."""
+        chain = chain_at(self.nominal, self.errors, self.poses, values[:self.own], self.pose_payload, self.par,
+                         self.orientation if orientation is None else orientation, jacobian)
+        return Chain(chain.positions[self.inverse], None if chain.rotations is None else
+                     chain.rotations[self.inverse], chain.jac, chain.omega)
+
+    def raw(self, values: NDArray[np.float64], measured_only: bool = False) -> list[NDArray[np.float64]]:
+        """Each kind's residuals (mm, unweighted); ``measured_only``: those of rows alone (not a known length
+        between two of a kind's unknowns)."""
+        chain = self.chain(values, False)
+        out = []
+        for kind, u in zip(self.kinds, self.split(values)):
+            r = kind.residuals(chain.positions, chain.rotations, u)
+            out.append(r.values[r.rows_a >= 0] if measured_only else r.values)
+        return out
+
+    def __call__(self, values: NDArray[np.float64], jacobian: bool = True):
+        """The weighted residuals and (with ``jacobian``) their Jacobian, as ``identify``'s ``jac_at``."""
+        chain = self.chain(values, jacobian)
+        out, blocks = [], []
+        for kind, u, cols, w in zip(self.kinds, self.split(values), self.columns, self.weights):
+            r = kind.residuals(chain.positions, chain.rotations, u)
+            out.append(w * r.values)
+            if jacobian:
+                block = np.zeros((r.values.size, values.size))
+                block[:, :self.own] = _through_chain(r, chain, self.inverse)
+                np.add.at(block.T, cols, r.du.T)
+                blocks.append(w * block)
+        return np.concatenate(out), (np.vstack(blocks) if jacobian else None)
+
+
+def _through_chain(r: Residuals, chain: Chain, pose_of: NDArray[np.intp], chunk: int = 20000
+                   ) -> NDArray[np.float64]:
+    """``d residual / d`` the model's own parameters: each residual's gradients through its rows' targets
+    (row ``i``'s derivatives are those of pose ``pose_of[i]``)."""
+    m, p = r.values.size, chain.jac.shape[2]
+    out = np.zeros((m, p))
+    for lo in range(0, m, chunk):
+        part = slice(lo, lo + chunk)
+        for rows, grad in ((r.rows_a, r.grad_a), (r.rows_b, r.grad_b)):
+            if rows is None:
+                continue
+            rows, grad = rows[part], grad[part]
+            live = rows >= 0
+            out[part][live] += np.einsum("mi,mip->mp", grad[live], chain.jac[pose_of[rows[live]]])
+        if r.turn_grad is not None:
+            rows, grad = r.rows_a[part], r.turn_grad[part]
+            live = rows >= 0
+            out[part][live] += np.einsum("mi,mip->mp", grad[live], chain.omega[pose_of[rows[live]]])
+    return out
+
+
+
+def identify_measures(robot: Robot, rows: Rows, features: dict | None = None, *, base: bool = True,
+                      tool: bool = True, rcond: float = 1e-6, errors: JointErrors | None = None,
+                      payload_kg=0.0, parametrization: str = "dh", prior: Prior | None = None
+                      ) -> tuple[Identification, list[str]]:
+    """Identify the robot's parameters and the kinds' unknowns from rows of any measurement kinds.
+
+    Parameters
+    ----------
+    robot : Robot
+        The nominal robot.
+    rows : Rows
+        Every row (all kinds).
+    features : dict, optional
+        The cell's planes and points and the kinds' noise (:func:`partcal.data.observations.read_features`).
+    base, tool, rcond, errors, payload_kg, parametrization
+        As :func:`~partcal.calibration.identification.identify`.
+    prior : Prior, optional
+        A Gaussian prior on the robot's own parameters (indices into the table's first entries, never the
+        kinds' unknowns): MAP as in :func:`~partcal.calibration.identification.identify`, by the same means (its
+        rows appended to the weighted residuals, which read as millimetres of a 0.02 mm tracker, and to the
+        Jacobian the rank rule reads; the parameters it holds never pruned as implausible; the covariance
+        the posterior's). The kinds' RMS figures are those of the rows alone.
+
+    Returns
+    -------
+    identification : Identification
+        The robot's parameters, then the kinds' unknowns. ``target_rms_mm`` holds each kind's RMS residual
+        (mm) under its name; ``rms_mm`` is the RMS of every residual (mm).
+    notes : list of str
+        What the data cannot identify, in words (a uniform scale, each kind's own blind spots).
+    """
+    features = features or {}
+    problem, names, wanted, jac0, notes = _prepared(robot, rows, features, base, tool, rcond, errors, payload_kg,
+                                                    parametrization, prior)
+    size, kinds, q_deg = geometric_size(robot, parametrization), problem.kinds, rows.q_deg
+    if prior is None:
+        table = fit_parameters(problem, problem.start, jac0, wanted, names, rcond, size, len(q_deg))[0]
+    else:
+        table = fit_parameters(prior.augmented(problem), problem.start, jac0, wanted, names, rcond, size,
+                               len(q_deg), held=prior.held(problem.start.size))[0]
+    raw = problem.raw(table.value, measured_only=True)
+    per_kind = {kind.name: float(np.sqrt(np.mean(r**2))) if r.size else 0.0 for kind, r in zip(kinds, raw)}
+    everything = np.concatenate(raw)
+    table = dataclasses.replace(table, target_rms_mm=per_kind, rms_mm=float(np.sqrt(np.mean(everything**2))))
+    for note in notes:
+        log.warning("%s", note)
+    return table, notes
+
+
+def rank_jacobian(problem: StackedProblem, wanted: NDArray[np.bool_], rcond: float
+                  ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The Jacobian the rank rule reads, at the problem's start on consistent data (:func:`consistent_jacobian`
+    along a uniform scale and the three turns of the cell, the turns when the base is asked for), and the
+    scale's direction."""
+    jac0 = problem(problem.start)[1]
+    direction = scale_direction(problem)
+    rigid = rigid_directions(problem)
+    turns = rigid[:, 3:] if not np.any(rigid[~wanted, 3:]) else np.zeros((rigid.shape[0], 0))   # base held: none
+    directions = np.column_stack([direction, turns])
+    misfit = misfit_parts(problem, problem.start)[:, :directions.shape[1]]
+    return consistent_jacobian(jac0, misfit, directions, rcond), direction
+
+
+def _prepared(robot: Robot, rows: Rows, features: dict, base: bool, tool: bool, rcond: float, errors, payload_kg,
+              parametrization: str, prior: Prior | None = None):
+    """The stacked problem at its start, every parameter's name, those asked for, the Jacobian the rank rule
+    reads (on consistent data: :func:`consistent_jacobian`; a ``prior``'s rows appended) and what the data
+    cannot identify, in words."""
+    kinds = built_kinds(rows, features)
+    q_deg = robot.check_joints(rows.q_deg)
+    payload = np.broadcast_to(np.asarray(payload_kg, dtype=float), (len(q_deg),))
+    problem = StackedProblem(robot, errors, rows, kinds, payload, parametrization)
+    names = parameter_names(robot, errors, parametrization) + problem.names
+    size = geometric_size(robot, parametrization)
+    wanted = np.ones(problem.start.size, dtype=bool)
+    wanted[size - 9:size - 6] = tool
+    wanted[size - 6:size] = base
+    notes = [note for kind in kinds for note in kind.notes()]
+    jac0, direction = rank_jacobian(problem, wanted, rcond)
+    if prior is not None:
+        own = parameter_names(robot, errors, parametrization)
+        if prior.index.size and int(prior.index.max()) >= len(own):
+            raise DataError(f"the prior holds parameter {int(prior.index.max())}; the robot has {len(own)} (a "
+                            "prior is on the robot's parameters, never on the kinds' unknowns)")
+        robot_names = [n for n, _ in own]   # a prior model fitted on kinds lists its own kinds' unknowns after these
+        dataclasses.replace(prior, names=None if prior.names is None else prior.names[:len(own)]
+                            ).check_names(robot_names)
+    if np.any(direction) and null_direction(jac0, direction, wanted, rcond):
+        held = prior is not None and not null_direction(np.vstack([jac0, prior.jacobian(jac0.shape[1])]), direction, wanted,
+                                               rcond)
+        notes.insert(0, f"{SCALE}: nothing here measures a length (every plane and point is unknown), so a uniform "
+                        "scale of the robot cannot be identified: " + (
+                            "the prior holds it (the lengths about their prior means, against the residuals' pull "
+                            "towards a smaller robot: what it leaves depends on the strength and the number of rows)"
+                            if held else
+                            "one length is held nominal") + ". Give one: a plane's spacing_mm, a point's distance_mm "
+                        "or known_mm, a distance, or tracker points")
+    if prior is not None:
+        jac0 = np.vstack([jac0, prior.jacobian(jac0.shape[1])])
+    return problem, names, wanted, jac0, notes
+
+
+def observability(robot: Robot, rows: Rows, features: dict | None = None, *, base: bool = True, tool: bool = True,
+                  rcond: float = 1e-6, errors: JointErrors | None = None, payload_kg=0.0,
+                  parametrization: str = "dh", prior: Prior | None = None) -> tuple[list[str], list[str]]:
+    """What rows of measurement kinds cannot identify, without fitting: the notes of :func:`identify_measures`
+    and the parameters its rank rule would hold nominal (judged at the nominal robot, on consistent data; with
+    a ``prior``, its rows read too)."""
+    _, names, wanted, jac0, notes = _prepared(robot, rows, features or {}, base, tool, rcond, errors, payload_kg,
+                                              parametrization, prior)
+    free = identifiable_parameters(jac0, wanted, rcond, [u for _, u in names])[0]
+    held = [names[i][0] for i in np.flatnonzero(wanted) if i not in set(free.tolist())]
+    return notes, held
+
+
+def kind_residuals(robot: Robot, rows: Rows, features: dict, table: Identification, *,
+                   errors: JointErrors | None = None, payload_kg=0.0, parametrization: str = "dh",
+                   only: NDArray[np.intp] | None = None, fitted_here: list | None = None,
+                   row_of: dict | None = None) -> dict[str, NDArray[np.float64]]:
+    """Each kind's residuals (mm) on ``rows`` for an identified ``table``: what held-out rows of the same kind
+    leave. The kinds' unknowns are the table's; an unknown the table lacks (a plane or point the fit never saw)
+    is fitted on these rows with everything else held, and its name appended to ``fitted_here`` (a list, when
+    given). ``only`` (indices into ``rows``): the residuals of those rows alone, the kinds built on every row
+    (held-out rows need not satisfy what an identification needs of its rows, such as three touches per
+    plane); a kind none of them reads is left out. ``row_of`` (a dict, when given, with ``only``) receives the
+    row (an index into ``rows``) of each residual, per kind."""
+    kinds = built_kinds(rows, features)
+    payload = np.broadcast_to(np.asarray(payload_kg, dtype=float), (len(rows),))
+    problem = StackedProblem(robot, errors, rows, kinds, payload, parametrization)
+    values = problem.start.copy()
+    values[:problem.own] = table.value[:problem.own]
+    fitted = dict(zip(table.names[problem.own:], table.value[problem.own:]))
+    missing = np.zeros(values.size, dtype=bool)
+    for k, (name, _) in enumerate(problem.names):
+        if name in fitted:
+            values[problem.own + k] = fitted[name]
+        else:
+            missing[problem.own + k] = True
+    if missing.any():                  # features the fit never saw: placed on these rows, the robot held
+        names = parameter_names(robot, errors, parametrization) + problem.names
+        size = geometric_size(robot, parametrization)
+        values = fit_parameters(problem, values, problem(values)[1], missing, names, 1e-6, size, len(rows))[0].value
+        if fitted_here is not None:
+            fitted_here += [n for (n, _), m in zip(names, missing) if m]
+    if only is None:
+        return {kind.name: r for kind, r in zip(kinds, problem.raw(values, measured_only=True))}
+    chain = problem.chain(values, False)
+    out = {}
+    for kind, u in zip(kinds, problem.split(values)):
+        r = kind.residuals(chain.positions, chain.rotations, u)
+        keep = np.isin(r.rows_a, only) & (r.rows_a >= 0)
+        if keep.any():
+            out[kind.name] = r.values[keep]
+            if row_of is not None:
+                row_of[kind.name] = r.rows_a[keep]
+    return out

@@ -1,0 +1,188 @@
+"""Tracker points: the tool's position (of any target on it, and its orientation) in the robot's base frame or
+in the tracker's own frame (:class:`PointKind`)."""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..errors import DataError
+from ..robot.frames import kabsch
+from ..robot.kinematics import ORIENTATION_MM_PER_RAD
+from ..robot.rotations import left_jacobian, log_derivative, matrices_from_xyz_deg, matrix_from_rotation_vector, rotation_vector_from_matrix, rotation_vectors_from_matrices, skew_matrices
+from .measurement import MeasurementKind, Residuals, unit_rows, worst_of
+from .parameters import PRIMARY_TARGET
+from .targets import PROBE_PARAMETERS
+
+TRACKER_FRAME = "tracker_frame"
+"""The features' key that says the point rows are in the instrument's frame (``True``): the point kind then
+has six unknowns of its own, the instrument's pose in the base frame (``tracker.x, y, z`` mm, ``tracker.rx,
+ry, rz`` a rotation vector in degrees), fitted with the robot's: the registration is part of the fit."""
+
+ORIENTATION_COLUMNS = ("rx_meas", "ry_meas", "rz_meas")
+
+UNIT_FACTOR = 30.0
+"""A distance this many times shorter or longer than the nominal robot's, where that is at least :data:`LONG_MM`,
+is refused: its unit is not mm."""
+
+LONG_MM = 300.0
+"""... (shorter nominal distances are not judged: a tool the nominal robot lacks changes them by any factor)."""
+
+POINT_FAR_MM = 100.0
+"""A tracker point in the base frame this far from where the nominal robot puts it is refused: metres, or a
+point in another frame."""
+
+TRACKER_PARAMETERS = (("tracker.x", "mm"), ("tracker.y", "mm"), ("tracker.z", "mm"), ("tracker.rx", "deg"),
+                      ("tracker.ry", "deg"), ("tracker.rz", "deg"))
+
+
+class PointKind(MeasurementKind):
+    """A tracker point of the tool, in the robot's base frame (registered), or in the tracker's own frame
+    (features ``tracker_frame: true``: the tracker's pose is then the kind's unknowns). A row may name a further
+    target on the tool (column ``target``; empty or ``A``: the primary one, the robot's tool point) and carry
+    the tool's measured orientation (``rx_meas, ry_meas, rz_meas``, intrinsic XYZ degrees, base frame)."""
+
+    name = "point"
+    reads = ("x_meas", "y_meas", "z_meas", "target", "rx_meas", "ry_meas", "rz_meas")
+    default_noise_mm = 0.02
+    summary = ("a tracker point of the tool (of target `target`): 3 residuals (mm); with rx_meas, ry_meas, "
+               "rz_meas the tool's turn too, 3 more (radians times 200 mm)")
+
+    def __init__(self, rows, index, features, noise_mm):
+        super().__init__(rows, index, features, noise_mm)
+        self.measured = np.column_stack([rows.number(c, index) for c in ("x_meas", "y_meas", "z_meas")])
+        self.own_frame = bool(features.get(TRACKER_FRAME))
+        named = rows.texts.get("target", ("",) * len(rows))
+        self.target = [named[i] if named[i] != PRIMARY_TARGET else "" for i in index]
+        self.targets = [t for t in dict.fromkeys(self.target) if t]
+        self.turned = self._orientation_rows(rows, index)
+        if self.turned.size and self.own_frame:
+            raise DataError(f"{rows.where(index[self.turned[0]])}: columns 'rx_meas, ry_meas, rz_meas': a measured "
+                            "orientation is read in the robot's base frame only; with data.frame: tracker register "
+                            "the file first (partcal import) or leave the orientation out")
+        self.needs_orientation = bool(self.targets) or bool(self.turned.size)
+
+    def _orientation_rows(self, rows, index) -> NDArray[np.intp]:
+        """Positions in ``index`` of the rows with a measured orientation (all three angles, else refused)."""
+        angles = [rows.numbers.get(c) for c in ORIENTATION_COLUMNS]
+        if all(a is None for a in angles):
+            self.rotations_measured = np.zeros((0, 3, 3))
+            return np.zeros(0, dtype=np.intp)
+        given = np.column_stack([np.full(len(rows), np.nan) if a is None else a for a in angles])[index]
+        some, every = np.isfinite(given).any(axis=1), np.isfinite(given).all(axis=1)
+        bad = np.flatnonzero(some & ~every)
+        if bad.size:
+            column = ORIENTATION_COLUMNS[int(np.flatnonzero(~np.isfinite(given[bad[0]]))[0])]
+            raise DataError(f"{rows.where(index[bad[0]])}: column {column!r}: a point row's orientation needs all of "
+                            f"{', '.join(ORIENTATION_COLUMNS)}; this one is empty")
+        turned = np.flatnonzero(every)
+        self.rotations_measured = matrices_from_xyz_deg(given[turned])
+        return turned
+
+    def unknowns(self, positions, rotations):
+        names, start = [], []
+        primary = np.array([not t for t in self.target], dtype=bool)
+        if self.own_frame:
+            names += list(TRACKER_PARAMETERS)
+            if primary.sum() < 3:       # too few to place it: the rank rule holds what they do not fix
+                start += [0.0] * 6
+            else:                       # tracker -> base at the nominal robot
+                rotation, shift = kabsch(self.measured[primary], positions[self.index[primary]])
+                start += [*shift, *np.degrees(rotation_vector_from_matrix(rotation))]
+        else:
+            self._check_near(positions, primary)
+        for target in self.targets:     # its offset from the primary target, flange frame, from the data
+            mine = np.array([t == target for t in self.target])
+            rows = self.index[mine]
+            seen = self._seen(start[:6] if self.own_frame else None, self.measured[mine])
+            local = np.einsum("nji,nj->ni", rotations[rows], seen - positions[rows])
+            names += [(f"target {target}.{c}", "mm") for c in "xyz"]
+            start += list(np.median(local, axis=0))
+        if self.turned.size:
+            names += list(PROBE_PARAMETERS)
+            start += [0.0, 0.0, 0.0]
+        return names, np.array(start, dtype=float)
+
+    def _check_near(self, positions, primary) -> None:
+        off = np.linalg.norm(positions[self.index[primary]] - self.measured[primary], axis=1)
+        worst = worst_of(off, off > POINT_FAR_MM)
+        if worst is not None:
+            i, count = worst
+            raise DataError(f"{self.rows.where(self.index[primary][i])}: columns 'x_meas, y_meas, z_meas': the "
+                            f"nominal robot puts this point {off[i]:.1f} mm away ({count} points beyond "
+                            f"{POINT_FAR_MM:g} mm): expected tracker points in the robot's base frame, in mm (points "
+                            "in the tracker's own frame: data.frame: tracker)")
+
+    @staticmethod
+    def _seen(frame, measured: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The measured points in the base frame: as they are, or through the tracker's pose ``frame``."""
+        if frame is None:
+            return measured
+        return measured @ matrix_from_rotation_vector(np.radians(frame[3:6])).T + np.asarray(frame[:3])
+
+    def residuals(self, positions, rotations, u) -> Residuals:
+        n = self.index.size
+        which, grad = unit_rows(n)
+        du = np.zeros((n, 3, u.size))
+        k = 0
+        if self.own_frame:
+            turn = np.radians(u[3:6])
+            seen = self.measured @ matrix_from_rotation_vector(turn).T          # R x, base frame axes
+            du[:, :, :3] = -np.eye(3)
+            # d(R x) = (J_l dr) x (R x): a turn of the rotation vector by dr (radians)
+            du[:, :, 3:6] = skew_matrices(seen) @ left_jacobian(turn) * (np.pi / 180.0)
+            seen, k = seen + u[:3], 6
+        else:
+            seen = self.measured
+        tips = positions[self.index].copy()
+        turn_grad = np.zeros((n, 3, 3)) if self.needs_orientation else None
+        for target in self.targets:         # p_B = p_A + R d: its offset d turns with the tool
+            mine = np.flatnonzero([t == target for t in self.target])
+            rot = rotations[self.index[mine]]
+            lever = rot @ u[k:k + 3]
+            tips[mine] += lever
+            du[mine, :, k:k + 3] = rot
+            turn_grad[mine] = -skew_matrices(lever)          # d(R d) = w x (R d)
+            k += 3
+        out = Residuals((tips - seen).ravel(), self.index[which], grad, du.reshape(3 * n, -1),
+                        turn_grad=None if turn_grad is None else turn_grad.reshape(3 * n, 3),
+                        turning=np.ones(3 * n, dtype=bool))
+        if not self.turned.size:
+            return out
+        return self._with_orientation(out, rotations, u[k:k + 3], k)
+
+    def _with_orientation(self, out: Residuals, rotations, probe, k: int) -> Residuals:
+        """``out`` with the orientation's residuals ``w log(R P R_meas^T)`` (three per row with one; ``w``
+        :data:`~partcal.robot.kinematics.ORIENTATION_MM_PER_RAD`, ``P`` the probe's turn on the flange)."""
+        rows = self.index[self.turned]
+        model = rotations[rows] @ matrix_from_rotation_vector(np.radians(probe))
+        turns = rotation_vectors_from_matrices(model @ self.rotations_measured.transpose(0, 2, 1))
+        weight = ORIENTATION_MM_PER_RAD
+        slope = weight * log_derivative(turns)                                 # (m, 3, 3): by a turn w of the tool
+        du = np.zeros((rows.size, 3, out.du.shape[1]))
+        # P(p + dp) = P exp(J_r(p) dp): a turn of the tool by R P J_r(p) dp, J_r(p) = J_l(p)^T
+        du[:, :, k:k + 3] = slope @ (model @ left_jacobian(np.radians(probe)).T) * (np.pi / 180.0)
+        m = 3 * rows.size
+        return Residuals(np.concatenate([out.values, weight * turns.ravel()]),
+                         np.concatenate([out.rows_a, np.repeat(rows, 3)]), np.vstack([out.grad_a, np.zeros((m, 3))]),
+                         np.vstack([out.du, du.reshape(m, -1)]),
+                         turn_grad=np.vstack([out.turn_grad, slope.reshape(m, 3)]),
+                         scaled=np.concatenate([np.ones(out.values.size, dtype=bool), np.zeros(m, dtype=bool)]),
+                         turning=np.ones(out.values.size + m, dtype=bool))      # an angle turns, does not scale
+
+    def moved(self, u, omega, shift):
+        out = np.zeros_like(u)
+        if self.own_frame:              # the tracker turns and shifts with the cell: exp(w) R, w x T + t
+            out[:3] = np.cross(omega, u[:3]) + shift
+            out[3:6] = np.degrees(log_derivative(np.radians(u[3:6])[None])[0] @ omega)
+        return out
+
+    def notes(self) -> list[str]:
+        return ["point: the tracker's frame and the robot's base frame are one unknown: the tracker's pose is "
+                "held where the nominal robot puts it and the base identified"] if self.own_frame else []
+
+    def describe(self) -> str:
+        where = "in the tracker's frame" if self.own_frame else "in the base frame"
+        more = (f", targets {', '.join(self.targets)} beside the primary" if self.targets else "") + (
+            f", {self.turned.size} with the tool's orientation" if self.turned.size else "")
+        return f"{self.index.size} tracker points {where}{more}"

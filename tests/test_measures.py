@@ -269,13 +269,14 @@ def test_the_data_layer_knows_the_kinds_of_the_table():
 
 def test_several_targets_and_the_orientation_on_the_seam_agree_with_the_tracker_path():
     """The virtual UR10 of configs/ur10_targets_virtual.yaml (three reflectors and a T-Mac's orientation):
-    identified by ``identify`` with its targets and orientation, and by ``identify_measures`` from the same
-    data as point rows (a ``target`` column, the orientation on the primary rows): the same robot."""
+    identified by ``identify`` with its targets and orientation (its further targets started at their nominal
+    offsets), and by ``identify_measures`` from the same data as a kinds run reads them (a ``target`` column, the
+    orientation on the primary rows; the targets started from the data): the same robot, targets and probe."""
     from pathlib import Path
 
     from partcal.data.simulate import load_study, simulate
     from partcal.calibration.identification import identify
-    from partcal.calibration.targets import extra_from
+    from partcal.calibration.identification import extra_from
     from partcal.robot.kinematics import flange_offset
     from partcal.study.kinds_run import point_rows
 
@@ -303,8 +304,9 @@ def test_several_targets_and_the_orientation_on_the_seam_agree_with_the_tracker_
     for t in names[1:]:                 # each further target where both put it
         tool = np.array([was[f"tool@{t}.{c}"] for c in "xyz"])
         expected = robot_with(robot, np.concatenate([old.value[:24], tool, old.value[27:33]])).positions(other)
-        offset = np.array([found[f"target {t}.{c}"] for c in "xyz"])
-        assert np.abs(after[:, :3, 3] + after[:, :3, :3] @ offset - expected).max() < 1e-6
+        offset = np.array([found[f"tool@{t}.{c}"] for c in "xyz"])           # on the flange, as the tracker path's
+        placed = robot_with(robot, np.concatenate([new.value[:24], offset, new.value[27:33]])).positions(other)
+        assert np.abs(placed - expected).max() < 1e-6
     probe = [found[f"probe.r{c}"] for c in "xyz"]
     assert np.allclose(probe, old.value[-3:], atol=1e-7)
 
@@ -418,3 +420,66 @@ def test_the_data_layer_requires_of_each_kind_what_the_kind_reads():
     from partcal.data.observations import READS
     for name, cls in MEASUREMENT_KINDS.items():
         assert set(READS[name]) <= set(cls.reads), name
+
+
+def test_a_robust_loss_on_distances_keeps_one_bar_reading_10_mm_off_from_bending_the_robot_and_names_it():
+    """All 435 pair distances of 30 poses, one of them 10 mm off: least squares is bent by it (tens of times the
+    clean fit's error against the truth, after a rigid fit), the Cauchy loss stays within 10 % of the clean fit
+    and names that row, by its index, file and line."""
+    rng = np.random.default_rng(8)
+    true = _true_robot(rng)
+    q = _configurations(30, rng)
+    tips = true.positions(q)
+    i, j = np.triu_indices(len(q), 1)
+    measured = np.linalg.norm(tips[i] - tips[j], axis=1) + rng.normal(0, 0.01, i.size)
+    bad = measured.copy()
+    bad[100] += 10.0
+
+    def rows(distances):
+        return _rows(np.vstack([q, q[i]]), ["pose"] * len(q) + ["distance"] * i.size,
+                     {"distance_mm": np.concatenate([np.full(len(q), np.nan), distances])},
+                     {"to": tuple([""] * len(q) + [str(k + 1) for k in j])})
+
+    cell = {"noise_mm": {"distance": 0.01}}
+    scores = {}
+    for name, distances, loss in (("clean", measured, "linear"), ("bent", bad, "linear"),
+                                  ("robust", bad, "cauchy")):
+        table = identify_measures(ROBOT, rows(distances), cell, loss=loss)[0]
+        scores[name] = _score(true, table.value[:33], "dh", np.random.default_rng(0), rigid=True)
+    assert scores["bent"] > 10 * scores["clean"]
+    assert scores["robust"] < 1.1 * scores["clean"]
+    named = {d["row"]: d for d in table.robust["downweighted"]}
+    assert 30 + 100 in named and named[130]["where"] == "test.csv:132"
+    assert abs(named[130]["residual_mm"] - 10.0) < 0.1 and named[130]["weight"] < 0.01
+
+
+def test_a_residual_model_beside_touches_learns_from_the_tracker_points_among_the_rows():
+    """Touches and 60 tracker points (base frame) in one identification, with a residual model: the residual is
+    fitted on what the identified kinematics leave of the points alone (compared with a fit of the same model
+    on those leftovers, built here), and the hybrid predicts their sum."""
+    from partcal.calibration.measurement import Measured
+    from partcal.models.kinematic import KinematicModel
+    from partcal.models.series import ErrorModel
+    rng = np.random.default_rng(11)
+    true = _true_robot(rng)
+    planes = {"top": ([0, 0, 1], 300.0), "side": ([1, 0, 0], 700.0)}
+    qt, names = _touches(true, rng, planes, 60, 0.01)
+    qp = _configurations(60, rng)
+    bump = 0.05 * np.column_stack([np.sin(np.radians(qp[:, 0])), np.cos(np.radians(qp[:, 1])), qp[:, 2] / 100])
+    measured = true.positions(qp) + bump               # an error field the geometry cannot carry
+    q = np.vstack([qt, qp])
+    rows = _rows(q, ["plane"] * len(qt) + ["point"] * len(qp),
+                 {"x_meas": np.r_[np.full(len(qt), np.nan), measured[:, 0]],
+                  "y_meas": np.r_[np.full(len(qt), np.nan), measured[:, 1]],
+                  "z_meas": np.r_[np.full(len(qt), np.nan), measured[:, 2]]},
+                 {"feature": tuple(names) + ("",) * len(qp)})
+    residual = ErrorModel(inputs="joint", degree=1, solver="lstsq")
+    model = KinematicModel(robot=ROBOT, residual=residual, loss="soft_l1").fit(q, None,
+                                                                            measures=Measured(rows, {}))
+    kinematic = model.predict_kinematic(qp)
+    reference = ErrorModel(inputs="joint", degree=1, solver="lstsq").fit(qp, measured - ROBOT.positions(qp)
+                                                                         - kinematic)
+    other = _configurations(20, np.random.default_rng(3))
+    assert np.allclose(model.residual_.predict(other), reference.predict(other), atol=1e-9)
+    assert np.allclose(model.predict(other), model.predict_kinematic(other) + reference.predict(other), atol=1e-9)
+    assert model.identification_.robust["loss"] == "soft_l1"

@@ -46,10 +46,11 @@ from ..robot.kinematics import Robot
 from .joint_errors import GRAVITY_M_S2, JointErrors, compliance_problem, harmonics_problem
 from .chain import identification_jacobian
 from .fit import held_still
-from .identification import stacked
+from .identification import Extra, point_rows
 from .parameters import nominal_values, parameter_names, PARAMETRIZATIONS, resolved_parametrization
 from .chain import model_jacobian as kinematic_jacobian
-from .targets import Extra
+from .stacked import StackedProblem
+from .tracker_points import PointKind
 
 log = logging.getLogger(__name__)
 
@@ -291,12 +292,13 @@ def target_identifiability(robot: Robot, q_deg: NDArray[np.float64], tools_mm: d
     tools = {name: np.asarray(t, dtype=float) for name, t in tools_mm.items()}
     extra = Extra(tools, {name: robot.replace(tool_mm=t).positions(q_deg) for name, t in tools.items()},
                   flange if orientation else None)
-    values = np.concatenate([nominal_values(robot), extra.nominal()])
-    jac_all = stacked(robot, None, q_deg, values, np.zeros(len(q_deg)), robot.positions(q_deg), extra)[1]
-    wanted_all = np.concatenate([wanted, np.full(extra.size, True)])
-    wanted_all[wanted.size:wanted.size + 3 * len(tools)] = tool
+    rows, cell = point_rows(q_deg, robot.positions(q_deg), extra)
+    kind = PointKind.build(rows, cell)
+    problem = StackedProblem(robot, None, rows, [kind], np.zeros(len(rows)), "dh")
+    jac_all = problem(problem.start)[1]
+    wanted_all = np.concatenate([wanted, [tool or not kind.follows_tool(name) for name, _ in problem.names]])
     found = identifiable(jac_all, wanted_all, rcond)
-    names = [n for n, _ in model_parameters(robot)[0]] + [n for n, _ in extra.names()]
+    names = [n for n, _ in model_parameters(robot)[0]] + [n for n, _ in problem.names]
     gained = sorted(set(found[found < wanted.size]) - set(one))
     return TargetIdentifiability(tuple(names[i] for i in one), int(wanted.sum()), tuple(names[i] for i in found),
                                  int(wanted_all.sum()), tuple(names[i] for i in gained))

@@ -29,7 +29,8 @@ down-weighted (:attr:`Identification.robust`)."""
 def fit_parameters(jac_at, v0: NDArray[np.float64], jac0: NDArray[np.float64], wanted: NDArray[np.bool_],
                    names: list[tuple[str, str]], rcond: float, size: int, n_poses: int, *,
                    row_weight: NDArray[np.float64] | None = None, loss: str = "linear", loss_scale: float = 3.0,
-                   reference_mm: float | None = None, held: NDArray[np.bool_] | None = None
+                   reference_mm: float | None = None, held: NDArray[np.bool_] | None = None,
+                   row_of: NDArray[np.intp] | None = None, weighted_by: NDArray[np.float64] | None = None
                    ) -> tuple[Identification, NDArray[np.float64]]:
     """The rank-checked fit of :func:`identify` over any stacked residuals, and the residuals it leaves.
 
@@ -45,8 +46,10 @@ def fit_parameters(jac_at, v0: NDArray[np.float64], jac0: NDArray[np.float64], w
     ``loss_scale`` times ``reference_mm`` (the weighted residuals' stated standard deviation) or, without it,
     times the robust spread of the least-squares fit's residuals; the covariance then weighs each residual by
     the loss's weight (:func:`loss_weights`), and the rows it weighs below :data:`DOWNWEIGHTED` are named in
-    the table's ``robust`` (the first ``3 n_poses`` residuals are the measurement rows' coordinates).
-    ``held``: the parameters a prior holds (its rows are in ``jac_at``), never pruned as implausible.
+    the table's ``robust``: ``row_of`` gives the measurement row of each residual (-1: none, such as a prior's;
+    default: the first ``3 n_poses`` residuals, three per row), and ``weighted_by`` the weights ``jac_at`` has
+    already put on its residuals (to say each row's residual in mm). ``held``: the parameters a prior holds (its
+    rows are in ``jac_at``), never pruned as implausible.
     """
     if loss not in LOSSES:
         raise DataError(f"loss must be one of {', '.join(LOSSES)}; got {loss!r}")
@@ -87,7 +90,13 @@ def fit_parameters(jac_at, v0: NDArray[np.float64], jac0: NDArray[np.float64], w
     if loss != "linear":
         scale = loss_scale * (reference_mm if reference_mm is not None else _robust_spread(jac_at, v))
         counted = loss_weights(resid / scale, loss)
-        robust = _downweighted(resid, counted, row_weight, n_poses, loss, scale)
+        weights = np.ones(resid.size)
+        for w in (row_weight, weighted_by):
+            if w is not None:
+                weights[:w.size] *= w
+        if row_of is None:
+            row_of = np.repeat(np.arange(n_poses), 3)
+        robust = _downweighted(resid / weights, counted, row_of, loss, scale)
     std, condition, covariance, sigma = _uncertainty(jac[:, free], resid, counted)
     std_full = np.full(v.size, np.nan)
     std_full[free] = std
@@ -137,16 +146,22 @@ def _robust_spread(jac_at, v: NDArray[np.float64]) -> float:
     return spread if spread > 0 else 1e-12
 
 
-def _downweighted(resid, counted, row_weight, n_poses: int, loss: str, scale: float) -> dict:
+def _downweighted(plain: NDArray[np.float64], counted: NDArray[np.float64], row_of: NDArray[np.intp], loss: str,
+                  scale: float) -> dict:
     """The ``robust`` entry of a table: the loss, its scale and the rows it weighs below :data:`DOWNWEIGHTED`
-    (each row's weight its worst coordinate's; its residual the 3-D one, mm, unweighted)."""
-    rows = slice(0, 3 * n_poses)
-    plain = resid[rows] if row_weight is None else resid[rows] / row_weight[rows]
-    weight = counted[rows].reshape(n_poses, 3).min(axis=1)
-    norm = np.linalg.norm(plain.reshape(n_poses, 3), axis=1)
+    (each row's weight its worst residual's; its residual the norm of its residuals, unweighted: a point's 3-D
+    miss, mm). ``plain`` are the unweighted residuals, ``row_of`` the row of each (-1: none)."""
+    live = np.flatnonzero(row_of >= 0)
+    rows = row_of[live]
+    n = int(rows.max()) + 1 if rows.size else 0
+    weight = np.ones(n)
+    np.minimum.at(weight, rows, counted[live])
+    norm = np.zeros(n)
+    np.add.at(norm, rows, plain[live] ** 2)
     low = np.flatnonzero(weight < DOWNWEIGHTED)
     return {"loss": loss, "scale_mm": float(scale),
-            "downweighted": [{"row": int(i), "residual_mm": float(norm[i]), "weight": float(weight[i])} for i in low]}
+            "downweighted": [{"row": int(i), "residual_mm": float(np.sqrt(norm[i])), "weight": float(weight[i])}
+                             for i in low]}
 
 
 def _prior(jac: NDArray[np.float64], free: NDArray[np.intp], status, units: list[str], size: int

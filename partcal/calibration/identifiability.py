@@ -139,10 +139,9 @@ def misfit_parts(problem, values: NDArray[np.float64]) -> NDArray[np.float64]:
     columns ``(m, 4)`` (weighted as the stacked residuals): the residuals are homogeneous in the cell's lengths
     (``J s = r + L``, ``L`` the known lengths, for the residuals that are lengths) and a vector residual turns
     with the cell (``J s_k = e_k x r + ...``), so on consistent data (``r = 0``) these parts are nil."""
-    chain = problem.chain(values, False)
     parts = []
-    for kind, u, w in zip(problem.kinds, problem.split(values), problem.weights):
-        r = kind.residuals(chain.positions, chain.rotations, u)
+    for index, r in enumerate(problem.each(values)):
+        w = problem.weight_of(index, r)[:, None]
         m = np.zeros((r.values.size, 4))
         m[:, 0] = r.values if r.scaled is None else np.where(r.scaled, r.values, 0.0)
         if r.turning is not None and r.turning.any():

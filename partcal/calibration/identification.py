@@ -1,16 +1,17 @@
 """Kinematic identification from measured positions (tracker points): :func:`identify`.
 
 ``identify`` finds the parameters (:mod:`partcal.calibration.parameters`) that put the forward kinematics
-through the measured positions, by the rank-checked Levenberg-Marquardt fit of
-:mod:`partcal.calibration.fit` with the analytic Jacobian of the chain (:mod:`partcal.calibration.chain`);
-further targets and the measured orientation are stacked with the primary target's positions.
+through the measured positions. It is the one identification of :mod:`partcal.calibration.stacked` on rows
+of tracker points (:func:`point_rows`): the primary target's, each further target's and the measured
+orientation, weighed by their stated standard deviations, with a robust loss and a prior as asked. Its table
+says what the tracker path always said: the primary target's 3-D RMS, each target's and the orientation's.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import functools
 import logging
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
@@ -18,19 +19,101 @@ from numpy.typing import NDArray
 from .._validation import check_array, check_std
 from ..errors import DataError
 from ..metrics import pooled_rms
-from ..robot.kinematics import Robot
-from ..robot.rotations import log_derivative, matrix_from_rotation_vector, rotation_vectors_from_matrices
-from .chain import actual_joints, identification_jacobian, model_jacobian, model_positions, turn_columns
-from .fit import fit_parameters, held_still
+from ..robot.kinematics import ORIENTATION_MM_PER_RAD, Robot
+from ..robot.rotations import matrices_from_rotation_vectors, xyz_deg_from_matrices
+from .fit import held_still
 from .identifiability import identifiable_parameters
 from .joint_errors import JointErrors
-from .parameters import PARAMETRIZATIONS, PRIMARY_TARGET, Identification, geometric_size, nominal_values, parameter_names, robot_with
+from .measurement import Rows
+from .parameters import PARAMETRIZATIONS, PRIMARY_TARGET, Identification
 from .prior import Prior
-from .targets import Extra
+from .stacked import StackedProblem, identify_measures
+from .tracker_points import ORIENTATION_WEIGHT, STD_COLUMNS, TARGETS, PointKind
 
 log = logging.getLogger(__name__)
 
-_DEG = np.pi / 180.0
+
+@dataclass(frozen=True, eq=False)
+class Extra:
+    """What the poses measured beyond the primary target.
+
+    Attributes
+    ----------
+    tools_mm : dict of str to ndarray (3,)
+        The extra targets' nominal offsets in the flange frame, mm (where their fit starts).
+    measured_mm : dict of str to ndarray (n, 3)
+        Their measured positions in the base frame, mm (same keys).
+    rotations : ndarray, shape (n, 3, 3), optional
+        The measured flange orientation in the base frame.
+    mm_per_rad : float
+        Weight of an orientation residual: one radian counts as this many mm.
+    """
+
+    tools_mm: dict
+    measured_mm: dict
+    rotations: NDArray[np.float64] | None = None
+    mm_per_rad: float = ORIENTATION_MM_PER_RAD
+
+
+def extra_from(robot: Robot, q_deg: NDArray[np.float64], targets: dict | None, orientation_deg,
+               mm_per_rad: float = ORIENTATION_MM_PER_RAD) -> Extra | None:
+    """:class:`Extra` from errors, as :meth:`KinematicModel.fit` takes them (None when there is nothing more).
+
+    Parameters
+    ----------
+    robot : Robot
+        The nominal robot.
+    q_deg : ndarray, shape (n, N)
+    targets : dict of str to (array-like (3,), array-like (n, 3)), optional
+        Per extra target: its nominal offset in the flange frame (mm) and its errors
+        ``measured - nominal`` (mm), the nominal being the robot with that offset.
+    orientation_deg : array-like, shape (n, 3), optional
+        Orientation errors: the turn from the nominal flange orientation to the measured
+        one, a rotation vector in the base frame, degrees (``Measurements.orientation_errors_deg``).
+    """
+    if not targets and orientation_deg is None:
+        return None
+    n = q_deg.shape[0]
+    tools, measured = {}, {}
+    for name, (tool, errors) in (targets or {}).items():
+        tools[name] = check_array(np.reshape(tool, (1, -1)), f"targets[{name!r}] offset", columns=3)[0]
+        err = check_array(errors, f"targets[{name!r}] errors", columns=3)
+        if err.shape[0] != n:
+            raise DataError(f"targets[{name!r}] has {err.shape[0]} rows but X has {n}")
+        measured[name] = robot.replace(tool_mm=tools[name]).positions(q_deg) + err
+    rotations = None
+    if orientation_deg is not None:
+        turns = check_array(orientation_deg, "orientation_deg", columns=3)
+        if turns.shape[0] != n:
+            raise DataError(f"orientation_deg has {turns.shape[0]} rows but X has {n}")
+        rotations = matrices_from_rotation_vectors(np.radians(turns)) @ robot.forward(q_deg)[:, :3, :3]
+    return Extra(tools, measured, rotations, float(mm_per_rad))
+
+
+def point_rows(q_deg: NDArray[np.float64], measured_mm: NDArray[np.float64], extra: Extra | None = None,
+               std_mm: NDArray[np.float64] | None = None, payload_kg: NDArray[np.float64] | None = None,
+               source: str = "positions") -> tuple[Rows, dict]:
+    """Tracker points of ``n`` poses as rows of the point kind, and the cell they need: the primary target's rows
+    (row ``i``: pose ``i``, with the orientation when ``extra`` has one), then each further target's (column
+    ``target``); every row of a pose takes its standard deviations ``std_mm`` (n, 3). The cell gives the further
+    targets' nominal offsets (where their fit starts) and the orientation's weight."""
+    n = len(q_deg)
+    extra = extra or Extra({}, {})
+    names = ["", *extra.tools_mm]
+    x = np.vstack([measured_mm, *extra.measured_mm.values()])
+    numbers = {"x_meas": x[:, 0], "y_meas": x[:, 1], "z_meas": x[:, 2]}
+    if extra.rotations is not None:
+        angles = np.vstack([xyz_deg_from_matrices(extra.rotations), np.full((n * (len(names) - 1), 3), np.nan)])
+        numbers.update({c: angles[:, k] for k, c in enumerate(("rx_meas", "ry_meas", "rz_meas"))})
+    if std_mm is not None:
+        numbers.update({c: np.tile(std_mm[:, k], len(names)) for k, c in enumerate(STD_COLUMNS)})
+    texts = {"target": tuple(t for t in names for _ in range(n))} if len(names) > 1 else {}
+    ids = tuple(f"{i + 1}" + (f"@{t}" if t else "") for t in names for i in range(n))
+    rows = Rows(np.tile(q_deg, (len(names), 1)), ("point",) * (n * len(names)), ids, tuple(range(1, n + 1)) *
+                len(names), source, numbers, texts, None if payload_kg is None else np.tile(payload_kg, len(names)))
+    cell = {TARGETS: {k: np.asarray(v, dtype=float) for k, v in extra.tools_mm.items()},
+            ORIENTATION_WEIGHT: float(extra.mm_per_rad)}
+    return rows, cell
 
 
 def identify(robot: Robot, q_deg: NDArray[np.float64], measured_mm: NDArray[np.float64], *, base: bool = True,
@@ -60,193 +143,85 @@ def identify(robot: Robot, q_deg: NDArray[np.float64], measured_mm: NDArray[np.f
     payload_kg : float or ndarray, shape (n,)
         Payload at the tool point, kg (only read by compliant joints).
     extra : Extra, optional
-        Further targets and the measured orientation (:mod:`partcal.calibration.targets`):
-        their residuals are stacked with the primary's, one offset per target
-        and the probe's turn are identified too (their parameters come last).
+        Further targets and the measured orientation: their residuals are stacked with the primary's, one
+        offset per target (``tool@B.x`` ...) and the probe's turn (``probe.rx`` ...) are identified too
+        (their parameters come last).
     parametrization : {"dh", "complete"}
         The geometric parameters: four DH parameters per row, or each row's
-        theta offset and the six errors of its fixed transform (see the module
-        notes).
+        theta offset and the six errors of its fixed transform.
     std_mm : ndarray, shape (n, 3), optional
         The standard deviation of each measured coordinate, mm: weighted least squares, each residual
         divided by its standard deviation and multiplied by their root mean square (the reference), so
         that the weighted residuals stay mm-like (further targets' rows take their pose's; the orientation's
-        are not weighted). None: every row alike (the same fit as before weights existed).
+        are not weighted). None: every row alike.
     loss : {"linear", "huber", "soft_l1", "cauchy"}
-        scipy's ``least_squares`` loss, applied to each weighted residual coordinate (:func:`fit_parameters`).
+        scipy's ``least_squares`` loss, applied to each weighted residual coordinate.
     loss_scale : float
         The loss's ``f_scale`` in standard deviations of one coordinate: the reference of ``std_mm``, or
         without it the robust spread (1.4826 times the median absolute residual) of the least-squares fit.
     prior : Prior, optional
         A Gaussian prior on some parameters (:mod:`partcal.calibration.prior`, indices into the table's order):
-        its rows are appended to the residuals, so the fit is MAP. A parameter it holds is identifiable
-        through it (the rank rule reads its row) and is never pruned as implausible (the prior prices its
-        distance from the mean); the standard errors and covariance are the posterior's. Default none:
-        plain least squares.
+        MAP (:func:`~partcal.calibration.stacked.identify_measures`).
 
     Returns
     -------
     Identification
+        ``rms_mm`` is the primary target's 3-D RMS; with further targets or an orientation,
+        ``target_rms_mm`` holds each target's and ``orientation_rms_deg`` the orientation's.
     """
     q_deg = held_still(robot.check_joints(q_deg))
     measured_mm = check_array(measured_mm, "measured_mm", columns=3)
-    if len(measured_mm) != len(q_deg):
-        raise DataError(f"measured_mm has {len(measured_mm)} rows but q_deg has {len(q_deg)}")
-    payload = np.broadcast_to(np.asarray(payload_kg, dtype=float), (len(q_deg),))
+    n = len(q_deg)
+    if len(measured_mm) != n:
+        raise DataError(f"measured_mm has {len(measured_mm)} rows but q_deg has {n}")
     if parametrization not in PARAMETRIZATIONS:
         raise DataError(f"parametrization must be one of {', '.join(PARAMETRIZATIONS)}; got {parametrization!r}")
-    v0 = nominal_values(robot, errors, parametrization)
-    size, own = geometric_size(robot, parametrization), v0.size
-    wanted = np.ones(v0.size + (extra.size if extra is not None else 0), dtype=bool)
-    wanted[size - 9:size - 6] = tool
-    wanted[size - 6:size] = base
+    std = None if std_mm is None else check_std(std_mm, n)
+    payload = np.broadcast_to(np.asarray(payload_kg, dtype=float), (n,))
+    rows, cell = point_rows(q_deg, measured_mm, extra, std, payload)
+    table, _ = identify_measures(robot, rows, cell, base=base, tool=tool, rcond=rcond, errors=errors,
+                                 payload_kg=payload[np.arange(len(rows)) % n], parametrization=parametrization,
+                                 prior=prior, loss=loss, loss_scale=loss_scale)
+    return _tracker_figures(table, robot, rows, cell, errors, payload, parametrization, n, extra, base, tool, rcond)
+
+
+def _tracker_figures(table: Identification, robot: Robot, rows: Rows, cell: dict, errors, payload, parametrization,
+                     n: int, extra: Extra | None, base: bool, tool: bool, rcond: float) -> Identification:
+    """``table`` with the figures of tracker points of ``n`` poses: the primary target's 3-D RMS (``rms_mm``), each
+    target's and the orientation's (with further targets or an orientation), and the rows a robust loss
+    down-weighed named by their pose."""
+    tiled = payload[np.arange(len(rows)) % n]
+    problem = StackedProblem(robot, errors, rows, [PointKind.build(rows, cell)], tiled, parametrization)
+    values = problem.raw(table.value)[0]
+    positions = values[:3 * len(rows)].reshape(-1, n, 3)
+    rms = [pooled_rms(block) for block in positions]
+    robust = table.robust
+    if robust is not None:
+        worst: dict[int, dict] = {}
+        for d in robust["downweighted"]:
+            pose = d["row"] % n
+            if pose not in worst or d["weight"] < worst[pose]["weight"]:
+                worst[pose] = {"row": pose, "residual_mm": d["residual_mm"], "weight": d["weight"]}
+        robust = {**robust, "downweighted": [worst[k] for k in sorted(worst)]}
+    table = dataclasses.replace(table, rms_mm=rms[0], n_poses=n, robust=robust, target_rms_mm={})
     if extra is None:
-        def jac_at(v, jacobian=True):
-            if not jacobian:
-                return (model_positions(robot, errors, q_deg, v, payload, parametrization) - measured_mm).ravel(), None
-            p, jac = model_jacobian(robot, errors, q_deg, v, payload, parametrization)
-            return (p - measured_mm).ravel(), jac
-    else:
-        v0 = np.concatenate([v0, extra.nominal()])
-        wanted[own:own + 3 * len(extra.tools_mm)] = tool
-        jac_at = functools.partial(stacked, robot, errors, q_deg, payload_kg=payload, measured_mm=measured_mm,
-                                   extra=extra, parametrization=parametrization)
-    data_at = jac_at
-    if prior is not None:
-        jac_at = prior.augmented(jac_at)
-    jac0 = jac_at(v0)[1]
-    names = parameter_names(robot, errors, parametrization) + (extra.names() if extra is not None else [])
-    units = [unit for _, unit in names]
-    weight, reference = row_weights(std_mm, len(q_deg), extra)
-    if prior is None:
-        result, resid = fit_parameters(jac_at, v0, jac0, wanted, names, rcond, size, q_deg.shape[0],
-                                       row_weight=weight, loss=loss, loss_scale=loss_scale, reference_mm=reference)
-    else:
-        if weight is not None:          # the prior's rows are weighed as they are
-            weight = np.concatenate([weight, np.ones(jac0.shape[0] - weight.size)])
-        result, resid = fit_parameters(jac_at, v0, jac0, wanted, names, rcond, size, q_deg.shape[0],
-                                       row_weight=weight, loss=loss, loss_scale=loss_scale, reference_mm=reference,
-                                       held=prior.held(v0.size))
-        resid = data_at(result.value, jacobian=False)[0]
-    rms, angle = _target_rms(resid, len(q_deg), extra)
-    more = {} if extra is None else {
-        "target_rms_mm": dict(zip([PRIMARY_TARGET, *extra.tools_mm], rms)), "orientation_rms_deg": angle,
-        "primary_identifiable": identifiable_parameters(jac0[:3 * len(q_deg), :own], wanted[:own], rcond,
-                                                        units[:own])[1]}
-    result = dataclasses.replace(result, rms_mm=rms[0], **more)
-    log.info("identified %d of %d parameters (condition %.3g): RMS %.4f mm", result.status.count("identified"),
-             result.value.size, result.condition, result.rms_mm)
-    return result
-
-
-def row_weights(std_mm: NDArray[np.float64] | None, n: int, extra: Extra | None = None
-                ) -> tuple[NDArray[np.float64] | None, float | None]:
-    """The weight of every stacked residual of :func:`identify` from the standard deviations ``std_mm`` (n, 3) mm
-    of the primary target's coordinates: ``reference / std`` with ``reference`` their root mean square
-    (returned too), each further target's rows taking their pose's, the orientation's rows 1. ``(None, None)``
-    without standard deviations.
-
-    Examples
-    --------
-    >>> w, ref = row_weights(np.array([[1.0, 1.0, 2.0], [1.0, 1.0, 2.0]]), 2)
-    >>> round(ref, 6), w.round(6).tolist()
-    (1.414214, [1.414214, 1.414214, 0.707107, 1.414214, 1.414214, 0.707107])
-    """
-    if std_mm is None:
-        return None, None
-    std = check_std(std_mm, n)
-    reference = float(np.sqrt(np.mean(std**2)))
-    weight = (reference / std).ravel()
-    if extra is None:
-        return weight, reference
-    parts = [weight] * (1 + len(extra.tools_mm)) + ([np.ones(3 * n)] if extra.rotations is not None else [])
-    return np.concatenate(parts), reference
-
-
-def _target_rms(resid: NDArray[np.float64], n: int, extra: Extra | None) -> tuple[list[float], float | None]:
-    """3-D RMS of each target's position residuals (mm, the primary first) and the orientation's RMS angle
-    (degrees, None without one), from the stacked residuals of :func:`identify`."""
-    k = 1 + (len(extra.tools_mm) if extra is not None else 0)
-    blocks = resid[:3 * n * k].reshape(k, n, 3)
-    rms = [pooled_rms(b) for b in blocks]
-    if extra is None or extra.rotations is None:
-        return rms, None
-    turns = resid[3 * n * k:].reshape(n, 3) / extra.mm_per_rad
-    return rms, float(np.degrees(pooled_rms(turns)))
-
-
-def stacked(nominal: Robot, errors: JointErrors | None, q_deg: NDArray[np.float64], values: NDArray[np.float64],
-            payload_kg: NDArray[np.float64], measured_mm: NDArray[np.float64], extra: Extra,
-            jacobian: bool = True, parametrization: str = "dh") -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
-    """The stacked residuals (model - measured) of every target and the orientation, and their Jacobian.
-
-    Parameters
-    ----------
-    values : ndarray, shape (P + extra.size,)
-        The model's parameters (geometry, joint errors), then the extra ones.
-    measured_mm : ndarray, shape (n, 3)
-        The primary target, base frame, mm.
-    parametrization : {"dh", "complete"}
-        The geometry's parameters (:mod:`partcal.calibration.identification`).
-
-    Returns
-    -------
-    residuals : ndarray, shape (3 n (K + 1) [+ 3 n],)
-        mm (the orientation's: radians times ``extra.mm_per_rad``).
-    jacobian : ndarray, shape (len(residuals), len(values)), or None
-    """
-    par = parametrization
-    size = geometric_size(nominal, par)
-    own = size + (errors.size if errors is not None else 0)
-    tool_at, n = slice(size - 9, size - 6), q_deg.shape[0]
-    q_actual, design, moves = actual_joints(nominal, errors, q_deg, values[:own], payload_kg, derivatives=jacobian,
-                                            parametrization=par)
-    tools = [values[tool_at]] + [values[own + 3 * k:own + 3 * k + 3] for k in range(len(extra.tools_mm))]
-    residuals, blocks = [], []
-    for k, (tool, meas) in enumerate(zip(tools, [measured_mm, *extra.measured_mm.values()])):
-        v_k = values[:own].copy()
-        v_k[tool_at] = tool
-        if not jacobian:
-            residuals.append((robot_with(nominal, v_k, par).positions(q_actual) - meas).ravel())
-            continue
-        p, jac = identification_jacobian(nominal, q_actual, v_k[:size], par)
-        residuals.append((p - meas).ravel())
-        block = np.zeros((3 * n, values.size))
-        if k:
-            block[:, own + 3 * (k - 1):own + 3 * k] = jac[:, tool_at]
-            jac[:, tool_at] = 0.0
-        if design is not None:
-            joints = robot_with(nominal, v_k, par).jacobian(q_actual)
-            if moves is not None:
-                jac[:, :size - 6] += (joints @ moves).reshape(-1, size - 6)
-            block[:, size:own] = (joints @ design).reshape(-1, design.shape[2])
-        block[:, :size] = jac
-        blocks.append(block)
+        return table
+    angle = None
     if extra.rotations is not None:
-        r, j = _orientation(nominal, q_actual, design, moves, values, own, extra, jacobian, par)
-        residuals.append(r)
-        blocks.append(j)
-    return np.concatenate(residuals), (np.vstack(blocks) if jacobian else None)
+        turns = values[3 * len(rows):].reshape(n, 3) / extra.mm_per_rad
+        angle = float(np.degrees(pooled_rms(turns)))
+    primary, primary_cell = point_rows(rows.q_deg[:n], rows_measured(rows, n))
+    start = StackedProblem(robot, errors, primary, [PointKind.build(primary, primary_cell)], payload, parametrization)
+    own = start.own
+    jac0 = start(start.start)[1][:, :own]
+    wanted = np.ones(own, dtype=bool)
+    size = own - (errors.size if errors is not None else 0)
+    wanted[size - 9:size - 6], wanted[size - 6:size] = tool, base
+    identifiable = identifiable_parameters(jac0, wanted, rcond, list(table.units[:own]))[1]
+    return dataclasses.replace(table, target_rms_mm=dict(zip([PRIMARY_TARGET, *extra.tools_mm], rms)),
+                               orientation_rms_deg=angle, primary_identifiable=identifiable)
 
 
-def _orientation(nominal: Robot, q_actual, design, moves, values, own: int, extra: Extra, jacobian: bool,
-                 parametrization: str = "dh"):
-    """The orientation's residuals ``mm_per_rad * log(R_model R_meas^T)`` and their Jacobian rows.
-
-    A parameter's column is the angular velocity it gives the flange (base frame, per unit): a
-    row's theta turns about the row's z axis, its alpha about the next frame's x axis (a complete
-    row's turns about their axes), the base correction about its axes, a joint error through the
-    joint's axes, the probe's turn about the model frame's axes. Lengths turn nothing.
-    """
-    n = q_actual.shape[0]
-    robot = robot_with(nominal, values[:own], parametrization)
-    model = robot.forward(q_actual)[:, :3, :3] @ matrix_from_rotation_vector(np.radians(values[-3:]))
-    weight = extra.mm_per_rad
-    turns = rotation_vectors_from_matrices(model @ extra.rotations.transpose(0, 2, 1))
-    residuals = weight * turns.ravel()
-    if not jacobian:
-        return residuals, None
-    omega = np.zeros((n, 3, values.size))
-    omega[:, :, :own] = turn_columns(nominal, robot, q_actual, design, moves, values[:own], parametrization)
-    omega[:, :, -3:] = model * _DEG                                        # columns: the model frame's axes
-    return residuals, weight * np.einsum("nij,njp->nip", log_derivative(turns), omega).reshape(-1, values.size)
+def rows_measured(rows: Rows, n: int) -> NDArray[np.float64]:
+    """The primary target's measured positions (n, 3) mm of point rows made by :func:`point_rows`."""
+    return np.column_stack([rows.numbers[c][:n] for c in ("x_meas", "y_meas", "z_meas")])

@@ -150,6 +150,10 @@ class Residuals:
         orientation's; None: none). A distance to a plane or between two points does not turn.
     du : ndarray, shape (m, k)
         ``d value / d`` the kind's unknowns (:meth:`MeasurementKind.unknowns`, in their order).
+    tool_grad : ndarray, shape (m, 3), optional
+        ``d value / d`` the robot's tool offset (flange frame, mm) beyond what reaches it through row ``rows_a``'s
+        target: a point fixed on the flange (a further target, a camera) at ``tool_mm``'s distance from the tool
+        point (:attr:`MeasurementKind.tool_mm`).
     """
 
     values: NDArray[np.float64]
@@ -161,6 +165,7 @@ class Residuals:
     turn_grad: NDArray[np.float64] | None = None
     scaled: NDArray[np.bool_] | None = None
     turning: NDArray[np.bool_] | None = None
+    tool_grad: NDArray[np.float64] | None = None
 
 
 class MeasurementKind:
@@ -168,18 +173,22 @@ class MeasurementKind:
 
     Class attributes: ``name`` (the CSV's ``kind`` value), ``reads`` (the columns its rows read beside the
     joints), ``needs_orientation`` (whether its residuals read the tool's orientation; an instance may say
-    so for its rows alone), ``default_noise_mm`` (its stated noise when the cell states none), ``summary``
-    (one line for the report: what one row says).
+    so for its rows alone), ``fixes_frame`` (whether its rows fix the base frame: points measured in it; an
+    instance may say so for its rows alone), ``default_noise_mm`` (its stated noise when the cell states none),
+    ``summary`` (one line for the report: what one row says).
     """
 
     name: ClassVar[str] = ""
     reads: ClassVar[tuple[str, ...]] = ()
     needs_orientation: ClassVar[bool] = False
+    fixes_frame: ClassVar[bool] = False
     default_noise_mm: ClassVar[float] = 0.01
     summary: ClassVar[str] = ""
 
     def __init__(self, rows: Rows, index: NDArray[np.intp], features: dict, noise_mm: float):
         self.rows, self.index, self.features, self.noise_mm = rows, index, features, float(noise_mm)
+        self.noise_stated = False
+        self.tool_mm = np.zeros(3)      # the model's tool offset (flange frame, mm), set before each residuals()
 
     @classmethod
     def build(cls, rows: Rows, features: dict) -> "MeasurementKind | None":
@@ -188,8 +197,24 @@ class MeasurementKind:
         index = rows.of(cls.name)
         if index.size == 0:
             return None
-        noise = (features.get("noise_mm") or {}).get(cls.name, cls.default_noise_mm)
-        return cls(rows, index, features, noise)
+        stated = (features.get("noise_mm") or {}).get(cls.name)
+        kind = cls(rows, index, features, cls.default_noise_mm if stated is None else stated)
+        kind.noise_stated = stated is not None
+        return kind
+
+    def relative_weights(self, residuals: Residuals) -> NDArray[np.float64]:
+        """Each residual's weight among the kind's own (the rows' stated standard deviations; default all one):
+        the kind's noise sets their level against other kinds."""
+        return np.ones(residuals.values.size)
+
+    def stated_spread(self) -> float | None:
+        """The standard deviation the rows state of themselves (in the kind's unit; None: the kind's noise if
+        the cell states it, else nothing stated)."""
+        return self.noise_mm if self.noise_stated else None
+
+    def follows_tool(self, name: str) -> bool:
+        """Whether the unknown ``name`` is a parameter of the tool, held where the tool is (``tool: false``)."""
+        return False
 
     def unknowns(self, positions: NDArray[np.float64], rotations: NDArray[np.float64]
                  ) -> tuple[list[tuple[str, str]], NDArray[np.float64]]:

@@ -14,7 +14,7 @@ from numpy.typing import NDArray
 from ..errors import DataError
 from ..robot.kinematics import Robot
 from .chain import Chain, chain_at
-from .fit import fit_parameters
+from .fit import fit_parameters, held_still
 from .identifiability import consistent_jacobian, identifiable_parameters, misfit_parts, null_direction, rigid_directions, scale_direction
 from .joint_errors import JointErrors
 from .measurement import REFERENCE_NOISE_MM, SCALE, MeasurementKind, Residuals, Rows
@@ -33,12 +33,15 @@ class StackedProblem:
         self.nominal, self.errors, self.rows, self.kinds = nominal, errors, rows, kinds
         self.payload, self.par = payload, parametrization
         self.own = nominal_values(nominal, errors, parametrization).size
+        size = geometric_size(nominal, parametrization)
+        self.tool = slice(size - 9, size - 6)
         self.orientation = any(k.needs_orientation for k in kinds)
         # the chain once per distinct pose (all pairs of 1,000 poses are 500,000 rows of 1,000 poses)
         poses, inverse = np.unique(np.column_stack([rows.q_deg, payload]), axis=0, return_inverse=True)
         self.poses, self.pose_payload, self.inverse = poses[:, :-1], poses[:, -1], inverse.ravel()
         v0 = nominal_values(nominal, errors, parametrization)
         start = self.chain(v0, False, orientation=True)          # the kinds check their rows' orientations
+        self.at_tool(v0)
         self.names: list[tuple[str, str]] = []
         starts: list[float] = []
         self.columns: list[NDArray[np.intp]] = []
@@ -53,6 +56,36 @@ class StackedProblem:
             self.columns.append(np.array(cols, dtype=np.intp))
         self.start = np.concatenate([v0, np.array(starts)])
         self.weights = [REFERENCE_NOISE_MM / kind.noise_mm for kind in kinds]
+        residuals = self.each(self.start)
+        self.residual_weights = np.concatenate([self.weight_of(k, r) for k, r in enumerate(residuals)])
+        self.row_of = np.concatenate([r.rows_a for r in residuals])
+
+    def weight_of(self, k: int, r: Residuals) -> NDArray[np.float64]:
+        """The weight of each residual ``r`` of kind ``k``: reference noise over the kind's, times its weight
+        among the kind's own (:meth:`MeasurementKind.relative_weights`)."""
+        return self.weights[k] * self.kinds[k].relative_weights(r)
+
+    def each(self, values: NDArray[np.float64]) -> list[Residuals]:
+        """Each kind's residuals at ``values`` (unweighted, with their derivatives by the targets)."""
+        chain = self.chain(values, False)
+        self.at_tool(values)
+        return [kind.residuals(chain.positions, chain.rotations, u) for kind, u in zip(self.kinds, self.split(values))]
+
+    def at_tool(self, values: NDArray[np.float64]) -> None:
+        """Tell every kind the model's tool offset at ``values`` (:attr:`MeasurementKind.tool_mm`)."""
+        for kind in self.kinds:
+            kind.tool_mm = values[self.tool].copy()
+
+    def reference_mm(self) -> float | None:
+        """The stated standard deviation of one weighted residual (root mean square over the residuals), when
+        every kind states its spread (:meth:`MeasurementKind.stated_spread`); else None."""
+        spreads = [kind.stated_spread() for kind in self.kinds]
+        if any(s is None for s in spreads):
+            return None
+        counts = np.bincount(np.repeat(np.arange(len(self.kinds)), [r.values.size for r in self.each(self.start)]),
+                             minlength=len(self.kinds))
+        levels = np.array([w * s for w, s in zip(self.weights, spreads)])
+        return float(np.sqrt(np.sum(counts * levels**2) / max(counts.sum(), 1)))
 
     def split(self, values: NDArray[np.float64]) -> list[NDArray[np.float64]]:
         return [values[cols] for cols in self.columns]
@@ -68,25 +101,24 @@ class StackedProblem:
     def raw(self, values: NDArray[np.float64], measured_only: bool = False) -> list[NDArray[np.float64]]:
         """Each kind's residuals (mm, unweighted); ``measured_only``: those of rows alone (not a known length
         between two of a kind's unknowns)."""
-        chain = self.chain(values, False)
-        out = []
-        for kind, u in zip(self.kinds, self.split(values)):
-            r = kind.residuals(chain.positions, chain.rotations, u)
-            out.append(r.values[r.rows_a >= 0] if measured_only else r.values)
-        return out
+        return [r.values[r.rows_a >= 0] if measured_only else r.values for r in self.each(values)]
 
     def __call__(self, values: NDArray[np.float64], jacobian: bool = True):
         """The weighted residuals and (with ``jacobian``) their Jacobian, as ``identify``'s ``jac_at``."""
         chain = self.chain(values, jacobian)
+        self.at_tool(values)
         out, blocks = [], []
-        for kind, u, cols, w in zip(self.kinds, self.split(values), self.columns, self.weights):
+        for k, (kind, u, cols) in enumerate(zip(self.kinds, self.split(values), self.columns)):
             r = kind.residuals(chain.positions, chain.rotations, u)
+            w = self.weight_of(k, r)
             out.append(w * r.values)
             if jacobian:
                 block = np.zeros((r.values.size, values.size))
                 block[:, :self.own] = _through_chain(r, chain, self.inverse)
                 np.add.at(block.T, cols, r.du.T)
-                blocks.append(w * block)
+                if r.tool_grad is not None:
+                    block[:, self.tool] += r.tool_grad
+                blocks.append(w[:, None] * block)
         return np.concatenate(out), (np.vstack(blocks) if jacobian else None)
 
 
@@ -114,8 +146,8 @@ def _through_chain(r: Residuals, chain: Chain, pose_of: NDArray[np.intp], chunk:
 
 def identify_measures(robot: Robot, rows: Rows, features: dict | None = None, *, base: bool = True,
                       tool: bool = True, rcond: float = 1e-6, errors: JointErrors | None = None,
-                      payload_kg=0.0, parametrization: str = "dh", prior: Prior | None = None
-                      ) -> tuple[Identification, list[str]]:
+                      payload_kg=0.0, parametrization: str = "dh", prior: Prior | None = None,
+                      loss: str = "linear", loss_scale: float = 3.0) -> tuple[Identification, list[str]]:
     """Identify the robot's parameters and the kinds' unknowns from rows of any measurement kinds.
 
     Parameters
@@ -134,6 +166,11 @@ def identify_measures(robot: Robot, rows: Rows, features: dict | None = None, *,
         rows appended to the weighted residuals, which read as millimetres of a 0.02 mm tracker, and to the
         Jacobian the rank rule reads; the parameters it holds never pruned as implausible; the covariance
         the posterior's). The kinds' RMS figures are those of the rows alone.
+    loss, loss_scale
+        A robust loss (:data:`~partcal.calibration.fit.LOSSES`) on every weighted residual, its scale
+        ``loss_scale`` times the residuals' stated standard deviation (when every kind states one: its rows'
+        ``std`` columns or the cell's noise) or the robust spread of the least-squares fit's; the rows it
+        down-weighs are named in ``robust`` (``row``: an index into ``rows``, ``where``: file and line).
 
     Returns
     -------
@@ -144,18 +181,23 @@ def identify_measures(robot: Robot, rows: Rows, features: dict | None = None, *,
         What the data cannot identify, in words (a uniform scale, each kind's own blind spots).
     """
     features = features or {}
+    rows = dataclasses.replace(rows, q_deg=held_still(robot.check_joints(rows.q_deg)))
     problem, names, wanted, jac0, notes = _prepared(robot, rows, features, base, tool, rcond, errors, payload_kg,
                                                     parametrization, prior)
-    size, kinds, q_deg = geometric_size(robot, parametrization), problem.kinds, rows.q_deg
-    if prior is None:
-        table = fit_parameters(problem, problem.start, jac0, wanted, names, rcond, size, len(q_deg))[0]
-    else:
-        table = fit_parameters(prior.augmented(problem), problem.start, jac0, wanted, names, rcond, size,
-                               len(q_deg), held=prior.held(problem.start.size))[0]
+    size, kinds = geometric_size(robot, parametrization), problem.kinds
+    table = fit_parameters(problem if prior is None else prior.augmented(problem), problem.start, jac0, wanted,
+                           names, rcond, size, len(rows), loss=loss, loss_scale=loss_scale,
+                           reference_mm=problem.reference_mm(), held=None if prior is None else
+                           prior.held(problem.start.size), row_of=problem.row_of,
+                           weighted_by=problem.residual_weights)[0]
     raw = problem.raw(table.value, measured_only=True)
     per_kind = {kind.name: float(np.sqrt(np.mean(r**2))) if r.size else 0.0 for kind, r in zip(kinds, raw)}
     everything = np.concatenate(raw)
-    table = dataclasses.replace(table, target_rms_mm=per_kind, rms_mm=float(np.sqrt(np.mean(everything**2))))
+    robust = None if table.robust is None else {**table.robust, "downweighted": [
+        {**d, "where": rows.where(d["row"]), "id": rows.ids[d["row"]], "kind": rows.kind[d["row"]]}
+        for d in table.robust["downweighted"]]}
+    table = dataclasses.replace(table, target_rms_mm=per_kind, rms_mm=float(np.sqrt(np.mean(everything**2))),
+                                robust=robust)
     for note in notes:
         log.warning("%s", note)
     return table, notes
@@ -168,6 +210,8 @@ def rank_jacobian(problem: StackedProblem, wanted: NDArray[np.bool_], rcond: flo
     scale's direction."""
     jac0 = problem(problem.start)[1]
     direction = scale_direction(problem)
+    if any(kind.fixes_frame for kind in problem.kinds):   # measured in the base frame: the frame and the scale fixed
+        return jac0, direction
     rigid = rigid_directions(problem)
     turns = rigid[:, 3:] if not np.any(rigid[~wanted, 3:]) else np.zeros((rigid.shape[0], 0))   # base held: none
     directions = np.column_stack([direction, turns])
@@ -189,6 +233,8 @@ def _prepared(robot: Robot, rows: Rows, features: dict, base: bool, tool: bool, 
     wanted = np.ones(problem.start.size, dtype=bool)
     wanted[size - 9:size - 6] = tool
     wanted[size - 6:size] = base
+    for kind, cols in zip(kinds, problem.columns):       # a kind's unknowns of the tool (a further target's offset)
+        wanted[cols] = [tool or not kind.follows_tool(problem.names[c - problem.own][0]) for c in cols]
     notes = [note for kind in kinds for note in kind.notes()]
     jac0, direction = rank_jacobian(problem, wanted, rcond)
     if prior is not None:
@@ -258,10 +304,8 @@ def kind_residuals(robot: Robot, rows: Rows, features: dict, table: Identificati
             fitted_here += [n for (n, _), m in zip(names, missing) if m]
     if only is None:
         return {kind.name: r for kind, r in zip(kinds, problem.raw(values, measured_only=True))}
-    chain = problem.chain(values, False)
     out = {}
-    for kind, u in zip(kinds, problem.split(values)):
-        r = kind.residuals(chain.positions, chain.rotations, u)
+    for kind, r in zip(kinds, problem.each(values)):
         keep = np.isin(r.rows_a, only) & (r.rows_a >= 0)
         if keep.any():
             out[kind.name] = r.values[keep]

@@ -32,7 +32,6 @@ from ..calibration.fit import LOSSES, prior_variance
 from ..calibration.identification import identify
 from ..calibration.parameters import geometric_size, Identification, nominal_values, own_geometry, parameter_names, PARAMETRIZATIONS, PLAUSIBLE_ERROR, PRIMARY_TARGET, resolved_parametrization, robot_with, STATUSES
 from ..calibration.joint_errors import compliance_problem, harmonics_problem, JointErrors
-from ..calibration.tracker_points import TRACKER_FRAME
 from ..calibration.cv import fold_rows, FOLDS, measuring, SCALE_CHOICE, scale_free, strength_table
 from ..calibration.measurement import Measured
 from ..calibration.registry import built_kinds, MEASUREMENT_KINDS
@@ -40,7 +39,8 @@ from ..calibration.stacked import identify_measures
 from .kindtable import body_of, check_body, may_be_residual, model_from_body, regions_of, residual_kinds
 from .pose import PoseErrorModel
 from ..calibration.prior import plausible_prior, Prior, strength_note, strength_problem, strength_rows, strengths_of
-from ..calibration.targets import added_names, added_nominal, extra_from
+from ..calibration.identification import extra_from
+from ..calibration.tracker_points import target_nominal, target_parameters
 
 log = logging.getLogger(__name__)
 
@@ -203,7 +203,7 @@ class KinematicModel(ErrorModelBase):
         ``orientation_deg``, the identification reads the orientation from ``y``; without
         ``use_orientation`` it identifies from the positions alone and predicts the orientation
         all the same (a residual model then fits all six). Further targets on the tool and the measured
-        orientation, when given, are identified from too (:mod:`partcal.calibration.targets`):
+        orientation, when given, are identified from too (:mod:`partcal.calibration.tracker_points`):
         ``targets`` maps a target's name to ``(offset, errors)``, its nominal offset in the
         flange frame (3,) mm and its errors (n, 3) mm; ``orientation_deg`` (n, 3) are the
         orientation errors, rotation vectors from the nominal flange orientation to the
@@ -252,7 +252,8 @@ class KinematicModel(ErrorModelBase):
             prior = self._own_prior(robot, X, y, payload_kg)
         if prior is not None:
             prior.check_names([n for n, _ in parameter_names(robot, self.joint_errors_, self.parametrization_)]
-                              + (extra.names() if extra is not None else []))
+                              + ([n for n, _ in target_parameters(extra.tools_mm, extra.rotations is not None)]
+                                 if extra is not None else []))
         self.identification_ = identify(robot, X, nominal + y[:, POSITION], base=bool(self.base), tool=bool(self.tool),
                                         rcond=float(self.rcond), errors=self.joint_errors_, payload_kg=ident_payload,
                                         extra=extra, parametrization=self.parametrization_, std_mm=std_mm,
@@ -345,12 +346,6 @@ class KinematicModel(ErrorModelBase):
                       ) -> "KinematicModel":
         """:meth:`fit` from rows of measurement kinds (:func:`~partcal.calibration.stacked.identify_measures`), MAP
         with a prior (``prior``, else the parameter's: a list of strengths chosen by :meth:`_measures_strength`)."""
-        if self.loss != "linear":
-            raise DataError(f"loss: {self.loss} weighs tracker points (a point CSV); rows of measurement kinds are "
-                            "identified by least squares: set loss: linear")
-        if self.residual is not None:
-            raise DataError("a residual model learns a 3-D error field from tracker points; it cannot be fitted to "
-                            "plane contacts, fixed points or distances: fit the kinematic model alone")
         X = validate_data(self, measures.rows.q_deg, dtype=np.float64)
         if X.shape[1] != robot.n_joints:
             raise DataError(f"{type(self).__name__} for {robot.name} takes {robot.n_joints} joint angles "
@@ -369,15 +364,38 @@ class KinematicModel(ErrorModelBase):
         self.identification_, self.measure_notes_ = identify_measures(
             robot, measures.rows, measures.features, base=bool(self.base), tool=bool(self.tool),
             rcond=float(self.rcond), errors=self.joint_errors_, payload_kg=ident_payload,
-            parametrization=self.parametrization_, prior=prior)
+            parametrization=self.parametrization_, prior=prior, loss=self.loss, loss_scale=float(self.loss_scale))
         self.targets_, self.orientation_, self.robot_ = {}, False, robot
         self.measures_ = tuple(dict.fromkeys(k for k in measures.rows.kind if k in MEASUREMENT_KINDS))
-        self.frame_fixed_ = "point" in self.measures_ and not measures.features.get(TRACKER_FRAME)
+        self.frame_fixed_ = any(k.fixes_frame for k in built_kinds(measures.rows, measures.features))
         self._build_robots()
         self._fitted_inputs(X)
-        self.residual_ = None
-        self.covariance_scale_ = 1.0
+        self.residual_, self.covariance_scale_ = None, 1.0
+        if self.residual is not None:
+            self._fit_residual_on_points(robot, measures, payload_kg)
         return self._prepare()
+
+    def _fit_residual_on_points(self, robot: Robot, measures: Measured, payload_kg) -> None:
+        """The residual model fitted on what the identified kinematics leave of the tracker points among the rows
+        (the primary target's, in the base frame): the only rows that carry a 3-D error field."""
+        rows = measures.rows
+        target = rows.texts.get("target", ("",) * len(rows))
+        points = np.array([i for i in rows.of("point") if target[i] in ("", PRIMARY_TARGET)], dtype=np.intp)
+        if not self.frame_fixed_ or points.size == 0:
+            raise DataError(f"residual: a residual model learns the 3-D error field that tracker points in the base "
+                            f"frame show; these rows ({', '.join(self.measures_)}) hold none"
+                            + (" (their points are in the tracker's frame)" if points.size else "")
+                            + ": fit the kinematic model alone, or add tracker points")
+        X = rows.q_deg[points]
+        measured = np.column_stack([rows.numbers[c][points] for c in ("x_meas", "y_meas", "z_meas")])
+        nominal = robot.positions(X)
+        payload = self._payload(None if payload_kg is None and rows.payload_kg is None else
+                                (payload_kg if payload_kg is not None else rows.payload_kg[points]), len(X),
+                                fitting=True)
+        residual = clone(self.residual).set_params(random_state=self._residual_seed())
+        self.residual_ = residual
+        residual.fit(self._residual_inputs(X, nominal), measured - nominal - self._kinematic_errors(X, payload))
+        self.covariance_scale_ = self._hybrid_covariance_scale(X, nominal)
 
     def _measures_strength(self, robot: Robot, measures: Measured, payload, strengths) -> tuple[int, list[dict]]:
         """A list of prior strengths chosen on rows of measurement kinds: :data:`~partcal.calibration.cv.FOLDS`
@@ -909,7 +927,7 @@ def _identification_from(ident: FieldReader, robot: Robot, errors: JointErrors |
     nominal values, unidentified parameters kept nominal, standard errors finite and >= 0 (or null). Fitted on
     measurement kinds (``kind_unknowns``), the kinds' unknowns (a plane, a point) follow the robot's, their
     start values as nominal."""
-    names = [n for n, _ in parameter_names(robot, errors, parametrization) + added_names(tools or {}, orientation)]
+    names = [n for n, _ in parameter_names(robot, errors, parametrization) + target_parameters(tools or {}, orientation)]
     given = ident.get("names", list)
     if kind_unknowns and given[:len(names)] == names and all(isinstance(n, str) for n in given):
         names = list(given)
@@ -922,7 +940,7 @@ def _identification_from(ident: FieldReader, robot: Robot, errors: JointErrors |
     if len(std) != len(names) or not all(v is None or isinstance(v, (int, float)) for v in std):
         ident.fail("std_error", f"expected {len(names)} numbers or nulls")
     nominal, value = ident.array("nominal", (len(names),)), ident.array("value", (len(names),))
-    expected = np.concatenate([nominal_values(robot, errors, parametrization), added_nominal(tools or {}, orientation)])
+    expected = np.concatenate([nominal_values(robot, errors, parametrization), target_nominal(tools or {}, orientation)])
     expected = np.concatenate([expected, nominal[expected.size:]])          # the kinds' unknowns start anywhere
     off = np.flatnonzero(~np.isclose(nominal, expected, rtol=1e-12, atol=1e-9))
     if off.size:

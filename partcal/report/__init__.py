@@ -26,7 +26,7 @@ from .. import __version__
 from ..metrics import MRAD_PER_DEG
 from ..calibration.parameters import BASE_PARAMETERS, TOOL_PARAMETERS
 from ..models.kinds import equations_of, identification_of, regions_of, run_summary
-from ..calibration.targets import added_names
+from ..calibration.tracker_points import target_parameters
 from ..study.kinds_run import KindsRunResult
 from ..study.results import ModelResult, RunResult
 from ..study.scoring import Outputs, errors_left
@@ -495,7 +495,7 @@ def identified_targets(summary: dict) -> dict | None:
         return None
     rms = summary["targets_rms_3d"]
     angle = summary["orientation_rms_deg"]
-    added = [n for n, _ in added_names(dict.fromkeys(list(rms)[1:]), angle is not None)]
+    added = [n for n, _ in target_parameters(dict.fromkeys(list(rms)[1:]), angle is not None)]
     return {"rms": [{"name": name, "rms": v, "primary": k == 0} for k, (name, v) in enumerate(rms.items())],
             "orientation": None if angle is None else {"rms_deg": angle, "rms_mrad": _mrad(angle)},
             "identified": summary["identified"], "parameters": summary["parameters"],

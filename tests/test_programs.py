@@ -14,6 +14,7 @@ from scipy.spatial.transform import Rotation
 
 from partcal import ErrorModel, load_robot
 from partcal.data.programs import ProgramSyntaxError, UnknownFrameError, program_kind, read_program
+from partcal.errors import PartcalError
 from partcal.data.simulate import load_study
 from partcal.models.kinematic import KinematicModel
 from partcal.robot.rotations import (kuka_abc_from_matrices, matrices_from_kuka_abc, matrices_from_quaternions,
@@ -64,6 +65,44 @@ def test_a_zero_model_writes_the_program_back_byte_for_byte(name, robot, count, 
     result = compensated(constant_model(robot, np.zeros(outputs), inputs), FIXTURES / name)
     assert len(result.program.targets) == count and not result.failures
     assert result.output == (FIXTURES / name).read_bytes()
+
+
+def repository_programs() -> list:
+    """Every robot program of the repository (its fixtures and examples, not .venv, .git nor reports), with the
+    robot it is written for: the UR10 for URScript and joint trajectories, the SK120 for KRL and RAPID."""
+    import os
+
+    from partcal.data.programs import DIALECTS
+
+    suffixes = {e for d in DIALECTS.values() for e in d.extensions}
+    found = []
+    for folder, subfolders, files in os.walk(ROOT):
+        subfolders[:] = sorted(d for d in subfolders if d not in (".venv", ".git", "reports", "__pycache__"))
+        for name in sorted(files):
+            path = ROOT / folder / name
+            kind = program_kind(path) if path.suffix.lower() in suffixes else None
+            if kind is not None:
+                found.append((path, UR10 if kind in ("urscript", "joints") else SK120))
+    return found
+
+
+@pytest.mark.parametrize("inputs, outputs", [("cartesian", 3), ("joint", 6)])
+def test_every_program_of_the_repository_comes_back_byte_for_byte_from_a_model_that_predicts_nothing(inputs, outputs):
+    """A cell diffs the compensated program against the one it runs: with no error to correct, every program
+    that compensates (exit 0) comes back as it was, whatever its numbers' style (PolyScope's 12 decimals without
+    a leading zero, a RobotStudio quaternion of 4 decimals a hair off unit, KSS's $config.dat)."""
+    compared = []
+    for path, robot in repository_programs():
+        try:
+            result = compensated(constant_model(robot, np.zeros(outputs), inputs), path)
+        except PartcalError:
+            continue                                     # exit 2: a frame to give; not an exit-0 program
+        if not result.failures:
+            assert result.output == path.read_bytes(), path
+            compared.append(path.relative_to(FIXTURES).as_posix() if FIXTURES in path.parents else path.name)
+    assert {"polyscope_export.script", "robotstudio_taught.mod", "taco_pick.mod", "kuka_home/$config.dat",
+            "kuka_home/glue.src", "kuka_home/glue.dat", "kuka_cell/weld.src", "kuka_cell/weld.dat"} <= set(compared)
+    assert len(compared) == len(repository_programs())
 
 
 def test_a_joint_trajectory_with_a_utf8_byte_order_mark_before_its_comment_is_read_and_keeps_it(tmp_path):
@@ -1078,18 +1117,24 @@ def test_a_joint_target_outside_the_limits_names_each_joint_beyond_its_range(tmp
         "is outside the joint limits: joint 3 at 100 deg (range -250 to -110), joint 6 at 400 deg (range -360 to 360)"))]
 
 
-def test_targets_at_a_singular_wrist_are_compensated_as_their_csv_is(tmp_path):
-    """The paper's rectangle holds the SK120's wrist singular (axes 4 and 5 at 0). Ten of its poses as a URScript
-    with the model's tool as TCP: every target is compensated (a solve to 1e-6 mm stalled near 4e-5 mm there and
-    refused six as unreachable), to the positions the same model gives the tool points as a CSV."""
+@pytest.fixture(scope="module")
+def paper_sdp():
+    """The paper's SDP(CI) kind fitted by least squares on the virtual SK120's identification set, and the first
+    ten of every twentieth pose of its test rectangle (the wrist straight: axes 4 and 5 at 0)."""
     from partcal import read_measurements
-    from partcal.robot.rotations import rotation_vectors_from_matrices
 
     ident = read_measurements(ROOT / "data" / "sk120" / "identification.csv")
     model = ErrorModel(inputs="cartesian", degree=2, solver="lstsq").fit(ident.nominal_mm, ident.errors_mm)
-    predictor = Predictor(model, model_to_dict(model, name="sdp-ci", robot=SK120), SK120)
     q = read_measurements(ROOT / "data" / "sk120" / "test_rectangle.csv").q_deg[::20][:10]
-    assert np.all(q[:, 3:5] == 0)
+    assert np.all(q[:, 3:5] == 0) and np.abs(q[:, 5]).max() > 5
+    return Predictor(model, model_to_dict(model, name="sdp-ci", robot=SK120), SK120), q
+
+
+def test_targets_at_a_singular_wrist_are_compensated_as_their_csv_is(tmp_path, paper_sdp):
+    """The paper's rectangle holds the SK120's wrist singular (axes 4 and 5 at 0). Ten of its poses as a URScript
+    with the model's tool as TCP: every target is compensated (a solve to 1e-6 mm stalled near 4e-5 mm there and
+    refused six as unreachable), to the positions the same model gives the tool points as a CSV."""
+    predictor, q = paper_sdp
     poses = SK120.forward(q)
     points, turns = poses[:, :3, 3], rotation_vectors_from_matrices(poses[:, :3, :3])
     tool = SK120.tool_mm / 1000
@@ -1103,6 +1148,86 @@ def test_targets_at_a_singular_wrist_are_compensated_as_their_csv_is(tmp_path):
     written = np.array([t.position_mm for t in read_program(path).targets])
     commanded = np.array([t.position_mm for t in read_program(tmp_path / "out.script").targets])
     np.testing.assert_allclose(commanded, predictor.compensate(written), atol=1e-3)      # the file's micrometres
+
+
+def trimmed(value: float, decimals: int) -> str:
+    """A number as RobotStudio and PolyScope write it: fixed decimals, trailing zeros dropped."""
+    text = f"{value:.{decimals}f}".rstrip("0").rstrip(".")
+    return "0" if text in ("-0", "") else text
+
+
+def rectangle_program(dialect: str, q, tool_mm) -> dict:
+    """The rectangle's poses ``q`` (n, 6) as a cell writes them, the TCP ``tool_mm`` on the flange, with the
+    configuration of their own joints: RAPID robtargets (RobotStudio's 9 decimals, confdata of axes 1, 4, 6;
+    ``rapid-taught``: positions to 0.01 mm and quaternions of 4 decimals, as hand-taught modules write them,
+    the wrist then 0.002 to 0.009 degrees off straight), a KRL module of inline forms (the .dat's E6POS in
+    KSS's 3 and 4 decimals with S and T; its .src), a PolyScope export (12 decimals, no leading zero). Returns
+    file name -> text; the first is compensated."""
+    flange = SK120.flange(q)
+    tcp = flange[:, :3, 3] + np.einsum("nij,j->ni", flange[:, :3, :3], tool_mm)
+    R = flange[:, :3, :3]
+    n = len(q)
+    if dialect.startswith("rapid"):
+        quat, cf = quaternions_from_matrices(R), np.floor(q[:, [0, 3, 5]] / 90).astype(int)
+        places = (2, 4) if dialect == "rapid-taught" else (9, 9)
+        t = ",".join(trimmed(v, 3) for v in tool_mm)
+        lines = ["MODULE Rectangle", f"    PERS tooldata tReflector:=[TRUE,[[{t}],[1,0,0,0]],[5,[0,0,60],[1,0,0,0],0,0,0]];"]
+        lines += [f"    CONST robtarget Target_{10 * (k + 1)}:=[[{','.join(trimmed(v, places[0]) for v in tcp[k])}],"
+                  f"[{','.join(trimmed(v, places[1]) for v in quat[k])}],[{cf[k, 0]},{cf[k, 1]},{cf[k, 2]},0],"
+                  "[9E+09,9E+09,9E+09,9E+09,9E+09,9E+09]];" for k in range(n)]
+        lines += ["    PROC Path_10()"] + [f"        MoveL Target_{10 * (k + 1)},v200,fine,tReflector\\WObj:=wobj0;"
+                                           for k in range(n)] + ["    ENDPROC", "ENDMODULE"]
+        return {"Rectangle.mod": "\r\n".join(lines) + "\r\n"}
+    if dialect == "krl":
+        abc, turn = kuka_abc_from_matrices(R), ((q < 0) * (1 << np.arange(6))).sum(axis=1)
+        dat = ["&ACCESS RVP", "&REL 1", "&PARAM TEMPLATE = C:\\KRC\\Roboter\\Template\\vorgabe", "DEFDAT  RECT",
+               ";FOLD EXTERNAL DECLARATIONS;%{PE}%V3.2.0,%MKUKATPBASIS,%CEXT,%VCOMMON,%P",
+               ";ENDFOLD (EXTERNAL DECLARATIONS)"]
+        src = ["&ACCESS RVP", "&REL 1", "DEF rect( )", ";FOLD INI", "  BAS (#INITMOV,0 )", ";ENDFOLD (INI)"]
+        for k in range(n):
+            dat += [f"DECL E6POS XP{k + 1}={{X {tcp[k, 0]:.3f},Y {tcp[k, 1]:.3f},Z {tcp[k, 2]:.3f},A {abc[k, 0]:.4f},"
+                    f"B {abc[k, 1]:.4f},C {abc[k, 2]:.4f},S 2,T {turn[k]},E1 0.0,E2 0.0,E3 0.0,E4 0.0,E5 0.0,E6 0.0}}",
+                    f'DECL FDAT FP{k + 1}={{TOOL_NO 1,BASE_NO 0,IPO_FRAME #BASE,POINT2[] " "}}']
+            src += [f";FOLD LIN P{k + 1} Vel=0.2 m/s CPDAT1 Tool[1] Base[0];%{{PE}}%R 8.3.31,%MKUKATPBASIS,%CMOVE",
+                    "$BWDSTART=FALSE", "LDAT_ACT=LCPDAT1", f"FDAT_ACT=FP{k + 1}", "BAS(#CP_PARAMS,0.2)",
+                    f"LIN XP{k + 1}", ";ENDFOLD"]
+        return {"rect.dat": "\r\n".join(dat + ["ENDDAT"]) + "\r\n", "rect.src": "\r\n".join(src + ["END"]) + "\r\n"}
+    rv = rotation_vectors_from_matrices(R)
+    lines = ["def Rectangle():", f"  set_tcp(p[{', '.join(trimmed(v / 1000, 5) for v in tool_mm)}, 0, 0, 0])"]
+    for k in range(n):
+        pose = ", ".join(trimmed(v, 12).replace("0.", ".", 1) for v in [*tcp[k] / 1000, *rv[k]])
+        lines += [f"  global Waypoint_{k + 1}_p=p[{pose}]"]
+    lines += ['  $ 1 "Robot Program"', '  $ 2 "MoveL"']
+    lines += [f"  movel(Waypoint_{k + 1}_p, a=1.2, v=0.25)" for k in range(n)]
+    return {"Rectangle.script": "\n".join(lines + ["end"]) + "\n"}
+
+
+@pytest.mark.parametrize("dialect", ["rapid", "rapid-taught", "krl", "urscript"])
+def test_the_straight_wrist_rectangle_is_compensated_as_its_csv_in_every_dialect(tmp_path, paper_sdp, dialect):
+    """The rectangle's poses hold the SK120's wrist straight (axis 5 at 0): axes 4 and 6 share one turn, and the
+    configuration written with each target (ABB ``[0, 0, -1, 0]``: axis 6 at -5.8 degrees; KUKA's T) is one split
+    of it. Every target is compensated (before: RAPID 0 of 10 in both writings, KRL 4 of 10, the others refused
+    as unreachable in their configuration or as leaving it), the written configuration kept on the shared turn,
+    and the commands are those that `compensate` gives the same targets as a CSV, to 1e-5 mm."""
+    predictor, q = paper_sdp
+    save_model(predictor.model, tmp_path / "m.json", name="sdp-ci", robot=SK120)
+    files = rectangle_program(dialect, q, SK120.tool_mm)
+    for name, text in files.items():
+        (tmp_path / name).write_bytes(text.encode("latin-1"))
+    path = tmp_path / next(iter(files))
+    tool = ("--tool", "TOOL_DATA[1]={X %s,Y %s,Z %s,A 0,B 0,C 0}" % tuple(SK120.tool_mm)) if dialect == "krl" else ()
+    done = run("compensate", str(tmp_path / "m.json"), str(path), "-o", str(tmp_path / "out" / path.name), *tool)
+    assert done.returncode == 0, done.stderr
+    summary = json.loads((tmp_path / "out" / (path.name + ".json")).read_text())
+    assert (summary["targets"], summary["compensated"]) == (10, 10)
+    written = np.array([t.position_mm for t in read_program(path).targets])
+    (tmp_path / "targets.csv").write_text("x,y,z\n" + "".join("%.12g,%.12g,%.12g\n" % tuple(x) for x in written))
+    done = run("compensate", str(tmp_path / "m.json"), str(tmp_path / "targets.csv"), "-o", str(tmp_path / "c.csv"))
+    assert done.returncode == 0, done.stderr
+    csv = np.loadtxt(tmp_path / "c.csv", delimiter=",", skiprows=1, usecols=(3, 4, 5))
+    got = np.array([t.position_mm for t in read_program(tmp_path / "out" / path.name).targets])
+    assert np.linalg.norm(got - written, axis=1).min() > 10.0                  # the model moves them, by 15-17 mm
+    np.testing.assert_allclose(got, csv, rtol=0, atol=1e-5)
 
 
 def test_every_unknown_tool_and_base_of_a_program_is_named_in_one_refusal(tmp_path):
@@ -1168,3 +1293,271 @@ def test_a_program_named_in_another_language_than_its_own_is_refused_not_copied(
     assert not out.exists()
     done = compensate_program_file(tmp_path / "m.json", FIXTURES / "pallet.mod", out, "rapid")
     assert not done.failure and out.read_bytes() != (FIXTURES / "pallet.mod").read_bytes()
+
+
+# ---------------------------------------------------------------------- real cells: what they write
+def test_a_changed_number_keeps_the_style_it_was_written_in():
+    """PolyScope writes .208 (no leading zero), RobotStudio 9E+09 (exponents): a number that changes keeps
+    that style and its decimals; one within the precision written keeps its text."""
+    from partcal.data.program_text import Field, number_text
+
+    def field(text):
+        return Field(0, len(text), text, float(text))
+
+    assert number_text(0.2081234567891, field(".208123456789"), 8) == ".208123456789"      # 1e-13 m: kept
+    assert number_text(0.2084, field(".208"), 8) == ".20840000"
+    assert number_text(-0.0004, field("-.001221359354"), 8) == "-.000400000000"
+    assert number_text(0.15034, field("1.5e-01"), 4) == "1.503e-01"                 # 4 decimals of the value
+    assert number_text(1203.5, field("1.2E+03"), 6) == "1.203500000E+03"
+    assert number_text(0.0123, field("+1.5E-1"), 6) == "+1.2300E-2"
+
+
+def test_a_polyscope_placeholder_set_from_pose_trans_is_left_and_the_waypoints_compensated(tmp_path):
+    """PolyScope declares a variable waypoint p[0,0,0,0,0,0] at the top and an Assignment node sets it from
+    pose_trans(..) before its move: the zeros are no target (they were, unreachable: exit 3), nor the offset
+    inside pose_trans (refused as relative to an unknown frame: exit 2); movej(get_inverse_kin(Waypoint_2_p, ..))
+    moves to a waypoint, no relative motion computed at run time."""
+    program = read_program(FIXTURES / "polyscope_export.script")
+    assert [(t.name, t.line) for t in program.targets] == [("Waypoint_1_p", 13), ("Waypoint_2_p", 15),
+                                                            ("Waypoint_3_p", 17)]
+    assert [(x.name, x.line, x.reason) for x in program.left] == [("Place_p", 12, (
+        "Place_p is also assigned pose_trans(Waypoint_3_p, p[0, 0, -0.05, 0, 0, 0]) at line 30: the pose its moves "
+        "take is computed at run time, not this one: kept as written"))]
+    save_model(constant_model(UR10, [0.3, -0.2, 0.1]).model, tmp_path / "m.json", name="c", robot=UR10)
+    out = tmp_path / "out.script"
+    done = run("compensate", str(tmp_path / "m.json"), str(FIXTURES / "polyscope_export.script"), "-o", str(out))
+    assert done.returncode == 0, done.stderr
+    assert json.loads((tmp_path / "out.script.json").read_text())["compensated"] == 3
+    line = out.read_text().splitlines()[12]            # the constant error taken off in metres, by hand
+    assert line.startswith("  global Waypoint_1_p=p[-.176414488873, -.602542264472, .072670995859, -.001221359354, ")
+
+
+def test_poses_read_at_run_time_are_left_and_reported_not_asked_for_as_frames(tmp_path):
+    """here = get_actual_tcp_pose() is no feature a user can give: a pose relative to it, or a move to it, is
+    computed at run time (it asked for --frame 'here=VALUE', exit 2)."""
+    path = tmp_path / "probe.script"
+    path.write_text("def probe():\n"
+                    "  here = get_actual_tcp_pose()\n"
+                    "  movel(pose_trans(here, p[0, 0, 0.05, 0, 0, 0]), a=0.3, v=0.1)\n"
+                    "  movel(here, a=0.3, v=0.1)\n"
+                    "  movel(p[-.7446, -.2977, .4299, 2.4066, 2.0194, 0], a=0.3, v=0.1)\n"
+                    "end\n")
+    program = read_program(path)
+    assert [(t.line, t.name) for t in program.targets] == [(5, "movel")]
+    assert [(x.line, x.column, x.reason) for x in program.left] == [
+        (3, 28, "relative to here, a pose computed at run time (here = get_actual_tcp_pose() at line 2): kept as "
+                "written"),
+        (4, 9, "moved to here, a pose computed at run time (here = get_actual_tcp_pose() at line 2): not "
+               "compensated, kept as written")]
+    result = compensated(constant_model(UR10, [0.3, -0.2, 0.1]), path)
+    assert not result.failures and result.summary()["compensated"] == 1
+
+
+def test_poses_kept_in_a_list_and_moved_to_in_a_loop_are_targets(tmp_path):
+    """path = [p[..], p[..]] moved to as path[i] in a loop: each element is a target, with the loop's TCP (the
+    file had 'no targets')."""
+    path = tmp_path / "loop.script"
+    path.write_text("def loop():\n"
+                    "  set_tcp(p[0, 0, 0.1, 0, 0, 0])\n"
+                    "  path = [p[-.7446, -.2977, .4299, 2.4066, 2.0194, 0], p[-.6872, -.5860, .4023, 1.5708, 2.7207, 0]]\n"
+                    "  i = 0\n"
+                    "  while i < 2:\n"
+                    "    movel(path[i], a=1.2, v=0.25)\n"
+                    "    i = i + 1\n"
+                    "  end\n"
+                    "end\n")
+    program = read_program(path)
+    assert [(t.name, t.line, t.tool) for t in program.targets] == [("path[0]", 3, "set_tcp at line 2"),
+                                                                    ("path[1]", 3, "set_tcp at line 2")]
+    np.testing.assert_allclose(program.targets[1].position_mm, [-687.2, -586.0, 402.3])
+    result = compensated(constant_model(UR10, [0.3, -0.2, 0.1]), path)
+    (tmp_path / "out.script").write_bytes(result.output)
+    moved = np.array([t.position_mm for t in read_program(tmp_path / "out.script").targets])
+    np.testing.assert_allclose(moved, [[-744.9, -297.5, 429.8], [-687.5, -585.8, 402.2]], atol=1e-6)
+
+
+def test_constant_arithmetic_in_a_pose_is_read_as_its_value_and_expressions_of_variables_left_alike(tmp_path):
+    """0.05 * 2 and -(0.1) are constants (refused as 'expected a number', while z0 - 2*h was left): read, and
+    written as a number only when the target moves."""
+    path = tmp_path / "arith.script"
+    path.write_text("def arith():\n"
+                    "  z0 = 0.4\n"
+                    "  h = 0.05\n"
+                    "  movel(p[-.7446, -.2977, 0.2 * 2 + 0.0299, 2.4066, 2.0194, -(0.1)], a=1.2, v=0.25)\n"
+                    "  movel(p[-.7446, -.2977, z0 - 2*h, 2.4066, 2.0194, 0], a=1.2, v=0.25)\n"
+                    "  movel(p[-.6872, -.5860, .4023, d2r(90), 2.7207, 0], a=1.2, v=0.25)\n"
+                    "end\n")
+    program = read_program(path)
+    assert [t.line for t in program.targets] == [4, 6] and [x.line for x in program.left] == [5]
+    np.testing.assert_allclose([f.value for f in program.targets[0].fields], [-.7446, -.2977, .4299, 2.4066, 2.0194,
+                                                                               -0.1])
+    assert program.targets[1].fields[3].value == np.pi / 2
+    assert compensated(constant_model(UR10, np.zeros(3)), path).output == path.read_bytes()
+    out = compensated(constant_model(UR10, [0.0, 0.0, 0.5]), path).output.decode()
+    assert "0.2 * 2 + 0.0299" not in out and ", 0.42940000, 2.4066, 2.0194, -(0.1)]" in out   # z moved, turn kept
+
+
+def cell_copy(tmp_path, config=True, replace=()):
+    """kuka_home's module (and its $config.dat, unless ``config`` is False) in ``tmp_path``, with byte
+    replacements ``(file, old, new)``."""
+    for name in ("glue.src", "glue.dat") + (("$config.dat",) if config else ()):
+        data = (FIXTURES / "kuka_home" / name).read_bytes()
+        for file, old, new in replace:
+            if file == name:
+                assert old in data
+                data = data.replace(old, new)
+        (tmp_path / name).write_bytes(data)
+    return tmp_path / "glue.src", tmp_path / "glue.dat"
+
+
+def test_the_home_fdat_of_kukas_inline_forms_is_read_from_config_dat(tmp_path):
+    """FDAT_ACT = FHOME (KUKA's standard home motion) sets the base and tool of FHOME, which $config.dat
+    declares: read from the $config.dat beside the module, or in System of a KRC backup above it; without
+    one, the motion after it is left, naming $config.dat (it said 'set at run time, not defined')."""
+    src = read_program(FIXTURES / "kuka_home" / "glue.src")
+    assert [(t.line, t.frame, t.tool) for t in src.targets] == [(27, "$NULLFRAME", "TOOL_DATA[1]")]
+    assert [(t.name, t.frame, t.tool) for t in read_program(FIXTURES / "kuka_home" / "glue.dat").targets] == [
+        (f"XP{k}", "$NULLFRAME", "TOOL_DATA[1]") for k in range(1, 5)]
+    (tmp_path / "alone").mkdir()
+    alone, _ = cell_copy(tmp_path / "alone", config=False)
+    left = read_program(alone).left
+    assert [(x.line, x.reason) for x in left] == [(27, (
+        "moved to in the base and tool of FDAT_ACT = FHOME at line 21, which neither the module nor a $config.dat "
+        "beside it (or in System/ of a folder above it) defines: put the cell's $config.dat there: not "
+        "compensated, kept as written"))]
+    backup = tmp_path / "KRC" / "R1"
+    (backup / "Program" / "glue").mkdir(parents=True)
+    (backup / "System").mkdir()
+    (backup / "System" / "$config.dat").write_bytes((FIXTURES / "kuka_home" / "$config.dat").read_bytes())
+    in_tree, _ = cell_copy(backup / "Program" / "glue", config=False)
+    assert [(t.line, t.tool) for t in read_program(in_tree).targets] == [(27, "TOOL_DATA[1]")]
+    shift = np.array([0.5, -0.3, 0.2])
+    result = compensated(constant_model(SK120, shift), in_tree)
+    (in_tree.parent / "out.src").write_bytes(result.output)
+    np.testing.assert_allclose(read_program(in_tree.parent / "out.src").targets[0].position_mm,
+                               src.targets[0].position_mm - shift, atol=1e-6)      # TOOL_DATA[1] from System/
+
+
+def test_config_dats_correction_frames_are_no_targets():
+    """KSS's $config.dat types its data without DECL (FRAME TOOL_CORR_W={..}, E6AXIS XHOME={..}): the
+    correction frames TOOL_CORR_W and M_BASE_CORR were taken as targets (zeros: exit 3)."""
+    program = read_program(FIXTURES / "kuka_home" / "$config.dat")
+    assert [(t.name, t.kind) for t in program.targets] == [("XHOME", "joints"), ("XHOME1", "joints")]
+    assert {x.name for x in program.left} == {"REF_PT[1]", "REF_PT[2]", "REF_TOOL", "TOOL_CORR", "TOOL_CORR_W",
+                                              "BASE_CORR", "M_BASE_CORR"}
+
+
+@pytest.mark.parametrize("replace, name, line, reason", [
+    ((("glue.src", b"LIN XP2 C_DIS", b"XP2={X 1105.878,Y 586.352,A -159.7642,B -70.6469,C 14.0764}\r\nLIN XP2 C_DIS"),),
+     "XP2", 40, "a partial aggregate assigned at run time: its Z keep the value XP2 had before"),
+    ((("glue.src", b"LIN XP3 C_DIS", b"XP3.Z = XP3.Z + 20\r\nLIN XP3 C_DIS"),),
+     "XP3", None, "changed at run time (XP3.Z = XP3.Z + 20 at line 47 of glue.src): its declared value is not"),
+    ((("glue.src", b"LIN XP4 C_DIS", b"$IPO_MODE = #TCP\r\nLIN XP4 C_DIS"),),
+     "XP4", None, "moved to with a fixed tool ($IPO_MODE = #TCP at line 54: the robot carries the workpiece)"),
+    ((("glue.src", b"\r\nEND\r\n", b"\r\nEND\r\nDEF set_table( )\r\n  $BASE = BASE_DATA[1]\r\nEND\r\n"),
+      ("glue.src", b"LIN XP4 C_DIS", b"set_table( )\r\nLIN XP4 C_DIS")),
+     "XP4", None, "moved to in a base or tool set at run time (set by the subroutine set_table() called at line 54)"),
+])
+def test_krl_statements_that_change_a_point_or_its_frame_leave_it_and_say_so(tmp_path, replace, name, line, reason):
+    """What a .src does to a point before its motion, which was passed over in silence and the point compensated
+    as declared (exit 0): a partial aggregate without Z (the .dat's same line is refused), a component
+    assignment, $IPO_MODE = #TCP (a fixed tool), a subroutine of the module setting $BASE."""
+    src, dat = cell_copy(tmp_path, replace=replace)
+    program = read_program(src if line else dat)
+    found = [x for x in program.left if x.name == name]
+    assert len(found) == 1 and found[0].reason.startswith(reason), program.left
+    assert line is None or found[0].line == line
+    assert name not in [t.name for t in read_program(dat).targets]
+    result = compensated(constant_model(SK120, [0.5, -0.3, 0.2]), dat)
+    assert not result.failures and f"DECL E6POS {name}=".encode() in result.output
+    kept = next(x for x in dat.read_bytes().split(b"\r\n") if x.startswith(f"DECL E6POS {name}=".encode()))
+    assert kept in result.output.split(b"\r\n")                   # byte for byte
+
+
+@pytest.mark.parametrize("file, old, new, axis", [
+    ("glue.dat", b"T 14,E1 0.0", b"T 14,E1 1500.0", "E1 is at 1500"),
+    ("robotstudio_taught.mod", b"[0,-1,0,0],[9E+09,", b"[0,-1,0,0],[1500,", "eax_a is at 1500"),
+])
+def test_a_target_of_a_robot_on_a_track_is_refused_naming_the_axis(tmp_path, file, old, new, axis):
+    """A KUKA or ABB on a linear track writes the track's position with each pose (E1, eax_a): the pose is then
+    not in the robot's own frame, and was compensated as if it were ('unreachable by the robot's kinematics',
+    or a wrong correction). Refused, naming the target, the axis and what is needed; axes at 0 (KSS writes
+    E1 0.0 .. E6 0.0 for every E6POS) and ABB's unused 9E9 change nothing."""
+    if file == "glue.dat":
+        _, path = cell_copy(tmp_path, replace=[(file, old, new)])
+    else:
+        path = tmp_path / file
+        path.write_bytes((FIXTURES / file).read_bytes().replace(old, new))
+    save_model(constant_model(SK120, np.zeros(3)).model, tmp_path / "m.json", name="zero", robot=SK120)
+    done = run("compensate", str(tmp_path / "m.json"), str(path), "-o", str(tmp_path / "out" / path.name))
+    assert done.returncode == 2 and f"its external axis {axis} (a linear track carrying the robot" in done.stderr
+    assert "give this station's targets relative to the robot's base" in done.stderr and "nothing written" in done.stderr
+    assert not (tmp_path / "out").exists()
+
+
+def test_an_unreachable_target_says_where_the_cause_is(tmp_path):
+    """'unreachable by the robot's kinematics' pointed nowhere: a target at the stretched arm says so; one far
+    off names the frame and tool it was read in, and that a base or tool set where partcal does not read (a
+    subroutine of another module, a track) would move it."""
+    poses = UR10.forward(np.array([[0, -90, 0, -90, 90, 0.0], [10, -80, 90, -100, -90, 20.0]]))
+    poses[1, :3, 3] += [5000.0, 0.0, 0.0]                                 # far beyond the arm's reach
+    rv = rotation_vectors_from_matrices(poses[:, :3, :3])
+    path = tmp_path / "cell.script"
+    path.write_text("def cell():\n" + "".join(f"  movel(p[{', '.join(f'{v:.9f}' for v in [*p[:3, 3] / 1000, *r])}])\n"
+                                              for p, r in zip(poses, rv)) + "end\n")
+    result = compensated(constant_model(UR10, [0.3, -0.2, 0.1]), path, keep_unconverged=True)
+    why = [w for _, w in result.failures]
+    assert why[0].startswith("is unreachable by the robot's kinematics: it lies where the arm is stretched out or "
+                             "folded (a singular pose), and the solve stops")
+    assert why[1].startswith("is unreachable by the robot's kinematics: the nearest the arm comes is")
+    assert "in the frame (the default) with the tool (the default) it was read in; if another base or tool is in " \
+           "force at its motion (set by a subroutine partcal does not read, or a track moving the robot)" in why[1]
+
+
+def test_programs_warn_target_by_target_of_targets_far_from_the_models_data(tmp_path):
+    """A joint model fitted within 20 degrees of one posture, a PolyScope program with one target there and one
+    with joint 1 turned 183 degrees: only that one is warned of, with its distance (computed here from the
+    training joints), as the CSV path warns of its rows (a program said nothing)."""
+    rng = np.random.default_rng(4)
+    centre = np.array([20.0, -70.0, 90.0, -100.0, -80.0, 10.0])
+    X = centre + rng.uniform(-20, 20, (300, 6))
+    model = ErrorModel(inputs="joint", degree=1, solver="lstsq").fit(X, np.tile([0.3, -0.2, 0.1], (300, 1)))
+    save_model(model, tmp_path / "m.json", name="joint", robot=UR10)
+    q = np.array([centre, centre + [183.0, 0, 0, 0, 0, 0]])
+    poses = UR10.forward(q)
+    rv = rotation_vectors_from_matrices(poses[:, :3, :3])
+    joints = ", ".join(f"{v:.6f}" for v in np.radians(q[1]))
+    lines = [f"  movej([{', '.join(f'{v:.6f}' for v in np.radians(q[0]))}])",
+             f"  movel(p[{', '.join(f'{v:.9f}' for v in [*poses[0, :3, 3] / 1000, *rv[0]])}])",
+             f"  movej([{joints}])", f"  movel(p[{', '.join(f'{v:.9f}' for v in [*poses[1, :3, 3] / 1000, *rv[1]])}])"]
+    path = tmp_path / "far.script"
+    path.write_text("def far():\n" + "\n".join(lines) + "\nend\n")
+    done = run("compensate", str(tmp_path / "m.json"), str(path), "-o", str(tmp_path / "out.script"))
+    assert done.returncode == 0, done.stderr
+    far = [line for line in done.stderr.splitlines() if "from the data the model was fitted on" in line]
+    nearest = np.linalg.norm(X[None] - q[:, None], axis=2).min(axis=1)          # brute force, degrees
+    assert nearest[0] < 50 < nearest[1]
+    assert [re.search(r": line (\d+), column", line).group(1) for line in far] == ["4", "5"]
+    for line in far:       # the compensated joints lie within a tenth of a degree of the written ones
+        said = float(re.search(r"lies ([\d.]+) deg from the data the model was fitted on \(more than 50 deg\)",
+                               line).group(1))
+        assert abs(said - nearest[1]) < 0.1
+    summary = json.loads((tmp_path / "out.script.json").read_text())
+    assert [(x["line"], x["unit"]) for x in summary["far_from_data"]] == [(4, "deg"), (5, "deg")]
+
+
+def test_a_correction_within_the_tolerance_or_a_rotation_kept_leaves_the_numbers_as_written():
+    """Below the compensation's tolerance (1e-4 mm, 1e-5 degrees) a target keeps its text though PolyScope's 12
+    decimals print 1e-9 mm (a model's 1e-6 mm came back as changed digits); a rotation a position model keeps
+    keeps its numbers, a RobotStudio quaternion of 4 decimals a hair off unit included (it was normalised and
+    printed to 9 decimals), while the position moves by the constant error taken off."""
+    polyscope = FIXTURES / "polyscope_export.script"
+    assert compensated(constant_model(UR10, [1e-6, -1e-6, 1e-6]), polyscope).output == polyscope.read_bytes()
+    taught = FIXTURES / "robotstudio_taught.mod"
+    out = compensated(constant_model(SK120, [0.3, -0.2, 0.1]), taught).output.decode()
+    before = re.findall(r"Target_\d+:=\[\[([^\]]*)\],\[([^\]]*)\]", taught.read_text())
+    after = re.findall(r"Target_\d+:=\[\[([^\]]*)\],\[([^\]]*)\]", out)
+    assert [q for _, q in after] == [q for _, q in before] and len(before) == 4
+    for (p0, _), (p1, _) in zip(before, after):
+        np.testing.assert_allclose(np.array(p1.split(","), float) - np.array(p0.split(","), float),
+                                   [-0.3, 0.2, -0.1], atol=1e-9)

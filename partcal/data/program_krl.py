@@ -33,29 +33,23 @@ from pathlib import Path
 import numpy as np
 
 from ..robot.rotations import kuka_abc_from_matrices, matrices_from_kuka_abc
+from .program_krl_reach import JOINT_KEYS, NULLFRAME, POSE_KEYS, Reach, fdat_frames, key, unusable
 from .program_text import (Dialect, Field, ProgramSyntaxError, Target, UnknownFrameError, closing, frame_pose,
                            is_number, lf_view, line_and_column, line_end, masked, syntax_error)
 
 POSE_TYPES = {"E6POS", "POS", "E3POS", "FRAME"}
 JOINT_TYPES = {"E6AXIS", "AXIS", "E3AXIS"}
-POSE_KEYS = ("X", "Y", "Z", "A", "B", "C")
-JOINT_KEYS = ("A1", "A2", "A3", "A4", "A5", "A6")
-NULLFRAME = "$NULLFRAME"
 MM_DECIMALS, DEG_DECIMALS = 6, 6
-_DECL = re.compile(r"\bDECL\s+(?:GLOBAL\s+)?([A-Za-z_]\w*)\s+([$A-Za-z_][\w\[\],]*)\s*=\s*$", re.IGNORECASE)
+_DECL = re.compile(r"(?:\bDECL\s+(?:GLOBAL\s+)?|^[ \t]*(?:GLOBAL[ \t]+)?(?=(?:E6POS|POS|E3POS|FRAME|E6AXIS|AXIS|E3AXIS|"
+                   r"FDAT)[ \t]))([A-Za-z_]\w*)\s+([$A-Za-z_][\w\[\],]*)\s*=\s*$", re.IGNORECASE | re.MULTILINE)
 _ASSIGN = re.compile(r"([$A-Za-z_][\w$]*(?:\[[\d, ]*\])?)\s*=\s*$")
 _MOTION = re.compile(r"\b(PTP|LIN|CIRC|SPTP|SLIN|SCIRC|PTP_REL|LIN_REL)\s+$", re.IGNORECASE)
 _ABSOLUTE_MOTIONS = {"PTP", "LIN", "CIRC", "SPTP", "SLIN", "SCIRC"}
 _ITEM = re.compile(r"\s*([A-Za-z_]\w*)\s+(\S(?:.*\S)?)\s*$", re.DOTALL)
 _INT = re.compile(r"[-+]?\d+|'[BbHh][0-9A-Fa-f]+'")
-_EVENT = re.compile(                      # in file order: what sets the base and tool, and the motions
-    r"^[ \t]*(?P<sys>\$BASE|\$TOOL)[ \t]*=(?!=)[ \t]*(?P<value>[^\r\n]*?)[ \t]*(?=[\r\n]|\Z)"
-    r"|\bBAS[ \t]*\([ \t]*#(?P<bas>BASE|TOOL)[ \t]*,(?P<number>[^)\r\n]*)\)"
-    r"|\bFDAT_ACT[ \t]*=[ \t]*(?P<fdat>[A-Za-z_]\w*)"
-    r"|^[ \t]*(?P<motion>PTP|LIN|CIRC|SPTP|SLIN|SCIRC)[ \t]+(?P<args>[^\r\n]*?)[ \t]*(?=[\r\n]|\Z)",
-    re.IGNORECASE | re.MULTILINE)
-SYSTEM_FRAMES = {"TOOL_CORR", "BASE_CORR", "REF_TOOL", "REF_PT", "MACHINE_DEF", "MACHINE_TOOL_DAT",
-                 "MACHINE_FRAME_DAT", "LOAD_DATA", "TOOL_DATA", "BASE_DATA"}    # $config.dat's, never targets
+SYSTEM_FRAMES = {"TOOL_CORR", "TOOL_CORR_W", "BASE_CORR", "M_BASE_CORR", "REF_TOOL", "REF_PT", "MACHINE_DEF",
+                 "MACHINE_TOOL_DAT", "MACHINE_FRAME_DAT", "LOAD_DATA", "TOOL_DATA", "BASE_DATA"}  # $config.dat's: no targets
+EXTERNAL_KEYS = ("E1", "E2", "E3", "E4", "E5", "E6")
 log = logging.getLogger(__name__)
 
 
@@ -66,13 +60,13 @@ def parse(text: str, source: str) -> tuple[list[Target], dict, list]:
     code = lf_view(masked(text, ";"))
     frames, fdat = {NULLFRAME: np.eye(4)}, {}
     records = _aggregates(text, code, source)
-    partner = _partner(source)
-    for rec in records + (_aggregates(*partner) if partner else []):
+    partner, config = _partner(source), config_dat(source)
+    for rec in (_aggregates(*config) if config else []) + records + (_aggregates(*partner) if partner else []):
         _definitions(rec, frames, fdat)
     suffix = Path(source).suffix.lower()
     is_dat = suffix == ".dat" or (suffix != ".src" and re.search(r"^[ \t]*DEFDAT\b", code, re.I | re.M) is not None)
     motions = (partner if partner and partner[2].lower().endswith(".src") else None) if is_dat else (text, code, source)
-    reach = _Reach(*motions, fdat, frames) if motions else None
+    reach = Reach(*motions, fdat, frames, frame) if motions else None
     targets, left = [], []
     for rec in records:
         target = _record_target(text, source, rec, reach, fdat, left)
@@ -83,25 +77,6 @@ def parse(text: str, source: str) -> tuple[list[Target], dict, list]:
                     "tool of its FDAT or of --frame and --tool (put its .src beside it to take only what motions "
                     "reach, in the base and tool set before them)", source)
     return targets, frames, left
-
-
-class Computed(str):
-    """A base or tool set at run time (its statement and line): targets moved to in it are left as written."""
-
-
-class FixedTool(str):
-    """An ``FDAT`` with ``IPO_FRAME #TCP``: the robot carries the workpiece past a fixed tool, its points are
-    in the tool's frame; they are left as written (the robot's own tool point is not on them)."""
-
-
-def _unusable(states: set) -> str | None:
-    """Why points moved to with these (base, tool) pairs cannot be compensated, if they cannot."""
-    for kind, text in ((FixedTool, "moved to with a fixed tool ({}: the robot carries the workpiece)"),
-                       (Computed, "moved to in a base or tool set at run time ({})")):
-        found = sorted(str(x) for state in states for x in state if isinstance(x, kind))
-        if found:
-            return text.format(found[0]) + ": not compensated, kept as written"
-    return None
 
 
 @dataclass
@@ -142,7 +117,7 @@ def _aggregates(text: str, code: str, source: str) -> list[_Record]:
 
 def _definitions(rec: _Record, frames: dict, fdat: dict) -> None:
     """``FDAT``s, and ``BASE_DATA[n]`` and ``TOOL_DATA[n]`` frames written as numbers."""
-    upper = _key(rec.name)
+    upper = key(rec.name)
     if rec.kind == "FDAT":
         fdat[upper] = {k: v[1] for k, v in rec.items.items() if k is not None}
     elif upper.startswith(("BASE_DATA[", "TOOL_DATA[")) and all(k in rec.items and rec.items[k][0] is not None
@@ -153,7 +128,7 @@ def _definitions(rec: _Record, frames: dict, fdat: dict) -> None:
 
 def _record_target(text, source, rec: _Record, reach, fdat, left) -> Target | None:
     """The target an aggregate is (None: not a target; a point not compensated goes into ``left``)."""
-    upper = _key(rec.name)
+    upper = key(rec.name)
     if rec.kind == "FDAT" or upper.startswith(("$", "BASE_DATA[", "TOOL_DATA[")) or \
             rec.kind not in (None, "pose", "joints") or (rec.via == "motion" and upper.endswith("_REL")):
         return None                                   # frames, other data, and relative motions' offsets
@@ -164,29 +139,25 @@ def _record_target(text, source, rec: _Record, reach, fdat, left) -> Target | No
             raise syntax_error(source, text, rec.start, f"{upper} to a partial aggregate", "a whole target: all of "
                                f"{' '.join(POSE_KEYS)} or of {' '.join(JOINT_KEYS)} (a partial one cannot be "
                                "compensated)")
+    why = _not_as_declared(rec, kind, upper, reach)
+    if why:
+        left.append((_first_value(rec), rec.name, why))
+    if kind is None or why:
         return None
     first = _first_value(rec)
-    if rec.via != "motion" and upper.split("[")[0] in SYSTEM_FRAMES:
-        left.append((first, rec.name, f"a system variable of the controller ({upper.split('[')[0]}), not a motion "
-                                      "target: kept as written"))
-        return None
     target = _target(text, source, rec.name, kind, rec.items, rec.start)
+    states = None if reach is None else reach.inline.get(rec.start) if rec.via == "motion" else reach.states(upper)
     if kind == "pose" and _fdat_of(upper, fdat) is not None and rec.via != "motion":
-        _frames_of(target, fdat)
-        why = _unusable({(target.frame, target.tool)})
-        if why:
-            left.append((first, rec.name, why))
-            return None
-        return target
-    if reach is None:
+        _frames_of(target, fdat)         # an inline form's point: its FDAT's frames, where its motions set none
+        states = {(b or target.frame, t or target.tool) for b, t in states or [(None, None)]}
+    elif reach is None:
         return target                          # a data list without its .src: every point, as declared
-    states = reach.inline.get(rec.start) if rec.via == "motion" else reach.states(upper)
     if not states:
         why = reach.through.get(upper) or reach.through.get(upper.split("[")[0])
         left.append((first, rec.name, f"reached only through the expression {why}, not compensated" if why else
                      f"no motion of {reach.source_name} reaches it: not a target, kept as written"))
         return None
-    why = _unusable(states) if kind == "pose" else None
+    why = unusable(states) if kind == "pose" else None
     if why:
         left.append((first, rec.name, why))
         return None
@@ -201,15 +172,51 @@ def _record_target(text, source, rec: _Record, reach, fdat, left) -> Target | No
     return target
 
 
+def _not_as_declared(rec: _Record, kind: str | None, upper: str, reach: Reach | None) -> str | None:
+    """Why an aggregate that is no motion's own is not what a motion moves to, if it is not: a partial one
+    assigned at run time (the rest keeps the point's old values), a point the module changes at run time
+    (``XC1.Z = XC1.Z + 20``), a system variable of the controller."""
+    if rec.via == "motion":
+        return None
+    if kind is None:
+        if rec.via != "assign" or reach is None or not reach.states(upper):
+            return None
+        keys = POSE_KEYS if set(rec.items) & set(POSE_KEYS) else JOINT_KEYS
+        kept = ", ".join(k for k in keys if k not in rec.items)
+        return (f"a partial aggregate assigned at run time: its {kept} keep the value {rec.name} had before, so the "
+                "point moved to is not all written here: not compensated, kept as written")
+    changed = reach.change(upper) if reach is not None else None
+    if changed:
+        return (f"changed at run time ({changed} of {reach.source_name}): its declared value is not what the robot "
+                "moves to, kept as written")
+    if upper.split("[")[0] in SYSTEM_FRAMES:
+        return f"a system variable of the controller ({upper.split('[')[0]}), not a motion target: kept as written"
+    return None
+
+
 def _first_value(rec: _Record) -> int:
     """Offset of the first value of an aggregate (where a note about it points)."""
     offsets = [v[2] for k, v in rec.items.items() if k is not None]
     return min(offsets) if offsets else rec.start
 
 
-def _key(name: str) -> str:
-    """A name as KRL compares it: upper case, no spaces (``xp1`` is ``XP1``; ``P[ 3 ]`` is ``P[3]``)."""
-    return re.sub(r"\s+", "", name).upper()
+def config_dat(source: str) -> tuple[str, str, str] | None:
+    """The ``$config.dat`` of a module, where the controller keeps it: beside it, or in ``System`` of a folder up
+    to three above it (a KRC backup's ``KRC/R1/System/$config.dat`` for ``KRC/R1/Program/weld/weld.src``). Its
+    text, masked code and path; None when there is none (or ``source`` is it)."""
+    path = Path(source)
+    if path.name.lower() == "$config.dat":
+        return None
+    try:
+        folders = [path.parent] + [d for a in path.parents[1:4] if a.is_dir() for d in a.iterdir()
+                                   if d.is_dir() and d.name.lower() == "system"]
+        match = next((f for folder in folders for f in folder.iterdir() if f.name.lower() == "$config.dat"), None)
+        if match is None:
+            return None
+        text = match.read_bytes().decode("latin-1")
+    except OSError:
+        return None
+    return text, lf_view(masked(text, ";")), str(match)
 
 
 def _partner(source: str) -> tuple[str, str, str] | None:
@@ -228,98 +235,6 @@ def _partner(source: str) -> tuple[str, str, str] | None:
         return None
     text = raw.decode("latin-1")
     return text, lf_view(masked(text, ";")), str(match)
-
-
-class _Reach:
-    """What the motions of a ``.src`` reach, and in which base and tool: the ``$BASE``/``$TOOL`` assignments,
-    ``BAS(#BASE, n)``/``BAS(#TOOL, n)`` and ``FDAT_ACT`` before each motion, in file order (from the program's
-    start: the default frames, those of ``--frame`` and ``--tool``)."""
-
-    def __init__(self, text: str, code: str, source: str, fdat: dict, frames: dict):
-        self.source_name = Path(source).name
-        self.named: dict = {}          # NAME or NAME[3] -> {(base, tool)}; NAME[] (any element) for NAME[i]
-        self.through: dict = {}        # NAME -> the expression a motion reaches it through
-        self.inline: dict = {}         # offset of an inline aggregate -> {(base, tool)}
-        base = tool = None
-        for m in _EVENT.finditer(code):
-            line = line_and_column(text, m.start())[0]
-            if m.group("sys"):
-                which = m.group("sys").upper()
-                value = _state_value(which, m.group("value"), line, frames, source)
-                base, tool = (value, tool) if which == "$BASE" else (base, value)
-            elif m.group("bas"):
-                number = m.group("number").strip()
-                which = m.group("bas").upper()
-                value = (NULLFRAME if int(number) == 0 else f"{which}_DATA[{int(number)}]") if \
-                    re.fullmatch(r"\d+", number) else Computed(f"BAS(#{which}, {number}) at line {line}")
-                base, tool = (value, tool) if which == "BASE" else (base, value)
-            elif m.group("fdat"):
-                data = fdat.get(m.group("fdat").upper())
-                if data is None:
-                    base = tool = Computed(f"FDAT_ACT = {m.group('fdat')} at line {line}, not defined")
-                else:
-                    base, tool = _fdat_frames(data)
-            else:
-                self._motion(m, code, (base, tool))
-
-    def _motion(self, m, code: str, state: tuple) -> None:
-        args = m.group("args")
-        parts = [args] if m.group("motion").upper() not in ("CIRC", "SCIRC") else _top_level(args)[:2]
-        for part in parts:
-            offset = m.start("args") + args.find(part) + len(part) - len(part.lstrip())
-            part = part.strip()
-            if part.startswith("{"):
-                self.inline.setdefault(offset, set()).add(state)
-                continue
-            name = re.match(r"([$A-Za-z_][\w$]*)\s*(\[[^\]]*\])?", part)
-            if name is None:
-                continue
-            rest = part[name.end():].lstrip()
-            index = re.sub(r"\s+", "", name.group(2) or "")
-            key = name.group(1).upper() + (index if re.fullmatch(r"\[\d+\]", index) else "[]" if index else "")
-            if rest.startswith(":") or (rest[:1] in "+-*/" and rest):
-                self.through.setdefault(key.replace("[]", ""), part.split(" C_")[0].strip())
-            else:
-                self.named.setdefault(key, set()).add(state)
-
-    def states(self, key: str) -> set:
-        """The (base, tool) pairs a named point is moved to with (an element: also those of ``NAME[i]``)."""
-        found = set(self.named.get(key, set()))
-        if "[" in key:
-            found |= self.named.get(key.split("[")[0] + "[]", set())
-        return found
-
-
-def _state_value(which: str, value: str, line: int, frames: dict, source: str):
-    """The base or tool a ``$BASE = ..``/``$TOOL = ..`` assignment sets: a name, a literal frame (defined here
-    as ``$BASE at line N``), or Computed."""
-    upper = re.sub(r"\s+", "", value).upper()
-    data = "BASE_DATA" if which == "$BASE" else "TOOL_DATA"
-    if upper == NULLFRAME:
-        return NULLFRAME
-    if re.fullmatch(data + r"\[\d+\]", upper):
-        return upper
-    if upper.startswith("{") and upper.endswith("}"):
-        try:
-            pose = frame(value, source)
-        except ProgramSyntaxError:
-            pose = None
-        if pose is not None:
-            name = f"{which} at line {line}"
-            frames[name] = pose
-            return name
-    return Computed(f"{which} = {value.strip()} at line {line}")
-
-
-def _top_level(text: str) -> list[str]:
-    """Comma-separated parts of ``text`` outside braces and brackets."""
-    out, depth, at = [], 0, 0
-    for k, c in enumerate(text):
-        depth += c in "{[(" and 1 or (-1 if c in "}])" else 0)
-        if c == "," and depth == 0:
-            out.append(text[at:k])
-            at = k + 1
-    return out + [text[at:]]
 
 
 def _items(text, code, source, start, end) -> dict:
@@ -366,8 +281,9 @@ def _target(text, source, name, kind, items, start) -> Target:
     if kind == "joints":
         return Target(name, 0, 0, "joints", tuple(fields), line_end=line_end(text, start))
     config = tuple(_status(items.get(k), text, source, name, k) for k in ("S", "T"))
+    external = tuple((k, items[k][0].value) for k in EXTERNAL_KEYS if k in items and items[k][0] is not None)
     return Target(name, 0, 0, "pose", tuple(fields), configuration=None if config == (None, None) else config,
-                  line_end=line_end(text, start))
+                  line_end=line_end(text, start), external=external)
 
 
 def _status(item, text, source, name, key) -> int | None:
@@ -386,22 +302,11 @@ def _fdat_of(name: str, fdat: dict) -> dict | None:
     return fdat.get("F" + name) or (fdat.get("F" + name[1:]) if name.startswith("X") else None)
 
 
-def _fdat_frames(data: dict) -> tuple:
-    """The base and tool an FDAT sets (``BASE_NO``, ``TOOL_NO``; 0: the robot base, the flange)."""
-    if data.get("IPO_FRAME", "#BASE").upper() != "#BASE":
-        return FixedTool(f"IPO_FRAME {data['IPO_FRAME']}"), None
-    base, tool = data.get("BASE_NO", "0").strip(), data.get("TOOL_NO", "0").strip()
-    if not re.fullmatch(r"\d+", base) or not re.fullmatch(r"\d+", tool):
-        return Computed(f"FDAT BASE_NO {base}, TOOL_NO {tool}"), None
-    return (NULLFRAME if int(base) == 0 else f"BASE_DATA[{int(base)}]",
-            NULLFRAME if int(tool) == 0 else f"TOOL_DATA[{int(tool)}]")
-
-
 def _frames_of(target: Target, fdat: dict) -> None:
     """The base and tool an FDAT names for ``target`` (``FP1`` for ``XP1`` or ``P1``)."""
-    data = _fdat_of(_key(target.name), fdat)
+    data = _fdat_of(key(target.name), fdat)
     if data is not None and target.kind == "pose":
-        target.frame, target.tool = _fdat_frames(data)
+        target.frame, target.tool = fdat_frames(data)
 
 
 def poses(values):
@@ -446,6 +351,17 @@ def seeds(configurations, reference_deg) -> np.ndarray:
     return q
 
 
+def ranges(configurations) -> tuple[np.ndarray, np.ndarray]:
+    """The joint ranges (n, 6) degrees, low and high, that configurations ``(S, T)`` (n, 2) allow: each axis on
+    the side of 0 its bit of ``T`` names (0 itself on both); rows without ``T`` (-1) free."""
+    turn = np.asarray(configurations)[:, 1]
+    negative = (turn[:, None] >> np.arange(6)) & 1 == 1
+    written = (turn >= 0)[:, None]
+    low = np.where(written & ~negative, 0.0, -np.inf)
+    high = np.where(written & negative, 0.0, np.inf)
+    return low, high
+
+
 DIALECT = Dialect("krl", (".src", ".dat"), parse, frame, ";", poses=poses, pose_values=pose_values,
                   pose_decimals=(MM_DECIMALS,) * 3 + (DEG_DECIMALS,) * 3, joint_decimals=DEG_DECIMALS,
-                  configuration=configuration, compare=(1,), seeds=seeds)
+                  configuration=configuration, compare=(1,), seeds=seeds, ranges=ranges)

@@ -30,6 +30,7 @@ from .program_text import (Dialect, ProgramSyntaxError, Target, UnknownFrameErro
 
 MM_DECIMALS, QUATERNION_DECIMALS, DEG_DECIMALS = 6, 9, 6
 UNIT_TOLERANCE = 1e-3      # a quaternion's norm may differ from 1 by this much (numbers rounded when written)
+UNUSED_AXIS = 8.9e9        # an external axis written 9E9 (9E+09) is not used
 _DECL = re.compile(r"\b(?:CONST|PERS|VAR)\s+(robtarget|jointtarget|tooldata|wobjdata)\s+([A-Za-z_]\w*)"
                    r"\s*(\{\s*\d+\s*\})?\s*:=\s*\[", re.IGNORECASE)
 _WOBJ = re.compile(r"\\WObj\s*:=\s*([A-Za-z_]\w*)", re.IGNORECASE)
@@ -230,9 +231,11 @@ def _robtarget(text, code, source, start, name) -> Target:
     trans = numbers(source, text, parts[0][0] + 1, parts[0][1], 3, f"{name}: position [x, y, z] (mm)")
     rot = numbers(source, text, parts[1][0] + 1, parts[1][1], 4, f"{name}: quaternion [q1, q2, q3, q4]")
     conf = numbers(source, text, parts[2][0] + 1, parts[2][1], 4, f"{name}: confdata [cf1, cf4, cf6, cfx]")
+    extax = numbers(source, text, parts[3][0] + 1, parts[3][1], 6, f"{name}: extjoint [eax_a, .., eax_f]")
     _check_unit(text, source, rot, f"{name}: quaternion")
+    used = tuple((f"eax_{'abcdef'[k]}", f.value) for k, f in enumerate(extax) if f.value < UNUSED_AXIS)
     return Target(name, 0, 0, "pose", tuple(trans + rot), configuration=tuple(int(f.value) for f in conf),
-                  line_end=line_end(text, start))
+                  line_end=line_end(text, start), external=used)
 
 
 def _check_unit(text, source, fields, what) -> None:
@@ -317,7 +320,16 @@ def seeds(configurations, reference_deg) -> np.ndarray:
     return q
 
 
+def ranges(configurations) -> tuple[np.ndarray, np.ndarray]:
+    """The joint ranges (n, 6) degrees, low and high, that configurations ``(cf1, cf4, cf6, cfx)`` (n, 4) allow:
+    axes 1, 4 and 6 in their quarter revolution (edges included), the others free."""
+    cf = np.asarray(configurations)[:, :3]
+    low, high = np.full((len(cf), 6), -np.inf), np.full((len(cf), 6), np.inf)
+    low[:, [0, 3, 5]], high[:, [0, 3, 5]] = cf * 90.0, cf * 90.0 + 90.0
+    return low, high
+
+
 DIALECT = Dialect("rapid", (".mod", ".modx", ".prg", ".sys"), parse, frame, "!", poses=poses, pose_values=pose_values,
                   pose_decimals=(MM_DECIMALS,) * 3 + (QUATERNION_DECIMALS,) * 4, joint_decimals=DEG_DECIMALS,
-                  configuration=configuration, compare=(0, 1, 2), seeds=seeds, statement_end=";",
+                  configuration=configuration, compare=(0, 1, 2), seeds=seeds, ranges=ranges, statement_end=";",
                   edge_kept=True)

@@ -7,6 +7,8 @@ syntax, and only the numbers of targets are ever replaced.
 
 from __future__ import annotations
 
+import ast
+import math
 import re
 from dataclasses import dataclass, field
 from typing import Callable
@@ -26,6 +28,48 @@ _BREAK_CHAR = re.compile(r"[\r\n]")
 def is_number(text: str) -> bool:
     """Whether ``text`` is a number as the vendors write it and finite as a float (``1e999`` is not)."""
     return bool(NUMBER_RE.fullmatch(text)) and np.isfinite(float(text))
+
+
+CONSTANT_CALLS = {"d2r": math.radians, "r2d": math.degrees}
+CONSTANT_NAMES = {"pi": math.pi}
+_OPERATORS = {ast.Add: lambda a, b: a + b, ast.Sub: lambda a, b: a - b, ast.Mult: lambda a, b: a * b,
+              ast.Div: lambda a, b: a / b, ast.USub: lambda a: -a, ast.UAdd: lambda a: a}
+
+
+def constant_value(text: str) -> float | None:
+    """The value of constant arithmetic as URScript writes it in a pose (``0.05 * 2``, ``-(0.1)``, ``d2r(180)``,
+    ``pi / 2``): numbers, ``+ - * /``, parentheses, ``d2r``, ``r2d`` and ``pi``; None for anything else (a
+    variable, another function) or a value that is not finite.
+
+    >>> constant_value("0.05 * 2"), constant_value("-(0.1)"), constant_value("d2r(90)") == math.pi / 2
+    (0.1, -0.1, True)
+    >>> constant_value("z0 - 2*h") is None, constant_value("1/0") is None
+    (True, True)
+    """
+    try:
+        tree = ast.parse(text.strip(), mode="eval").body
+    except (SyntaxError, ValueError):
+        return None
+
+    def value(node):
+        if isinstance(node, ast.Constant) and type(node.value) in (int, float):
+            return float(node.value)
+        if isinstance(node, ast.Name) and node.id in CONSTANT_NAMES:
+            return CONSTANT_NAMES[node.id]
+        if isinstance(node, ast.UnaryOp) and type(node.op) in _OPERATORS:
+            return _OPERATORS[type(node.op)](value(node.operand))
+        if isinstance(node, ast.BinOp) and type(node.op) in _OPERATORS:
+            return _OPERATORS[type(node.op)](value(node.left), value(node.right))
+        if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in CONSTANT_CALLS \
+                and len(node.args) == 1 and not node.keywords:
+            return CONSTANT_CALLS[node.func.id](value(node.args[0]))
+        raise ValueError(node)
+
+    try:
+        result = value(tree)
+    except (ValueError, ZeroDivisionError, OverflowError):
+        return None
+    return result if math.isfinite(result) else None
 
 
 class ProgramSyntaxError(DataError):
@@ -72,6 +116,9 @@ class Target:
         dialect's default, the robot base and the flange unless options say otherwise).
     line_end : int
         Offset of the end of the target's line (before its line ending): where a comment goes.
+    external : tuple of (str, float)
+        The external axes written with a pose, as the program names them and in its units (KUKA ``E1 1500``,
+        ABB ``eax_a``; a track's mm, a positioner's degrees); none when absent or unused (ABB's ``9E9``).
     """
 
     name: str
@@ -86,6 +133,7 @@ class Target:
     frame: str | None = None
     tool: str | None = None
     line_end: int = 0
+    external: tuple = ()
 
     def where(self, source: str) -> str:
         return f"{source}: line {self.line}, column {self.column}: target {self.name}"
@@ -128,7 +176,9 @@ class Dialect:
     ``frame(text, source)`` -> a pose (4, 4) mm from an option's value in the vendor's syntax.
     ``configuration(q_deg (n, N))`` -> the configuration each joint solution has (n, k) ints, compared
     with a target's written one at the indices ``compare``; ``seeds(configurations (n, k), reference (n, N)
-    deg)`` -> IK seeds that have the written configurations (-1: not written), near the reference joints.
+    deg)`` -> IK seeds that have the written configurations (-1: not written), near the reference joints;
+    ``ranges(configurations (n, k))`` -> the joint ranges they allow (low, high (n, N) degrees; -inf, inf where
+    free), where a straight wrist's shared turn is split (:func:`partcal.robot.wrist.nearest_split`).
     ``comment``: the line-comment mark. ``edge_kept``: a target whose intended joint lies on the edge of two
     configurations (ABB's axis 4 at 0 degrees, tool down) has both, and its compensated joints may take either
     side (the ABB controller takes the nearest; a KUKA ``T`` bit decides the turn of a ``PTP``, so KRL keeps
@@ -148,6 +198,7 @@ class Dialect:
     configuration: Callable | None = None
     compare: tuple[int, ...] = ()
     seeds: Callable | None = None
+    ranges: Callable | None = None
     comment_line: bool = False          # a note goes on a line of its own before the target (CSV)
     statement_end: str = ""             # a note goes after the statement's end (RAPID's ";"), not mid-statement
     edge_kept: bool = False             # a target on a configuration's edge keeps it on either side (ABB)
@@ -170,18 +221,20 @@ class Dialect:
             if t.kind == "joints":
                 t.joints_deg = np.array([f.value for f in t.fields]) * self.joint_unit_deg
 
-    def texts(self, targets: list[Target], positions=None, rotations=None, joints_deg=None) -> list[list[str]]:
+    def texts(self, targets: list[Target], positions=None, rotations=None, joints_deg=None,
+              tol_deg: float = 0.0) -> list[list[str]]:
         """The new text of every field of ``targets`` (all poses, or all joints): positions (n, 3) mm and
         rotations (n, 3, 3), or joints (n, N) degrees. A number equal to the old one at the precision
-        written keeps its text; a rotation equal to the old one keeps its numbers (a quaternion written a
-        little off unit, a rotation vector of either sign)."""
+        written keeps its text (:func:`number_text`); a rotation within ``tol_deg`` degrees of the old one
+        keeps its numbers (a quaternion written a little off unit, a rotation vector of either sign)."""
         old = np.array([[f.value for f in t.fields] for t in targets])
         if joints_deg is not None:
             values, decimals = np.asarray(joints_deg) / self.joint_unit_deg, [self.joint_decimals] * old.shape[1]
         else:
             values, decimals = self.pose_values(positions, rotations, old), self.pose_decimals
             before = np.stack([t.rotation for t in targets])
-            same = np.abs(np.einsum("nij,nij->n", before, rotations) - 3.0) < 1e-15      # trace: angle ~0
+            chord = np.linalg.norm(rotations - before, axis=(1, 2)) / (2.0 * np.sqrt(2.0))   # sin(angle / 2)
+            same = np.degrees(2.0 * np.arcsin(np.minimum(chord, 1.0))) <= tol_deg
             values[same, 3:] = old[same, 3:]
         return [[number_text(v, f, d) for v, f, d in zip(row, t.fields, decimals)] for row, t in zip(values, targets)]
 
@@ -254,17 +307,19 @@ def syntax_error(source: str, text: str, offset: int, what: str, expected: str,
                               f"{found!r}; nothing written")
 
 
-def numbers(source: str, text: str, start: int, end: int, count: int | tuple, what: str) -> list[Field]:
-    """The comma-separated numbers between ``start`` and ``end`` (a list body), exactly ``count`` of them."""
+def numbers(source: str, text: str, start: int, end: int, count: int | tuple, what: str,
+            constants: bool = False) -> list[Field]:
+    """The comma-separated numbers between ``start`` and ``end`` (a list body), exactly ``count`` of them; with
+    ``constants``, an item may be constant arithmetic (:func:`constant_value`), read as its value."""
     out, at = [], start
     body = text[start:end]
-    parts = body.split(",")
-    for k, part in enumerate(parts):
+    for k, part in enumerate(top_level(body) if constants and "(" in body else body.split(",")):
         stripped = part.strip()
         offset = at + (len(part) - len(part.lstrip()))
-        if not is_number(stripped):
+        value = float(stripped) if is_number(stripped) else constant_value(stripped) if constants else None
+        if value is None:
             raise syntax_error(source, text, offset, f"{what}, item {k + 1}", "a number", stripped)
-        out.append(Field(offset, offset + len(stripped), stripped, float(stripped)))
+        out.append(Field(offset, offset + len(stripped), stripped, value))
         at += len(part) + 1
     counts = count if isinstance(count, tuple) else (count,)
     if len(out) not in counts:
@@ -272,23 +327,70 @@ def numbers(source: str, text: str, start: int, end: int, count: int | tuple, wh
     return out
 
 
+def top_level(body: str) -> list[str]:
+    """The comma-separated items of a list body, commas inside brackets, braces and calls not counted.
+
+    >>> top_level("p[0, 1], d2r(90), {X 1, Y 2}")
+    ['p[0, 1]', ' d2r(90)', ' {X 1, Y 2}']
+    """
+    out, depth, at = [], 0, 0
+    for k, c in enumerate(body):
+        depth += 1 if c in "([{" else -1 if c in ")]}" else 0
+        if c == "," and depth == 0:
+            out.append(body[at:k])
+            at = k + 1
+    return out + [body[at:]]
+
+
+_STYLE = re.compile(r"(?P<sign>[-+]?)(?P<whole>\d*)(?:\.(?P<frac>\d*))?(?:(?P<e>[eE])(?P<esign>[-+]?)(?P<exp>\d+))?")
+
+
 def number_text(value: float, old: Field, min_decimals: int) -> str:
-    """``value`` written as the number ``old`` was: its own text when equal at the precision written, else fixed
-    decimals (at least ``min_decimals``, more if the old text had more)."""
-    decimals = max(min_decimals, _decimals(old.text))
+    """``value`` written as the number ``old`` was: its own text when equal at the precision written (at least
+    ``min_decimals`` decimals), else in its style: as many decimals as it had and at least ``min_decimals``,
+    without the leading zero where it had none (``.208``), a ``+`` where it had one, in exponent form where it
+    was (``1.5e-01``, the exponent's case, sign and digits kept). Constant arithmetic (``0.05 * 2``) that
+    changes becomes a number.
+
+    >>> f = lambda text: Field(0, len(text), text, float(eval(text)))
+    >>> number_text(0.2080000001, f(".208"), 8), number_text(0.2083, f(".208"), 8), number_text(-0.5, f("-.4"), 3)
+    ('.208', '.20830000', '-.500')
+    >>> number_text(0.1503, f("1.5e-01"), 4), number_text(1203.5, f("+1.2E+03"), 3), number_text(0.1, f("0.05 * 2"), 3)
+    ('1.503e-01', '+1.203500E+03', '0.05 * 2')
+    """
+    m = _STYLE.fullmatch(old.text)               # None: constant arithmetic, read as its value
+    if m is not None and m.group("e"):
+        return _exponent_text(value, old, m, min_decimals)
+    decimals = max(min_decimals, len(m.group("frac") or "") if m else 0)
     new = f"{value + 0.0:.{decimals}f}"
     if float(new) == 0.0:
         new = new.lstrip("-")                       # no "-0.000000"
     if float(f"{old.value + 0.0:.{decimals}f}") == float(new):
         return old.text
-    if old.text.startswith("+") and not new.startswith("-"):
+    if m is None:
+        return new
+    if m.group("sign") == "+" and not new.startswith("-"):
         new = "+" + new
+    if not m.group("whole"):                        # written without the zero before the point
+        new = re.sub(r"^([-+]?)0\.", r"\1.", new)
     return new
 
 
-def _decimals(text: str) -> int:
-    mantissa = re.split("[eE]", text)[0]
-    return len(mantissa.split(".")[1]) if "." in mantissa else 0
+def _exponent_text(value: float, old: Field, m: re.Match, min_decimals: int) -> str:
+    """``value`` in the exponent form of ``old`` (``m``: its parts), with at least ``min_decimals`` decimals of
+    the value itself; ``old``'s text when equal at that precision."""
+    exponent = int(m.group("esign") + m.group("exp"))
+    places = max(min_decimals, len(m.group("frac") or "") - exponent)        # decimals of the value
+    if round(value, places) == round(old.value, places):
+        return old.text
+    power = exponent if value == 0 else int(np.floor(np.log10(abs(value))))
+    mantissa = f"{value / 10.0 ** power:.{max(places + power, 0)}f}"
+    if abs(float(mantissa)) >= 10:                  # rounded up to the next power of ten
+        power += 1
+        mantissa = f"{value / 10.0 ** power:.{max(places + power, 0)}f}"
+    sign = "-" if power < 0 else "+" if m.group("esign") == "+" else ""
+    new = f"{mantissa}{m.group('e')}{sign}{str(abs(power)).zfill(len(m.group('exp')))}"
+    return "+" + new if m.group("sign") == "+" and not new.startswith("-") else new
 
 
 def frame_pose(positions_mm, rotations) -> NDArray[np.float64]:

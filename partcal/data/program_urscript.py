@@ -25,8 +25,8 @@ import re
 import numpy as np
 
 from ..robot.rotations import matrices_from_rotation_vectors, rotation_vectors_from_matrices
-from .program_text import (Dialect, ProgramSyntaxError, Target, UnknownFrameError, closing, frame_pose,
-                           line_and_column, line_end, masked, numbers, syntax_error)
+from .program_text import (CONSTANT_CALLS, CONSTANT_NAMES, Dialect, ProgramSyntaxError, Target, UnknownFrameError,
+                           closing, frame_pose, line_and_column, line_end, masked, numbers, syntax_error, top_level)
 
 MOVES = ("movel", "movej", "movep", "movec", "servoj")
 _POSE = re.compile(r"\bp\s*\[")
@@ -43,14 +43,14 @@ def parse(text: str, source: str) -> tuple[list[Target], dict, list]:
     code = masked(text, "#")
     tools: dict = {}
     tcps = _tcps(text, code, source, tools)
-    uses = _pose_uses(code, tcps)
+    uses, values = _pose_uses(code, tcps), _assignments(text, code)
     targets, left = [], []
     for m in _POSE.finditer(code):
         start = m.end() - 1
         if closing(code, start, "[", "]") < 0:          # a broken program, whether or not a move takes this pose
             raise syntax_error(source, text, start, "pose literal", "a closing ']'")
         before = code[max(0, m.start() - 200):m.start()]
-        frame, tool = None, _tool_at(tcps, start)
+        frame, tool, variable = None, _tool_at(tcps, start), None
         if re.search(r"\bset_tcp\s*\(\s*$", before):
             continue                                                    # a tool, not a target
         assigned = _ASSIGN.search(before)
@@ -58,24 +58,89 @@ def parse(text: str, source: str) -> tuple[list[Target], dict, list]:
                 re.search(r"\bmovec\s*\([^()]*,\s*$", before):
             pass
         elif (trans := _POSE_TRANS.search(before)) is not None:
+            if not _MOVED_TRANS.search(before):
+                continue                        # pose_trans(A, p[..]) computed into a variable: an offset of A
             frame = trans.group(1)
         elif assigned and assigned.group(1) in uses:                    # a pose variable that a move takes
-            frame, tool = _one_use(text, code, source, start, assigned.group(1), uses[assigned.group(1)])
+            variable = assigned.group(1)
+            frame, tool = _one_use(text, code, source, start, variable, uses[variable])
         else:
             continue                                        # an offset, an argument, a variable no move takes
         name = _name_before(code, start) or "p[...]"
-        why = _computed(code, start, "pose") or (f"moved to with a TCP computed at run time ({tool})" if tool and
-                                                  tool.endswith(_COMPUTED_TCP) else None)
+        why = _computed(code, start, "pose") or _computed_frame(frame, values) or _reassigned(variable, values) or \
+            (f"moved to with a TCP computed at run time ({tool})" if tool and tool.endswith(_COMPUTED_TCP) else None)
         if why:
             left.append((_first_item(code, start), name, why + ": kept as written"))
         else:
             targets.append(_pose_target(text, code, source, start, frame, tool, name))
-    targets += _joint_targets(text, code, source, left)
-    left += _relative_moves(code)
+    targets += _joint_targets(text, code, source, left) + _list_targets(text, code, source, tcps, values, left)
+    left += _relative_moves(code) + _computed_moves(code, values)
     return sorted(targets, key=lambda t: t.fields[0].start), tools, left
 
 
-_RELATIVE = re.compile(r"\b(?P<move>" + "|".join(MOVES) + r")\s*\(\s*(?P<call>(?!pose_trans\b)[A-Za-z_]\w*)\s*\(")
+_MOVED_TRANS = re.compile(r"\b(?:" + "|".join(MOVES) + r"|get_inverse_kin)\s*\(\s*pose_trans\s*\(\s*[A-Za-z_]\w*\s*,\s*$")
+_ASSIGNMENT = re.compile(r"(?:^|(?<=[\r\n;]))[ \t]*(?:global[ \t]+|local[ \t]+)?([A-Za-z_]\w*)[ \t]*(?::=|=(?!=))[ \t]*",
+                         re.MULTILINE)
+
+
+def _assignments(text: str, code: str) -> dict:
+    """Every assignment of a variable: name -> [(its line, the value as written, whether it is a literal: a pose
+    or a list of numbers and constant arithmetic, no value of the run)]."""
+    out: dict = {}
+    for m in _ASSIGNMENT.finditer(code):
+        end = m.end()
+        depth = 0
+        while end < len(code) and (depth > 0 or code[end] not in "\r\n;"):
+            depth += 1 if code[end] in "([" else -1 if code[end] in ")]" else 0
+            end += 1
+        value = " ".join(code[m.end():end].split())
+        out.setdefault(m.group(1), []).append((line_and_column(text, m.start(1))[0], value, _is_literal(value)))
+    return out
+
+
+def _is_literal(value: str) -> bool:
+    """Whether an assigned value is written out, no value of the run: ``p[..]`` or ``[..]`` (lists of them too)
+    naming no variable or function but constant arithmetic's (a number written wrong is the reader's to refuse)."""
+    return value.strip()[:1] in ("p", "[") and not set(_IDENTIFIER.findall(re.sub(r"\bp\s*\[", "[", value))) - _CONSTANT
+
+
+def _first_computed(name: str | None, values: dict) -> tuple | None:
+    """The first assignment of ``name`` that is no literal: (line, value), or None."""
+    return next(((line, value) for line, value, literal in values.get(name, ()) if not literal), None)
+
+
+def _computed_frame(frame: str | None, values: dict) -> str | None:
+    """Why a pose relative to ``frame`` (``pose_trans(frame, p[..])``) is no target: ``frame`` is computed at
+    run time (``here = get_actual_tcp_pose()``), not a feature to give."""
+    found = _first_computed(frame, values)
+    return None if found is None else (f"relative to {frame}, a pose computed at run time ({frame} = {found[1]} at "
+                                       f"line {found[0]})")
+
+
+def _reassigned(variable: str | None, values: dict) -> str | None:
+    """Why a pose literal assigned to ``variable`` is no target: the variable is assigned a computed pose too
+    (PolyScope's ``global Place_p=p[0,0,0,0,0,0]``, set by an Assignment node before its move)."""
+    found = _first_computed(variable, values)
+    return None if found is None else (f"{variable} is also assigned {found[1]} at line {found[0]}: the pose its "
+                                       "moves take is computed at run time, not this one")
+
+
+def _computed_moves(code: str, values: dict) -> list[tuple[int, str, str]]:
+    """Moves to a variable only ever assigned a computed pose (``here = get_actual_tcp_pose()``, then
+    ``movel(here)``): no target, reported as ``left`` entries (offset, name, why)."""
+    out = []
+    for m in re.finditer(r"\b(?P<move>" + "|".join(MOVES) + r"|get_inverse_kin)\s*\(\s*(?P<name>[A-Za-z_]\w*)\s*[,)]",
+                         code):
+        assigned = values.get(m.group("name"), ())
+        if assigned and not any(literal for _, _, literal in assigned):
+            line, value = _first_computed(m.group("name"), values)
+            out.append((m.start("name"), m.group("move"), f"moved to {m.group('name')}, a pose computed at run time "
+                        f"({m.group('name')} = {value} at line {line}): not compensated, kept as written"))
+    return out
+
+
+_RELATIVE = re.compile(r"\b(?P<move>" + "|".join(MOVES) + r")\s*\(\s*(?P<call>(?!pose_trans\b|get_inverse_kin\s*\(\s*"
+                       r"(?:p\s*\[|[A-Za-z_]\w*\s*[,)]))[A-Za-z_]\w*)\s*\(")
 
 
 def _relative_moves(code: str) -> list[tuple[int, str, str]]:
@@ -88,14 +153,15 @@ def _relative_moves(code: str) -> list[tuple[int, str, str]]:
 _IDENTIFIER = re.compile(r"(?<![\w.])[A-Za-z_]\w*")
 _EXPRESSION = re.compile(r"[\w\s.+\-*/%()\[\],]+")
 _COMPUTED_TCP = "(computed at run time)"
+_CONSTANT = set(CONSTANT_CALLS) | set(CONSTANT_NAMES)        # d2r(180), pi / 2: constant arithmetic, read
 
 
 def _computed(code: str, start: int, what: str) -> str | None:
     """Why the list at ``start`` is no target: some item is an expression of run-time values (``p[home[0] + r,
     ..]``); None when every item is a number, or when an item is neither (then the caller refuses it)."""
     end = _end_of(code, start)
-    items = _top_level(code[start + 1:end])
-    if any(_IDENTIFIER.search(item) and _EXPRESSION.fullmatch(item.strip()) for item in items):
+    items = top_level(code[start + 1:end])
+    if any(set(_IDENTIFIER.findall(item)) - _CONSTANT and _EXPRESSION.fullmatch(item.strip()) for item in items):
         body = " ".join(code[start + 1:end].split())
         shown = body if len(body) <= 60 else body[:57] + "..."
         return f"a {what} computed at run time ({'p' if what == 'pose' else ''}[{shown}])"
@@ -105,17 +171,6 @@ def _computed(code: str, start: int, what: str) -> str | None:
 def _first_item(code: str, start: int) -> int:
     """Offset of the first character of the first item of the list at ``start``."""
     return start + 1 + len(code[start + 1:]) - len(code[start + 1:].lstrip())
-
-
-def _top_level(body: str) -> list[str]:
-    """The comma-separated items of a list body, commas inside brackets and calls not counted."""
-    out, depth, at = [], 0, 0
-    for k, c in enumerate(body):
-        depth += 1 if c in "[(" else -1 if c in "])" else 0
-        if c == "," and depth == 0:
-            out.append(body[at:k])
-            at = k + 1
-    return out + [body[at:]]
 
 
 def _one_use(text, code, source, start, name, used) -> tuple:
@@ -145,7 +200,7 @@ def _pose_target(text, code, source, start, frame, tool, name) -> Target:
     end = closing(code, start, "[", "]")
     if end < 0:
         raise syntax_error(source, text, start, "pose literal", "a closing ']'")
-    fields = numbers(source, text, start + 1, end, 6, "pose p[x, y, z, rx, ry, rz] (m, rad)")
+    fields = numbers(source, text, start + 1, end, 6, "pose p[x, y, z, rx, ry, rz] (m, rad)", constants=True)
     return Target(name, 0, 0, "pose", tuple(fields), frame=frame, tool=tool, line_end=line_end(text, start))
 
 
@@ -176,7 +231,7 @@ def _tcps(text: str, code: str, source: str, tools: dict) -> list[tuple[int, str
             out.append((m.start(), f"set_tcp at line {line_and_column(text, m.start())[0]} {_COMPUTED_TCP}"))
         elif re.match(r"p\s*\[", arg):
             inner = code.index("[", m.end())
-            fields = numbers(source, text, inner + 1, closing(code, inner, "[", "]"), 6, "set_tcp pose")
+            fields = numbers(source, text, inner + 1, closing(code, inner, "[", "]"), 6, "set_tcp pose", constants=True)
             v = np.array([f.value for f in fields])
             name = f"set_tcp at line {line_and_column(text, m.start())[0]}"
             tools[name] = frame_pose(v[:3] * 1000.0, matrices_from_rotation_vectors(v[3:])[0])
@@ -207,8 +262,8 @@ def _joint_targets(text: str, code: str, source: str, left: list) -> list[Target
         at = m.end()
         if code.startswith("[", at):
             found.append((at, m.group(1)))
-        elif (name := re.match(r"[A-Za-z_]\w*", code[at:])) is not None:
-            moved.add(name.group())
+        elif (name := re.match(r"([A-Za-z_]\w*)\s*(\[?)", code[at:])) is not None and not name.group(2):
+            moved.add(name.group(1))                          # an element of a list: _list_targets
     for name in moved:
         for m in re.finditer(r"(?:^|[\r\n;])[ \t]*(?:global[ \t]+|local[ \t]+)?" + re.escape(name) +
                              r"[ \t]*=[ \t]*\[", code):
@@ -222,11 +277,43 @@ def _joint_targets(text: str, code: str, source: str, left: list) -> list[Target
     return out
 
 
+def _list_targets(text: str, code: str, source: str, tcps: list, values: dict, left: list) -> list[Target]:
+    """The poses and joint lists of a list that moves take element by element (``path = [p[..], p[..]]``, then
+    ``movel(path[i])`` in a loop): targets ``path[0]``, ``path[1]``.., with the tool of those moves (computed
+    ones go to ``left``; a list moved to with two tools is refused, as a pose variable)."""
+    uses: dict = {}
+    for m in re.finditer(r"\b(?:" + "|".join(MOVES) + r"|get_inverse_kin)\s*\(\s*([A-Za-z_]\w*)\s*\[", code):
+        uses.setdefault(m.group(1), set()).add((None, _tool_at(tcps, m.start())))
+    out = []
+    for name, used in uses.items():
+        for m in re.finditer(r"(?:^|(?<=[\r\n;]))[ \t]*(?:global[ \t]+|local[ \t]+)?" + re.escape(name) +
+                             r"[ \t]*=(?!=)[ \t]*\[", code, re.MULTILINE):
+            at, end = m.end() - 1, _end_of(code, m.end() - 1)
+            offset = at + 1
+            for k, item in enumerate(top_level(code[at + 1:end])):
+                start = offset + len(item) - len(item.lstrip())
+                offset += len(item) + 1
+                pose = re.match(r"p\s*\[", code[start:])
+                if not pose and not code.startswith("[", start):
+                    continue                                        # an element computed some other way
+                start += pose.end() - 1 if pose else 0
+                what, element = "pose" if pose else "joint list", f"{name}[{k}]"
+                why = _computed(code, start, what)
+                if why:
+                    left.append((_first_item(code, start), element, why + ": kept as written"))
+                elif pose:
+                    frame, tool = _one_use(text, code, source, start, element, used)
+                    out.append(_pose_target(text, code, source, start, frame, tool, element))
+                else:
+                    out.append(_joints(text, code, source, start, element))
+    return out
+
+
 def _joints(text, code, source, start, name) -> Target:
     end = closing(code, start, "[", "]")
     if end < 0:
         raise syntax_error(source, text, start, "joint list", "a closing ']'")
-    fields = numbers(source, text, start + 1, end, 6, "joint list [q1, ..., q6] (rad)")
+    fields = numbers(source, text, start + 1, end, 6, "joint list [q1, ..., q6] (rad)", constants=True)
     return Target(name, 0, 0, "joints", tuple(fields), line_end=line_end(text, start))
 
 

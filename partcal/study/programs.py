@@ -8,17 +8,21 @@ tool point in the robot base: ``W = F P T^-1 Tm`` (``F`` the frame, ``P`` the ta
 
 1. the intended joints ``q0``: the joints themselves, or the pose IK of ``W`` on the branch the target names
    (KUKA ``T``, ABB ``cf1 cf4 cf6``), from the joint target before it in the file (else the home pose),
-   then from further seeds until the branch matches;
+   then from further seeds until the branch matches; a straight wrist's shared turn split nearest the seed
+   (:mod:`partcal.robot.wrist`);
 2. the compensation (:meth:`Predictor.compensate_poses`, seeded with ``q0``): the full pose for a pose
    model, the position with the orientation kept for a position model; a Cartesian model's command is
    then solved by the robot's IK from ``q0``, as the controller would;
 3. the configuration kept: the compensated joints ``q1`` have the Jacobian's determinant of the sign of
    ``q0``'s (no shoulder, elbow or wrist flip; the UR's joint branch) and the configuration written with
-   the target, if any;
-4. the commanded pose carried back, ``P' = F^-1 C Tm^-1 T``, written in the vendor's units (joints: ``q1``).
+   the target, if any (:mod:`partcal.study.program_configuration`);
+4. the commanded pose carried back, ``P' = F^-1 C Tm^-1 T``, written in the vendor's units (joints: ``q1``)
+   and in the style of the old numbers; a target whose correction is within the tolerance keeps its text.
 
 A target that fails 1, 2 or 3 is not compensated: it is reported by file, line and name, and the
 program is not written unless ``keep_unconverged`` (then it keeps its original numbers and a comment).
+A target with an external axis off 0 (a track) is refused before. Each compensated target's distance
+from the model's data is kept (``ProgramResult.far``).
 """
 
 from __future__ import annotations
@@ -31,16 +35,13 @@ from numpy.typing import NDArray
 
 from ..data.program_text import Program, Target, UnknownFrameError
 from ..errors import DataError
-from ..robot.kinematics import checked_poses, pose_errors
+from ..robot.ik_refine import conditioning, refine_pose
+from ..robot.kinematics import checked_poses, ik_settings, pose_errors
 from ..robot.rotations import inverse_poses, poses_from
-from .predictor import Predictor
+from ..robot.wrist import nearest_split, shared_turns
+from .predictor import EXTRAPOLATION_LIMIT, Predictor
+from .program_configuration import configuration_kept, configuration_of, configurations_text, written_ranges
 
-BOUNDARY_DEG = 1e-6       # a joint this close to a configuration's boundary is in both
-SINGULAR_DET = 1e-6
-"""The determinant of the reach-scaled Jacobian below which a pose counts as on a singularity, whose sign
-means nothing. On the SK120's rectangle the determinant is about 2e-4 times axis 5 in degrees: a wrist written
-at axis 5 = 0 to micrometres lies 1e-4 degrees off it (2e-8), where the sign is the rounding's (1e-9 counted
-three of ten such targets as flips); 1e-6 holds axis 5 within 0.005 degrees as on the singularity."""
 EXACT_MM, EXACT_DEG = 1e-6, 1e-6
 IK_TOL_MM, IK_TOL_DEG = 1e-4, 1e-5
 """How closely the joints of a target's pose must be solved: they are solved to :data:`EXACT_MM` and
@@ -48,6 +49,12 @@ IK_TOL_MM, IK_TOL_DEG = 1e-4, 1e-5
 reals carry (about 1e-4 mm at a metre) is enough. At a singular wrist (axes 4 and 5 at 0, the paper's
 rectangle) the solve stalls near 4e-5 mm and 3e-6 degrees: 1e-6 alone refused 6 of 10 such targets."""
 SEED_TRIES = 40            # seeds for a pose target's intended joints: the one before it, then spread ones
+SPLIT_TOL_DEG = 0.02
+"""How far the intended joints of a target whose wrist is within 0.01 degrees of straight may turn its tool when
+the turn its wrist axes share is split nearest the seed (:func:`~partcal.robot.wrist.nearest_split`): twice the
+bend (its tool point moves by that turn times its distance from the wrist's axis). A program writes such a wrist straight only to its printed precision (KUKA's A B C to 1e-4 degrees), and
+the intended joints only seed the compensation and name its configuration: the compensation solves the pose
+itself."""
 
 
 @dataclass(frozen=True)
@@ -86,6 +93,10 @@ class ProgramResult:
     residual_mm, residual_deg : ndarray, shape (n,)
         The model's predicted miss after compensation (NaN where failed).
     orientation : "model" or "kept"
+    distance_to_data : ndarray, shape (n,)
+        How far each compensated target's model input (its commanded tool point, mm, for a Cartesian model;
+        its joints, degrees, for a joint model) lies from the data the model was fitted on (NaN where failed).
+    input_unit : "mm" or "deg"
     """
 
     program: Program
@@ -96,11 +107,20 @@ class ProgramResult:
     residual_mm: NDArray[np.float64]
     residual_deg: NDArray[np.float64]
     orientation: str
+    distance_to_data: NDArray[np.float64] | None = None
+    input_unit: str = "mm"
+
+    def far(self) -> list[tuple[Target, float]]:
+        """The compensated targets whose model input lies more than :data:`EXTRAPOLATION_LIMIT` (mm or degrees)
+        from the data the model was fitted on, with that distance: their correction is the model extrapolated."""
+        if self.distance_to_data is None:
+            return []
+        return [(t, float(d)) for t, d in zip(self.program.targets, self.distance_to_data) if d > EXTRAPOLATION_LIMIT]
 
     def summary(self, model: str = "") -> dict:
         """The summary written beside the output (JSON values): counts, the largest move and turn of a target
-        (with its name and line), the largest predicted residual, the targets not compensated, and the poses
-        the program reader left as written (with their reasons)."""
+        (with its name and line), the largest predicted residual, the targets not compensated, the poses the
+        program reader left as written (with their reasons), and the targets far from the model's data."""
         n, bad = len(self.program.targets), len(self.failures)
         ok = np.isfinite(self.residual_mm)
 
@@ -122,6 +142,8 @@ class ProgramResult:
                                 for t, why in self.failures],
             "left_as_written": [{"line": x.line, "column": x.column, "target": x.name, "reason": x.reason}
                                 for x in self.program.left],
+            "far_from_data": [{"line": t.line, "column": t.column, "target": t.name, "distance": d,
+                               "unit": self.input_unit} for t, d in self.far()],
             "written": self.output is not None,
         }
 
@@ -159,8 +181,14 @@ def compensate_program(predictor: Predictor, program: Program, frames: ProgramFr
     orientation = "model" if predictor.predicts_pose else "kept"
     q1, commanded, residual_mm, residual_deg = _solved(predictor, program, wanted, q0, failures, orientation,
                                                        tol_mm, tol_deg)
-    return _result(program, program.targets, frame, tool, tool_model, wanted, commanded, q1, failures,
-                   residual_mm, residual_deg, orientation, keep_unconverged)
+    result = _result(program, program.targets, frame, tool, tool_model, wanted, commanded, q1, failures,
+                     residual_mm, residual_deg, orientation, keep_unconverged, (tol_mm, tol_deg))
+    distance, cartesian = np.full(len(wanted), np.nan), predictor.inputs == "cartesian"
+    done = np.array([k not in failures for k in range(len(wanted))], dtype=bool)
+    if done.any():                      # the model's input at each solution: its tool point or the joints
+        distance[done] = predictor.distance_to_data(**({"positions": commanded[done, :3, 3]} if cartesian else
+                                                       {"joints": q1[done]}))
+    return dataclasses.replace(result, distance_to_data=distance, input_unit="mm" if cartesian else "deg")
 
 
 def _robot_for(predictor: Predictor, program: Program):
@@ -176,6 +204,16 @@ def _robot_for(predictor: Predictor, program: Program):
                             f"{robot.n_joints}")
     if robot.n_joints != 6 and not joints.all():
         raise DataError(f"{program.path}: pose targets need a six-joint robot; {robot.name} has {robot.n_joints}")
+    moved = [(t, axis, value) for t in program.targets for axis, value in t.external if value != 0.0]
+    if moved:
+        t, axis, value = moved[0]
+        raise DataError(f"{t.where(program.path)}: its external axis {axis} is at {value:g} (a linear track carrying "
+                        "the robot, or a positioner carrying the work): the pose is not in the robot's own frame "
+                        f"there, and the model's robot {robot.name} has no axis {axis}. partcal compensates poses in "
+                        "the robot's frame: give this station's targets relative to the robot's base (its travel "
+                        f"taken off, {axis} at 0), or as joint targets; "
+                        + (f"{len(moved) - 1} more targets with external axes off 0; " if len(moved) > 1 else "")
+                        + "nothing written")
     return robot, joints
 
 
@@ -212,7 +250,8 @@ def _solved(predictor: Predictor, program: Program, wanted, q0, failures: dict, 
         q1[idx] = r.joints_deg
     else:                        # the controller solves the command on the target's branch
         ik = _inverse_pose(robot, commanded[idx], q0[idx], min(tol_mm, IK_TOL_MM), min(tol_deg, IK_TOL_DEG))
-        q1[idx] = ik.q_deg
+        low, high = written_ranges(program, [program.targets[k] for k in idx], robot.n_joints)
+        q1[idx] = nearest_split(robot, ik.q_deg, q0[idx], low, high, tol_mm=IK_TOL_MM, tol_deg=IK_TOL_DEG)
         converged &= ik.success
     singular = r.singular if r.singular is not None else np.zeros(len(idx), dtype=bool)
     for k, ok, miss_mm, miss_deg, at_singularity in zip(idx, converged, r.residual_mm, r.residual_deg, singular):
@@ -227,15 +266,17 @@ def _solved(predictor: Predictor, program: Program, wanted, q0, failures: dict, 
             else:
                 failures[k] = f"did not converge ({miss})"
     chosen = [program.targets[k] for k in idx]
-    for k, same in zip(idx, _configuration_kept(robot, program, chosen, q0[idx], q1[idx])):
+    for k, same in zip(idx, configuration_kept(robot, program, chosen, q0[idx], q1[idx])):
         if not same and k not in failures:
-            failures[k] = "leaves its configuration (" + _configurations(program, q0[k], q1[k]) + ")"
+            failures[k] = "leaves its configuration (" + configurations_text(program, q0[k], q1[k]) + ")"
     return q1, commanded, residual_mm, residual_deg
 
 
 def _result(program, targets, frame, tool, tool_model, wanted, commanded, q1, failures, residual_mm,
-            residual_deg, orientation, keep_unconverged) -> ProgramResult:
-    """The rewritten text, the corrections and the failures."""
+            residual_deg, orientation, keep_unconverged, tolerance) -> ProgramResult:
+    """The rewritten text, the corrections and the failures. A target whose correction is within the
+    compensation's ``tolerance`` (mm, degrees) keeps its text: a model that predicts no error gives the
+    program back byte for byte, whatever the round-off of its solves (1e-12 m in a UR's 12 decimals)."""
     n = len(targets)
     out_pose = inverse_poses(frame) @ commanded @ inverse_poses(tool_model) @ tool
     original = inverse_poses(frame) @ wanted @ inverse_poses(tool_model) @ tool
@@ -245,13 +286,14 @@ def _result(program, targets, frame, tool, tool_model, wanted, commanded, q1, fa
         correction_mm[k] = correction_deg[k] = 0.0
         residual_mm[k] = residual_deg[k] = np.nan
         replacements.append(dialect.note(program.text, targets[k], f"partcal: not compensated: {failures[k]}"))
+    unmoved = (correction_mm <= tolerance[0]) & (correction_deg <= tolerance[1])
     for kind in ("pose", "joints"):
-        rows = [k for k, t in enumerate(targets) if t.kind == kind and k not in failures]
+        rows = [k for k, t in enumerate(targets) if t.kind == kind and k not in failures and not unmoved[k]]
         if not rows:
             continue
         chosen = [targets[k] for k in rows]
         texts = dialect.texts(chosen, joints_deg=q1[rows]) if kind == "joints" else \
-            dialect.texts(chosen, out_pose[rows, :3, 3], out_pose[rows, :3, :3])
+            dialect.texts(chosen, out_pose[rows, :3, 3], out_pose[rows, :3, :3], tol_deg=tolerance[1])
         replacements += [(f.start, f.end, new) for t, row in zip(chosen, texts) for f, new in zip(t.fields, row)
                          if new != f.text]
     listed = [(targets[k], why) for k, why in sorted(failures.items())]
@@ -299,9 +341,20 @@ def _lookup(program: Program, name: str | None, given: dict) -> NDArray[np.float
 def _inverse_pose(robot, poses, seeds, tol_mm: float, tol_deg: float):
     """The robot's pose IK of ``poses`` (n, 4, 4) from ``seeds``, solved to :data:`EXACT_MM` / :data:`EXACT_DEG`;
     a solve that stalls short of that (a singular wrist) succeeds where it is within ``tol_mm`` / ``tol_deg``
-    and the joint limits."""
+    and the joint limits. One that stalls farther off, at a wrist a hair off straight (axis 4 must turn to the
+    direction of a tilt of thousandths of a degree, where it has almost no leverage), is finished by
+    Levenberg-Marquardt with restarts along the self-motion (:func:`~partcal.robot.ik_refine.refine_pose`)."""
     ik = robot.inverse_pose(poses, seeds, tol_mm=min(tol_mm, EXACT_MM), tol_deg=min(tol_deg, EXACT_DEG))
     close = (ik.error_mm <= tol_mm) & (ik.error_deg <= tol_deg) & robot.within_limits(ik.q_deg)
+    stalled = np.flatnonzero(~(ik.success | close) & (shared_turns(robot, ik.q_deg)[0] >= 0))
+    if stalled.size:                  # a wrist a hair off straight: its axis 4 must turn far, with little leverage
+        q, error_mm, error_deg = ik.q_deg.copy(), ik.error_mm.copy(), ik.error_deg.copy()
+        settings, free = ik_settings(tol_mm, 100, 10.0, 0.05, tol_deg=tol_deg, length_mm=1000.0), robot.free_joints(())
+        q[stalled] = refine_pose(robot, poses[stalled, :3, 3], poses[stalled, :3, :3], q[stalled], free, settings,
+                                 tol_deg, 1000.0)[0]
+        error_mm[stalled], error_deg[stalled] = pose_errors(robot.forward(q[stalled]), poses[stalled])
+        close = (error_mm <= tol_mm) & (error_deg <= tol_deg) & robot.within_limits(q)
+        ik = dataclasses.replace(ik, q_deg=q, error_mm=error_mm, error_deg=error_deg)
     return dataclasses.replace(ik, success=ik.success | close)
 
 
@@ -343,79 +396,41 @@ def _intended_joints(robot, program: Program, wanted, q_given, joints, failures:
         named[written] = program.dialect.seeds(config, named[written])
         tries.append(named)
     tries += list(spread[robot.within_limits(spread)][:SEED_TRIES - len(tries)])
-    found = np.zeros(n, dtype=bool)
+    found, reached = np.zeros(n, dtype=bool), np.zeros(n, dtype=bool)
+    nearest, nearest_q = np.full(n, np.inf), q0.copy()          # the nearest miss of the pose, and its joints
+    low, high = written_ranges(program, program.targets, robot.n_joints)
     for seed in tries:
         rows = todo[~found[todo]]
         if rows.size == 0:
             break
         start = seed if np.ndim(seed) == 1 else seed[~found[todo]]
         ik = _inverse_pose(robot, wanted[rows], start, IK_TOL_MM, IK_TOL_DEG)
-        ok = ik.success & _matches(program, [program.targets[k] for k in rows], ik.q_deg)
-        q0[rows[ok]] = ik.q_deg[ok]
-        found[rows[ok]] = True
+        q = nearest_split(robot, ik.q_deg, start, low[rows], high[rows], tol_deg=SPLIT_TOL_DEG,
+                          tol_mm=np.radians(SPLIT_TOL_DEG) * robot.reach_mm)
+        ok = ik.success & configuration_of(robot, program, [program.targets[k] for k in rows], q, q)
+        q0[rows[ok]] = q[ok]
+        found[rows[ok]], reached[rows[ik.success]] = True, True
+        closer = ik.error_mm < nearest[rows]
+        nearest[rows[closer]], nearest_q[rows[closer]] = ik.error_mm[closer], ik.q_deg[closer]
     for k in todo[~found[todo]]:
-        conf = program.targets[k].configuration
-        failures[k] = "unreachable by the robot's kinematics" + (f" in its configuration {conf}" if conf else "")
+        failures[k] = _unreachable(robot, program.targets[k], reached[k], nearest[k], nearest_q[k])
     return q0
 
 
-def _matches(program: Program, targets: list[Target], q: NDArray[np.float64], q0=None) -> NDArray[np.bool_]:
-    """Whether joint solutions have the configuration their targets name (the parts the dialect compares).
-    With the intended joints ``q0`` and a dialect whose edges are kept (``Dialect.edge_kept``): a target whose
-    intended joint lies on an edge (ABB axis 4 at 0, tool down) has both sides' configuration, so ``q`` may be
-    on either."""
-    dialect = program.dialect
-    ok = np.ones(len(q), dtype=bool)
-    if dialect.configuration is None or not dialect.compare:
-        return ok
-    low, high = _configuration_bounds(dialect, q)
-    edge = _configuration_bounds(dialect, q0) if q0 is not None and dialect.edge_kept else None
-    for j, t in enumerate(targets):
-        if t.configuration is not None:
-            ok[j] = all(t.configuration[i] is None or t.configuration[i] in (low[j, i], high[j, i]) or
-                        (edge is not None and edge[0][j, i] != edge[1][j, i] and t.configuration[i] in
-                         (edge[0][j, i], edge[1][j, i]) and {low[j, i], high[j, i]} & {edge[0][j, i], edge[1][j, i]})
-                        for i in dialect.compare)
-    return ok
-
-
-def _configuration_bounds(dialect, q) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
-    """The configuration of joints ``q`` (n, N) moved by -/+ 1e-6 degrees: a joint on a boundary (a KUKA
-    axis at 0, an ABB axis at 90) is in both configurations."""
-    return dialect.configuration(q - BOUNDARY_DEG), dialect.configuration(q + BOUNDARY_DEG)
-
-
-def _configuration_kept(robot, program: Program, targets: list[Target], q0, q1) -> NDArray[np.bool_]:
-    """No flip (the Jacobian's determinant keeps its sign, where not ~0), and the configuration written with a
-    target (KUKA ``T``, ABB ``cf1 cf4 cf6``) still that of the compensated joints. A target written without
-    one is the controller's to solve near where the robot is: only a flip changes it."""
-    return (_branch(robot, q0) * _branch(robot, q1) >= 0) & _matches(program, targets, q1, q0)
-
-
-def _configurations(program: Program, q0, q1) -> str:
-    dialect = program.dialect
-    if dialect.configuration is not None and dialect.compare:
-        a, b = dialect.configuration(q0[None])[0], dialect.configuration(q1[None])[0]
-        if not np.array_equal(a[list(dialect.compare)], b[list(dialect.compare)]):
-            return f"{a.tolist()} -> {b.tolist()} in {dialect.name}'s terms"
-    return "the arm flips: the Jacobian's determinant changes sign"
-
-
-def _branch(robot, q: NDArray[np.float64], step_deg: float = 1e-4) -> NDArray[np.float64]:
-    """Sign of the 6 x 6 Jacobian's determinant (position mm, rotation vector rad; by central differences),
-    0 within :data:`SINGULAR_DET` of a singularity (relative to the arm's reach)."""
-    n, N = q.shape
-    if n == 0 or N != 6:
-        return np.zeros(n)
-    shifted = np.repeat(q[:, None], 2 * N, axis=1)
-    for k in range(N):
-        shifted[:, 2 * k, k] += step_deg
-        shifted[:, 2 * k + 1, k] -= step_deg
-    T = robot.forward(shifted.reshape(-1, N)).reshape(n, 2 * N, 4, 4)
-    dp = (T[:, 0::2, :3, 3] - T[:, 1::2, :3, 3]) / robot.reach_mm
-    dR = np.einsum("nkij,nklj->nkil", T[:, 0::2, :3, :3], T[:, 1::2, :3, :3])
-    dr = np.stack([dR[..., 2, 1] - dR[..., 1, 2], dR[..., 0, 2] - dR[..., 2, 0], dR[..., 1, 0] - dR[..., 0, 1]],
-                  axis=-1) / 2.0
-    J = np.concatenate([dp, dr], axis=2) / (2 * np.radians(step_deg))       # (n, 6 joints, 6)
-    det = np.linalg.det(J)
-    return np.where(np.abs(det) > SINGULAR_DET, np.sign(det), 0.0)
+def _unreachable(robot, target: Target, reached: bool, nearest_mm: float, q_deg) -> str:
+    """Why no seed gave a target's pose its intended joints, pointing where the cause is: its configuration
+    (the arm takes the pose, but not so), the joint limits (it takes the pose only outside them), the stretched
+    arm (a singular pose the solve stops short of), or its frame and tool (the nearest the arm comes is far off: the base or tool in force at its motion may not be
+    the one the program was read with)."""
+    conf = f" in its configuration {target.configuration}" if target.configuration else ""
+    if reached:
+        return f"is reachable by the robot's kinematics, but not{conf} (every solution found has another)"
+    if nearest_mm <= IK_TOL_MM and not robot.within_limits(np.asarray(q_deg)[None])[0]:
+        return f"{_outside_limits(robot, np.asarray(q_deg))} (the arm reaches the pose only there{conf})"
+    if nearest_mm < 1.0 and conditioning(robot, q_deg[None], np.arange(robot.n_joints), 1000.0)[0] < 1e-3:
+        return (f"is unreachable by the robot's kinematics{conf}: it lies where the arm is stretched out or folded "
+                f"(a singular pose), and the solve stops {nearest_mm:.3g} mm short of it")
+    return (f"is unreachable by the robot's kinematics{conf}: the nearest the arm comes is {nearest_mm:.4g} mm off, "
+            f"in the frame {target.frame or '(the default)'} with the tool {target.tool or '(the default)'} it was "
+            "read in; if another base or tool is in force at its motion (set by a subroutine partcal does not "
+            "read, or a track moving the robot), give them with --frame and --tool")

@@ -12,7 +12,7 @@ SYSTEM := $(VENV)/.system-packages
 # Debian packages the report tests use: the browser, and Mesa's EGL for off-screen 3-D pictures
 DEBS   := chromium libegl1 libegl-mesa0 libgl1-mesa-dri
 
-.PHONY: run test bench lock clean
+.PHONY: run test bench lock clean mutation
 
 $(STAMP): pyproject.toml $(LOCK)
 	$(PYTHON) -m venv $(VENV)
@@ -48,5 +48,15 @@ bench: $(STAMP)
 	$(BIN)/python -m pip install --quiet -c $(LOCK) pyswarms numba
 	for b in benchmarks/bench_*.py; do $(BIN)/python $$b || exit 1; done
 
+# Mutation testing of one module against the tests that guard it (CONTRIBUTING.md): slow, never in CI.
+#   make mutation MODULE=partcal/study/check.py TESTS="tests/test_check.py"
+# ONLY=explain,ALPHA: those definitions alone; RETEST=1: after new tests, the survivors again.
+# cosmic-ray is a development tool only: pinned in pyproject.toml's extra 'mutation', installed beside the
+# locked versions, never in the lock that make test installs.
+mutation: $(STAMP)
+	@test -n "$(MODULE)" -a -n "$(TESTS)" || { echo 'usage: make mutation MODULE=partcal/x.py TESTS="tests/test_x.py ..."'; exit 2; }
+	$(BIN)/python -m pip install --quiet -c $(LOCK) -e '.[mutation]'
+	$(BIN)/python tools/mutation.py $(MODULE) "$(TESTS)" $(if $(ONLY),--only $(ONLY)) $(if $(RETEST),--retest-survivors)
+
 clean:
-	rm -rf $(VENV) reports .pytest_cache
+	rm -rf $(VENV) reports .pytest_cache .mutation

@@ -3,7 +3,7 @@
 A laser tracker without its frame still measures distances: between the measured points of two poses,
 whatever the tracker's place. Here DH (parametrization "dh", the tool identified, the base held: distances
 cannot see it) is identified from the distances between the measured T-Mac points of series B rows
-1-1000 alone, with no registration and no tracker frame (``identify_measures`` over ``pose`` rows and
+1-1000 alone, with no registration and no tracker frame (``identify_measurements`` over ``pose`` rows and
 one ``distance`` row per pair, the tool started at the nominal robot's zero), from
 
 - every pair of the 1000 poses (499,500 distances),
@@ -51,8 +51,8 @@ from partcal.data.measurements import read_measurements  # noqa: E402
 from partcal.data.registration import register_tracker  # noqa: E402
 from partcal.calibration.parameters import nominal_values, robot_with
 from partcal.models.kinematic import KinematicModel  # noqa: E402
-from partcal.calibration.measurement import Rows
-from partcal.calibration.stacked import identify_measures
+from partcal.calibration.measurement import MeasurementRows
+from partcal.calibration.stacked import identify_measurements
 from partcal.robot.frames import kabsch  # noqa: E402
 
 TESTS = ("B 1001-1495", "C", "D")
@@ -79,12 +79,12 @@ def rigid_rms(predicted, measured) -> float:
     return rms(predicted @ rot.T + t - measured)
 
 
-def distance_rows(q, points, i, j) -> Rows:
+def distance_rows(q, points, i, j) -> MeasurementRows:
     """``pose`` rows for the poses, then one ``distance`` row per pair ``(i, j)``: the first end's joints,
     ``to`` the second end's pose row, the distance between their measured points."""
     n, m = len(q), i.size
     measured = np.linalg.norm(points[i] - points[j], axis=1)
-    return Rows(np.vstack([q, q[i]]), ("pose",) * n + ("distance",) * m, tuple(str(k + 1) for k in range(n + m)),
+    return MeasurementRows(np.vstack([q, q[i]]), ("pose",) * n + ("distance",) * m, tuple(str(k + 1) for k in range(n + m)),
                 tuple(range(2, n + m + 2)), "B 1-1000 distances",
                 {"distance_mm": np.concatenate([np.full(n, np.nan), measured])},
                 {"to": ("",) * n + tuple(str(k + 1) for k in j)})
@@ -96,7 +96,7 @@ def from_distances(q, points, pairs):
     i, j = pairs
     live = np.linalg.norm(points[i] - points[j], axis=1) > 0
     i, j = i[live], j[live]
-    table, notes = identify_measures(ROBOT, distance_rows(q, points, i, j), {}, parametrization="dh")
+    table, notes = identify_measurements(ROBOT, distance_rows(q, points, i, j), {}, parametrization="dh")
     own = nominal_values(ROBOT, None, "dh").size
     robot = robot_with(ROBOT, table.value[:own], "dh")
     info = (f"{i.size} distances, {table.status.count('identified')}/{own} identified, tool "

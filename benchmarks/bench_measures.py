@@ -1,10 +1,10 @@
-"""The accuracy each measurement kind reaches against the truth, beside a laser tracker's (issue 39).
+"""The accuracy each measurement type reaches against the truth, beside a laser tracker's (issue 39).
 
 The virtual UR10 of configs/ur10_tilts_virtual.yaml (DH errors, tilts of 0.03 and -0.02 degrees between
 its parallel axes, a tool offset error, a misaligned base) is identified with the complete
-parametrization (base and tool identified) from each measurement kind of
+parametrization (base and tool identified) from each measurement type of
 :mod:`partcal.calibration.registry`, and scored by the 3-D RMS of its tool positions against the truth on
-2,000 poses of the study's ranges (``sample_configurations``). A kind that fixes no frame (planes,
+2,000 poses of the study's ranges (``sample_configurations``). A type that fixes no frame (planes,
 fixed points, distances: every plane and point unknown) is scored after a rigid fit of the model's
 positions to the truth (``kabsch``); the tracker without one (and, for the record, with one).
 
@@ -21,7 +21,7 @@ The truth's measurements are made on the true robot, base frame included (``vr.t
   orientations, ``a`` and ``b`` 1 m apart on a bar of known length;
 - distances: between the true tips of every pair of the tracker's poses (0.01 mm on the length), and
   for the record the same distances computed from points of 0.02 mm per axis (stated noise 0.028 mm);
-- mixed: 20 tracker points (kind ``point``, base frame, 0.02 mm per axis) and 200 touches in one identification,
+- mixed: 20 tracker points (type ``point``, base frame, 0.02 mm per axis) and 200 touches in one identification,
   scored without a rigid fit (the points fix the frame).
 
 Every figure is the median of DRAWS draws of poses and noise (seed below; the test poses are one set),
@@ -49,8 +49,8 @@ from _table import print_table  # noqa: E402
 from partcal.data.simulate import load_study, sample_configurations  # noqa: E402
 from partcal.calibration.parameters import nominal_values, robot_with
 from partcal.models.kinematic import KinematicModel  # noqa: E402
-from partcal.calibration.measurement import Rows, SCALE
-from partcal.calibration.stacked import identify_measures
+from partcal.calibration.measurement import MeasurementRows, SCALE
+from partcal.calibration.stacked import identify_measurements
 from partcal.robot.frames import kabsch  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -148,9 +148,9 @@ class Bench:
         predicted = self.nominal.positions(self.q_test) + model.predict(self.q_test)
         return self.score(predicted, rigid=False), self.score(predicted, rigid=True), cpu
 
-    def kinds(self, rows, features):
+    def measurements(self, rows, cell):
         start = time.process_time()
-        table, notes = identify_measures(self.nominal, rows, features, parametrization="complete")
+        table, notes = identify_measurements(self.nominal, rows, cell, parametrization="complete")
         cpu = time.process_time() - start
         own = nominal_values(self.nominal, None, "complete").size
         predicted = robot_with(self.nominal, table.value[:own], "complete").positions(self.q_test)
@@ -163,9 +163,9 @@ class Bench:
         return rms(predicted - self.truth)
 
 
-def rows_of(q, kinds, numbers=None, texts=None):
+def rows_of(q, measurements, numbers=None, texts=None):
     n = len(q)
-    return Rows(np.asarray(q, float), tuple(kinds), tuple(str(i + 1) for i in range(n)), tuple(range(2, n + 2)),
+    return MeasurementRows(np.asarray(q, float), tuple(measurements), tuple(str(i + 1) for i in range(n)), tuple(range(2, n + 2)),
                 "bench", numbers or {}, texts or {})
 
 
@@ -184,25 +184,25 @@ def one_draw(b: Bench, seed: int) -> tuple[dict, dict, bool]:
     for n in (200, 400, 800):
         q, names = b.touches(n)
         plane_rows = rows_of(q, ["plane"] * n, texts={"feature": tuple(names)})
-        out[f"planes, step block 200 mm ({n} touches)"] = b.kinds(plane_rows, TIED)[:4]
+        out[f"planes, step block 200 mm ({n} touches)"] = b.measurements(plane_rows, TIED)[:4]
         if n == 800:
-            loose = b.kinds(plane_rows, {})
+            loose = b.measurements(plane_rows, {})
             out[f"planes, all unknown ({n} touches)"] = loose[:4]
             named = bool(loose[3]) and loose[3][0].startswith(SCALE)
     for per in (25, 50):
         q, names = b.visits(per)
-        out[f"fixed points, 1 m bar ({4 * per} visits)"] = b.kinds(
+        out[f"fixed points, 1 m bar ({4 * per} visits)"] = b.measurements(
             rows_of(q, ["fixed"] * len(q), texts={"feature": tuple(names)}), BAR)[:4]
     for n in (20, 100):
         q = track[n]
         i, j = np.triu_indices(n, 1)
         tips = b.vr.true_positions(q)
         measured = np.linalg.norm(tips[i] - tips[j], axis=1) + b.rng.normal(0.0, PROBE_MM, i.size)
-        out[f"distances, all pairs of {n} poses ({i.size})"] = b.kinds(distance_rows(q, i, j, measured), {})[:4]
+        out[f"distances, all pairs of {n} poses ({i.size})"] = b.measurements(distance_rows(q, i, j, measured), {})[:4]
         if n == 100:        # the same pairs' distances computed from tracker points (0.02 mm per axis, correlated)
             points = b.vr.true_positions(q) + b.rng.normal(0.0, TRACKER_MM, (n, 3))
             measured = np.linalg.norm(points[i] - points[j], axis=1)
-            out[f"  the same from tracker points ({i.size})"] = b.kinds(
+            out[f"  the same from tracker points ({i.size})"] = b.measurements(
                 distance_rows(q, i, j, measured), {"noise_mm": {"distance": 0.028}})[:4]
     qp = track[20]
     xp = b.vr.true_positions(qp) + b.rng.normal(0.0, TRACKER_MM, (20, 3))
@@ -212,8 +212,8 @@ def one_draw(b: Bench, seed: int) -> tuple[dict, dict, bool]:
                     {"x_meas": np.concatenate([xp[:, 0], nan]), "y_meas": np.concatenate([xp[:, 1], nan]),
                      "z_meas": np.concatenate([xp[:, 2], nan])},
                     {"feature": tuple([""] * 20 + names)})
-    out["mixed: 20 tracker points + 200 touches (planes unknown)"] = b.kinds(mixed, {})[:4]
-    out["  the same, planes tied by the step"] = b.kinds(mixed, TIED)[:4]
+    out["mixed: 20 tracker points + 200 touches (planes unknown)"] = b.measurements(mixed, {})[:4]
+    out["  the same, planes tied by the step"] = b.measurements(mixed, TIED)[:4]
     return out, track, named
 
 
@@ -272,7 +272,7 @@ def main() -> None:
     named = [d[2] for d in draws]
     print(f"\nplanes all unknown: notes[0] starts with SCALE ({SCALE!r}) in {sum(named)} of {len(named)} draws")
     print("reference: the median absolute figure of a tracker of 0.02 mm per axis from the poses named. ratio: the "
-          "kind's median figure after a rigid fit (mixed: absolute, the tracker points fix the frame) over it; ratio "
+          "type's median figure after a rigid fit (mixed: absolute, the tracker points fix the frame) over it; ratio "
           "(config): over the config's tracker's (10 ppm of the distance to a tracker at x = 2.5 m: 0.013-0.038 mm "
           "per axis, median 0.027). CPU s: one identification.")
     print(f"total wall time {time.perf_counter() - wall:.0f} s")

@@ -1,13 +1,13 @@
-"""Planned plane touches against random ones (issue 39): what ``partcal plan --kind plane`` buys.
+"""Planned plane touches against random ones (issue 39): what ``partcal plan --type plane`` buys.
 
 The virtual UR10 of configs/ur10_contacts_virtual.yaml (DH errors, tilts between its parallel axes, a
 tool and a base error) touches the config's step block: ``top`` (z = 500), ``step`` (parallel, 200 mm
 below: tied by the known step) and ``side`` (normal [1, 0, 0.02], offset 600). Each set of touches is
-identified with the complete parametrization (:func:`identify_measures`, the features tied by the step:
+identified with the complete parametrization (:func:`identify_measurements`, the cell tied by the step:
 ``top`` and ``side`` unknown) and scored by the 3-D RMS of the tool positions against the truth on 2,000
 poses of the config's ranges after a rigid fit (as bench_measures.py: planes fix no frame).
 
-- planned: :func:`partcal.study.plan_kinds.plan_kinds` on the NOMINAL robot (POOL candidates within the
+- planned: :func:`partcal.study.plan_measurements.plan_measurements` on the NOMINAL robot (POOL candidates within the
   config's ranges, the D-optimal N for the complete model and the planes' unknowns); the cell then runs
   the planned joints: each is the seed the TRUE robot starts from, moved by Newton steps on joints 1-3
   until its true tip lies on the true plane, missing it by N(0, 0.01 mm) along the normal;
@@ -46,9 +46,9 @@ from partcal.data.simulate_contacts import plane_touches  # noqa: E402
 from partcal.calibration import design  # noqa: E402
 from partcal.calibration.parameters import nominal_values, robot_with
 from partcal.models.kinematic import KinematicModel  # noqa: E402
-from partcal.calibration.stacked import identify_measures
+from partcal.calibration.stacked import identify_measurements
 from partcal.robot.frames import kabsch  # noqa: E402
-from partcal.study import plan_kinds  # noqa: E402
+from partcal.study import plan_measurements  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 SEED = 39
@@ -71,7 +71,7 @@ class Bench:
         self.study = load_study(ROOT / "configs" / "ur10_contacts_virtual.yaml")
         self.vr = self.study.robot
         self.nominal = self.vr.nominal
-        self.planes = {name: (np.asarray(n, float), float(d)) for name, (n, d) in self.study.features.planes.items()}
+        self.planes = {name: (np.asarray(n, float), float(d)) for name, (n, d) in self.study.cell.planes.items()}
         # what the planner is given: the drawing's planes (approximate, still fitted), the step tied
         self.given = {"planes": {"top": {"normal": [0.0, 0.0, 1.0], "offset_mm": 500.0},
                                  "step": {"parallel_to": "top", "spacing_mm": -200.0},
@@ -98,8 +98,8 @@ class Bench:
         return q, ok
 
     def identified(self, q, names):
-        rows = plan_kinds.kind_rows(q, "plane", names)
-        table, notes = identify_measures(self.nominal, rows, TIED, parametrization="complete")
+        rows = plan_measurements.measurement_rows_of(q, "plane", names)
+        table, notes = identify_measurements(self.nominal, rows, TIED, parametrization="complete")
         own = nominal_values(self.nominal, None, "complete").size
         predicted = robot_with(self.nominal, table.value[:own], "complete").positions(self.q_test)
         rot, t = kabsch(predicted, self.truth)
@@ -121,7 +121,7 @@ def one_draw(b: Bench, k: int) -> dict:
         out[f"tracker 0.02 mm ({n} poses)"] = (b.tracker(n, rng), np.nan, np.nan, n)
     for n in COUNTS:
         start = time.process_time()
-        planned = plan_kinds.plan_kinds(b.nominal, n, b.given, "plane", model=MODEL, pool=POOL, floor=None,
+        planned = plan_measurements.plan_measurements(b.nominal, n, b.given, "plane", model=MODEL, pool=POOL, floor=None,
                                         ranges_deg=b.study.ranges_deg, random_state=rng)
         cpu = time.process_time() - start
         pool = planned.candidates

@@ -9,6 +9,7 @@ reads one mapping field by field and refuses what it did not read, with a
 from __future__ import annotations
 
 import difflib
+import logging
 import re
 from pathlib import Path
 from typing import Any, Callable
@@ -17,6 +18,8 @@ import yaml
 
 from .errors import ConfigError
 
+
+log = logging.getLogger(__name__)
 
 class _Loader(yaml.SafeLoader):
     """The safe loader, reading ``1e-3`` and ``-2E5`` as numbers as YAML 1.2 does (YAML 1.1, PyYAML's, wants a
@@ -113,6 +116,21 @@ class Section:
     def has(self, key: str) -> bool:
         return key in self.data
 
+    def renamed(self, old: str, new: str) -> None:
+        """Take key ``old`` as ``new`` (a key renamed: the old name is read for one release, with a warning that
+        names file, key and line); both given is refused."""
+        if old not in self.data:
+            return
+        where, to = self.path(old), self.path(new)
+        if new in self.data:
+            self.fail(where, f"is the old name of {new!r}, which is given too: keep {new!r} alone")
+        line = self.lines.get(where)
+        log.warning("%s: %s%s: the old name of %r, read as it for this release: rename it (the old name will be "
+                    "refused in the next)", self.source, where, f" (line {line})" if line else "", new)
+        self.data[new] = self.data.pop(old)
+        for key in [k for k in self.lines if k == where or k.startswith(where + ".")]:
+            self.lines[to + key[len(where):]] = self.lines[key]
+
     def get(self, key: str, kind: str, default: Any = _MISSING, check: Callable[[Any], str | None] | None = None):
         """Read ``key`` as ``kind`` (``int``, ``float``, ``str``, ``bool``, ``list``, ``map``, ``any``).
 
@@ -188,9 +206,11 @@ def _kind(value: Any) -> str:
     return {dict: "a mapping", list: "a list", str: "a text"}.get(type(value), repr(value))
 
 
-def _show(value: Any) -> str:
+def _show(value: Any, limit: int = 80) -> str:
+    """A value as a message shows it: a list or mapping by what it is and what it holds (shortened)."""
     if isinstance(value, (dict, list)):
-        return _kind(value)
+        text = repr(value)
+        return f"{_kind(value)} {text if len(text) <= limit else text[:limit - 5] + ' ...' + text[-1]}"
     return repr(value)
 
 

@@ -344,10 +344,11 @@ def _add_plan(sub) -> None:
                      help="how far above the floor the joint origins, flange and tool stay (default 100 mm)")
     pln.add_argument("--no-floor", action="store_true",
                      help="no floor (a ceiling- or wall-mounted robot): poses anywhere within the limits")
-    pln.add_argument("--kind", choices=("plane", "fixed"), help="plan touches of the planes (plane) or visits of "
-                     "the points (fixed) of --features instead of poses, a kinds CSV (with -n -o)")
-    pln.add_argument("--features", metavar="CELL.yaml", help="the cell's planes and points, for --kind and an "
-                     "--evaluate of a kinds file")
+    pln.add_argument("--measurement", "--kind", metavar="TYPE", choices=_Names("partcal.calibration.registry",
+                     "MEASUREMENT_TYPES"), help="plan rows of this measurement type on --cell instead of poses (plane: "
+                     "touches of its planes, fixed: visits of its points), a measurements CSV (-n -o; --kind: old name)")
+    pln.add_argument("--cell", "--features", metavar="CELL.yaml", help="the cell's planes and points, for "
+                     "--measurement and an --evaluate of a measurements file (--features: its old name)")
     pln.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
     pln.set_defaults(func=_cmd_plan)
 

@@ -68,6 +68,24 @@ def write_text(tmp_path, text, name):
     return path
 
 
+def small_contact_cell(folder, *, touches: int, side: int, visits: int = 50, poses: int = 30):
+    """The shipped virtual contact cell's config (configs/ur10_contacts_virtual.yaml) made smaller and written to
+    ``folder / "virtual.yaml"``: ``touches`` on the top and step planes each, ``side`` on the side plane,
+    ``visits`` to each fixed point, a ballbar of ``poses`` poses; its data go to ``folder / "data"``."""
+    text = (ROOT / "configs" / "ur10_contacts_virtual.yaml").read_text()
+    for old, new in (("output: ../data/ur10_contacts", "output: data"),
+                     ("plane: {top: 300, step: 300, side: 200}",
+                      f"plane: {{top: {touches}, step: {touches}, side: {side}}}"),
+                     ("fixed: {nest_a: 50, nest_b: 50, sphere: 50, cone: 50}",
+                      f"fixed: {{nest_a: {visits}, nest_b: {visits}, sphere: {visits}, cone: {visits}}}"),
+                     ("pairs: all, poses: 100", f"pairs: all, poses: {poses}")):
+        assert old in text, old
+        text = text.replace(old, new)
+    path = folder / "virtual.yaml"
+    path.write_text(text)
+    return path
+
+
 DH_FIELDS = ("theta_offset_deg", "d_mm", "a_mm", "alpha_deg")
 
 

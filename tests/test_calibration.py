@@ -44,7 +44,7 @@ KINDS = {"SDP(AI)": "series", "DH": "kinematic", "DH + SDP(CI)": "kinematic + se
 
 
 @pytest.fixture(scope="module")
-def kinds_run(tmp_path_factory):
+def model_kinds_run(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("kinds")
     (tmp / "configs").mkdir()
     (tmp / "configs" / "run.yaml").write_text(CONFIG)
@@ -67,8 +67,8 @@ def independent_rank(q_deg) -> int:
     return int(np.sum(s > 1e-6 * s[0]))
 
 
-def test_every_kind_is_ranked_and_its_model_file_predicts_the_metrics(kinds_run):
-    result, out = kinds_run
+def test_every_kind_is_ranked_and_its_model_file_predicts_the_metrics(model_kinds_run):
+    result, out = model_kinds_run
     doc = json.loads((out / "metrics.json").read_text())
     assert {name: entry["kind"] for name, entry in doc["models"].items()} == KINDS
     cv = {name: entry["cv"] for name, entry in doc["models"].items()}
@@ -97,8 +97,8 @@ def test_every_kind_is_ranked_and_its_model_file_predicts_the_metrics(kinds_run)
     assert doc["models"]["DH"]["rectangle"]["rms_3d"] < 0.5 * doc["models"]["SDP(AI)"]["rectangle"]["rms_3d"]
 
 
-def test_compensation_works_for_every_kind_on_the_virtual_robot(kinds_run):
-    result, _ = kinds_run
+def test_compensation_works_for_every_kind_on_the_virtual_robot(model_kinds_run):
+    result, _ = model_kinds_run
     for r in result.models:
         if r.spec.kind == "series":
             continue                      # test_registry checks those
@@ -110,9 +110,9 @@ def test_compensation_works_for_every_kind_on_the_virtual_robot(kinds_run):
             r.spec.name
 
 
-def test_a_kinematic_model_file_compensates_through_the_identified_robot(kinds_run):
+def test_a_kinematic_model_file_compensates_through_the_identified_robot(model_kinds_run):
     """The commanded joints put the identified robot on the targets: FK(identified, q_cmd) = target."""
-    _, out = kinds_run
+    _, out = model_kinds_run
     p = load_predictor(out / "models" / "dh.json")
     doc = json.loads((out / "models" / "dh.json").read_text())
     identified = robot_with(load_robot("motoman_sk120"), np.array(doc["model"]["identification"]["value"]))
@@ -122,8 +122,8 @@ def test_a_kinematic_model_file_compensates_through_the_identified_robot(kinds_r
     np.testing.assert_array_equal(comp.joints_deg[:, 3:5], 0.0)          # q4, q5 never moved: held
 
 
-def test_report_shows_the_identified_dh_table(kinds_run):
-    result, out = kinds_run
+def test_report_shows_the_identified_dh_table(model_kinds_run):
+    result, out = model_kinds_run
     text = (out / "index.html").read_text()
     tree = html5lib.parse(text, namespaceHTMLElements=False)
     tables = [t for t in tree.iter("table") if t.get("class") == "dh"]

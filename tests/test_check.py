@@ -256,3 +256,118 @@ def test_the_share_of_an_explanation_the_likeliest_can_reproduce(cell, q1_deg):
     else:
         assert expected < 0.9
     assert f"shared {joint2.shared:4.2f}" in "\n".join(result.lines())
+
+
+@pytest.mark.parametrize("p, verdict", [(0.003, "moved"), (0.03, "holds")])
+def test_the_verdict_turns_at_a_p_value_of_one_hundredth(cell, p, verdict):
+    """New poses whose standardised residuals are scaled so that their chi-square p-value (scipy's, with 3 n
+    degrees of freedom) is 0.003 or 0.03: a tenth and ten times the default significance away from it, the first is
+    'moved' and the second 'holds', on the command line too."""
+    model_path, measure, _, folder = cell
+    _, data = measure(f"p{p}")
+    model = load_model(model_path)[0]
+    mean, std = model.predict_with_std(data.q_deg)
+    z = (data.measured_mm - model.robot_.positions(data.q_deg) - mean) / std
+    z *= np.sqrt(chi2.isf(p, z.size) / np.sum(z ** 2))
+    csv = folder / f"scaled{p}.csv"
+    write_measurements(Measurements(data.q_deg, data.nominal_mm, model.robot_.positions(data.q_deg) + mean + z * std),
+                       csv)
+    result = check_file(model_path, csv)
+    assert result.p_value == pytest.approx(p, rel=1e-3)           # the CSV rounds the positions
+    assert result.alpha == 0.01 and result.holds == (verdict == "holds")
+    run = partcal_cli("check", str(model_path), str(csv))
+    assert run.returncode == 0 and run.stdout.startswith(f"{verdict}:")
+
+
+def test_check_takes_a_significance_in_zero_one_and_needs_a_degree_of_freedom(cell):
+    """A significance outside (0, 1) is refused; within it it sets the verdict (the same poses moved above their
+    p-value, hold below it); two poses registered in a tracker frame leave 6 - 6 = 0 coordinates and are refused,
+    three leave 3."""
+    from partcal import ConfigError
+    from partcal.errors import DataError
+    model_path, measure, _, _ = cell
+    _, data = measure("alpha")
+    model = load_model(model_path)[0]
+    errors = data.measured_mm - model.robot_.positions(data.q_deg)
+    for alpha in (0.0, 1.0, -0.5, 1.5):
+        with pytest.raises(ConfigError, match=r"check: alpha must lie in \(0, 1\); got"):
+            check_arrays(model, data.q_deg, errors, alpha=alpha)
+    p = check_arrays(model, data.q_deg, errors).p_value             # 0.995: the spread is conservative
+    assert not check_arrays(model, data.q_deg, errors, alpha=(1.0 + p) / 2).holds
+    assert check_arrays(model, data.q_deg, errors, alpha=p / 2).holds
+    with pytest.raises(DataError, match=r"2 poses leave no degree of freedom to check once the tracker frame is "
+                                        r"registered on them \(give at least 3\)"):
+        check_arrays(model, data.q_deg[:2], errors[:2], registered=True)
+    three = check_arrays(model, data.q_deg[:3], errors[:3], registered=True)
+    assert three.dof == 3 and all(e.name != "the base frame" for e in three.explanations)
+    assert check_arrays(model, data.q_deg[:3], errors[:3]).dof == 9
+
+
+def test_each_explanations_evidence_is_its_marginal_likelihood_against_none(cell):
+    """Each joint's offset and the tool offset, with their columns written out as central differences of the
+    identified arm's positions: the evidence equals 2 ln of the Bayes factor computed from the two marginal
+    likelihoods (z ~ N(0, I + B B^T) against z ~ N(0, I), B the standardised columns times the prior standard
+    deviations), the fitted change the posterior mean, and what is left the chi-square of its residuals."""
+    model_path, measure, _, _ = cell
+    csv, _ = measure("q2-evidence", read_offset_deg=np.array([0, 0.03, 0, 0, 0, 0]))
+    result, data = check_file(model_path, csv), read_measurements(csv)
+    model = load_model(model_path)[0]
+    q = data.q_deg
+    mean, std = model.predict_with_std(q)
+    zv = ((data.measured_mm - model.robot_.positions(q) - mean) / std).ravel()
+    arm = model.identified_robot_
+    h = 1e-4
+    columns = {f"joint {j + 1}'s offset": (0.1, [(arm.positions(q + h * np.eye(6)[j]) -
+                                                   arm.positions(q - h * np.eye(6)[j])).ravel() / (2 * h)])
+               for j in range(6)}
+    columns["the tool offset"] = (1.0, [(arm.replace(tool_mm=arm.tool_mm + h * e).positions(q) -
+                                         arm.replace(tool_mm=arm.tool_mm - h * e).positions(q)).ravel() / (2 * h)
+                                        for e in np.eye(3)])
+    found = {e.name: e for e in result.explanations}
+    assert result.explanations[0].name == "joint 2's offset"
+    for name, (s, cols) in columns.items():
+        B = np.column_stack(cols) / std.ravel()[:, None] * s
+        cov = np.eye(zv.size) + B @ B.T
+        evidence = zv @ zv - zv @ np.linalg.solve(cov, zv) - np.linalg.slogdet(cov)[1]
+        change = s * B.T @ np.linalg.solve(cov, zv)                  # the posterior mean, mm or degrees
+        left = zv - B @ (change / s)
+        e = found[name]
+        assert e.evidence == pytest.approx(evidence, rel=1e-6, abs=1e-6), name
+        np.testing.assert_allclose(e.change, change, rtol=1e-5, atol=1e-9, err_msg=name)
+        assert e.p_value == pytest.approx(chi2.sf(left @ left, zv.size - B.shape[1]), rel=1e-5), name
+
+
+class _PayloadSag(ErrorModel):
+    """A series model whose prediction is a sag of 0.1 mm per kg along -z and whose spread is 0.05 mm: what a
+    model that reads the payload gives, written out so that the check's use of the payload can be computed by
+    hand."""
+
+    @property
+    def reads_payload(self) -> bool:
+        return True
+
+    def spread_problem(self):
+        return None
+
+    def predict_with_std(self, X, payload_kg=None):
+        sag = np.zeros((len(X), 3))
+        sag[:, 2] = -0.1 * (np.zeros(len(X)) if payload_kg is None else np.asarray(payload_kg, dtype=float))
+        return sag, np.full((len(X), 3), 0.05)
+
+
+def test_check_judges_a_payload_reading_model_at_each_poses_payload(cell):
+    """The payload of each pose goes to a model that reads one (a sag of 0.1 mm per kg here): the standardised
+    residuals are (measured - 0.1 kg-sag) / 0.05, by hand; without a payload the model's default (none)."""
+    model_path, measure, virtual, _ = cell
+    _, data = measure("payload")
+    q = data.q_deg
+    payload = np.linspace(0.0, 10.0, len(q))
+    model = _PayloadSag(inputs="joint", degree=1, solver="lstsq").fit(q, np.zeros((len(q), 3)))
+    errors = np.zeros((len(q), 3))
+    errors[:, 2] = -0.1 * payload + 0.01
+    z = np.zeros((len(q), 3))
+    z[:, 2] = 0.01 / 0.05
+    np.testing.assert_allclose(check_arrays(model, q, errors, robot=virtual.nominal, payload_kg=payload).z, z,
+                               atol=1e-12)
+    np.testing.assert_allclose(check_arrays(model, q, errors, robot=virtual.nominal).z[:, 2],
+                               (errors[:, 2]) / 0.05, atol=1e-12)

@@ -227,3 +227,32 @@ def test_unconverged_warnings_name_the_source_and_each_targets_reason():
                                                  r"0.0001 mm: #1 \(0.5 mm: not converged\), #2 \(1e-06 mm: joint "
                                                  r"limit\)$"):
         result.warn_unconverged(1e-4, robot=sk120, source="model 'M' on data set 'test'")
+
+
+def test_a_straight_wrists_shared_turn_is_split_nearest_the_reference_without_moving_the_pose(sk120):
+    """Axis 5 at 0: axes 4 and 6 of the SK120 turn about one line, only q4 + q6 is the pose's. The split nearest
+    a reference (r4, r6) is the least squares one, q4 = (q4 + q6 + r4 - r6) / 2, by hand; bounds clip it; a
+    wrist bent 1 degree has no shared turn and is left as it was."""
+    from partcal.robot.wrist import nearest_split, shared_turns
+
+    rng = np.random.default_rng(7)
+    q = np.column_stack([rng.uniform(-40, 40, 20), rng.uniform(-140, -110, 20), rng.uniform(-175, -150, 20),
+                         rng.uniform(-60, 60, 20), np.zeros(20), rng.uniform(-60, 60, 20)])
+    ref = q + rng.uniform(-30, 30, q.shape)
+    j, k, c = shared_turns(sk120, q)
+    assert np.all(j == 3) and np.all(k == 5) and np.allclose(c, 1.0)
+    split = nearest_split(sk120, q, ref)
+    total = q[:, 3] + q[:, 5]
+    np.testing.assert_allclose(split[:, 3], (total + ref[:, 3] - ref[:, 5]) / 2, atol=1e-9)
+    np.testing.assert_allclose(split[:, 3] + split[:, 5], total, atol=1e-9)
+    np.testing.assert_array_equal(split[:, :3], q[:, :3])
+    before, after = sk120.forward(q), sk120.forward(split)
+    np.testing.assert_allclose(after, before, atol=1e-9)
+    low = np.full(q.shape, -np.inf)
+    low[:, 3] = np.maximum(split[:, 3], 0) + 1.0                    # axis 4 held above where the nearest lies
+    bounded = nearest_split(sk120, q, ref, low, np.full(q.shape, np.inf))
+    np.testing.assert_allclose(bounded[:, 3], low[:, 3], atol=1e-9)
+    bent = q.copy()
+    bent[:, 4] = 1.0
+    assert np.all(shared_turns(sk120, bent)[0] == -1)
+    np.testing.assert_array_equal(nearest_split(sk120, bent, ref), bent)

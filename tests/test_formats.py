@@ -97,13 +97,13 @@ def test_bad_foreign_files_name_file_line_and_column(tmp_path, kwargs, text, mat
     ({"columns": [("q1", "a")]}, r"The 'columns' parameter of MeasurementFormat must be a mapping of contract "
                                  r"column to file column"),
     ({"columns": {"q13": "a"}}, r"The 'columns' entry 'q13' of MeasurementFormat must be a contract column "
-                                r"\(q1\.\.q12, .*, set, payload_kg\) or a measurement-kinds column \(kind, id, "
-                                r"feature, to, target, distance_mm, flush\)\. Got 'q13'"),
+                                r"\(q1\.\.q12, .*, set, payload_kg\) or a measurement-type column \(measurement, id, "
+                                r"target, feature, flush, distance_mm, to\)\. Got 'q13'"),
     ({"columns": {"temperature": "a"}}, r"Got 'temperature' instead"),
     ({"columns": {"xmeas": "a"}}, r"Got 'xmeas' \(did you mean 'x_meas'\?\) instead"),
-    ({"kinds": ["Plane"]}, r"The 'kinds' parameter of MeasurementFormat must be a mapping of the file's kind "
-                           r"value to a kind name\. Got \['Plane'\] instead"),
-    ({"kinds": {"Plane": ""}}, r"The 'kinds' entry 'Plane' of MeasurementFormat must be a non-empty kind name"),
+    ({"measurements": ["Plane"]}, r"The 'measurements' parameter of MeasurementFormat must be a mapping of the file's type "
+                           r"value to a type name\. Got \['Plane'\] instead"),
+    ({"measurements": {"Plane": ""}}, r"The 'measurements' entry 'Plane' of MeasurementFormat must be a non-empty type name"),
     ({"columns": {"q1": " "}}, r"The 'columns' entry 'q1' of MeasurementFormat must be a non-empty file column "
                                r"name\. Got ' ' instead"),
     ({"columns": {"q1": "a", "q2": "a"}}, r"The 'columns' entry 'q2' of MeasurementFormat must be a file column "
@@ -131,13 +131,24 @@ def test_format_yaml_round_trip(tmp_path):
     assert MeasurementFormat(**fmt.to_dict()) == fmt and not fmt.is_contract and MeasurementFormat().is_contract
 
 
-def test_a_format_for_kinds_files_round_trips_through_yaml(tmp_path):
-    text = YAML.replace("x_meas: smr_x}", "x_meas: smr_x, kind: Type, distance_mm: Length}")
-    fmt = load_format(write(tmp_path, text + "kinds: {Sphere: fixed, Plane: plane}\n", "fmt.yaml"))
-    assert fmt.columns == {"q1": "axis_1", "x_meas": "smr_x", "kind": "Type", "distance_mm": "Length"}
-    assert fmt.kinds == {"Sphere": "fixed", "Plane": "plane"}
-    assert MeasurementFormat(**fmt.to_dict()) == fmt and fmt.to_dict()["kinds"] == fmt.kinds
-    assert "kinds" not in MeasurementFormat().to_dict()        # a format without it is written as before
+def test_a_format_for_measurements_files_round_trips_through_yaml(tmp_path):
+    text = YAML.replace("x_meas: smr_x}", "x_meas: smr_x, measurement: Type, distance_mm: Length}")
+    fmt = load_format(write(tmp_path, text + "measurements: {Sphere: fixed, Plane: plane}\n", "fmt.yaml"))
+    assert fmt.columns == {"q1": "axis_1", "x_meas": "smr_x", "measurement": "Type", "distance_mm": "Length"}
+    assert fmt.measurements == {"Sphere": "fixed", "Plane": "plane"}
+    assert MeasurementFormat(**fmt.to_dict()) == fmt and fmt.to_dict()["measurements"] == fmt.measurements
+    assert "measurements" not in MeasurementFormat().to_dict()        # a format without it is written as before
+
+
+def test_a_format_of_the_old_names_kind_and_kinds_is_read_for_one_release_with_a_warning(tmp_path, caplog):
+    text = YAML.replace("x_meas: smr_x}", "x_meas: smr_x, kind: Type}")
+    fmt = load_format(write(tmp_path, text + "kinds: {Plane: plane}\n", "fmt.yaml"))
+    assert fmt.columns["measurement"] == "Type" and fmt.measurements == {"Plane": "plane"}
+    said = [r.getMessage() for r in caplog.records]
+    assert any("columns.kind (line 3): the old name of 'measurement'" in m for m in said)
+    assert any("kinds (line 6): the old name of 'measurements'" in m for m in said)
+    with pytest.raises(ConfigError, match=r"kinds \(line 6\): is the old name of 'measurements', which is given too"):
+        load_format(write(tmp_path, text + "kinds: {Plane: plane}\nmeasurements: {}\n", "both.yaml"))
 
 
 @pytest.mark.parametrize("old, new, match", [
@@ -145,7 +156,7 @@ def test_a_format_for_kinds_files_round_trips_through_yaml(tmp_path):
                                          r"got ','"),
     ('decimal: ","', 'decimal: "/"', r"fmt.yaml: decimal \(line 2\): must be one of '\.', ','; got '/'"),
     ("q1: axis_1", "q_1: axis_1", r"fmt.yaml: columns.q_1 \(line 3\): must be a contract column "
-                                  r"\(q1\.\.q12, .*, set, payload_kg\) or a measurement-kinds column \(kind, .*\); "
+                                  r"\(q1\.\.q12, .*, set, payload_kg\) or a measurement-type column \(measurement, .*\); "
                                   r"got 'q_1' \(did you mean 'q1'\?\)"),
     ("q1: axis_1", "q1: ' '", r"fmt.yaml: columns.q1 \(line 3\): must be a non-empty file column name; got ' '"),
     ("x_meas: smr_x", "x_meas: axis_1", r"columns.x_meas \(line 3\): must be a file column that holds no other "
@@ -167,7 +178,7 @@ def test_format_yaml_errors_name_key_and_line(tmp_path, old, new, match):
     {"delimiter": ";;"}, {"delimiter": '"'}, {"decimal": ";"}, {"decimal": ","}, {"joint_unit": "grad"},
     {"length_unit": "cm"}, {"columns": {"q13": "a"}}, {"columns": {"xmeas": "a"}}, {"columns": {"q1": " "}},
     {"columns": {"q1": "a", "q2": "a"}}, {"columns": {"x_meas": "q1"}}, {"columns": {"featur": "a"}},
-    {"columns": {"kind": "a", "feature": "to"}}, {"kinds": {"Plane": " "}},
+    {"columns": {"measurement": "a", "feature": "to"}}, {"measurements": {"Plane": " "}},
 ])
 def test_each_format_rule_has_one_wording_from_python_and_from_yaml(tmp_path, kwargs):
     with pytest.raises(ConfigError) as built:

@@ -252,19 +252,19 @@ def test_measurements_record_checks_targets_and_orientation():
         Measurements(np.zeros((1, 2)), z, z, measured_orientation_deg=z, nominal_orientation_deg=[[0, 91, 0]])
 
 
-def test_a_measurement_kinds_file_read_as_points_is_named_as_one(tmp_path):
+def test_a_measurements_file_read_as_points_is_named_as_one(tmp_path):
     from partcal.data.formats import MeasurementFormat
     path = tmp_path / "probe.csv"
     path.write_text("q1,q2,q3,q4,q5,q6,kind,feature\n0,-90,90,0,90,0,plane,top\n")
     with pytest.raises(DataError, match=r"probe\.csv:1: column 'x_meas' is missing .*; column 'kind' makes it a "
-                                        r"measurement-kinds file, which partcal run"):
+                                        r"measurements file, which partcal run"):
         read_measurements(path, robot="universal_robots_ur10")
     foreign = tmp_path / "foreign.csv"
     foreign.write_text("q1,q2,q3,q4,q5,q6,Type,Feature\n0,-90,90,0,90,0,plane,top\n")
-    with pytest.raises(DataError, match=r"column 'Type' makes it a measurement-kinds file"):
-        read_measurements(foreign, robot="universal_robots_ur10", fmt=MeasurementFormat(columns={"kind": "Type"}))
+    with pytest.raises(DataError, match=r"column 'Type' makes it a measurements file"):
+        read_measurements(foreign, robot="universal_robots_ur10", fmt=MeasurementFormat(columns={"measurement": "Type"}))
     plain = tmp_path / "plain.csv"
     plain.write_text("q1,q2,q3,q4,q5,q6,x_meas\n0,-90,90,0,90,0,1\n")
     with pytest.raises(DataError) as refused:
         read_measurements(plain, robot="universal_robots_ur10")
-    assert "measurement-kinds" not in str(refused.value)
+    assert "measurement-type" not in str(refused.value)

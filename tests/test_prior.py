@@ -6,6 +6,7 @@ from conftest import random_row_prior
 from scipy.optimize import least_squares
 
 from partcal import load_robot
+from partcal.metrics import pooled_rms
 from partcal.calibration.chain import model_positions
 from partcal.calibration.identification import identify
 from partcal.calibration.parameters import nominal_values, parameter_names
@@ -93,10 +94,107 @@ def test_a_prior_holds_a_fit_on_the_measured_orientation_too(ur10):
 
 
 def test_without_a_prior_the_fit_is_unchanged_bit_for_bit(ur10):
+    """No prior, and a plausible prior of strength 0 (which is none), give one fit bit for bit: the plain least
+    squares of the positions, as an independently written one finds it."""
+    from partcal.models.kinematic import KinematicModel
     q = poses(ur10, 30, 8)
-    measured = model_positions(ur10, None, q, moved(ur10, 9), np.zeros(len(q)))
-    a, b = identify(ur10, q, measured), identify(ur10, q, measured, prior=None)
-    assert np.array_equal(a.value, b.value) and a.status == b.status and a.rms_mm == b.rms_mm
+    measured = model_positions(ur10, None, q, moved(ur10, 9), np.zeros(len(q))) + \
+        np.random.default_rng(10).normal(scale=0.02, size=(len(q), 3))
+    y = measured - ur10.positions(q)
+    plain = KinematicModel(robot=ur10).fit(q, y).identification_
+    zero = KinematicModel(robot=ur10, prior="plausible", prior_strength=0.0).fit(q, y).identification_
+    assert zero.status == plain.status
+    for field in ("value", "std_error", "covariance"):
+        np.testing.assert_array_equal(getattr(zero, field), getattr(plain, field))
+    free = np.flatnonzero(np.array(plain.status) == "identified")
+    v0 = nominal_values(ur10)
+
+    def resid(x):                                             # written out: the positions' residuals alone
+        v = v0.copy()
+        v[free] = x
+        return (model_positions(ur10, None, q, v, np.zeros(len(q))) - measured).ravel()
+
+    x = least_squares(resid, v0[free], jac="3-point", x_scale="jac", xtol=1e-15, ftol=1e-15, gtol=1e-15).x
+    np.testing.assert_allclose(plain.value[free], x, atol=1e-5)
+    np.testing.assert_allclose(np.sum(resid(plain.value[free]) ** 2), np.sum(resid(x) ** 2), rtol=1e-9)
+    # and a prior would have changed it: the comparison can tell
+    weak = KinematicModel(robot=ur10, prior="plausible", prior_strength=0.3).fit(q, y).identification_
+    assert np.max(np.abs(weak.value[free] - plain.value[free])) > 1e-3
+
+
+def test_a_prior_keeps_the_per_row_weights(ur10):
+    """Standard deviations per row and a prior together: the MAP of the rows divided by their standard deviations
+    (times their root mean square, as identify states them) and the prior's rows, written out here."""
+    q = poses(ur10, 30, 51)
+    rng = np.random.default_rng(52)
+    std = np.repeat(rng.uniform(0.01, 0.2, (30, 1)), 3, axis=1)
+    std[:, 2] *= 3.0
+    measured = model_positions(ur10, None, q, moved(ur10, 53), np.zeros(len(q))) + rng.standard_normal((30, 3)) * std
+    v0 = nominal_values(ur10)
+    units = np.array([u for _, u in parameter_names(ur10)])[:24]
+    prior = Prior.from_std(np.arange(24), v0[:24], np.where(units == "mm", 1.0, 0.1), 0.05)
+    table = identify(ur10, q, measured, std_mm=std, prior=prior)
+    free = np.flatnonzero(np.array(table.status) == "identified")
+    reference = np.sqrt(np.mean(std**2))
+
+    def resid(x):
+        v = v0.copy()
+        v[free] = x
+        p = model_positions(ur10, None, q, v, np.zeros(len(q)))
+        return np.concatenate([((p - measured) / std * reference).ravel(), 0.05 * (v[:24] - v0[:24]) /
+                               np.where(units == "mm", 1.0, 0.1)])
+
+    x = least_squares(resid, v0[free], jac="3-point", x_scale="jac", xtol=1e-15, ftol=1e-15, gtol=1e-15).x
+    np.testing.assert_allclose(table.value[free], x, atol=2e-5)
+    np.testing.assert_allclose(np.sum(resid(table.value[free]) ** 2), np.sum(resid(x) ** 2), rtol=1e-9)
+    unweighted = identify(ur10, q, measured, prior=prior)     # the weights matter here
+    assert np.max(np.abs(unweighted.value[free] - x)) > 1e-2
+
+
+def test_a_parameter_the_prior_holds_is_never_pruned_as_implausible(ur10):
+    """d[1] trades exactly with the base's height: the data fix their sum alone. A prior puts d[1] 15 mm off nominal
+    (beyond the 10 mm a row's length may plausibly be, and within three of its standard errors of nominal, where an
+    unheld parameter is kept nominal): the prior prices that distance, so the MAP keeps it, as a written-out MAP
+    finds, and the base's height makes up for it."""
+    q = poses(ur10, 30, 61)
+    measured = ur10.positions(q) + np.random.default_rng(62).normal(scale=0.01, size=(30, 3))
+    v0 = nominal_values(ur10)
+    base_z = [n for n, _ in parameter_names(ur10)].index("base.z")
+    prior = Prior.from_std([1], [v0[1] + 15.0], [20.0], 0.01)
+    table = identify(ur10, q, measured, prior=prior)
+    assert table.status[1] == table.status[base_z] == "identified"
+    free = np.flatnonzero(np.array(table.status) == "identified")
+
+    def resid(x):
+        v = v0.copy()
+        v[free] = x
+        return np.concatenate([(model_positions(ur10, None, q, v, np.zeros(len(q))) - measured).ravel(),
+                               [0.01 * (v[1] - v0[1] - 15.0) / 20.0]])
+
+    x = least_squares(resid, v0[free], jac="3-point", x_scale="jac", xtol=1e-15, ftol=1e-15, gtol=1e-15).x
+    np.testing.assert_allclose(table.value[free], x, atol=1e-3)
+    assert table.value[1] - v0[1] == pytest.approx(15.0, abs=1e-3)
+    assert table.value[base_z] == pytest.approx(-15.0, abs=0.01)
+
+
+def test_the_plausible_prior_holds_every_row_parameter_the_last_one_too(ur10):
+    """The plausible prior has a row per row parameter (the last row's twist included), each its plausible error
+    under the strength; a strong one holds them all at nominal where the data alone would move the last one."""
+    from partcal.calibration.parameters import geometric_size, PLAUSIBLE_ERROR
+    from partcal.models.kinematic import KinematicModel
+    units = [u for _, u in parameter_names(ur10)]
+    prior = plausible_prior(units, geometric_size(ur10) - 9, nominal_values(ur10), 2.0, PLAUSIBLE_ERROR)
+    assert prior.index.tolist() == list(range(24))
+    np.testing.assert_allclose(prior.root, np.diag([2.0 / (1.0 if k % 4 in (1, 2) else 0.1) for k in range(24)]))
+    robot = ur10.replace(tool_mm=np.array([80.0, 60.0, 150.0]))      # off the flange's axis: its twist moves it
+    q = poses(robot, 40, 71)
+    true = nominal_values(robot)
+    true[23] += 0.5                                           # alpha[6], the last row parameter
+    y = model_positions(robot, None, q, true, np.zeros(len(q))) - robot.positions(q)
+    alone = KinematicModel(robot=robot, tool=False).fit(q, y).identification_
+    assert alone.value[23] - true[23] == pytest.approx(0.0, abs=1e-6)
+    held = KinematicModel(robot=robot, tool=False, prior="plausible", prior_strength=1e3).fit(q, y).identification_
+    np.testing.assert_allclose(held.value[:24], nominal_values(robot)[:24], atol=1e-3)
 
 
 def test_a_bad_prior_covariance_is_refused():
@@ -143,6 +241,7 @@ def test_update_moves_the_model_toward_a_shifted_joint_offset_and_records_its_pr
     info = doc["fit"]["update"]
     assert info["data"] == str(tmp_path / "new.csv") and info["rows"] == 30 and info["inflate"] == DEFAULT_INFLATE
     assert info["prior_checksum"] == old_doc["checksum"] and info["prior_name"] == "robot a"
+    assert doc["name"] == "robot a updated"
     assert info["kept_prior"] is False and info["determined"] > IDENTIFY_LITTLE
     q = poses(ur10, 200, 16)
     true_errors = model_positions(ur10, None, q, shifted, np.zeros(len(q))) - ur10.positions(q)
@@ -168,6 +267,218 @@ def test_update_from_a_compact_patch_keeps_the_prior_and_says_so(ur10, calibrate
     table = done.model.identification_
     rows = np.flatnonzero(np.array(old.status[:24]) == "identified")
     np.testing.assert_allclose(table.value[rows], old.value[rows], atol=1e-3)
+
+
+FRAME_TURN_DEG, FRAME_SHIFT_MM = np.array([0.2, -0.1, 0.3]), np.array([5.0, -3.0, 2.0])
+
+
+def in_moved_frame(robot, values, q, seed, noise=0.01):
+    """Positions of the robot with parameter ``values`` at ``q`` measured in a frame turned by FRAME_TURN_DEG
+    (roll, pitch, yaw about fixed axes) and shifted by FRAME_SHIFT_MM from its base frame: new data after the
+    tracker or the cell moved."""
+    from partcal.data.measurements import Measurements
+    from scipy.spatial.transform import Rotation
+    turn = Rotation.from_euler("xyz", FRAME_TURN_DEG, degrees=True).as_matrix()
+    p = model_positions(robot, None, q, values, np.zeros(len(q))) @ turn.T + FRAME_SHIFT_MM
+    return Measurements(q, robot.positions(q), p + np.random.default_rng(seed).normal(scale=noise, size=p.shape))
+
+
+def test_update_identifies_a_moved_base_afresh(ur10, calibrated):
+    """New poses measured in a frame moved by 5 mm and 0.3 degree: the base frame is not part of the prior (a
+    model's base is known to hundredths of a mm), so the update finds the new frame and predicts the new
+    measurements to their noise."""
+    from partcal.study.persist import load_model
+    from partcal.study.update import update_model
+    from scipy.spatial.transform import Rotation
+    path, truth = calibrated
+    done = update_model(load_model(path)[0], in_moved_frame(ur10, truth, poses(ur10, 30, 14), 15))
+    assert not done.kept_prior
+    assert done.rms_after_mm < 0.02 and done.rms_before_mm < 0.03           # 0.01 mm of noise per coordinate
+    table = done.model.identification_
+    base = table.value[[table.names.index(f"base.{c}") for c in ("x", "y", "z", "rx", "ry", "rz")]]
+    np.testing.assert_allclose(base[:3], FRAME_SHIFT_MM, atol=0.05)
+    turn = Rotation.from_euler("xyz", FRAME_TURN_DEG, degrees=True).as_matrix()
+    np.testing.assert_allclose(Rotation.from_euler("ZYX", base[[5, 4, 3]], degrees=True).as_matrix(), turn,
+                               atol=2e-5)
+    q = poses(ur10, 200, 16)
+    truth_there = in_moved_frame(ur10, truth, q, 0, noise=0.0).measured_mm
+    assert pooled_rms(ur10.positions(q) + done.model.predict(q) - truth_there) < 0.02
+
+
+def test_update_that_keeps_the_prior_holds_it_firmly_and_identifies_the_frame(ur10, calibrated):
+    """A compact patch (joint 6 still) of a robot whose joint 2 moved 0.05 degree, in a moved frame: the poses
+    identify little, so the prior model's parameters are kept, each to 1e-4 of its prior standard deviation (the
+    identified ones' inflated covariance, the others' plausible error), and the frame alone is identified again:
+    the positions on the patch are predicted to a few hundredths of a mm."""
+    from partcal.study.persist import load_model
+    from partcal.study.update import DEFAULT_INFLATE, update_model
+    path, truth = calibrated
+    q = np.array([30.0, -60.0, 80.0, -100.0, 60.0, 10.0]) + np.random.default_rng(17).uniform(-1.5, 1.5, (20, 6))
+    q[:, 5] = 10.0
+    shifted = truth.copy()
+    shifted[4] += 0.05
+    model = load_model(path)[0]
+    done = update_model(model, in_moved_frame(ur10, shifted, q, 18))
+    assert done.kept_prior
+    old, new = model.identification_, done.model.identification_
+    identified = [k for k, (n, s) in enumerate(zip(old.names, old.status)) if s == "identified"
+                  and not n.startswith("base.")]
+    std = np.full(len(old.names), np.nan)
+    std[identified] = np.sqrt(np.diag(old.covariance)[[list(np.flatnonzero(np.array(old.status) == "identified"))
+                                                       .index(k) for k in identified]] * DEFAULT_INFLATE)
+    others = [k for k in old.prior_indices() if not old.names[k].startswith("base.")]
+    std[others] = old.prior_std[others]
+    held = np.flatnonzero(np.isfinite(std))
+    assert held.size == 27
+    assert np.max(np.abs(new.value[held] - old.value[held]) / std[held]) < 1e-4
+    assert all(new.status[new.names.index(f"base.{c}")] == "identified" for c in ("x", "y", "z", "rx", "ry", "rz"))
+    assert done.rms_after_mm == done.rms_before_mm < 0.05
+
+
+@pytest.mark.parametrize("spread_deg", [1.5, 60.0])
+def test_update_judges_the_new_poses_with_the_frame_profiled_out(ur10, calibrated, spread_deg):
+    """What the new poses determine of each direction of the prior, against the posterior of the prior's
+    parameters and the frame together (the frame free, no prior on it) inverted as one matrix, from central
+    differences of the positions: with the frame profiled out, the poses' frame-like directions count for
+    nothing (counted, a compact patch would seem to determine several); poses spread 60 degrees determine a
+    quarter of one direction and more."""
+    from partcal.study.persist import load_model
+    from partcal.study.update import determined_shares, model_prior
+    path, truth = calibrated
+    model = load_model(path)[0]
+    q = np.array([30.0, -60.0, 80.0, -100.0, 60.0, 10.0]) + \
+        np.random.default_rng(17).uniform(-spread_deg, spread_deg, (20, 6))
+    data = in_moved_frame(ur10, truth, q, 18)
+    prior = model_prior(model, 1.0, unidentified=False)
+    shares = determined_shares(model, data, prior)
+    table = model.identification_
+    frame = [table.names.index(f"base.{c}") for c in ("x", "y", "z", "rx", "ry", "rz")]
+    columns = np.concatenate([prior.index, frame])
+    jac = np.empty((3 * len(q), columns.size))
+    for j, k in enumerate(columns):
+        step = np.zeros(table.value.size)
+        step[k] = 1e-4
+        jac[:, j] = ((model_positions(ur10, None, q, table.value + step, np.zeros(len(q))) -
+                      model_positions(ur10, None, q, table.value - step, np.zeros(len(q)))) / 2e-4).ravel()
+    sigma = table.sigma_mm
+    k = prior.index.size
+    prior_cov = sigma**2 * np.linalg.inv(prior.root.T @ prior.root)
+    information = jac.T @ jac / sigma**2
+    information[:k, :k] += np.linalg.inv(prior_cov)
+    posterior = np.linalg.inv(information)[:k, :k]            # the prior's parameters, the frame's marginalised
+    root = np.linalg.cholesky(prior_cov)
+    remaining = np.linalg.eigvalsh(np.linalg.solve(root, np.linalg.solve(root, posterior).T))
+    expected = np.sort(1.0 - remaining)[::-1]                 # the share of each direction's variance removed
+    np.testing.assert_allclose(shares, expected, rtol=1e-5, atol=1e-9)
+    assert shares.sum() < 1.5 and (shares.max() > 0.2) == (spread_deg > 10)
+
+
+def test_a_models_prior_is_its_inflated_covariance_and_its_unidentified_parameters_plausible_errors(ur10,
+                                                                                                     calibrated):
+    """model_prior's rows W, by hand: W^T W = sigma^2 C^-1 with C the covariance of the identified parameters (the
+    base frame's left out unless asked) times the inflation, beside the unidentified ones' plausible errors
+    squared; type_prior: each row parameter at the model's value, its plausible error under 1 mm."""
+    from partcal.calibration.parameters import PLAUSIBLE_ERROR
+    from partcal.study.persist import load_model
+    from partcal.study.update import model_prior, type_prior
+    model = load_model(calibrated[0])[0]
+    table = model.identification_
+    identified = np.flatnonzero(np.array(table.status) == "identified")
+    unknown = table.prior_indices()
+    for frame, unidentified in ((False, True), (True, True), (False, False)):
+        keep = [j for j, k in enumerate(identified) if frame or not table.names[k].startswith("base.")]
+        plausible = [k for k in unknown if unidentified and (frame or not table.names[k].startswith("base."))]
+        cov = np.zeros((len(keep) + len(plausible),) * 2)
+        cov[:len(keep), :len(keep)] = 7.0 * table.covariance[np.ix_(keep, keep)]
+        cov[len(keep):, len(keep):] = np.diag(table.prior_std[plausible] ** 2)
+        prior = model_prior(model, 7.0, frame=frame, unidentified=unidentified)
+        assert prior.index.tolist() == identified[keep].tolist() + plausible
+        np.testing.assert_array_equal(prior.mean, table.value[prior.index])
+        expected = table.sigma_mm**2 * np.linalg.inv(cov)
+        np.testing.assert_allclose(prior.root.T @ prior.root, expected, rtol=1e-6, atol=1e-9 * np.abs(expected).max())
+    assert any(table.names[k].startswith("base.") for k in unknown) and len(plausible) == 0
+    other = type_prior(model, PLAUSIBLE_ERROR)
+    assert other.index.tolist() == list(range(24))
+    np.testing.assert_array_equal(other.mean, table.value[:24])
+    np.testing.assert_allclose(other.root, np.diag([1.0 / (1.0 if k % 4 in (1, 2) else 0.1) for k in range(24)]))
+
+
+def test_update_keeps_the_prior_below_one_and_a_half_directions_determined(ur10, calibrated):
+    """Twenty poses spread 60 degrees about one pose determine about one direction of the prior model's
+    covariance (between 0.5 and 1.5): too little, so the prior's values are kept. Its default inflation is 30."""
+    from partcal.study.persist import load_model
+    from partcal.study.update import update_model
+    path, truth = calibrated
+    model = load_model(path)[0]
+    q = np.array([30.0, -60.0, 80.0, -100.0, 60.0, 10.0]) + np.random.default_rng(17).uniform(-60, 60, (20, 6))
+    done = update_model(model, measured_set(ur10, truth, q, 18))
+    assert 0.5 < done.shares.sum() < 1.5 and done.kept_prior
+    done = update_model(model, measured_set(ur10, truth, poses(ur10, 20, 19), 18))   # 20 random poses: 1.8
+    assert 1.5 < done.shares.sum() < 2.5 and not done.kept_prior
+    wide = measured_set(ur10, truth, poses(ur10, 30, 14), 15)
+    np.testing.assert_array_equal(update_model(model, wide).model.identification_.value,
+                                  update_model(model, wide, 30.0).model.identification_.value)
+
+
+def test_update_refuses_what_it_cannot_update(ur10, calibrated, tmp_path):
+    """An inflation that is not a positive number (a small one is fine), a model without the covariance of its
+    parameters, and a model fitted on the orientation (positions of one target only) are refused."""
+    import dataclasses
+    from partcal import PartcalError
+    from partcal.errors import ModelFileError
+    from partcal.models.kinematic import KinematicModel
+    from partcal.study.persist import load_model, save_model
+    from partcal.study.update import update_file, update_model
+    path, truth = calibrated
+    model = load_model(path)[0]
+    data = measured_set(ur10, truth, poses(ur10, 30, 14), 15)
+    for bad in (0.0, -1.0, float("nan")):
+        with pytest.raises(PartcalError, match="--inflate must be a number > 0"):
+            update_model(model, data, bad)
+    assert not update_model(model, data, 0.5).kept_prior
+    for field, value in (("covariance", None), ("sigma_mm", float("nan"))):
+        bare = load_model(path)[0]
+        bare.identification_ = dataclasses.replace(bare.identification_, **{field: value})
+        with pytest.raises(ModelFileError, match="the model has no covariance of its parameters"):
+            update_model(bare, data)
+    q = poses(ur10, 30, 31)
+    y = np.column_stack([np.random.default_rng(32).normal(scale=0.5, size=(30, 3)), np.zeros((30, 3))])
+    save_model(KinematicModel(robot=ur10, use_orientation=True).fit(q, y), tmp_path / "pose.json", robot=ur10)
+    from partcal.data.measurements import write_measurements
+    write_measurements(data, tmp_path / "new.csv")
+    with pytest.raises(ModelFileError, match="update reads positions of one target; this model was fitted on "
+                                             "further targets or an orientation"):
+        update_file(tmp_path / "pose.json", tmp_path / "new.csv", tmp_path / "out.json")
+
+
+def test_update_of_a_model_without_its_tool_or_written_before_checksums(ur10, calibrated, tmp_path):
+    """A model identified with its tool fixed (tool: false) updates (its fixed parameters are no part of the
+    prior); a file written before model files carried a checksum gets the one computed from it in the
+    provenance, and one written before the covariance was kept is refused naming it."""
+    import json
+    from partcal.data.measurements import write_measurements
+    from partcal.errors import ModelFileError
+    from partcal.models.kinematic import KinematicModel
+    from partcal.study.persist import checksum, save_model
+    from partcal.study.update import model_prior, update_file, update_model
+    _, truth = calibrated
+    m = measured_set(ur10, truth, poses(ur10, 60, 41), 42)
+    fixed_tool = KinematicModel(robot=ur10, tool=False).fit(m.q_deg, m.errors_mm)
+    assert fixed_tool.identification_.status[24:27] == ("fixed",) * 3
+    assert not set(model_prior(fixed_tool, 1.0).index) & {24, 25, 26}
+    new = measured_set(ur10, truth, poses(ur10, 30, 43), 44)
+    assert update_model(fixed_tool, new).rms_after_mm < 0.05
+    write_measurements(new, tmp_path / "new.csv")
+    save_model(fixed_tool, tmp_path / "a.json", name="a", robot=ur10)
+    doc = json.loads((tmp_path / "a.json").read_text())
+    del doc["checksum"]
+    (tmp_path / "old.json").write_text(json.dumps(doc))
+    done = update_file(tmp_path / "old.json", tmp_path / "new.csv", tmp_path / "b.json")
+    assert done.provenance["prior_checksum"] == checksum(doc)
+    del doc["model"]["identification"]["covariance"]
+    (tmp_path / "older.json").write_text(json.dumps(doc))
+    with pytest.raises(ModelFileError, match=r"older.json: the model has no covariance of its parameters"):
+        update_file(tmp_path / "older.json", tmp_path / "new.csv", tmp_path / "c.json")
 
 
 @pytest.mark.parametrize("case, message", [

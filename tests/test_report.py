@@ -654,3 +654,25 @@ def test_the_scatter_panels_keep_their_tick_labels_apart(monkeypatch):
             if a is not b:                   # one panel's labels never run into the next panel or its labels
                 assert not any(_overlap(t, a.get_window_extent(renderer)) for t in texts(b))
                 assert not any(_overlap(s, t) for s in texts(a) for t in texts(b))
+
+
+def test_a_run_on_data_without_error_reports_that_there_was_none_to_reduce(tmp_path):
+    """Measured = nominal everywhere: every model's error left is 0 of 0 before, which is no change in percent
+    (the report divided by the uncompensated RMS and crashed with ZeroDivisionError, exit 1)."""
+    from conftest import partcal_cli
+
+    for name in ("identification", "test_rectangle"):
+        lines = [line.split(",") for line in (DATA / f"{name}.csv").read_text().splitlines() if line[:1] != "#"]
+        at = {c: lines[0].index(c) for c in lines[0]}
+        for row in lines[1:]:
+            for axis in "xyz":
+                row[at[f"{axis}_meas"]] = row[at[f"{axis}_nom"]]
+        (tmp_path / f"{name}.csv").write_text("".join(",".join(row) + "\n" for row in lines))
+    (tmp_path / "run.yaml").write_text("name: exact\nrobot: motoman_sk120\ncv_folds: 3\ndata:\n"
+                                       "  identification: identification.csv\n  tests:\n"
+                                       "    rectangle: test_rectangle.csv\nmodels:\n"
+                                       "  - {name: FDP(CI), degree: 1, solver: {method: lstsq}}\noutput: out\n")
+    done = partcal_cli("run", str(tmp_path / "run.yaml"))
+    assert done.returncode == 0, done.stderr
+    text = (tmp_path / "out" / "index.html").read_text()
+    assert "from 0.00 to 0.00 mm (no error before to reduce)" in text

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from conftest import ROOT
 
-from partcal.data.observations import read_features, read_observations
+from partcal.data.measurement_rows import read_cell, read_measurement_rows
 from partcal.data.simulate import Compliance, load_study, simulate, write_study
 from partcal.data.simulate_contacts import (all_pairs, fixed_point_visits, pair_distances, plane_touches,
                                             random_pairs)
@@ -128,35 +128,35 @@ def test_a_plane_out_of_reach_is_refused_naming_it(vr):
         plane_touches(vr, {"far": ([0, 0, 1], 5000.0)}, {"far": 5}, np.random.default_rng(0), 0.01)
 
 
-def test_simulate_writes_each_kind_its_truth_and_the_cells_features(study, tmp_path):
+def test_simulate_writes_each_measurement_type_its_truth_and_the_cells_features(study, tmp_path):
     study = dataclasses.replace(study, output=tmp_path / "a")
     paths = write_study(study, simulate(study))
     assert sorted(p.name for p in paths) == sorted(
-        ["test.csv", "features.yaml"] + [f"{n}{s}" for n in ("touches", "flush", "nests", "ballbar")
+        ["test.csv", "cell.yaml"] + [f"{n}{s}" for n in ("touches", "flush", "nests", "ballbar")
                                          for s in (".csv", ".truth.yaml")])
-    features = read_features(tmp_path / "a" / "features.yaml")
-    assert features["planes"]["step"] == {"parallel_to": "top", "spacing_mm": -200.0}
-    assert features["planes"]["side"] == {} and features["points"]["cone"] == {}
-    assert features["points"]["nest_b"] == {"distance_to": "nest_a", "distance_mm": 1000.0}
-    assert features["points"]["sphere"] == {"known_mm": [0.0, -600.0, 700.0]}
-    top = features["planes"]["top"]        # approximate: 0.5 degrees and 1 mm off the truth
+    cell = read_cell(tmp_path / "a" / "cell.yaml")
+    assert cell["planes"]["step"] == {"parallel_to": "top", "spacing_mm": -200.0}
+    assert cell["planes"]["side"] == {} and cell["points"]["cone"] == {}
+    assert cell["points"]["nest_b"] == {"distance_to": "nest_a", "distance_mm": 1000.0}
+    assert cell["points"]["sphere"] == {"known_mm": [0.0, -600.0, 700.0]}
+    top = cell["planes"]["top"]        # approximate: 0.5 degrees and 1 mm off the truth
     assert np.degrees(np.arccos(top["normal"][2])) == pytest.approx(0.5, abs=1e-6)
     assert abs(top["offset_mm"] - 500.0) == pytest.approx(1.0)
-    assert features["noise_mm"] == {"plane": 0.01, "fixed": 0.01, "distance": 0.01}
-    touches = read_observations(tmp_path / "a" / "touches.csv", study.robot.nominal, features=features)
-    assert touches.texts["feature"].count("side") == 200 and set(touches.kind) == {"plane"}
+    assert cell["noise"] == {"plane": 0.01, "fixed": 0.01, "distance": 0.01}
+    touches = read_measurement_rows(tmp_path / "a" / "touches.csv", study.robot.nominal, cell=cell)
+    assert touches.texts["feature"].count("side") == 200 and set(touches.types) == {"plane"}
     tips, _ = true_tips(study.robot, touches.q_deg)
     side = np.array(touches.texts["feature"]) == "side"
     assert np.abs(tips[side] @ PLANES["side"][0] - 600.0).max() < 0.06
-    ballbar = read_observations(tmp_path / "a" / "ballbar.csv", study.robot.nominal, features=features)
-    assert ballbar.kind.count("pose") == 100 and ballbar.kind.count("distance") == 4950
+    ballbar = read_measurement_rows(tmp_path / "a" / "ballbar.csv", study.robot.nominal, cell=cell)
+    assert ballbar.types.count("pose") == 100 and ballbar.types.count("distance") == 4950
     at = {name: k for k, name in enumerate(ballbar.ids)}
-    rows = ballbar.rows_of("distance")
+    rows = ballbar.of("distance")
     tips, _ = true_tips(study.robot, ballbar.q_deg)
     ends = [at[t] for t in np.array(ballbar.texts["to"])[rows]]
     err = ballbar.numbers["distance_mm"][rows] - np.linalg.norm(tips[rows] - tips[ends], axis=1)
     assert 0.008 < err.std() < 0.012
-    flush = read_observations(tmp_path / "a" / "flush.csv", study.robot.nominal)
+    flush = read_measurement_rows(tmp_path / "a" / "flush.csv", study.robot.nominal)
     assert (flush.numbers["flush"] == 1).all()
     truth = (tmp_path / "a" / "nests.truth.yaml").read_text()
     assert "nest_b:\n    position_mm: [500.0, 500.0, 400.0]" in truth and "true_robot:" in truth
@@ -176,12 +176,12 @@ def _config(tmp_path, old, new):
 
 @pytest.mark.parametrize("old, new, pattern", [
     ("plane: {top: 300,", "plane: {floor: 300,", r"datasets\.touches\.plane\.floor \(line \d+\): names no plane "
-                                                 r"of features\.planes \(top, step, side\)"),
-    ("given: approximate}", "given: tied}", r"features\.planes\.top\.given \(line \d+\): must be one of"),
-    ("distance_to: nest_a}", "distance_to: nest_z}", r"features\.points\.nest_b\.distance_to \(line \d+\): must "
-                                                     r"name a feature of features\.points"),
+                                                 r"of cell\.planes \(top, step, side\)"),
+    ("given: approximate}", "given: tied}", r"cell\.planes\.top\.given \(line \d+\): must be one of"),
+    ("distance_to: nest_a}", "distance_to: nest_z}", r"cell\.points\.nest_b\.distance_to \(line \d+\): must "
+                                                     r"name a feature of cell\.points"),
     ("cone:   {position_mm: [-500, 0, 500]}", "cone:   {position_mm: [-500, 0, 500], distance_to: nest_a}",
-     r"features\.points\.cone\.distance_to \(line \d+\): is read with given: tied only"),
+     r"cell\.points\.cone\.distance_to \(line \d+\): is read with given: tied only"),
     ("pairs: all, poses: 100", "pairs: 5000, poses: 100", r"datasets\.ballbar\.distance\.pairs \(line \d+\): must "
                                                           r"be at most 4950"),
     ("test:    {sample: 400}", "test:    {sample: 400, plane: {top: 3}}", r"datasets\.test \(line \d+\): give "
@@ -196,7 +196,7 @@ def test_config_refusals_name_key_and_line(tmp_path, old, new, pattern):
 def test_a_feature_out_of_reach_is_refused_naming_its_key(tmp_path):
     path = _config(tmp_path, "offset_mm: 600, given: unknown}", "offset_mm: 4000, given: unknown}")
     study = load_study(path)
-    with pytest.raises(ConfigError, match=rf"^{re.escape(str(path))}: features\.planes\.side \(line \d+\): plane "
+    with pytest.raises(ConfigError, match=rf"^{re.escape(str(path))}: cell\.planes\.side \(line \d+\): plane "
                                           r"'side': the arm reached it 0 times of 200 .*\(datasets\.touches asks"):
         write_study(study, simulate(study))
     assert not (tmp_path / "o").exists()                      # no file, and no empty folder either

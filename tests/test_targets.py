@@ -16,7 +16,7 @@ from partcal.calibration.parameters import nominal_values
 from partcal.calibration.joint_errors import JointErrors
 from partcal.calibration.identification import Extra, point_rows
 from partcal.calibration.stacked import StackedProblem
-from partcal.calibration.tracker_points import PointKind
+from partcal.calibration.tracker_points import TrackerPoints
 
 TOOLS = {"B": np.array([100.0, 0.0, 90.0]), "C": np.array([-40.0, 90.0, 90.0])}
 CONFIG = ROOT / "configs" / "ur10_targets_virtual.yaml"
@@ -92,7 +92,7 @@ def test_stacked_jacobian_matches_finite_differences(ur10, compliance, parametri
     turned = Rotation.from_rotvec(rng.normal(0, 0.02, (12, 3))).as_matrix() @ ur10.forward(q)[:, :3, :3]
     extra = Extra(TOOLS, {k: ur10.replace(tool_mm=t).positions(q) + 0.1 for k, t in TOOLS.items()}, turned)
     rows, cell = point_rows(q, ur10.positions(q), extra)
-    problem = StackedProblem(ur10, errors, rows, [PointKind.build(rows, cell)], np.full(len(rows), 4.0),
+    problem = StackedProblem(ur10, errors, rows, [TrackerPoints.build(rows, cell)], np.full(len(rows), 4.0),
                              parametrization)
     own = nominal_values(ur10, errors, parametrization)
     assert [n for n, _ in problem.names] == [f"tool@{t}.{c}" for t in TOOLS for c in "xyz"] + \

@@ -120,6 +120,45 @@ def test_loss_weights_are_the_derivative_of_scipys_losses():
         np.testing.assert_allclose(loss_weights(z, loss), rho[1], rtol=1e-12)
 
 
+@pytest.mark.parametrize("loss", ["huber", "cauchy"])
+def test_a_far_rows_down_weight_and_the_covariance_are_the_losses_own(ur10, loss):
+    """A row pushed 0.4 mm off among rows of stated standard deviations: its weight is scipy's rho' of its worst
+    weighted coordinate over the loss's scale (loss_scale times the standard deviations' root mean square), and
+    the covariance is iteratively reweighted least squares' at the solution, sigma^2 (J^T W J)^-1 with W those
+    weights and sigma^2 = sum(W r^2) / dof, J written here as central differences."""
+    from scipy.optimize._lsq.least_squares import IMPLEMENTED_LOSSES
+    vr, q, true, _ = ur10
+    rng = np.random.default_rng(81)
+    std = np.repeat(rng.uniform(0.01, 0.03, (len(q), 1)), 3, axis=1)
+    measured = true + rng.standard_normal(true.shape) * std
+    measured[17] += [0.3, -0.2, 0.25]
+    table = identify(vr.nominal, q, measured, std_mm=std, loss=loss, loss_scale=2.0, parametrization="complete")
+    reference = np.sqrt(np.mean(std**2))
+    scale = 2.0 * reference
+    assert table.robust["scale_mm"] == pytest.approx(scale, rel=1e-12)
+
+    def weighted(v):
+        return ((robot_with(vr.nominal, v, "complete").positions(q) - measured) / std * reference).ravel()
+    r = weighted(table.value)
+    rho = np.empty((3, r.size))
+    IMPLEMENTED_LOSSES[loss]((r / scale) ** 2, rho, cost_only=False)
+    per_row = rho[1].reshape(-1, 3).min(axis=1)
+    named = {d["row"]: d["weight"] for d in table.robust["downweighted"]}
+    assert 17 in named and named[17] < 0.2
+    assert sorted(named) == np.flatnonzero(per_row < 0.5).tolist()
+    np.testing.assert_allclose(list(named.values()), per_row[sorted(named)], rtol=1e-6)
+    free = np.flatnonzero(np.array(table.status) == "identified")
+    jac = np.empty((r.size, free.size))
+    for j, k in enumerate(free):
+        step = np.zeros(table.value.size)
+        step[k] = 1e-6
+        jac[:, j] = (weighted(table.value + step) - weighted(table.value - step)) / 2e-6
+    sigma2 = np.sum(rho[1] * r**2) / (r.size - free.size)
+    expected = sigma2 * np.linalg.inv(jac.T @ (rho[1][:, None] * jac))
+    np.testing.assert_allclose(table.covariance, expected, rtol=1e-5, atol=1e-7 * np.abs(expected).max())
+    assert table.sigma_mm == pytest.approx(np.sqrt(sigma2), rel=1e-6)
+
+
 def _tracker_files(tmp_path, vr, rng, *, std_columns: bool):
     """An identification and a test CSV of the virtual UR10 in a tracker frame 2.5 m away, noise growing with
     the distance (0.005 mm + 5 ppm per axis); row 11 of the identification set pushed 3 mm off."""
@@ -182,6 +221,38 @@ def test_robust_run_names_the_bad_row_in_the_warnings_metrics_and_report(ur10, t
     assert 'class="downweighted"' in html and "<td>11</td>" in html
 
 
+def test_data_noise_with_a_prior_keeps_its_weights_in_a_run(ur10, tmp_path):
+    """data.noise and prior: plausible together in a run (base frame): the model is the weighted MAP that
+    identify gives with each point's standard deviation from the noise model (itself checked against a written-out
+    MAP in test_prior), not the unweighted one."""
+    from partcal.calibration.parameters import geometric_size, nominal_values, parameter_names, PLAUSIBLE_ERROR
+    from partcal.calibration.prior import plausible_prior
+    vr, q, true, rng = ur10
+    std = np.repeat((0.005 + 50e-6 * np.linalg.norm(true, axis=1))[:, None], 3, axis=1)
+    measured = true + np.random.default_rng(91).standard_normal(true.shape) * std
+    header = "q1,q2,q3,q4,q5,q6,x_meas,y_meas,z_meas"
+    for name, rows in (("ident", slice(0, 90)), ("test", slice(90, 120))):
+        np.savetxt(tmp_path / f"{name}.csv", np.column_stack([q[rows], measured[rows]]), delimiter=",",
+                   header=header, comments="", fmt="%.9f")
+    import yaml
+    from partcal.robot.description import robot_to_dict
+    (tmp_path / "robot.yaml").write_text(yaml.safe_dump(robot_to_dict(vr.nominal)))     # the virtual cell's tool
+    (tmp_path / "run.yaml").write_text(
+        "name: w\nrobot: robot.yaml\ncv_folds: 3\ndata:\n  identification: ident.csv\n"
+        "  tests: {test: test.csv}\n  noise: {constant_mm: 0.005, ppm: 50}\n"
+        "models:\n  - {name: DH, kind: kinematic, prior: plausible, prior_strength: 0.1}\noutput: out\n")
+    fitted = run(load_config(tmp_path / "run.yaml")).models[0].model.identification_
+    robot = vr.nominal
+    read = read_measurements(tmp_path / "ident.csv", robot)
+    units = [u for _, u in parameter_names(robot)]
+    prior = plausible_prior(units, geometric_size(robot) - 9, nominal_values(robot), 0.1, PLAUSIBLE_ERROR)
+    by_hand = np.repeat((0.005 + 50e-6 * np.linalg.norm(read.measured_mm, axis=1))[:, None], 3, axis=1)
+    weighted = identify(robot, read.q_deg, read.measured_mm, std_mm=by_hand, prior=prior)
+    unweighted = identify(robot, read.q_deg, read.measured_mm, prior=prior)
+    np.testing.assert_allclose(fitted.value, weighted.value, atol=1e-6)
+    assert np.max(np.abs(unweighted.value - weighted.value)) > 1e-3
+
+
 def test_ipa_std_columns_read_through_a_format(tmp_path):
     path = ROOT.parent / "shared" / "datasets" / "ipa_ur10" / "Series_B" / "measurements_joint_configurations.csv"
     if not path.is_file():
@@ -222,9 +293,3 @@ def test_noise_model_gives_each_point_its_distance_std():
     expected = 0.005 + 5e-6 * np.array([0.0, 2500.0, np.sqrt(1500.0**2 + 1000.0**2 + 500.0**2)])
     np.testing.assert_allclose(NoiseModel(0.005, 5.0, (2500.0, 0.0, 0.0)).std_of(p), np.repeat(expected[:, None], 3, 1))
 
-
-def test_a_loss_is_refused_on_rows_of_measurement_kinds():
-    from partcal.calibration.measurement import Measured
-    with pytest.raises(PartcalError, match="loss: huber weighs tracker points"):
-        KinematicModel(robot="universal_robots_ur10", loss="huber").fit(np.zeros((5, 6)), None,
-                                                                        measures=Measured(None, None))

@@ -179,7 +179,7 @@ def turn_columns(nominal: Robot, robot: Robot, q_actual: NDArray[np.float64], de
 
 @dataclass(frozen=True, eq=False)
 class Chain:
-    """The model's targets at every row: positions (n, 3) mm, tool rotations (n, 3, 3) when a kind needs
+    """The model's targets at every row: positions (n, 3) mm, tool rotations (n, 3, 3) when a type needs
     them, and their derivatives by the model's own parameters: ``jac`` (n, 3, P), ``omega`` (n, 3, P) the
     tool's angular velocity (radians per unit)."""
 

@@ -50,7 +50,7 @@ from .identification import Extra, point_rows
 from .parameters import nominal_values, parameter_names, PARAMETRIZATIONS, resolved_parametrization
 from .chain import model_jacobian as kinematic_jacobian
 from .stacked import StackedProblem
-from .tracker_points import PointKind
+from .tracker_points import TrackerPoints
 
 log = logging.getLogger(__name__)
 
@@ -293,10 +293,10 @@ def target_identifiability(robot: Robot, q_deg: NDArray[np.float64], tools_mm: d
     extra = Extra(tools, {name: robot.replace(tool_mm=t).positions(q_deg) for name, t in tools.items()},
                   flange if orientation else None)
     rows, cell = point_rows(q_deg, robot.positions(q_deg), extra)
-    kind = PointKind.build(rows, cell)
-    problem = StackedProblem(robot, None, rows, [kind], np.zeros(len(rows)), "dh")
+    points = TrackerPoints.build(rows, cell)
+    problem = StackedProblem(robot, None, rows, [points], np.zeros(len(rows)), "dh")
     jac_all = problem(problem.start)[1]
-    wanted_all = np.concatenate([wanted, [tool or not kind.follows_tool(name) for name, _ in problem.names]])
+    wanted_all = np.concatenate([wanted, [tool or not points.follows_tool(name) for name, _ in problem.names]])
     found = identifiable(jac_all, wanted_all, rcond)
     names = [n for n, _ in model_parameters(robot)[0]] + [n for n, _ in problem.names]
     gained = sorted(set(found[found < wanted.size]) - set(one))

@@ -1,4 +1,4 @@
-"""Distances: between two rows' tool tips, or between the tip and a pivot (a ballbar, a draw-wire) (:class:`DistanceKind`)."""
+"""Distances: between two rows' tool tips, or between the tip and a pivot (a ballbar, a draw-wire) (:class:`Distances`)."""
 
 from __future__ import annotations
 
@@ -6,8 +6,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import DataError
-from .fixed_points import FixedPointKind
-from .measurement import MeasurementKind, Residuals, point_unknowns, points_moved, worst_of
+from .fixed_points import FixedPoints
+from .measurement import Column, MeasurementType, Residuals, point_unknowns, points_moved, worst_of
 
 UNIT_FACTOR = 30.0
 """A distance this many times shorter or longer than the nominal robot's, where that is at least :data:`LONG_MM`,
@@ -17,20 +17,21 @@ LONG_MM = 300.0
 """... (shorter nominal distances are not judged: a tool the nominal robot lacks changes them by any factor)."""
 
 
-class DistanceKind(MeasurementKind):
+class Distances(MeasurementType):
     """The distance between this row's tool tip and another row's (or a pivot's)."""
 
     name = "distance"
-    reads = ("distance_mm", "to")
+    columns = {"distance_mm": Column("mm", required=True, check=lambda v: None if v > 0 else "a distance > 0 mm"),
+               "to": Column(text=True, required=True, refers="points")}
     summary = "|tip - tip of row `to` (or pivot `to`)| - distance_mm (mm)"
 
-    def __init__(self, rows, index, features, noise_mm):
-        super().__init__(rows, index, features, noise_mm)
+    def __init__(self, rows, index, cell, noise):
+        super().__init__(rows, index, cell, noise)
         self.measured = rows.number("distance_mm", index)
         targets = rows.text("to", index)
         where = {name: i for i, name in enumerate(rows.ids)}
-        fixed = rows.of(FixedPointKind.name)
-        points = set(features.get("points") or {}) | (set(rows.text("feature", fixed)) if fixed.size else set())
+        fixed = rows.of(FixedPoints.name)
+        points = set(cell.get("points") or {}) | (set(rows.text("feature", fixed)) if fixed.size else set())
         self.other = np.full(index.size, -1, dtype=np.intp)
         self.pivot: list[str | None] = []
         for i, (row, to) in enumerate(zip(index, targets)):
@@ -41,14 +42,14 @@ class DistanceKind(MeasurementKind):
                 self.pivot.append(to)
             else:
                 raise DataError(f"{rows.where(row)}: column 'to': {to!r} names no row (column 'id') and no point of "
-                                "the features")
+                                "the cell")
             if to in where and where[to] == row:
                 raise DataError(f"{rows.where(row)}: column 'to': the row refers to itself")
         bad = np.flatnonzero(~(self.measured > 0))
         if bad.size:
             raise DataError(f"{rows.where(index[bad[0]])}: column 'distance_mm': {self.measured[bad[0]]:g} is not a "
                             "distance; expected a length above 0 mm")
-        self.specs = dict(features.get("points") or {})
+        self.specs = dict(cell.get("points") or {})
         self.pivots = [p for p in dict.fromkeys(x for x in self.pivot if x)
                        if "known_mm" not in self.specs.get(p, {})]
 

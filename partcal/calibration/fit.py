@@ -30,8 +30,8 @@ def fit_parameters(jac_at, v0: NDArray[np.float64], jac0: NDArray[np.float64], w
                    names: list[tuple[str, str]], rcond: float, size: int, n_poses: int, *,
                    row_weight: NDArray[np.float64] | None = None, loss: str = "linear", loss_scale: float = 3.0,
                    reference_mm: float | None = None, held: NDArray[np.bool_] | None = None,
-                   row_of: NDArray[np.intp] | None = None, weighted_by: NDArray[np.float64] | None = None
-                   ) -> tuple[Identification, NDArray[np.float64]]:
+                   row_of: NDArray[np.intp] | None = None, weighted_by: NDArray[np.float64] | None = None,
+                   prior_rows: int = 0) -> tuple[Identification, NDArray[np.float64]]:
     """The rank-checked fit of :func:`identify` over any stacked residuals, and the residuals it leaves.
 
     ``jac_at(values, jacobian=True)`` gives the residuals and their Jacobian; ``v0`` is the start (the
@@ -49,14 +49,14 @@ def fit_parameters(jac_at, v0: NDArray[np.float64], jac0: NDArray[np.float64], w
     the table's ``robust``: ``row_of`` gives the measurement row of each residual (-1: none, such as a prior's;
     default: the first ``3 n_poses`` residuals, three per row), and ``weighted_by`` the weights ``jac_at`` has
     already put on its residuals (to say each row's residual in mm). ``held``: the parameters a prior holds (its
-    rows are in ``jac_at``), never pruned as implausible.
+    rows are in ``jac_at``, the last ``prior_rows`` of ``jac0``), never pruned as implausible.
     """
     if loss not in LOSSES:
         raise DataError(f"loss must be one of {', '.join(LOSSES)}; got {loss!r}")
     if row_weight is not None:
         jac_at, jac0 = _weighted(jac_at, row_weight), jac0 * row_weight[:, None]
     units = [unit for _, unit in names]
-    free, rank = identifiable_parameters(jac0, wanted, rcond, units)
+    free, rank = identifiable_parameters(jac0, wanted, rcond, units, jac0.shape[0] - prior_rows)
 
     limits = np.full(v0.size, np.nan)
     limits[:size - 9] = [PLAUSIBLE_ERROR[unit] * IMPLAUSIBLE for unit in units[:size - 9]]     # the rows' parameters

@@ -1,5 +1,5 @@
 """Fixed points: the tool tip brought to a point of the cell (a sphere's or cone's centre, a nest) from several
-orientations (:class:`FixedPointKind`)."""
+orientations (:class:`FixedPoints`)."""
 
 from __future__ import annotations
 
@@ -7,24 +7,49 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import DataError
-from .measurement import NEAR_MM, MeasurementKind, Residuals, counted, largest_turn_deg, point_unknowns, points_moved, unit_rows, worst_of
+from .checks import known_length
+from .cell import check_ties, entry_form, named_entry, positive_problem, vector3_problem
+from .measurement import NEAR_MM, Column, MeasurementType, Residuals, counted, largest_turn_deg, point_unknowns, points_moved, unit_rows, worst_of
+
+POINT_FORMS = (("distance_to", "distance_mm"), ("known_mm",))
+"""The keys of each form of a fixed point (tied, known); an unknown point has none."""
 
 BAR_NOISE_MM = 0.001
 """The stated uncertainty of a known length between two fixed points (a calibrated bar), mm."""
 
 
 
-class FixedPointKind(MeasurementKind):
+class FixedPoints(MeasurementType):
     """The tool tip brought to a fixed point (a sphere's or cone's centre, a nest)."""
 
     name = "fixed"
-    reads = ("feature",)
+    columns = {"feature": Column(text=True, required=True)}
     summary = "the tool tip at fixed point `feature`: 3 residuals (mm)"
+    cell_section, feature_column = "points", "feature"
 
-    def __init__(self, rows, index, features, noise_mm):
-        super().__init__(rows, index, features, noise_mm)
+    @classmethod
+    def read_section(cls, sec) -> dict:
+        """The cell's points: each ``{}`` (unknown), ``{known_mm: [x, y, z]}`` (known in the base frame) or
+        ``{distance_to: NAME, distance_mm: d}`` (tied to another by a known distance)."""
+        out = {}
+        for name in list(sec.data):
+            entry = named_entry(sec, name)
+            entry_form(entry, POINT_FORMS)
+            if entry.has("distance_to") or entry.has("distance_mm"):
+                out[name] = {"distance_to": entry.get("distance_to", "str"),
+                             "distance_mm": entry.get("distance_mm", "float", check=positive_problem)}
+            elif entry.has("known_mm"):
+                out[name] = {"known_mm": [float(v) for v in entry.get("known_mm", "list", check=vector3_problem)]}
+            else:
+                out[name] = {}
+            entry.done()
+        check_ties(sec, out, "distance_to")
+        return out
+
+    def __init__(self, rows, index, cell, noise):
+        super().__init__(rows, index, cell, noise)
         self.point = rows.text("feature", index)
-        self.specs = dict(features.get("points") or {})
+        self.specs = dict(cell.get("points") or {})
         self.names = list(dict.fromkeys(self.point))
         for name in self.names:
             mine = self.index[[p == name for p in self.point]]
@@ -43,7 +68,7 @@ class FixedPointKind(MeasurementKind):
             if other not in self.names and "known_mm" not in self.specs.get(other, {}):
                 first = self.index[self.point.index(n)]
                 raise DataError(f"{self.rows.where(first)}: column 'feature': fixed point {n!r} is tied to {other!r} "
-                                f"by distance_mm (points.{n}.distance_to of the features), but no row visits "
+                                f"by distance_mm (points.{n}.distance_to of the cell), but no row visits "
                                 f"{other!r}: visit it too, or list {n!r} as unknown ({n}: {{}})")
         for name in self.unknown:
             names += point_unknowns(name)
@@ -51,7 +76,22 @@ class FixedPointKind(MeasurementKind):
         self.tied = tied
         start = np.array(start)
         self._check_rows(positions, rotations, start)
+        self._check_bars(start)
         return names, start
+
+    def _check_bars(self, u) -> None:
+        """Each known distance between two points against the nominal robot's view of it (the medians of their
+        visits, or a known point): refused when its unit is another, said when off by more than the nominal
+        robot's own errors (:func:`~partcal.calibration.checks.known_length`)."""
+        for name in self.tied:
+            other = self.specs[name]["distance_to"]
+            seen = float(np.linalg.norm(self.centre(name, u)[0] - self.centre(other, u)[0]))
+            first = self.index[self.point.index(name)]
+            note = known_length(f"points.{name}.distance_mm", self.rows.where(first),
+                                float(self.specs[name]["distance_mm"]), seen,
+                                f"the nominal robot's visits of {name!r} and {other!r}")
+            if note:
+                self.suspicions.append(note)
 
     def _check_rows(self, positions, rotations, u) -> None:
         """Every point reached from more than one orientation, every visit near its point at the nominal robot."""
@@ -96,7 +136,7 @@ class FixedPointKind(MeasurementKind):
             b, kb = self.centre(other, u)
             length = np.linalg.norm(a - b)
             direction = (a - b) / length
-            scale = self.noise_mm / BAR_NOISE_MM         # weighed as a length known to BAR_NOISE_MM
+            scale = self.noise / BAR_NOISE_MM         # weighed as a length known to BAR_NOISE_MM
             bars.append(scale * (length - float(self.specs[name]["distance_mm"])))
             d = np.zeros(u.size)
             if ka is not None:

@@ -7,7 +7,7 @@ to unit length; the rank from the singular values, the choice of which parameter
 pivoting, ties going to the first in the table, so that the choice is the same on every processor). They
 stay at their nominal values and are reported as unidentifiable.
 
-On rows of measurement kinds the rank rule reads the Jacobian on consistent data
+On rows of measurement types the rank rule reads the Jacobian on consistent data
 (:func:`consistent_jacobian`), so that noise or a misfit cannot make a null direction (a uniform scale, a
 turn of the whole cell) look merely weak.
 """
@@ -26,8 +26,8 @@ WEAK_LEVER = 0.01
 geometric parameter's does is not identified (see :func:`identifiable_parameters`)."""
 
 
-def identifiable_parameters(jac0: NDArray[np.float64], wanted: NDArray[np.bool_], rcond: float, units: list[str]
-                  ) -> tuple[NDArray[np.intp], int]:
+def identifiable_parameters(jac0: NDArray[np.float64], wanted: NDArray[np.bool_], rcond: float, units: list[str],
+                            data_rows: int | None = None) -> tuple[NDArray[np.intp], int]:
     """Indices of the parameters to identify, and the rank, from the Jacobian ``jac0`` at nominal.
 
     The columns are scaled to unit length; the rank counts singular values
@@ -40,13 +40,20 @@ def identifiable_parameters(jac0: NDArray[np.float64], wanted: NDArray[np.bool_]
     on the last joint's axis) would mimic a tool offset, which unit columns
     cannot tell apart from it, and would then need a turn of degrees for a
     tenth of a millimetre, far outside the range where the fit converges.
+
+    ``data_rows``: the first rows of ``jac0`` are the measurements' and the rest a prior's (which move no
+    tool): the median lever is read on those rows alone. (Read on the prior's rows too, a strong prior's
+    columns raised it ten thousandfold and dropped every parameter it does not hold, the base frame of an
+    update among them.)
     """
     norms = np.linalg.norm(jac0, axis=0)
     moving = wanted & (norms > 1e-12 * max(norms.max(), 1e-300))
-    plausible = np.array([PLAUSIBLE_ERROR.get(unit, np.nan) for unit in units]) * norms
+    per_unit = np.array([PLAUSIBLE_ERROR.get(unit, np.nan) for unit in units])
+    plausible = per_unit * norms
+    lever = plausible if data_rows is None else per_unit * np.linalg.norm(jac0[:data_rows], axis=0)
     geometric = moving & np.isfinite(plausible)
     if geometric.any():
-        moving &= ~geometric | (plausible >= WEAK_LEVER * np.median(plausible[geometric]))
+        moving &= ~geometric | (plausible >= WEAK_LEVER * np.median(lever[geometric]))
     candidates = np.flatnonzero(moving)
     if candidates.size == 0:
         return candidates, 0
@@ -94,7 +101,7 @@ def _most_independent(columns: NDArray[np.float64], count: int) -> NDArray[np.in
 def scale_direction(problem) -> NDArray[np.float64]:
     """The parameter change of a uniform scale of the whole cell by one: the robot's lengths (found as the
     length parameters' change that moves every row's target ``p`` by ``p``, the base's place included), and
-    every length among the kinds' unknowns by its own value. Zero when the robot's lengths cannot do it."""
+    every length among the types' unknowns by its own value. Zero when the robot's lengths cannot do it."""
     chain = chain_at(problem.nominal, problem.errors, problem.poses, problem.start[:problem.own],
                      problem.pose_payload, problem.par, False, True)
     units = [u for _, u in parameter_names(problem.nominal, problem.errors, problem.par)]
@@ -108,8 +115,8 @@ def scale_direction(problem) -> NDArray[np.float64]:
     s[lengths] = x
     mine = np.array([u == "mm" for _, u in problem.names], dtype=bool)
     scaled = problem.start[problem.own:].copy()
-    for kind, cols in zip(problem.kinds, problem.columns):
-        scaled[cols - problem.own] = kind.scaled_lengths(scaled[cols - problem.own])
+    for measurement, cols in zip(problem.measurements, problem.columns):
+        scaled[cols - problem.own] = measurement.scaled_lengths(scaled[cols - problem.own])
     s[problem.own:][mine] = scaled[mine]
     return s
 
@@ -117,19 +124,19 @@ def scale_direction(problem) -> NDArray[np.float64]:
 def rigid_directions(problem) -> NDArray[np.float64]:
     """The parameter changes of the six rigid motions of the whole cell (shifts along, then turns about the base
     frame's axes, through its origin), as columns ``(P, 6)``: the base correction (its shift, its turn) and the
-    kinds' unknowns as each kind moves them (:meth:`MeasurementKind.moved`)."""
+    types' unknowns as each type moves them (:meth:`MeasurementType.moved`)."""
     size = geometric_size(problem.nominal, problem.par)
     out = np.zeros((problem.start.size, 6))
     for k in range(3):
         out[size - 6 + k, k] = 1.0                           # base.x, y, z: mm
         out[size - 3 + k, 3 + k] = np.degrees(1.0)           # base.rx, ry, rz: degrees per radian
     seen: set[int] = set()
-    for kind, cols in zip(problem.kinds, problem.columns):
+    for measurement, cols in zip(problem.measurements, problem.columns):
         u = problem.start[cols]
         new = np.array([c not in seen for c in cols], dtype=bool)      # a shared unknown moves once
         for k in range(6):
             motion = np.eye(6)[k]
-            out[cols[new], k] = kind.moved(u, motion[3:], motion[:3])[new]
+            out[cols[new], k] = measurement.moved(u, motion[3:], motion[:3])[new]
         seen.update(cols.tolist())
     return out
 

@@ -24,11 +24,11 @@ from ..robot.rotations import matrices_from_rotation_vectors, xyz_deg_from_matri
 from .fit import held_still
 from .identifiability import identifiable_parameters
 from .joint_errors import JointErrors
-from .measurement import Rows
+from .measurement import MeasurementRows
 from .parameters import PARAMETRIZATIONS, PRIMARY_TARGET, Identification
 from .prior import Prior
-from .stacked import StackedProblem, identify_measures
-from .tracker_points import ORIENTATION_WEIGHT, STD_COLUMNS, TARGETS, PointKind
+from .stacked import StackedProblem, identify_measurements
+from .tracker_points import ORIENTATION_WEIGHT, STD_COLUMNS, TARGETS, TrackerPoints
 
 log = logging.getLogger(__name__)
 
@@ -92,8 +92,8 @@ def extra_from(robot: Robot, q_deg: NDArray[np.float64], targets: dict | None, o
 
 def point_rows(q_deg: NDArray[np.float64], measured_mm: NDArray[np.float64], extra: Extra | None = None,
                std_mm: NDArray[np.float64] | None = None, payload_kg: NDArray[np.float64] | None = None,
-               source: str = "positions") -> tuple[Rows, dict]:
-    """Tracker points of ``n`` poses as rows of the point kind, and the cell they need: the primary target's rows
+               source: str = "positions") -> tuple[MeasurementRows, dict]:
+    """Tracker points of ``n`` poses as rows of the point type, and the cell they need: the primary target's rows
     (row ``i``: pose ``i``, with the orientation when ``extra`` has one), then each further target's (column
     ``target``); every row of a pose takes its standard deviations ``std_mm`` (n, 3). The cell gives the further
     targets' nominal offsets (where their fit starts) and the orientation's weight."""
@@ -109,7 +109,7 @@ def point_rows(q_deg: NDArray[np.float64], measured_mm: NDArray[np.float64], ext
         numbers.update({c: np.tile(std_mm[:, k], len(names)) for k, c in enumerate(STD_COLUMNS)})
     texts = {"target": tuple(t for t in names for _ in range(n))} if len(names) > 1 else {}
     ids = tuple(f"{i + 1}" + (f"@{t}" if t else "") for t in names for i in range(n))
-    rows = Rows(np.tile(q_deg, (len(names), 1)), ("point",) * (n * len(names)), ids, tuple(range(1, n + 1)) *
+    rows = MeasurementRows(np.tile(q_deg, (len(names), 1)), ("point",) * (n * len(names)), ids, tuple(range(1, n + 1)) *
                 len(names), source, numbers, texts, None if payload_kg is None else np.tile(payload_kg, len(names)))
     cell = {TARGETS: {k: np.asarray(v, dtype=float) for k, v in extra.tools_mm.items()},
             ORIENTATION_WEIGHT: float(extra.mm_per_rad)}
@@ -161,7 +161,7 @@ def identify(robot: Robot, q_deg: NDArray[np.float64], measured_mm: NDArray[np.f
         without it the robust spread (1.4826 times the median absolute residual) of the least-squares fit.
     prior : Prior, optional
         A Gaussian prior on some parameters (:mod:`partcal.calibration.prior`, indices into the table's order):
-        MAP (:func:`~partcal.calibration.stacked.identify_measures`).
+        MAP (:func:`~partcal.calibration.stacked.identify_measurements`).
 
     Returns
     -------
@@ -179,19 +179,19 @@ def identify(robot: Robot, q_deg: NDArray[np.float64], measured_mm: NDArray[np.f
     std = None if std_mm is None else check_std(std_mm, n)
     payload = np.broadcast_to(np.asarray(payload_kg, dtype=float), (n,))
     rows, cell = point_rows(q_deg, measured_mm, extra, std, payload)
-    table, _ = identify_measures(robot, rows, cell, base=base, tool=tool, rcond=rcond, errors=errors,
+    table, _ = identify_measurements(robot, rows, cell, base=base, tool=tool, rcond=rcond, errors=errors,
                                  payload_kg=payload[np.arange(len(rows)) % n], parametrization=parametrization,
                                  prior=prior, loss=loss, loss_scale=loss_scale)
     return _tracker_figures(table, robot, rows, cell, errors, payload, parametrization, n, extra, base, tool, rcond)
 
 
-def _tracker_figures(table: Identification, robot: Robot, rows: Rows, cell: dict, errors, payload, parametrization,
+def _tracker_figures(table: Identification, robot: Robot, rows: MeasurementRows, cell: dict, errors, payload, parametrization,
                      n: int, extra: Extra | None, base: bool, tool: bool, rcond: float) -> Identification:
     """``table`` with the figures of tracker points of ``n`` poses: the primary target's 3-D RMS (``rms_mm``), each
     target's and the orientation's (with further targets or an orientation), and the rows a robust loss
     down-weighed named by their pose."""
     tiled = payload[np.arange(len(rows)) % n]
-    problem = StackedProblem(robot, errors, rows, [PointKind.build(rows, cell)], tiled, parametrization)
+    problem = StackedProblem(robot, errors, rows, [TrackerPoints.build(rows, cell)], tiled, parametrization)
     values = problem.raw(table.value)[0]
     positions = values[:3 * len(rows)].reshape(-1, n, 3)
     rms = [pooled_rms(block) for block in positions]
@@ -203,7 +203,7 @@ def _tracker_figures(table: Identification, robot: Robot, rows: Rows, cell: dict
             if pose not in worst or d["weight"] < worst[pose]["weight"]:
                 worst[pose] = {"row": pose, "residual_mm": d["residual_mm"], "weight": d["weight"]}
         robust = {**robust, "downweighted": [worst[k] for k in sorted(worst)]}
-    table = dataclasses.replace(table, rms_mm=rms[0], n_poses=n, robust=robust, target_rms_mm={})
+    table = dataclasses.replace(table, rms_mm=rms[0], n_poses=n, robust=robust, target_rms_mm={}, misfit=None)
     if extra is None:
         return table
     angle = None
@@ -211,7 +211,7 @@ def _tracker_figures(table: Identification, robot: Robot, rows: Rows, cell: dict
         turns = values[3 * len(rows):].reshape(n, 3) / extra.mm_per_rad
         angle = float(np.degrees(pooled_rms(turns)))
     primary, primary_cell = point_rows(rows.q_deg[:n], rows_measured(rows, n))
-    start = StackedProblem(robot, errors, primary, [PointKind.build(primary, primary_cell)], payload, parametrization)
+    start = StackedProblem(robot, errors, primary, [TrackerPoints.build(primary, primary_cell)], payload, parametrization)
     own = start.own
     jac0 = start(start.start)[1][:, :own]
     wanted = np.ones(own, dtype=bool)
@@ -222,6 +222,6 @@ def _tracker_figures(table: Identification, robot: Robot, rows: Rows, cell: dict
                                orientation_rms_deg=angle, primary_identifiable=identifiable)
 
 
-def rows_measured(rows: Rows, n: int) -> NDArray[np.float64]:
+def rows_measured(rows: MeasurementRows, n: int) -> NDArray[np.float64]:
     """The primary target's measured positions (n, 3) mm of point rows made by :func:`point_rows`."""
     return np.column_stack([rows.numbers[c][:n] for c in ("x_meas", "y_meas", "z_meas")])

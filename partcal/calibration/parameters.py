@@ -190,6 +190,10 @@ class Identification:
         parameters is ``-A u``). A prediction's error from them is ``(J_u(q) - J_i(q) A) u``: nil where
         the identified parameters stand in for them (a base turn for the first joint's offset), growing
         where the data did not go (:func:`prior_variance`).
+    misfit : dict, optional
+        Fitted on measurement types: ``noise_ratio`` (each type's RMS residual over its noise) and ``calibrated``
+        (False when a type with a stated noise leaves :data:`~partcal.calibration.checks.NOT_CALIBRATED` times it
+        or more). None otherwise.
     robust : dict, optional
         With a robust loss (:data:`LOSSES`, not ``linear``): ``loss``, ``scale_mm`` (its ``f_scale``, mm of the
         weighted residuals) and ``downweighted``, the measurement rows the loss weighs below
@@ -215,6 +219,7 @@ class Identification:
     prior_std: NDArray[np.float64] | None = None
     prior_absorbed: NDArray[np.float64] | None = None
     robust: dict | None = None
+    misfit: dict | None = None
 
     @property
     def correction(self) -> NDArray[np.float64]:
@@ -244,7 +249,8 @@ class Identification:
                    if self.covariance is not None else {}),
                 **({"prior_std": [None if np.isnan(v) else float(v) for v in self.prior_std],
                     "prior_absorbed": self.prior_absorbed.tolist()} if self.prior_std is not None else {}),
-                **({"robust": self.robust} if self.robust is not None else {})}
+                **({"robust": self.robust} if self.robust is not None else {}),
+                **({"misfit": self.misfit} if self.misfit is not None else {})}
 
     @classmethod
     def from_dict(cls, d: dict) -> "Identification":
@@ -260,7 +266,7 @@ class Identification:
                    None if d.get("prior_std") is None else np.array(
                        [np.nan if v is None else v for v in d["prior_std"]], dtype=float),
                    None if d.get("prior_absorbed") is None else _matrix(
-                       d["prior_absorbed"], sum(s == "identified" for s in d["status"])), d.get("robust"))
+                       d["prior_absorbed"], sum(s == "identified" for s in d["status"])), d.get("robust"), d.get("misfit"))
 
     def prior_indices(self) -> NDArray[np.intp]:
         """Indices of the parameters with a prior standard deviation (:attr:`prior_std`), in table order."""
@@ -271,3 +277,13 @@ def _matrix(rows: list, n_rows: int) -> NDArray[np.float64]:
     """A JSON matrix (a list of rows) as an array of ``n_rows`` rows (an empty one keeps its shape)."""
     arr = np.asarray(rows, dtype=float)
     return arr.reshape(n_rows, -1) if arr.size else np.zeros((n_rows, 0))
+
+
+def nominal_identification(robot: Robot, errors: JointErrors | None = None, parametrization: str = "dh"
+                           ) -> Identification:
+    """The nominal robot as an identified table that identified nothing: what "no calibration" predicts (its
+    held-out residuals are the reference a calibration must beat)."""
+    names = parameter_names(robot, errors, parametrization)
+    value = nominal_values(robot, errors, parametrization)
+    return Identification(tuple(n for n, _ in names), tuple(u for _, u in names), value, value.copy(),
+                          np.full(value.size, np.nan), ("fixed",) * value.size, 0, 1.0, float("nan"), 0, 0)

@@ -1,4 +1,4 @@
-"""Plane contacts: the probe tip on a plane of the cell, and a flat face of the tool lying on it (:class:`PlaneKind`)."""
+"""Plane contacts: the probe tip on a plane of the cell, and a flat face of the tool lying on it (:class:`PlaneContacts`)."""
 
 from __future__ import annotations
 
@@ -6,33 +6,65 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import DataError
-from .measurement import NEAR_MM, MeasurementKind, Residuals, counted, largest_turn_deg, worst_of
+from .checks import known_length
+from .cell import check_ties, entry_form, finite_problem, named_entry, unit_vector
+from .measurement import NEAR_MM, Column, MeasurementType, Residuals, counted, largest_turn_deg, worst_of
+
+PLANE_FORMS = (("parallel_to", "spacing_mm"), ("normal", "offset_mm"))
+"""The keys of each form of a plane (tied, approximately known); an unknown plane has none."""
+
+GIVEN_NORMAL_DEG = 10.0
+"""A plane whose nominal touches put its normal farther than this from the cell's approximate normal is refused."""
 
 FACE_RADIUS_MM = 50.0
 """A flush contact's tilt residual: the rise of the rim of a face of this radius, mm per radian."""
 
 
-class PlaneKind(MeasurementKind):
+class PlaneContacts(MeasurementType):
     """The probe tip on a plane (and, flush, a face of the tool lying on it)."""
 
     name = "plane"
-    reads = ("feature", "flush")
+    columns = {"feature": Column(text=True, required=True),
+               "flush": Column(check=lambda v: None if v in (0, 1) else "0 or 1 (1: a flat face of the tool lies on "
+                                                                       "the plane), or empty")}
     summary = "the tool tip touches plane `feature`: its distance to the plane (mm); flush adds two tilts"
+    cell_section, feature_column = "planes", "feature"
 
-    def __init__(self, rows, index, features, noise_mm):
-        super().__init__(rows, index, features, noise_mm)
+    @classmethod
+    def read_section(cls, sec) -> dict:
+        """The cell's planes: each ``{}`` (unknown), ``{normal: [nx, ny, nz], offset_mm: d}`` (approximately
+        known: ``n . p = d`` in the base frame, the fit's start) or ``{parallel_to: NAME, spacing_mm: s}`` (tied:
+        that plane's normal, its offset plus ``s``)."""
+        out = {}
+        for name in list(sec.data):
+            entry = named_entry(sec, name)
+            entry_form(entry, PLANE_FORMS)
+            if entry.has("parallel_to") or entry.has("spacing_mm"):
+                out[name] = {"parallel_to": entry.get("parallel_to", "str"),
+                             "spacing_mm": entry.get("spacing_mm", "float", check=finite_problem)}
+            elif entry.has("normal") or entry.has("offset_mm"):
+                out[name] = {"normal": unit_vector(entry, "normal"),
+                             "offset_mm": entry.get("offset_mm", "float", check=finite_problem)}
+            else:
+                out[name] = {}
+            entry.done()
+        check_ties(sec, out, "parallel_to")
+        return out
+
+    def __init__(self, rows, index, cell, noise):
+        super().__init__(rows, index, cell, noise)
         self.plane = rows.text("feature", index)
         flush = rows.numbers.get("flush")
         self.flush = np.zeros(index.size, dtype=bool) if flush is None else np.nan_to_num(
             np.asarray(flush, dtype=float)[index]) > 0.5
         self.needs_orientation = bool(self.flush.any())         # the tool's turn enters flush rows alone
-        self.specs = dict((features.get("planes") or {}))
+        self.specs = dict((cell.get("planes") or {}))
         self.names = list(dict.fromkeys(self.plane))
         for name in self.names:
             spec = self.specs.setdefault(name, {})
             root = spec.get("parallel_to")
             if root is not None and root not in self.specs:
-                raise DataError(f"plane {name!r}: parallel_to {root!r} is not a plane of the features")
+                raise DataError(f"plane {name!r}: parallel_to {root!r} is not a plane of the cell")
         self._check()
 
     def _check(self) -> None:
@@ -64,9 +96,7 @@ class PlaneKind(MeasurementKind):
             spec = self.specs.get(root, {})
             members = [n for n in self.names if self._root(n)[0] == root]
             if "normal" in spec:
-                normal = np.asarray(spec["normal"], dtype=float)
-                normal = normal / np.linalg.norm(normal)
-                offset = float(spec.get("offset_mm", np.nan))
+                normal, offset = self._started(root, members, positions, spec)
             else:
                 normal, offset = self._fitted_plane(root, members, positions)
             if not np.isfinite(offset):
@@ -84,7 +114,25 @@ class PlaneKind(MeasurementKind):
         self.roots = roots
         start = np.array(start)
         self._check_rows(positions, rotations, start)
+        self._check_spacings(positions, start)
         return names, start
+
+    def _check_spacings(self, positions, u) -> None:
+        """Each known spacing between two touched planes against the nominal robot's view of it (the mean distance
+        of their touches along the normal): refused when its unit is another, said when off by more than the
+        nominal robot's own errors (:func:`~partcal.calibration.checks.known_length`)."""
+        for name in self.names:
+            parent = self.specs[name].get("parallel_to")
+            if parent is None or parent not in self.names:
+                continue
+            normal = self._plane(self._root(name)[0], u)[0]
+            mine, theirs = ([self.index[[p == n for p in self.plane]]] for n in (name, parent))
+            seen = float(np.mean(positions[mine[0]] @ normal) - np.mean(positions[theirs[0]] @ normal))
+            note = known_length(f"planes.{name}.spacing_mm", self.rows.where(mine[0][0]),
+                                float(self.specs[name].get("spacing_mm", 0.0)), seen,
+                                f"the nominal robot's touches of {name!r} and {parent!r}")
+            if note:
+                self.suspicions.append(note)
 
     def moved(self, u, omega, shift):
         """A root plane's normal turns with the cell (its slopes change accordingly) and its offset shifts by the
@@ -127,7 +175,31 @@ class PlaneKind(MeasurementKind):
             raise DataError(f"{self.rows.where(self.index[i])}: column 'feature': the nominal robot puts this touch "
                             f"{distance[i]:.1f} mm from plane {self.plane[i]!r} ({count} touches beyond "
                             f"{NEAR_MM:g} mm): expected a touch of that plane (a wrong feature name, or the plane's "
-                            "normal and offset in the features?)")
+                            "normal and offset in the cell?)")
+
+    def _started(self, root: str, members: list[str], positions, spec: dict) -> tuple[NDArray[np.float64], float]:
+        """Where an approximately known plane's fit starts: where the nominal robot's touches put it, when they fix a
+        plane (what the touches then cannot identify of it is held there, consistent with the robot, not at the
+        given values, which would bend the robot to meet them); the given normal only orients it. Touches that
+        fix no plane (on one line) start from the given values. A plane the touches put far from the given one
+        is refused: the feature or the normal is wrong."""
+        given = np.asarray(spec["normal"], dtype=float)
+        given = given / np.linalg.norm(given)
+        try:
+            normal, offset = self._fitted_plane(root, members, positions)
+        except DataError:
+            return given, float(spec.get("offset_mm", np.nan))
+        spacings = {self._root(p)[1] for p in self.plane if self._root(p)[0] == root}
+        if normal @ given < 0 and len(spacings) < 2:    # two spacings touched orient the group by themselves
+            normal = -normal
+        angle = float(np.degrees(np.arccos(np.clip(normal @ given, -1.0, 1.0))))
+        if angle > GIVEN_NORMAL_DEG:
+            where = self.index[[self._root(p)[0] == root for p in self.plane]][0]
+            raise DataError(f"{self.rows.where(where)}: column 'feature': the nominal robot's touches of plane "
+                            f"{root!r} put its normal {angle:.1f} degrees from the cell's planes.{root}.normal "
+                            f"{[round(v, 4) for v in given.tolist()]} (more than {GIVEN_NORMAL_DEG:g}): a wrong "
+                            "feature name, or a wrong normal (the base frame's, a unit vector)?")
+        return normal, offset
 
     def _fitted_plane(self, root: str, members: list[str], positions) -> tuple[NDArray[np.float64], float]:
         """The plane through the nominal touches of ``root`` and the planes tied to it (their spacings taken
@@ -141,7 +213,7 @@ class PlaneKind(MeasurementKind):
         where = self.index[[p == best for p in self.plane]][0]
         if sv.size < 3 or sv[1] < 1e-6 * max(sv[0], 1e-300):
             raise DataError(f"{self.rows.where(where)}: column 'feature': the touches of plane {best!r} lie on one "
-                            "line or point: they do not fix a plane's normal (give its normal in the features)")
+                            "line or point: they do not fix a plane's normal (give its normal in the cell)")
         normal = vt[2]
         group = self.index[[self._root(p)[0] == root for p in self.plane]]
         spacing = np.array([self._root(p)[1] for p in self.plane if self._root(p)[0] == root])

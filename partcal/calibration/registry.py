@@ -1,42 +1,42 @@
-"""The table of measurement kinds, in one place: the built-in kinds and any added with
-:func:`add_measurement_kind`; the kinds present in a set of rows (:func:`built_kinds`)."""
+"""The table of measurement types, in one place: the built-in types and any added with
+:func:`add_measurement_type`; the types present in a set of rows (:func:`built_types`)."""
 
 from __future__ import annotations
 
 from ..errors import DataError
-from .distances import DistanceKind
-from .fixed_points import FixedPointKind
-from .measurement import END_KIND, MeasurementKind, Rows
-from .plane_contacts import PlaneKind
-from .tracker_points import PointKind
+from .distances import Distances
+from .fixed_points import FixedPoints
+from .measurement import END_TYPE, MeasurementType, MeasurementRows
+from .plane_contacts import PlaneContacts
+from .tracker_points import TrackerPoints
 
-MEASUREMENT_KINDS: dict[str, type[MeasurementKind]] = {k.name: k for k in (PointKind, PlaneKind, FixedPointKind,
-                                                                          DistanceKind)}
-"""The table of measurement kinds: the CSV's ``kind`` value -> its class; the built-in ones, then those added with
-:func:`add_measurement_kind`."""
-
-
-def add_measurement_kind(kind: type[MeasurementKind]) -> type[MeasurementKind]:
-    """Register ``kind`` under its ``name`` (usable as a class decorator); a name taken is refused."""
-    if not kind.name or kind.name == END_KIND or kind.name in MEASUREMENT_KINDS:
-        raise ValueError(f"a measurement kind needs a name of its own; {kind.name!r} is empty or taken")
-    MEASUREMENT_KINDS[kind.name] = kind
-    return kind
+MEASUREMENT_TYPES: dict[str, type[MeasurementType]] = {k.name: k for k in (TrackerPoints, PlaneContacts, FixedPoints,
+                                                                          Distances)}
+"""The table of measurement types: the CSV's ``measurement`` value -> its class; the built-in ones, then those added with
+:func:`add_measurement_type`."""
 
 
-def kind_names() -> tuple[str, ...]:
-    """Every name a ``kind`` column may hold: the table's, and :data:`END_KIND`."""
-    return (*MEASUREMENT_KINDS, END_KIND)
+def add_measurement_type(measurement: type[MeasurementType]) -> type[MeasurementType]:
+    """Register ``measurement_type`` under its ``name`` (usable as a class decorator); a name taken is refused."""
+    if not measurement.name or measurement.name == END_TYPE or measurement.name in MEASUREMENT_TYPES:
+        raise ValueError(f"a measurement type needs a name of its own; {measurement.name!r} is empty or taken")
+    MEASUREMENT_TYPES[measurement.name] = measurement
+    return measurement
 
 
-def built_kinds(rows: Rows, features: dict) -> list[MeasurementKind]:
-    """The kinds present in ``rows``, in the table's order; a row of a kind the table does not list is refused."""
-    known = set(kind_names())
-    for i, k in enumerate(rows.kind):
+def measurement_names() -> tuple[str, ...]:
+    """Every name a ``measurement`` column may hold: the table's, and :data:`END_TYPE`."""
+    return (*MEASUREMENT_TYPES, END_TYPE)
+
+
+def built_types(rows: MeasurementRows, cell: dict) -> list[MeasurementType]:
+    """The types present in ``rows``, in the table's order; a row of a type the table does not list is refused."""
+    known = set(measurement_names())
+    for i, k in enumerate(rows.types):
         if k not in known:
-            raise DataError(f"{rows.where(i)}: column 'kind': {k!r} is not a measurement kind; expected one of "
+            raise DataError(f"{rows.where(i)}: column 'measurement': {k!r} is not a measurement type; expected one of "
                             f"{', '.join(sorted(known))}")
-    kinds = [k for k in (cls.build(rows, features) for cls in MEASUREMENT_KINDS.values()) if k is not None]
-    if not kinds:
-        raise DataError(f"{rows.source}: no row measures anything (every row is a {END_KIND!r} row)")
-    return kinds
+    measurements = [k for k in (cls.build(rows, cell) for cls in MEASUREMENT_TYPES.values()) if k is not None]
+    if not measurements:
+        raise DataError(f"{rows.source}: no row measures anything (every row is a {END_TYPE!r} row)")
+    return measurements

@@ -1,5 +1,5 @@
 """Tracker points: the tool's position (of any target on it, and its orientation) in the robot's base frame or
-in the tracker's own frame (:class:`PointKind`)."""
+in the tracker's own frame (:class:`TrackerPoints`)."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from ..robot.frames import kabsch
 from ..robot.kinematics import ORIENTATION_MM_PER_RAD
 from ..robot.rotations import (left_jacobian, log_derivative, matrices_from_xyz_deg, matrix_from_rotation_vector,
                                rotation_vector_from_matrix, rotation_vectors_from_matrices, skew_matrices)
-from .measurement import MeasurementKind, Residuals, unit_rows, worst_of
+from .measurement import Column, MeasurementType, Residuals, unit_rows, worst_of
 from .parameters import PRIMARY_TARGET
 
 PROBE_PARAMETERS = (("probe.rx", "deg"), ("probe.ry", "deg"), ("probe.rz", "deg"))
@@ -30,7 +30,7 @@ STD_COLUMNS = ("std_x", "std_y", "std_z")
 """Per-row standard deviations of the measured coordinates (mm): they weigh the point rows among themselves."""
 
 TRACKER_FRAME = "tracker_frame"
-"""The features' key that says the point rows are in the instrument's frame (``True``): the point kind then
+"""The cell' key that says the point rows are in the instrument's frame (``True``): the point type then
 has six unknowns of its own, the instrument's pose in the base frame (``tracker.x, y, z`` mm, ``tracker.rx,
 ry, rz`` a rotation vector in degrees), fitted with the robot's: the registration is part of the fit."""
 
@@ -44,22 +44,24 @@ TRACKER_PARAMETERS = (("tracker.x", "mm"), ("tracker.y", "mm"), ("tracker.z", "m
                       ("tracker.ry", "deg"), ("tracker.rz", "deg"))
 
 
-class PointKind(MeasurementKind):
+class TrackerPoints(MeasurementType):
     """A tracker point of the tool, in the robot's base frame (registered), or in the tracker's own frame
-    (features ``tracker_frame: true``: the tracker's pose is then the kind's unknowns). A row may name a further
+    (cell ``tracker_frame: true``: the tracker's pose is then the type's unknowns). A row may name a further
     target on the tool (column ``target``; empty or ``A``: the primary one, the robot's tool point) and carry
     the tool's measured orientation (``rx_meas, ry_meas, rz_meas``, intrinsic XYZ degrees, base frame)."""
 
     name = "point"
-    reads = ("x_meas", "y_meas", "z_meas", "target", "rx_meas", "ry_meas", "rz_meas", *STD_COLUMNS)
-    default_noise_mm = 0.02
+    columns = {**{c: Column("mm", required=True) for c in ("x_meas", "y_meas", "z_meas")},
+               "target": Column(text=True), **{c: Column("deg") for c in ORIENTATION_COLUMNS},
+               **{c: Column("mm") for c in STD_COLUMNS}}
+    default_noise = 0.02
     summary = ("a tracker point of the tool (of target `target`): 3 residuals (mm); with rx_meas, ry_meas, "
                "rz_meas the tool's turn too, 3 more (radians times 200 mm)")
 
-    def __init__(self, rows, index, features, noise_mm):
-        super().__init__(rows, index, features, noise_mm)
+    def __init__(self, rows, index, cell, noise):
+        super().__init__(rows, index, cell, noise)
         self.measured = np.column_stack([rows.number(c, index) for c in ("x_meas", "y_meas", "z_meas")])
-        self.own_frame = bool(features.get(TRACKER_FRAME))
+        self.own_frame = bool(cell.get(TRACKER_FRAME))
         named = rows.texts.get("target", ("",) * len(rows))
         self.target = [named[i] if named[i] != PRIMARY_TARGET else "" for i in index]
         self.targets = [t for t in dict.fromkeys(self.target) if t]
@@ -70,7 +72,7 @@ class PointKind(MeasurementKind):
                             "the file first (partcal import) or leave the orientation out")
         self.needs_orientation = bool(self.targets) or bool(self.turned.size)
         self.fixes_frame = not self.own_frame
-        self.orientation_weight = float(features.get(ORIENTATION_WEIGHT, ORIENTATION_MM_PER_RAD))
+        self.orientation_weight = float(cell.get(ORIENTATION_WEIGHT, ORIENTATION_MM_PER_RAD))
         self.std = self._std(rows, index)
 
     @staticmethod
@@ -88,7 +90,7 @@ class PointKind(MeasurementKind):
 
     def relative_weights(self, residuals: Residuals) -> NDArray[np.float64]:
         """The stated standard deviations' weights of the position residuals, ``reference / std`` with ``reference``
-        their root mean square (so the kind's noise keeps its level); an orientation's residuals weigh one."""
+        their root mean square (so the type's noise keeps its level); an orientation's residuals weigh one."""
         out = np.ones(residuals.values.size)
         if self.std is not None:
             n = self.index.size
@@ -96,7 +98,7 @@ class PointKind(MeasurementKind):
         return out
 
     def stated_spread(self) -> float | None:
-        """The root mean square of the rows' stated standard deviations, mm (without them: the kind's stated noise)."""
+        """The root mean square of the rows' stated standard deviations, mm (without them: the type's stated noise)."""
         return super().stated_spread() if self.std is None else float(np.sqrt(np.mean(self.std**2)))
 
     def follows_tool(self, name: str) -> bool:
@@ -132,7 +134,7 @@ class PointKind(MeasurementKind):
                 start += [*shift, *np.degrees(rotation_vector_from_matrix(rotation))]
         else:
             self._check_near(positions, primary)
-        given = self.features.get(TARGETS) or {}
+        given = self.cell.get(TARGETS) or {}
         for target in self.targets:     # its offset from the primary target, flange frame: given, or from the data
             names += [(f"tool@{target}.{c}", "mm") for c in "xyz"]
             if target in given:

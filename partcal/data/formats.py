@@ -4,10 +4,10 @@ A :class:`MeasurementFormat` says how a file differs from the measurement CSV
 contract (``docs/data.md``): its delimiter and decimal mark, which of its
 columns hold the contract's columns, and the units of its joint angles and
 lengths. The readers in :mod:`partcal.data.measurements` and
-:mod:`partcal.data.observations` apply it, so values are converted once, at
-the boundary, to degrees and millimetres. For a measurement-kinds file it also
-maps the kinds columns (``kind``, ``feature``, ``distance_mm``..) and the
-file's kind values (``kinds``).
+:mod:`partcal.data.measurement_rows` apply it, so values are converted once, at
+the boundary, to degrees and millimetres. For a measurements file it also
+maps its columns (``measurement``, ``feature``, ``distance_mm``..) and the
+file's type values (``measurements``).
 
 A :class:`RowSelection` picks data rows of a file (``rows: "1-600"``,
 ``every: 5``), for instance a subset of a large series for identification.
@@ -35,6 +35,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .._validation import one_of
+from ..calibration.registry import MEASUREMENT_TYPES
 from .._yamlio import Section, load_yaml
 from ..errors import ConfigError, DataError
 from ..robot.description import MAX_JOINTS
@@ -44,12 +45,19 @@ LENGTHS = ("x_nom", "y_nom", "z_nom", "x_meas", "y_meas", "z_meas", "x", "y", "z
 ORIENTATIONS = ("rx_meas", "ry_meas", "rz_meas", "rx_nom", "ry_nom", "rz_nom")
 STDS = ("std_x", "std_y", "std_z")      # the measured position's standard deviation per coordinate (a length)
 CONTRACT_COLUMNS = JOINTS + LENGTHS + ORIENTATIONS + STDS + ("set", "payload_kg")
-KIND, ID = "kind", "id"
-KINDS_TEXTS = ("feature", "to", "target")
-KINDS_NUMBERS = ("distance_mm", "flush")
-KINDS_COLUMNS = (KIND, ID, *KINDS_TEXTS, *KINDS_NUMBERS)
-"""A measurement-kinds file's columns beyond the point contract's (:mod:`partcal.data.observations` reads
-them with ``q1..qN``, ``x_meas, y_meas, z_meas``, ``set`` and ``payload_kg``)."""
+MEASUREMENT, ID = "measurement", "id"
+OLD_MEASUREMENT = "kind"
+"""The measurements file's column of each row's type: ``measurement`` (``kind`` read for one release)."""
+
+
+def measurement_columns() -> tuple[str, ...]:
+    """A measurements file's columns beyond the point contract's: ``measurement``, ``id`` and those the measurement
+    types declare (:data:`partcal.calibration.registry.MEASUREMENT_TYPES`, read when asked: a type added there is
+    known here)."""
+    declared = (c for cls in MEASUREMENT_TYPES.values() for c in cls.columns if not is_contract_column(c))
+    return (MEASUREMENT, ID, *dict.fromkeys(declared))
+
+
 TARGET_COLUMN = re.compile(r"^([xyz]_(?:meas|nom))@(.*)$")
 TARGET_NAME = re.compile(r"^[A-Za-z0-9_]+$")
 JOINT_UNITS = ("deg", "rad")
@@ -72,10 +80,10 @@ class MeasurementFormat:
     columns : mapping of str to str
         Contract column (``q1``..``q12``, ``x_nom``.., ``x_meas``.., a target's
         ``x_meas@B``.., ``rx_meas``.., ``rx_nom``.., ``x, y, z``, ``set``, and
-        a measurement-kinds file's ``kind, id, feature, to, target,
+        a measurements file's ``measurement, id, feature, to, target,
         distance_mm, flush``) -> the file's column that holds it. Unmapped contract columns
         are looked up under their own name; unmapped file columns are ignored.
-        One format may serve a run's point CSVs and kinds files: which mapped
+        One format may serve a run's point CSVs and measurements files: which mapped
         columns a file must have is :func:`file_must_have`.
     joint_unit : {"deg", "rad"}
         Unit of the joint columns in the file.
@@ -83,10 +91,10 @@ class MeasurementFormat:
         Unit of the position columns in the file.
     orientation_unit : {"deg", "rad"}
         Unit of the orientation columns (intrinsic XYZ angles) in the file.
-    kinds : mapping of str to str
-        A measurement-kinds file's ``kind`` values -> partcal's kind names
+    measurements : mapping of str to str
+        A measurements file's ``measurement`` values -> partcal's type names
         (``{"Plane": "plane", "Sphere": "fixed"}``); an unmapped value is read
-        as written. The reader checks the names against its kinds.
+        as written. The reader checks the names against its types.
     """
 
     delimiter: str = ","
@@ -95,17 +103,17 @@ class MeasurementFormat:
     joint_unit: str = "deg"
     length_unit: str = "mm"
     orientation_unit: str = "deg"
-    kinds: Mapping[str, str] = field(default_factory=dict)
+    measurements: Mapping[str, str] = field(default_factory=dict)
 
     def __post_init__(self):
         problem = _format_problem(self.delimiter, self.decimal, self.columns, self.joint_unit, self.length_unit,
-                                  self.orientation_unit, self.kinds)
+                                  self.orientation_unit, self.measurements)
         if problem:
             name = f"{problem.key!r} parameter" if problem.entry is None else f"{problem.key!r} entry {problem.entry!r}"
             raise ConfigError(f"The {name} of MeasurementFormat must be {problem.expected}. "
                               f"Got {problem.got!r}{problem.note} instead.")
         object.__setattr__(self, "columns", dict(self.columns))
-        object.__setattr__(self, "kinds", dict(self.kinds))
+        object.__setattr__(self, "measurements", dict(self.measurements))
 
     def file_column(self, contract: str) -> str:
         """The file's name of a contract column (itself when unmapped)."""
@@ -134,10 +142,11 @@ class MeasurementFormat:
         return self == MeasurementFormat()
 
     def to_dict(self) -> dict:
-        """Plain types, as in the YAML (``kinds`` only when given)."""
+        """Plain types, as in the YAML (``measurements`` only when given)."""
         return {"delimiter": self.delimiter, "decimal": self.decimal, "columns": dict(self.columns),
                 "joint_unit": self.joint_unit, "length_unit": self.length_unit,
-                "orientation_unit": self.orientation_unit, **({"kinds": dict(self.kinds)} if self.kinds else {})}
+                "orientation_unit": self.orientation_unit,
+                **({"measurements": dict(self.measurements)} if self.measurements else {})}
 
     @classmethod
     def from_section(cls, sec: Section) -> "MeasurementFormat":
@@ -150,9 +159,11 @@ class MeasurementFormat:
                   (("delimiter", ","), ("decimal", "."), ("joint_unit", "deg"), ("length_unit", "mm"),
                    ("orientation_unit", "deg"))}
         cols = sec.section("columns")
+        cols.renamed(OLD_MEASUREMENT, MEASUREMENT)
         values["columns"] = {str(key): _stripped(cols.get(key, "str")) for key in list(cols.data)}
-        kinds = sec.section("kinds")
-        values["kinds"] = {str(key): _stripped(kinds.get(key, "str")) for key in list(kinds.data)}
+        sec.renamed("kinds", "measurements")
+        measurements = sec.section("measurements")
+        values["measurements"] = {str(key): _stripped(measurements.get(key, "str")) for key in list(measurements.data)}
         problem = _format_problem(**values)
         if problem:
             where = problem.key if problem.entry is None else f"{problem.key}.{problem.entry}"
@@ -183,7 +194,7 @@ class _Problem(NamedTuple):
 
 
 def _format_problem(delimiter: Any, decimal: Any, columns: Any, joint_unit: Any, length_unit: Any,
-                    orientation_unit: Any = "deg", kinds: Any = None) -> _Problem | None:
+                    orientation_unit: Any = "deg", measurements: Any = None) -> _Problem | None:
     """The first format rule the values break, or None: each rule is checked here and only here.
 
     Both ways of making a format use it: the constructor frames the problem
@@ -204,55 +215,55 @@ def _format_problem(delimiter: Any, decimal: Any, columns: Any, joint_unit: Any,
     if not isinstance(columns, Mapping):
         return _Problem("columns", None, "a mapping of contract column to file column", columns)
     for key, value in columns.items():
-        if not is_contract_column(key) and key not in KINDS_COLUMNS:
+        if not is_contract_column(key) and key not in measurement_columns():
             close = _close(str(key))
             return _Problem("columns", key, f"a contract column (q1..q{MAX_JOINTS}, x_nom, y_nom, z_nom, x_meas, "
                                             "y_meas, z_meas, x_meas@NAME.., rx_meas, ry_meas, rz_meas, rx_nom, "
                                             "ry_nom, rz_nom, x, y, z, std_x, std_y, std_z, set, "
-                                            f"payload_kg) or a measurement-kinds column ({', '.join(KINDS_COLUMNS)})",
+                                            f"payload_kg) or a measurement-type column ({', '.join(measurement_columns())})",
                             key, f" (did you mean {close[0]!r}?)" if close else "")
         if not isinstance(value, str) or not value.strip():
             return _Problem("columns", key, "a non-empty file column name", value)
-    return _mapping_problem(columns) or _kinds_problem({} if kinds is None else kinds)
+    return _mapping_problem(columns) or _measurements_problem({} if measurements is None else measurements)
 
 
-def _kinds_problem(kinds: Any) -> _Problem | None:
-    """The first broken rule of ``kinds``: a mapping of the file's kind value to a kind name, both non-empty
-    texts (whether the name is a kind is the reader's to say: the data layer does not know the models' kinds)."""
-    if not isinstance(kinds, Mapping):
-        return _Problem("kinds", None, "a mapping of the file's kind value to a kind name", kinds)
-    for key, value in kinds.items():
+def _measurements_problem(measurements: Any) -> _Problem | None:
+    """The first broken rule of ``measurements``: a mapping of the file's type value to a type name, both non-empty
+    texts (whether the name is a type is the reader's to say: the data layer does not know the models' types)."""
+    if not isinstance(measurements, Mapping):
+        return _Problem("measurements", None, "a mapping of the file's type value to a type name", measurements)
+    for key, value in measurements.items():
         if not isinstance(key, str) or not key.strip():
-            return _Problem("kinds", key, "a non-empty kind value of the file", key)
+            return _Problem("measurements", key, "a non-empty type value of the file", key)
         if not isinstance(value, str) or not value.strip():
-            return _Problem("kinds", key, "a non-empty kind name (point, plane, fixed, distance, pose, ...)", value)
+            return _Problem("measurements", key, "a non-empty type name (point, plane, fixed, distance, pose, ...)", value)
     return None
 
 
 def _close(key: str) -> list[str]:
     """The mappable column a misspelt key most likely meant (``[]``: none): a point column as always, else a
-    kinds column at a stricter cutoff (so that ``temperature`` is not taken for ``feature``)."""
+    measurements file's columns at a stricter cutoff (so that ``temperature`` is not taken for ``feature``)."""
     return (difflib.get_close_matches(key, CONTRACT_COLUMNS, n=1, cutoff=0.6)
-            or difflib.get_close_matches(key, KINDS_COLUMNS, n=1, cutoff=0.7))
+            or difflib.get_close_matches(key, measurement_columns(), n=1, cutoff=0.7))
 
 
-def file_must_have(contract: str, kinds_file: bool) -> bool:
+def file_must_have(contract: str, measurements_file: bool) -> bool:
     """Whether a file must have the column that a format maps ``contract`` to (it is refused naming both when it
-    has not): one format may serve a run's point CSVs and measurement-kinds files.
+    has not): one format may serve a run's point CSVs and measurements files.
 
-    A point CSV must have its contract's mapped columns, not a kinds file's (``kind``, ``feature``..); a kinds
-    file its joints and kinds columns, while the point contract's (``x_nom``.., ``x_meas``.., ``rx_meas``..,
-    ``set``, ``payload_kg``) are read when present (a point row without ``x_meas`` is refused naming the mapped
-    column).
+    A point CSV must have its contract's mapped columns, not a measurements file's (``measurement``, ``feature``..); a
+    measurements file its joints and ``measurement``, while every other column (a type's, ``x_meas``.., ``set``,
+    ``payload_kg``) is read when present: a row whose type requires it is refused naming the mapped column, so a
+    ballbar's export need not carry a plane's ``feature``.
 
-    >>> file_must_have("kind", kinds_file=False), file_must_have("x_meas", kinds_file=True)
+    >>> file_must_have("measurement", measurements_file=False), file_must_have("x_meas", measurements_file=True)
     (False, False)
-    >>> file_must_have("x_meas", kinds_file=False), file_must_have("feature", kinds_file=True)
-    (True, True)
+    >>> file_must_have("x_meas", measurements_file=False), file_must_have("feature", measurements_file=True)
+    (True, False)
     """
-    if kinds_file:
-        return contract in JOINTS or contract in KINDS_COLUMNS
-    return contract not in KINDS_COLUMNS
+    if measurements_file:
+        return contract in JOINTS or contract == MEASUREMENT
+    return contract not in measurement_columns()
 
 
 def is_contract_column(name: Any) -> bool:
@@ -278,20 +289,20 @@ def _mapping_problem(columns: Mapping[str, str]) -> _Problem | None:
 
     Two contract columns mapped to one file column, or mapped to the name of
     a contract column that is not mapped (and so is read under its own name:
-    ``{x_meas: q1}`` would read q1 twice). The kinds file's own columns
-    (``kind``, ``id``, ``feature``..) count as contract columns here only in a
-    format that maps one of them (a format for kinds files), so that a point
+    ``{x_meas: q1}`` would read q1 twice). The measurements file's own columns
+    (``measurement``, ``id``, ``feature``..) count as contract columns here only in a
+    format that maps one of them (a format for measurements files), so that a point
     format mapping, say, ``set`` to a column ``id`` stays valid.
     """
     one = "a file column that holds no other contract column"
-    kinds = any(key in KINDS_COLUMNS for key in columns)
+    measurements = any(key in measurement_columns() for key in columns)
     owner: dict[str, str] = {}
     for key, value in columns.items():
         if value in owner:
             return _Problem("columns", key, one, value, f" (already mapped to {owner[value]})")
         owner[value] = key
     for key, value in columns.items():
-        if (is_contract_column(value) or (kinds and value in KINDS_COLUMNS)) and value != key and value not in columns:
+        if (is_contract_column(value) or (measurements and value in measurement_columns())) and value != key and value not in columns:
             return _Problem("columns", key, one, value, f" (the contract column {value} is not mapped, so it is "
                                                         f"read under its own name: map {value} too)")
     return None

@@ -45,7 +45,7 @@ from ..metrics import MRAD_PER_DEG
 from ..robot.description import MAX_JOINTS, joint_columns, load_robot
 from ..robot.kinematics import Robot
 from ..robot.rotations import matrices_from_xyz_deg, rotation_vectors_from_matrices, xyz_deg_from_matrices
-from .formats import KIND, STDS, MeasurementFormat, RowSelection, file_must_have
+from .formats import MEASUREMENT, OLD_MEASUREMENT, STDS, MeasurementFormat, RowSelection, file_must_have
 from .pose_columns import (ORIENTATION_MEASURED, ORIENTATION_NOMINAL, PRIMARY, check_angles, checked_orientation,
                            checked_targets, orientation_columns, suffixed, target_columns)
 from .plausibility import Plausibility, check_measured, check_orientation
@@ -389,12 +389,12 @@ class CsvTable:
 
 
 def read_table(path: str | Path, expected: str, fmt: MeasurementFormat | None = None, *,
-               kinds_file: bool = False) -> CsvTable:
+               measurements_file: bool = False) -> CsvTable:
     """Parse a CSV once (``expected``: a header to suggest when the file is empty); errors name file, line and
-    column. ``kinds_file``: the file is a measurement-kinds file (which mapped columns it must have:
+    column. ``measurements_file``: the file is a measurements file (which mapped columns it must have:
     :func:`~partcal.data.formats.file_must_have`)."""
     path, fmt = Path(path), fmt or _CONTRACT
-    return CsvTable(path, *_table(path, expected, fmt, kinds_file), fmt)
+    return CsvTable(path, *_table(path, expected, fmt, measurements_file), fmt)
 
 
 def _payloads(path: Path, line: int, header: list[str], data: list, column: int, decimal: str
@@ -445,13 +445,13 @@ def csv_rows(path: Path, delimiter: str = ","):
             raise DataError(f"{path}: not a UTF-8 text file ({exc.reason} at byte {exc.start})") from None
 
 
-def _table(path: Path, expected: str, fmt: MeasurementFormat = _CONTRACT, kinds_file: bool = False
+def _table(path: Path, expected: str, fmt: MeasurementFormat = _CONTRACT, measurements_file: bool = False
            ) -> tuple[int, list[str], dict[str, int], list]:
     """Header line number, column labels for messages, contract name -> position, and the data rows.
 
     Refuses empty files, duplicate columns and mapped columns that are missing
     (those the file must have: :func:`~partcal.data.formats.file_must_have`, as a
-    run's one format may map both its point CSVs' and kinds files' columns;
+    run's one format may map both its point CSVs' and measurements files' columns;
     a mapped column that is absent is then not found). File columns that ``fmt`` maps are found
     under their contract names; an unmapped file column named like a mapped
     contract column is ignored.
@@ -460,7 +460,7 @@ def _table(path: Path, expected: str, fmt: MeasurementFormat = _CONTRACT, kinds_
     if not rows:
         raise DataError(f"{path}: empty file: expected a header line such as '{expected}'")
     line, names = rows[0][0], [h.strip() for h in rows[0][1]]
-    hint = _delimiter_hint(names, fmt)
+    hint = delimiter_hint(names, fmt)
     if hint:        # no measurement file has a single column: the delimiter is wrong
         raise DataError(f"{path}:{line}: {hint}")
     position: dict[str, int] = {}
@@ -472,7 +472,7 @@ def _table(path: Path, expected: str, fmt: MeasurementFormat = _CONTRACT, kinds_
     labels = [repr(col) for col in names]
     for contract, column in fmt.columns.items():
         if column not in position:
-            if not file_must_have(contract, kinds_file):
+            if not file_must_have(contract, measurements_file):
                 continue
             raise DataError(f"{path}:{line}: column {column!r} is missing (the format maps {contract} to it)")
         seen[contract] = position[column]
@@ -480,7 +480,7 @@ def _table(path: Path, expected: str, fmt: MeasurementFormat = _CONTRACT, kinds_
     return line, labels, seen, rows[1:]
 
 
-def _delimiter_hint(names: list[str], fmt: MeasurementFormat) -> str:
+def delimiter_hint(names: list[str], fmt: MeasurementFormat) -> str:
     """A hint when a single-column header looks split by another delimiter than the format's."""
     if len(names) == 1:
         for other in (";", ",", "\t", "|"):
@@ -532,11 +532,12 @@ def _check_header(path: Path, line: int, seen: dict[str, int], fmt: MeasurementF
     n_joints = joint_count(where, seen)
     for col in MEASURED:
         if col not in seen:
-            kinds = (f"; column {fmt.file_column(KIND)!r} makes it a measurement-kinds file, which partcal run and "
-                     "partcal plan --evaluate read (docs/data.md, \"Measurement kinds\"), not this command"
-                     if KIND in seen else "")
+            named = fmt.file_column(MEASUREMENT if MEASUREMENT in seen else OLD_MEASUREMENT)
+            other = (f"; column {named!r} makes it a measurements file, which partcal run and "
+                     "partcal plan --evaluate read (docs/data.md, \"Measurement types\"), not this command"
+                     if MEASUREMENT in seen or OLD_MEASUREMENT in seen else "")
             raise DataError(f"{where}: column {fmt.file_column(col)!r} is missing (required: "
-                            f"{', '.join(fmt.file_column(c) for c in MEASURED)}){kinds}")
+                            f"{', '.join(fmt.file_column(c) for c in MEASURED)}){other}")
     present = [c for c in NOMINAL if c in seen]
     if 0 < len(present) < 3:
         missing = next(c for c in NOMINAL if c not in seen)

@@ -43,13 +43,13 @@ from numpy.typing import NDArray
 
 
 from .._validation import check_params, real
+from ..calibration.checks import MIN_POSES, check_joint_units
 from ..errors import DataError
 from ..metrics import pooled_rms
 from ..robot.frames import kabsch
 from ..robot.rotations import matrices_from_euler_deg, matrices_from_xyz_deg
 
 _AXES = ("x", "y", "z")
-MIN_POSES = 5                 # fewer poses are no evidence of radians, nor (without a robot) of a workspace
 MIN_WORKSPACE_MM = 100.0      # without a robot: nominal positions spread less than this give no reach
 
 
@@ -126,18 +126,6 @@ def check_measured(source: str, rows: list[int], q_deg: NDArray[np.float64], nom
     reach = robot.reach_mm if robot is not None else _reach_of(nominal_mm)
     check_errors([f"{source}:{r}" for r in rows], nominal_mm, measured_mm, reach, limits,
                  robot=robot.name if robot is not None else None)
-
-
-def check_joint_units(source: str, rows: list[int], q_deg: NDArray[np.float64]) -> None:
-    """Refuse joint angles that all lie within ±2π: radians read as degrees."""
-    q = np.asarray(q_deg, dtype=float)
-    if len(q) < MIN_POSES or not np.ptp(q, axis=0).any():
-        return                                  # a few poses, or nothing moves: no evidence either way
-    largest = float(np.abs(q).max())
-    if largest <= 2 * np.pi + 1e-9:
-        raise DataError(f"{source}:{rows[0]}: every joint angle of the {len(q)} poses lies within ±{largest:.3g} "
-                        f"degrees: they look like radians; the contract is degrees (a format with joint_unit: rad "
-                        f"converts them)")
 
 
 def check_errors(where: list[str], nominal_mm, measured_mm, reach_mm: float,

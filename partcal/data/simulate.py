@@ -31,7 +31,7 @@ from ..robot.kinematics import Robot
 from ..robot.rotations import (matrices_from_rotation_vectors, matrix_from_rpy_deg, rpy_deg_from_matrix,
                                xyz_deg_from_matrices)
 from ..robot.trajectories import PATHS, paper_path
-from .contact_sets import (CONTACT_KEYS, CellFeatures, read_cell_features, read_contact_dataset,
+from .contact_sets import (contact_keys, TrueCell, read_true_cell, read_contact_dataset,
                            simulate_observations, write_contact_files)
 from .formats import TARGET_NAME
 from .measurements import Measurements, write_measurements
@@ -166,7 +166,7 @@ class Study:
     ranges_deg: dict[int, tuple[float, float]]
     fixed_deg: dict[int, float]
     source: Path
-    features: CellFeatures | None = None            # the cell's true planes and points (``features:``)
+    cell: TrueCell | None = None                # the cell's true planes and points (``cell:``)
     observations: dict = field(default_factory=dict)  # contact data sets: name -> spec (simulate_contacts)
 
 
@@ -209,11 +209,12 @@ def load_study(path: str | Path) -> Study:
     ranges = _joint_map(sampling, "ranges_deg", nominal, pairs=True)
     fixed = _joint_map(sampling, "fixed_deg", nominal, pairs=False)
     sampling.done()
-    features = read_cell_features(top.section("features")) if top.has("features") else None
-    datasets, observations = _datasets(top.section("datasets", required=True), features)
+    top.renamed("features", "cell")
+    cell = read_true_cell(top.section("cell")) if top.has("cell") else None
+    datasets, observations = _datasets(top.section("datasets", required=True), cell)
     top.done()
     robot = VirtualRobot(nominal, true, base_rot, base_mm, compliance, gear, tracker, scale, targets, repeatability)
-    return Study(robot, seed, output, datasets, ranges, fixed, path, features, observations)
+    return Study(robot, seed, output, datasets, ranges, fixed, path, cell, observations)
 
 
 def _targets(top: Section, nominal: Robot) -> tuple[Robot, dict]:
@@ -323,7 +324,7 @@ def _joint_map(sec: Section, key: str, robot: Robot, pairs: bool) -> dict:
     return out
 
 
-def _datasets(sec: Section, features: CellFeatures | None) -> tuple[dict[str, dict], dict[str, dict]]:
+def _datasets(sec: Section, cell: TrueCell | None) -> tuple[dict[str, dict], dict[str, dict]]:
     """The point data sets and the contact data sets (``plane:``, ``fixed:``, ``distance:``) of ``datasets:``."""
     out, contacts = {}, {}
     for name in list(sec.data):
@@ -331,15 +332,16 @@ def _datasets(sec: Section, features: CellFeatures | None) -> tuple[dict[str, di
         if problem:
             sec.fail(sec.path(str(name)), f"the data-set name {str(name)!r} must be {problem}")
         item = sec.section(name)
-        given = [k for k in ("sample", "path", "iso9283", *CONTACT_KEYS) if item.has(k)]
+        keys = contact_keys()
+        given = [k for k in ("sample", "path", "iso9283", *keys) if item.has(k)]
         if len(given) != 1:
             item.fail(item.where, "give exactly one of 'sample: N' (sampled configurations), "
                                   f"'path: NAME' ({', '.join(PATHS)}), 'iso9283: CYCLES' (the ISO 9283 cube's "
                                   "P1..P5), or contact data 'plane:', 'fixed:' or 'distance:' (docs/virtual_robot.md)")
-        if given[0] in CONTACT_KEYS:
-            if features is None and given[0] != "distance":
-                item.fail(item.path(given[0]), "needs the cell's planes and points: add a 'features:' section")
-            contacts[name] = read_contact_dataset(item, features)
+        if given[0] in keys:
+            if cell is None and given[0] in ("plane", "fixed"):
+                item.fail(item.path(given[0]), "needs the cell's planes and points: add a 'cell:' section")
+            contacts[name] = read_contact_dataset(item, cell)
             item.done()
             continue
         if item.has("sample"):
@@ -416,8 +418,8 @@ def write_study(study: Study, data: dict[str, Measurements], observations: dict 
     """Write each data set to ``<output>/<name>.csv`` and return the paths.
 
     Contact data sets (``observations``: :func:`~partcal.data.simulate_contacts.simulate_observations` of the
-    study, made here when not given) add ``<name>.csv`` in the measurement-kinds contract, ``<name>.truth.yaml``
-    and the cell's ``features.yaml``. The files are replaced as a set: all are written to temporary names
+    study, made here when not given) add ``<name>.csv`` in the measurement-type contract, ``<name>.truth.yaml``
+    and the cell's ``cell.yaml``. The files are replaced as a set: all are written to temporary names
     first and renamed only when every one of them is complete.
     """
     if observations is None:

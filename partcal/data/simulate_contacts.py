@@ -175,12 +175,12 @@ def fixed_point_visits(vr, points: dict, counts: dict, rng: np.random.Generator,
     return np.concatenate(out_q), tuple(out_names)
 
 
-def _checked(features: dict, counts: dict, noise_mm: float, what: str) -> None:
+def _checked(cell: dict, counts: dict, noise_mm: float, what: str) -> None:
     """Refuse counts naming no feature or not a count >= 1, and a noise that is not a finite number >= 0."""
     for name, count in counts.items():
-        if name not in features:
+        if name not in cell:
             raise DataError(f"counts names the {what} {name!r}, which the {what}s given do not hold "
-                            f"({', '.join(map(str, features)) or 'none'})")
+                            f"({', '.join(map(str, cell)) or 'none'})")
         if not isinstance(count, (int, np.integer)) or isinstance(count, bool) or count < 1:
             raise DataError(f"counts[{name!r}] must be a number of rows >= 1; got {count!r}")
     if not (isinstance(noise_mm, (int, float, np.integer, np.floating)) and np.isfinite(noise_mm) and noise_mm >= 0):

@@ -1,4 +1,5 @@
-"""Error models: series models, Gaussian processes, kinematic identification, partitions and blending.
+"""Error models: series models, Gaussian processes, the kinematic model (on :mod:`partcal.calibration`), partitions and
+blending.
 
 Every estimator here follows the scikit-learn contract: ``fit(X, y)`` with
 inputs in contract units (positions in mm or joint angles in degrees) and

@@ -9,7 +9,6 @@ up (a hybrid model).
 from __future__ import annotations
 
 import logging
-import math
 import warnings
 from pathlib import PurePath
 
@@ -19,10 +18,10 @@ from sklearn.base import clone
 from sklearn.utils.validation import check_is_fitted, validate_data
 
 from .._validation import MAX_PAYLOAD_KG, FieldReader, Requirement, boolean, check_array, one_of, param_error, real, seed_from
-from ..errors import DataError, ModelFileError
+from ..errors import DataError
 from ..metrics import (MRAD_PER_DEG, MRAD_PER_RAD, ORIENTATION, POSITION, ExtrapolationWarning, distance_outside_boxes,
                        pooled_rms, rms_standard_error)
-from ..robot.description import load_robot, robot_from_dict, robot_to_dict
+from ..robot.description import load_robot
 from ..robot.kinematics import ORIENTATION_MM_PER_RAD, Robot
 from ..robot.rotations import matrix_from_rotation_vector, rotation_vectors_from_matrices
 from .base import ErrorModelBase, box_points
@@ -30,17 +29,18 @@ from .features import varying_inputs
 from ..calibration.chain import model_jacobian
 from ..calibration.fit import LOSSES, prior_variance
 from ..calibration.identification import identify
-from ..calibration.parameters import geometric_size, Identification, nominal_values, own_geometry, parameter_names, PARAMETRIZATIONS, PLAUSIBLE_ERROR, PRIMARY_TARGET, resolved_parametrization, robot_with, STATUSES
+from ..calibration.parameters import geometric_size, Identification, nominal_values, own_geometry, parameter_names, PARAMETRIZATIONS, PLAUSIBLE_ERROR, PRIMARY_TARGET, resolved_parametrization, robot_with
 from ..calibration.joint_errors import compliance_problem, harmonics_problem, JointErrors
 from ..calibration.cv import fold_rows, FOLDS, measuring, SCALE_CHOICE, scale_free, strength_table
-from ..calibration.measurement import Measured
-from ..calibration.registry import built_kinds, MEASUREMENT_KINDS
-from ..calibration.stacked import identify_measures
-from .kindtable import body_of, check_body, may_be_residual, model_from_body, regions_of, residual_kinds
+from ..calibration.measurement import MeasurementRows
+from ..calibration.registry import built_types, MEASUREMENT_TYPES
+from ..calibration.stacked import identify_measurements
+from .kindtable import check_body, may_be_residual, regions_of, residual_kinds
+from .kinematic_file import kinematic_from_section, kinematic_section
 from .pose import PoseErrorModel
 from ..calibration.prior import plausible_prior, Prior, strength_note, strength_problem, strength_rows, strengths_of
 from ..calibration.identification import extra_from
-from ..calibration.tracker_points import target_nominal, target_parameters
+from ..calibration.tracker_points import target_parameters
 
 log = logging.getLogger(__name__)
 
@@ -181,7 +181,7 @@ class KinematicModel(ErrorModelBase):
 
     def robot_parameter_names(self) -> list[str]:
         """The names of the robot's parameters a fit of these settings identifies, in the identification table's
-        order (rows, joint errors, tool, base; the kinds' and further targets' unknowns come after them), without
+        order (rows, joint errors, tool, base; the measurement types' and further targets' unknowns come after them), without
         fitting: what a ``Prior`` must have been made for (:meth:`~partcal.calibration.prior.Prior.check_names`)."""
         robot = self._check_params()
         return [name for name, _ in parameter_names(robot, *self.joint_settings(robot))]
@@ -191,7 +191,8 @@ class KinematicModel(ErrorModelBase):
         return resolved_parametrization(self.parametrization, robot)
 
     def fit(self, X, y, payload_kg=None, *, targets=None, orientation_deg=None, orientation_mm_per_rad=None,
-            measures: Measured | None = None, std_mm=None, prior: Prior | None = None):
+            rows: MeasurementRows | None = None, cell: dict | None = None, std_mm=None,
+            prior: Prior | None = None):
         """Identify the parameters from joint angles ``X`` (n, N) deg and errors ``y`` (n, 3) mm. Returns self.
 
         ``payload_kg`` (n,) kg per pose, or a number; default the parameter ``payload_kg``.
@@ -212,7 +213,8 @@ class KinematicModel(ErrorModelBase):
         that name, 200: one mrad weighs as 0.2 mm). The prediction stays the
         primary target's (:meth:`predict_target` gives another's).
 
-        ``measures`` (:class:`~partcal.calibration.measurement.Measured`): rows of any measurement kinds (plane
+        ``rows`` (:class:`~partcal.calibration.measurement.MeasurementRows`) and ``cell`` (the cell's description,
+        :func:`partcal.data.measurement_rows.read_cell`): rows of any measurement types (plane
         contacts, fixed points, distances, tracker points) and the cell's features, identified from instead
         of ``y`` (which is then ignored; ``X`` are the rows' joints). The model is the same kinematic model;
         what the data cannot identify is in :meth:`fit_notes`.
@@ -225,14 +227,14 @@ class KinematicModel(ErrorModelBase):
         ``prior_strength``; a list of strengths, or ``'auto'`` for :data:`~partcal.calibration.prior.STRENGTH_GRID`:
         the strongest within one standard error of the lowest RMS on 5 contiguous blocks of the data held out in
         turn, :meth:`_chosen_strength`; a run chooses on its own folds) or a ``Prior`` (another robot's model,
-        ``prior: FILE.json`` in a run: its rows times ``prior_strength`` too). With ``measures`` the prior is on
+        ``prior: FILE.json`` in a run: its rows times ``prior_strength`` too). With ``rows`` the prior is on
         the robot's parameters alone (never the kinds' unknowns), the fit MAP the same way
-        (:func:`~partcal.calibration.stacked.identify_measures`), and a list of strengths is chosen on 5 random folds of
-        the measuring rows instead (they have no order to keep: :meth:`_measures_strength`).
+        (:func:`~partcal.calibration.stacked.identify_measurements`), and a list of strengths is chosen on 5 random folds of
+        the measuring rows instead (they have no order to keep: :meth:`_measurement_strength`).
         """
         robot = self._check_params()
-        if measures is not None:
-            return self._fit_measures(robot, measures, payload_kg, prior)
+        if rows is not None:
+            return self._fit_rows(robot, rows, cell or {}, payload_kg, prior)
         X, y = validate_data(self, X, y, multi_output=True, y_numeric=True, dtype=np.float64)
         if X.shape[1] != robot.n_joints:
             raise DataError(f"{type(self).__name__} for {robot.name} takes {robot.n_joints} joint angles "
@@ -260,7 +262,7 @@ class KinematicModel(ErrorModelBase):
                                         loss=self.loss, loss_scale=float(self.loss_scale), prior=prior)
         self.targets_ = dict(extra.tools_mm) if extra is not None else {}
         self.orientation_ = extra is not None and extra.rotations is not None
-        self.measures_, self.measure_notes_, self.frame_fixed_ = (), [], True
+        self.measurement_types_, self.measurement_notes_, self.frame_fixed_ = (), [], True
         self.robot_ = robot
         self._build_robots()
         self._fitted_inputs(X)
@@ -342,48 +344,49 @@ class KinematicModel(ErrorModelBase):
         self.active_ = varying_inputs(X)
         self.data_bounds_ = np.stack([X.min(axis=0), X.max(axis=0)])
 
-    def _fit_measures(self, robot: Robot, measures: Measured, payload_kg, prior: Prior | None = None
+    def _fit_rows(self, robot: Robot, rows: MeasurementRows, cell: dict, payload_kg, prior: Prior | None = None
                       ) -> "KinematicModel":
-        """:meth:`fit` from rows of measurement kinds (:func:`~partcal.calibration.stacked.identify_measures`), MAP
-        with a prior (``prior``, else the parameter's: a list of strengths chosen by :meth:`_measures_strength`)."""
-        X = validate_data(self, measures.rows.q_deg, dtype=np.float64)
+        """:meth:`fit` from rows of measurement types (:func:`~partcal.calibration.stacked.identify_measurements`), MAP
+        with a prior (``prior``, else the parameter's: a list of strengths chosen by :meth:`_measurement_strength`)."""
+        X = validate_data(self, rows.q_deg, dtype=np.float64)
         if X.shape[1] != robot.n_joints:
             raise DataError(f"{type(self).__name__} for {robot.name} takes {robot.n_joints} joint angles "
                             f"(degrees) per row; the rows have {X.shape[1]}")
         self._y_1d, self.n_outputs_ = False, 3
-        ident_payload = self._fit_settings(robot, payload_kg if payload_kg is not None else measures.rows.payload_kg,
+        ident_payload = self._fit_settings(robot, payload_kg if payload_kg is not None else rows.payload_kg,
                                            len(X))[1]
         self.prior_strength_table_ = None
         if prior is None and self.prior is not None:
             strengths = strengths_of(self.prior_strength)
             self.prior_strength_ = strengths[0]
             if len(strengths) > 1:
-                best, self.prior_strength_table_ = self._measures_strength(robot, measures, ident_payload, strengths)
+                best, self.prior_strength_table_ = self._measurement_strength(robot, rows, cell, ident_payload,
+                                                                                         strengths)
                 self.prior_strength_ = strengths[best]
             prior = self.prior_at(robot, self.prior_strength_)
-        self.identification_, self.measure_notes_ = identify_measures(
-            robot, measures.rows, measures.features, base=bool(self.base), tool=bool(self.tool),
+        self.identification_, self.measurement_notes_ = identify_measurements(
+            robot, rows, cell, base=bool(self.base), tool=bool(self.tool),
             rcond=float(self.rcond), errors=self.joint_errors_, payload_kg=ident_payload,
-            parametrization=self.parametrization_, prior=prior, loss=self.loss, loss_scale=float(self.loss_scale))
+            parametrization=self.parametrization_, prior=prior, loss=self.loss, loss_scale=float(self.loss_scale),
+            residual_left=True)
         self.targets_, self.orientation_, self.robot_ = {}, False, robot
-        self.measures_ = tuple(dict.fromkeys(k for k in measures.rows.kind if k in MEASUREMENT_KINDS))
-        self.frame_fixed_ = any(k.fixes_frame for k in built_kinds(measures.rows, measures.features))
+        self.measurement_types_ = tuple(dict.fromkeys(k for k in rows.types if k in MEASUREMENT_TYPES))
+        self.frame_fixed_ = any(m.fixes_frame for m in built_types(rows, cell))
         self._build_robots()
         self._fitted_inputs(X)
         self.residual_, self.covariance_scale_ = None, 1.0
         if self.residual is not None:
-            self._fit_residual_on_points(robot, measures, payload_kg)
+            self._fit_residual_on_points(robot, rows, payload_kg)
         return self._prepare()
 
-    def _fit_residual_on_points(self, robot: Robot, measures: Measured, payload_kg) -> None:
+    def _fit_residual_on_points(self, robot: Robot, rows: MeasurementRows, payload_kg) -> None:
         """The residual model fitted on what the identified kinematics leave of the tracker points among the rows
         (the primary target's, in the base frame): the only rows that carry a 3-D error field."""
-        rows = measures.rows
         target = rows.texts.get("target", ("",) * len(rows))
         points = np.array([i for i in rows.of("point") if target[i] in ("", PRIMARY_TARGET)], dtype=np.intp)
         if not self.frame_fixed_ or points.size == 0:
             raise DataError(f"residual: a residual model learns the 3-D error field that tracker points in the base "
-                            f"frame show; these rows ({', '.join(self.measures_)}) hold none"
+                            f"frame show; these rows ({', '.join(self.measurement_types_)}) hold none"
                             + (" (their points are in the tracker's frame)" if points.size else "")
                             + ": fit the kinematic model alone, or add tracker points")
         X = rows.q_deg[points]
@@ -397,13 +400,13 @@ class KinematicModel(ErrorModelBase):
         residual.fit(self._residual_inputs(X, nominal), measured - nominal - self._kinematic_errors(X, payload))
         self.covariance_scale_ = self._hybrid_covariance_scale(X, nominal)
 
-    def _measures_strength(self, robot: Robot, measures: Measured, payload, strengths) -> tuple[int, list[dict]]:
-        """A list of prior strengths chosen on rows of measurement kinds: :data:`~partcal.calibration.cv.FOLDS`
+    def _measurement_strength(self, robot: Robot, rows: MeasurementRows, features: dict, payload, strengths
+                              ) -> tuple[int, list[dict]]:
+        """A list of prior strengths chosen on rows of measurement types: :data:`~partcal.calibration.cv.FOLDS`
         random folds of the measuring rows (drawn from ``random_state``), each strength's held-out residuals
         weighted by their kinds' noise, the strongest within one standard error of the lowest
-        (:func:`~partcal.calibration.cv.strength_table`; a kinds run chooses on its own folds the same way)."""
-        rows, features = measures.rows, measures.features
-        built_kinds(rows, features)         # the rows' own faults said as they are, before any fold is cut
+        (:func:`~partcal.calibration.cv.strength_table`; a measurement run chooses on its own folds the same way)."""
+        built_types(rows, features)         # the rows' own faults said as they are, before any fold is cut
         if scale_free(robot, rows, features, base=bool(self.base), tool=bool(self.tool), rcond=float(self.rcond),
                       errors=self.joint_errors_, payload_kg=payload, parametrization=self.parametrization_):
             raise param_error(type(self).__name__, "prior_strength", f"one number here ({SCALE_CHOICE})",
@@ -412,7 +415,7 @@ class KinematicModel(ErrorModelBase):
 
         def identified_at(strength: float, train) -> Identification:
             part = clone(self).set_params(prior_strength=float(strength))
-            return part.fit(train.q_deg, None, measures=Measured(train, features)).identification_
+            return part.fit(train.q_deg, None, rows=train, cell=features).identification_
 
         try:
             return strength_table(identified_at, strengths, robot, rows, features, folds, errors=self.joint_errors_,
@@ -607,7 +610,7 @@ class KinematicModel(ErrorModelBase):
     def _noise_mm(self) -> float:
         """The fit's residual standard deviation of one coordinate of the primary target, mm."""
         table = self.identification_
-        if PRIMARY_TARGET not in table.target_rms_mm:         # one target, or rows of measurement kinds
+        if PRIMARY_TARGET not in table.target_rms_mm:         # one target, or rows of measurement types
             return float(table.sigma_mm)
         n, k = 3 * table.n_poses, table.status.count("identified")
         return float(table.rms_mm / np.sqrt(3.0) * np.sqrt(n / max(n - k, 1)))
@@ -667,85 +670,14 @@ class KinematicModel(ErrorModelBase):
         return "joint"
 
     def file_section(self) -> dict:
-        errors = self.joint_errors_
-        return {"robot": robot_to_dict(self.robot_), "base": bool(self.base), "tool": bool(self.tool),
-                "rcond": float(self.rcond), "payload_kg": float(self.payload_kg),
-                **({"parametrization": self.parametrization_} if self.parametrization_ != "dh" else {}),
-                **({"orientation_mm_per_rad": float(self.orientation_mm_per_rad)} if self.orientation_ else {}),
-                **({"loss": self.loss, "loss_scale": float(self.loss_scale)} if self.loss != "linear" else {}),
-                "compliance": list(errors.compliance), "joint_harmonics": list(errors.harmonics),
-                "identification": self.identification_.to_dict(),
-                **({"targets": {k: [float(v) for v in t] for k, t in self.targets_.items()},
-                    "orientation": bool(self.orientation_)} if self.targets_ or self.orientation_ else {}),
-                **({"measures": list(self.measures_), "frame_fixed": bool(self.frame_fixed_)}
-                   if getattr(self, "measures_", ()) else {}),
-                "data_bounds": self.data_bounds_.tolist(), "active": self.active_.tolist(),
-                **({"covariance_scale": self.covariance_scale_} if self.covariance_scale_ != 1.0 else {}),
-                **({"fitted_payload_kg": [float(v) for v in self.fitted_payload_kg_]}
-                   if getattr(self, "fitted_payload_kg_", None) is not None else {}),
-                "residual": body_of(self.residual_) if self.residual_ is not None else None}
+        return kinematic_section(self)
 
     @classmethod
     def from_file_section(cls, r: FieldReader, inputs: str, n_in: int, n_out: int) -> "KinematicModel":
-        """A kinematic model from its section: the identified table must agree with the file's robot
-        (nominal values, unidentified parameters kept nominal, standard errors >= 0)."""
-        try:
-            robot = robot_from_dict(r.get("robot", dict), source=f"{r.source}: field {r.path('robot')!r}")
-        except Exception as exc:  # noqa: BLE001 - any damage in the robot section is a file error
-            raise ModelFileError(str(exc)) from None
-        if robot.n_joints != n_in:
-            r.fail("robot", f"a robot with the file's {n_in} joints (n_inputs); got {robot.n_joints}")
-        if n_out not in (3, 6):
-            r.fail("", f"a kinematic model has 3 outputs (n_outputs; position errors) or 6 (pose errors); the file "
-                       f"says {n_out}")
-        joint = {}
-        for name, (default, problem) in cls._joint_rules.items():       # files before the joint errors: none
-            joint[name] = r.doc.get(name, default)
-            if problem(joint[name], robot.n_joints) is not None:
-                r.fail(name, f"expected {problem(joint[name], robot.n_joints)}; got {joint[name]!r}"[:200])
-        rules = {key: rule for key, rule in cls._parameter_rules.items()
-                 if key not in cls._from_fitted and (key in r.doc or key not in cls._OPTIONAL_IN_FILES)}
-        tools, orientation = _targets_from(r)
-        model = cls(robot=robot, **{key: r.rule(key, rule) for key, rule in rules.items()}, **joint,
-                    all_targets=bool(tools), use_orientation=orientation)
-        errors = JointErrors.for_robot(robot, joint["compliance"], joint["joint_harmonics"])
-        if model.parametrization == "auto":     # a file holds what was fitted: written when not dh
-            if "parametrization" in r.doc:
-                r.fail("parametrization", f"one of {', '.join(PARAMETRIZATIONS)} (what was fitted); got 'auto'")
-            model.parametrization = "dh"
-        model.parametrization_ = model.parametrization
-        measures = r.doc.get("measures", [])
-        if not (isinstance(measures, list) and all(isinstance(k, str) and k for k in measures)):
-            r.fail("measures", f"the names of the measurement kinds it was fitted on; got {measures!r}"[:200])
-        model.measures_ = tuple(measures)
-        model.frame_fixed_ = bool(r.rule("frame_fixed", boolean(True))) if "frame_fixed" in r.doc else True
-        if not model.frame_fixed_:
-            log.warning("%s: %s", r.source, model.frame_note())
-        table = _identification_from(r.sub("identification"), robot, errors, tools, orientation,
-                                     model.parametrization_, kind_unknowns=bool(measures))
-        model.robot_, model.identification_, model.joint_errors_ = robot, table, errors
-        model.targets_, model.orientation_ = tools, orientation
+        """A kinematic model from its section (:func:`~partcal.models.kinematic_file.kinematic_from_section`)."""
+        model = kinematic_from_section(cls, r, n_in, n_out)
+        model._y_1d = False
         model._build_robots()
-        model.data_bounds_ = r.array("data_bounds", (2, n_in))
-        if np.any(model.data_bounds_[0] > model.data_bounds_[1]):
-            r.fail("data_bounds", "a low bound exceeds its high bound")
-        model.active_ = r.array("active", (n_in,), bool)
-        model.covariance_scale_ = r.number("covariance_scale", 0.0, 1.0) if "covariance_scale" in r.doc else 1.0
-        if model.covariance_scale_ != 1.0 and r.doc.get("residual") is None:
-            r.fail("covariance_scale", f"a model without a residual model counts all its fit leaves as noise: "
-                                       f"expected 1 or no field; got {model.covariance_scale_!r}")
-        model.fitted_payload_kg_ = r.array("fitted_payload_kg", (2,)) if "fitted_payload_kg" in r.doc else None
-        if model.fitted_payload_kg_ is not None and not 0 <= model.fitted_payload_kg_[0] <= model.fitted_payload_kg_[1]:
-            r.fail("fitted_payload_kg", "the smallest and largest payload of the data, 0 <= low <= high kg")
-        model.n_features_in_, model.n_outputs_, model._y_1d = n_in, n_out, False
-        model.residual_ = None
-        if r.doc.get("residual") is not None:
-            model.residual_ = model_from_body(r.sub("residual"))
-            if model.residual_.n_outputs() != n_out or isinstance(model.residual_, PoseErrorModel) != (n_out == 6):
-                r.sub("residual").fail("kind", f"a residual of {n_out} outputs" + (" of kind 'pose' (one model on the "
-                                       "position, one on the orientation)" if n_out == 6 else "") + f"; got kind "
-                                       f"{r.sub('residual').doc.get('kind')!r} of {model.residual_.n_outputs()} outputs")
-            model.residual = model.residual_ if n_out == 3 else model.residual_.model
         return model
 
     def check_section(self, r: FieldReader, limit_mm: float = 1e6) -> None:
@@ -807,18 +739,18 @@ class KinematicModel(ErrorModelBase):
         if self.n_outputs() == 6 and not self.orientation_:
             notes.append("identified from the positions alone, it predicts the orientation its parameters imply, "
                          "which the positions do not determine (use_orientation: true identifies from it)")
-        notes += list(getattr(self, "measure_notes_", []))
+        notes += list(getattr(self, "measurement_notes_", []))
         if not getattr(self, "frame_fixed_", True):
             notes.append(self.frame_note())
         if getattr(self, "prior_strength_table_", None):
             table = self.prior_strength_table_
             notes.append(strength_note(table, f"{FOLDS}-fold CV of the rows", "cv_weighted_rms_mm", "CV weighted RMS")
-                         if self.measures_ else strength_note(table, "5-block CV"))
+                         if self.measurement_types_ else strength_note(table, "5-block CV"))
         return notes + (self.residual_.fit_notes() if self.residual_ is not None else [])
 
     def frame_note(self) -> str:
-        """What a model identified from kinds that fix no frame (planes, points, distances) predicts."""
-        return (f"identified from {', '.join(self.measures_)} rows, which fix no frame: the base frame is the "
+        """What a model identified from measurement types that fix no frame (planes, points, distances) predicts."""
+        return (f"identified from {', '.join(self.measurement_types_)} rows, which fix no frame: the base frame is the "
                 "nominal one, so absolute positions (and compensated targets) carry the base's error; after a rigid "
                 "fit they hold. Tracker points or a fixed point known in the base frame fix it")
 
@@ -899,76 +831,7 @@ def _targets_summary(table: Identification) -> dict:
     """metrics.json fields of a fit on several targets or an orientation (none for one target)."""
     if not table.target_rms_mm:
         return {}
-    if PRIMARY_TARGET not in table.target_rms_mm:           # rows of measurement kinds: each kind's RMS residual
-        return {"kinds_rms_mm": dict(table.target_rms_mm)}
+    if PRIMARY_TARGET not in table.target_rms_mm:           # rows of measurement types: each type's RMS residual
+        return {"rms_by_type": dict(table.target_rms_mm), **(dict(table.misfit) if table.misfit else {})}
     return {"targets_rms_3d": dict(table.target_rms_mm), "orientation_rms_deg": table.orientation_rms_deg,
             "identifiable_from_primary": table.primary_identifiable}
-
-
-def _targets_from(r: FieldReader) -> tuple[dict, bool]:
-    """A model file's extra targets (name -> nominal offset, mm) and whether it read an orientation (files of
-    one target have neither)."""
-    tools = r.doc.get("targets", {})
-    if not isinstance(tools, dict) or not all(
-            isinstance(k, str) and isinstance(v, list) and len(v) == 3 and
-            all(isinstance(c, (int, float)) and not isinstance(c, bool) and math.isfinite(c) for c in v)
-            for k, v in tools.items()):
-        r.fail("targets", "a mapping of target name to its offset [x, y, z] (mm)")
-    orientation = r.doc.get("orientation", False)
-    if not isinstance(orientation, bool):
-        r.fail("orientation", "true or false")
-    return {k: np.asarray(v, dtype=float) for k, v in tools.items()}, orientation
-
-
-def _identification_from(ident: FieldReader, robot: Robot, errors: JointErrors | None = None, tools=None,
-                         orientation: bool = False, parametrization: str = "dh",
-                         kind_unknowns: bool = False) -> Identification:
-    """A model file's identified table, which must agree with its robot: the robot's parameter names and
-    nominal values, unidentified parameters kept nominal, standard errors finite and >= 0 (or null). Fitted on
-    measurement kinds (``kind_unknowns``), the kinds' unknowns (a plane, a point) follow the robot's, their
-    start values as nominal."""
-    names = [n for n, _ in parameter_names(robot, errors, parametrization) + target_parameters(tools or {}, orientation)]
-    given = ident.get("names", list)
-    if kind_unknowns and given[:len(names)] == names and all(isinstance(n, str) for n in given):
-        names = list(given)
-    if given != names:
-        ident.fail("names", f"expected the {len(names)} parameters of {robot.name} ({names[0]} ... {names[-1]})")
-    status = ident.get("status", list)
-    if len(status) != len(names) or any(s not in STATUSES for s in status):
-        ident.fail("status", f"expected {len(names)} of {', '.join(STATUSES)}")
-    std = ident.get("std_error", list)
-    if len(std) != len(names) or not all(v is None or isinstance(v, (int, float)) for v in std):
-        ident.fail("std_error", f"expected {len(names)} numbers or nulls")
-    nominal, value = ident.array("nominal", (len(names),)), ident.array("value", (len(names),))
-    expected = np.concatenate([nominal_values(robot, errors, parametrization), target_nominal(tools or {}, orientation)])
-    expected = np.concatenate([expected, nominal[expected.size:]])          # the kinds' unknowns start anywhere
-    off = np.flatnonzero(~np.isclose(nominal, expected, rtol=1e-12, atol=1e-9))
-    if off.size:
-        k = off[0]
-        ident.fail("nominal", f"entry {k} ({names[k]}) is {float(nominal[k])!r}, but the file's robot gives "
-                              f"{float(expected[k])!r}: "
-                              "the nominal values must be those of field 'model.robot'")
-    kept = np.flatnonzero((np.array(status) != "identified") & (value != nominal))
-    if kept.size:
-        k = kept[0]
-        ident.fail("value", f"entry {k} ({names[k]}) is {status[k]!r}, so it keeps its nominal value "
-                            f"{float(nominal[k])!r}; got {float(value[k])!r}")
-    if any(v is not None and not (math.isfinite(v) and v >= 0) for v in std):
-        ident.fail("std_error", "standard errors must be finite and >= 0 (or null)")
-    if "covariance" in ident.doc:           # files before the spread have none
-        k = status.count("identified")
-        cov = ident.array("covariance", (k, k))
-        if np.any(np.diagonal(cov) < 0) or not np.allclose(cov, cov.T, rtol=1e-9, atol=1e-15):
-            ident.fail("covariance", "a symmetric matrix with a diagonal >= 0")
-        if ident.number("sigma_mm", 0.0) < 0:
-            ident.fail("sigma_mm", "a standard deviation >= 0")
-    if "prior_std" in ident.doc:            # files before the unidentified parameters' prior have none
-        prior = ident.get("prior_std", list)
-        if len(prior) != len(names) or not all(v is None or (isinstance(v, (int, float)) and math.isfinite(v)
-                                                             and v > 0) for v in prior):
-            ident.fail("prior_std", f"expected {len(names)} standard deviations > 0 or nulls")
-        if any(v is not None and s == "identified" for v, s in zip(prior, status)):
-            ident.fail("prior_std", "a prior only for parameters that are not identified (null for the others)")
-        if status.count("identified"):     # with none identified the matrix has no rows: []
-            ident.array("prior_absorbed", (status.count("identified"), sum(v is not None for v in prior)))
-    return Identification.from_dict(ident.doc)

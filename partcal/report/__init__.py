@@ -27,11 +27,11 @@ from ..metrics import MRAD_PER_DEG
 from ..calibration.parameters import BASE_PARAMETERS, TOOL_PARAMETERS
 from ..models.kinds import equations_of, identification_of, regions_of, run_summary
 from ..calibration.tracker_points import target_parameters
-from ..study.kinds_run import KindsRunResult
+from ..study.measurement_run import MeasurementRunResult
 from ..study.results import ModelResult, RunResult
 from ..study.scoring import Outputs, errors_left
 from . import figures
-from .kinds import render_kinds_report
+from .measurement_run import render_measurement_report
 from .scene import SceneRendering
 
 log = logging.getLogger(__name__)
@@ -39,10 +39,10 @@ log = logging.getLogger(__name__)
 
 def render_report(result: RunResult, folder: Path, *, screenshot: bool = False) -> Path:
     """Write ``index.html`` (and ``report.png`` with ``screenshot=True``) into ``folder``. A run on measurement
-    kinds gets its own page (:mod:`partcal.report.kinds`)."""
+    types gets its own page (:mod:`partcal.report.measurement_run`)."""
     start = time.perf_counter()
-    if isinstance(result, KindsRunResult):
-        path = render_kinds_report(result, folder)
+    if isinstance(result, MeasurementRunResult):
+        path = render_measurement_report(result, folder)
         if screenshot:
             from .browser import open_report
 
@@ -387,10 +387,11 @@ def family_sentences(result: RunResult) -> list[str]:
         best = min(members, key=lambda r: r.score(result.config.rank_by))
         before = np.mean([result.uncompensated[n]["rms_3d"] for n in tests])
         after = np.mean([best.metrics[n]["rms_3d"] for n in tests])
-        changes = [100 * (best.metrics[n]["rms_3d"] / result.uncompensated[n]["rms_3d"] - 1) for n in tests]
+        changes = _change_text([best.metrics[n]["rms_3d"] for n in tests],
+                               [result.uncompensated[n]["rms_3d"] for n in tests])
         out.append(f"{family} ({len(members)}): the best by {'validation' if result.config.rank_by == 'validation' else 'CV'}, {best.spec.name}, brings the mean 3-D RMS on "
                    f"{'the test sets' if tests != ['identification'] else 'the identification set'} from "
-                   f"{before:.2f} to {after:.2f} mm ({_change_text(changes)})"
+                   f"{before:.2f} to {after:.2f} mm ({changes})"
                    f"{_orientation_gain(result, best, tests)}.")
     return out
 
@@ -401,13 +402,29 @@ def _orientation_gain(result: RunResult, best: ModelResult, tests: list[str]) ->
         return ""
     before = [result.uncompensated[n]["orientation"]["rms_angle"] for n in tests]
     after = [best.metrics[n]["orientation"]["rms_angle"] for n in tests]
-    changes = [100 * (a / b - 1) for a, b in zip(after, before)]
     return (f", and the mean orientation RMS angle from {np.mean(before):.3f} to {np.mean(after):.3f} mrad "
-            f"({_change_text(changes)})")
+            f"({_change_text(after, before)})")
 
 
-def _change_text(changes: list[float]) -> str:
-    """``"12–40% less"``, ``"5% more"`` or ``"from 13% less to 95% more"`` for per-set changes in percent."""
+def _change_text(after: list[float], before: list[float]) -> str:
+    """``"12–40% less"``, ``"5% more"`` or ``"from 13% less to 95% more"``: the per-set change from ``before`` to
+    ``after`` in percent. A set without error before (data whose errors are all zero) has no change in percent:
+    it is said so, and left out of the range.
+
+    >>> _change_text([0.5, 2.0], [1.0, 0.0]), _change_text([0.0], [0.0])
+    ('50% less; 1 set without error before', 'no error before to reduce')
+    """
+    changes = [100 * (a / b - 1) for a, b in zip(after, before) if b > 0]
+    if not changes:
+        return "no error before to reduce"
+    text = _range_text(changes)
+    if len(changes) < len(before):
+        text += f"; {len(before) - len(changes)} set{'s' if len(before) - len(changes) > 1 else ''} without error before"
+    return text
+
+
+def _range_text(changes: list[float]) -> str:
+    """The range of per-set changes in percent, in words."""
     lo, hi = min(changes), max(changes)
 
     def one(v):

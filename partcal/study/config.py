@@ -156,8 +156,8 @@ class DataOptions:
     fit_tool: bool = True
     plausibility: Plausibility = Plausibility()      # data.checks: the limits of plausible data
     groups: str | None = None                         # data.groups: the column naming each row's pose
-    features: Path | None = None                      # data.features: the cell's planes and points (kinds runs)
-    more_identification: tuple[Path, ...] = ()        # data.identification: [A, B, ...]: kinds files after the first
+    cell: Path | None = None                          # data.cell: the cell's planes and points (measurement runs)
+    more_identification: tuple[Path, ...] = ()        # data.identification: [A, B, ...]: measurements files after the first
     noise: NoiseModel | None = None                   # data.noise: {constant_mm, ppm, instrument_mm}
     loss: str = "linear"                              # registration.loss
     loss_scale: float = 3.0                           # registration.loss_scale
@@ -173,7 +173,7 @@ class DataOptions:
                 "registration": ({"tool_mm": list(self.tool_mm) if self.tool_mm else None, "fit_tool": self.fit_tool}
                                  if self.frame == "tracker" else None),
                 "checks": {name: getattr(self.plausibility, name) for name in Plausibility.rules},
-                "groups": self.groups, **({"features": str(self.features)} if self.features else {}),
+                "groups": self.groups, **({"cell": str(self.cell)} if self.cell else {}),
                 **({"more_identification": [str(p) for p in self.more_identification]}
                    if self.more_identification else {}),
                 **({"noise": self.noise.to_dict()} if self.noise is not None else {}),
@@ -236,7 +236,7 @@ class RunConfig:
     def inputs(self) -> list[Path]:
         """The files this run reads: the config, the data sets, a robot or simulation YAML file."""
         files = [self.source, self.identification, *self.data_options.more_identification, *self.tests.values(),
-                 self.validation, self.virtual_robot, self.data_options.features]
+                 self.validation, self.virtual_robot, self.data_options.cell]
         if self.robot is not None and Path(self.robot).suffix in (".yaml", ".yml"):
             files.append(Path(self.robot))
         elif self.robot is not None and is_urdf(self.robot):
@@ -370,9 +370,9 @@ def _data(data_sec: Section, top: Section, base: Path, *, has_robot: bool
                                               "the tracker frame")
     rows: dict[str, RowSelection] = {}
     more: tuple[Path, ...] = ()
-    if isinstance(data_sec.data.get("identification"), list):      # several measurement-kinds files
+    if isinstance(data_sec.data.get("identification"), list):      # several measurements files
         files = data_sec.get("identification", "list", check=lambda v: None if v and all(
-            isinstance(f, str) for f in v) else "a file, or a list of files (measurement-kinds files and point CSVs)")
+            isinstance(f, str) for f in v) else "a file, or a list of files (measurements files and point CSVs)")
         paths = [_listed(data_sec, "identification", k, base) for k in range(len(files))]
         ident, more, rows["identification"] = paths[0], tuple(paths[1:]), None
     else:
@@ -393,7 +393,8 @@ def _data(data_sec: Section, top: Section, base: Path, *, has_robot: bool
         tests_sec.fail(tests_sec.path(reserved), f"a test set may not be called {reserved!r} (reserved: "
                                                  f"{', '.join(sorted(RESERVED_NAMES))})")
     groups = data_sec.get("groups", "str", default=None, check=lambda v: None if v.strip() else "a column name")
-    features = _existing(data_sec, "features", base) if data_sec.has("features") else None
+    data_sec.renamed("features", "cell")
+    cell = _existing(data_sec, "cell", base) if data_sec.has("cell") else None
     checks = data_sec.section("checks")
     plausibility = Plausibility(**{key: checks.rule(key, rule) for key, rule in Plausibility.rules.items()})
     checks.done()
@@ -411,7 +412,7 @@ def _data(data_sec: Section, top: Section, base: Path, *, has_robot: bool
     return ident, tests, validation, DataOptions(format=fmt, frame=frame, rows={k: v for k, v in rows.items() if v is not None},
                                      own_frame=tuple(own), tool_mm=tuple(float(x) for x in tool) if tool else None,
                                      fit_tool=fit_tool, plausibility=plausibility, groups=groups,
-                                     features=features, more_identification=more, noise=noise, loss=loss,
+                                     cell=cell, more_identification=more, noise=noise, loss=loss,
                                      loss_scale=loss_scale)
 
 

@@ -240,6 +240,7 @@ def compensate_program_file(model: str | Path, program: str | Path, output: str 
     summary = result.summary(predictor.name)
     empty = () if read.targets else (f"{program} holds no targets partcal reads ({dialect}); written as it was "
                                      "(docs/predictor.md, 'Robot programs', says which targets are read)",)
+    empty += far_targets(result, str(program))
     failure = ""
     if result.failures:
         first, why = result.failures[0]
@@ -258,6 +259,18 @@ def compensate_program_file(model: str | Path, program: str | Path, output: str 
     return Outcome(output, len(read.targets), warnings=empty, notes=(program_line(summary, output, summary_path),),
                    failure=failure and f"{failure}; {output} keeps them as they were, with a comment",
                    result=result, summary=summary)
+
+
+def far_targets(result: ProgramResult, source: str, shown: int = 10) -> tuple[str, ...]:
+    """A warning per compensated target whose model input lies far from the model's data (the first ``shown``,
+    then how many more: the summary lists them all), as ``compensate`` warns of a targets CSV's rows."""
+    far = result.far()
+    unit = result.input_unit
+    lines = tuple(f"{t.where(source)}: lies {d:.4g} {unit} from the data the model was fitted on (more than "
+                  f"{EXTRAPOLATION_LIMIT:g} {unit}): its correction is the model extrapolated" for t, d in far[:shown])
+    more = (f"{source}: and {len(far) - shown} more targets more than {EXTRAPOLATION_LIMIT:g} {unit} from the data "
+            "(the summary's far_from_data lists them)",) if len(far) > shown else ()
+    return lines + more
 
 
 def program_line(summary: dict, output, summary_path) -> str:

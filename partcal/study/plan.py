@@ -25,7 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .._io import atomic_write
-from ..data.plausibility import check_joint_units
+from ..calibration.checks import check_joint_units
 from ..errors import DataError, PartcalError
 from ..calibration import design
 from .._validation import seed_from
@@ -91,7 +91,7 @@ def floor_of(robot: Robot, floor) -> Floor | None:
 def check_candidates(robot: Robot, q_deg: NDArray[np.float64], source: str,
                      floor: Floor | None = None) -> NDArray[np.float64]:
     """The user's poses ``(n, N)`` deg (candidates, or a set to evaluate), refused when they look like radians
-    (:func:`~partcal.data.plausibility.check_joint_units`), one is outside the limits, or (with ``floor``) one
+    (:func:`~partcal.calibration.checks.check_joint_units`), one is outside the limits, or (with ``floor``) one
     puts a link, the flange or the tool below the floor."""
     q_deg = robot.check_joints(q_deg, source)
     check_joint_units(source, ["data row 1"], q_deg)

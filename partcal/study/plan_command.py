@@ -27,11 +27,10 @@ from ..calibration import design
 from ..robot.description import joint_columns
 from ..robot.floor import Floor, robot_floor
 from ..robot.kinematics import Robot
-from ..data.observations import has_kind_column, read_features, read_observations, write_observations
+from ..data.measurement_rows import has_measurement_column, read_cell, read_measurement_rows, write_measurement_rows
 from ..calibration.measurement import SCALE
-from ..calibration.registry import kind_names
-from . import plan, plan_kinds
-from .kinds_run import rows_of
+from ..calibration.registry import measurement_names
+from . import plan, plan_measurements
 from .config import robot_named
 
 
@@ -44,8 +43,8 @@ class PlanOptions:
     ``pool`` poses within the limits; the planned model (``no_base``, ``no_tool``, ``compliance`` joints,
     ``joint_harmonics`` (one K, or one per joint), ``payload_kg``, ``parametrization``); ``iso9283`` with
     ``cube`` (cx, cy, cz, edge mm) and ``cycles``; the floor (``floor_mm``, ``clearance_mm``, ``no_floor``);
-    measurement kinds: ``kind`` rows to plan on the cell's ``features`` (a features YAML), which an evaluated
-    kinds file is read with too.
+    measurement types: ``measurement`` rows to plan on the cell's description ``cell`` (a cell YAML), which an evaluated
+    measurements file is read with too.
     """
 
     n: int | None = None
@@ -71,8 +70,8 @@ class PlanOptions:
     floor_mm: float | None = None
     clearance_mm: float | None = None
     no_floor: bool = False
-    features: str | Path | None = None
-    kind: str | None = None
+    cell: str | Path | None = None
+    measurement: str | None = None
 
     @classmethod
     def from_args(cls, args) -> "PlanOptions":
@@ -91,11 +90,11 @@ def run_plan(robot: str | Path, options: PlanOptions, *, say: Callable[[str], No
     if o.iso9283:
         return _iso9283(robot, o, show)
     fmt = load_format(o.format) if o.format else None
-    if o.kind is not None or (o.evaluate and has_kind_column(o.evaluate, fmt)):
-        return _kinds(robot, o, say, show)
-    if o.features is not None:
-        raise PartcalError("plan: --features goes with --kind plane|fixed (plan touches or visits) or --evaluate of a "
-                           "measurement-kinds file (one with a kind column)")
+    if o.measurement is not None or (o.evaluate and has_measurement_column(o.evaluate, fmt)):
+        return _measurements(robot, o, say, show)
+    if o.cell is not None:
+        raise PartcalError("plan: --cell goes with --measurement plane|fixed (plan touches or visits) or --evaluate of a "
+                           "measurements file (one with a measurement column)")
     planning = o.n is not None
     if o.cube is not None or o.cycles is not None:
         raise PartcalError("plan: --cube and --cycles go with --iso9283")
@@ -177,61 +176,61 @@ def _planned(robot: Robot, o: PlanOptions, space, model, where: str, start: floa
          f"{time.perf_counter() - start:.1f} s)")
 
 
-def _kinds(robot: str | Path, o: PlanOptions, say, show) -> None:
-    """``--kind plane|fixed -n N -o ROWS.csv --features CELL.yaml`` (rows planned on the cell's features), or
-    ``--evaluate KINDS.csv [--features CELL.yaml]`` (a kinds file judged): docs/plan.md, "Measurement kinds"."""
-    planning = o.kind is not None
+def _measurements(robot: str | Path, o: PlanOptions, say, show) -> None:
+    """``--measurement plane|fixed -n N -o ROWS.csv --cell CELL.yaml`` (rows planned on the cell's planes and points), or
+    ``--evaluate KINDS.csv [--cell CELL.yaml]`` (a measurements file judged): docs/plan.md, "Measurement types"."""
+    planning = o.measurement is not None
     others = [flag for flag, on in (("--curve", o.curve), ("--candidates", o.candidates), ("--box", o.box),
                                     ("--cube", o.cube), ("--cycles", o.cycles)) if on]
     if planning and o.evaluate:
-        raise PartcalError("plan: give either --kind with -n N -o ROWS.csv or --evaluate DATA.csv, not both")
-    if planning and (o.n is None or o.output is None or o.features is None):
-        raise PartcalError(f"plan --kind {o.kind}: give -n N -o ROWS.csv --features CELL.yaml (how many rows, the "
-                           "kinds CSV to write, and the cell's planes and points)")
+        raise PartcalError("plan: give either --measurement with -n N -o ROWS.csv or --evaluate DATA.csv, not both")
+    if planning and (o.n is None or o.output is None or o.cell is None):
+        raise PartcalError(f"plan --measurement {o.measurement}: give -n N -o ROWS.csv --cell CELL.yaml (how many rows, the "
+                           "measurements CSV to write, and the cell's planes and points)")
     if not planning and (o.n is not None or o.output is not None):
-        raise PartcalError(f"plan: {o.evaluate} holds measurement kinds (a kind column): give --evaluate alone, or "
-                           "--kind plane|fixed with -n N -o ROWS.csv to plan rows")
+        raise PartcalError(f"plan: {o.evaluate} holds measurement types (a measurement column): give --evaluate alone, or "
+                           "--measurement plane|fixed with -n N -o ROWS.csv to plan rows")
     if others:
         verb = "goes" if len(others) == 1 else "go"
-        raise PartcalError(f"plan: {', '.join(others)} {verb} with tracker poses, not with measurement kinds "
-                           f"({'--kind' if planning else 'a kinds file'}); the candidates of --kind are drawn "
-                           "on the features (--pool of them)")
-    refuse_input_as_output(o.output, "plan", [("features file", o.features), ("robot file", robot)])
+        raise PartcalError(f"plan: {', '.join(others)} {verb} with tracker poses, not with measurement types "
+                           f"({'--measurement' if planning else 'a measurements file'}); the candidates of --measurement are drawn "
+                           "on the cell's planes and points (--pool of them)")
+    refuse_input_as_output(o.output, "plan", [("cell file", o.cell), ("robot file", robot)])
     arm = robot_named(robot)
     model = _planned_model(arm, o)
-    features = read_features(o.features, kinds=kind_names()) if o.features is not None else {}
+    cell = read_cell(o.cell) if o.cell is not None else {}
     if not planning:
-        table = read_observations(o.evaluate, arm, load_format(o.format) if o.format else None, features or None,
-                                  kinds=kind_names())
+        table = read_measurement_rows(o.evaluate, arm, load_format(o.format) if o.format else None, cell or None,
+                                  measurements=measurement_names())
         show(f"{o.evaluate}: {len(table)} rows of {arm.name} ({model.describe(arm)})")
-        show("\n".join(plan_kinds.evaluate_kinds(arm, rows_of(table), features, model=model,
+        show("\n".join(plan_measurements.evaluate_measurements(arm, table, cell, model=model,
                                                   random_state=o.seed).lines()))
         return
-    _kinds_planned(arm, o, model, features, say, show)
+    _measurements_planned(arm, o, model, cell, say, show)
 
 
-def _kinds_planned(arm: Robot, o: PlanOptions, model, features: dict, say, show) -> None:
-    """``--kind plane|fixed -n N -o ROWS.csv``: the rows planned, written as a kinds CSV, their evaluation shown."""
+def _measurements_planned(arm: Robot, o: PlanOptions, model, cell: dict, say, show) -> None:
+    """``--measurement plane|fixed -n N -o ROWS.csv``: the rows planned, written as a measurements CSV, their evaluation shown."""
     start = time.perf_counter()
-    result = plan_kinds.plan_kinds(arm, o.n, features, o.kind, model=model, pool=o.pool, random_state=o.seed,
-                                   source=str(o.features), floor=plan_floor(arm, o),
+    result = plan_measurements.plan_measurements(arm, o.n, cell, o.measurement, model=model, pool=o.pool, random_state=o.seed,
+                                   source=str(o.cell), floor=plan_floor(arm, o),
                                    callback=lambda k, logdet: say(f"DETMAX exchange {k}: log det {logdet:.4f}")
                                    if k % 10 == 0 else None)
     names = result.rows.texts["feature"]
     spread = ", ".join(f"{name} {names.count(name)}" for name in dict.fromkeys(names))
     ev = result.evaluation
-    write_observations(plan_kinds.planned_table(result.rows, Path(o.output).stem), o.output, comment=(
-        f"{o.kind} rows planned by partcal {__version__} for {arm.name} ({model.describe(arm)}) on the features of "
-        f"{o.features}: {o.n} of {len(result.candidates)} candidates (the nominal tool tip on the feature, random "
+    write_measurement_rows(plan_measurements.planned_table(result.rows, Path(o.output).stem), o.output, comment=(
+        f"{o.measurement} rows planned by partcal {__version__} for {arm.name} ({model.describe(arm)}) on the features of "
+        f"{o.cell}: {o.n} of {len(result.candidates)} candidates (the nominal tool tip on the feature, random "
         f"orientations), D-optimal (DETMAX), seed {o.seed}.\nJoint angles in degrees. Run each row and touch "
-        f"(or visit) its feature; the rows are the measurement-kinds CSV partcal run reads.\n"
+        f"(or visit) its feature; the rows are the measurements CSV partcal run reads.\n"
         f"Not identifiable from these rows (held nominal): {', '.join(ev.held) or 'none'}"))
     show("\n".join(ev.lines()))
     scale = any(note.startswith(SCALE) for note in ev.notes)
     show(f"the plan leaves unidentifiable (held nominal): {', '.join(ev.held) or 'nothing'}"
          + ("; and the robot's uniform scale: nothing in these rows measures a length (give a plane's spacing_mm or "
             "a point's known_mm)" if scale else ""))
-    show(f"wrote {o.n} {o.kind} rows ({spread}) to {o.output} ({result.exchange.exchanges} exchanges, log det "
+    show(f"wrote {o.n} {o.measurement} rows ({spread}) to {o.output} ({result.exchange.exchanges} exchanges, log det "
          f"{result.exchange.start_logdet:.3f} -> {result.exchange.logdet:.3f}, {time.perf_counter() - start:.1f} s)")
 
 

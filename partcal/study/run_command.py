@@ -19,7 +19,7 @@ from typing import Callable
 
 from .. import __version__
 from .config import RunConfig
-from .kinds_run import check_kinds, kinds_table, run_kinds, uses_kinds, write_kinds_run
+from .measurement_run import check_measurement_run, measurement_run_table, run_measurements, uses_measurement_types, write_measurement_run
 from .outputs import check_writable, write_run
 from .prepare import prepare
 from .results import RunResult
@@ -60,8 +60,8 @@ class Progress:
 def check_run(config: RunConfig, source: str | Path) -> str:
     """``partcal run --check``: every problem a fit would meet refused, else one line on what would run
     (``source``: how to name the config); nothing fitted."""
-    if uses_kinds(config):
-        return check_kinds(config, source)
+    if uses_measurement_types(config):
+        return check_measurement_run(config, source)
     prepared = prepare(config)
     data, plan = prepared.datasets, prepared.plan
     check_writable(config.output, config.inputs(), create=False)
@@ -76,9 +76,9 @@ def run_and_write(config: RunConfig, progress: Callable[[int, int, str], None] |
     outputs with the report that ``report()`` returns (asked after the fits; None: no report), and return
     the lines the command prints: the results table, the identification set's observability, the folder."""
     check_writable(config.output, config.inputs())
-    if uses_kinds(config):
-        kinds = run_kinds(config, progress)
-        return [kinds_table(kinds), f"outputs: {write_kinds_run(kinds, report())}"]
+    if uses_measurement_types(config):
+        kinds = run_measurements(config, progress)
+        return [measurement_run_table(kinds), f"outputs: {write_measurement_run(kinds, report())}"]
     result = run(config, progress)
     out = write_run(result, report())
     lines = [results_table(result)]

@@ -93,15 +93,17 @@ def model_prior(model: KinematicModel, inflate: float, frame: bool = False, unid
         raise ModelFileError("the model has no covariance of its parameters (field 'identification.covariance'; "
                              "written before partcal kept it): fit it again with partcal run")
     identified = np.flatnonzero(np.array(table.status) == "identified")
-    keep = np.array([frame or not table.names[k].startswith("base.") for k in identified], dtype=bool)
+    own = len(model.robot_parameter_names())        # a model of measurement types lists its cell's unknowns after
+    keep = np.array([k < own and (frame or not table.names[k].startswith("base.")) for k in identified], dtype=bool)
     plausible = table.prior_indices()
-    plausible = plausible[[unidentified and (frame or not table.names[k].startswith("base.")) for k in plausible]]
+    plausible = plausible[[k < own and unidentified and (frame or not table.names[k].startswith("base."))
+                           for k in plausible]]
     index = np.concatenate([identified[keep], plausible]).astype(np.intp)
     cov = np.zeros((index.size, index.size))
     cov[:keep.sum(), :keep.sum()] = table.covariance[np.ix_(keep, keep)] * inflate
     cov[keep.sum():, keep.sum():] = np.diag(table.prior_std[plausible] ** 2)
     prior = Prior.from_covariance(index, table.value[index], cov, float(table.sigma_mm))
-    return Prior(prior.index, prior.mean, prior.root, tuple(table.names))
+    return Prior(prior.index, prior.mean, prior.root, tuple(table.names[:own]))
 
 
 def type_prior(model: KinematicModel, plausible: dict[str, float]) -> Prior:
@@ -154,7 +156,7 @@ def update_model(model: KinematicModel, data: Measurements, inflate: float = DEF
     frame_only = _refit(model, data, Prior(prior.index, prior.mean, prior.root * FIRM, prior.names))
     kept = shares.sum() < IDENTIFY_LITTLE
     updated = frame_only if kept else _refit(model, data, prior)
-    if updated.identification_.names != model.identification_.names:
+    if updated.identification_.names != model.identification_.names[:len(model.robot_parameter_names())]:
         raise PartcalError("update: the new fit's parameters differ from the model's (its targets or joint errors)")
     before = pooled_rms(data.errors_mm - frame_only.predict(data.q_deg))
     after = pooled_rms(data.errors_mm - updated.predict(data.q_deg))
@@ -183,9 +185,9 @@ def update_file(model_path: str | Path, data_path: str | Path, output: str | Pat
     if model.residual_ is not None:
         raise ModelFileError(f"{model_path}: field 'residual': update re-identifies a kinematic model alone; this "
                              f"one has a residual model of kind {doc.get('residual', {}).get('kind')!r}")
-    if model.targets_ or model.orientation_ or model.measures_:
+    if model.targets_ or model.orientation_:
         raise ModelFileError(f"{model_path}: field 'targets': update reads positions of one target; this model "
-                             "was fitted on further targets, an orientation or measurement kinds")
+                             "was fitted on further targets or an orientation")
     try:
         model_prior(model, 1.0)
     except ModelFileError as exc:

@@ -15,7 +15,7 @@ prior every length is held about its nominal value with its plausible error, aga
 residual is a length: a smaller robot leaves smaller ones). ``fit`` refuses a list of strengths there; the CV
 column shows what the model's choice (``strength_table`` on its 5 folds) would have taken.
 
-Run (from the repository root): ``PYTHONPATH=$PWD .venv/bin/python benchmarks/bench_kinds_prior.py``
+Run (from the repository root): ``PYTHONPATH=$PWD .venv/bin/python benchmarks/bench_measurement_prior.py``
 (about 6 minutes on a shared 2-core machine; BLAS kept to one thread).
 """
 
@@ -38,7 +38,6 @@ from partcal.errors import PartcalError  # noqa: E402
 from partcal.models.base import seed_from  # noqa: E402
 from partcal.calibration.cv import fold_rows, FOLDS, strength_table
 from partcal.models.kinematic import KinematicModel  # noqa: E402
-from partcal.calibration.measurement import Measured
 
 DRAWS = 5
 FIXED = (0.01, 0.03, 0.1, 1.0)
@@ -47,7 +46,7 @@ AUTO_ROWS = 80          # ``auto`` (the 11 strengths of STRENGTH_GRID) is scored
 LOOSE = {"planes": {"top": {}, "step": {}, "side": {}}}
 
 
-def scored(b: Bench, rows, features, seed: int) -> list[tuple[float, float | None]]:
+def scored(b: Bench, rows, cell, seed: int) -> list[tuple[float, float | None]]:
     """(3-D RMS after a rigid fit against the truth, the strength) of: no prior, each of FIXED, the CV choice among
     CHOICE, and (on at most AUTO_ROWS rows) ``auto``."""
     out = []
@@ -55,25 +54,25 @@ def scored(b: Bench, rows, features, seed: int) -> list[tuple[float, float | Non
         params = {} if strength is None else {"prior": "plausible", "prior_strength": strength}
         model = KinematicModel(robot=b.nominal, parametrization="complete", random_state=seed, **params)
         try:
-            model.fit(rows.q_deg, None, measures=Measured(rows, features))
+            model.fit(rows.q_deg, None, rows=rows, cell=cell)
         except PartcalError:            # refused where nothing measures a length: what the choice would have been
-            model.set_params(prior_strength=unguarded_choice(b, model, rows, features, seed))
-            model.fit(rows.q_deg, None, measures=Measured(rows, features))
+            model.set_params(prior_strength=unguarded_choice(b, model, rows, cell, seed))
+            model.fit(rows.q_deg, None, rows=rows, cell=cell)
         predicted = b.nominal.positions(b.q_test) + model.predict(b.q_test)
         out.append((b.score(predicted, rigid=True), getattr(model, "prior_strength_", None)))
     return out
 
 
-def unguarded_choice(b: Bench, model: KinematicModel, rows, features, seed: int) -> float:
+def unguarded_choice(b: Bench, model: KinematicModel, rows, cell, seed: int) -> float:
     """The strength the model's own choice (5 random folds, one-standard-error rule) would take on rows that leave
     the scale free, which ``fit`` refuses (``SCALE_CHOICE``): to show why."""
     def identified_at(strength, train):
         part = KinematicModel(robot=b.nominal, parametrization="complete", prior="plausible",
                               prior_strength=float(strength))
-        return part.fit(train.q_deg, None, measures=Measured(train, features)).identification_
+        return part.fit(train.q_deg, None, rows=train, cell=cell).identification_
 
     folds = fold_rows(rows, seed_from(seed), FOLDS)
-    best, _ = strength_table(identified_at, CHOICE, b.nominal, rows, features, folds, parametrization="complete")
+    best, _ = strength_table(identified_at, CHOICE, b.nominal, rows, cell, folds, parametrization="complete")
     return CHOICE[best]
 
 

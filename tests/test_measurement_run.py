@@ -1,6 +1,6 @@
-"""``partcal run`` on measurement kinds (partcal/study/kinds_run.py): a virtual UR10 touching a step block,
+"""``partcal run`` on measurement types (partcal/study/measurement_run.py): a virtual UR10 touching a step block,
 visiting fixed points and measured by a ballbar, identified without a tracker and scored against tracker
-points of the same virtual robot; refusals; a kind added by a test module runs through the command."""
+points of the same virtual robot; refusals; a type added by a test module runs through the command."""
 
 import json
 import shutil
@@ -8,40 +8,33 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import small_contact_cell
 
 from partcal.cli import main
 from partcal.data.measurements import read_measurements
 from partcal.data.simulate import load_study, simulate, write_study
-from partcal.errors import ConfigError
-from partcal.calibration.measurement import MeasurementKind, Residuals
-from partcal.calibration.registry import add_measurement_kind, MEASUREMENT_KINDS
+from partcal.calibration.measurement import MeasurementType, Residuals
+from partcal.calibration.registry import add_measurement_type, MEASUREMENT_TYPES
 from partcal.robot.frames import kabsch
 from partcal.study.config import load_config
 from partcal.study.persist import load_model
-
-ROOT = Path(__file__).resolve().parent.parent
-
 
 @pytest.fixture(scope="module")
 def cell(tmp_path_factory):
     """The shipped virtual cell, smaller: its data sets written into a folder of their own."""
     folder = tmp_path_factory.mktemp("cell")
-    text = (ROOT / "configs" / "ur10_contacts_virtual.yaml").read_text()
-    text = text.replace("output: ../data/ur10_contacts", "output: data")
-    text = text.replace("plane: {top: 300, step: 300, side: 200}", "plane: {top: 100, step: 100, side: 80}")
-    text = text.replace("pairs: all, poses: 100", "pairs: all, poses: 30")
-    (folder / "virtual.yaml").write_text(text)
+    small_contact_cell(folder, touches=100, side=80, visits=50, poses=30)
     study = load_study(folder / "virtual.yaml")
     write_study(study, simulate(study))
     return folder, study
 
 
-def _config(folder: Path, identification: str, features: str | None = "features.yaml", models: str = "", name="r"):
+def _config(folder: Path, identification: str, cell: str | None = "cell.yaml", models: str = "", name="r"):
     text = f"""name: {name}
 robot: universal_robots_ur10
 data:
   identification: data/{identification}
-{f'  features: data/{features}' if features else ''}
+{f'  cell: data/{cell}' if cell else ''}
   tests:
     test: data/test.csv
 models:
@@ -64,7 +57,7 @@ def test_a_run_on_touches_identifies_the_robot_and_scores_tracker_points_after_a
     metrics = json.loads((folder / "out_touches" / "metrics.json").read_text())
     assert metrics["seed"] == 0 and metrics["cv"]["folds"] == 5          # the config's seed, cv_folds: auto
     entry = metrics["models"]["complete"]
-    assert 0.005 < entry["cv_kinds_rms_mm"]["plane"] < 0.02          # the touches' 0.01 mm noise, held out
+    assert 0.005 < entry["cv_rms_by_type"]["plane"] < 0.02          # the touches' 0.01 mm noise, held out
     # the score printed is the model's, after a rigid fit, against the test set: computed here independently
     model, _ = load_model(folder / "out_touches" / "models" / "complete.json")
     test = read_measurements(folder / "data" / "test.csv")
@@ -83,7 +76,7 @@ def test_a_run_on_touches_identifies_the_robot_and_scores_tracker_points_after_a
 def test_check_names_the_scale_when_every_plane_is_unknown(cell, capsys):
     folder, _ = cell
     (folder / "data" / "loose.yaml").write_text("planes: {top: {}, step: {}, side: {}}\n")
-    path = _config(folder, "touches.csv", features="loose.yaml", name="loose")
+    path = _config(folder, "touches.csv", cell="loose.yaml", name="loose")
     assert main(["run", "--check", str(path)]) == 0
     out = capsys.readouterr().out
     assert "scale: nothing here measures a length" in out
@@ -101,13 +94,13 @@ def test_fixed_points_and_distances_run_too(cell, data, capsys):
     assert main(["run", "-q", str(path)]) == 0
     metrics = json.loads((folder / f"out_{data.split('.')[0]}" / "metrics.json").read_text())
     entry = metrics["models"]["complete"]
-    kind = "fixed" if data == "nests.csv" else "distance"
-    assert entry["cv_kinds_rms_mm"][kind] < 0.03
+    measurement = "fixed" if data == "nests.csv" else "distance"
+    assert entry["cv_rms_by_type"][measurement] < 0.03
     assert entry["tests"]["test"]["rms_3d"] < 0.15
-    # the identification file as a test set: its residuals are the fit's, printed with their kind's name
-    again = entry["tests"]["again"]["kinds_rms_mm"][kind]
-    assert again == pytest.approx(entry["fit_kinds_rms_mm"][kind], rel=1e-9)
-    assert f"{kind} {again:.4f}" in capsys.readouterr().out
+    # the identification file as a test set: its residuals are the fit's, printed with their type's name
+    again = entry["tests"]["again"]["rms_by_type"][measurement]
+    assert again == pytest.approx(entry["fit_rms_by_type"][measurement], rel=1e-9)
+    assert f"{measurement} {again:.4f}" in capsys.readouterr().out
 
 
 def test_a_model_of_an_error_field_is_refused_naming_it(cell, capsys):
@@ -120,11 +113,11 @@ def test_a_model_of_an_error_field_is_refused_naming_it(cell, capsys):
     assert "FDP(CI)" in err and "error field" in err and "plane" in err
 
 
-class Height(MeasurementKind):
-    """A toy kind of this test module: the tool tip's height read by a height gauge, ``height_mm``."""
+class Height(MeasurementType):
+    """A toy type of this test module: the tool tip's height read by a height gauge, ``height_mm``."""
 
     name = "height_toy"
-    default_noise_mm = 0.01
+    default_noise = 0.01
 
     def residuals(self, positions, rotations, u):
         grad = np.tile([0.0, 0.0, 1.0], (self.index.size, 1))
@@ -132,24 +125,24 @@ class Height(MeasurementKind):
                          grad, np.zeros((self.index.size, 0)))
 
 
-def test_a_kind_registered_here_runs_through_partcal_run(cell, capsys):
+def test_a_measurement_type_registered_here_runs_through_partcal_run(cell, capsys):
     folder, study = cell
     vr = study.robot
     rng = np.random.default_rng(0)
     q = read_measurements(folder / "data" / "test.csv").q_deg[:120]
     height = vr.true_positions(q)[:, 2] + rng.normal(0, 0.01, len(q))
-    lines = ["q1,q2,q3,q4,q5,q6,kind,height_mm"] + [
+    lines = ["q1,q2,q3,q4,q5,q6,measurement,height_mm"] + [
         ",".join(f"{v:.6f}" for v in row) + f",height_toy,{h:.6f}" for row, h in zip(q, height)]
     (folder / "data" / "heights.csv").write_text("\n".join(lines) + "\n")
-    add_measurement_kind(Height)
+    add_measurement_type(Height)
     try:
-        path = _config(folder, "heights.csv", features=None, name="heights")
+        path = _config(folder, "heights.csv", cell=None, name="heights")
         assert main(["run", "-q", str(path)]) == 0
         metrics = json.loads((folder / "out_heights" / "metrics.json").read_text())
-        assert metrics["kinds"]["height_toy"] == "120 height_toy rows; noise 0.01 mm"
-        assert 0.005 < metrics["models"]["complete"]["cv_kinds_rms_mm"]["height_toy"] < 0.03
+        assert metrics["measurement_types"]["height_toy"] == "120 height_toy rows; noise 0.01 mm"
+        assert 0.005 < metrics["models"]["complete"]["cv_rms_by_type"]["height_toy"] < 0.03
     finally:
-        del MEASUREMENT_KINDS["height_toy"]
+        del MEASUREMENT_TYPES["height_toy"]
 
 
 def test_touches_and_tracker_points_in_two_files_in_the_trackers_frame(cell):
@@ -173,16 +166,16 @@ def test_touches_and_tracker_points_in_two_files_in_the_trackers_frame(cell):
     assert main(["run", "-q", str(path)]) == 0
     metrics = json.loads((folder / "out_mixed" / "metrics.json").read_text())
     entry = metrics["models"]["complete"]
-    assert set(entry["cv_kinds_rms_mm"]) == {"point", "plane"}
-    assert entry["cv_kinds_rms_mm"]["point"] < 0.05 and entry["cv_kinds_rms_mm"]["plane"] < 0.02
-    assert metrics["kinds"]["point"] == "20 tracker points in the tracker's frame; noise 0.02 mm"
+    assert set(entry["cv_rms_by_type"]) == {"point", "plane"}
+    assert entry["cv_rms_by_type"]["point"] < 0.05 and entry["cv_rms_by_type"]["plane"] < 0.02
+    assert metrics["measurement_types"]["point"] == "20 tracker points in the tracker's frame; noise 0.02 mm"
     assert entry["tests"]["test"]["rigid_fit"] and entry["tests"]["test"]["rms_3d"] < 0.1
 
 
 def test_a_list_of_point_files_is_refused(cell, capsys):
     folder, _ = cell
     path = folder / "points_list.yaml"
-    path.write_text(_config(folder, "test.csv", features=None, name="plist").read_text()
+    path.write_text(_config(folder, "test.csv", cell=None, name="plist").read_text()
                     .replace("identification: data/test.csv", "identification: [data/test.csv, data/test.csv]"))
     assert main(["run", "--check", str(path)]) == 2
     assert "join them into one file" in capsys.readouterr().err
@@ -193,7 +186,7 @@ def test_features_beside_a_point_file_alone_are_refused(cell, capsys):
     path = _config(folder, "test.csv", name="points_features")
     assert main(["run", "--check", str(path)]) == 2
     err = capsys.readouterr().err
-    assert "data.features (line 5)" in err and "no identification file here has a 'kind' column" in err
+    assert "data.cell (line 5)" in err and "no identification file here has a 'measurement' column" in err
 
 
 def _edited(folder: Path, source: str, target: str, edit) -> str:
@@ -203,8 +196,8 @@ def _edited(folder: Path, source: str, target: str, edit) -> str:
     return target
 
 
-def _refusal(folder, data, capsys, features="features.yaml"):
-    path = _config(folder, data, features=features, name=data.split(".")[0])
+def _refusal(folder, data, capsys, cell="cell.yaml"):
+    path = _config(folder, data, cell=cell, name=data.split(".")[0])
     assert main(["run", "--check", str(path)]) == 2
     return capsys.readouterr().err
 
@@ -246,7 +239,7 @@ def test_bad_rows_are_refused_naming_file_line_and_column(cell, capsys):
     ("predict", "predict: pose\n"),
     ("spread", "spread: {coverage: 0.9}\n"),
 ])
-def test_a_setting_a_kinds_run_does_not_use_is_refused_naming_its_key(cell, capsys, key, text):
+def test_a_setting_a_measurement_run_does_not_use_is_refused_naming_its_key(cell, capsys, key, text):
     folder, _ = cell
     config = _config(folder, "nests.csv", name="unused").read_text()
     if key.startswith("data."):
@@ -260,13 +253,13 @@ def test_a_setting_a_kinds_run_does_not_use_is_refused_naming_its_key(cell, caps
     assert f"{key} (line " in err and "does not use it" in err
 
 
-def test_a_point_test_set_takes_a_row_subset_and_a_kinds_file_does_not(cell, capsys):
-    from partcal.study.kinds_run import prepare_kinds
+def test_a_point_test_set_takes_a_row_subset_and_a_measurements_file_does_not(cell, capsys):
+    from partcal.study.measurement_run import prepare_measurement_run
     folder, _ = cell
     path = folder / "subset.yaml"
     path.write_text(_config(folder, "nests.csv", name="subset").read_text()
                     .replace("test: data/test.csv", "test: {file: data/test.csv, rows: 11-40}"))
-    data = prepare_kinds(load_config(path))
+    data = prepare_measurement_run(load_config(path))
     whole = read_measurements(folder / "data" / "test.csv")
     assert np.array_equal(data.tests["test"].q_deg, whole.q_deg[10:40])
     path.write_text(_config(folder, "nests.csv", name="subset").read_text()
@@ -305,8 +298,8 @@ def test_held_out_touches_are_scored_however_few_of_a_plane_a_fold_holds(cell, c
     path = _config(folder, _few_side(folder, 8), name="side8")
     assert main(["run", "-q", str(path)]) == 0, capsys.readouterr().err
     metrics = json.loads((folder / "out_side8" / "metrics.json").read_text())
-    assert "side 8" in metrics["kinds"]["plane"]
-    assert 0.005 < metrics["models"]["complete"]["cv_kinds_rms_mm"]["plane"] < 0.1      # 0.01 mm touches
+    assert "side 8" in metrics["measurement_types"]["plane"]
+    assert 0.005 < metrics["models"]["complete"]["cv_rms_by_type"]["plane"] < 0.1      # 0.01 mm touches
 
 
 def test_check_refuses_folds_that_leave_a_plane_too_few_touches(cell, capsys):
@@ -317,7 +310,7 @@ def test_check_refuses_folds_that_leave_a_plane_too_few_touches(cell, capsys):
     assert "cv_folds: cross-validation fold" in err and "plane 'side' has" in err and "fewer folds" in err
 
 
-def test_a_kinds_test_set_is_scored_with_what_the_identification_fitted(cell):
+def test_a_measurement_test_set_is_scored_with_what_the_identification_fitted(cell):
     """A test set of visits of nest_b alone (tied to nest_a, which it does not visit; an identification would
     refuse it) is scored with the points the identification fitted: the 3-D coincidence of the model's tips with
     nest_b, computed here from the model file."""
@@ -330,13 +323,13 @@ def test_a_kinds_test_set_is_scored_with_what_the_identification_fitted(cell):
     assert main(["run", "-q", str(path)]) == 0
     metrics = json.loads((folder / "out_nestb" / "metrics.json").read_text())
     model, _ = load_model(folder / "out_nestb" / "models" / "complete.json")
-    from partcal.data.observations import read_observations
-    rows = read_observations(folder / "data" / nest_b, "universal_robots_ur10")
+    from partcal.data.measurement_rows import read_measurement_rows
+    rows = read_measurement_rows(folder / "data" / nest_b, "universal_robots_ur10")
     table = model.identification_
     centre = np.array([table.value[list(table.names).index(f"point nest_b.{c}")] for c in "xyz"])
     tips = model.robot.positions(rows.q_deg) + model.predict(rows.q_deg)
     expected = np.sqrt(np.mean((tips - centre) ** 2))
-    assert metrics["models"]["complete"]["tests"]["b"]["kinds_rms_mm"]["fixed"] == pytest.approx(expected, rel=1e-6)
+    assert metrics["models"]["complete"]["tests"]["b"]["rms_by_type"]["fixed"] == pytest.approx(expected, rel=1e-6)
 
 
 def test_a_test_set_of_planes_the_identification_never_saw_places_them_on_its_own_rows(cell):
@@ -350,10 +343,10 @@ def test_a_test_set_of_planes_the_identification_never_saw_places_them_on_its_ow
     entry = json.loads((folder / "out_unseen" / "metrics.json").read_text())["models"]["complete"]
     touches = entry["tests"]["touches"]
     assert touches["fitted_on_test"] == ["plane side", "plane top"]
-    assert touches["kinds_rms_mm"]["plane"] < 0.05
+    assert touches["rms_by_type"]["plane"] < 0.05
 
 
-def test_a_model_from_kinds_that_fix_no_frame_says_so_when_loaded(cell, caplog):
+def test_a_model_from_measurement_types_that_fix_no_frame_says_so_when_loaded(cell, caplog):
     folder, _ = cell
     path = _config(folder, "touches.csv", name="frame")
     assert main(["run", "-q", str(path)]) == 0
@@ -364,35 +357,74 @@ def test_a_model_from_kinds_that_fix_no_frame_says_so_when_loaded(cell, caplog):
         model, _ = load_model(model_file)
     assert "fix no frame" in caplog.text and str(model_file) in caplog.text
     assert any("fix no frame" in note for note in model.fit_notes())
+    # a file of partcal 0.1 names the types it was fitted on `measures`: read the same
+    from partcal.study.persist import checksum
+    doc["model"]["measures"] = doc["model"].pop("measurement_types")
+    doc["checksum"] = checksum(doc)
+    old_file = folder / "old_frame.json"
+    old_file.write_text(json.dumps(doc))
+    old, _ = load_model(old_file)
+    assert old.measurement_types_ == model.measurement_types_ == ("plane",)
+    q = np.random.default_rng(0).uniform(-90, 90, (5, 6))
+    np.testing.assert_array_equal(old.predict(q), model.predict(q))
 
 
-def test_a_prior_on_a_kinds_run_chooses_its_strength_on_the_runs_folds(cell, capsys):
+def test_a_prior_on_a_measurement_run_chooses_its_strength_on_the_runs_folds(cell, capsys):
+    """Three strengths: the run scores each on its folds and chooses by the one-standard-error rule (written out
+    here from its table), here the middle one, neither the first nor the strongest; the model fitted on every row
+    is then the fit at that strength, as KinematicModel gives it, and not the fit at either other."""
+    from partcal.models.kinematic import KinematicModel
+
+    from partcal.study.measurement_run import prepare_measurement_run
     folder, _ = cell
-    path = _config(folder, "nests.csv", name="prior",
-                   models="    prior: plausible\n    prior_strength: [0, 1, 30]\n")
+    strengths = [0.01, 0.1, 1.0]
+    half = _edited(folder, "nests.csv", "nests_half.csv",       # every other visit, on 2 folds: a quicker run
+                   lambda lines: lines[:3] + lines[3::2])
+    path = _config(folder, half, name="prior", models=f"    prior: plausible\n    prior_strength: {strengths}\n")
+    path.write_text(path.read_text().replace("robot:", "cv_folds: 2\nrobot:"))
     assert main(["run", "-q", str(path)]) == 0
     printed = capsys.readouterr().out
     out = folder / "out_prior"
     metrics = json.loads((out / "metrics.json").read_text())
     table = metrics["models"]["complete"]["prior_strength"]
-    assert [row["prior_strength"] for row in table] == [0.0, 1.0, 30.0]
+    assert [row["prior_strength"] for row in table] == strengths
     assert set(table[0]) == {"prior_strength", "cv_weighted_rms_mm", "cv_se", "chosen"}
     scores, errors = [row["cv_weighted_rms_mm"] for row in table], [row["cv_se"] for row in table]
     best = int(np.argmin(scores))                 # the one-standard-error rule, written out
     chosen = max(row["prior_strength"] for row in table if row["cv_weighted_rms_mm"] <= scores[best] + errors[best])
+    assert chosen == 0.1                          # neither the first in the list nor the strongest
     assert [row["chosen"] for row in table] == [row["prior_strength"] == chosen for row in table]
     note = next(n for n in metrics["models"]["complete"]["notes"] if n.startswith(f"prior strength {chosen:g} chosen"))
     assert "CV weighted RMS" in note and f"note: {note}" in printed
-    # the strength 0 entry is the run without a prior: its score is the same entry's CV figure without one
-    plain = _config(folder, "nests.csv", name="noprior")
-    assert main(["run", "-q", str(plain)]) == 0
-    without = json.loads((folder / "out_noprior" / "metrics.json").read_text())["models"]["complete"]
-    assert table[0]["cv_weighted_rms_mm"] == pytest.approx(without["cv_weighted_rms_mm"], rel=1e-12)
-    assert "prior_strength" not in without
     html = (out / "index.html").read_text()
     assert "Prior strength chosen by cross-validation" in html and f"{scores[1]:.4f}" in html
-    # another model file (fitted on kinds: its planes' and points' unknowns follow the robot's) as a strong prior:
-    # the row parameters come out at its values
+    data = prepare_measurement_run(load_config(path))
+    fitted, _ = load_model(out / "models" / "complete.json")
+
+    def at(strength):
+        return KinematicModel(robot=data.robot, parametrization="complete", prior="plausible",
+                              prior_strength=strength).fit(data.rows.q_deg, None,
+                                                           rows=data.rows, cell=data.cell).identification_
+    np.testing.assert_allclose(fitted.identification_.value, at(chosen).value, rtol=0, atol=1e-9)
+    for other in (strengths[0], strengths[-1]):
+        assert np.max(np.abs(at(other).value[:33] - fitted.identification_.value[:33])) > 1e-3
+
+
+def test_a_measurement_run_calls_best_the_entry_of_the_lowest_cv_score_and_a_model_file_serves_as_a_prior(cell, capsys):
+    """Two entries, complete and DH rows: "best" is the one whose weighted CV residual is the lower (the table marks
+    it). Then one of the model files (fitted on types: its planes' and points' unknowns follow the robot's) as a
+    strong prior of another run: the row parameters come out at its values."""
+    folder, _ = cell
+    plain = _config(folder, "nests.csv", name="noprior", models="  - name: dh\n    kind: kinematic\n")
+    plain.write_text(plain.read_text().replace("robot:", "cv_folds: 2\nrobot:"))
+    assert main(["run", str(plain)]) == 0
+    printed = capsys.readouterr().out
+    metrics = json.loads((folder / "out_noprior" / "metrics.json").read_text())
+    scores = {name: entry["cv_weighted_rms_mm"] for name, entry in metrics["models"].items()}
+    assert set(scores) == {"complete", "dh"} and abs(scores["complete"] - scores["dh"]) > 1e-4
+    lowest = min(scores, key=scores.get)
+    assert metrics["best"] == lowest
+    assert any(line.startswith(f"{lowest} *") for line in printed.splitlines())
     other = _config(folder, "nests.csv", name="fileprior",
                     models="    prior: out_noprior/models/complete.json\n    prior_strength: 10000\n")
     assert main(["run", "-q", str(other)]) == 0
@@ -403,7 +435,7 @@ def test_a_prior_on_a_kinds_run_chooses_its_strength_on_the_runs_folds(cell, cap
     assert np.max(np.abs(source.identification_.correction[:rows])) > 1e-2      # and those are not nominal
 
 
-def test_a_bad_prior_strength_on_a_kinds_run_is_refused_naming_file_line_and_field(cell, capsys):
+def test_a_bad_prior_strength_on_a_measurement_run_is_refused_naming_file_line_and_field(cell, capsys):
     folder, _ = cell
     path = _config(folder, "nests.csv", name="badprior", models="    prior: plausible\n    prior_strength: -1\n")
     line = path.read_text().splitlines().index("    prior_strength: -1") + 1
@@ -419,13 +451,13 @@ def test_a_bad_prior_strength_on_a_kinds_run_is_refused_naming_file_line_and_fie
 def test_check_says_a_prior_holds_the_scale_unknown_planes_leave_free(cell, capsys):
     folder, _ = cell
     (folder / "data" / "loose.yaml").write_text("planes: {top: {}, step: {}, side: {}}\n")
-    path = _config(folder, "touches.csv", features="loose.yaml", name="loose_prior",
+    path = _config(folder, "touches.csv", cell="loose.yaml", name="loose_prior",
                    models="    prior: plausible\n")
     assert main(["run", "--check", str(path)]) == 0
     out = capsys.readouterr().out
     assert "scale: nothing here measures a length" in out and "the prior holds it" in out
     held = next(line for line in out.splitlines() if line.startswith("complete: held nominal"))
-    plain = _config(folder, "touches.csv", features="loose.yaml", name="loose_plain")
+    plain = _config(folder, "touches.csv", cell="loose.yaml", name="loose_plain")
     assert main(["run", "--check", str(plain)]) == 0
     out = capsys.readouterr().out
     assert "one length is held nominal" in out
@@ -433,7 +465,7 @@ def test_check_says_a_prior_holds_the_scale_unknown_planes_leave_free(cell, caps
     # the prior's rows make the length the scale would have held identifiable: fewer parameters held nominal
     assert len(held.split(":", 2)[2].split(",")) < len(held_plain.split(":", 2)[2].split(","))
     # but no cross-validation of such rows can choose a strength (held-out lengths fall as the robot shrinks)
-    listed = _config(folder, "touches.csv", features="loose.yaml", name="loose_list",
+    listed = _config(folder, "touches.csv", cell="loose.yaml", name="loose_list",
                      models="    prior: plausible\n    prior_strength: auto\n")
     line = listed.read_text().splitlines().index("    prior_strength: auto") + 1
     assert main(["run", "--check", str(listed)]) == 2
@@ -441,7 +473,7 @@ def test_check_says_a_prior_holds_the_scale_unknown_planes_leave_free(cell, caps
     assert f"{listed}: models[0].prior_strength (line {line}): a list of strengths cannot be chosen on these " in err
 
 
-PROBE = {**{f"q{j}": f"Axis {j}" for j in range(1, 7)}, "kind": "Type", "id": "Name", "distance_mm": "Length",
+PROBE = {**{f"q{j}": f"Axis {j}" for j in range(1, 7)}, "measurement": "Type", "id": "Name", "distance_mm": "Length",
          "to": "Ref", "x_nom": "Xn", "y_nom": "Yn", "z_nom": "Zn", "x_meas": "X", "y_meas": "Y", "z_meas": "Z",
          "set": "Group"}
 PROBE_KINDS = {"pose": "Pose", "distance": "Bar"}
@@ -449,7 +481,7 @@ PROBE_KINDS = {"pose": "Pose", "distance": "Bar"}
 
 def _probe_export(folder: Path, source: str, target: str) -> str:
     """The cell's ``source`` as a foreign export writes it: PROBE's column names, semicolons, decimal commas,
-    joints in radians, lengths in metres and PROBE_KINDS' kind values (converted here, not by partcal)."""
+    joints in radians, lengths in metres and PROBE_KINDS' type values (converted here, not by partcal)."""
     lines = [x for x in (folder / "data" / source).read_text().splitlines() if x and not x.startswith("#")]
     header = lines[0].split(",")
     out = [";".join(PROBE[c] for c in header)]
@@ -460,28 +492,79 @@ def _probe_export(folder: Path, source: str, target: str) -> str:
                 cell = repr(float(cell) * np.pi / 180.0)
             elif cell and column in ("distance_mm", "x_nom", "y_nom", "z_nom", "x_meas", "y_meas", "z_meas"):
                 cell = repr(float(cell) / 1000.0)
-            cells.append(PROBE_KINDS.get(cell, cell) if column == "kind" else cell.replace(".", ","))
+            cells.append(PROBE_KINDS.get(cell, cell) if column == "measurement" else cell.replace(".", ","))
         out.append(";".join(cells))
     (folder / "data" / target).write_text("\n".join(out) + "\n")
     return target
 
 
-def test_a_run_reads_a_foreign_kinds_file_and_point_csv_through_one_format(cell):
-    """``data.format`` maps the ballbar's kinds columns and kind values and the tracker test set's columns: the
+def test_a_run_reads_a_foreign_measurements_file_and_point_csv_through_one_format(cell):
+    """``data.format`` maps the ballbar's types columns and type values and the tracker test set's columns: the
     run's figures are those of the same data in the contract."""
     folder, _ = cell
     contract = _config(folder, "ballbar.csv", name="bar_contract")
     foreign = _config(folder, _probe_export(folder, "ballbar.csv", "ballbar_probe.csv"), name="bar_probe")
     test = _probe_export(folder, "test.csv", "test_probe.csv")
     columns = ", ".join(f"{k}: '{v}'" for k, v in PROBE.items())
-    kinds = ", ".join(f"{v}: {k}" for k, v in PROBE_KINDS.items())
+    measurements = ", ".join(f"{v}: {k}" for k, v in PROBE_KINDS.items())
     foreign.write_text(foreign.read_text().replace("data/test.csv", f"data/{test}").replace(
         "data:\n", f"data:\n  format: {{delimiter: ';', decimal: ',', joint_unit: rad, length_unit: m,\n"
-                   f"           columns: {{{columns}}},\n           kinds: {{{kinds}}}}}\n"))
+                   f"           columns: {{{columns}}},\n           measurements: {{{measurements}}}}}\n"))
     assert main(["run", "-q", str(contract)]) == 0 and main(["run", "-q", str(foreign)]) == 0
     want, got = ((json.loads((folder / f"out_{n}" / "metrics.json").read_text())["models"]["complete"])
                  for n in ("bar_contract", "bar_probe"))
-    assert got["fit_kinds_rms_mm"]["distance"] == pytest.approx(want["fit_kinds_rms_mm"]["distance"], rel=1e-6)
-    assert got["cv_kinds_rms_mm"]["distance"] == pytest.approx(want["cv_kinds_rms_mm"]["distance"], rel=1e-6)
+    assert got["fit_rms_by_type"]["distance"] == pytest.approx(want["fit_rms_by_type"]["distance"], rel=1e-6)
+    assert got["cv_rms_by_type"]["distance"] == pytest.approx(want["cv_rms_by_type"]["distance"], rel=1e-6)
     assert got["tests"]["test"]["rms_3d"] == pytest.approx(want["tests"]["test"]["rms_3d"], rel=1e-6)
     assert want["tests"]["test"]["rms_3d"] < 0.15                      # a calibrated robot, not two failures
+
+
+def test_a_ballbar_split_over_two_files_links_its_ids_across_them(cell, capsys):
+    """The ballbar's poses in one file and its distances in another (their 'to' naming the poses' ids): the run
+    links them and its figures are those of the one file; an id two other files both hold is refused."""
+    folder, _ = cell
+    lines = (folder / "data" / "ballbar.csv").read_text().splitlines()
+    header, rows = lines[[i for i, x in enumerate(lines) if not x.startswith("#")][0]], \
+        [x for x in lines if x and not x.startswith("#")][1:]
+    (folder / "data" / "bar_poses.csv").write_text("\n".join([header, *(r for r in rows if ",pose," in r)]) + "\n")
+    (folder / "data" / "bar_lengths.csv").write_text(
+        "\n".join([header, *(r for r in rows if ",distance," in r)]) + "\n")
+    whole = _config(folder, "ballbar.csv", name="bar_whole")
+    split = _config(folder, "ballbar.csv", name="bar_split")
+    split.write_text(split.read_text().replace("identification: data/ballbar.csv",
+                                               "identification: [data/bar_poses.csv, data/bar_lengths.csv]"))
+    assert main(["run", "-q", str(whole)]) == 0 and main(["run", "-q", str(split)]) == 0, capsys.readouterr().err
+    want, got = (json.loads((folder / f"out_{n}" / "metrics.json").read_text())["models"]["complete"]
+                 for n in ("bar_whole", "bar_split"))
+    assert got["fit_rms_by_type"]["distance"] == pytest.approx(want["fit_rms_by_type"]["distance"], rel=1e-9)
+    assert got["tests"]["test"]["rms_3d"] == pytest.approx(want["tests"]["test"]["rms_3d"], rel=1e-9)
+    shutil.copy(folder / "data" / "bar_poses.csv", folder / "data" / "bar_poses2.csv")
+    split.write_text(split.read_text().replace("[data/bar_poses.csv, data/bar_lengths.csv]",
+                                               "[data/bar_poses.csv, data/bar_poses2.csv, data/bar_lengths.csv]"))
+    capsys.readouterr()
+    assert main(["run", "-q", str(split)]) == 2
+    assert ("bar_lengths.csv:2: column 'to': 'p2' names no row of its file and a row of 2 others (bar_poses, "
+            "bar_poses2)") in capsys.readouterr().err
+
+
+def test_update_takes_a_model_identified_from_touches_and_new_tracker_points(cell, capsys):
+    """``partcal update`` of a model identified from touches (its planes among its unknowns) with tracker points of
+    the same robot: the prior is on the robot's parameters alone, the new model holds the robot's parameters, and
+    on the points it leaves less than the touches' model did (its frame refitted), as printed."""
+    folder, _ = cell
+    path = _config(folder, "touches.csv", name="touches_for_update")
+    assert main(["run", "-q", str(path)]) == 0
+    model_path = folder / "out_touches_for_update" / "models" / "complete.json"
+    capsys.readouterr()
+    assert main(["update", str(model_path), str(folder / "data" / "test.csv"), "-o", str(folder / "new.json")]) == 0
+    printed = capsys.readouterr().out
+    import re
+    before, after = (float(x) for x in re.search(r"3-D RMS on them ([\d.]+) mm with the prior model \(its frame "
+                                                 r"refitted\) -> ([\d.]+) mm", printed).groups())
+    new, _ = load_model(folder / "new.json")
+    old, _ = load_model(model_path)
+    assert new.identification_.names == old.identification_.names[:len(old.robot_parameter_names())]
+    assert not any(n.startswith("plane ") for n in new.identification_.names)
+    test = read_measurements(folder / "data" / "test.csv")
+    left = np.sqrt(np.mean(np.sum((test.errors_mm - new.predict(test.q_deg)) ** 2, axis=1)))
+    assert left == pytest.approx(after, abs=5e-4) and after < before

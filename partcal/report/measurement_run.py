@@ -1,4 +1,4 @@
-"""The report of a run on measurement kinds (:mod:`partcal.study.kinds_run`): what each kind measured, what
+"""The report of a run on measurement types (:mod:`partcal.study.measurement_run`): what each type measured, what
 each model leaves of it in the fit and held out, the test sets, what the data cannot identify, and the
 best model's parameters."""
 
@@ -18,26 +18,26 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from .. import __version__  # noqa: E402
-from ..calibration.registry import MEASUREMENT_KINDS
-from ..study.kinds_run import KindsRunResult  # noqa: E402
+from ..calibration.registry import MEASUREMENT_TYPES
+from ..study.measurement_run import MeasurementRunResult  # noqa: E402
 from .figures import COLOURS, svg_of  # noqa: E402
 
 
-def render_kinds_report(result: KindsRunResult, folder: Path) -> Path:
-    """Write ``index.html`` of a kinds run into ``folder``, in the run report's style (its template's)."""
+def render_measurement_report(result: MeasurementRunResult, folder: Path) -> Path:
+    """Write ``index.html`` of a measurement run into ``folder``, in the run report's style (its template's)."""
     env = jinja2.Environment(autoescape=True, undefined=jinja2.StrictUndefined)
     files = resources.files(__package__)
-    template = env.from_string(files.joinpath("kinds_template.html").read_text())
+    template = env.from_string(files.joinpath("measurement_template.html").read_text())
     style = re.search(r"<style>.*?</style>", files.joinpath("template.html").read_text(), re.S).group(0)
     path = Path(folder) / "index.html"
     path.write_text(template.render(style=style, **kinds_context(result)), encoding="utf-8")
     return path
 
 
-def kinds_context(result: KindsRunResult) -> dict:
-    """Everything the kinds template shows."""
+def kinds_context(result: MeasurementRunResult) -> dict:
+    """Everything the types template shows."""
     data, cfg = result.data, result.config
-    kinds = list(data.descriptions)
+    measurements = list(data.descriptions)
     best = next(r for r in result.models if r.spec.name == result.best)
     notes = []
     for r in result.models:
@@ -46,14 +46,14 @@ def kinds_context(result: KindsRunResult) -> dict:
     return {
         "name": cfg.name, "version": __version__, "seed": cfg.seed, "seconds": result.seconds,
         "date": datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC"), "config_path": str(cfg.source),
-        "kinds": [{"name": k, "text": data.descriptions[k], "summary": MEASUREMENT_KINDS[k].summary,
-                   "reads": ", ".join(MEASUREMENT_KINDS[k].reads)} for k in kinds],
+        "types": [{"name": k, "text": data.descriptions[k], "summary": MEASUREMENT_TYPES[k].summary,
+                   "reads": ", ".join(MEASUREMENT_TYPES[k].reads)} for k in measurements],
         "models": [{"name": r.spec.name, "best": r.spec.name == result.best,
-                    "fit": [r.fit_rms.get(k) for k in kinds], "cv": [r.cv_rms.get(k) for k in kinds],
+                    "fit": [r.fit_rms.get(k) for k in measurements], "cv": [r.cv_rms.get(k) for k in measurements],
                     "weighted": r.cv_pooled, "identified": r.model.identification_.status.count("identified"),
                     "parameters": len(r.model.identification_.names), "seconds": r.fit_seconds,
                     "tests": [_test_text(r.tests[t]) for t in data.tests]} for r in result.models],
-        "kind_names": kinds, "tests": list(data.tests),
+        "measurement_names": measurements, "tests": list(data.tests),
         "uncompensated": [_test_text(result.uncompensated[t]) if t in result.uncompensated else "" for t in data.tests],
         "rigid": not data.fixes_frame, "notes": notes, "best": result.best,
         "held": table.unidentifiable(),
@@ -68,15 +68,15 @@ def kinds_context(result: KindsRunResult) -> dict:
 def _test_text(figures: dict) -> str:
     if "rms_3d" in figures:
         return f"{figures['rms_3d']:.4f}" + (" (rigid fit)" if figures.get("rigid_fit") else "")
-    return ", ".join(f"{k} {v:.4f}" for k, v in figures["kinds_rms_mm"].items())
+    return ", ".join(f"{k} {v:.4f}" for k, v in figures["rms_by_type"].items())
 
 
 def _histograms(residuals: dict, name: str) -> str:
-    """The held-out residuals of each kind, one panel each."""
+    """The held-out residuals of each type, one panel each."""
     fig, axes = plt.subplots(1, len(residuals), figsize=(3.2 * len(residuals) + 1, 2.6), squeeze=False)
-    for k, (ax, (kind, values)) in enumerate(zip(axes[0], residuals.items())):
+    for k, (ax, (measurement, values)) in enumerate(zip(axes[0], residuals.items())):
         ax.hist(values, bins=40, color=COLOURS[k % len(COLOURS)], alpha=0.8)
-        ax.set_title(f"{kind}: RMS {np.sqrt(np.mean(values**2)):.4f} mm")
+        ax.set_title(f"{measurement}: RMS {np.sqrt(np.mean(values**2)):.4f} mm")
         ax.set_xlabel("held-out residual (mm)")
     axes[0][0].set_ylabel("rows")
     fig.suptitle(f"{name}: residuals of rows held out by cross-validation")

@@ -1,35 +1,35 @@
-"""``partcal plan`` for measurement kinds: judge a kinds file, or plan plane touches and fixed-point visits.
+"""``partcal plan`` for measurement types: judge a measurements file, or plan plane touches and fixed-point visits.
 
-A kinds file (a ``kind`` column, docs/data.md "Measurement kinds") is judged as a tracker's pose set is
-(:func:`evaluate_kinds`): at the nominal robot, on consistent data (the kinds' unknowns started from
-the nominal robot's own positions at the measured poses), from the stacked Jacobian of every kind,
-each row weighted by its kind's stated noise (:class:`~partcal.calibration.stacked.StackedProblem`). It
+A measurements file (a ``measurement`` column, docs/data.md "Measurement types") is judged as a tracker's pose set is
+(:func:`evaluate_measurements`): at the nominal robot, on consistent data (the types' unknowns started from
+the nominal robot's own positions at the measured poses), from the stacked Jacobian of every type,
+each row weighted by its type's stated noise (:class:`~partcal.calibration.stacked.StackedProblem`). It
 names what the data cannot identify (:func:`~partcal.calibration.stacked.observability`: a uniform scale
-where nothing measures a length, each kind's blind spots, the parameters held nominal) and gives the
+where nothing measures a length, each type's blind spots, the parameters held nominal) and gives the
 indices, each identified parameter's predicted standard error and the predicted position uncertainty
 of the identified robot over the workspace.
 
-:func:`plan_kinds` plans ``n`` touches of the cell's planes (``kind="plane"``) or visits of its fixed
-points (``kind="fixed"``): candidates from many tool orientations, each put on its feature by the
+:func:`plan_measurements` plans ``n`` touches of the cell's planes (``type="plane"``) or visits of its fixed
+points (``type="fixed"``): candidates from many tool orientations, each put on its feature by the
 nominal robot (the contact simulator's generators run on the nominal robot: uniform joint samples
 near the feature, inverse kinematics and Newton steps onto it, within the joint limits), then the
 ``n`` of them that maximise the determinant of the stacked, noise-weighted information of the robot's
-and the kinds' unknowns (the points planner's DETMAX, :func:`~partcal.calibration.design.detmax`). A plane
+and the types' unknowns (the points planner's DETMAX, :func:`~partcal.calibration.design.detmax`). A plane
 is planned for when its geometry is given (``normal`` and ``offset_mm``, or ``parallel_to`` a plane
 that has them, offset plus ``spacing_mm``); a fixed point when its position is (``known_mm``): an
-unknown nest is planned for at its approximate position given as ``known_mm`` in the features read
-by ``plan``, and the measured file judged with the cell's own features (``--evaluate``).
+unknown nest is planned for at its approximate position given as ``known_mm`` in the cell read
+by ``plan``, and the measured file judged with the cell's own cell (``--evaluate``).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
-from ..data.observations import ObservationTable
 from ..data.simulate import Tracker, VirtualRobot
 from ..data.simulate_contacts import fixed_point_visits, plane_touches
 from ..errors import PartcalError, UnreachableError
@@ -37,15 +37,16 @@ from ..calibration import design
 from .._validation import seed_from
 from ..calibration.identifiability import identifiable_parameters
 from ..calibration.parameters import parameter_names
-from ..calibration.measurement import REFERENCE_NOISE_MM, Rows
-from ..calibration.registry import built_kinds
+from ..calibration.measurement import REFERENCE_NOISE_MM, MeasurementRows
+from ..calibration.checks import PLANNED
+from ..calibration.registry import MEASUREMENT_TYPES, built_types
 from ..calibration.stacked import observability, rank_jacobian, StackedProblem
 from ..robot.floor import above_floor
 from ..robot.kinematics import Robot
 from . import plan
 
-PLANNED_KINDS = ("plane", "fixed")
-"""The kinds ``partcal plan --kind`` plans for."""
+PLANNED_TYPES = ("plane", "fixed")
+"""The built-in types ``partcal plan --measurement`` plans for (others: a type's ``candidates`` hook)."""
 
 
 # ---------------------------------------------------------------------- the stacked design
@@ -56,9 +57,9 @@ class StackedDesign:
     Attributes
     ----------
     names : list of (name, unit)
-        The robot's parameters, then the kinds' unknowns.
+        The robot's parameters, then the types' unknowns.
     jac : ndarray, shape (m, P)
-        The weighted residuals' Jacobian (each kind's rows times ``REFERENCE_NOISE_MM / noise``), its answer
+        The weighted residuals' Jacobian (each type's rows times ``REFERENCE_NOISE_MM / noise``), its answer
         to a uniform scale and the cell's turns made that of consistent data
         (:func:`~partcal.calibration.stacked.rank_jacobian`).
     row_of : ndarray of int, shape (m,)
@@ -69,7 +70,7 @@ class StackedDesign:
     held : list of str
         The parameters asked for that the rank rule holds nominal.
     own : int
-        How many of the columns are the robot's (the rest: the kinds' unknowns).
+        How many of the columns are the robot's (the rest: the types' unknowns).
     """
 
     names: list
@@ -82,22 +83,22 @@ class StackedDesign:
     own: int
 
 
-def stacked_design(robot: Robot, rows: Rows, features: dict, model: design.PlannedModel = design.DH,
+def stacked_design(robot: Robot, rows: MeasurementRows, cell: dict, model: design.PlannedModel = design.DH,
                    rcond: float = 1e-6) -> StackedDesign:
     """:class:`StackedDesign` of ``rows`` for the planned ``model`` (base, tool, joint errors; the rows' own
     payloads where they carry a ``payload_kg`` column, else the model's)."""
     errors, par = model.joint_errors(robot), model.parametrization_for(robot)
-    kinds = built_kinds(rows, features)
+    measurements = built_types(rows, cell)
     payload = np.full(len(rows), float(model.payload_kg)) if rows.payload_kg is None else rows.payload_kg
-    problem = StackedProblem(robot, errors, rows, kinds, payload, par)
+    problem = StackedProblem(robot, errors, rows, measurements, payload, par)
     chain = problem.chain(problem.start, False)
     row_of = np.concatenate([k.residuals(chain.positions, chain.rotations, u).rows_a
-                             for k, u in zip(kinds, problem.split(problem.start))])
+                             for k, u in zip(measurements, problem.split(problem.start))])
     names = parameter_names(robot, errors, par) + problem.names
     wanted = np.array([(model.tool or not n.startswith("tool.")) and (model.base or not n.startswith("base."))
                        for n, _ in names])
     jac = rank_jacobian(problem, wanted, rcond)[0]
-    notes, held = observability(robot, rows, features, base=model.base, tool=model.tool, rcond=rcond,
+    notes, held = observability(robot, rows, cell, base=model.base, tool=model.tool, rcond=rcond,
                                 errors=errors, payload_kg=payload, parametrization=par)
     free = identifiable_parameters(jac, wanted, rcond, [u for _, u in names])[0]
     return StackedDesign(names, jac, row_of, wanted, free, notes, held, problem.own)
@@ -113,8 +114,8 @@ def column_scales(robot: Robot, names: list) -> NDArray[np.float64]:
 
 # ---------------------------------------------------------------------- evaluation
 @dataclass(frozen=True)
-class KindsEvaluation:
-    """What ``plan --evaluate`` says of a kinds file (:func:`evaluate_kinds`)."""
+class MeasurementEvaluation:
+    """What ``plan --evaluate`` says of a measurements file (:func:`evaluate_measurements`)."""
 
     described: tuple[str, ...]
     notes: tuple[str, ...]
@@ -129,7 +130,7 @@ class KindsEvaluation:
 
     def lines(self) -> list[str]:
         out = [f"  {d}" for d in self.described]
-        out.append("observability at the nominal robot, on consistent data (each kind weighted by its stated "
+        out.append("observability at the nominal robot, on consistent data (each type weighted by its stated "
                    f"noise; {REFERENCE_NOISE_MM:g} mm of a tracker point weighs one):")
         out.append(f"  {self.indices.text()}")
         out.append("not identifiable from these rows (held nominal): " + (", ".join(self.held) or "none"))
@@ -143,18 +144,18 @@ class KindsEvaluation:
         return out
 
 
-def evaluate_kinds(robot: Robot, rows: Rows, features: dict, *, model: design.PlannedModel = design.DH,
+def evaluate_measurements(robot: Robot, rows: MeasurementRows, cell: dict, *, model: design.PlannedModel = design.DH,
                    workspace_q_deg: NDArray[np.float64] | None = None, random_state=0,
-                   rcond: float = 1e-6) -> KindsEvaluation:
-    """Judge rows of measurement kinds at the nominal robot (module docstring).
+                   rcond: float = 1e-6) -> MeasurementEvaluation:
+    """Judge rows of measurement types at the nominal robot (module docstring).
 
     Parameters
     ----------
     robot : Robot
-    rows : Rows
-        The rows of a kinds file (every kind).
-    features : dict
-        The cell's planes, points and noise (:func:`partcal.data.observations.read_features`).
+    rows : MeasurementRows
+        The rows of a measurements file (every type).
+    cell : dict
+        The cell's planes, points and noise (:func:`partcal.data.measurement_rows.read_cell`).
     model : PlannedModel
         The fit judged for (base, tool, joint errors, parametrization).
     workspace_q_deg : ndarray, shape (m, N), optional
@@ -162,7 +163,7 @@ def evaluate_kinds(robot: Robot, rows: Rows, features: dict, *, model: design.Pl
         above the robot's floor, seeded by ``random_state``).
     """
     model.check(robot)
-    d = stacked_design(robot, rows, features, model, rcond)
+    d = stacked_design(robot, rows, cell, model, rcond)
     scales = column_scales(robot, d.names)
     scaled = d.jac[:, d.free] * scales[d.free]
     ind = design.indices(scaled, len(rows))
@@ -179,8 +180,8 @@ def evaluate_kinds(robot: Robot, rows: Rows, features: dict, *, model: design.Pl
         jac_ws = design.model_jacobian(robot, workspace_q_deg, model)[0]
         blocks = (jac_ws[:, d.free[mine]] * scales[d.free[mine]]).reshape(len(workspace_q_deg), 3, -1)
         position = design.position_std(blocks, cov[np.ix_(mine, mine)])
-    described = tuple(k.describe() for k in built_kinds(rows, features))
-    return KindsEvaluation(described, tuple(d.notes), tuple(d.held), ind, tuple(n for n, _ in d.names),
+    described = tuple(k.describe() for k in built_types(rows, cell))
+    return MeasurementEvaluation(described, tuple(d.notes), tuple(d.held), ind, tuple(n for n, _ in d.names),
                            tuple(u for _, u in d.names), std, float(np.sqrt(np.mean(position**2))),
                            float(np.percentile(position, 95)), float(position.max()))
 
@@ -193,10 +194,10 @@ def nominal_cell(robot: Robot) -> VirtualRobot:
                         gear=(), tracker=Tracker(np.zeros(3), 0.0, 0.0, 1), tracker_scale=1.0)
 
 
-def plane_geometry(features: dict, name: str, source: str) -> tuple[NDArray[np.float64], float]:
-    """Plane ``name``'s unit normal and offset (mm) from the features: its own, or its ``parallel_to`` plane's
+def plane_geometry(cell: dict, name: str, source: str) -> tuple[NDArray[np.float64], float]:
+    """Plane ``name``'s unit normal and offset (mm) from the cell: its own, or its ``parallel_to`` plane's
     with the spacings added. A plane without them cannot be planned for (one :class:`PartcalError`)."""
-    planes = features.get("planes") or {}
+    planes = cell.get("planes") or {}
     spacing, at = 0.0, name
     while "parallel_to" in planes[at]:
         spacing += float(planes[at].get("spacing_mm", 0.0))
@@ -210,16 +211,18 @@ def plane_geometry(features: dict, name: str, source: str) -> tuple[NDArray[np.f
     return normal / np.linalg.norm(normal), float(spec["offset_mm"]) + spacing
 
 
-def feature_targets(features: dict, kind: str, source: str) -> dict:
-    """The features of ``kind`` to plan for: plane name -> (normal, offset_mm), or point name -> position (mm)."""
-    if kind not in PLANNED_KINDS:
-        raise PartcalError(f"plan: --kind must be one of {', '.join(PLANNED_KINDS)}; got {kind!r}")
-    section = "planes" if kind == "plane" else "points"
-    specs = features.get(section) or {}
+def feature_targets(cell: dict, measurement: str, source: str) -> dict:
+    """The cell of ``type`` to plan for: plane name -> (normal, offset_mm), or point name -> position (mm)."""
+    if measurement not in PLANNED_TYPES:
+        hooked = [k for k, cls in MEASUREMENT_TYPES.items() if cls.candidates is not None]
+        raise PartcalError(f"plan: --measurement must be one of {', '.join([*PLANNED_TYPES, *hooked])} (a type "
+                           f"without candidate poses cannot be planned); got {measurement!r}")
+    section = "planes" if measurement == "plane" else "points"
+    specs = cell.get(section) or {}
     if not specs:
-        raise PartcalError(f"{source}: {section}: no {section} to plan {kind} rows for; the features define none")
-    if kind == "plane":
-        return {name: plane_geometry(features, name, source) for name in specs}
+        raise PartcalError(f"{source}: {section}: no {section} to plan {measurement} rows for; the cell define none")
+    if measurement == "plane":
+        return {name: plane_geometry(cell, name, source) for name in specs}
     out = {}
     for name, spec in specs.items():
         if "known_mm" not in spec:
@@ -229,64 +232,64 @@ def feature_targets(features: dict, kind: str, source: str) -> dict:
     return out
 
 
-def touch_candidates(robot: Robot, features: dict, kind: str, count: int, rng: np.random.Generator, *,
-                     source: str = "features", floor=plan.ROBOT_FLOOR, ranges_deg: dict | None = None) -> Rows:
-    """About ``count`` candidate rows of ``kind``, shared evenly among the features: the nominal tool tip on
+def touch_candidates(robot: Robot, cell: dict, measurement: str, count: int, rng: np.random.Generator, *,
+                     source: str = "cell", floor=plan.ROBOT_FLOOR, ranges_deg: dict | None = None) -> MeasurementRows:
+    """About ``count`` candidate rows of ``type``, shared evenly among the cell: the nominal tool tip on
     each plane (or at each point) from random orientations (joints sampled within the limits, or the
     ``ranges_deg`` ``{joint: (lo, hi)}``, 1-based), kept above ``floor``."""
-    targets = feature_targets(features, kind, source)
+    targets = feature_targets(cell, measurement, source)
     each = max(3, math.ceil(count / len(targets)))
     cell, floor = nominal_cell(robot), plan.floor_of(robot, floor)
     qs, names = [], []
     for name, target in targets.items():
         try:
-            if kind == "plane":
+            if measurement == "plane":
                 q, _ = plane_touches(cell, {name: target}, {name: each}, rng, 0.0, ranges_deg=ranges_deg)
             else:
                 q, _ = fixed_point_visits(cell, {name: target}, {name: each}, rng, 0.0,
                                           ranges_deg=ranges_deg)
         except UnreachableError as exc:
-            raise UnreachableError(f"{source}: {'planes' if kind == 'plane' else 'points'}.{name}: out of reach of "
+            raise UnreachableError(f"{source}: {'planes' if measurement == 'plane' else 'points'}.{name}: out of reach of "
                                    f"{robot.name}: {exc}") from None
         if floor is not None:
             q = q[above_floor(robot, q, floor)]
         if len(q) < 3:
-            raise UnreachableError(f"{source}: {'planes' if kind == 'plane' else 'points'}.{name}: {len(q)} of "
+            raise UnreachableError(f"{source}: {'planes' if measurement == 'plane' else 'points'}.{name}: {len(q)} of "
                                    f"{each} candidates keep above the floor ({floor.describe()}); lower the floor "
                                    "or move the feature")
         qs.append(q)
         names += [name] * len(q)
-    return kind_rows(np.vstack(qs), kind, names)
+    return measurement_rows_of(np.vstack(qs), measurement, names)
 
 
-def kind_rows(q_deg: NDArray[np.float64], kind: str, names, source: str = "plan") -> Rows:
-    """Rows of one ``kind`` at ``q_deg`` (n, N) deg, each naming its feature."""
+def measurement_rows_of(q_deg: NDArray[np.float64], measurement: str, names, source: str = "plan") -> MeasurementRows:
+    """Rows of one ``type`` at ``q_deg`` (n, N) deg, each naming its feature."""
     n = len(q_deg)
-    return Rows(np.asarray(q_deg, dtype=float), (kind,) * n, tuple(str(i + 1) for i in range(n)),
+    return MeasurementRows(np.asarray(q_deg, dtype=float), (measurement,) * n, tuple(str(i + 1) for i in range(n)),
                 tuple(range(1, n + 1)), source, {}, {"feature": tuple(names)})
 
 
 # ---------------------------------------------------------------------- planning
 @dataclass(frozen=True)
-class KindsPlan:
-    """Planned rows of one kind: ``rows`` (in candidate order), their ``chosen`` rows of the ``candidates``, the
+class MeasurementPlan:
+    """Planned rows of one type: ``rows`` (in candidate order), their ``chosen`` rows of the ``candidates``, the
     ``evaluation`` of the set, the ``exchange``, and the candidates' scaled Jacobian ``blocks`` (C, r, L) the
     exchange chose from (:func:`candidate_blocks`; ``design.information_logdet(blocks, rows)`` judges any
     other choice of the same candidates alike)."""
 
-    rows: Rows
+    rows: MeasurementRows
     chosen: NDArray[np.intp]
-    evaluation: KindsEvaluation
+    evaluation: MeasurementEvaluation
     exchange: design.ExchangeResult
-    candidates: Rows
+    candidates: MeasurementRows
     blocks: NDArray[np.float64]
 
 
-def candidate_blocks(robot: Robot, candidates: Rows, features: dict, model: design.PlannedModel,
+def candidate_blocks(robot: Robot, candidates: MeasurementRows, cell: dict, model: design.PlannedModel,
                      rcond: float = 1e-6) -> tuple[NDArray[np.float64], StackedDesign]:
     """Each candidate's weighted Jacobian rows over the parameters the whole pool identifies, columns scaled as
     :func:`column_scales`: shape ``(C, r, L)`` (``r`` residuals per row: 1 a touch, 3 a visit)."""
-    d = stacked_design(robot, candidates, features, model, rcond)
+    d = stacked_design(robot, candidates, cell, model, rcond)
     live = d.row_of >= 0                      # a known length between two unknowns reads no row: no choice
     order = np.argsort(d.row_of[live], kind="stable")
     rows = d.jac[live][order][:, d.free] * column_scales(robot, d.names)[d.free]
@@ -294,33 +297,39 @@ def candidate_blocks(robot: Robot, candidates: Rows, features: dict, model: desi
     return rows.reshape(len(candidates), per, -1), d
 
 
-def plan_kinds(robot: Robot, n: int, features: dict, kind: str, *, model: design.PlannedModel = design.DH,
-               pool: int = plan.DEFAULT_POOL, random_state=0, source: str = "features", floor=plan.ROBOT_FLOOR,
-               ranges_deg: dict | None = None, candidates: Rows | None = None, callback=None) -> KindsPlan:
-    """Plan ``n`` rows of ``kind`` (``plane``: touches; ``fixed``: visits) on the cell's features (module
+def plan_measurements(robot: Robot, n: int, cell: dict, measurement: str, *, model: design.PlannedModel = design.DH,
+               pool: int = plan.DEFAULT_POOL, random_state=0, source: str = "cell", floor=plan.ROBOT_FLOOR,
+               ranges_deg: dict | None = None, candidates: MeasurementRows | None = None, callback=None) -> MeasurementPlan:
+    """Plan ``n`` rows of ``type`` (``plane``: touches; ``fixed``: visits) on the cell's cell (module
     docstring): ``pool`` candidates (:func:`touch_candidates`), the D-optimal ``n`` of them for the stacked
-    problem. Given ``candidates`` (rows of ``kind``) are chosen from instead."""
+    problem. Given ``candidates`` (rows of ``type``) are chosen from instead."""
     seeds = np.random.SeedSequence(seed_from(random_state)).spawn(3)
     model.check(robot)
-    if candidates is None:
-        candidates = touch_candidates(robot, features, kind, pool, np.random.default_rng(seeds[0]), source=source,
+    hook = getattr(MEASUREMENT_TYPES.get(measurement), "candidates", None)
+    if candidates is None and hook is not None and measurement not in PLANNED_TYPES:
+        candidates = hook(robot, cell, pool, np.random.default_rng(seeds[0]))       # the type's own candidates
+    elif candidates is None:
+        candidates = touch_candidates(robot, cell, measurement, pool, np.random.default_rng(seeds[0]), source=source,
                                       floor=floor, ranges_deg=ranges_deg)
-    if any(k != kind for k in candidates.kind):
-        raise PartcalError(f"plan: the candidates must all be {kind} rows; got {sorted(set(candidates.kind))}")
-    blocks, d = candidate_blocks(robot, candidates, features, model)
+    if any(k != measurement for k in candidates.types):
+        raise PartcalError(f"plan: the candidates must all be {measurement} rows; got {sorted(set(candidates.types))}")
+    blocks, d = candidate_blocks(robot, candidates, cell, model)
     need = max(1, math.ceil(d.free.size / blocks.shape[1]))
     if not isinstance(n, (int, np.integer)) or isinstance(n, bool) or not need <= n <= len(candidates):
-        raise PartcalError(f"plan: the number of {kind} rows must be a whole number in [{need}, {len(candidates)}]: "
+        raise PartcalError(f"plan: the number of {measurement} rows must be a whole number in [{need}, {len(candidates)}]: "
                            f"at least {need} for the {d.free.size} identifiable unknowns, at most the "
                            f"{len(candidates)} candidates (--pool); got {n!r}")
     result = design.detmax(blocks, int(n), random_state=np.random.default_rng(seeds[1]), callback=callback)
-    names = [candidates.texts["feature"][i] for i in result.indices]
-    chosen = kind_rows(candidates.q_deg[result.indices], kind, names)
-    evaluation = evaluate_kinds(robot, chosen, features, model=model, random_state=np.random.default_rng(seeds[2]))
-    return KindsPlan(chosen, result.indices, evaluation, result, candidates, blocks)
+    chosen = candidates.take(result.indices)
+    chosen = dataclasses.replace(chosen, ids=tuple(str(i + 1) for i in range(len(chosen))),
+                                 lines=tuple(range(1, len(chosen) + 1)))
+    evaluation = evaluate_measurements(robot, chosen, cell, model=model, random_state=np.random.default_rng(seeds[2]))
+    return MeasurementPlan(chosen, result.indices, evaluation, result, candidates, blocks)
 
 
-def planned_table(rows: Rows, name: str = "plan") -> ObservationTable:
-    """The planned rows as a kinds CSV's table (``kind``, ``id``, ``feature``, joints) for ``write_observations``."""
-    return ObservationTable(q_deg=rows.q_deg, kind=rows.kind, ids=rows.ids, lines=rows.lines, source=rows.source,
-                            numbers={}, texts={"feature": rows.texts["feature"]}, name=name)
+def planned_table(rows: MeasurementRows, name: str = "plan") -> MeasurementRows:
+    """The planned rows as a measurements CSV's table (``measurement``, ``id``, what names their feature, joints, and
+    ``planned`` 1: no measured value, they are to be measured; the identification refuses them until they are,
+    :data:`~partcal.calibration.checks.PLANNED`) for ``write_measurement_rows``."""
+    return MeasurementRows(q_deg=rows.q_deg, types=rows.types, ids=rows.ids, lines=rows.lines, source=rows.source,
+                           numbers={PLANNED: np.ones(len(rows))}, texts=dict(rows.texts), name=name)

@@ -75,13 +75,13 @@ def test_other_columns_are_kept_as_numbers_or_texts(tmp_path):
 
 def test_measurement_types_are_a_parameter(tmp_path):
     path = write(tmp_path, "q1,measurement,angle\n1,inclinometer,0.5\n2,pose,\n")
-    refused(path, 2, "measurement", r"one of the types point, plane, fixed, distance, pose, got 'inclinometer'")
+    refused(path, 2, "measurement", r"one of the types point, plane, fixed, distance, camera, pose, got 'inclinometer'")
     t = read_measurement_rows(path, measurements=("pose", "inclinometer"))
     assert t.types == ("inclinometer", "pose") and t.numbers["angle"][0] == 0.5
 
 
 @pytest.mark.parametrize("row, line, column, pattern", [
-    ("1,2,laser,,,,,,,,,", 3, "measurement", r"one of the types point, plane, fixed, distance, pose, got 'laser'"),
+    ("1,2,laser,,,,,,,,,", 3, "measurement", r"one of the types point, plane, fixed, distance, camera, pose, got 'laser'"),
     ("1,2,,,,,,,,,,", 3, "measurement", r"one of the types .*, got an empty cell"),
     ("1,2,plane,,,,,,,,,", 3, "feature", r"a value on a plane row \(plane rows read feature\), got an empty cell"),
     ("1,2,fixed,,,,,,,,,", 3, "feature", r"a value on a fixed row"),
@@ -184,8 +184,9 @@ def test_features_are_read_with_unit_normals(tmp_path):
                             "step": {"parallel_to": "top", "spacing_mm": -200.0}, "side": {}},
                  "points": {"nest_a": {}, "nest_b": {"distance_to": "nest_a", "distance_mm": 1000.0},
                             "sphere": {"known_mm": [900.0, 0.0, 300.0]}},
-                 "noise": {"plane": 0.01, "fixed": 0.02}}
-    assert read_cell(write(tmp_path, "", "empty.yaml")) == {"planes": {}, "points": {}, "noise": {}}
+                 "cameras": {}, "boards": {}, "noise": {"plane": 0.01, "fixed": 0.02}}
+    assert read_cell(write(tmp_path, "", "empty.yaml")) == {"planes": {}, "points": {}, "cameras": {}, "boards": {},
+                                                            "noise": {}}
 
 
 @pytest.mark.parametrize("old, new, pattern", [
@@ -339,7 +340,8 @@ def test_one_format_serves_a_runs_point_csvs_and_measurements_files(tmp_path):
 
 @pytest.mark.parametrize("columns, match", [
     ({"featur": "Feature"}, r"The 'columns' entry 'featur' of MeasurementFormat must be a contract column .* or "
-                            r"a measurement-type column \(measurement, id, target, feature, flush, distance_mm, to\)\. Got "
+                            r"a measurement-type column \(measurement, id, target, feature, flush, distance_mm, to, image, camera, board, "
+                            r"point, u_px, v_px\)\. Got "
                             r"'featur' \(did you mean 'feature'\?\) instead"),
     ({"distance": "Length"}, r"Got 'distance' \(did you mean 'distance_mm'\?\) instead"),
     ({"Measurement": "Type"}, r"Got 'Measurement' \(did you mean 'measurement'\?\) instead"),
@@ -367,7 +369,7 @@ def test_a_format_names_the_files_measurement_type_values(tmp_path):
     assert t.types == ("plane", "fixed", "pose")          # an unmapped value is read as written
     assert t.of("fixed").tolist() == [1]
     with pytest.raises(DataError, match=r"obs\.csv:2: column 'Type' \(measurement\): expected one of the types point, plane, "
-                                        r"fixed, distance, pose \(the format's types name it 'lazer'\), got 'Lazer'$"):
+                                        r"fixed, distance, camera, pose \(the format's types name it 'lazer'\), got 'Lazer'$"):
         read_measurement_rows(write(tmp_path, "q1,Type\n1,Lazer\n"), fmt=fmt)
 
 

@@ -233,7 +233,8 @@ class MeasurementType:
       report: what one row says);
     - ``cell_section`` and ``feature_column``: its section of the cell's description (``planes``, ``points``) and
       the column that names an entry of it; :meth:`read_section` reads the section, :meth:`given_section` says
-      what a simulated cell knows of it;
+      what a simulated cell knows of it; ``extra_sections``: further sections it reads (a camera's ``boards``,
+      :meth:`read_extra_section`, :meth:`given_extra_section`);
     - optional hooks: ``simulate(truth, spec, rng, noise)`` (rows of a virtual robot: ``partcal simulate``) and
       ``candidates(robot, cell, spec, count, rng)`` (rows to choose from: ``partcal plan --measurement``).
     """
@@ -248,6 +249,7 @@ class MeasurementType:
     summary: ClassVar[str] = ""
     cell_section: ClassVar[str | None] = None
     feature_column: ClassVar[str | None] = None
+    extra_sections: ClassVar[tuple[str, ...]] = ()
     simulate: ClassVar[Callable | None] = None
     candidates: ClassVar[Callable | None] = None
 
@@ -274,6 +276,17 @@ class MeasurementType:
         """What a simulated cell knows of the true entries ``true`` of its section (the cell YAML that
         ``partcal simulate`` writes): by default nothing (each unknown)."""
         return {name: {} for name in true}
+
+    @classmethod
+    def read_extra_section(cls, name: str, sec) -> dict:
+        """A further section ``name`` of the cell (one of ``extra_sections``: a camera's boards beside its
+        cameras), read as :meth:`read_section` reads the type's own."""
+        return cls.read_section(sec)
+
+    @classmethod
+    def given_extra_section(cls, name: str, true: dict, rng) -> dict:
+        """What a simulated cell knows of the true entries of its further section ``name``."""
+        return cls.given_section(true, rng)
 
     def __init__(self, rows: MeasurementRows, index: NDArray[np.intp], cell: dict, noise: float):
         self.rows, self.index, self.cell, self.noise = rows, index, cell, float(noise)

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 from ..errors import DataError
+from .camera import CameraPoints
 from .distances import Distances
 from .fixed_points import FixedPoints
 from .measurement import END_TYPE, MeasurementType, MeasurementRows
@@ -11,7 +12,7 @@ from .plane_contacts import PlaneContacts
 from .tracker_points import TrackerPoints
 
 MEASUREMENT_TYPES: dict[str, type[MeasurementType]] = {k.name: k for k in (TrackerPoints, PlaneContacts, FixedPoints,
-                                                                          Distances)}
+                                                                          Distances, CameraPoints)}
 """The table of measurement types: the CSV's ``measurement`` value -> its class; the built-in ones, then those added with
 :func:`add_measurement_type`."""
 

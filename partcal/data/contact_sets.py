@@ -46,8 +46,8 @@ def contact_keys() -> tuple[str, ...]:
 
 def _hooked_sections() -> dict[str, type]:
     """The cell sections of the types with a ``simulate`` hook beyond the planes and points: section -> type."""
-    return {cls.cell_section: cls for k, cls in MEASUREMENT_TYPES.items() if cls.simulate is not None
-            and cls.cell_section and cls.cell_section not in ("planes", "points")}
+    return {section: cls for k, cls in MEASUREMENT_TYPES.items() if cls.simulate is not None
+            for section in (cls.cell_section, *cls.extra_sections) if section and section not in ("planes", "points")}
 
 
 @dataclass(frozen=True)
@@ -269,14 +269,15 @@ def given_cell(cell: TrueCell, noise: dict, rng: np.random.Generator) -> dict:
                             "distance_mm": round(float(np.linalg.norm(position - cell.points[other])), 6)}
         else:
             points[name] = {}
-    others = {section: cls.given_section(cell.sections[section], rng)
+    others = {section: cls.given_section(cell.sections[section], rng) if section == cls.cell_section else
+              cls.given_extra_section(section, cell.sections[section], rng)
               for section, cls in _hooked_sections().items() if section in (cell.sections or {})}
     return {"planes": planes, "points": points, **others, "noise": {k: v for k, v in noise.items() if v > 0}}
 
 
 def truth(cell: TrueCell | None, vr, spec: dict) -> dict:
-    """A contact data set's truth (``<name>.truth.yaml``): the true planes and points, the noise, and the
-    true robot's parameters (DH rows, origins, tool, base error)."""
+    """A contact data set's truth (``<name>.truth.yaml``): the true planes and points, the true sections of types
+    with a ``simulate`` hook (a camera's poses and intrinsics), the noise, and the true robot's parameters (DH rows, origins, tool, base error)."""
     t = vr.true
 
     def floats(a):
@@ -292,6 +293,7 @@ def truth(cell: TrueCell | None, vr, spec: dict) -> dict:
             "planes": {n: {"normal": floats(nv), "offset_mm": round(float(o), 9)}
                        for n, (nv, o) in (cell.planes.items() if cell else ())},
             "points": {n: {"position_mm": floats(p)} for n, p in (cell.points.items() if cell else ())},
+            **({"sections": cell.sections} if cell is not None and cell.sections else {}),
             "true_robot": robot}
 
 

@@ -355,10 +355,12 @@ def cell_from_section(top: Section) -> dict:
     its old name, read for one release)."""
     out = {}
     for cls in MEASUREMENT_TYPES.values():
-        if cls.cell_section and cls.cell_section not in out:
-            sec = top.section(cls.cell_section)
-            out[cls.cell_section] = cls.read_section(sec)
-            sec.done()
+        for section in (cls.cell_section, *cls.extra_sections):
+            if section and section not in out:
+                sec = top.section(section)
+                out[section] = (cls.read_section(sec) if section == cls.cell_section else
+                                cls.read_extra_section(section, sec))
+                sec.done()
     top.renamed("noise_mm", "noise")
     noise, names = top.section("noise"), [n for n in measurement_names() if n != END_TYPE]
     out["noise"] = {}

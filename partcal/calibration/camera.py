@@ -1,0 +1,498 @@
+"""Camera rows: one detected point of a board seen by one camera in one image (:class:`CameraPoints`).
+
+Two set-ups, alone or together: a camera fixed in the cell seeing a board on the flange (eye-to-hand) and a camera
+on the flange seeing a board fixed in the cell (eye-in-hand); several cameras. The type's unknowns are each
+camera's pose (in the base frame, or on the flange: the hand-eye), each board's pose (on the flange, or in the
+cell) and each camera's intrinsics (OpenCV's pinhole camera with Brown-Conrady distortion: ``fx, fy, cx, cy, k1,
+k2, p1, p2, k3``), fitted with the robot's parameters, or given. Residuals are pixels, weighed by the stated pixel
+noise (:attr:`CameraPoints.default_noise`).
+
+Poses are a position (mm) and a rotation vector (degrees): ``camera C.x, y, z, rx, ry, rz`` maps the camera's
+frame (x right, y down, z along the optical axis) into the base frame (mount ``cell``) or the flange's
+(mount ``flange``); ``board B.x ... rz`` maps the board's frame (x along its columns, y along its rows, z into the
+board; its points at z = 0, :func:`board_points`) likewise.
+
+The cell's description::
+
+    cameras:
+      cam1: {mount: cell, image_size: [1920, 1200], intrinsics: {fx: 1400, fy: 1400, cx: 960, cy: 600}}
+      cam2: {mount: flange, image_size: [1280, 1024], fit_intrinsics: false,
+             intrinsics: {fx: 900, fy: 900, cx: 640, cy: 512, k1: -0.1}}
+    boards:
+      b1: {type: charuco, rows: 8, cols: 11, square_mm: 30, marker_mm: 22}
+
+Intrinsics are the fit's start (``fit_intrinsics: true``, the default) or known (``false``); a camera without
+them starts from its image's centre and a focal length read from the images (the board's homographies).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .._yamlio import Section
+from ..errors import DataError
+from ..robot.rotations import left_jacobian, log_derivative, matrix_from_rotation_vector, skew_matrices
+from .camera_model import (INTRINSICS, board_points, focal_from_homographies, homography, pose_from_homography,
+                           pose_matrix, pose_values, project, solve_ax_yc, undistorted)
+from .cell import named_entry
+from .measurement import Column, MeasurementRows, MeasurementType, Residuals
+
+BOARD_TYPES = ("chessboard", "charuco", "apriltag")
+MOUNTS = ("cell", "flange")
+POSE = ("x", "y", "z", "rx", "ry", "rz")
+_DEG = np.pi / 180.0
+OBLIQUE_DEG = 60.0
+"""A simulated image sees the board turned at most this far from the camera's line of sight."""
+MARGIN_PX = 10.0
+"""A simulated image keeps the points at least this far inside its edges."""
+MIN_IMAGE_POINTS = 6
+"""An image with fewer points of a board places nothing at the fit's start (its rows are fitted all the same)."""
+
+
+# ---------------------------------------------------------------------- the cell's cameras and boards
+def _positive(value) -> str | None:
+    return None if np.isfinite(value) and value > 0 else "a finite number > 0"
+
+
+def read_camera(entry) -> dict:
+    """One camera of the cell's ``cameras:``: its mount, image size, intrinsics and whether they are fitted."""
+    out = {"mount": entry.get("mount", "str", check=lambda v: None if v in MOUNTS else "'cell' or 'flange'"),
+           "fit_intrinsics": entry.get("fit_intrinsics", "bool", default=True)}
+    size = entry.get("image_size", "list", check=lambda v: None if len(v) == 2 and all(
+        isinstance(x, int) and not isinstance(x, bool) and x > 0 for x in v) else "[width, height] in pixels")
+    out["image_size"] = [int(v) for v in size]
+    if entry.has("intrinsics"):
+        sec = entry.section("intrinsics")
+        values = {}
+        for key in INTRINSICS:
+            required = key in INTRINSICS[:4]
+            values[key] = sec.get(key, "float", **({} if required else {"default": 0.0}),
+                                  check=_positive if required else lambda v: None if np.isfinite(v) else "finite")
+        sec.done()
+        out["intrinsics"] = [values[k] for k in INTRINSICS]
+    elif not out["fit_intrinsics"]:
+        entry.fail(entry.path("intrinsics"), "is required with fit_intrinsics: false (known intrinsics: fx, fy, cx, "
+                                             "cy in pixels, and k1, k2, p1, p2, k3); got none")
+    if entry.has("pose"):           # the truth of a virtual cell (partcal simulate): x, y, z mm, rx, ry, rz degrees
+        out["pose"] = [float(v) for v in entry.get("pose", "list", check=_six)]
+    entry.done()
+    return out
+
+
+def read_board(entry) -> dict:
+    """One board of the cell's ``boards:``: its type, size (squares or tags), and sizes in mm (required)."""
+    out = {"type": entry.get("type", "str", check=lambda v: None if v in BOARD_TYPES else
+                             f"one of {', '.join(BOARD_TYPES)}")}
+    for key in ("rows", "cols"):
+        out[key] = entry.get(key, "int", check=lambda v: None if v >= 2 else "an integer >= 2")
+    out["square_mm"] = entry.get("square_mm", "float", check=_positive)
+    if out["type"] != "chessboard":
+        out["marker_mm"] = entry.get("marker_mm", "float", check=lambda v: _positive(v) or (
+            None if v < out["square_mm"] else f"smaller than square_mm ({out['square_mm']:g})"))
+    if entry.has("pose"):
+        out["pose"] = [float(v) for v in entry.get("pose", "list", check=_six)]
+    entry.done()
+    return out
+
+
+def _six(value) -> str | None:
+    ok = len(value) == 6 and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
+    return None if ok else "[x, y, z, rx, ry, rz] (mm, a rotation vector in degrees)"
+
+
+def half_turn_symmetric(board: dict) -> bool:
+    """Whether the board's points look the same turned half a turn about its normal (its corners' ids then
+    cannot tell its two orientations apart): a chessboard of an odd count of squares along one side and an even
+    count along the other is not; one with both counts even or both odd is (its colours then repeat under the
+    turn). A ChArUco board or a tag grid never is (its markers are read)."""
+    return board["type"] == "chessboard" and (board["rows"] - board["cols"]) % 2 == 0
+
+
+# ---------------------------------------------------------------------- the measurement type
+class CameraPoints(MeasurementType):
+    """A point of a board seen by a camera in one image: its pixel ``u_px, v_px``. The camera and the board
+    stand one in the cell and one on the flange (``mount`` in the cell's ``cameras:``; the board the other)."""
+
+    name = "camera"
+    unit = "px"
+    default_noise = 0.2
+    needs_orientation = True
+    columns = {"image": Column(text=True, required=True), "camera": Column(text=True, required=True),
+               "board": Column(text=True),
+               "point": Column(required=True, check=lambda v: None if v >= 0 and v == int(v) else
+                               "a board point's id (an integer >= 0)"),
+               "u_px": Column("px", required=True), "v_px": Column("px", required=True)}
+    summary = "a board point seen by camera `camera` in image `image`: its pixel u, v (2 residuals, px)"
+    cell_section, feature_column = "cameras", "camera"
+    extra_sections = ("boards",)
+
+    @classmethod
+    def read_section(cls, sec) -> dict:
+        return {name: read_camera(named_entry(sec, name)) for name in list(sec.data)}
+
+    @classmethod
+    def read_extra_section(cls, name: str, sec) -> dict:
+        return {board: read_board(named_entry(sec, board)) for board in list(sec.data)}
+
+    @classmethod
+    def given_section(cls, true: dict, rng) -> dict:
+        """What a simulated cell knows of its cameras: mount and image size; intrinsics as written, when the
+        true camera says ``fit_intrinsics: false`` (known), else none (fitted from the images)."""
+        out = {}
+        for name, spec in true.items():
+            out[name] = {"mount": spec["mount"], "image_size": list(spec["image_size"])}
+            if spec.get("fit_intrinsics", True) is False:
+                out[name].update(fit_intrinsics=False, intrinsics=dict(spec["intrinsics"]))
+        return out
+
+    @classmethod
+    def given_extra_section(cls, name: str, true: dict, rng) -> dict:
+        """A simulated cell knows its boards' geometry, not their poses."""
+        return {board: {k: v for k, v in spec.items() if k != "pose"} for board, spec in true.items()}
+
+    def __init__(self, rows, index, cell, noise):
+        super().__init__(rows, index, cell, noise)
+        self.cameras_cell = dict(cell.get("cameras") or {})
+        self.boards_cell = dict(cell.get("boards") or {})
+        self.image = rows.text("image", index)
+        self.camera = rows.text("camera", index)
+        self.point = rows.number("point", index).astype(int)
+        self.uv = np.column_stack([rows.number("u_px", index), rows.number("v_px", index)])
+        named = rows.texts.get("board")
+        self.board = [named[i] if named is not None and named[i] else "" for i in index]
+        self._resolve()
+        self.camera_names = list(dict.fromkeys(self.camera))
+        self.board_names = list(dict.fromkeys(self.board))
+        self.local = np.empty((index.size, 3))
+        for b in self.board_names:
+            mine = np.array([x == b for x in self.board])
+            self.local[mine] = board_points(self.boards_cell[b])[self.point[mine]]
+
+    def _resolve(self) -> None:
+        """Each row's camera in the cell, its board (named, or the one board the cell has), mounts opposite, point
+        ids on the board, pixels within the image."""
+        rows, index = self.rows, self.index
+        for i, (cam, row) in enumerate(zip(self.camera, index)):
+            if cam not in self.cameras_cell:
+                listed = ", ".join(self.cameras_cell) or "none: the cell has no cameras section"
+                raise DataError(f"{rows.where(row)}: column 'camera': {cam!r} is not a camera of the cell ({listed})")
+            if not self.board[i]:
+                if len(self.boards_cell) != 1:
+                    listed = ", ".join(self.boards_cell) or "none: the cell has no boards section"
+                    raise DataError(f"{rows.where(row)}: column 'board': a camera row names its board when the cell "
+                                    f"has other than one ({listed})")
+                self.board[i] = next(iter(self.boards_cell))
+            board = self.boards_cell.get(self.board[i])
+            if board is None:
+                raise DataError(f"{rows.where(row)}: column 'board': {self.board[i]!r} is not a board of the cell "
+                                f"({', '.join(self.boards_cell) or 'none'})")
+            count = board_points(board).shape[0]
+            if self.point[i] >= count:
+                raise DataError(f"{rows.where(row)}: column 'point': {self.point[i]} is not a point of board "
+                                f"{self.board[i]!r} (a {board['type']} of {board['rows']} x {board['cols']}: ids 0 to "
+                                f"{count - 1})")
+            width, height = self.cameras_cell[cam]["image_size"]
+            for k, (column, limit) in enumerate((("u_px", width), ("v_px", height))):
+                if not 0.0 <= self.uv[i, k] <= limit:
+                    raise DataError(f"{rows.where(row)}: column {column!r}: {self.uv[i, k]:g} lies outside camera "
+                                    f"{cam!r}'s image; expected a pixel in [0, {limit}] (image_size {width} x "
+                                    f"{height})")
+        seen_by: dict[str, dict[str, int]] = {}
+        for i, (cam, b) in enumerate(zip(self.camera, self.board)):
+            seen_by.setdefault(b, {}).setdefault(self.cameras_cell[cam]["mount"], i)
+        for b, mounts in seen_by.items():
+            if len(mounts) > 1:
+                raise DataError(f"{rows.where(index[max(mounts.values())])}: column 'camera': board {b!r} is seen by "
+                                "a camera in the cell and by one on the flange; a board stands where the cameras "
+                                "that see it do not (name a board per set-up, column 'board')")
+
+    # -------------------------------------------------------------- unknowns
+    def _layout(self) -> None:
+        """Where each camera's and board's unknowns stand in ``u``: ``self.at[("camera", name)]`` -> first index."""
+        self.names_units, self.at = [], {}
+        for cam in self.camera_names:
+            self.at[("camera", cam)] = len(self.names_units)
+            self.names_units += [(f"camera {cam}.{c}", "mm" if c in "xyz" else "deg") for c in POSE]
+            if self.cameras_cell[cam]["fit_intrinsics"]:
+                self.at[("intrinsics", cam)] = len(self.names_units)
+                self.names_units += [(f"camera {cam}.{k}", "px" if k in INTRINSICS[:4] else "1") for k in INTRINSICS]
+        for b in self.board_names:
+            self.at[("board", b)] = len(self.names_units)
+            self.names_units += [(f"board {b}.{c}", "mm" if c in "xyz" else "deg") for c in POSE]
+
+    def unknowns(self, positions, rotations):
+        self._layout()
+        start = np.zeros(len(self.names_units))
+        flanges = np.tile(np.eye(4), (self.index.size, 1, 1))
+        flanges[:, :3, :3] = rotations[self.index]
+        flanges[:, :3, 3] = positions[self.index] - rotations[self.index] @ self.tool_mm
+        placed: dict[str, NDArray[np.float64]] = {}
+        for cam in sorted(self.camera_names, key=lambda c: -self.camera.count(c)):     # most rows first
+            k = self._start_intrinsics(cam)
+            if ("intrinsics", cam) in self.at:
+                start[self.at[("intrinsics", cam)]:][:9] = k
+            views = self._views(cam, k)
+            if len(views) < 3:
+                first = self.index[self.camera.index(cam)]
+                raise DataError(f"{self.rows.where(first)}: column 'camera': camera {cam!r} sees a board with at least "
+                                f"{MIN_IMAGE_POINTS} points in {len(views)} images; its pose needs at least three")
+            board = views[0][0]
+            a = np.array([flanges[rows[0]] for _, rows, _ in views])
+            seen = np.array([pose for _, _, pose in views])          # camera_T_board per image
+            if self.cameras_cell[cam]["mount"] == "cell":            # base_T_flange X = Y cam_T_board, X flange_T_board
+                x, y = solve_ax_yc(a, seen)
+                camera_pose, board_pose = y, x
+            else:                                                    # base_T_flange X = Y board_T_cam, X flange_T_cam
+                x, y = solve_ax_yc(a, np.linalg.inv(seen))
+                camera_pose, board_pose = x, y
+            start[self.at[("camera", cam)]:][:6] = pose_values(camera_pose)
+            if board not in placed:
+                placed[board] = board_pose
+                start[self.at[("board", board)]:][:6] = pose_values(board_pose)
+        return self.names_units, start
+
+    def _start_intrinsics(self, cam: str) -> NDArray[np.float64]:
+        spec = self.cameras_cell[cam]
+        if "intrinsics" in spec:
+            return np.asarray(spec["intrinsics"], dtype=float)
+        width, height = spec["image_size"]
+        centre = np.array([width / 2.0, height / 2.0])
+        hs = []
+        for image in dict.fromkeys(i for i, c in zip(self.image, self.camera) if c == cam):
+            mine = np.flatnonzero([i == image and c == cam for i, c in zip(self.image, self.camera)])
+            if mine.size >= MIN_IMAGE_POINTS:
+                hs.append(homography(self.local[mine, :2], self.uv[mine] - centre))
+        f = focal_from_homographies(hs)
+        if f is None:
+            first = self.index[self.camera.index(cam)]
+            raise DataError(f"{self.rows.where(first)}: column 'camera': camera {cam!r}'s images do not fix a focal "
+                            "length (every view square on to the board?): give its intrinsics in the cell")
+        return np.array([f, f, *centre, 0.0, 0.0, 0.0, 0.0, 0.0])
+
+    def _views(self, cam: str, k: NDArray[np.float64]) -> list[tuple[str, NDArray[np.intp], NDArray[np.float64]]]:
+        """Each image of camera ``cam`` with enough points of one board: the board, its rows (positions in
+        ``self.index``) and the board's pose in the camera's frame, from its homography."""
+        out = []
+        keys = dict.fromkeys((i, b) for i, c, b in zip(self.image, self.camera, self.board) if c == cam)
+        for image, board in keys:
+            mine = np.flatnonzero([i == image and c == cam and b == board
+                                   for i, c, b in zip(self.image, self.camera, self.board)])
+            if mine.size < MIN_IMAGE_POINTS:
+                continue
+            h = homography(self.local[mine, :2], undistorted(self.uv[mine], k))
+            out.append((board, mine, pose_from_homography(h)))
+        main = max(dict.fromkeys(b for b, _, _ in out), key=lambda b: sum(v[0] == b for v in out), default=None)
+        return [v for v in out if v[0] == main]
+
+    # -------------------------------------------------------------- residuals
+    def residuals(self, positions, rotations, u) -> Residuals:
+        m = self.index.size
+        values = np.empty((m, 2))
+        grad = np.empty((m, 2, 3))
+        turn = np.empty((m, 2, 3))
+        tool = np.empty((m, 2, 3))
+        du = np.zeros((m, 2, u.size))
+        rot, pos = rotations[self.index], positions[self.index]
+        for cam in self.camera_names:
+            for b in self.board_names:
+                mine = np.flatnonzero([c == cam and x == b for c, x in zip(self.camera, self.board)])
+                if mine.size:
+                    self._block(mine, cam, b, pos[mine], rot[mine], u, values, grad, turn, tool, du)
+        return Residuals(values.ravel(), np.repeat(self.index, 2), grad.reshape(-1, 3), du.reshape(2 * m, -1),
+                         turn_grad=turn.reshape(-1, 3), scaled=np.zeros(2 * m, dtype=bool),
+                         tool_grad=tool.reshape(-1, 3))
+
+    def intrinsics(self, cam: str, u) -> NDArray[np.float64]:
+        """Camera ``cam``'s intrinsics at the unknowns ``u`` (fitted, or known)."""
+        at = self.at.get(("intrinsics", cam))
+        return np.asarray(self.cameras_cell[cam]["intrinsics"], dtype=float) if at is None else u[at:at + 9]
+
+    def _block(self, mine, cam, b, pos, rot, u, values, grad, turn, tool, du) -> None:
+        """The residuals of rows ``mine`` (camera ``cam``, board ``b``) and their derivatives, written in place."""
+        ci, bi = self.at[("camera", cam)], self.at[("board", b)]
+        rc_vec, rb_vec = np.radians(u[ci + 3:ci + 6]), np.radians(u[bi + 3:bi + 6])
+        rc, rb = matrix_from_rotation_vector(rc_vec), matrix_from_rotation_vector(rb_vec)
+        tc, tb = u[ci:ci + 3], u[bi:bi + 3]
+        jc, jb = left_jacobian(rc_vec) * _DEG, left_jacobian(rb_vec) * _DEG
+        spun = self.local[mine] @ rb.T                        # R_b s, in the frame the board is mounted in
+        eye = np.broadcast_to(np.eye(3), (mine.size, 3, 3))
+        if self.cameras_cell[cam]["mount"] == "cell":
+            lever = np.einsum("nij,nj->ni", rot, tb + spun - self.tool_mm)       # the point from the tool point
+            p = pos + lever
+            to_cam = np.broadcast_to(rc.T, (mine.size, 3, 3))                     # d X / d p
+            by_turn = -skew_matrices(lever)                                        # d p / d turn of the tool
+            by_tool = -rot
+            by_camera = np.concatenate([-to_cam, rc.T @ skew_matrices(p - tc) @ jc], axis=2)
+            by_board = np.concatenate([rot, -rot @ skew_matrices(spun) @ jb], axis=2)
+            by_board = to_cam @ by_board
+            points_cam = (p - tc) @ rc
+            grad_p, turn_p, tool_p = to_cam, to_cam @ by_turn, to_cam @ by_tool
+        else:
+            p = tb + spun                                                          # the board's point, base frame
+            centre = pos + rot @ (tc - self.tool_mm)
+            to_cam = rc.T @ rot.transpose(0, 2, 1)                                # X = R_c^T R^T (p - C)
+            points_cam = np.einsum("nij,nj->ni", to_cam, p - centre)
+            grad_p = -to_cam
+            turn_p = to_cam @ skew_matrices(p - pos)
+            tool_p = np.broadcast_to(rc.T, (mine.size, 3, 3))
+            local = np.einsum("nji,nj->ni", rot, p - centre)                        # R^T (p - C)
+            by_camera = np.concatenate([-np.broadcast_to(rc.T, (mine.size, 3, 3)),
+                                        rc.T @ skew_matrices(local) @ jc], axis=2)
+            by_board = to_cam @ np.concatenate([eye, -skew_matrices(spun) @ jb], axis=2)
+        if np.any(points_cam[:, 2] <= 0):
+            points_cam = points_cam.copy()
+            points_cam[:, 2] = np.maximum(points_cam[:, 2], 1e-6)          # behind the camera: a large residual
+        k = self.intrinsics(cam, u)
+        uv, by_point, by_k = project(points_cam, k)
+        values[mine] = uv - self.uv[mine]
+        grad[mine], turn[mine], tool[mine] = by_point @ grad_p, by_point @ turn_p, by_point @ tool_p
+        du[mine, :, ci:ci + 6] += by_point @ by_camera
+        du[mine, :, bi:bi + 6] += by_point @ by_board
+        if ("intrinsics", cam) in self.at:
+            at = self.at[("intrinsics", cam)]
+            du[mine, :, at:at + 9] = by_k
+
+    # -------------------------------------------------------------- a virtual robot's images
+    @classmethod
+    def simulate(cls, truth, spec, rng, noise):
+        """Pixel rows of a virtual robot (``partcal simulate``): ``spec`` ``{images: N, cameras: [names],
+        min_points: k}`` (default: 30 images of every camera of the true cell, each seeing at least half its
+        board). Poses are drawn within the config's ranges and kept when the board is in front of the camera,
+        turned less than :data:`OBLIQUE_DEG` from it and ``min_points`` of its points fall inside the image; the
+        true cell's cameras and boards give their ``pose`` (``[x, y, z, rx, ry, rz]``: mm, a rotation vector in
+        degrees) and the cameras their ``intrinsics``."""
+        unknown = set(spec) - {"images", "cameras", "min_points"}
+        if unknown:
+            raise DataError(f"a camera data set reads images, cameras, min_points; got {', '.join(sorted(unknown))}")
+        cameras, boards = true_cell(truth.cell)
+        count = int(spec.get("images", 30))
+        q_all, texts, numbers = [], {"image": [], "camera": [], "board": []}, {"point": [], "u_px": [], "v_px": []}
+        for cam in spec.get("cameras") or list(cameras):
+            if cam not in cameras:
+                raise DataError(f"a camera data set names camera {cam!r}; the cell has {', '.join(cameras)}")
+            board = next(iter(boards))
+            local = board_points(boards[board])
+            least = int(spec.get("min_points", (local.shape[0] + 1) // 2))
+            taken = 0
+            for _ in range(200):
+                q = truth.sample(200, rng)
+                seen, uv = seen_points(cameras[cam], boards[board], *truth.robot.true_flange(q), local)
+                good = np.flatnonzero(seen.sum(axis=1) >= least)[:count - taken]
+                for i in good:
+                    points = np.flatnonzero(seen[i])
+                    image = f"{cam}-{taken + 1:04d}"
+                    q_all.append(np.repeat(q[i][None], points.size, axis=0))
+                    texts["image"] += [image] * points.size
+                    texts["camera"] += [cam] * points.size
+                    texts["board"] += [board] * points.size
+                    numbers["point"].append(points.astype(float))
+                    noisy = uv[i, points] + rng.normal(0.0, noise, (points.size, 2))
+                    numbers["u_px"].append(noisy[:, 0])
+                    numbers["v_px"].append(noisy[:, 1])
+                    taken += 1
+                if taken == count:
+                    break
+            else:
+                raise DataError(f"camera {cam!r} sees board {board!r} in {taken} of 40,000 poses drawn; {count} wanted "
+                                "(the sampling ranges, the camera's pose or the board's)")
+        q = np.vstack(q_all)
+        n = len(q)
+        size = {c: cameras[c]["image_size"] for c in cameras}
+        u = np.concatenate(numbers["u_px"])
+        v = np.concatenate(numbers["v_px"])
+        width = np.array([size[c][0] for c in texts["camera"]], dtype=float)
+        height = np.array([size[c][1] for c in texts["camera"]], dtype=float)
+        return MeasurementRows(q, ("camera",) * n, tuple(str(i + 1) for i in range(n)), tuple(range(1, n + 1)),
+                               "camera", {"point": np.concatenate(numbers["point"]), "u_px": np.clip(u, 0, width),
+                                          "v_px": np.clip(v, 0, height)},
+                               {k: tuple(t) for k, t in texts.items()})
+
+    # -------------------------------------------------------------- the cell's symmetries, words
+    def moved(self, u, omega, shift):
+        """What stands in the cell (a camera of mount ``cell``, a board on a camera of mount ``flange``) turns and
+        shifts with it; what is on the flange and the intrinsics do not."""
+        out = np.zeros_like(u)
+        for (what, name), at in self.at.items():
+            in_cell = (what == "camera" and self.cameras_cell[name]["mount"] == "cell") or (
+                what == "board" and self._board_mount(name) == "cell")
+            if what != "intrinsics" and in_cell:
+                out[at:at + 3] = np.cross(omega, u[at:at + 3]) + shift
+                out[at + 3:at + 6] = np.degrees(log_derivative(np.radians(u[at + 3:at + 6])[None])[0] @ omega)
+        return out
+
+    def scaled_lengths(self, start):
+        """Under a uniform scale the poses' positions scale; their turns and the intrinsics do not."""
+        return start
+
+    def _board_mount(self, board: str) -> str:
+        cam = next(c for c, b in zip(self.camera, self.board) if b == board)
+        return "flange" if self.cameras_cell[cam]["mount"] == "cell" else "cell"
+
+    def notes(self) -> list[str]:
+        out = []
+        mounts = {self.cameras_cell[c]["mount"] for c in self.camera_names}
+        if "cell" in mounts:
+            out.append("camera: a camera in the cell is the images' only reference of the base frame: the base's pose "
+                       "and the camera's are one unknown (joint 1's offset and the base height with them), held where "
+                       "the images and the nominal robot put it (tracker points or touches beside the images fix it)")
+        if "flange" in mounts:
+            out.append("camera: a board in the cell is the images' only reference of the base frame: the base's pose "
+                       "and the board's are one unknown (joint 1's offset and the base height with them), held where "
+                       "the images and the nominal robot put it")
+        out.append("camera: the last joint's offset and the flange's own frame go with the pose on the flange (the "
+                   "board's or the camera's: the hand-eye), and a camera does not see the tool offset: held nominal")
+        if any(half_turn_symmetric(self.boards_cell[b]) for b in self.board_names):
+            out.append("camera: a chessboard with both square counts even or both odd looks the same turned half a "
+                       "turn: its detections may flip between images (use one odd and one even count, or a ChArUco "
+                       "board)")
+        return out
+
+    def describe(self) -> str:
+        images = len(set(zip(self.image, self.camera)))
+        return (f"{self.index.size} board points in {images} images of {len(self.camera_names)} cameras "
+                f"({', '.join(c + ' on the ' + self.cameras_cell[c]['mount'] for c in self.camera_names)})")
+
+
+
+def true_cell(sections: dict) -> tuple[dict, dict]:
+    """The true cameras and boards of a virtual cell's ``cell:`` (each with its ``pose``; the cameras with their
+    ``intrinsics``), read and checked as the cell's description is."""
+    out = []
+    for key, read in (("cameras", read_camera), ("boards", read_board)):
+        sec = Section(sections.get(key), f"cell.{key}", {}, "the virtual robot's config")
+        entries = {name: read(named_entry(sec, name)) for name in list(sec.data)}
+        for name, spec in entries.items():
+            if "pose" not in spec:
+                sec.fail(sec.path(name), "a virtual cell's camera or board needs its true pose: [x, y, z, rx, ry, rz] "
+                                         "(mm, a rotation vector in degrees)")
+            if key == "cameras" and "intrinsics" not in spec:
+                sec.fail(sec.path(name), "a virtual camera needs its true intrinsics (fx, fy, cx, cy, k1, ...)")
+        if not entries:
+            sec.fail(sec.where, f"a virtual cell's camera data set needs {key}; got none")
+        out.append(entries)
+    return out[0], out[1]
+
+
+def seen_points(camera: dict, board: dict, flange_mm, flange_rotations, local) -> tuple[NDArray, NDArray]:
+    """Which of a board's points (``local``, (p, 3) mm in its frame) a camera sees at flange poses (positions
+    (n, 3) mm, rotations (n, 3, 3), base frame), and their true pixels: masks (n, p) and pixels (n, p, 2)."""
+    cam, brd = pose_matrix(camera["pose"]), pose_matrix(board["pose"])
+    n = flange_mm.shape[0]
+    flange = np.tile(np.eye(4), (n, 1, 1))
+    flange[:, :3, :3], flange[:, :3, 3] = flange_rotations, flange_mm
+    if camera["mount"] == "cell":
+        cam_T_board = np.linalg.inv(cam) @ flange @ brd
+    else:
+        cam_T_board = np.linalg.inv(flange @ cam) @ brd
+    points = np.einsum("nij,pj->npi", cam_T_board[:, :3, :3], local) + cam_T_board[:, None, :3, 3]
+    centre = cam_T_board[:, :3, 3] + cam_T_board[:, :3, :3] @ local.mean(axis=0)
+    facing = np.einsum("ni,ni->n", cam_T_board[:, :3, 2], centre) / np.linalg.norm(centre, axis=1)
+    front = points[..., 2] > 50.0
+    safe = np.where(front[..., None], points, np.array([0.0, 0.0, 1.0]))
+    uv = project(safe.reshape(-1, 3), np.asarray(camera["intrinsics"], dtype=float))[0].reshape(n, -1, 2)
+    width, height = camera["image_size"]
+    inside = ((uv[..., 0] >= MARGIN_PX) & (uv[..., 0] <= width - MARGIN_PX) & (uv[..., 1] >= MARGIN_PX)
+              & (uv[..., 1] <= height - MARGIN_PX))
+    ok = front & inside & (facing > np.cos(np.radians(OBLIQUE_DEG)))[:, None] & front.all(axis=1)[:, None]
+    return ok, uv

@@ -425,6 +425,15 @@ class CameraPoints(MeasurementType):
         """Under a uniform scale the poses' positions scale; their turns and the intrinsics do not."""
         return start
 
+    def stands_for(self, names: list[str]) -> set[str]:
+        """Pixels see the camera's pose relative to the board's: what stands in the cell carries the base frame
+        (``base.*``, and joint 1's offset and length along its axis, ``theta[1]``, ``d[1]``) and what is on the
+        flange carries the last row of the chain (every parameter of it: the flange's own frame)."""
+        rows = [int(n[6:-1]) for n in names if n.startswith("theta[") and n.endswith("]")]
+        last = f"[{max(rows)}]" if rows else None
+        return {n for n in names if n.startswith("base.") or n in ("theta[1]", "d[1]")
+                or (last is not None and n.endswith(last))}
+
     def _board_mount(self, board: str) -> str:
         cam = next(c for c, b in zip(self.camera, self.board) if b == board)
         return "flange" if self.cameras_cell[cam]["mount"] == "cell" else "cell"
@@ -434,14 +443,16 @@ class CameraPoints(MeasurementType):
         mounts = {self.cameras_cell[c]["mount"] for c in self.camera_names}
         if "cell" in mounts:
             out.append("camera: a camera in the cell is the images' only reference of the base frame: the base's pose "
-                       "and the camera's are one unknown (joint 1's offset and the base height with them), held where "
-                       "the images and the nominal robot put it (tracker points or touches beside the images fix it)")
+                       "and the camera's are one unknown (joint 1's offset and the base height with them): the base is "
+                       "held nominal and the camera's pose identified in it (tracker points or touches beside the "
+                       "images fix the base)")
         if "flange" in mounts:
             out.append("camera: a board in the cell is the images' only reference of the base frame: the base's pose "
-                       "and the board's are one unknown (joint 1's offset and the base height with them), held where "
-                       "the images and the nominal robot put it")
-        out.append("camera: the last joint's offset and the flange's own frame go with the pose on the flange (the "
-                   "board's or the camera's: the hand-eye), and a camera does not see the tool offset: held nominal")
+                       "and the board's are one unknown (joint 1's offset and the base height with them): the base is "
+                       "held nominal and the board's pose identified in it")
+        out.append("camera: the last joint's offset and the flange's own frame (the chain's last row) go with the "
+                   "pose on the flange (the board's or the camera's: the hand-eye), held nominal; a camera does not see "
+                   "the tool offset")
         if any(half_turn_symmetric(self.boards_cell[b]) for b in self.board_names):
             out.append("camera: a chessboard with both square counts even or both odd looks the same turned half a "
                        "turn: its detections may flip between images (use one odd and one even count, or a ChArUco "

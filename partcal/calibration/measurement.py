@@ -320,6 +320,13 @@ class MeasurementType:
         """Whether the unknown ``name`` is a parameter of the tool, held where the tool is (``tool: false``)."""
         return False
 
+    def stands_for(self, names: list[str]) -> set[str]:
+        """The robot's parameters (of ``names``, the table's) that this type's own unknowns stand for: what its rows
+        cannot tell from them (a camera's pose in the cell and the base frame). Held nominal when every type
+        present says so, so that the type's unknowns carry them (the rank rule would otherwise pick either).
+        Default: none."""
+        return set()
+
     def unknowns(self, positions: NDArray[np.float64], rotations: NDArray[np.float64]
                  ) -> tuple[list[tuple[str, str]], NDArray[np.float64]]:
         """The type's own unknowns ``(name, unit)`` and where their fit starts, from the targets' ``positions``

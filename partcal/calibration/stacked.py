@@ -254,6 +254,9 @@ def _prepared(robot: Robot, rows: MeasurementRows, cell: dict, base: bool, tool:
     wanted[size - 6:size] = base
     for measurement, cols in zip(measurements, problem.columns):       # a type's unknowns of the tool (a further target's offset)
         wanted[cols] = [tool or not measurement.follows_tool(problem.names[c - problem.own][0]) for c in cols]
+    own = [n for n, _ in parameter_names(robot, errors, parametrization)]
+    stand_ins = set.intersection(*(measurement.stands_for(own) for measurement in measurements))
+    wanted[[i for i, n in enumerate(own) if n in stand_ins]] = False   # carried by the types' own unknowns
     notes = [note for measurement in measurements for note in measurement.notes()]
     jac0, direction = rank_jacobian(problem, wanted, rcond)
     if prior is not None:

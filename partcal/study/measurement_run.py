@@ -549,7 +549,10 @@ def measurement_run_table(result: MeasurementRunResult) -> str:
     widths = [max(len(str(x)) for x in col) for col in zip(header, *rows)]
     for row in [header, *rows]:
         lines.append("  ".join(str(c).ljust(w) for c, w in zip(row, widths)))
-    lines.append("residuals in mm (RMS); * best by cross-validation" + (
+    others = [f"{k} in {MEASUREMENT_TYPES[k].unit}" for k in measurements
+              if k in MEASUREMENT_TYPES and MEASUREMENT_TYPES[k].unit != "mm"]
+    lines.append(f"residuals in mm{' (' + ', '.join(others) + ')' if others else ''} (RMS); * best by "
+                 "cross-validation" + (
         "; test sets of points scored after a rigid fit (the identification data fix no frame)"
         if not result.data.fixes_frame and any(isinstance(t, Measurements) for t in result.data.tests.values())
         else ""))

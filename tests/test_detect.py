@@ -1,0 +1,116 @@
+"""Images in: boards rendered for a virtual robot (partcal/data/boards.py) and detected in a folder of images with a
+joints CSV (partcal/data/detect.py), scored against the true pixels (cv2.projectPoints of the true poses)."""
+
+import cv2
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from partcal.data.boards import render_folder
+from partcal.data.detect import detect_folder, write_pixel_rows
+from partcal.data.measurement_rows import read_measurement_rows
+from partcal.errors import DataError
+from partcal.robot.description import load_robot
+
+CAMERA = {"image_size": [800, 600], "intrinsics": [700.0, 700.0, 400.0, 300.0, -0.08, 0.03, 0.0004, -0.0003, 0.0]}
+BOARDS = {"charuco": {"type": "charuco", "rows": 6, "cols": 8, "square_mm": 30.0, "marker_mm": 22.0},
+          "chessboard": {"type": "chessboard", "rows": 6, "cols": 9, "square_mm": 25.0}}
+
+
+def _views(board: dict, count: int, seed: int = 0):
+    """Board poses in the camera's frame (the board ~700 mm away, turned up to 35 degrees) and joints for them."""
+    rng = np.random.default_rng(seed)
+    centre = np.array([board["cols"], board["rows"], 0.0]) * board["square_mm"] / 2
+    poses = []
+    for _ in range(count):
+        rotation = Rotation.from_rotvec(rng.uniform(-0.6, 0.6, 3) * [1, 1, 0.5]).as_matrix()
+        pose = np.eye(4)
+        pose[:3, :3] = rotation
+        pose[:3, 3] = [rng.uniform(-40, 40), rng.uniform(-30, 30), rng.uniform(650, 800)] - rotation @ centre
+        poses.append(pose)
+    q = rng.uniform(-90, 90, (count, 6))
+    return np.array(poses), q
+
+
+def _truth(board: dict, pose: np.ndarray) -> np.ndarray:
+    s, rows, cols = board["square_mm"], board["rows"], board["cols"]
+    r, c = np.divmod(np.arange((rows - 1) * (cols - 1)), cols - 1)
+    local = np.column_stack([(c + 1) * s, (r + 1) * s, np.zeros(r.size)])
+    k = CAMERA["intrinsics"]
+    matrix = np.array([[k[0], 0, k[2]], [0, k[1], k[3]], [0, 0, 1.0]])
+    rvec = Rotation.from_matrix(pose[:3, :3]).as_rotvec()
+    return cv2.projectPoints(local, rvec, pose[:3, 3], matrix, np.array(k[4:]))[0][:, 0]
+
+
+@pytest.mark.parametrize("kind", ["charuco", "chessboard"])
+def test_rendered_boards_are_detected_within_a_tenth_of_a_pixel(kind, tmp_path):
+    board = BOARDS[kind]
+    poses, q = _views(board, 4)
+    render_folder(tmp_path, CAMERA, board, poses, q, np.random.default_rng(1))
+    found = detect_folder(tmp_path, tmp_path / "joints.csv", load_robot("universal_robots_ur10"), board, "cam1",
+                          "b1", image_size=(800, 600))
+    assert found.not_found == [] and found.warnings == []
+    rows = found.rows
+    errors = []
+    for k, pose in enumerate(poses):
+        mine = np.flatnonzero(np.array(rows.texts["image"]) == f"image_{k + 1:04d}.png")
+        assert np.allclose(rows.q_deg[mine], q[k])
+        truth = _truth(board, pose)
+        ids = rows.numbers["point"][mine].astype(int)
+        assert ids.size == truth.shape[0]                          # every corner in view found
+        errors.append(np.column_stack([rows.numbers["u_px"][mine], rows.numbers["v_px"][mine]]) - truth[ids])
+    rms = np.sqrt(np.mean(np.sum(np.vstack(errors) ** 2, axis=1)))
+    assert rms < 0.1, rms
+
+
+def test_an_image_without_the_board_is_named_and_shifts_no_pairing(tmp_path):
+    board = BOARDS["charuco"]
+    poses, q = _views(board, 3, seed=2)
+    poses[1][:3, 3] += [5000.0, 0.0, 0.0]                        # the board out of view
+    render_folder(tmp_path, CAMERA, board, poses, q, np.random.default_rng(3))
+    found = detect_folder(tmp_path, tmp_path / "joints.csv", load_robot("universal_robots_ur10"), board, "cam1")
+    assert found.not_found == ["image_0002.png"]
+    assert any("image_0002.png: no board found" in w for w in found.warnings)
+    for k in (0, 2):
+        mine = np.array(found.rows.texts["image"]) == f"image_{k + 1:04d}.png"
+        assert mine.any() and np.allclose(found.rows.q_deg[mine], q[k])
+    write_pixel_rows(found, tmp_path / "pixels.csv")
+    back = read_measurement_rows(tmp_path / "pixels.csv")
+    assert back.types[0] == "camera" and len(back) == len(found.rows)
+
+
+def test_a_half_turn_symmetric_chessboard_is_warned(tmp_path):
+    board = {"type": "chessboard", "rows": 6, "cols": 8, "square_mm": 25.0}
+    poses, q = _views(board, 1, seed=4)
+    render_folder(tmp_path, CAMERA, board, poses, q, np.random.default_rng(5))
+    found = detect_folder(tmp_path, tmp_path / "joints.csv", load_robot("universal_robots_ur10"), board, "cam1")
+    assert any("looks the same turned half a turn" in w for w in found.warnings)
+
+
+def _folder(tmp_path, joints: str, images=("a.png", "b.png")):
+    for name in images:
+        cv2.imwrite(str(tmp_path / name), np.full((60, 80), 128, np.uint8))
+    (tmp_path / "joints.csv").write_text(joints)
+    return tmp_path / "joints.csv"
+
+
+@pytest.mark.parametrize("joints, images, message", [
+    ("image,q1,q2,q3,q4,q5,q6\na.png,0,0,0,0,0,0\nb.png,0,0,0,0,0,0\nc.png,0,0,0,0,0,0\n", ("a.png", "b.png"),
+     r"joints.csv:4: column 'image': 'c.png' is not an image of "),
+    ("image,q1,q2,q3,q4,q5,q6\na.png,0,0,0,0,0,0\n", ("a.png", "b.png"),
+     r"b.png: no row of .*joints.csv names this image"),
+    ("image,q1,q2,q3,q4,q5\na.png,0,0,0,0,0\n", ("a.png",),
+     r"joints.csv:1: columns q1, q2, q3, q4, q5: expected the 6 joints of universal_robots_ur10"),
+    ("image,q1,q2,q3,q4,q5,q6\na.png,0,0,x,0,0,0\n", ("a.png",), r"joints.csv:2: column 'q3': expected a joint angle"),
+])
+def test_bad_joints_or_images_are_refused_naming_file_line_and_field(tmp_path, joints, images, message):
+    path = _folder(tmp_path, joints, images)
+    with pytest.raises(DataError, match=message):
+        detect_folder(tmp_path, path, load_robot("universal_robots_ur10"), BOARDS["charuco"], "cam1")
+
+
+def test_an_image_of_another_size_than_the_cameras_is_refused(tmp_path):
+    path = _folder(tmp_path, "image,q1,q2,q3,q4,q5,q6\na.png,0,0,0,0,0,0\n", ("a.png",))
+    with pytest.raises(DataError, match=r"a.png: 80 x 60 pixels; camera 'cam1''s image_size is 800 x 600"):
+        detect_folder(tmp_path, path, load_robot("universal_robots_ur10"), BOARDS["charuco"], "cam1",
+                      image_size=(800, 600))

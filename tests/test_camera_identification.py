@@ -5,8 +5,10 @@ scored against the simulation's truth (0.2 px noise)."""
 
 import json
 
+import cv2
 import numpy as np
 import pytest
+import yourdfpy
 from scipy.spatial.transform import Rotation
 
 from partcal.calibration.parameters import geometric_size, robot_with
@@ -21,6 +23,7 @@ CAMERA = {"cell": [1900.0, 300.0, 900.0, -73.4542, -96.1699, 68.1777],      # lo
 BOARD = {"cell": [-165.0, 120.0, 30.0, 178.0, 3.0, 2.0],                     # on the flange, facing out
          "flange": [580.0, 160.0, 20.0, 179.0, 2.0, 1.0]}                    # on the table, facing up
 SQUARE = {"cell": 30.0, "flange": 40.0}
+OTHER = {"cell": "flange", "flange": "cell"}
 
 VIRTUAL = """robot: universal_robots_ur10
 seed: 3
@@ -90,7 +93,7 @@ def test_simulated_images_identify_the_hand_eye_the_robot_and_the_intrinsics(mou
     nominal = load_robot("universal_robots_ur10")
     robot = robot_with(nominal, np.asarray(table["value"])[:geometric_size(nominal, "dh")])
     camera, board = ([value[f"{what}.{c}"] for c in ("x", "y", "z", "rx", "ry", "rz")]
-                     for what in ("camera cam1", "board b1"))
+                     for what in (f"camera cam1@{mount}", f"board b1@{OTHER[mount]}"))
     study = load_study(tmp_path / "virtual.yaml")
     q = np.unique(np.loadtxt(tmp_path / "data" / "images.csv", delimiter=",", comments="#", skiprows=3,
                              usecols=range(6)), axis=0)
@@ -121,3 +124,21 @@ def test_simulated_images_identify_the_hand_eye_the_robot_and_the_intrinsics(mou
     assert np.allclose(fitted_k, INTRINSICS[mount][:4], atol=1.0)
     notes = " ".join(metrics.get("notes", [])) + json.dumps(metrics)
     assert "held nominal" in notes
+
+    # out: the intrinsics as a camera_info YAML OpenCV reads, the camera a link of the exported URDF
+    info = cv2.FileStorage(str(tmp_path / "out" / "models" / "dh_camera_cam1.yaml"), cv2.FILE_STORAGE_READ)
+    data = info.getNode("camera_matrix").getNode("data")
+    assert [data.at(i).real() for i in range(9)] == pytest.approx(
+        [fitted_k[0], 0, fitted_k[2], 0, fitted_k[1], fitted_k[3], 0, 0, 1], abs=1e-9)
+    assert info.getNode("image_width").real() == 1920
+    distortion = info.getNode("distortion_coefficients").getNode("data")
+    assert [distortion.at(i).real() for i in range(5)] == pytest.approx(
+        [value[f"camera cam1.{k}"] for k in ("k1", "k2", "p1", "p2", "k3")], abs=1e-12)
+    assert main(["export", str(tmp_path / "out" / "models" / "dh.json"), "-o", str(tmp_path / "export")]) == 0
+    urdf = yourdfpy.URDF.load(str(tmp_path / "export" / "dh.urdf"))
+    pose = q[3]
+    urdf.update_cfg({f"joint{k + 1}": np.radians(pose[k]) for k in range(6)})
+    seen = urdf.get_transform("cam1_optical_frame", "world")
+    expected = fitted_flange[3] @ _pose(camera) if mount == "flange" else _pose(camera)
+    assert np.allclose(seen[:3, :3], expected[:3, :3], atol=1e-12)
+    assert np.allclose(seen[:3, 3] * 1000.0, expected[:3, 3], atol=1e-9)

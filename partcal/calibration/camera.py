@@ -213,13 +213,15 @@ class CameraPoints(MeasurementType):
         self.names_units, self.at = [], {}
         for cam in self.camera_names:
             self.at[("camera", cam)] = len(self.names_units)
-            self.names_units += [(f"camera {cam}.{c}", "mm" if c in "xyz" else "deg") for c in POSE]
+            mount = self.cameras_cell[cam]["mount"]
+            self.names_units += [(f"camera {cam}@{mount}.{c}", "mm" if c in "xyz" else "deg") for c in POSE]
             if self.cameras_cell[cam]["fit_intrinsics"]:
                 self.at[("intrinsics", cam)] = len(self.names_units)
                 self.names_units += [(f"camera {cam}.{k}", "px" if k in INTRINSICS[:4] else "1") for k in INTRINSICS]
         for b in self.board_names:
             self.at[("board", b)] = len(self.names_units)
-            self.names_units += [(f"board {b}.{c}", "mm" if c in "xyz" else "deg") for c in POSE]
+            self.names_units += [(f"board {b}@{self._board_mount(b)}.{c}", "mm" if c in "xyz" else "deg")
+                                 for c in POSE]
 
     def unknowns(self, positions, rotations):
         self._layout()
@@ -352,6 +354,20 @@ class CameraPoints(MeasurementType):
         if ("intrinsics", cam) in self.at:
             at = self.at[("intrinsics", cam)]
             du[mine, :, at:at + 9] = by_k
+
+    @classmethod
+    def files(cls, cell: dict, names, values) -> dict[str, str]:
+        """Each camera's intrinsics as an OpenCV / ROS ``camera_info`` YAML (``camera_NAME.yaml``): the fitted ones
+        of an identified table (``names``, ``values``), or those the cell gives."""
+        value = dict(zip(names, np.asarray(values, dtype=float)))
+        out = {}
+        for cam, spec in (cell.get("cameras") or {}).items():
+            fitted = [value.get(f"camera {cam}.{k}") for k in INTRINSICS]
+            if all(v is not None for v in fitted):
+                out[f"camera_{cam}.yaml"] = camera_info_text(cam, spec["image_size"], np.array(fitted), "identified")
+            elif "intrinsics" in spec and f"camera {cam}@{spec['mount']}.x" in value:
+                out[f"camera_{cam}.yaml"] = camera_info_text(cam, spec["image_size"], spec["intrinsics"], "given")
+        return out
 
     # -------------------------------------------------------------- a virtual robot's images
     @classmethod
@@ -507,3 +523,34 @@ def seen_points(camera: dict, board: dict, flange_mm, flange_rotations, local) -
               & (uv[..., 1] <= height - MARGIN_PX))
     ok = front & inside & (facing > np.cos(np.radians(OBLIQUE_DEG)))[:, None] & front.all(axis=1)[:, None]
     return ok, uv
+
+
+def camera_info_text(name: str, image_size, intrinsics, how: str) -> str:
+    """A camera's intrinsics as ROS's ``camera_info`` YAML (``plumb_bob``: OpenCV's k1, k2, p1, p2, k3), which
+    ``cv2.FileStorage`` reads too (the ``%YAML 1.1`` line)."""
+    fx, fy, cx, cy, *dist = (float(v) for v in intrinsics)
+
+    def matrix(rows, cols, data):
+        return f"  rows: {rows}\n  cols: {cols}\n  data: [{', '.join(repr(float(v)) for v in data)}]"
+    return "\n".join([
+        "%YAML 1.1", "---", f"# camera {name}: intrinsics {how} by partcal (OpenCV's pinhole camera with Brown-Conrady "
+        "distortion; pixels)", f"image_width: {int(image_size[0])}", f"image_height: {int(image_size[1])}",
+        f"camera_name: {name}", "camera_matrix:", matrix(3, 3, [fx, 0, cx, 0, fy, cy, 0, 0, 1]),
+        "distortion_model: plumb_bob", "distortion_coefficients:", matrix(1, 5, dist),
+        "rectification_matrix:", matrix(3, 3, np.eye(3).ravel()),
+        "projection_matrix:", matrix(3, 4, [fx, 0, cx, 0, 0, fy, cy, 0, 0, 0, 1, 0])]) + "\n"
+
+
+def mounted_frames(names, values) -> list[tuple[str, str, NDArray[np.float64]]]:
+    """The cameras' and boards' poses of an identified table: ``(link, mount, pose (4, 4) mm)`` each, ``link``
+    ``NAME_optical_frame`` for a camera (x right, y down, z along the optical axis: ROS's optical frame) and
+    ``NAME_board`` for a board, ``mount`` ``cell`` (the base frame the rows are in) or ``flange``."""
+    value = dict(zip(names, np.asarray(values, dtype=float)))
+    out = []
+    for name in names:
+        for what, suffix in (("camera", "optical_frame"), ("board", "board")):
+            if name.startswith(f"{what} ") and "@" in name and name.endswith(".x"):
+                entry, mount = name[len(what) + 1:-2].split("@")
+                pose = pose_matrix([value[f"{what} {entry}@{mount}.{c}"] for c in POSE])
+                out.append((f"{entry}_{suffix}", mount, pose))
+    return out

@@ -288,6 +288,12 @@ class MeasurementType:
         """What a simulated cell knows of the true entries of its further section ``name``."""
         return cls.given_section(true, rng)
 
+    @classmethod
+    def files(cls, cell: dict, names, values) -> dict[str, str]:
+        """The files the type writes beside an identified model (file name -> text), from the cell and the
+        identified table's ``names`` and ``values`` (a camera's ``camera_info`` YAML). Default: none."""
+        return {}
+
     def __init__(self, rows: MeasurementRows, index: NDArray[np.intp], cell: dict, noise: float):
         self.rows, self.index, self.cell, self.noise = rows, index, cell, float(noise)
         self.noise_stated = False

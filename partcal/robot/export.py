@@ -145,7 +145,7 @@ def urdf_joints(robot: Robot, base_pose: NDArray[np.float64] | None = None,
 
 
 def urdf_from_robot(robot: Robot, base_pose: NDArray[np.float64] | None = None, comment: str = "",
-                    tool_rotation: NDArray[np.float64] | None = None) -> str:
+                    tool_rotation: NDArray[np.float64] | None = None, fixed_links=()) -> str:
     """The chain as URDF text: links ``[world], base_link, link1..linkR, flange, tcp`` (metres, radians).
 
     Parameters
@@ -160,12 +160,17 @@ def urdf_from_robot(robot: Robot, base_pose: NDArray[np.float64] | None = None, 
         The tool's (or reflector's) turn in the flange frame, ``flange_T_tool``'s
         rotation (an identified probe turn): the fixed joint ``flange -> tcp``
         carries it. None: the tool frame is the flange's, moved to the tool point.
+    fixed_links : sequence of (child, parent, origin)
+        Further links fixed to one of the chain's (``world``, ``base_link``, ``flange``, ...) at ``origin`` (4, 4;
+        mm): a camera's optical frame, a board.
     """
     from xml.sax.saxutils import quoteattr
 
     lines = ['<?xml version="1.0"?>', *(f"<!-- {c} -->" for c in comment.splitlines() if c),
              f"<robot name={quoteattr(robot.name + '_calibrated')}>"]
     joints = urdf_joints(robot, base_pose, tool_rotation)
+    joints += [UrdfJoint(f"{child}_joint", "fixed", parent, child, np.asarray(origin, dtype=float))
+               for child, parent, origin in fixed_links]
     links = [joints[0].parent] + [j.child for j in joints]
     lines += [f'  <link name="{name}"/>' for name in links]
     for j in joints:

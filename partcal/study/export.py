@@ -5,7 +5,9 @@ identified geometry (:mod:`partcal.robot.export` does the writing):
 
 - ``<name>.urdf``: the calibrated chain, joint offsets folded into the joint
   origins, the identified base pose as the fixed joint ``world -> base_link``
-  and the tool point, turned by the tool's identified turn, as ``flange -> tcp``;
+  and the tool point, turned by the tool's identified turn, as ``flange -> tcp``; identified cameras and boards
+  (camera rows) as fixed links, ``NAME_optical_frame`` and ``NAME_board``, from ``world`` (in the cell) or
+  ``flange``;
 - ``<name>_ur_kinematics.yaml``: ur_description's ``default_kinematics.yaml``
   (UR-shaped six-joint chains turned by q1..q6), with the TCP it needs in
   ``tool0``, position and rotation, in its header (the file has no tool);
@@ -35,6 +37,7 @@ from ..data.formats import load_format
 from ..data.measurements import read_measurements
 from ..errors import PartcalError
 from ..metrics import pooled_rms
+from ..calibration.camera import mounted_frames
 from ..calibration.parameters import geometric_size, own_geometry
 from ..models.kinematic import KinematicModel
 from ..robot.description import robot_to_dict
@@ -133,7 +136,10 @@ def export_model(model_path, output: Path, formats=FORMATS, q_deg=None, errors_m
     stamp = (f"Calibrated {model.robot_.name} from {Path(model_path).name} ({model.parametrization_} "
              "parametrization), written by partcal export.")
     texts, files, skipped, tcp, tcp_text, turn = {}, {}, {}, None, "", tool_turn(model)
-    writers = {"urdf": lambda: (f"{name}.urdf", urdf_from_robot(robot, base_pose, comment=stamp, tool_rotation=turn)),
+    links = [(link, "world" if mount == "cell" else "flange", pose)
+             for link, mount, pose in mounted_frames(model.identification_.names, model.identification_.value)]
+    writers = {"urdf": lambda: (f"{name}.urdf", urdf_from_robot(robot, base_pose, comment=stamp, tool_rotation=turn,
+                                                               fixed_links=links)),
                "yaml": lambda: (f"{name}_robot.yaml", _robot_yaml(robot, stamp)),
                "dh": lambda: (f"{name}_dh.csv", _dh_csv(robot))}
     for fmt in formats:

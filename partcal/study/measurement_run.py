@@ -505,7 +505,8 @@ def measurement_run_metrics(result: MeasurementRunResult) -> dict:
 
 
 def write_measurement_run(result: MeasurementRunResult, render: Callable | None = None) -> Path:
-    """Write a measurement run's outputs atomically (metrics.json, model files, resolved config, report)."""
+    """Write a measurement run's outputs atomically (metrics.json, model files and the files each type writes beside
+    them, such as a camera's ``camera_info`` YAML, resolved config, report)."""
     cfg = result.config
 
     def fill(folder: Path) -> None:
@@ -514,6 +515,10 @@ def write_measurement_run(result: MeasurementRunResult, render: Callable | None 
             save_model(r.model, folder / "models" / f"{r.spec.slug}.json", name=r.spec.name, robot=result.data.robot,
                        extra={"cv_weighted_rms_mm": r.cv_pooled, "fit_seconds": round(r.fit_seconds, 4),
                               "seed": cfg.seed, "run": cfg.name})
+            table = getattr(r.model, "identification_", None)
+            for name in (n for n in result.data.descriptions if n in MEASUREMENT_TYPES and table is not None):
+                for filename, text in MEASUREMENT_TYPES[name].files(result.data.cell, table.names, table.value).items():
+                    (folder / "models" / f"{r.spec.slug}_{filename}").write_text(text)
         (folder / "metrics.json").write_text(json.dumps(measurement_run_metrics(result), indent=1) + "\n")
         resolved = {"partcal_version": __version__, **cfg.resolved()}
         (folder / "config.resolved.yaml").write_text(yaml.safe_dump(resolved, sort_keys=False))

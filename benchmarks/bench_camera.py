@@ -1,0 +1,246 @@
+"""Camera calibration: the robot, the hand-eye, the board and the intrinsics identified together from pixels
+(camera rows), against OpenCV's five hand-eye methods on the nominal flange poses.
+
+A virtual UR10 with DH errors (0.5 mm, 0.03 deg, 0.05 deg offsets), tilts between its parallel axes (q2 0.03 deg,
+q3 -0.02 deg), a base error and a tool error; a 1920 x 1200 camera with distortion; a ChArUco board of 8 x 11
+squares. Two set-ups: eye-to-hand (the camera in the cell, the board on the flange) and eye-in-hand (the camera
+on the flange, the board on the table). 30, 60 and 120 images, the board's corners with 0.2 px of normal noise
+(``partcal simulate``'s pixel rows: the true pixels plus noise, not rendered images; the detection's own error on
+rendered images is tests/test_detect.py's, under 0.1 px RMS). Per row the median over the virtual robots
+(seeds):
+
+- partcal: the hand-eye (the board's pose on the flange, eye-to-hand; the camera's, eye-in-hand) against the truth
+  in the gauge the images define (the cell's frame: the fitted pose in the cell against the true one; the
+  flange's: the mean over the poses in view of the fitted flange's pose against the true one in that frame), in mm
+  and degrees; the largest error of fx, fy, cx, cy (px); the board's centre in
+  the camera's frame with no fit on up to 2,000 random poses with the board in view (mm); the identification's
+  time (s);
+- OpenCV: ``cv2.solvePnP`` per image (with the true intrinsics: the most OpenCV can be given), then
+  ``cv2.calibrateHandEye`` (Tsai, Park, Horaud, Andreff, Daniilidis) on the nominal robot's flange poses, the
+  hand-eye scored in the same gauge; the best of the five and its method; the board's centre in the camera's
+  frame through the nominal robot and the best method's hand-eye.
+
+    .venv/bin/python benchmarks/bench_camera.py [--robots 3] [--parametrization dh|complete]
+        (about a minute per robot)
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import io
+import logging
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _table import print_table  # noqa: E402
+
+from partcal.calibration.camera import seen_points, true_cell  # noqa: E402
+from partcal.calibration.camera_model import board_points  # noqa: E402
+from partcal.calibration.parameters import geometric_size, robot_with  # noqa: E402
+from partcal.calibration.stacked import identify_measurements  # noqa: E402
+from partcal.cli import main  # noqa: E402
+from partcal.data.measurement_rows import read_cell, read_measurement_rows  # noqa: E402
+from partcal.data.sampling import sample_configurations  # noqa: E402
+from partcal.data.simulate import load_study  # noqa: E402
+
+SETUPS = {
+    "eye-to-hand": {"mount": "cell", "k": [1500.0, 1500.0, 960.0, 600.0, -0.1, 0.05, 0.0005, -0.0003, 0.0],
+                    "camera": [1900.0, 300.0, 900.0, -73.4542, -96.1699, 68.1777],
+                    "board": [-165.0, 120.0, 30.0, 178.0, 3.0, 2.0], "square": 30.0},
+    "eye-in-hand": {"mount": "flange", "k": [1400.0, 1400.0, 950.0, 610.0, -0.12, 0.06, 0.0004, -0.0002, 0.0],
+                    "camera": [0.0, 70.0, 40.0, 2.0, -3.0, 90.0],
+                    "board": [580.0, 160.0, 20.0, 179.0, 2.0, 1.0], "square": 40.0},
+}
+PARAMETRIZATION = "complete"
+"""The chain's parametrization (``--parametrization``): DH rows cannot hold tilts between parallel axes, the
+complete one can."""
+METHODS = {"Tsai": cv2.CALIB_HAND_EYE_TSAI, "Park": cv2.CALIB_HAND_EYE_PARK, "Horaud": cv2.CALIB_HAND_EYE_HORAUD,
+           "Andreff": cv2.CALIB_HAND_EYE_ANDREFF, "Daniilidis": cv2.CALIB_HAND_EYE_DANIILIDIS}
+
+VIRTUAL = """robot: universal_robots_ur10
+seed: {seed}
+output: data
+errors:
+  dh_sigma: {{length_mm: 0.5, twist_deg: 0.03, zero_offset_deg: 0.05}}
+  tilt_deg: {{q2: 0.03, q3: -0.02}}
+  tool_mm: [0.3, -0.2, 0.4]
+  base: {{rotation_deg: [0.02, -0.03, 0.04], translation_mm: [1.0, -0.5, 0.8]}}
+tracker: {{position_mm: [2500, 0, 0], accuracy_ppm: 0, repeatability_ppm: 10, readings: 1}}
+sampling:
+  ranges_deg: {{q1: [-40, 40], q2: [-150, -30], q3: [-140, 140], q4: [-180, 180], q5: [-150, 150], q6: [-180, 180]}}
+cell:
+  cameras:
+    cam1: {{mount: {mount}, image_size: [1920, 1200], pose: {camera},
+           intrinsics: {{fx: {k[0]}, fy: {k[1]}, cx: {k[2]}, cy: {k[3]}, k1: {k[4]}, k2: {k[5]}, p1: {k[6]}, p2: {k[7]}}}}}
+  boards:
+    b1: {{type: charuco, rows: 8, cols: 11, square_mm: {square}, marker_mm: {marker}, pose: {board}}}
+datasets:
+  images: {{camera: {{images: {images}}}, noise: 0.2}}
+"""
+
+
+def pose(values) -> np.ndarray:
+    out = np.eye(4)
+    out[:3, :3] = Rotation.from_rotvec(values[3:], degrees=True).as_matrix()
+    out[:3, 3] = values[:3]
+    return out
+
+
+def flanges(positions, rotations) -> np.ndarray:
+    out = np.tile(np.eye(4), (len(positions), 1, 1))
+    out[:, :3, :3], out[:, :3, 3] = rotations, positions
+    return out
+
+
+def error(expected, got) -> tuple[float, float]:
+    return (float(np.linalg.norm(expected[:3, 3] - got[:3, 3])),
+            float(np.degrees(Rotation.from_matrix(expected[:3, :3].T @ got[:3, :3]).magnitude())))
+
+
+def mean_pose(poses) -> np.ndarray:
+    out = np.eye(4)
+    out[:3, :3] = Rotation.from_matrix(poses[:, :3, :3]).mean().as_matrix()
+    out[:3, 3] = poses[:, :3, 3].mean(axis=0)
+    return out
+
+
+def opencv(setup: dict, rows, nominal_flange) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Each method's (pose on the flange, pose in the cell) from solvePnP per image and calibrateHandEye."""
+    k = setup["k"]
+    matrix = np.array([[k[0], 0, k[2]], [0, k[1], k[3]], [0, 0, 1.0]])
+    local = board_points({"type": "charuco", "rows": 8, "cols": 11, "square_mm": setup["square"], "marker_mm": 1})
+    images = list(dict.fromkeys(rows.texts["image"]))
+    board_in_cam, flange = [], []
+    for image in images:
+        mine = np.flatnonzero(np.array(rows.texts["image"]) == image)
+        uv = np.column_stack([rows.numbers["u_px"][mine], rows.numbers["v_px"][mine]])
+        ok, rvec, tvec = cv2.solvePnP(local[rows.numbers["point"][mine].astype(int)], uv, matrix, np.array(k[4:]))
+        b = np.eye(4)
+        b[:3, :3], b[:3, 3] = cv2.Rodrigues(rvec)[0], tvec.ravel()
+        board_in_cam.append(b)
+        flange.append(nominal_flange[mine[0]])
+    board_in_cam, flange = np.array(board_in_cam), np.array(flange)
+    out = {}
+    for name, method in METHODS.items():
+        if setup["mount"] == "flange":          # camera on the flange: cam -> gripper
+            r, t = cv2.calibrateHandEye(flange[:, :3, :3], flange[:, :3, 3], board_in_cam[:, :3, :3],
+                                        board_in_cam[:, :3, 3], method=method)
+            on_flange = np.eye(4)
+            on_flange[:3, :3], on_flange[:3, 3] = r, t.ravel()
+            in_cell = mean_pose(flange @ on_flange @ board_in_cam)
+        else:                                   # camera in the cell: base -> gripper poses give cam -> base
+            inverse = np.linalg.inv(flange)
+            r, t = cv2.calibrateHandEye(inverse[:, :3, :3], inverse[:, :3, 3], board_in_cam[:, :3, :3],
+                                        board_in_cam[:, :3, 3], method=method)
+            in_cell = np.eye(4)
+            in_cell[:3, :3], in_cell[:3, 3] = r, t.ravel()
+            on_flange = mean_pose(inverse @ in_cell @ board_in_cam)
+        out[name] = (on_flange, in_cell)
+    return out
+
+
+def board_centre_miss(setup, study, q, fitted_flange, on_flange, in_cell) -> float:
+    """RMS (mm) of the board's centre in the camera's frame, fitted chain against the true one, poses ``q``."""
+    centre = np.array([5.5 * setup["square"], 4.0 * setup["square"], 0.0, 1.0])
+    true = flanges(*study.robot.true_flange(q))
+    if setup["mount"] == "cell":
+        truth = np.linalg.inv(pose(setup["camera"])) @ true @ pose(setup["board"]) @ centre
+        fitted = np.linalg.inv(in_cell) @ fitted_flange @ on_flange @ centre
+    else:
+        truth = np.linalg.inv(true @ pose(setup["camera"])) @ pose(setup["board"]) @ centre
+        fitted = np.linalg.inv(fitted_flange @ on_flange) @ in_cell @ centre
+    return float(np.sqrt(np.mean(np.sum((truth - fitted)[:, :3] ** 2, axis=1))))
+
+
+def one(name: str, images: int, seed: int, folder: Path) -> dict:
+    setup = SETUPS[name]
+    mount = setup["mount"]
+    text = VIRTUAL.format(seed=seed, mount=mount, camera=setup["camera"], k=setup["k"], square=setup["square"],
+                          marker=0.75 * setup["square"], board=setup["board"], images=images)
+    (folder / "virtual.yaml").write_text(text)
+    with contextlib.redirect_stdout(io.StringIO()):
+        assert main(["simulate", str(folder / "virtual.yaml")]) == 0
+    study = load_study(folder / "virtual.yaml")
+    nominal = study.robot.nominal
+    rows = read_measurement_rows(folder / "data" / "images.csv")
+    cell = read_cell(folder / "data" / "cell.yaml")
+    start = time.perf_counter()
+    table, _ = identify_measurements(nominal, rows, cell, parametrization=PARAMETRIZATION)
+    seconds = time.perf_counter() - start
+    value = dict(zip(table.names, table.value))
+    other = "flange" if mount == "cell" else "cell"
+    camera = pose([value[f"camera cam1@{mount}.{c}"] for c in ("x", "y", "z", "rx", "ry", "rz")])
+    board = pose([value[f"board b1@{other}.{c}"] for c in ("x", "y", "z", "rx", "ry", "rz")])
+    on_flange, in_cell = (board, camera) if mount == "cell" else (camera, board)
+    fitted_robot = robot_with(nominal, table.value[:geometric_size(nominal, PARAMETRIZATION)], PARAMETRIZATION)
+    # random poses with the board in view (the true chain's view)
+    cameras, boards = true_cell(study.cell.sections)
+    q = sample_configurations(nominal, 20000, study.ranges_deg, study.fixed_deg, np.random.default_rng(seed + 100))
+    seen = seen_points(cameras["cam1"], boards["b1"], *study.robot.true_flange(q), board_points(boards["b1"]))[0]
+    q = q[seen.sum(axis=1) >= seen.shape[1] // 2][:2000]
+    true_on_flange = pose(setup["board"] if mount == "cell" else setup["camera"])
+    true_in_cell = pose(setup["camera"] if mount == "cell" else setup["board"])
+    true_flange = flanges(*study.robot.true_flange(q))
+
+    def hand_eye_error(flange_q, on, cell_pose):
+        """The pose on the flange against the truth carried into the fitted chain's frames: the cell's gauge
+        from the pose in the cell, the flange's as the mean of fitted^-1 gauge true over the poses."""
+        gauge = cell_pose @ np.linalg.inv(true_in_cell)
+        return error(mean_pose(np.linalg.inv(flange_q) @ gauge @ true_flange) @ true_on_flange, on)
+
+    out = {"he": hand_eye_error(fitted_robot.flange(q), on_flange, in_cell),
+           "k": float(np.max(np.abs(np.array([value[f"camera cam1.{c}"] for c in ("fx", "fy", "cx", "cy")])
+                                     - setup["k"][:4]))),
+           "view": board_centre_miss(setup, study, q, fitted_robot.flange(q), on_flange, in_cell),
+           "seconds": seconds, "in_view": len(q)}
+    methods = opencv(setup, rows, nominal.flange(rows.q_deg))
+    scores = {m: hand_eye_error(nominal.flange(q), x, y) for m, (x, y) in methods.items()}
+    best = min(scores, key=lambda m: scores[m][0])
+    out["cv"] = {m: s for m, s in scores.items()}
+    out["cv_best"] = (best, scores[best])
+    out["cv_view"] = board_centre_miss(setup, study, q, nominal.flange(q), *methods[best])
+    return out
+
+
+def run(robots: int) -> None:
+    logging.getLogger("partcal").setLevel(logging.ERROR)
+    table = []
+    for name in SETUPS:
+        for images in (30, 60, 120):
+            results = []
+            for seed in range(robots):
+                with tempfile.TemporaryDirectory() as tmp:
+                    results.append(one(name, images, seed, Path(tmp)))
+            med = lambda f: float(np.median([f(r) for r in results]))  # noqa: E731
+            best = max(set(r["cv_best"][0] for r in results), key=[r["cv_best"][0] for r in results].count)
+            table.append([name, images, f"{med(lambda r: r['he'][0]):.3f}", f"{med(lambda r: r['he'][1]):.4f}",
+                          f"{med(lambda r: r['k']):.2f}", f"{med(lambda r: r['view']):.3f}",
+                          f"{med(lambda r: r['seconds']):.1f}",
+                          f"{med(lambda r: r['cv_best'][1][0]):.3f}", f"{med(lambda r: r['cv_best'][1][1]):.4f}",
+                          best, f"{med(lambda r: r['cv_view']):.3f}",
+                          " ".join(f"{m[:4]} {med(lambda r: r['cv'][m][0]):.2f}" for m in METHODS)])
+    print_table(f"Camera: partcal (robot ({PARAMETRIZATION}) + hand-eye + board + intrinsics from pixels) vs OpenCV "
+                f"hand-eye on nominal poses; virtual UR10, 0.2 px, median of {robots} robots",
+                ["set-up", "images", "he mm", "he deg", "K px", "view mm", "s", "cv he mm", "cv he deg", "best",
+                 "cv view mm", "OpenCV methods (he mm)"], table)
+    print("he: the hand-eye against the truth (pose on the flange, the last row's gauge); K: largest fx, fy, cx, cy "
+          "error; view: the board's centre in the camera's frame, no fit, RMS over random poses with the board "
+          "in view; s: one identification; cv: OpenCV (solvePnP with the true intrinsics, calibrateHandEye on the "
+          "nominal flange poses), best of five by he mm")
+
+
+if __name__ == "__main__":
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--robots", type=int, default=3, help="virtual robots (seeds) per row; median reported")
+    parser.add_argument("--parametrization", choices=("dh", "complete"), default="complete")
+    args = parser.parse_args()
+    PARAMETRIZATION = args.parametrization
+    run(args.robots)

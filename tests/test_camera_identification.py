@@ -142,3 +142,9 @@ def test_simulated_images_identify_the_hand_eye_the_robot_and_the_intrinsics(mou
     expected = fitted_flange[3] @ _pose(camera) if mount == "flange" else _pose(camera)
     assert np.allclose(seen[:3, :3], expected[:3, :3], atol=1e-12)
     assert np.allclose(seen[:3, 3] * 1000.0, expected[:3, 3], atol=1e-9)
+    capsys.readouterr()
+    assert main(["plan", "universal_robots_ur10", "--evaluate", str(tmp_path / "data" / "images.csv"),
+                 "--cell", str(tmp_path / "data" / "cell.yaml")]) == 0
+    said = capsys.readouterr().out
+    assert "(held nominal): theta[1], d[1], theta[6], d[6], a[6], alpha[6], base.x" in said
+    assert "the base is held nominal and the " + ("camera's" if mount == "cell" else "board's") in said

@@ -221,6 +221,12 @@ def identify_measurements(robot: Robot, rows: MeasurementRows, cell: dict | None
     return table, notes
 
 
+def stand_ins(measurements: list[MeasurementType], names: list[str]) -> set[str]:
+    """The robot's parameters (of ``names``) every type present says its own unknowns stand for
+    (:meth:`MeasurementType.stands_for`): held nominal, the types' unknowns carrying them."""
+    return set.intersection(*(measurement.stands_for(names) for measurement in measurements)) if measurements else set()
+
+
 def rank_jacobian(problem: StackedProblem, wanted: NDArray[np.bool_], rcond: float
                   ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """The Jacobian the rank rule reads, at the problem's start on consistent data (:func:`consistent_jacobian`
@@ -255,8 +261,8 @@ def _prepared(robot: Robot, rows: MeasurementRows, cell: dict, base: bool, tool:
     for measurement, cols in zip(measurements, problem.columns):       # a type's unknowns of the tool (a further target's offset)
         wanted[cols] = [tool or not measurement.follows_tool(problem.names[c - problem.own][0]) for c in cols]
     own = [n for n, _ in parameter_names(robot, errors, parametrization)]
-    stand_ins = set.intersection(*(measurement.stands_for(own) for measurement in measurements))
-    wanted[[i for i, n in enumerate(own) if n in stand_ins]] = False   # carried by the types' own unknowns
+    carried = stand_ins(measurements, own)
+    wanted[[i for i, n in enumerate(own) if n in carried]] = False   # carried by the types' own unknowns
     notes = [note for measurement in measurements for note in measurement.notes()]
     jac0, direction = rank_jacobian(problem, wanted, rcond)
     if prior is not None:
@@ -288,12 +294,13 @@ def observability(robot: Robot, rows: MeasurementRows, cell: dict | None = None,
     """What rows of measurement types cannot identify, without fitting: the notes of :func:`identify_measurements`
     and the parameters its rank rule would hold nominal (judged at the nominal robot, on consistent data; with
     a ``prior``, its rows read too)."""
-    _, names, wanted, jac0, notes = _prepared(robot, rows, cell or {}, base, tool, rcond, errors, payload_kg,
-                                              parametrization, prior)
+    problem, names, wanted, jac0, notes = _prepared(robot, rows, cell or {}, base, tool, rcond, errors, payload_kg,
+                                                    parametrization, prior)
     free = identifiable_parameters(jac0, wanted, rcond, [u for _, u in names],
                                    jac0.shape[0] - (prior.size if prior is not None else 0))[0]
     held = [names[i][0] for i in np.flatnonzero(wanted) if i not in set(free.tolist())]
-    return notes, held
+    carried = stand_ins(problem.measurements, [n for n, _ in names])
+    return notes, [n for n, _ in names if n in carried] + held
 
 
 def freedom(robot: Robot, rows: MeasurementRows, cell: dict | None = None, *, base: bool = True, tool: bool = True,

@@ -40,7 +40,7 @@ from ..calibration.parameters import parameter_names
 from ..calibration.measurement import REFERENCE_NOISE_MM, MeasurementRows
 from ..calibration.checks import PLANNED
 from ..calibration.registry import MEASUREMENT_TYPES, built_types
-from ..calibration.stacked import observability, rank_jacobian, StackedProblem
+from ..calibration.stacked import observability, rank_jacobian, stand_ins, StackedProblem
 from ..robot.floor import above_floor
 from ..robot.kinematics import Robot
 from . import plan
@@ -95,8 +95,9 @@ def stacked_design(robot: Robot, rows: MeasurementRows, cell: dict, model: desig
     row_of = np.concatenate([k.residuals(chain.positions, chain.rotations, u).rows_a
                              for k, u in zip(measurements, problem.split(problem.start))])
     names = parameter_names(robot, errors, par) + problem.names
+    carried = stand_ins(measurements, [n for n, _ in names])
     wanted = np.array([(model.tool or not n.startswith("tool.")) and (model.base or not n.startswith("base."))
-                       for n, _ in names])
+                       and n not in carried for n, _ in names])
     jac = rank_jacobian(problem, wanted, rcond)[0]
     notes, held = observability(robot, rows, cell, base=model.base, tool=model.tool, rcond=rcond,
                                 errors=errors, payload_kg=payload, parametrization=par)

@@ -231,7 +231,7 @@ def run(robots: int) -> None:
                 f"hand-eye on nominal poses; virtual UR10, 0.2 px, median of {robots} robots",
                 ["set-up", "images", "he mm", "he deg", "K px", "view mm", "s", "cv he mm", "cv he deg", "best",
                  "cv view mm", "OpenCV methods (he mm)"], table)
-    print("he: the hand-eye against the truth (pose on the flange, the last row's gauge); K: largest fx, fy, cx, cy "
+    print("he: the hand-eye against the truth (pose on the flange, in the gauge the images define); K: largest fx, fy, cx, cy "
           "error; view: the board's centre in the camera's frame, no fit, RMS over random poses with the board "
           "in view; s: one identification; cv: OpenCV (solvePnP with the true intrinsics, calibrateHandEye on the "
           "nominal flange poses), best of five by he mm")

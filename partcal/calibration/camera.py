@@ -164,6 +164,10 @@ class CameraPoints(MeasurementType):
         self._resolve()
         self.camera_names = list(dict.fromkeys(self.camera))
         self.board_names = list(dict.fromkeys(self.board))
+        pairs: dict[tuple[str, str], list[int]] = {}
+        for k, key in enumerate(zip(self.camera, self.board)):
+            pairs.setdefault(key, []).append(k)
+        self.pairs = {key: np.array(rows, dtype=np.intp) for key, rows in pairs.items()}   # each camera's board
         self.local = np.empty((index.size, 3))
         for b in self.board_names:
             mine = np.array([x == b for x in self.board])
@@ -261,9 +265,8 @@ class CameraPoints(MeasurementType):
         width, height = spec["image_size"]
         centre = np.array([width / 2.0, height / 2.0])
         hs = []
-        for image in dict.fromkeys(i for i, c in zip(self.image, self.camera) if c == cam):
-            mine = np.flatnonzero([i == image and c == cam for i, c in zip(self.image, self.camera)])
-            if mine.size >= MIN_IMAGE_POINTS:
+        for (_, c, _), mine in self._groups().items():
+            if c == cam and mine.size >= MIN_IMAGE_POINTS:
                 hs.append(homography(self.local[mine, :2], self.uv[mine] - centre))
         f = focal_from_homographies(hs)
         if f is None:
@@ -276,16 +279,20 @@ class CameraPoints(MeasurementType):
         """Each image of camera ``cam`` with enough points of one board: the board, its rows (positions in
         ``self.index``) and the board's pose in the camera's frame, from its homography."""
         out = []
-        keys = dict.fromkeys((i, b) for i, c, b in zip(self.image, self.camera, self.board) if c == cam)
-        for image, board in keys:
-            mine = np.flatnonzero([i == image and c == cam and b == board
-                                   for i, c, b in zip(self.image, self.camera, self.board)])
-            if mine.size < MIN_IMAGE_POINTS:
+        for (_, c, board), mine in self._groups().items():
+            if c != cam or mine.size < MIN_IMAGE_POINTS:
                 continue
             h = homography(self.local[mine, :2], undistorted(self.uv[mine], k))
             out.append((board, mine, pose_from_homography(h)))
         main = max(dict.fromkeys(b for b, _, _ in out), key=lambda b: sum(v[0] == b for v in out), default=None)
         return [v for v in out if v[0] == main]
+
+    def _groups(self) -> dict[tuple[str, str, str], NDArray[np.intp]]:
+        """The rows (positions in ``self.index``) of each image, camera and board, in the rows' order."""
+        out: dict[tuple[str, str, str], list[int]] = {}
+        for k, key in enumerate(zip(self.image, self.camera, self.board)):
+            out.setdefault(key, []).append(k)
+        return {key: np.array(rows, dtype=np.intp) for key, rows in out.items()}
 
     # -------------------------------------------------------------- residuals
     def residuals(self, positions, rotations, u) -> Residuals:
@@ -296,11 +303,8 @@ class CameraPoints(MeasurementType):
         tool = np.empty((m, 2, 3))
         du = np.zeros((m, 2, u.size))
         rot, pos = rotations[self.index], positions[self.index]
-        for cam in self.camera_names:
-            for b in self.board_names:
-                mine = np.flatnonzero([c == cam and x == b for c, x in zip(self.camera, self.board)])
-                if mine.size:
-                    self._block(mine, cam, b, pos[mine], rot[mine], u, values, grad, turn, tool, du)
+        for (cam, b), mine in self.pairs.items():
+            self._block(mine, cam, b, pos[mine], rot[mine], u, values, grad, turn, tool, du)
         return Residuals(values.ravel(), np.repeat(self.index, 2), grad.reshape(-1, 3), du.reshape(2 * m, -1),
                          turn_grad=turn.reshape(-1, 3), scaled=np.zeros(2 * m, dtype=bool),
                          tool_grad=tool.reshape(-1, 3))

@@ -112,7 +112,7 @@ def homography(plane: NDArray[np.float64], image: NDArray[np.float64]) -> NDArra
     b = np.column_stack([image, np.ones(len(image))]) @ tb.T
     zero = np.zeros_like(a)
     rows = np.vstack([np.hstack([a, zero, -b[:, :1] * a]), np.hstack([zero, a, -b[:, 1:2] * a])])
-    h = np.linalg.svd(rows)[2][-1].reshape(3, 3)
+    h = np.linalg.eigh(rows.T @ rows)[1][:, 0].reshape(3, 3)      # the smallest singular vector
     h = np.linalg.inv(tb) @ h @ ta
     return h / h[2, 2]
 
@@ -150,7 +150,7 @@ def solve_ax_yc(a: NDArray[np.float64], c: NDArray[np.float64]) -> tuple[NDArray
     translations): a start for the fit, not its answer."""
     eye = np.eye(3)
     rows = np.vstack([np.hstack([np.kron(ai[:3, :3], eye), -np.kron(eye, ci[:3, :3].T)]) for ai, ci in zip(a, c)])
-    v = np.linalg.svd(rows)[2][-1]
+    v = np.linalg.eigh(rows.T @ rows)[1][:, 0]
     rx, ry = v[:9].reshape(3, 3), v[9:].reshape(3, 3)
     det = np.linalg.det(rx)
     scale = np.sign(det) / abs(det) ** (1.0 / 3.0)

@@ -25,7 +25,7 @@ SAMPLES = 3
 BACKGROUND = 90
 """The grey of what the board does not cover."""
 
-ARUCO_DICTIONARY = cv2.aruco.DICT_5X5_1000
+ARUCO_DICTIONARY = cv2.aruco.DICT_4X4_1000
 """The markers of a ChArUco board (and of the detection that reads it)."""
 
 

@@ -1,0 +1,76 @@
+"""From images to the hand-eye: board images of a virtual robot rendered (partcal/data/boards.py), the board
+detected in them with the joints CSV (partcal/data/detect.py), and the robot, the camera, the board and the
+intrinsics identified from the detected pixels (eye-to-hand), scored against the simulation's truth."""
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from partcal.calibration.camera import seen_points, true_cell
+from partcal.calibration.camera_model import board_points
+from partcal.calibration.stacked import identify_measurements
+from partcal.data.boards import render_folder
+from partcal.data.detect import detect_folder
+from partcal.data.sampling import sample_configurations
+from partcal.data.simulate import load_study
+
+VIRTUAL = """robot: universal_robots_ur10
+seed: 5
+output: data
+errors:
+  dh_sigma: {length_mm: 0.5, twist_deg: 0.03, zero_offset_deg: 0.05}
+  tool_mm: [0.3, -0.2, 0.4]
+  base: {rotation_deg: [0.02, -0.03, 0.04], translation_mm: [1.0, -0.5, 0.8]}
+tracker: {position_mm: [2500, 0, 0], accuracy_ppm: 0, repeatability_ppm: 10, readings: 1}
+sampling:
+  ranges_deg: {q1: [-40, 40], q2: [-150, -30], q3: [-140, 140], q4: [-180, 180], q5: [-150, 150], q6: [-180, 180]}
+cell:
+  cameras:
+    cam1: {mount: cell, image_size: [960, 600], pose: [1900.0, 300.0, 900.0, -73.4542, -96.1699, 68.1777],
+           intrinsics: {fx: 750, fy: 750, cx: 480, cy: 300, k1: -0.1, k2: 0.05, p1: 0.0005, p2: -0.0003}}
+  boards:
+    b1: {type: charuco, rows: 8, cols: 11, square_mm: 50, marker_mm: 38, pose: [-275, 200, 30, 178, 3, 2]}
+datasets:
+  test: {sample: 10}
+"""
+
+
+def _pose(values) -> np.ndarray:
+    out = np.eye(4)
+    out[:3, :3] = Rotation.from_rotvec(values[3:], degrees=True).as_matrix()
+    out[:3, 3] = values[:3]
+    return out
+
+
+def test_rendered_images_of_a_virtual_robot_give_its_hand_eye(tmp_path):
+    (tmp_path / "virtual.yaml").write_text(VIRTUAL)
+    study = load_study(tmp_path / "virtual.yaml")
+    cameras, boards = true_cell(study.cell.sections)
+    camera, board = cameras["cam1"], boards["b1"]
+    q = sample_configurations(study.robot.nominal, 3000, study.ranges_deg, study.fixed_deg,
+                              np.random.default_rng(6))
+    flange_mm, flange_rot = study.robot.true_flange(q)
+    seen, uv = seen_points(camera, board, flange_mm, flange_rot, board_points(board))
+    span = np.ptp(uv[..., 0], axis=1)
+    keep = np.flatnonzero(seen.all(axis=1) & (span > 300))[:12]     # the whole board in view, 300 px wide or more
+    flanges = np.tile(np.eye(4), (keep.size, 1, 1))
+    flanges[:, :3, :3], flanges[:, :3, 3] = flange_rot[keep], flange_mm[keep]
+    in_camera = np.linalg.inv(_pose(camera["pose"])) @ flanges @ _pose(board["pose"])
+    render_folder(tmp_path / "images", camera, board, in_camera, q[keep], np.random.default_rng(7))
+
+    found = detect_folder(tmp_path / "images", tmp_path / "images" / "joints.csv", study.robot.nominal, board, "cam1",
+                          "b1", image_size=(960, 600))
+    assert found.not_found == []
+    cell = {"cameras": {"cam1": {"mount": "cell", "image_size": [960, 600], "fit_intrinsics": True}},
+            "boards": {"b1": {k: v for k, v in board.items() if k != "pose"}}, "noise": {"camera": 0.1}}
+    table, _ = identify_measurements(study.robot.nominal, found.rows, cell)
+    value = dict(zip(table.names, table.value))
+    assert table.target_rms_mm["camera"] < 0.15                         # the detection's own error, px
+    fitted = _pose([value[f"board b1@flange.{c}"] for c in ("x", "y", "z", "rx", "ry", "rz")])
+    true, nominal = study.robot.true, study.robot.nominal
+    last = {k: np.r_[getattr(true, k)[:-1], getattr(nominal, k)[-1]]
+            for k in ("alpha_deg", "d_mm", "a_mm", "theta_offset_deg")}
+    expected = np.linalg.inv(true.replace(**last).flange(q[:1])[0]) @ true.flange(q[:1])[0] @ _pose(board["pose"])
+    assert np.linalg.norm(expected[:3, 3] - fitted[:3, 3]) < 0.3        # 0.03 mm seen with 16 images
+    assert Rotation.from_matrix(expected[:3, :3].T @ fitted[:3, :3]).magnitude() < np.radians(0.05)
+    k = [value[f"camera cam1.{c}"] for c in ("fx", "fy", "cx", "cy")]
+    assert np.allclose(k, [750, 750, 480, 300], atol=1.5)

@@ -463,16 +463,16 @@ class CameraPoints(MeasurementType):
         mounts = {self.cameras_cell[c]["mount"] for c in self.camera_names}
         if "cell" in mounts:
             out.append("camera: a camera in the cell is the images' only reference of the base frame: the base's pose "
-                       "and the camera's are one unknown (joint 1's offset and the base height with them): the base is "
-                       "held nominal and the camera's pose identified in it (tracker points or touches beside the "
-                       "images fix the base)")
+                       "and the camera's are one unknown (joint 1's offset and the base height with them): with camera "
+                       "rows alone the base is held nominal and the camera's pose identified in it (tracker points or "
+                       "touches beside the images fix the base)")
         if "flange" in mounts:
             out.append("camera: a board in the cell is the images' only reference of the base frame: the base's pose "
-                       "and the board's are one unknown (joint 1's offset and the base height with them): the base is "
-                       "held nominal and the board's pose identified in it")
+                       "and the board's are one unknown (joint 1's offset and the base height with them): with camera "
+                       "rows alone the base is held nominal and the board's pose identified in it")
         out.append("camera: the last joint's offset and the flange's own frame (the chain's last row) go with the "
-                   "pose on the flange (the board's or the camera's: the hand-eye), held nominal; a camera does not see "
-                   "the tool offset")
+                   "pose on the flange (the board's or the camera's: the hand-eye), held nominal with camera rows "
+                   "alone; a camera does not see the tool offset")
         if any(half_turn_symmetric(self.boards_cell[b]) for b in self.board_names):
             out.append("camera: a chessboard with both square counts even or both odd looks the same turned half a "
                        "turn: its detections may flip between images (use one odd and one even count, or a ChArUco "

@@ -42,7 +42,7 @@ from scipy.spatial.transform import Rotation
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _table import print_table  # noqa: E402
 
-from partcal.calibration.camera import seen_points, true_cell  # noqa: E402
+from partcal.calibration.camera_cell import seen_points, true_cell  # noqa: E402
 from partcal.calibration.camera_model import board_points  # noqa: E402
 from partcal.calibration.parameters import geometric_size, robot_with  # noqa: E402
 from partcal.calibration.stacked import identify_measurements  # noqa: E402

@@ -5,7 +5,8 @@ import cv2
 import numpy as np
 import pytest
 
-from partcal.calibration.camera import CameraPoints, half_turn_symmetric
+from partcal.calibration.camera import CameraPoints
+from partcal.calibration.camera_cell import half_turn_symmetric
 from partcal.calibration.camera_model import (board_points, focal_from_homographies, homography, pose_from_homography,
                                               pose_matrix, project, solve_ax_yc)
 from partcal.calibration.measurement import MeasurementRows

@@ -5,7 +5,7 @@ intrinsics identified from the detected pixels (eye-to-hand), scored against the
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from partcal.calibration.camera import seen_points, true_cell
+from partcal.calibration.camera_cell import seen_points, true_cell
 from partcal.calibration.camera_model import board_points
 from partcal.calibration.stacked import identify_measurements
 from partcal.data.boards import render_folder

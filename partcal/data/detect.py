@@ -20,11 +20,11 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from ..calibration.camera import half_turn_symmetric
+from ..calibration.camera_cell import half_turn_symmetric
 from ..calibration.measurement import MeasurementRows
 from ..errors import DataError
 from ..robot.kinematics import Robot
-from .boards import ARUCO_DICTIONARY, charuco_board
+from .boards import charuco_board
 from .measurement_rows import write_measurement_rows
 
 log = logging.getLogger(__name__)

@@ -37,7 +37,7 @@ from ..data.formats import load_format
 from ..data.measurements import read_measurements
 from ..errors import PartcalError
 from ..metrics import pooled_rms
-from ..calibration.camera import mounted_frames
+from ..calibration.camera_cell import mounted_frames
 from ..calibration.parameters import geometric_size, own_geometry
 from ..models.kinematic import KinematicModel
 from ..robot.description import robot_to_dict

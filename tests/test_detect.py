@@ -13,7 +13,7 @@ from partcal.errors import DataError
 from partcal.robot.description import load_robot
 
 CAMERA = {"image_size": [800, 600], "intrinsics": [700.0, 700.0, 400.0, 300.0, -0.08, 0.03, 0.0004, -0.0003, 0.0]}
-BOARDS = {"charuco": {"type": "charuco", "rows": 6, "cols": 8, "square_mm": 30.0, "marker_mm": 22.0},
+BOARDS = {"charuco": {"type": "charuco", "rows": 6, "cols": 8, "square_mm": 40.0, "marker_mm": 30.0},
           "chessboard": {"type": "chessboard", "rows": 6, "cols": 9, "square_mm": 25.0}}
 
 

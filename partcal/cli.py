@@ -69,18 +69,6 @@ def _said(done) -> int:
     return 0
 
 
-def _cmd_predict(args) -> int:
-    from .study.downstream import predict_points
-    return _said(predict_points(args.model, args.input, args.output, fmt=args.format, std=args.std))
-
-
-def _cmd_compensate(args) -> int:
-    from .study.downstream import compensate_file
-    return _said(compensate_file(args.model, args.targets, args.output, program=args.program, fmt=args.format,
-                                 std=args.std, frames=args.frame, tools=args.tool, tol_mm=args.tol_mm,
-                                 tol_deg=args.tol_deg, keep_unconverged=args.keep_unconverged))
-
-
 def _cmd_import(args) -> int:
     if (args.input is None) == (args.config is None):
         raise PartcalError("import: give either an input file or --config RUN.yaml (not both)")
@@ -174,6 +162,16 @@ def _add_run_commands(sub) -> None:
     sim = sub.add_parser("simulate", help="generate measurement data from a virtual robot config")
     sim.add_argument("config", help="virtual-experiment YAML, e.g. configs/sk120_virtual.yaml")
     sim.set_defaults(func=_printed("data_files", lambda m, a: m.simulate_files(a.config)))
+    det = sub.add_parser("detect", help="detect the cell's board in a folder of images: the camera rows of a run")
+    det.add_argument("images", help="folder of images (.png, .jpg, .bmp, .tif), one per row of --joints")
+    det.add_argument("--joints", required=True, metavar="JOINTS.csv", help="image,q1..qN (deg): each image's pose")
+    det.add_argument("--cell", required=True, metavar="CELL.yaml", help="the cell's cameras: and boards: (sizes)")
+    det.add_argument("--robot", required=True, help="robot (built-in name, robot YAML or URDF): its joint count")
+    det.add_argument("--camera", help="the cell's camera that took the images (default: its only one)")
+    det.add_argument("--board", help="the cell's board in the images (default: its only one)")
+    det.add_argument("-o", "--output", required=True, help="measurements CSV to write (camera rows)")
+    det.set_defaults(func=_printed("detect_command", lambda m, a: m.detect_images(
+        a.images, a.joints, a.cell, a.robot, a.output, camera=a.camera, board=a.board)))
     run = sub.add_parser("run", help="fit and compare the models of a batch-run YAML; write metrics, models, report")
     run.add_argument("config", help="batch-run YAML, e.g. configs/paper_sk120.yaml")
     run.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
@@ -193,7 +191,8 @@ def _add_downstream(sub) -> None:
     _format_option(pred, "the input's")
     pred.add_argument("--std", action="store_true", help="also the standard deviation of each predicted error: "
                                                          "sdx,sdy,sdz (mm; pose models also sdrx,sdry,sdrz, mrad)")
-    pred.set_defaults(func=_cmd_predict)
+    pred.set_defaults(func=lambda a: _said(importlib.import_module("partcal.study.downstream").predict_points(
+        a.model, a.input, a.output, fmt=a.format, std=a.std)))
     comp = sub.add_parser("compensate", help="false targets that make the robot reach the given targets")
     comp.add_argument("model", help="model file (models/<name>.json of a run)")
     comp.add_argument("targets", help="CSV with x,y,z (or x_nom,y_nom,z_nom) in mm; joint models also read q1..qN "
@@ -224,7 +223,9 @@ def _add_downstream(sub) -> None:
     comp.add_argument("--keep-unconverged", action="store_true",
                       help="write the program even when targets are not compensated: they keep their numbers, "
                            "with a comment (exit code 3 all the same)")
-    comp.set_defaults(func=_cmd_compensate)
+    comp.set_defaults(func=lambda a: _said(importlib.import_module("partcal.study.downstream").compensate_file(
+        a.model, a.targets, a.output, program=a.program, fmt=a.format, std=a.std, frames=a.frame, tools=a.tool,
+        tol_mm=a.tol_mm, tol_deg=a.tol_deg, keep_unconverged=a.keep_unconverged)))
 
 
 def _add_file_commands(sub) -> None:

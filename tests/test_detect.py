@@ -114,3 +114,55 @@ def test_an_image_of_another_size_than_the_cameras_is_refused(tmp_path):
     with pytest.raises(DataError, match=r"a.png: 80 x 60 pixels; camera 'cam1''s image_size is 800 x 600"):
         detect_folder(tmp_path, path, load_robot("universal_robots_ur10"), BOARDS["charuco"], "cam1",
                       image_size=(800, 600))
+
+
+CELL = """cameras:
+  cam1: {mount: cell, image_size: [800, 600]}
+boards:
+  b1: {type: charuco, rows: 6, cols: 8, square_mm: 40, marker_mm: 30}
+"""
+
+
+def test_partcal_detect_writes_the_camera_rows_of_a_folder_and_names_an_image_without_the_board(tmp_path, capsys):
+    """The command reads the board and the image size from the cell: the rows it writes are the true pixels
+    (cv2.projectPoints of the true poses) within 0.1 px, each image with its own joints, the empty one named."""
+    from partcal.cli import main
+    board = BOARDS["charuco"]
+    poses, q = _views(board, 3, seed=6)
+    poses[0][:3, 3] += [5000.0, 0.0, 0.0]                        # the first image sees no board
+    render_folder(tmp_path / "images", CAMERA, board, poses, q, np.random.default_rng(7))
+    (tmp_path / "cell.yaml").write_text(CELL)
+    args = ["detect", str(tmp_path / "images"), "--joints", str(tmp_path / "images" / "joints.csv"), "--cell",
+            str(tmp_path / "cell.yaml"), "--robot", "universal_robots_ur10", "-o", str(tmp_path / "pixels.csv")]
+    assert main(args) == 0
+    out = capsys.readouterr()
+    assert "no board found in 1 images (left out): image_0001.png" in out.out
+    rows = read_measurement_rows(tmp_path / "pixels.csv")
+    assert set(rows.texts["camera"]) == {"cam1"} and set(rows.texts["board"]) == {"b1"}
+    assert set(rows.texts["image"]) == {"image_0002.png", "image_0003.png"}
+    errors = []
+    for k in (1, 2):
+        mine = np.flatnonzero(np.array(rows.texts["image"]) == f"image_{k + 1:04d}.png")
+        np.testing.assert_allclose(rows.q_deg[mine], np.repeat(q[k][None], mine.size, axis=0), atol=1e-9)
+        uv = np.column_stack([rows.numbers["u_px"][mine], rows.numbers["v_px"][mine]])
+        errors.append(uv - _truth(board, poses[k])[rows.numbers["point"][mine].astype(int)])
+    assert np.sqrt(np.mean(np.sum(np.vstack(errors) ** 2, axis=1))) < 0.1
+
+
+@pytest.mark.parametrize("cell, extra, message", [
+    (CELL.replace("boards:", "  cam2: {mount: flange, image_size: [800, 600]}\nboards:"), [],
+     r"cell.yaml: cameras: 2 entries \(cam1, cam2\); expected one, or name it with --camera"),
+    (CELL, ["--board", "b9"], r"--board b9: not among .*cell.yaml's boards: \(b1\)"),
+    (CELL.replace(", square_mm: 40", ""), [], r"cell.yaml.*square_mm"),
+])
+def test_partcal_detect_refuses_a_camera_or_board_it_cannot_choose(tmp_path, capsys, cell, extra, message):
+    from partcal.cli import main
+    path = _folder(tmp_path, "image,q1,q2,q3,q4,q5,q6\na.png,0,0,0,0,0,0\n", ("a.png",))
+    (tmp_path / "cell.yaml").write_text(cell)
+    code = main(["detect", str(tmp_path), "--joints", str(path), "--cell", str(tmp_path / "cell.yaml"), "--robot",
+                 "universal_robots_ur10", "-o", str(tmp_path / "pixels.csv"), *extra])
+    err = capsys.readouterr().err
+    assert code == 2 and len(err.strip().splitlines()) == 1, err
+    import re
+    assert re.search(message, err), err
+    assert not (tmp_path / "pixels.csv").exists()

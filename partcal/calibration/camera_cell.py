@@ -83,15 +83,17 @@ def half_turn_symmetric(board: dict) -> bool:
 
 
 def simulated_rows(truth, spec, rng, noise) -> MeasurementRows:
-    """Camera rows of a virtual robot (``partcal simulate``; :meth:`CameraPoints.simulate <partcal.calibration.camera.CameraPoints.simulate>`): ``spec`` ``{images: N, cameras: [names],
-    min_points: k}`` (default: 30 images of every camera of the true cell, each seeing at least half its
-    board). Poses are drawn within the config's ranges and kept when the board is in front of the camera,
-    turned less than :data:`OBLIQUE_DEG` from it and ``min_points`` of its points fall inside the image; the
-    true cell's cameras and boards give their ``pose`` (``[x, y, z, rx, ry, rz]``: mm, a rotation vector in
-    degrees) and the cameras their ``intrinsics``."""
-    unknown = set(spec) - {"images", "cameras", "min_points"}
+    """Camera rows of a virtual robot (``partcal simulate``; :meth:`CameraPoints.simulate
+    <partcal.calibration.camera.CameraPoints.simulate>`): ``spec`` ``{images: N, cameras: [names], min_points: k,
+    render: bool}`` (default: 30 images of every camera of the true cell, each seeing at least half its board;
+    ``render: true`` writes the images too, :func:`partcal.data.boards.image_files`). Poses are drawn within the
+    config's ranges and kept when the board is in front of the camera, turned less than :data:`OBLIQUE_DEG` from
+    it and ``min_points`` of its points fall inside the image; the true cell's cameras and boards give their
+    ``pose`` (``[x, y, z, rx, ry, rz]``: mm, a rotation vector in degrees) and the cameras their ``intrinsics``."""
+    unknown = set(spec) - {"images", "cameras", "min_points", "render"}
     if unknown:
-        raise DataError(f"a camera data set reads images, cameras, min_points; got {', '.join(sorted(unknown))}")
+        raise DataError(f"a camera data set reads images, cameras, min_points, render; got "
+                        f"{', '.join(sorted(unknown))}")
     cameras, boards = true_cell(truth.cell)
     count = int(spec.get("images", 30))
     q_all, texts, numbers = [], {"image": [], "camera": [], "board": []}, {"point": [], "u_px": [], "v_px": []}
@@ -155,17 +157,22 @@ def true_cell(sections: dict) -> tuple[dict, dict]:
     return out[0], out[1]
 
 
+def camera_T_boards(camera: dict, board: dict, flange_mm, flange_rotations) -> NDArray[np.float64]:
+    """The true board in the true camera's frame (n, 4, 4; mm) at flange poses (positions (n, 3) mm, rotations
+    (n, 3, 3), base frame): the camera's and the board's ``pose`` on their mounts."""
+    cam, brd = pose_matrix(camera["pose"]), pose_matrix(board["pose"])
+    flange = np.tile(np.eye(4), (flange_mm.shape[0], 1, 1))
+    flange[:, :3, :3], flange[:, :3, 3] = flange_rotations, flange_mm
+    if camera["mount"] == "cell":
+        return np.linalg.inv(cam) @ flange @ brd
+    return np.linalg.inv(flange @ cam) @ brd
+
+
 def seen_points(camera: dict, board: dict, flange_mm, flange_rotations, local) -> tuple[NDArray, NDArray]:
     """Which of a board's points (``local``, (p, 3) mm in its frame) a camera sees at flange poses (positions
     (n, 3) mm, rotations (n, 3, 3), base frame), and their true pixels: masks (n, p) and pixels (n, p, 2)."""
-    cam, brd = pose_matrix(camera["pose"]), pose_matrix(board["pose"])
     n = flange_mm.shape[0]
-    flange = np.tile(np.eye(4), (n, 1, 1))
-    flange[:, :3, :3], flange[:, :3, 3] = flange_rotations, flange_mm
-    if camera["mount"] == "cell":
-        cam_T_board = np.linalg.inv(cam) @ flange @ brd
-    else:
-        cam_T_board = np.linalg.inv(flange @ cam) @ brd
+    cam_T_board = camera_T_boards(camera, board, flange_mm, flange_rotations)
     points = np.einsum("nij,pj->npi", cam_T_board[:, :3, :3], local) + cam_T_board[:, None, :3, 3]
     centre = cam_T_board[:, :3, 3] + cam_T_board[:, :3, :3] @ local.mean(axis=0)
     facing = np.einsum("ni,ni->n", cam_T_board[:, :3, 2], centre) / np.linalg.norm(centre, axis=1)

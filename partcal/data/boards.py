@@ -13,6 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .._io import atomic_write
+from ..calibration.camera_cell import camera_T_boards
 from ..calibration.camera_model import board_points, project
 from ..robot.description import joint_columns
 
@@ -134,3 +135,29 @@ def true_pixels(camera: dict, board: dict, cam_T_board: NDArray[np.float64]) -> 
     local = board_points(board)
     points = local @ cam_T_board[:3, :3].T + cam_T_board[:3, 3]
     return project(points, np.asarray(camera["intrinsics"], dtype=float))[0]
+
+
+def image_files(rows, cameras: dict, boards: dict, true_flange, rng: np.random.Generator) -> dict[str, bytes]:
+    """The images of a virtual robot's camera rows (``partcal simulate`` with ``render: true``): for each camera,
+    ``<camera>/<image>.png`` of every image of ``rows`` (the board at the true robot's pose of that image) and
+    ``<camera>/joints.csv`` (``image, q1..qN``: the folder ``partcal detect`` reads). ``cameras``, ``boards``: the
+    true cell's (:func:`partcal.calibration.camera_cell.true_cell`); ``true_flange(q)``: the true flange's
+    positions and rotations. Returns relative path -> the file's bytes."""
+    images, first = np.unique(np.asarray(rows.texts["image"]), return_index=True)
+    order = np.argsort(first)
+    files = {}
+    for cam in dict.fromkeys(rows.texts["camera"]):
+        mine = [k for k in order if rows.texts["camera"][first[k]] == cam]
+        rays, textures = camera_rays(cameras[cam]), {}
+        lines = [",".join(["image", *joint_columns(rows.q_deg.shape[1])])]
+        for k in mine:
+            row = first[k]
+            q = rows.q_deg[row:row + 1]
+            name = rows.texts["board"][row]
+            texture = textures.setdefault(name, pattern(boards[name]))
+            pose = camera_T_boards(cameras[cam], boards[name], *true_flange(q))[0]
+            png = cv2.imencode(".png", render_view(rays, texture, pose, rng))[1]
+            files[f"{cam}/{images[k]}.png"] = png.tobytes()
+            lines.append(",".join([f"{images[k]}.png", *(f"{v:.6f}" for v in q[0])]))
+        files[f"{cam}/joints.csv"] = ("\n".join(lines) + "\n").encode()
+    return files

@@ -24,6 +24,7 @@ from .._validation import one_of
 from .._yamlio import Section, range_check
 from ..errors import UnreachableError
 from ..robot.rotations import matrices_from_rotation_vectors
+from ..calibration.camera_cell import true_cell
 from ..calibration.cell import FEATURE_NAME, check_ties, unit_vector, vector3_problem
 from ..calibration.measurement import MeasurementRows
 from ..calibration.registry import MEASUREMENT_TYPES
@@ -312,12 +313,32 @@ def write_contact_files(study, observations: dict, note) -> list[tuple[Path, Pat
         tmp = study.output / f".{name}.truth.yaml.partial"
         pending.append((tmp, study.output / f"{name}.truth.yaml"))
         _write_yaml(tmp, truth(study.cell, study.robot, spec), note(study, f"the truth of '{name}'"))
+        if (spec.get("params") or {}).get("render"):
+            pending += _image_files(study, name, table)
     if study.cell is not None:
         rng = np.random.default_rng(np.random.SeedSequence(study.seed, spawn_key=(39, 0)))
         tmp = study.output / ".cell.yaml.partial"
         pending.append((tmp, study.output / "cell.yaml"))
         _write_yaml(tmp, given_cell(study.cell, noise, rng), note(study, "what the cell knows of its "
                     "planes and points (read_cell, docs/data.md)"))
+    return pending
+
+
+def _image_files(study, name: str, table: MeasurementRows) -> list[tuple[Path, Path]]:
+    """A camera data set's images (``render: true``) in ``<name>_images/<camera>/``, each file written to a
+    temporary name: the folder ``partcal detect`` reads, one image per image of the rows with its joints CSV.
+    Rendered from their own stream (``spawn_key=(41, k)``): the rows do not change."""
+    from .boards import image_files          # OpenCV, imported only when images are rendered
+    k = list(study.observations).index(name) + 1
+    rng = np.random.default_rng(np.random.SeedSequence(study.seed, spawn_key=(41, k)))
+    cameras, boards = true_cell(study.cell.sections)
+    pending = []
+    for relative, data in image_files(table, cameras, boards, study.robot.true_flange, rng).items():
+        final = study.output / f"{name}_images" / relative
+        final.parent.mkdir(parents=True, exist_ok=True)
+        tmp = final.with_name(f".{final.name}.partial")
+        tmp.write_bytes(data)
+        pending.append((tmp, final))
     return pending
 
 

@@ -98,7 +98,8 @@ def test_bad_foreign_files_name_file_line_and_column(tmp_path, kwargs, text, mat
                                  r"column to file column"),
     ({"columns": {"q13": "a"}}, r"The 'columns' entry 'q13' of MeasurementFormat must be a contract column "
                                 r"\(q1\.\.q12, .*, set, payload_kg\) or a measurement-type column \(measurement, id, "
-                                r"target, feature, flush, distance_mm, to\)\. Got 'q13'"),
+                                r"target, feature, flush, distance_mm, to, image, camera, board, point, u_px, "
+                                r"v_px\)\. Got 'q13'"),
     ({"columns": {"temperature": "a"}}, r"Got 'temperature' instead"),
     ({"columns": {"xmeas": "a"}}, r"Got 'xmeas' \(did you mean 'x_meas'\?\) instead"),
     ({"measurements": ["Plane"]}, r"The 'measurements' parameter of MeasurementFormat must be a mapping of the file's type "

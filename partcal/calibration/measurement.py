@@ -365,6 +365,11 @@ class MeasurementType:
         """What this type can never identify, in words (for the run and the report)."""
         return []
 
+    def fit_notes(self, residuals: Residuals) -> list[str]:
+        """What the fit's ``residuals`` of this type say of some of its rows, in words (a camera's image whose pixels
+        disagree with its pose's prediction): notes of the run, the fit then not called calibrated. Default: none."""
+        return []
+
     def describe(self) -> str:
         """One line: the rows and what they touch."""
         return f"{self.index.size} {self.name} rows"

@@ -236,7 +236,9 @@ class MeasurementType:
       what a simulated cell knows of it; ``extra_sections``: further sections it reads (a camera's ``boards``,
       :meth:`read_extra_section`, :meth:`given_extra_section`);
     - optional hooks: ``simulate(truth, spec, rng, noise)`` (rows of a virtual robot: ``partcal simulate``) and
-      ``candidates(robot, cell, spec, count, rng)`` (rows to choose from: ``partcal plan --measurement``).
+      ``candidates(robot, cell, spec, count, rng)`` (rows to choose from: ``partcal plan --measurement``);
+    - :meth:`fit_notes`: what the fit's residuals say of some of its rows (a camera's image paired with the wrong
+      joints), notes of the run.
     """
 
     name: ClassVar[str] = ""

@@ -32,7 +32,8 @@ from numpy.typing import NDArray
 
 from ..errors import DataError
 from ..robot.rotations import left_jacobian, log_derivative, matrix_from_rotation_vector, skew_matrices
-from .camera_cell import POSE, camera_info_text, half_turn_symmetric, read_board, read_camera, simulated_rows
+from .camera_cell import (POSE, camera_info_text, candidate_rows, half_turn_symmetric, read_board, read_camera,
+                          simulated_rows)
 from .camera_model import (INTRINSICS, board_points, focal_from_homographies, homography, pose_from_homography,
                            pose_values, project, solve_ax_yc, undistorted)
 from .cell import named_entry
@@ -319,6 +320,14 @@ class CameraPoints(MeasurementType):
     def simulate(cls, truth, spec, rng, noise):
         """Pixel rows of a virtual robot (``partcal simulate``): :func:`~partcal.calibration.camera_cell.simulated_rows`."""
         return simulated_rows(truth, spec, rng, noise)
+
+    plans_by = "image"
+    """``partcal plan --measurement camera`` chooses whole images (each many rows), not rows."""
+
+    @staticmethod
+    def candidates(robot, cell, count, rng):
+        """Candidate images for ``partcal plan``: :func:`~partcal.calibration.camera_cell.candidate_rows`."""
+        return candidate_rows(robot, cell, count, rng)
 
     # -------------------------------------------------------------- the cell's symmetries, words
     def moved(self, u, omega, shift):

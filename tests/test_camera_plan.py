@@ -9,6 +9,7 @@ import numpy as np
 import yaml
 from scipy.spatial.transform import Rotation
 
+from partcal.calibration.registry import MEASUREMENT_TYPES
 from partcal.cli import main
 from partcal.data.measurement_rows import read_cell
 from partcal.robot.description import load_robot
@@ -63,3 +64,18 @@ def test_planned_images_keep_the_board_in_view_and_beat_random_ones(tmp_path, ca
         rows = planned.candidates.take(np.flatnonzero(np.isin(image, [names[k] for k in pick])))
         random = evaluate_measurements(robot, rows, cell, random_state=0)
         assert planned.evaluation.position_rms_mm < random.position_rms_mm
+
+
+def test_planned_images_keep_above_the_floor(tmp_path):
+    """Candidate images below a floor are dropped: with a floor at the base (0 mm, 100 mm clearance) every planned
+    pose keeps the flange more than 100 mm above it (independently: the nominal flange's height)."""
+    from partcal.robot.floor import Floor
+    (tmp_path / "cell.yaml").write_text(yaml.safe_dump(CELL))
+    robot = load_robot("universal_robots_ur10")
+    planned = plan_measurements(robot, 8, read_cell(tmp_path / "cell.yaml"), "camera", pool=40, random_state=2,
+                                floor=Floor(0.0, 100.0))
+    assert np.all(robot.flange(planned.rows.q_deg)[:, 2, 3] > 100.0)
+    assert np.all(robot.flange(planned.candidates.q_deg)[:, 2, 3] > 100.0)
+    drawn = MEASUREMENT_TYPES["camera"].candidates(robot, read_cell(tmp_path / "cell.yaml"), 40,
+                                                   np.random.default_rng(0))
+    assert np.any(robot.flange(drawn.q_deg)[:, 2, 3] <= 100.0)          # without the floor some are below it

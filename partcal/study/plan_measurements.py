@@ -309,6 +309,9 @@ def plan_measurements(robot: Robot, n: int, cell: dict, measurement: str, *, mod
     hook = getattr(MEASUREMENT_TYPES.get(measurement), "candidates", None)
     if candidates is None and hook is not None and measurement not in PLANNED_TYPES:
         candidates = hook(robot, cell, pool, np.random.default_rng(seeds[0]))       # the type's own candidates
+        below = ~above_floor(robot, candidates.q_deg, plan.floor_of(robot, floor))   # an image's rows share its pose
+        if below.any():
+            candidates = candidates.take(np.flatnonzero(~below))
     elif candidates is None:
         candidates = touch_candidates(robot, cell, measurement, pool, np.random.default_rng(seeds[0]), source=source,
                                       floor=floor, ranges_deg=ranges_deg)

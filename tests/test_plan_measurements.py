@@ -187,7 +187,7 @@ def test_an_unreachable_plane_is_refused_from_python():
     far = {"planes": {"high": {"normal": [0.0, 0.0, 1.0], "offset_mm": 5000.0}}}
     with pytest.raises(UnreachableError, match=r"planes.high: out of reach of universal_robots_ur10"):
         plan_measurements.touch_candidates(UR10, far, "plane", 10, np.random.default_rng(0))
-    with pytest.raises(PartcalError, match=r"--measurement must be one of plane, fixed \(a type without candidate poses cannot be planned\); got 'distance'"):
+    with pytest.raises(PartcalError, match=r"--measurement must be one of plane, fixed, camera \(a type without candidate poses cannot be planned\); got 'distance'"):
         plan_measurements.feature_targets(GIVEN, "distance", "cell.yaml")
 
 

@@ -32,13 +32,21 @@ from numpy.typing import NDArray
 
 from ..errors import DataError
 from ..robot.rotations import left_jacobian, log_derivative, matrix_from_rotation_vector, skew_matrices
-from .camera_cell import POSE, camera_info_text, half_turn_symmetric, read_board, read_camera, simulated_rows
+from .camera_cell import (POSE, camera_info_text, candidate_rows, half_turn_symmetric, read_board, read_camera,
+                          simulated_rows)
 from .camera_model import (INTRINSICS, board_points, focal_from_homographies, homography, pose_from_homography,
                            pose_values, project, solve_ax_yc, undistorted)
 from .cell import named_entry
 from .measurement import Column, MeasurementType, Residuals
 
 _DEG = np.pi / 180.0
+IMAGE_MISFIT = 10.0
+"""An image whose points the fit leaves this many times the stated pixel noise from their prediction (RMS) is named:
+its detection disagrees with its pose (an image paired with another's joints after a failed detection, a board that
+slipped, a wrong corner order)."""
+IMAGE_OUTLIER = 3.0
+"""... and this many times the median image's RMS: a few such images bend the fit, so every image then leaves more
+than the noise; those far beyond the others are the ones named."""
 MIN_IMAGE_POINTS = 6
 """An image with fewer points of a board places nothing at the fit's start (its rows are fitted all the same)."""
 
@@ -313,6 +321,14 @@ class CameraPoints(MeasurementType):
         """Pixel rows of a virtual robot (``partcal simulate``): :func:`~partcal.calibration.camera_cell.simulated_rows`."""
         return simulated_rows(truth, spec, rng, noise)
 
+    plans_by = "image"
+    """``partcal plan --measurement camera`` chooses whole images (each many rows), not rows."""
+
+    @staticmethod
+    def candidates(robot, cell, count, rng):
+        """Candidate images for ``partcal plan``: :func:`~partcal.calibration.camera_cell.candidate_rows`."""
+        return candidate_rows(robot, cell, count, rng)
+
     # -------------------------------------------------------------- the cell's symmetries, words
     def moved(self, u, omega, shift):
         """What stands in the cell (a camera of mount ``cell``, a board on a camera of mount ``flange``) turns and
@@ -362,6 +378,37 @@ class CameraPoints(MeasurementType):
             out.append("camera: a chessboard with both square counts even or both odd looks the same turned half a "
                        "turn: its detections may flip between images (use one odd and one even count, or a ChArUco "
                        "board)")
+        return out
+
+    def image_rms(self, residuals: Residuals) -> dict[tuple[str, str, str], float]:
+        """Each image's RMS pixel residual (over its points' u and v), keyed ``(image, camera, board)``."""
+        values = residuals.values[:2 * self.index.size].reshape(-1, 2)
+        return {key: float(np.sqrt(np.mean(values[mine] ** 2))) for key, mine in self._groups().items()}
+
+    def fit_notes(self, residuals: Residuals) -> list[str]:
+        """The images the fit leaves :data:`IMAGE_MISFIT` times the stated pixel noise or more (RMS) and
+        :data:`IMAGE_OUTLIER` times the median image's or more, worst first, each named by its image id, camera and
+        file lines. A few images paired with the wrong joints bend a least-squares fit, so the others leave more
+        than the noise too: they are counted in one further note, not named as the culprits."""
+        rms = self.image_rms(residuals)
+        groups = self._groups()
+        median = float(np.median(list(rms.values())))
+        bound = max(IMAGE_MISFIT * self.noise, IMAGE_OUTLIER * median)
+        far = sorted((key for key, value in rms.items() if value >= bound), key=lambda k: -rms[k])
+        out = []
+        for key in far:
+            rows, value = self.index[groups[key]], rms[key]
+            where = f"{self.rows.where(rows[0])}-{self.rows.lines[rows[-1]]}"
+            out.append(f"camera: image {key[0]!r} (camera {key[1]}, board {key[2]}, {where}) leaves {value:.3g} px RMS, "
+                       f"{value / self.noise:.0f} times the stated pixel noise {self.noise:g} px and "
+                       f"{value / median:.1f} times the median image's: its detection disagrees with its pose's "
+                       "prediction (paired with another image's joints after a failed detection? a board that "
+                       "slipped?): check its joints row, or leave the image out")
+        beyond = sum(value >= IMAGE_MISFIT * self.noise for key, value in rms.items() if key not in far)
+        if far and beyond:
+            out.append(f"camera: {beyond} further images leave more than {IMAGE_MISFIT:g} times the pixel noise "
+                       f"(median image {median:.3g} px): the fit is bent by the images named above; leave them out "
+                       "and run again")
         return out
 
     def describe(self) -> str:

@@ -9,7 +9,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .._yamlio import Section
-from ..errors import DataError
+from ..errors import DataError, PartcalError
 from .camera_model import INTRINSICS, board_points, pose_matrix, project
 from .cell import named_entry
 from .measurement import MeasurementRows
@@ -136,6 +136,58 @@ def simulated_rows(truth, spec, rng, noise) -> MeasurementRows:
                            "camera", {"point": np.concatenate(numbers["point"]), "u_px": np.clip(u, 0, width),
                                       "v_px": np.clip(v, 0, height)},
                            {k: tuple(t) for k, t in texts.items()})
+
+
+PLAN_IMAGES = 300
+"""At most this many candidate images for ``partcal plan --measurement camera`` (each is many rows)."""
+
+
+def candidate_rows(robot, cell: dict, count: int, rng) -> MeasurementRows:
+    """Candidate images for ``partcal plan --measurement camera``: poses drawn within the joint limits and kept where
+    the cell's first camera sees at least half of its first board's points inside its image, the board turned less
+    than :data:`OBLIQUE_DEG` from the line of sight (:func:`seen_points`, at the nominal robot and the camera's and
+    board's approximate ``pose`` and the camera's ``intrinsics`` the cell gives); each image's rows carry the pixels
+    predicted there (``min(count, PLAN_IMAGES)`` images)."""
+    cameras, boards = cell.get("cameras") or {}, cell.get("boards") or {}
+    if not cameras or not boards:
+        raise PartcalError("plan --measurement camera: the cell needs cameras: and boards: (with their approximate "
+                           "pose and the camera's intrinsics)")
+    cam, board = next(iter(cameras)), next(iter(boards))
+    for section, name, spec, keys in (("cameras", cam, cameras[cam], ("pose", "intrinsics")),
+                                      ("boards", board, boards[board], ("pose",))):
+        missing = [k for k in keys if k not in spec]
+        if missing:
+            raise PartcalError(f"plan --measurement camera: {section}.{name}: planning images needs its approximate "
+                               f"{' and '.join(missing)} (pose: [x, y, z, rx, ry, rz] mm and degrees, in the base "
+                               "frame or the flange's; intrinsics: fx, fy, cx, cy)")
+    local = board_points(boards[board])
+    least = (local.shape[0] + 1) // 2
+    wanted = min(int(count), PLAN_IMAGES)
+    q_all, points, uv_all, images = [], [], [], []
+    lo, hi = robot.limits_deg[:, 0], robot.limits_deg[:, 1]
+    for _ in range(50):
+        q = rng.uniform(lo, hi, size=(2000, robot.n_joints))
+        flange = robot.flange(q)
+        seen, uv = seen_points(cameras[cam], boards[board], flange[:, :3, 3], flange[:, :3, :3], local)
+        for i in np.flatnonzero(seen.sum(axis=1) >= least)[:wanted - len(images)]:
+            mine = np.flatnonzero(seen[i])
+            images += [f"{cam}-{len(images) + 1:04d}"]
+            q_all.append(np.repeat(q[i][None], mine.size, axis=0))
+            points.append(mine.astype(float))
+            uv_all.append(uv[i, mine])
+        if len(images) == wanted:
+            break
+    if len(images) < 3:
+        raise PartcalError(f"plan --measurement camera: camera {cam!r} sees board {board!r} in {len(images)} of "
+                           "100,000 poses drawn at the nominal robot; check their poses in the cell")
+    counts = [len(p) for p in points]
+    image = tuple(name for name, k in zip(images, counts) for _ in range(k))
+    n = len(image)
+    uv = np.vstack(uv_all)
+    return MeasurementRows(np.vstack(q_all), ("camera",) * n, tuple(str(i + 1) for i in range(n)),
+                           tuple(range(1, n + 1)), "plan", {"point": np.concatenate(points), "u_px": uv[:, 0],
+                                                            "v_px": uv[:, 1]},
+                           {"image": image, "camera": (cam,) * n, "board": (board,) * n})
 
 
 def true_cell(sections: dict) -> tuple[dict, dict]:

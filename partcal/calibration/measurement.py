@@ -236,7 +236,10 @@ class MeasurementType:
       what a simulated cell knows of it; ``extra_sections``: further sections it reads (a camera's ``boards``,
       :meth:`read_extra_section`, :meth:`given_extra_section`);
     - optional hooks: ``simulate(truth, spec, rng, noise)`` (rows of a virtual robot: ``partcal simulate``) and
-      ``candidates(robot, cell, spec, count, rng)`` (rows to choose from: ``partcal plan --measurement``).
+      ``candidates(robot, cell, count, rng)`` (rows to choose from: ``partcal plan --measurement``), and
+      ``plans_by = "image"`` when the plan chooses whole groups of rows (a camera's images), not rows;
+    - :meth:`fit_notes`: what the fit's residuals say of some of its rows (a camera's image paired with the wrong
+      joints), notes of the run.
     """
 
     name: ClassVar[str] = ""
@@ -252,6 +255,7 @@ class MeasurementType:
     extra_sections: ClassVar[tuple[str, ...]] = ()
     simulate: ClassVar[Callable | None] = None
     candidates: ClassVar[Callable | None] = None
+    plans_by: ClassVar[str | None] = None
 
     def __init_subclass__(cls, **kw):
         super().__init_subclass__(**kw)
@@ -363,6 +367,11 @@ class MeasurementType:
 
     def notes(self) -> list[str]:
         """What this type can never identify, in words (for the run and the report)."""
+        return []
+
+    def fit_notes(self, residuals: Residuals) -> list[str]:
+        """What the fit's ``residuals`` of this type say of some of its rows, in words (a camera's image whose pixels
+        disagree with its pose's prediction): notes of the run, the fit then not called calibrated. Default: none."""
         return []
 
     def describe(self) -> str:

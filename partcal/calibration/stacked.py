@@ -210,6 +210,7 @@ def identify_measurements(robot: Robot, rows: MeasurementRows, cell: dict | None
                                          for m, r in zip(measurements, each)},
                                   {m.name: (m.noise, m.unit, m.noise_stated) for m in measurements})
     misfit += [note for m in measurements for note in m.suspicions]
+    misfit += [note for m, r in zip(measurements, each) for note in m.fit_notes(r)]
     for note in notes:                  # what the rows cannot identify: said once (the same in every fold's fit)
         log.warning("%s", note)
     notes = misfit + notes

@@ -52,12 +52,16 @@ from scipy.stats import chi2
 
 from ..data.formats import ROWS_EXPECTED, MeasurementFormat, RowSelection, load_format
 from ..data.measurements import read_measurements
+from ..data.measurement_rows import has_measurement_column, read_measurement_rows
 from ..errors import ConfigError, DataError, ModelFileError
 from ..calibration.chain import model_jacobian
-from ..calibration.parameters import geometric_size
+from ..calibration.measurement import MeasurementRows
+from ..calibration.parameters import geometric_size, parameter_names
 from ..models.kindtable import identification_of
 from ..robot.frames import kabsch
 from ..robot.rotations import rotation_vector_from_matrix
+from .check_types import model_cell, refuse_points_against_camera, stacked_at_model
+from .persist import load_model
 from .predictor import load_predictor
 
 ALPHA = 0.01
@@ -324,6 +328,9 @@ def check_file(model_path: str | Path, data_path: str | Path, *, fmt: str | Path
                              "positions the errors are taken from (a model file of 'partcal run' with a robot)")
     if frame not in ("base", "tracker"):
         raise ConfigError(f"check: --frame must be base or tracker; got {frame!r}")
+    if has_measurement_column(data_path, load_format(fmt) if isinstance(fmt, (str, Path)) else fmt):  # pixels, touches
+        return check_rows_file(model, load_model(model_path)[1], model_path, data_path, fmt, frame, rows, alpha)
+    refuse_points_against_camera(model, model_path, data_path, "check")
     try:
         selection = RowSelection.parse(rows) if rows else None
     except ConfigError:
@@ -342,3 +349,95 @@ def check_file(model_path: str | Path, data_path: str | Path, *, fmt: str | Path
     return check_arrays(model, m.q_deg, measured - nominal, robot=robot, payload_kg=m.payload_kg,
                         registered=frame == "tracker",
                         alpha=alpha, model_name=str(model_path), data_name=str(data_path), registration=registration)
+
+
+# ---------------------------------------------------------------------- rows of measurement types (pixels, touches)
+@dataclass(frozen=True)
+class RowsCheckResult(CheckResult):
+    """:class:`~partcal.study.check.CheckResult` of rows of measurement types: ``z`` (residuals, 1) the weighted
+    residuals over the model's sigma; ``worst`` the largest ``(where, type, |z|)``."""
+
+    worst: tuple = ()
+    types: str = ""
+
+    def lines(self, worst: int = 5) -> list[str]:
+        out = [self.verdict(), f"checked {self.dof} residuals of {self.types} rows of {self.data} against "
+               f"{self.model}: the rows' noise the model's fit sigma, its parameters' uncertainty through its "
+               f"covariance; the statistic against chi-square with {self.dof} degrees of freedom",
+               "largest standardised residuals (file:line type |z|): "
+               + ", ".join(f"{w} {t} {z:.2f}" for w, t, z in self.worst[:worst])]
+        if self.explanations:
+            out.append("explanations, likeliest first (evidence: 2 ln Bayes factor against nothing moved, "
+                       "prior of a change 0.1 deg or 1 mm per parameter):")
+            width = max(len(e.name) for e in self.explanations)
+            for rank, e in enumerate(self.explanations, 1):
+                out.append(f"  {rank:2d}. {e.name:<{width}}  evidence {e.evidence:9.1f}  {e.values_text()}")
+        return out
+
+
+def check_type_rows(model, doc: dict, rows: MeasurementRows, *, model_path="model", data_path="data",
+                    alpha: float = ALPHA) -> RowsCheckResult:
+    """Check rows of measurement types against a model identified from such rows (module docstring)."""
+    if not 0.0 < alpha < 1.0:
+        raise ConfigError(f"check: alpha must lie in (0, 1); got {alpha!r}")
+    table = model.identification_
+    if table.covariance is None or table.sigma_mm is None or not np.isfinite(table.sigma_mm):
+        raise ModelFileError(f"{model_path}: field 'identification.covariance': the model has no covariance of its "
+                             "parameters: fit it again with partcal run")
+    problem, values = stacked_at_model(model, rows, model_cell(doc, model_path), model_path, data_path)
+    r, jac = problem(values)
+    names = [n for n, _ in parameter_names(model.robot_, model.joint_errors_, model.parametrization_)]
+    names += [n for n, _ in problem.names]
+    column = {n: k for k, n in enumerate(names)}
+    identified = [table.names[k] for k in np.flatnonzero(np.array(table.status) == "identified")]
+    at = [column.get(n, -1) for n in identified]
+    cov = np.asarray(table.covariance, dtype=float)
+    keep = np.array([a >= 0 for a in at], dtype=bool)
+    w, v = np.linalg.eigh(cov[np.ix_(keep, keep)])
+    lever = jac[:, np.array(at)[keep]] @ (v * np.sqrt(np.clip(w, 0.0, None)))       # J C^1/2
+    s2 = float(table.sigma_mm) ** 2
+    projected = lever.T @ r
+    total = float(r @ r - projected @ np.linalg.solve(s2 * np.eye(lever.shape[1]) + lever.T @ lever, projected)) / s2
+    dof = r.size
+    z = r / np.sqrt(s2)
+    jac = -jac                      # r is the model less the rows: a change of the truth moves it the other way
+    candidates = [(f"joint {j}'s offset", (f"q{j}",), ("deg",), jac[:, [column[f"theta[{j}]"]]])
+                  for j in range(1, model.robot_.n_joints + 1) if f"theta[{j}]" in column]
+    poses = dict.fromkeys(n.rsplit(".", 1)[0] for n, _ in problem.names if "@" in n)
+    for pose in poses:
+        params = tuple(f"{pose}.{c}" for c in ("x", "y", "z", "rx", "ry", "rz"))
+        if all(p in column for p in params):
+            candidates.append((pose.replace("@", " on the ") + "'s pose", params, ("mm",) * 3 + ("deg",) * 3,
+                               jac[:, [column[p] for p in params]]))
+    expl, together = explain(z[:, None], np.full((dof, 1), np.sqrt(s2)), candidates, dof)
+    row_of = problem.row_of
+    order = np.argsort(-np.abs(z))
+    worst, seen = [], set()
+    for k in order:
+        if row_of[k] >= 0 and row_of[k] not in seen:
+            seen.add(row_of[k])
+            worst.append((rows.where(row_of[k]), rows.types[row_of[k]], float(abs(z[k]))))
+        if len(worst) == 5:
+            break
+    return RowsCheckResult(z[:, None], dof, total / dof, float(chi2.sf(total, dof)), alpha, expl, None,
+                           str(model_path), str(data_path), together, tuple(worst),
+                           ", ".join(m.name for m in problem.measurements))
+
+
+def check_rows_file(model, doc, model_path, data_path, fmt, frame: str, rows: str | None, alpha: float
+                    ) -> RowsCheckResult:
+    """``partcal check`` of a measurements file (a ``measurement`` column): refused naming why for a model
+    without robot parameters, a tracker frame or a row selection."""
+    if frame != "base":
+        raise ConfigError(f"check: --frame {frame}: {data_path} holds measurement types, whose unknowns (a "
+                          "camera's pose, a plane's) are the model's: leave --frame out")
+    if rows:
+        raise ConfigError(f"check: --rows: {data_path} holds measurement types and is read whole (a distance's "
+                          "'to' names rows by id): split the file instead")
+    if getattr(model, "identification_", None) is None or not (doc.get("model") or {}).get("measurement_types"):
+        raise ModelFileError(f"{model_path}: {data_path} holds measurement types (a 'measurement' column); this model "
+                             "was not identified from any: check it with tracker points (x_meas, y_meas, z_meas), "
+                             "or check a model of partcal run on these types")
+    cell = model_cell(doc, model_path)
+    table = read_measurement_rows(data_path, model.robot_, load_format(fmt) if fmt else None, cell or None)
+    return check_type_rows(model, doc, table, model_path=model_path, data_path=data_path, alpha=alpha)

@@ -28,6 +28,7 @@ import yaml
 from numpy.typing import NDArray
 
 from .. import __version__
+from .._yamlio import load_yaml
 from ..data.measurements import Measurements, read_measurements
 from ..data.measurement_rows import has_measurement_column, read_cell, read_measurement_rows
 from ..errors import DataError, PartcalError
@@ -514,7 +515,7 @@ def write_measurement_run(result: MeasurementRunResult, render: Callable | None 
         for r in result.models:
             save_model(r.model, folder / "models" / f"{r.spec.slug}.json", name=r.spec.name, robot=result.data.robot,
                        extra={"cv_weighted_rms_mm": r.cv_pooled, "fit_seconds": round(r.fit_seconds, 4),
-                              "seed": cfg.seed, "run": cfg.name})
+                              "seed": cfg.seed, "run": cfg.name, **_cell_field(cfg)})
             table = getattr(r.model, "identification_", None)
             for name in (n for n in result.data.descriptions if n in MEASUREMENT_TYPES and table is not None):
                 for filename, text in MEASUREMENT_TYPES[name].files(result.data.cell, table.names, table.value).items():
@@ -527,6 +528,15 @@ def write_measurement_run(result: MeasurementRunResult, render: Callable | None 
 
     replace_folder(cfg.output, fill)
     return cfg.output
+
+
+def _cell_field(config: RunConfig) -> dict:
+    """The cell file's content as the model file keeps it (``fit.cell``: what partcal check and update read rows of
+    measurement types against); nothing when the run reads no cell."""
+    if config.data_options.cell is None:
+        return {}
+    data, _ = load_yaml(config.data_options.cell)
+    return {"cell": json.loads(json.dumps(data or {}, default=float))}
 
 
 def _figure(t: dict) -> str:

@@ -29,7 +29,7 @@ from ..robot.floor import Floor, robot_floor
 from ..robot.kinematics import Robot
 from ..data.measurement_rows import has_measurement_column, read_cell, read_measurement_rows, write_measurement_rows
 from ..calibration.measurement import SCALE
-from ..calibration.registry import measurement_names
+from ..calibration.registry import MEASUREMENT_TYPES, measurement_names
 from . import plan, plan_measurements
 from .config import robot_named
 
@@ -216,6 +216,9 @@ def _measurements_planned(arm: Robot, o: PlanOptions, model, cell: dict, say, sh
                                    source=str(o.cell), floor=plan_floor(arm, o),
                                    callback=lambda k, logdet: say(f"DETMAX exchange {k}: log det {logdet:.4f}")
                                    if k % 10 == 0 else None)
+    if getattr(MEASUREMENT_TYPES.get(o.measurement), "plans_by", None) == "image":
+        _images_written(arm, o, model, result, start, show)
+        return
     names = result.rows.texts["feature"]
     spread = ", ".join(f"{name} {names.count(name)}" for name in dict.fromkeys(names))
     ev = result.evaluation
@@ -231,6 +234,24 @@ def _measurements_planned(arm: Robot, o: PlanOptions, model, cell: dict, say, sh
          + ("; and the robot's uniform scale: nothing in these rows measures a length (give a plane's spacing_mm or "
             "a point's known_mm)" if scale else ""))
     show(f"wrote {o.n} {o.measurement} rows ({spread}) to {o.output} ({result.exchange.exchanges} exchanges, log det "
+         f"{result.exchange.start_logdet:.3f} -> {result.exchange.logdet:.3f}, {time.perf_counter() - start:.1f} s)")
+
+
+def _images_written(arm: Robot, o: PlanOptions, model, result, start: float, show) -> None:
+    """``--measurement camera -n N -o JOINTS.csv``: the planned images' joints (``image, q1..qN``, one row each: the
+    joints CSV an image folder is detected with), their evaluation shown."""
+    names, q = plan_measurements.planned_images(result.rows)
+    ev = result.evaluation
+    lines = [f"# camera images planned by partcal {__version__} for {arm.name} ({model.describe(arm)}) on the cell "
+             f"{o.cell}: {len(names)} of {len(set(result.candidates.texts['image']))} candidate images (the board in "
+             f"view, not too oblique, at the nominal robot), D-optimal (DETMAX), seed {o.seed}.",
+             "# Joint angles in degrees. Take one image at each pose, named as its row; partcal.data.detect reads the "
+             "folder with this file.",
+             "image," + ",".join(f"q{j + 1}" for j in range(arm.n_joints))]
+    lines += [name + "," + ",".join(f"{v:.6f}" for v in row) for name, row in zip(names, q)]
+    Path(o.output).write_text("\n".join(lines) + "\n")
+    show("\n".join(ev.lines()))
+    show(f"wrote {len(names)} images' joints to {o.output} ({result.exchange.exchanges} exchanges, log det "
          f"{result.exchange.start_logdet:.3f} -> {result.exchange.logdet:.3f}, {time.perf_counter() - start:.1f} s)")
 
 

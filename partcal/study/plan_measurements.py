@@ -309,12 +309,17 @@ def plan_measurements(robot: Robot, n: int, cell: dict, measurement: str, *, mod
     hook = getattr(MEASUREMENT_TYPES.get(measurement), "candidates", None)
     if candidates is None and hook is not None and measurement not in PLANNED_TYPES:
         candidates = hook(robot, cell, pool, np.random.default_rng(seeds[0]))       # the type's own candidates
+        below = ~above_floor(robot, candidates.q_deg, plan.floor_of(robot, floor))   # an image's rows share its pose
+        if below.any():
+            candidates = candidates.take(np.flatnonzero(~below))
     elif candidates is None:
         candidates = touch_candidates(robot, cell, measurement, pool, np.random.default_rng(seeds[0]), source=source,
                                       floor=floor, ranges_deg=ranges_deg)
     if any(k != measurement for k in candidates.types):
         raise PartcalError(f"plan: the candidates must all be {measurement} rows; got {sorted(set(candidates.types))}")
     blocks, d = candidate_blocks(robot, candidates, cell, model)
+    if getattr(MEASUREMENT_TYPES.get(measurement), "plans_by", None) == "image":     # a camera: whole images
+        return _plan_images(robot, n, cell, measurement, model, candidates, blocks, d, seeds, callback)
     need = max(1, math.ceil(d.free.size / blocks.shape[1]))
     if not isinstance(n, (int, np.integer)) or isinstance(n, bool) or not need <= n <= len(candidates):
         raise PartcalError(f"plan: the number of {measurement} rows must be a whole number in [{need}, {len(candidates)}]: "
@@ -326,6 +331,38 @@ def plan_measurements(robot: Robot, n: int, cell: dict, measurement: str, *, mod
                                  lines=tuple(range(1, len(chosen) + 1)))
     evaluation = evaluate_measurements(robot, chosen, cell, model=model, random_state=np.random.default_rng(seeds[2]))
     return MeasurementPlan(chosen, result.indices, evaluation, result, candidates, blocks)
+
+
+def _plan_images(robot, n, cell, measurement, model, candidates, blocks, d, seeds, callback) -> MeasurementPlan:
+    """``n`` whole images of a camera's candidates (``candidates.texts["image"]``), D-optimal: each image's rows'
+    blocks as one block (the triangle of their QR: the same information), DETMAX over the images; the plan's rows
+    are every row of the chosen images."""
+    image = np.asarray(candidates.texts["image"], dtype=object)
+    names = list(dict.fromkeys(image))
+    rows_of = [np.flatnonzero(image == name) for name in names]
+    width = blocks.shape[2]
+    stacked = np.zeros((len(names), width, width))        # each image's rows as the triangle R of their QR
+    for k, rows in enumerate(rows_of):                    # (R^T R = J^T J: the same information, fewer rows)
+        triangle = np.linalg.qr(blocks[rows].reshape(-1, width), mode="r")
+        stacked[k, :triangle.shape[0]] = triangle
+    if not isinstance(n, (int, np.integer)) or isinstance(n, bool) or not 3 <= n <= len(names):
+        raise PartcalError(f"plan: the number of images must be a whole number in [3, {len(names)}]: at least 3 for "
+                           f"the camera's pose, at most the {len(names)} candidate images; got {n!r}")
+    result = design.detmax(stacked, int(n), random_state=np.random.default_rng(seeds[1]), callback=callback)
+    taken = np.sort(np.concatenate([rows_of[k] for k in result.indices]))
+    chosen = candidates.take(taken)
+    chosen = dataclasses.replace(chosen, ids=tuple(str(i + 1) for i in range(len(chosen))),
+                                 lines=tuple(range(1, len(chosen) + 1)))
+    evaluation = evaluate_measurements(robot, chosen, cell, model=model, random_state=np.random.default_rng(seeds[2]))
+    return MeasurementPlan(chosen, taken, evaluation, result, candidates, blocks)
+
+
+def planned_images(rows: MeasurementRows) -> tuple[list[str], NDArray[np.float64]]:
+    """The planned images' names and joints (one row each, in plan order): the joints CSV an image folder is taken
+    with (:func:`partcal.data.detect.detect_folder`)."""
+    image = list(rows.texts["image"])
+    first = [image.index(name) for name in dict.fromkeys(image)]
+    return [image[i] for i in first], rows.q_deg[first]
 
 
 def planned_table(rows: MeasurementRows, name: str = "plan") -> MeasurementRows:

@@ -29,11 +29,13 @@ from numpy.typing import NDArray
 from .._io import refuse_input_as_output
 from ..data.formats import load_format
 from ..data.measurements import Measurements, read_measurements
+from ..data.measurement_rows import has_measurement_column, read_measurement_rows
 from ..errors import ModelFileError, PartcalError
 from ..metrics import pooled_rms
 from ..calibration.chain import model_jacobian
 from ..models.kinematic import KinematicModel
 from ..calibration.prior import Prior
+from .check_types import CELL_FIELD, RowsUpdated, model_cell, refit_on_rows, refuse_points_against_camera
 from .persist import checksum, load_model, save_model
 
 DEFAULT_INFLATE = 30.0
@@ -177,7 +179,8 @@ def update_file(model_path: str | Path, data_path: str | Path, output: str | Pat
     frame; ``fmt`` a format file), written to ``output`` with its provenance in ``fit.update``; ``inflate``
     default :data:`DEFAULT_INFLATE`."""
     inflate = DEFAULT_INFLATE if inflate is None else inflate
-    refuse_input_as_output(output, model_path, data_path)
+    refuse_input_as_output(output, "update", [("model file", model_path), ("data file", data_path),
+                                              ("format file", fmt)])
     model, doc = load_model(model_path)
     if not isinstance(model, KinematicModel):
         raise ModelFileError(f"{model_path}: field 'kind': update needs a model of kind 'kinematic'; got "
@@ -192,6 +195,9 @@ def update_file(model_path: str | Path, data_path: str | Path, output: str | Pat
         model_prior(model, 1.0)
     except ModelFileError as exc:
         raise ModelFileError(f"{model_path}: {exc}") from None
+    if has_measurement_column(data_path, load_format(fmt) if fmt else None):     # pixels, touches, ...
+        return update_type_rows(model, doc, model_path, data_path, output, fmt, inflate)
+    refuse_points_against_camera(model, model_path, data_path, "update")
     data = read_measurements(data_path, model.robot_, fmt=load_format(fmt) if fmt else None)
     done = update_model(model, data, inflate)
     provenance = {"data": str(data_path), "rows": len(data.q_deg), "prior_model": str(model_path),
@@ -204,3 +210,22 @@ def update_file(model_path: str | Path, data_path: str | Path, output: str | Pat
                extra={"update": provenance, "n_poses": len(data.q_deg)})
     return Updated(done.model, done.shares, done.kept_prior, done.n_poses, done.rms_before_mm, done.rms_after_mm,
                    provenance)
+
+
+def update_type_rows(model, doc: dict, model_path, data_path, output, fmt, inflate: float) -> RowsUpdated:
+    """``partcal update`` from a measurements file: the model re-identified from the new rows (its cell from the
+    model file) with its robot parameters as the prior."""
+    cell = model_cell(doc, model_path)
+    rows = read_measurement_rows(data_path, model.robot_, load_format(fmt) if fmt else None, cell or None)
+    prior = model_prior(model, inflate)
+    updated = refit_on_rows(model, rows, cell, prior)
+    held = refit_on_rows(model, rows, cell, Prior(prior.index, prior.mean, prior.root * FIRM, prior.names))
+    before = dict(held.identification_.target_rms_mm)
+    after = dict(updated.identification_.target_rms_mm)
+    provenance = {"data": str(data_path), "rows": len(rows), "prior_model": str(model_path),
+                  "prior_name": doc.get("name", ""), "inflate": float(inflate), "rms_by_type_before": before,
+                  "rms_by_type_after": after}
+    name = doc.get("name") or Path(model_path).stem
+    save_model(updated, output, name=f"{name} updated", robot=model.robot_,
+               extra={"update": provenance, "n_rows": len(rows), CELL_FIELD: (doc.get("fit") or {})[CELL_FIELD]})
+    return RowsUpdated(updated, len(rows), before, after, provenance)

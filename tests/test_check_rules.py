@@ -104,9 +104,9 @@ def test_a_joint_more_than_a_degree_beyond_either_limit_is_refused(value, limit)
 
 def test_the_row_and_joint_farthest_beyond_are_named_and_the_rows_beyond_counted():
     """Row 2 is 5 degrees beyond joint 5's high limit (130) and 2 beyond joint 2's; row 5 is 20 beyond joint 3's low
-    limit (-250); row 6 is 2 beyond joint 1's; row 1 is 0.5 beyond joint 5's, within the slack: three rows, the
-    farthest row 5's joint 3."""
-    rows = _sk120({(2, 4): 135.0, (2, 1): -57.0, (5, 2): -270.0, (6, 0): 182.0, (1, 4): 130.5})
+    limit (-250); row 6 is 2 beyond joint 1's; row 1 is 0.5 beyond joint 5's and row 4 exactly 1 beyond joint 1's,
+    within the slack: three rows, the farthest row 5's joint 3."""
+    rows = _sk120({(2, 4): 135.0, (2, 1): -57.0, (5, 2): -270.0, (6, 0): 182.0, (1, 4): 130.5, (4, 0): 181.0})
     with pytest.raises(DataError, match=r"^m\.csv:15: column 'q3': -270 degrees lies outside joint 3's limits "
                                         r"\[-250, -110\] of motoman_sk120 \(3 rows beyond a limit\)$"):
         check_rows(SK120, rows)

@@ -1319,6 +1319,7 @@ def test_a_changed_number_keeps_the_style_it_was_written_in():
     (1.5, "1.0e00", 2, "1.50e00"),
     (0.0, "1.5e-01", 4, "0.000e-01"),           # zero keeps the written exponent
     (0.0123, "1.5E-001", 6, "1.2300E-002"),     # the exponent's digits kept
+    (-0.0123, "1.5E-001", 6, "-1.2300E-002"),   # a negative value's own exponent, not the written one
     (0.1234567, "1.23456e-01", 4, "1.23457e-01"),   # 6 decimals written (5 + 1 of the exponent) outnumber 4
     (0.1234561, "1.23456e-01", 4, "1.23456e-01"),   # equal at those 6: the text kept
     (0.15004, "1.5e-01", 4, "1.5e-01"),         # equal at 4 decimals of the value
@@ -1609,6 +1610,18 @@ def test_a_rotation_within_the_tolerance_keeps_its_numbers_and_one_beyond_is_rew
     for t, row in zip(targets, texts):
         assert row[:3] == [f.text for f in t.fields[:3]]
         assert (row[3:] == [f.text for f in t.fields[3:]]) == kept, (t.name, row)
+
+
+@pytest.mark.parametrize("name, per_degree", [("pick_place.script", np.pi / 180.0), ("trajectory.csv", 1.0)])
+def test_joints_one_degree_on_are_written_in_the_files_unit(name, per_degree):
+    """Every joint target given back one degree further on every joint: URScript's joints are radians (each number
+    grows by pi / 180 = 0.0174533), a joint trajectory's degrees (each grows by 1)."""
+    program = read_program(FIXTURES / name)
+    targets = [t for t in program.targets if t.kind == "joints"]
+    texts = program.dialect.texts(targets, joints_deg=np.stack([t.joints_deg for t in targets]) + 1.0)
+    assert len(targets) >= 2
+    for t, row in zip(targets, texts):
+        np.testing.assert_allclose([float(x) for x in row], [f.value + per_degree for f in t.fields], atol=1e-6)
 
 
 def test_a_rotation_given_back_unchanged_keeps_its_numbers_with_no_tolerance():

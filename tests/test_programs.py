@@ -1329,6 +1329,8 @@ def test_a_changed_number_keeps_the_style_it_was_written_in():
     (0.0096, "5e+00", 0, "1e-02"),
     (-0.2, "+1.5e-01", 4, "-2.000e-01"),        # a "+" written, the value negative: its "-" alone
     (0.2, "+1.5e-01", 4, "+2.000e-01"),
+    (0.2, "-1.5e-01", 4, "2.000e-01"),         # a "-" written, the value positive: no sign
+    (1.5, "1.0e-01", 2, "1.50e00"),             # an exponent written "-", now 0: no sign, not a "+"
 ])
 def test_a_changed_number_in_exponent_form_keeps_the_style_worked_by_hand(value, text, decimals, expected):
     """Each expected text worked out by hand: the value with max(decimals asked, decimals written) decimals of its
@@ -1342,6 +1344,7 @@ def test_a_changed_number_in_exponent_form_keeps_the_style_worked_by_hand(value,
 @pytest.mark.parametrize("value, text, decimals, expected", [
     (-2.25, "+1.5", 3, "-2.250"),               # a "+" written, the value negative
     (2.25, "+1.5", 3, "+2.250"),
+    (2.25, "-1.5", 3, "2.250"),
     (1.25, ".5", 2, "1.25"),                    # no leading zero written: none dropped from a whole number
     (0.25, "+.5", 2, "+.25"),
     (-0.25, ".5", 2, "-.25"),

@@ -1315,6 +1315,7 @@ def test_a_changed_number_keeps_the_style_it_was_written_in():
 @pytest.mark.parametrize("value, text, decimals, expected", [
     (0.09999, "1.5e-01", 4, "1.000e-01"),       # 4 decimals of the value round to 0.1000: the mantissa to 1.000
     (-0.09999, "1.5e-01", 4, "-1.000e-01"),
+    (0.095, "1.5e-01", 4, "9.50e-02"),          # a mantissa of 9.5 stays below 10
     (1.5, "1.0e+00", 2, "1.50e+00"),            # exponent 0 keeps the "+" it was written with, not "-"
     (1.5, "1.0e00", 2, "1.50e00"),
     (0.0, "1.5e-01", 4, "0.000e-01"),           # zero keeps the written exponent

@@ -200,3 +200,35 @@ def test_a_plane_given_approximately_is_held_where_the_touches_put_it_not_at_the
     b = identify_measurements(robot, rows, unknown)[0]
     assert a.names[:33] == b.names[:33] and a.status[:33] == b.status[:33]       # the robot's parameters
     np.testing.assert_allclose(a.value[:33], b.value[:33], atol=1e-6)
+
+
+def test_a_robust_fits_noise_ratio_leaves_out_only_the_rows_weighed_below_a_tenth(cell):
+    """Ballbar distances with one 10 mm off (the Cauchy loss weighs it ~1e-5) and one 0.06 mm off (weighed about
+    1 / (1 + (0.06 / 0.03)^2) = 0.2: named as down-weighted, but kept): the noise ratio is the RMS of every row but
+    the first over the stated noise, worked out from the fit's RMS of all rows and the residual of the row left
+    out (one residual a row)."""
+    from partcal.calibration.stacked import identify_measurements
+    from partcal.data.measurement_rows import read_cell, read_measurement_rows
+    from partcal.robot.description import load_robot
+
+    def bad(lines):
+        out = list(lines)
+        for k, off in ((100, 10.0), (200, 0.06)):
+            cells = out[k].split(",")
+            cells[8] = f"{float(cells[8]) + off:.6f}"       # distance_mm
+            out[k] = ",".join(cells)
+        return out
+    robot = load_robot("universal_robots_ur10")
+    rows = read_measurement_rows(cell / _edited_rows(cell, "ballbar.csv", "bar_two.csv", bad), robot)
+    given = read_cell(cell / "data" / "cell.yaml")
+    table = identify_measurements(robot, rows, given, parametrization="complete", loss="cauchy")[0]
+    sigma = given["noise"]["distance"]
+    assert sigma == 0.01 and table.misfit is not None and table.robust is not None
+    weights = {d["row"]: d["weight"] for d in table.robust["downweighted"]}
+    far = [d for d in table.robust["downweighted"] if d["weight"] < 0.1]
+    assert len(far) == 1 and weights[far[0]["row"]] < 1e-3
+    assert any(0.1 < w < 0.5 for w in weights.values())            # a row down-weighted but kept
+    n = rows.types.count("distance")
+    kept_squares = n * table.target_rms_mm["distance"] ** 2 - far[0]["residual_mm"] ** 2
+    expected = np.sqrt(kept_squares / (n - 1)) / sigma
+    assert table.misfit["noise_ratio"]["distance"] == pytest.approx(expected, rel=1e-9)

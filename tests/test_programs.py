@@ -1312,6 +1312,58 @@ def test_a_changed_number_keeps_the_style_it_was_written_in():
     assert number_text(0.0123, field("+1.5E-1"), 6) == "+1.2300E-2"
 
 
+@pytest.mark.parametrize("value, text, decimals, expected", [
+    (0.09999, "1.5e-01", 4, "1.000e-01"),       # 4 decimals of the value round to 0.1000: the mantissa to 1.000
+    (-0.09999, "1.5e-01", 4, "-1.000e-01"),
+    (0.095, "1.5e-01", 4, "9.50e-02"),          # a mantissa of 9.5 stays below 10
+    (1.5, "1.0e+00", 2, "1.50e+00"),            # exponent 0 keeps the "+" it was written with, not "-"
+    (1.5, "1.0e00", 2, "1.50e00"),
+    (0.0, "1.5e-01", 4, "0.000e-01"),           # zero keeps the written exponent
+    (0.0123, "1.5E-001", 6, "1.2300E-002"),     # the exponent's digits kept
+    (-0.0123, "1.5E-001", 6, "-1.2300E-002"),   # a negative value's own exponent, not the written one
+    (0.1234567, "1.23456e-01", 4, "1.23457e-01"),   # 6 decimals written (5 + 1 of the exponent) outnumber 4
+    (0.1234561, "1.23456e-01", 4, "1.23456e-01"),   # equal at those 6: the text kept
+    (0.15004, "1.5e-01", 4, "1.5e-01"),         # equal at 4 decimals of the value
+    (2.0, "5e+00", 0, "2e+00"),                 # no decimals written, none asked: none
+    (0.02, "5e+00", 0, "2e-02"),                # ... never fewer than none in the mantissa
+    (0.96, "5e+00", 0, "1e+00"),                # 9.6e-01 rounds up to 10: 1e+00, no decimals
+    (0.0096, "5e+00", 0, "1e-02"),
+    (-0.2, "+1.5e-01", 4, "-2.000e-01"),        # a "+" written, the value negative: its "-" alone
+    (0.2, "+1.5e-01", 4, "+2.000e-01"),
+    (0.2, "-1.5e-01", 4, "2.000e-01"),         # a "-" written, the value positive: no sign
+    (1.5, "1.0e-01", 2, "1.50e00"),             # an exponent written "-", now 0: no sign, not a "+"
+])
+def test_a_changed_number_in_exponent_form_keeps_the_style_worked_by_hand(value, text, decimals, expected):
+    """Each expected text worked out by hand: the value with max(decimals asked, decimals written) decimals of its
+    own (``1.5e-01`` writes 2), in exponent form with the mantissa in [1, 10), the exponent's case, sign and
+    digits as written."""
+    from partcal.data.program_text import Field, number_text
+
+    assert number_text(value, Field(0, len(text), text, float(text)), decimals) == expected
+
+
+@pytest.mark.parametrize("value, text, decimals, expected", [
+    (-2.25, "+1.5", 3, "-2.250"),               # a "+" written, the value negative
+    (2.25, "+1.5", 3, "+2.250"),
+    (2.25, "-1.5", 3, "2.250"),
+    (1.25, ".5", 2, "1.25"),                    # no leading zero written: none dropped from a whole number
+    (0.25, "+.5", 2, "+.25"),
+    (-0.25, ".5", 2, "-.25"),
+    (1.504, "1.50", 1, "1.50"),                 # equal at the 2 decimals written: the text kept
+    (1.506, "1.50", 1, "1.51"),
+    (-1e-12, "-0.5", 3, "0.000"),               # never "-0.000"
+    (-0.0004, "-0.5", 3, "0.000"),              # nor a value that rounds to zero at the decimals written
+    (0.1 + 1e-12, "0.05 * 2", 3, "0.05 * 2"),   # constant arithmetic equal: kept
+    (0.125, "0.05 * 2", 3, "0.125"),            # changed: a number, of the decimals asked
+    (-0.126, "-0.05*2", 2, "-0.13"),
+])
+def test_a_changed_plain_number_keeps_the_style_worked_by_hand(value, text, decimals, expected):
+    from partcal.data.program_text import Field, constant_value, number_text
+
+    old = Field(0, len(text), text, constant_value(text))
+    assert number_text(value, old, decimals) == expected
+
+
 def test_a_polyscope_placeholder_set_from_pose_trans_is_left_and_the_waypoints_compensated(tmp_path):
     """PolyScope declares a variable waypoint p[0,0,0,0,0,0] at the top and an Assignment node sets it from
     pose_trans(..) before its move: the zeros are no target (they were, unreachable: exit 3), nor the offset
@@ -1544,6 +1596,47 @@ def test_programs_warn_target_by_target_of_targets_far_from_the_models_data(tmp_
         assert abs(said - nearest[1]) < 0.1
     summary = json.loads((tmp_path / "out.script.json").read_text())
     assert [(x["line"], x["unit"]) for x in summary["far_from_data"]] == [(4, "deg"), (5, "deg")]
+
+
+@pytest.mark.parametrize("name", ["pallet.mod", "pallet.dat", "pick_place.script"])
+@pytest.mark.parametrize("angle_deg, kept", [(0.009, True), (0.011, False)])
+def test_a_rotation_within_the_tolerance_keeps_its_numbers_and_one_beyond_is_rewritten(name, angle_deg, kept):
+    """Every pose target turned by ``angle_deg`` about its own x axis (the angle between the old and the new rotation
+    is that angle, whatever the rotation's form) against a tolerance of 0.01 degrees: 0.009 keeps the rotation's
+    numbers as written, 0.011 rewrites them (its quaternion, KUKA angles or rotation vector change by about 1e-4 of
+    their unit, beyond the decimals written); the positions, unchanged, keep theirs."""
+    program = read_program(FIXTURES / name)
+    targets = [t for t in program.targets if t.kind == "pose"]
+    turn = Rotation.from_rotvec([np.radians(angle_deg), 0.0, 0.0]).as_matrix()
+    texts = program.dialect.texts(targets, np.stack([t.position_mm for t in targets]),
+                                  np.stack([t.rotation @ turn for t in targets]), tol_deg=0.01)
+    assert len(targets) >= 2
+    for t, row in zip(targets, texts):
+        assert row[:3] == [f.text for f in t.fields[:3]]
+        assert (row[3:] == [f.text for f in t.fields[3:]]) == kept, (t.name, row)
+
+
+@pytest.mark.parametrize("name, per_degree", [("pick_place.script", np.pi / 180.0), ("trajectory.csv", 1.0)])
+def test_joints_one_degree_on_are_written_in_the_files_unit(name, per_degree):
+    """Every joint target given back one degree further on every joint: URScript's joints are radians (each number
+    grows by pi / 180 = 0.0174533), a joint trajectory's degrees (each grows by 1)."""
+    program = read_program(FIXTURES / name)
+    targets = [t for t in program.targets if t.kind == "joints"]
+    texts = program.dialect.texts(targets, joints_deg=np.stack([t.joints_deg for t in targets]) + 1.0)
+    assert len(targets) >= 2
+    for t, row in zip(targets, texts):
+        np.testing.assert_allclose([float(x) for x in row], [f.value + per_degree for f in t.fields], atol=1e-6)
+
+
+def test_a_rotation_given_back_unchanged_keeps_its_numbers_with_no_tolerance():
+    """RobotStudio's quaternions of 4 decimals a hair off unit: given back exactly the rotations read, with a tolerance
+    of 0 degrees, every number keeps its text (normalised, they would print differently)."""
+    program = read_program(FIXTURES / "robotstudio_taught.mod")
+    targets = [t for t in program.targets if t.kind == "pose"]
+    texts = program.dialect.texts(targets, np.stack([t.position_mm for t in targets]),
+                                  np.stack([t.rotation for t in targets]), tol_deg=0.0)
+    assert len(targets) == 4
+    assert texts == [[f.text for f in t.fields] for t in targets]
 
 
 def test_a_correction_within_the_tolerance_or_a_rotation_kept_leaves_the_numbers_as_written():

@@ -65,8 +65,10 @@ def test_one_joint_moving_is_enough_to_call_radians():
 # ---------------------------------------------------------------- rows planned, not measured
 
 
-def test_the_first_planned_row_is_named_by_its_line():
-    rows = _rows(np.zeros((5, 6)), planned=[0.0, np.nan, 1.0, 0.0, 1.0])
+@pytest.mark.parametrize("mark", [1.0, 2.0, 0.5])
+def test_the_first_planned_row_is_named_by_its_line(mark):
+    """partcal plan writes 1; any other mark but 0 (or an empty cell) is a row planned too."""
+    rows = _rows(np.zeros((5, 6)), planned=[0.0, np.nan, mark, 0.0, 1.0])
     with pytest.raises(DataError, match=r"^m\.csv:12: column 'planned'"):
         check_measured(rows)
 

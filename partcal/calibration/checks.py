@@ -46,11 +46,12 @@ def check_joint_units(source: str, rows: list, q_deg: NDArray[np.float64]) -> No
 
 
 def check_measured(rows: MeasurementRows) -> None:
-    """Refuse rows ``partcal plan`` planned (:data:`PLANNED`), naming the first: a fit needs the joints the robot
-    reached. (Judging a plan, ``plan --evaluate``, reads them as they are.)"""
+    """Refuse rows ``partcal plan`` planned (:data:`PLANNED` not 0 nor empty), naming the first: a fit needs the
+    joints the robot reached. (Judging a plan, ``plan --evaluate``, reads them as they are.)"""
     planned = rows.numbers.get(PLANNED)
-    if planned is not None and np.any(planned == 1):
-        i = int(np.flatnonzero(planned == 1)[0])
+    marked = None if planned is None else np.nan_to_num(planned) != 0      # plan writes 1; any mark but 0 counts
+    if marked is not None and marked.any():
+        i = int(np.flatnonzero(marked)[0])
         raise DataError(f"{rows.where(i)}: column {PLANNED!r}: a row partcal plan planned, not yet measured (its "
                         "joints are where the nominal robot would touch): measure it, write the joints the robot "
                         "reached, and drop the column")

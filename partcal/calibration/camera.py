@@ -106,10 +106,8 @@ class CameraPoints(MeasurementType):
         self._resolve()
         self.camera_names = list(dict.fromkeys(self.camera))
         self.board_names = list(dict.fromkeys(self.board))
-        pairs: dict[tuple[str, str], list[int]] = {}
-        for k, key in enumerate(zip(self.camera, self.board)):
-            pairs.setdefault(key, []).append(k)
-        self.pairs = {key: np.array(rows, dtype=np.intp) for key, rows in pairs.items()}   # each camera's board
+        self.pairs = _grouped(zip(self.camera, self.board))                       # each camera's board
+        self.groups = _grouped(zip(self.image, self.camera, self.board))         # each image
         self.local = np.empty((index.size, 3))
         for b in self.board_names:
             mine = np.array([x == b for x in self.board])
@@ -119,6 +117,7 @@ class CameraPoints(MeasurementType):
         """Each row's camera in the cell, its board (named, or the one board the cell has), mounts opposite, point
         ids on the board, pixels within the image."""
         rows, index = self.rows, self.index
+        counts: dict[str, int] = {}
         for i, (cam, row) in enumerate(zip(self.camera, index)):
             if cam not in self.cameras_cell:
                 listed = ", ".join(self.cameras_cell) or "none: the cell has no cameras section"
@@ -133,7 +132,7 @@ class CameraPoints(MeasurementType):
             if board is None:
                 raise DataError(f"{rows.where(row)}: column 'board': {self.board[i]!r} is not a board of the cell "
                                 f"({', '.join(self.boards_cell) or 'none'})")
-            count = board_points(board).shape[0]
+            count = counts.setdefault(self.board[i], board_points(board).shape[0])
             if self.point[i] >= count:
                 raise DataError(f"{rows.where(row)}: column 'point': {self.point[i]} is not a point of board "
                                 f"{self.board[i]!r} (a {board['type']} of {board['rows']} x {board['cols']}: ids 0 to "
@@ -207,7 +206,7 @@ class CameraPoints(MeasurementType):
         width, height = spec["image_size"]
         centre = np.array([width / 2.0, height / 2.0])
         hs = []
-        for (_, c, _), mine in self._groups().items():
+        for (_, c, _), mine in self.groups.items():
             if c == cam and mine.size >= MIN_IMAGE_POINTS:
                 hs.append(homography(self.local[mine, :2], self.uv[mine] - centre))
         f = focal_from_homographies(hs)
@@ -221,20 +220,13 @@ class CameraPoints(MeasurementType):
         """Each image of camera ``cam`` with enough points of one board: the board, its rows (positions in
         ``self.index``) and the board's pose in the camera's frame, from its homography."""
         out = []
-        for (_, c, board), mine in self._groups().items():
+        for (_, c, board), mine in self.groups.items():
             if c != cam or mine.size < MIN_IMAGE_POINTS:
                 continue
             h = homography(self.local[mine, :2], undistorted(self.uv[mine], k))
             out.append((board, mine, pose_from_homography(h)))
         main = max(dict.fromkeys(b for b, _, _ in out), key=lambda b: sum(v[0] == b for v in out), default=None)
         return [v for v in out if v[0] == main]
-
-    def _groups(self) -> dict[tuple[str, str, str], NDArray[np.intp]]:
-        """The rows (positions in ``self.index``) of each image, camera and board, in the rows' order."""
-        out: dict[tuple[str, str, str], list[int]] = {}
-        for k, key in enumerate(zip(self.image, self.camera, self.board)):
-            out.setdefault(key, []).append(k)
-        return {key: np.array(rows, dtype=np.intp) for key, rows in out.items()}
 
     # -------------------------------------------------------------- residuals
     def residuals(self, positions, rotations, u) -> Residuals:
@@ -383,7 +375,7 @@ class CameraPoints(MeasurementType):
     def image_rms(self, residuals: Residuals) -> dict[tuple[str, str, str], float]:
         """Each image's RMS pixel residual (over its points' u and v), keyed ``(image, camera, board)``."""
         values = residuals.values[:2 * self.index.size].reshape(-1, 2)
-        return {key: float(np.sqrt(np.mean(values[mine] ** 2))) for key, mine in self._groups().items()}
+        return {key: float(np.sqrt(np.mean(values[mine] ** 2))) for key, mine in self.groups.items()}
 
     def fit_notes(self, residuals: Residuals) -> list[str]:
         """The images the fit leaves :data:`IMAGE_MISFIT` times the stated pixel noise or more (RMS) and
@@ -391,13 +383,12 @@ class CameraPoints(MeasurementType):
         file lines. A few images paired with the wrong joints bend a least-squares fit, so the others leave more
         than the noise too: they are counted in one further note, not named as the culprits."""
         rms = self.image_rms(residuals)
-        groups = self._groups()
         median = float(np.median(list(rms.values())))
         bound = max(IMAGE_MISFIT * self.noise, IMAGE_OUTLIER * median)
         far = sorted((key for key, value in rms.items() if value >= bound), key=lambda k: -rms[k])
         out = []
         for key in far:
-            rows, value = self.index[groups[key]], rms[key]
+            rows, value = self.index[self.groups[key]], rms[key]
             where = f"{self.rows.where(rows[0])}-{self.rows.lines[rows[-1]]}"
             out.append(f"camera: image {key[0]!r} (camera {key[1]}, board {key[2]}, {where}) leaves {value:.3g} px RMS, "
                        f"{value / self.noise:.0f} times the stated pixel noise {self.noise:g} px and "
@@ -417,3 +408,9 @@ class CameraPoints(MeasurementType):
                 f"({', '.join(c + ' on the ' + self.cameras_cell[c]['mount'] for c in self.camera_names)})")
 
 
+def _grouped(keys) -> dict[tuple, NDArray[np.intp]]:
+    """The positions of each key among ``keys``, in their order (first seen first)."""
+    out: dict[tuple, list[int]] = {}
+    for k, key in enumerate(keys):
+        out.setdefault(key, []).append(k)
+    return {key: np.array(rows, dtype=np.intp) for key, rows in out.items()}

@@ -13,7 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .._io import atomic_write
-from ..calibration.camera_cell import camera_T_boards
+from ..calibration.camera_cell import camera_T_boards, true_cell
 from ..calibration.camera_model import board_points, project
 from ..robot.description import joint_columns
 
@@ -137,12 +137,13 @@ def true_pixels(camera: dict, board: dict, cam_T_board: NDArray[np.float64]) -> 
     return project(points, np.asarray(camera["intrinsics"], dtype=float))[0]
 
 
-def image_files(rows, cameras: dict, boards: dict, true_flange, rng: np.random.Generator) -> dict[str, bytes]:
+def image_files(rows, sections: dict, true_flange, rng: np.random.Generator) -> dict[str, bytes]:
     """The images of a virtual robot's camera rows (``partcal simulate`` with ``render: true``): for each camera,
     ``<camera>/<image>.png`` of every image of ``rows`` (the board at the true robot's pose of that image) and
-    ``<camera>/joints.csv`` (``image, q1..qN``: the folder ``partcal detect`` reads). ``cameras``, ``boards``: the
-    true cell's (:func:`partcal.calibration.camera_cell.true_cell`); ``true_flange(q)``: the true flange's
-    positions and rotations. Returns relative path -> the file's bytes."""
+    ``<camera>/joints.csv`` (``image, q1..qN``: the folder ``partcal detect`` reads). ``sections``: the virtual
+    cell's true ``cameras:`` and ``boards:`` (:func:`partcal.calibration.camera_cell.true_cell`);
+    ``true_flange(q)``: the true flange's positions and rotations. Returns relative path -> the file's bytes."""
+    cameras, boards = true_cell(sections)
     images, first = np.unique(np.asarray(rows.texts["image"]), return_index=True)
     order = np.argsort(first)
     files = {}

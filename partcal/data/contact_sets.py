@@ -24,7 +24,6 @@ from .._validation import one_of
 from .._yamlio import Section, range_check
 from ..errors import UnreachableError
 from ..robot.rotations import matrices_from_rotation_vectors
-from ..calibration.camera_cell import true_cell
 from ..calibration.cell import FEATURE_NAME, check_ties, unit_vector, vector3_problem
 from ..calibration.measurement import MeasurementRows
 from ..calibration.registry import MEASUREMENT_TYPES
@@ -331,9 +330,8 @@ def _image_files(study, name: str, table: MeasurementRows) -> list[tuple[Path, P
     from .boards import image_files          # OpenCV, imported only when images are rendered
     k = list(study.observations).index(name) + 1
     rng = np.random.default_rng(np.random.SeedSequence(study.seed, spawn_key=(41, k)))
-    cameras, boards = true_cell(study.cell.sections)
     pending = []
-    for relative, data in image_files(table, cameras, boards, study.robot.true_flange, rng).items():
+    for relative, data in image_files(table, study.cell.sections, study.robot.true_flange, rng).items():
         final = study.output / f"{name}_images" / relative
         final.parent.mkdir(parents=True, exist_ok=True)
         tmp = final.with_name(f".{final.name}.partial")

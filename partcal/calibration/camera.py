@@ -31,7 +31,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import DataError
-from ..robot.rotations import left_jacobian, log_derivative, matrix_from_rotation_vector, skew_matrices
+from ..robot.rotations import (left_jacobian, log_derivative, matrix_from_rotation_vector, poses_from,
+                               skew_matrices)
 from .camera_cell import (POSE, camera_info_text, candidate_rows, half_turn_symmetric, read_board, read_camera,
                           simulated_rows)
 from .camera_model import (INTRINSICS, board_points, focal_from_homographies, homography, pose_from_homography,
@@ -171,9 +172,7 @@ class CameraPoints(MeasurementType):
     def unknowns(self, positions, rotations):
         self._layout()
         start = np.zeros(len(self.names_units))
-        flanges = np.tile(np.eye(4), (self.index.size, 1, 1))
-        flanges[:, :3, :3] = rotations[self.index]
-        flanges[:, :3, 3] = positions[self.index] - rotations[self.index] @ self.tool_mm
+        flanges = poses_from(positions[self.index] - rotations[self.index] @ self.tool_mm, rotations[self.index])
         placed: dict[str, NDArray[np.float64]] = {}
         for cam in sorted(self.camera_names, key=lambda c: -self.camera.count(c)):     # most rows first
             k = self._start_intrinsics(cam)

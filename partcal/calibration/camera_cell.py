@@ -10,6 +10,7 @@ from numpy.typing import NDArray
 
 from .._yamlio import Section
 from ..errors import DataError, PartcalError
+from ..robot.rotations import poses_from
 from .camera_model import INTRINSICS, board_points, pose_matrix, project
 from .cell import named_entry
 from .measurement import MeasurementRows
@@ -213,8 +214,7 @@ def camera_T_boards(camera: dict, board: dict, flange_mm, flange_rotations) -> N
     """The true board in the true camera's frame (n, 4, 4; mm) at flange poses (positions (n, 3) mm, rotations
     (n, 3, 3), base frame): the camera's and the board's ``pose`` on their mounts."""
     cam, brd = pose_matrix(camera["pose"]), pose_matrix(board["pose"])
-    flange = np.tile(np.eye(4), (flange_mm.shape[0], 1, 1))
-    flange[:, :3, :3], flange[:, :3, 3] = flange_rotations, flange_mm
+    flange = poses_from(flange_mm, flange_rotations)
     if camera["mount"] == "cell":
         return np.linalg.inv(cam) @ flange @ brd
     return np.linalg.inv(flange @ cam) @ brd

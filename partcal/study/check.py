@@ -61,7 +61,6 @@ from ..models.kindtable import identification_of
 from ..robot.frames import kabsch
 from ..robot.rotations import rotation_vector_from_matrix
 from .check_types import model_cell, refuse_points_against_camera, stacked_at_model
-from .persist import load_model
 from .predictor import load_predictor
 
 ALPHA = 0.01
@@ -328,15 +327,15 @@ def check_file(model_path: str | Path, data_path: str | Path, *, fmt: str | Path
                              "positions the errors are taken from (a model file of 'partcal run' with a robot)")
     if frame not in ("base", "tracker"):
         raise ConfigError(f"check: --frame must be base or tracker; got {frame!r}")
-    if has_measurement_column(data_path, load_format(fmt) if isinstance(fmt, (str, Path)) else fmt):  # pixels, touches
-        return check_rows_file(model, load_model(model_path)[1], model_path, data_path, fmt, frame, rows, alpha)
+    fmt = load_format(fmt) if isinstance(fmt, (str, Path)) else fmt
+    if has_measurement_column(data_path, fmt):                                        # pixels, touches, ...
+        return check_rows_file(model, predictor.document, model_path, data_path, fmt, frame, rows, alpha)
     refuse_points_against_camera(model, model_path, data_path, "check")
     try:
         selection = RowSelection.parse(rows) if rows else None
     except ConfigError:
         raise ConfigError(f"check: --rows {rows!r}: expected {ROWS_EXPECTED}") from None
-    m = read_measurements(data_path, robot, fmt=load_format(fmt) if isinstance(fmt, (str, Path)) else fmt,
-                          rows=selection, frame=frame)
+    m = read_measurements(data_path, robot, fmt=fmt, rows=selection, frame=frame)
     if m.n_joints != robot.n_joints:
         raise DataError(f"{data_path}: {m.n_joints} joint columns (q1..q{m.n_joints}); the model's robot "
                         f"{robot.name} has {robot.n_joints}")
@@ -424,9 +423,10 @@ def check_type_rows(model, doc: dict, rows: MeasurementRows, *, model_path="mode
                            ", ".join(m.name for m in problem.measurements))
 
 
-def check_rows_file(model, doc, model_path, data_path, fmt, frame: str, rows: str | None, alpha: float
-                    ) -> RowsCheckResult:
-    """``partcal check`` of a measurements file (a ``measurement`` column): refused naming why for a model
+def check_rows_file(model, doc, model_path, data_path, fmt: MeasurementFormat | None, frame: str, rows: str | None,
+                    alpha: float) -> RowsCheckResult:
+    """``partcal check`` of a measurements file (a ``measurement`` column; ``fmt`` its format, loaded): refused
+    naming why for a model
     without robot parameters, a tracker frame or a row selection."""
     if frame != "base":
         raise ConfigError(f"check: --frame {frame}: {data_path} holds measurement types, whose unknowns (a "
@@ -439,5 +439,5 @@ def check_rows_file(model, doc, model_path, data_path, fmt, frame: str, rows: st
                              "was not identified from any: check it with tracker points (x_meas, y_meas, z_meas), "
                              "or check a model of partcal run on these types")
     cell = model_cell(doc, model_path)
-    table = read_measurement_rows(data_path, model.robot_, load_format(fmt) if fmt else None, cell or None)
+    table = read_measurement_rows(data_path, model.robot_, fmt, cell or None)
     return check_type_rows(model, doc, table, model_path=model_path, data_path=data_path, alpha=alpha)

@@ -195,10 +195,11 @@ def update_file(model_path: str | Path, data_path: str | Path, output: str | Pat
         model_prior(model, 1.0)
     except ModelFileError as exc:
         raise ModelFileError(f"{model_path}: {exc}") from None
-    if has_measurement_column(data_path, load_format(fmt) if fmt else None):     # pixels, touches, ...
-        return update_type_rows(model, doc, model_path, data_path, output, fmt, inflate)
+    loaded = load_format(fmt) if fmt else None
+    if has_measurement_column(data_path, loaded):                                    # pixels, touches, ...
+        return update_type_rows(model, doc, model_path, data_path, output, loaded, inflate)
     refuse_points_against_camera(model, model_path, data_path, "update")
-    data = read_measurements(data_path, model.robot_, fmt=load_format(fmt) if fmt else None)
+    data = read_measurements(data_path, model.robot_, fmt=loaded)
     done = update_model(model, data, inflate)
     provenance = {"data": str(data_path), "rows": len(data.q_deg), "prior_model": str(model_path),
                   "prior_name": doc.get("name", ""), "prior_checksum": doc.get("checksum") or checksum(doc),
@@ -216,7 +217,7 @@ def update_type_rows(model, doc: dict, model_path, data_path, output, fmt, infla
     """``partcal update`` from a measurements file: the model re-identified from the new rows (its cell from the
     model file) with its robot parameters as the prior."""
     cell = model_cell(doc, model_path)
-    rows = read_measurement_rows(data_path, model.robot_, load_format(fmt) if fmt else None, cell or None)
+    rows = read_measurement_rows(data_path, model.robot_, fmt, cell or None)
     prior = model_prior(model, inflate)
     updated = refit_on_rows(model, rows, cell, prior)
     held = refit_on_rows(model, rows, cell, Prior(prior.index, prior.mean, prior.root * FIRM, prior.names))

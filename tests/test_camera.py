@@ -150,6 +150,19 @@ def test_a_board_without_sizes_is_refused_naming_file_and_field(tmp_path):
         read_cell(path)
 
 
+@pytest.mark.parametrize("family, message", [
+    ("36h12", r"boards.b1.family \(line 4\): must be one of 36h11, 36h10, 25h9, 16h5; got '36h12'"),
+    ("16h5", r"boards.b1.family \(line 4\): must be a family of 42 tags or more \(a grid of 6 x 7; it has 30\); "
+             r"got '16h5'"),
+])
+def test_an_apriltag_family_that_cannot_hold_the_grid_is_refused(tmp_path, family, message):
+    path = tmp_path / "cell.yaml"
+    path.write_text("cameras:\n  c1: {mount: cell, image_size: [640, 480]}\nboards:\n"
+                    f"  b1: {{type: apriltag, rows: 6, cols: 7, square_mm: 30, marker_mm: 24, family: '{family}'}}\n")
+    with pytest.raises(ConfigError, match=message):
+        read_cell(path)
+
+
 def test_known_intrinsics_are_required_where_they_are_not_fitted(tmp_path):
     path = tmp_path / "cell.yaml"
     path.write_text("cameras:\n  c1: {mount: cell, image_size: [640, 480], fit_intrinsics: false}\n")

@@ -16,6 +16,10 @@ from .cell import named_entry
 from .measurement import MeasurementRows
 
 BOARD_TYPES = ("chessboard", "charuco", "apriltag")
+
+TAG_FAMILIES = {"36h11": 587, "36h10": 2320, "25h9": 35, "16h5": 30}
+"""An AprilTag grid's ``family`` (default ``36h11``) and its count of tags: tag ``t`` of the grid, row by row, is the
+family's tag ``t``."""
 MOUNTS = ("cell", "flange")
 POSE = ("x", "y", "z", "rx", "ry", "rz")
 OBLIQUE_DEG = 60.0
@@ -63,10 +67,23 @@ def read_board(entry) -> dict:
     if out["type"] != "chessboard":
         out["marker_mm"] = entry.get("marker_mm", "float", check=lambda v: _positive(v) or (
             None if v < out["square_mm"] else f"smaller than square_mm ({out['square_mm']:g})"))
+    if out["type"] == "apriltag":
+        tags = out["rows"] * out["cols"]
+        family = entry.get("family", "str", "36h11", check=lambda v: _family(v, out["rows"], out["cols"]))
+        if family != "36h11":
+            out["family"] = family
     if entry.has("pose"):
         out["pose"] = [float(v) for v in entry.get("pose", "list", check=_six)]
     entry.done()
     return out
+
+
+def _family(value: str, rows: int, cols: int) -> str | None:
+    if value not in TAG_FAMILIES:
+        return f"one of {', '.join(TAG_FAMILIES)}"
+    if TAG_FAMILIES[value] < rows * cols:
+        return f"a family of {rows * cols} tags or more (a grid of {rows} x {cols}; it has {TAG_FAMILIES[value]})"
+    return None
 
 
 def _six(value) -> str | None:

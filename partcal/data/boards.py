@@ -1,5 +1,5 @@
 """Board images of a virtual robot: a board's printed pattern (a ChArUco board through ``cv2.aruco``, a chessboard
-drawn here) seen by a camera of OpenCV's model (:func:`partcal.calibration.camera_model.project`) at a pose, each
+and an AprilTag grid drawn here) seen by a camera of OpenCV's model (:func:`partcal.calibration.camera_model.project`) at a pose, each
 pixel the average of a few samples of the pattern (:func:`render_view`); a folder of such images with the joints
 CSV that :func:`partcal.data.detect.detect_folder` reads (:func:`render_folder`). Tests, benchmarks and the docs
 render their images with it: no image data is kept in the repository."""
@@ -29,6 +29,20 @@ BACKGROUND = 90
 ARUCO_DICTIONARY = cv2.aruco.DICT_4X4_1000
 """The markers of a ChArUco board (and of the detection that reads it)."""
 
+TAG_DICTIONARIES = {"16h5": cv2.aruco.DICT_APRILTAG_16h5, "25h9": cv2.aruco.DICT_APRILTAG_25h9,
+                    "36h10": cv2.aruco.DICT_APRILTAG_36h10, "36h11": cv2.aruco.DICT_APRILTAG_36h11}
+"""OpenCV's dictionary of each AprilTag family (:data:`partcal.calibration.camera_cell.TAG_FAMILIES`)."""
+
+
+def tag_dictionary(board: dict):
+    """OpenCV's dictionary of an AprilTag grid's tags (tag ``t`` of the grid is the family's tag ``t``)."""
+    return cv2.aruco.getPredefinedDictionary(TAG_DICTIONARIES[board.get("family", "36h11")])
+
+
+def tag_cells(board: dict) -> int:
+    """The cells across one tag (its code's bits and the black border around them)."""
+    return tag_dictionary(board).markerSize + 2
+
 
 def charuco_board(board: dict):
     """OpenCV's ChArUco board of a board of the cell (``cols`` x ``rows`` squares, sizes in mm)."""
@@ -49,9 +63,31 @@ def pattern(board: dict) -> tuple[NDArray[np.uint8], float]:
         r, c = ((y + 0.5) / PIXELS_PER_MM // s).astype(int), ((x + 0.5) / PIXELS_PER_MM // s).astype(int)
         squares = np.where((r + c) % 2 == 0, 0, 255).astype(np.uint8)
     else:
-        raise ValueError(f"rendering a {board['type']} board is not built; expected chessboard or charuco")
+        squares = _tag_grid(board, width, height)
     margin = int(round(s * PIXELS_PER_MM))
     return cv2.copyMakeBorder(squares, margin, margin, margin, margin, cv2.BORDER_CONSTANT, value=255), s
+
+
+def _tag_grid(board: dict, width: int, height: int) -> NDArray[np.uint8]:
+    """An AprilTag grid's printed tags on white: tag ``r cols + c`` (its black border ``marker_mm`` wide) centred
+    in the grid's square ``(r, c)``; each pixel takes the colour of the tag's cell its centre falls in."""
+    s, half, cols = float(board["square_mm"]), float(board["marker_mm"]) / 2, int(board["cols"])
+    dictionary, cells = tag_dictionary(board), tag_cells(board)
+    count = int(board["rows"]) * cols
+    bits = np.array([cv2.aruco.generateImageMarker(dictionary, t, cells, borderBits=1) for t in range(count)])
+
+    def cell(pixels: int):
+        at = (np.arange(pixels) + 0.5) / PIXELS_PER_MM
+        square = (at // s).astype(int)
+        k = np.floor((at - (square + 0.5) * s + half) / (2 * half) * cells).astype(int)
+        inside = (k >= 0) & (k < cells)
+        return square, np.clip(k, 0, cells - 1), inside
+
+    r, v, inside_v = cell(height)
+    c, u, inside_u = cell(width)
+    tags = r[:, None] * cols + c[None, :]
+    out = bits[tags, v[:, None], u[None, :]]
+    return np.where(inside_v[:, None] & inside_u[None, :], out, 255).astype(np.uint8)
 
 
 def camera_rays(camera: dict, step: int = 2) -> NDArray[np.float64]:

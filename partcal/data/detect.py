@@ -6,7 +6,9 @@ paired with the row that names it, never by order, so an image where nothing is 
 shifts no other. A ChArUco board is read through ``cv2.aruco`` (each corner's id from the markers around it); a
 chessboard through ``cv2.findChessboardCornersSB`` refined by ``cv2.cornerSubPix``, its corners ordered by the board's own frame: seen from the
 front (the board's x along its columns, y along its rows) and its square (0, 0) black. A chessboard that looks the
-same turned half a turn (both square counts even or both odd) cannot be ordered so: it is warned of.
+same turned half a turn (both square counts even or both odd) cannot be ordered so: it is warned of. An AprilTag
+grid's tags are read by ``cv2.aruco`` and each corner is where two lines fitted to the tag's border edges meet
+(:func:`detect_tags`).
 """
 
 from __future__ import annotations
@@ -19,12 +21,13 @@ from pathlib import Path
 import cv2
 import numpy as np
 from numpy.typing import NDArray
+from scipy.special import ndtr
 
 from ..calibration.camera_cell import half_turn_symmetric
 from ..calibration.measurement import MeasurementRows
 from ..errors import DataError
 from ..robot.kinematics import Robot
-from .boards import charuco_board
+from .boards import charuco_board, tag_cells, tag_dictionary
 from .measurement_rows import write_measurement_rows
 
 log = logging.getLogger(__name__)
@@ -38,6 +41,11 @@ detector's error on rendered boards (0.13 -> 0.07 px RMS)."""
 
 MIN_POINTS = 6
 """An image with fewer points of the board found counts as one where nothing was found."""
+
+
+BLUR_CELLS = 1 / 3
+"""A tag's edge blurred wider (the step's sigma) than this share of its cells is not fitted: the pixels across it
+then hold too little of the step."""
 
 
 @dataclass
@@ -90,8 +98,11 @@ def read_joints(path: str | Path, robot: Robot) -> dict[str, tuple[NDArray[np.fl
     return out
 
 
-def detect_board(image: NDArray[np.uint8], board: dict) -> tuple[NDArray[np.intp], NDArray[np.float64]]:
-    """The board points found in a grey image: their ids (k,) and pixels (k, 2) (empty when none)."""
+def detect_board(image: NDArray[np.uint8], board: dict, unfitted: list[int] | None = None
+                 ) -> tuple[NDArray[np.intp], NDArray[np.float64]]:
+    """The board points found in a grey image: their ids (k,) and pixels (k, 2) (empty when none). ``unfitted``
+    collects the tags of an AprilTag grid that were read but whose corners could not be fitted
+    (:func:`detect_tags`)."""
     if board["type"] == "charuco":
         corners, ids, _, _ = cv2.aruco.CharucoDetector(charuco_board(board)).detectBoard(image)
         if ids is None or len(ids) == 0:
@@ -105,7 +116,133 @@ def detect_board(image: NDArray[np.uint8], board: dict) -> tuple[NDArray[np.intp
         corners = cv2.cornerSubPix(image, corners, (5, 5), (-1, -1), SUBPIXEL)      # SB's own: ~0.13 px
         grid = chessboard_order(image, corners[:, 0].astype(float).reshape(size[1], size[0], 2))
         return np.arange(grid.shape[0] * grid.shape[1]), grid.reshape(-1, 2)
-    raise DataError(f"detecting a {board['type']} board is not built; expected a chessboard or a charuco board")
+    if board["type"] == "apriltag":
+        return detect_tags(image, board, unfitted)
+    raise DataError(f"detecting a {board['type']} board is not built; expected chessboard, charuco or apriltag")
+
+
+def detect_tags(image: NDArray[np.uint8], board: dict, unfitted: list[int] | None = None
+                ) -> tuple[NDArray[np.intp], NDArray[np.float64]]:
+    """An AprilTag grid's tag corners found in a grey image: ids ``4 t + k`` (k: top left, top right, bottom
+    right, bottom left) and pixels. ``cv2.aruco`` finds and reads the tags; each corner is then the meeting of
+    two of the tag's border lines, each fitted to the pixels across its edge (:func:`edge_line`). OpenCV's own
+    corner refinements leave 0.6-0.9 px on rendered tags (a tag's corner is no saddle point, and its contour is
+    traced on whole pixels); the edges' lines about a tenth of that. A tag whose edges cannot be fitted (too small,
+    blurred over more than a third of its cells, cut by the image's border) is left out and its id appended to
+    ``unfitted``."""
+    count = int(board["rows"]) * int(board["cols"])
+    corners, ids, _ = cv2.aruco.ArucoDetector(tag_dictionary(board)).detectMarkers(image)
+    if ids is None:
+        return np.zeros(0, dtype=np.intp), np.zeros((0, 2))
+    grey = image.astype(float)
+    gap = (float(board["square_mm"]) - float(board["marker_mm"])) / float(board["marker_mm"])
+    out_ids, out_uv = [], []
+    for tag, quad in zip(ids.ravel(), corners):
+        if tag >= count:
+            continue                                       # a tag of the family that is not the grid's
+        refined = tag_corners(grey, quad[0].astype(float), tag_cells(board), gap)
+        if refined is None:
+            if unfitted is not None:
+                unfitted.append(int(tag))
+            continue
+        out_ids.append(4 * int(tag) + np.arange(4))
+        out_uv.append(refined)
+    if not out_ids:
+        return np.zeros(0, dtype=np.intp), np.zeros((0, 2))
+    order = np.argsort(np.concatenate(out_ids))
+    return np.concatenate(out_ids)[order].astype(np.intp), np.vstack(out_uv)[order]
+
+
+def tag_corners(grey: NDArray[np.float64], quad: NDArray[np.float64], cells: int, gap: float
+                ) -> NDArray[np.float64] | None:
+    """A tag's four corners (4, 2) where its border lines meet (:func:`edge_line`), from OpenCV's ``quad``; None
+    when an edge is too short to fit (under 8 pixels) or its fit fails. ``cells``: the cells across the tag;
+    ``gap``: the white between two tags, in tag widths."""
+    centre = quad.mean(axis=0)
+    lines = [edge_line(grey, quad[k], quad[(k + 1) % 4], centre, cells, gap) for k in range(4)]
+    if any(line is None for line in lines):
+        return None
+    corners = np.array([_meet(lines[k - 1], lines[k]) for k in range(4)])        # corner k: edges k - 1 and k
+    return corners if np.all(np.abs(corners - quad) < 3.0) else None
+
+
+def _meet(first, second) -> NDArray[np.float64]:
+    """Where two lines (a point and a direction each) meet."""
+    (p, d), (q, e) = first, second
+    t = np.linalg.solve(np.column_stack([d, -e]), q - p)[0]
+    return p + t * d
+
+
+def edge_line(grey: NDArray[np.float64], a: NDArray[np.float64], b: NDArray[np.float64],
+              centre: NDArray[np.float64], cells: int, gap: float
+              ) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
+    """The line of a tag's border edge from ``a`` to ``b`` (a point and a unit direction): the pixels across the
+    edge (within 0.6 of a cell inside, the black border; within 0.6 of a cell or of the white gap outside) away
+    from its ends, fitted by least squares (Gauss-Newton) with a blurred step, ``dark + (light - dark) Phi(d /
+    sigma)`` of the distance ``d`` to the line (offset and turn about the edge's middle): every pixel's grey
+    counts, none is interpolated, and a blur symmetric about the edge moves it nowhere."""
+    length = float(np.linalg.norm(b - a))
+    if length < 8.0:
+        return None
+    t = (b - a) / length
+    n = np.array([t[1], -t[0]])
+    if n @ ((a + b) / 2 - centre) < 0:
+        n = -n                                             # outwards: dark inside, light outside
+    cell = length / cells
+    inner, outer = 0.6 * cell, cell * min(1.0, 0.6 * gap * cells)
+    ends = max(0.6 * cell, 2.5)
+    lo = np.floor(np.minimum(a, b) - max(inner, outer) - 1).astype(int)
+    hi = np.ceil(np.maximum(a, b) + max(inner, outer) + 1).astype(int)
+    lo, hi = np.maximum(lo, 0), np.minimum(hi, np.array(grey.shape[::-1]) - 1)
+    if np.any(hi - lo < 2):
+        return None
+    v, u = np.mgrid[lo[1]:hi[1] + 1, lo[0]:hi[0] + 1]
+    rel = np.column_stack([u.ravel(), v.ravel()]) - a
+    d, s = rel @ n, rel @ t
+    keep = (d > -inner) & (d < outer) & (s > ends) & (s < length - ends)
+    if keep.sum() < 12:
+        return None
+    d, s = d[keep], s[keep] - length / 2
+    value = grey[v.ravel()[keep], u.ravel()[keep]]
+    dark, light = np.percentile(value, 5), np.percentile(value, 95)
+    start = np.clip((light - value.mean()) / max(light - dark, 1.0) * (inner + outer) - inner, -inner, outer)
+    x = np.array([start, 0.0, dark, light, 0.8])          # offset, turn, dark, light, sigma
+    x, cost = _step_fit(x, d, s, value)
+    if not (np.isfinite(x).all() and abs(x[0]) < 3.0 and x[3] - x[2] > 10 and x[4] < BLUR_CELLS * cell):
+        return None
+    direction = t + x[1] * n
+    return a + (length / 2) * t + x[0] * n, direction / np.linalg.norm(direction)
+
+
+def _step_fit(x: NDArray[np.float64], d: NDArray[np.float64], s: NDArray[np.float64], value: NDArray[np.float64]
+              ) -> tuple[NDArray[np.float64], float]:
+    """Levenberg-Marquardt on a blurred step's five (:func:`edge_line`): the parameters and the sum of squares."""
+
+    def model(x):
+        z = (d - x[0] - x[1] * s) / x[4]
+        cdf = ndtr(z)
+        return x[2] + (x[3] - x[2]) * cdf - value, z, cdf
+
+    residual, z, cdf = model(x)
+    cost, damping = float(residual @ residual), 1e-3
+    for _ in range(50):
+        pdf, span = np.exp(-0.5 * z * z) / np.sqrt(2 * np.pi), x[3] - x[2]
+        jac = np.column_stack([-span * pdf / x[4], -span * pdf * s / x[4], 1 - cdf, cdf, -span * pdf * z / x[4]])
+        normal, gradient = jac.T @ jac, jac.T @ residual
+        step = np.linalg.solve(normal + damping * np.diag(np.diag(normal) + 1e-12), -gradient)
+        trial = x + step
+        trial[4] = max(trial[4], 0.2)
+        r2, z2, cdf2 = model(trial)
+        if r2 @ r2 < cost:
+            x, residual, z, cdf, cost = trial, r2, z2, cdf2, float(r2 @ r2)
+            damping /= 3
+            if abs(step[0]) < 1e-5 and abs(step[1]) < 1e-7:
+                break
+        else:
+            damping *= 4
+            if damping > 1e8:
+                break
+    return x, cost
 
 
 def chessboard_order(image: NDArray[np.uint8], grid: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -181,7 +318,11 @@ def detect_folder(folder: str | Path, joints: str | Path, robot: Robot, board: d
         if image_size is not None and tuple(image.shape[::-1]) != tuple(image_size):
             raise DataError(f"{folder / name}: {image.shape[1]} x {image.shape[0]} pixels; camera {camera!r}'s "
                             f"image_size is {image_size[0]} x {image_size[1]}")
-        ids, uv = detect_board(image, board)
+        unfitted: list[int] = []
+        ids, uv = detect_board(image, board, unfitted)
+        if unfitted:
+            out.warnings.append(f"{folder / name}: tags {', '.join(map(str, unfitted))} read but their corners not "
+                                "fitted (blurred, too small or cut by the image's border): left out")
         if ids.size < MIN_POINTS:
             out.not_found.append(name)
             continue

@@ -26,7 +26,7 @@ rendered images is tests/test_detect.py's, under 0.1 px RMS). Per row the median
   frame through the nominal robot and the best method's hand-eye.
 
     .venv/bin/python benchmarks/bench_camera.py [--robots 3] [--parametrization dh|complete]
-        (about a minute per robot)
+        [--setups eye-to-hand eye-in-hand] [--images 30 60 120]     (about a minute per robot)
 """
 
 from __future__ import annotations
@@ -267,15 +267,20 @@ def one(name: str, images: int, seed: int, folder: Path) -> dict:
     return out
 
 
-def run(robots: int) -> None:
+def run(robots: int, setups=tuple(SETUPS), counts=(30, 60, 120)) -> None:
     logging.getLogger("partcal").setLevel(logging.ERROR)
     table, beside = [], []
-    for name in SETUPS:
-        for images in (30, 60, 120):
+    for name in setups:
+        for images in counts:
             results = []
             for seed in range(robots):
                 with tempfile.TemporaryDirectory() as tmp:
                     results.append(one(name, images, seed, Path(tmp)))
+                r = results[-1]
+                print(f"  {name} {images} images, robot {seed}: hand-eye {r['he'][0]:.3f} mm {r['he'][1]:.4f} deg, "
+                      f"no fit in view {r['view']:.3f} mm, rigid camera/tracker "
+                      f"{r['rigid_view'][0] / r['rigid_view'][1]:.2f}, OpenCV best {r['cv_best'][1][0]:.3f} mm, "
+                      f"{r['seconds']:.1f} s", file=sys.stderr, flush=True)
             med = lambda f: float(np.median([f(r) for r in results]))  # noqa: E731
             best = max(set(r["cv_best"][0] for r in results), key=[r["cv_best"][0] for r in results].count)
             table.append([name, images, f"{med(lambda r: r['he'][0]):.3f}", f"{med(lambda r: r['he'][1]):.4f}",
@@ -311,6 +316,8 @@ if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--robots", type=int, default=3, help="virtual robots (seeds) per row; median reported")
     parser.add_argument("--parametrization", choices=("dh", "complete"), default="complete")
+    parser.add_argument("--setups", nargs="+", choices=tuple(SETUPS), default=tuple(SETUPS), help="default: both")
+    parser.add_argument("--images", nargs="+", type=int, default=(30, 60, 120), help="default: 30 60 120")
     args = parser.parse_args()
     PARAMETRIZATION = args.parametrization
-    run(args.robots)
+    run(args.robots, args.setups, args.images)

@@ -79,3 +79,59 @@ def test_planned_images_keep_above_the_floor(tmp_path):
     drawn = MEASUREMENT_TYPES["camera"].candidates(robot, read_cell(tmp_path / "cell.yaml"), 40,
                                                    np.random.default_rng(0))
     assert np.any(robot.flange(drawn.q_deg)[:, 2, 3] <= 100.0)          # without the floor some are below it
+
+
+def test_planned_images_are_chosen_among_the_cells_own_poses(tmp_path, capsys):
+    """``--candidates FILE.csv`` (the cell's reachable, collision-free poses, e.g. within narrow joint ranges): every
+    planned image is one of those poses, to the file's digits; a touch plan refuses them (its candidates are put on
+    the planes), naming the option."""
+    (tmp_path / "cell.yaml").write_text(yaml.safe_dump(CELL))
+    rng = np.random.default_rng(3)
+    q = rng.uniform([-40, -150, -140, -180, -150, -180], [40, -30, 140, 180, 150, 180], (3000, 6))
+    q = np.round(q, 3)
+    np.savetxt(tmp_path / "safe.csv", q, delimiter=",", header="q1,q2,q3,q4,q5,q6", comments="", fmt="%.3f")
+    assert main(["plan", "universal_robots_ur10", "--measurement", "camera", "-n", "6", "-o",
+                 str(tmp_path / "joints.csv"), "--cell", str(tmp_path / "cell.yaml"), "--candidates",
+                 str(tmp_path / "safe.csv"), "--pool", "40", "-q"]) == 0
+    lines = [line for line in (tmp_path / "joints.csv").read_text().splitlines() if not line.startswith("#")]
+    planned = np.array([[float(v) for v in line.split(",")[1:]] for line in lines[1:]])
+    assert planned.shape == (6, 6)
+    assert all(np.min(np.max(np.abs(q - row), axis=1)) < 1e-9 for row in planned)
+    assert np.all((planned[:, 0] >= -40) & (planned[:, 0] <= 40))            # within the file's ranges
+    plane_cell = tmp_path / "planes.yaml"
+    plane_cell.write_text("planes:\n  top: {point_mm: [700, 0, 0], normal: [0, 0, 1]}\n")
+    assert main(["plan", "universal_robots_ur10", "--measurement", "plane", "-n", "6", "-o", str(tmp_path / "t.csv"),
+                 "--cell", str(plane_cell), "--candidates", str(tmp_path / "safe.csv"), "-q"]) == 2
+    assert "--candidates goes with tracker poses" in capsys.readouterr().err
+
+
+def test_two_cameras_in_the_cell_get_a_joints_file_each_with_the_board_in_their_view(tmp_path, capsys):
+    """A second camera in the cell, across from the first: the plan shares the images between them and writes one
+    joints CSV per camera (each camera's folder is detected with its own), each pose putting the board in that
+    camera's view (a pinhole of its intrinsics, independently). Cameras in the cell and on the flange in one cell
+    are refused: which board each sees is not known."""
+    second = [1900.0, -300.0, 900.0, -91.45, -69.8492, 49.5181]     # the first mirrored across the base's x-z plane
+    cell = {**CELL, "cameras": {**CELL["cameras"], "cam2": {**CELL["cameras"]["cam1"], "pose": second}}}
+    (tmp_path / "cell.yaml").write_text(yaml.safe_dump(cell))
+    assert main(["plan", "universal_robots_ur10", "--measurement", "camera", "-n", "10", "-o",
+                 str(tmp_path / "joints.csv"), "--cell", str(tmp_path / "cell.yaml"), "--pool", "60", "-q"]) == 0
+    robot = load_robot("universal_robots_ur10")
+    counts = {}
+    for cam, pose in (("cam1", CAMERA), ("cam2", second)):
+        lines = [line for line in (tmp_path / f"joints_{cam}.csv").read_text().splitlines()
+                 if not line.startswith("#")]
+        assert lines[0] == "image,q1,q2,q3,q4,q5,q6" and all(line.startswith(f"{cam}-") for line in lines[1:])
+        q = np.array([[float(v) for v in line.split(",")[1:]] for line in lines[1:]])
+        counts[cam] = len(q)
+        cam_T_board = np.linalg.inv(_pose(pose)) @ robot.flange(q) @ _pose(BOARD)
+        centre = cam_T_board[:, :3, :3] @ [165.0, 120.0, 0.0] + cam_T_board[:, :3, 3]
+        assert np.all(centre[:, 2] > 0)
+        u, v = 1500 * centre[:, 0] / centre[:, 2] + 960, 1500 * centre[:, 1] / centre[:, 2] + 600
+        assert np.all((u > 0) & (u < 1920) & (v > 0) & (v < 1200))
+    assert not (tmp_path / "joints.csv").exists() and sum(counts.values()) == 10 and min(counts.values()) >= 1
+    mixed = {**cell, "cameras": {**cell["cameras"], "cam2": {**cell["cameras"]["cam2"], "mount": "flange",
+                                                              "pose": [0.0, 70.0, 40.0, 2.0, -3.0, 90.0]}}}
+    (tmp_path / "mixed.yaml").write_text(yaml.safe_dump(mixed))
+    assert main(["plan", "universal_robots_ur10", "--measurement", "camera", "-n", "10", "-o",
+                 str(tmp_path / "m.csv"), "--cell", str(tmp_path / "mixed.yaml"), "-q"]) == 2
+    assert "plan each set-up on a cell of its own" in capsys.readouterr().err

@@ -316,9 +316,10 @@ class CameraPoints(MeasurementType):
     """``partcal plan --measurement camera`` chooses whole images (each many rows), not rows."""
 
     @staticmethod
-    def candidates(robot, cell, count, rng):
-        """Candidate images for ``partcal plan``: :func:`~partcal.calibration.camera_cell.candidate_rows`."""
-        return candidate_rows(robot, cell, count, rng)
+    def candidates(robot, cell, count, rng, poses=None):
+        """Candidate images for ``partcal plan`` (at ``poses``, the cell's safe poses, when given):
+        :func:`~partcal.calibration.camera_cell.candidate_rows`."""
+        return candidate_rows(robot, cell, count, rng, poses)
 
     # -------------------------------------------------------------- the cell's symmetries, words
     def moved(self, u, omega, shift):

@@ -160,52 +160,64 @@ PLAN_IMAGES = 300
 """At most this many candidate images for ``partcal plan --measurement camera`` (each is many rows)."""
 
 
-def candidate_rows(robot, cell: dict, count: int, rng) -> MeasurementRows:
-    """Candidate images for ``partcal plan --measurement camera``: poses drawn within the joint limits and kept where
-    the cell's first camera sees at least half of its first board's points inside its image, the board turned less
-    than :data:`OBLIQUE_DEG` from the line of sight (:func:`seen_points`, at the nominal robot and the camera's and
+def candidate_rows(robot, cell: dict, count: int, rng, poses: NDArray[np.float64] | None = None) -> MeasurementRows:
+    """Candidate images for ``partcal plan --measurement camera``: for every camera and every board (the cameras all
+    in the cell, seeing boards on the flange, or all on the flange, seeing boards in the cell), poses where
+    the camera sees at least half of the board's points inside its image, the board turned less than
+    :data:`OBLIQUE_DEG` from the line of sight (:func:`seen_points`, at the nominal robot and the camera's and
     board's approximate ``pose`` and the camera's ``intrinsics`` the cell gives); each image's rows carry the pixels
-    predicted there (``min(count, PLAN_IMAGES)`` images)."""
+    predicted there. ``poses`` (n, N) deg: the poses to choose from (the cell's reachable, collision-free ones);
+    default: drawn within the joint limits. At most ``min(count, PLAN_IMAGES)`` images, shared evenly among the
+    pairs."""
     cameras, boards = cell.get("cameras") or {}, cell.get("boards") or {}
     if not cameras or not boards:
         raise PartcalError("plan --measurement camera: the cell needs cameras: and boards: (with their approximate "
                            "pose and the camera's intrinsics)")
-    cam, board = next(iter(cameras)), next(iter(boards))
-    for section, name, spec, keys in (("cameras", cam, cameras[cam], ("pose", "intrinsics")),
-                                      ("boards", board, boards[board], ("pose",))):
-        missing = [k for k in keys if k not in spec]
-        if missing:
-            raise PartcalError(f"plan --measurement camera: {section}.{name}: planning images needs its approximate "
-                               f"{' and '.join(missing)} (pose: [x, y, z, rx, ry, rz] mm and degrees, in the base "
-                               "frame or the flange's; intrinsics: fx, fy, cx, cy)")
-    local = board_points(boards[board])
-    least = (local.shape[0] + 1) // 2
+    for section, entries, keys in (("cameras", cameras, ("pose", "intrinsics")), ("boards", boards, ("pose",))):
+        for name, spec in entries.items():
+            missing = [k for k in keys if k not in spec]
+            if missing:
+                raise PartcalError(f"plan --measurement camera: {section}.{name}: planning images needs its "
+                                   f"approximate {' and '.join(missing)} (pose: [x, y, z, rx, ry, rz] mm and degrees, "
+                                   "in the base frame or the flange's; intrinsics: fx, fy, cx, cy)")
+    mounts = {spec["mount"] for spec in cameras.values()}
+    if len(mounts) > 1:
+        raise PartcalError("plan --measurement camera: the cell has cameras in the cell and on the flange, and which "
+                           "board each sees is not known before the images are taken: plan each set-up on a cell of "
+                           "its own (its cameras and the boards they see)")
+    pairs = [(cam, board) for cam in cameras for board in boards]
     wanted = min(int(count), PLAN_IMAGES)
-    q_all, points, uv_all, images = [], [], [], []
-    lo, hi = robot.limits_deg[:, 0], robot.limits_deg[:, 1]
-    for _ in range(50):
-        q = rng.uniform(lo, hi, size=(2000, robot.n_joints))
-        flange = robot.flange(q)
-        seen, uv = seen_points(cameras[cam], boards[board], flange[:, :3, 3], flange[:, :3, :3], local)
-        for i in np.flatnonzero(seen.sum(axis=1) >= least)[:wanted - len(images)]:
-            mine = np.flatnonzero(seen[i])
-            images += [f"{cam}-{len(images) + 1:04d}"]
-            q_all.append(np.repeat(q[i][None], mine.size, axis=0))
-            points.append(mine.astype(float))
-            uv_all.append(uv[i, mine])
-        if len(images) == wanted:
-            break
-    if len(images) < 3:
-        raise PartcalError(f"plan --measurement camera: camera {cam!r} sees board {board!r} in {len(images)} of "
-                           "100,000 poses drawn at the nominal robot; check their poses in the cell")
-    counts = [len(p) for p in points]
-    image = tuple(name for name, k in zip(images, counts) for _ in range(k))
-    n = len(image)
+    each = [wanted // len(pairs) + (k < wanted % len(pairs)) for k in range(len(pairs))]
+    q_all, points, uv_all, images, texts = [], [], [], [], {"camera": [], "board": []}
+    for (cam, board), want in zip(pairs, each):
+        local = board_points(boards[board])
+        least, taken = (local.shape[0] + 1) // 2, 0
+        batches = [poses] if poses is not None else (
+            rng.uniform(robot.limits_deg[:, 0], robot.limits_deg[:, 1], size=(2000, robot.n_joints)) for _ in range(50))
+        for q in batches:
+            flange = robot.flange(q)
+            seen, uv = seen_points(cameras[cam], boards[board], flange[:, :3, 3], flange[:, :3, :3], local)
+            for i in np.flatnonzero(seen.sum(axis=1) >= least)[:want - taken]:
+                mine = np.flatnonzero(seen[i])
+                taken += 1
+                images += [f"{cam}-{len(images) + 1:04d}"] * mine.size
+                texts["camera"] += [cam] * mine.size
+                texts["board"] += [board] * mine.size
+                q_all.append(np.repeat(q[i][None], mine.size, axis=0))
+                points.append(mine.astype(float))
+                uv_all.append(uv[i, mine])
+            if taken == want:
+                break
+        if taken < 3:
+            where = f"the {len(poses)} poses given" if poses is not None else "100,000 poses drawn"
+            raise PartcalError(f"plan --measurement camera: camera {cam!r} sees board {board!r} in {taken} of {where} "
+                               "at the nominal robot; check their poses in the cell")
+    n = len(images)
     uv = np.vstack(uv_all)
     return MeasurementRows(np.vstack(q_all), ("camera",) * n, tuple(str(i + 1) for i in range(n)),
                            tuple(range(1, n + 1)), "plan", {"point": np.concatenate(points), "u_px": uv[:, 0],
                                                             "v_px": uv[:, 1]},
-                           {"image": image, "camera": (cam,) * n, "board": (board,) * n})
+                           {"image": tuple(images), **{k: tuple(v) for k, v in texts.items()}})
 
 
 def true_cell(sections: dict) -> tuple[dict, dict]:

@@ -19,7 +19,7 @@ from typing import Callable
 import numpy as np
 
 from .. import __version__
-from .._io import refuse_input_as_output
+from .._io import atomic_write, refuse_input_as_output
 from ..data.formats import load_format
 from ..data.measurements import read_columns
 from ..errors import PartcalError
@@ -180,8 +180,9 @@ def _measurements(robot: str | Path, o: PlanOptions, say, show) -> None:
     """``--measurement plane|fixed -n N -o ROWS.csv --cell CELL.yaml`` (rows planned on the cell's planes and points), or
     ``--evaluate KINDS.csv [--cell CELL.yaml]`` (a measurements file judged): docs/plan.md, "Measurement types"."""
     planning = o.measurement is not None
-    others = [flag for flag, on in (("--curve", o.curve), ("--candidates", o.candidates), ("--box", o.box),
-                                    ("--cube", o.cube), ("--cycles", o.cycles)) if on]
+    images = getattr(MEASUREMENT_TYPES.get(o.measurement), "plans_by", None) == "image"
+    others = [flag for flag, on in (("--curve", o.curve), ("--candidates", o.candidates and not images),
+                                    ("--box", o.box), ("--cube", o.cube), ("--cycles", o.cycles)) if on]
     if planning and o.evaluate:
         raise PartcalError("plan: give either --measurement with -n N -o ROWS.csv or --evaluate DATA.csv, not both")
     if planning and (o.n is None or o.output is None or o.cell is None):
@@ -194,8 +195,10 @@ def _measurements(robot: str | Path, o: PlanOptions, say, show) -> None:
         verb = "goes" if len(others) == 1 else "go"
         raise PartcalError(f"plan: {', '.join(others)} {verb} with tracker poses, not with measurement types "
                            f"({'--measurement' if planning else 'a measurements file'}); the candidates of --measurement are drawn "
-                           "on the cell's planes and points (--pool of them)")
-    refuse_input_as_output(o.output, "plan", [("cell file", o.cell), ("robot file", robot)])
+                           "on the cell's planes and points (--pool of them); --candidates also goes with "
+                           "--measurement camera (the poses its images are chosen among)")
+    refuse_input_as_output(o.output, "plan", [("cell file", o.cell), ("candidate file", o.candidates),
+                                              ("robot file", robot)])
     arm = robot_named(robot)
     model = _planned_model(arm, o)
     cell = read_cell(o.cell) if o.cell is not None else {}
@@ -212,8 +215,12 @@ def _measurements(robot: str | Path, o: PlanOptions, say, show) -> None:
 def _measurements_planned(arm: Robot, o: PlanOptions, model, cell: dict, say, show) -> None:
     """``--measurement plane|fixed -n N -o ROWS.csv``: the rows planned, written as a measurements CSV, their evaluation shown."""
     start = time.perf_counter()
+    floor, poses = plan_floor(arm, o), None
+    if o.candidates:                                  # a cell's own poses: the cell's to vouch for, unless a floor is stated
+        floor = floor if o.floor_mm is not None or o.clearance_mm is not None else None
+        poses = plan.check_candidates(arm, _joints(arm, o.candidates, o), str(o.candidates), floor)
     result = plan_measurements.plan_measurements(arm, o.n, cell, o.measurement, model=model, pool=o.pool, random_state=o.seed,
-                                   source=str(o.cell), floor=plan_floor(arm, o),
+                                   source=str(o.cell), floor=floor, poses=poses,
                                    callback=lambda k, logdet: say(f"DETMAX exchange {k}: log det {logdet:.4f}")
                                    if k % 10 == 0 else None)
     if getattr(MEASUREMENT_TYPES.get(o.measurement), "plans_by", None) == "image":
@@ -239,19 +246,30 @@ def _measurements_planned(arm: Robot, o: PlanOptions, model, cell: dict, say, sh
 
 def _images_written(arm: Robot, o: PlanOptions, model, result, start: float, show) -> None:
     """``--measurement camera -n N -o JOINTS.csv``: the planned images' joints (``image, q1..qN``, one row each: the
-    joints CSV an image folder is detected with), their evaluation shown."""
+    joints CSV an image folder is detected with), their evaluation shown. With several cameras, one such file per
+    camera (``JOINTS_<camera>.csv``): each camera's folder is detected with its own."""
     names, q = plan_measurements.planned_images(result.rows)
+    camera = dict(zip(result.rows.texts["image"], result.rows.texts["camera"]))
+    cameras = list(dict.fromkeys(camera[name] for name in names))
     ev = result.evaluation
-    lines = [f"# camera images planned by partcal {__version__} for {arm.name} ({model.describe(arm)}) on the cell "
-             f"{o.cell}: {len(names)} of {len(set(result.candidates.texts['image']))} candidate images (the board in "
-             f"view, not too oblique, at the nominal robot), D-optimal (DETMAX), seed {o.seed}.",
-             "# Joint angles in degrees. Take one image at each pose, named as its row; partcal.data.detect reads the "
-             "folder with this file.",
-             "image," + ",".join(f"q{j + 1}" for j in range(arm.n_joints))]
-    lines += [name + "," + ",".join(f"{v:.6f}" for v in row) for name, row in zip(names, q)]
-    Path(o.output).write_text("\n".join(lines) + "\n")
+    output = Path(o.output)
+    written = []
+    for cam in cameras:
+        path = output if len(cameras) == 1 else output.with_name(f"{output.stem}_{cam}{output.suffix}")
+        mine = [k for k, name in enumerate(names) if camera[name] == cam]
+        lines = [f"# camera images planned by partcal {__version__} for {arm.name} ({model.describe(arm)}) on the "
+                 f"cell {o.cell}: {len(names)} of {len(set(result.candidates.texts['image']))} candidate images (the "
+                 f"board in view, not too oblique, at the nominal robot), D-optimal (DETMAX), seed {o.seed}"
+                 + (f"; camera {cam}'s {len(mine)} of them." if len(cameras) > 1 else "."),
+                 "# Joint angles in degrees. Take one image at each pose, named as its row; partcal.data.detect reads "
+                 "the folder with this file.",
+                 "image," + ",".join(f"q{j + 1}" for j in range(arm.n_joints))]
+        lines += [names[k] + "," + ",".join(f"{v:.6f}" for v in q[k]) for k in mine]
+        with atomic_write(path) as handle:
+            handle.write("\n".join(lines) + "\n")
+        written.append(f"{path} ({len(mine)})" if len(cameras) > 1 else str(path))
     show("\n".join(ev.lines()))
-    show(f"wrote {len(names)} images' joints to {o.output} ({result.exchange.exchanges} exchanges, log det "
+    show(f"wrote {len(names)} images' joints to {', '.join(written)} ({result.exchange.exchanges} exchanges, log det "
          f"{result.exchange.start_logdet:.3f} -> {result.exchange.logdet:.3f}, {time.perf_counter() - start:.1f} s)")
 
 

@@ -300,15 +300,21 @@ def candidate_blocks(robot: Robot, candidates: MeasurementRows, cell: dict, mode
 
 def plan_measurements(robot: Robot, n: int, cell: dict, measurement: str, *, model: design.PlannedModel = design.DH,
                pool: int = plan.DEFAULT_POOL, random_state=0, source: str = "cell", floor=plan.ROBOT_FLOOR,
-               ranges_deg: dict | None = None, candidates: MeasurementRows | None = None, callback=None) -> MeasurementPlan:
+               ranges_deg: dict | None = None, candidates: MeasurementRows | None = None, callback=None,
+               poses: NDArray[np.float64] | None = None) -> MeasurementPlan:
     """Plan ``n`` rows of ``type`` (``plane``: touches; ``fixed``: visits) on the cell's cell (module
     docstring): ``pool`` candidates (:func:`touch_candidates`), the D-optimal ``n`` of them for the stacked
-    problem. Given ``candidates`` (rows of ``type``) are chosen from instead."""
+    problem. Given ``candidates`` (rows of ``type``) are chosen from instead. ``poses`` (n, N) deg: the cell's
+    safe poses a type with its own candidates (a camera's images) draws them from, instead of the joint limits."""
     seeds = np.random.SeedSequence(seed_from(random_state)).spawn(3)
     model.check(robot)
     hook = getattr(MEASUREMENT_TYPES.get(measurement), "candidates", None)
+    if poses is not None and (hook is None or measurement in PLANNED_TYPES):
+        raise PartcalError(f"plan --measurement {measurement}: its candidates are put on the cell's planes and points, "
+                           "not chosen among given poses (--candidates goes with tracker poses and camera images)")
     if candidates is None and hook is not None and measurement not in PLANNED_TYPES:
-        candidates = hook(robot, cell, pool, np.random.default_rng(seeds[0]))       # the type's own candidates
+        rng = np.random.default_rng(seeds[0])                                       # the type's own candidates
+        candidates = hook(robot, cell, pool, rng) if poses is None else hook(robot, cell, pool, rng, poses=poses)
         below = ~above_floor(robot, candidates.q_deg, plan.floor_of(robot, floor))   # an image's rows share its pose
         if below.any():
             candidates = candidates.take(np.flatnonzero(~below))

@@ -6,7 +6,8 @@ q3 -0.02 deg), a base error and a tool error; a 1920 x 1200 camera with distorti
 squares. Two set-ups: eye-to-hand (the camera in the cell, the board on the flange) and eye-in-hand (the camera
 on the flange, the board on the table). 30, 60 and 120 images, the board's corners with 0.2 px of normal noise
 (``partcal simulate``'s pixel rows: the true pixels plus noise, not rendered images; the detection's own error on
-rendered images is tests/test_detect.py's, under 0.1 px RMS). Per row the median over the virtual robots
+rendered images is tests/test_detect.py's, under 0.1 px RMS), at random poses with the board in view or, with
+``--planned``, at the poses ``partcal plan --measurement camera`` chooses. Per row the median over the virtual robots
 (seeds):
 
 - partcal: the hand-eye (the board's pose on the flange, eye-to-hand; the camera's, eye-in-hand) against the truth
@@ -26,7 +27,7 @@ rendered images is tests/test_detect.py's, under 0.1 px RMS). Per row the median
   frame through the nominal robot and the best method's hand-eye.
 
     .venv/bin/python benchmarks/bench_camera.py [--robots 3] [--parametrization dh|complete]
-        [--setups eye-to-hand eye-in-hand] [--images 30 60 120]     (about a minute per robot)
+        [--setups eye-to-hand eye-in-hand] [--images 30 60 120] [--planned]     (about a minute per robot)
 """
 
 from __future__ import annotations
@@ -57,6 +58,7 @@ from partcal.data.measurement_rows import read_cell, read_measurement_rows  # no
 from partcal.data.sampling import sample_configurations  # noqa: E402
 from partcal.data.simulate import load_study  # noqa: E402
 from partcal.robot.frames import kabsch  # noqa: E402
+from partcal.study.plan_measurements import plan_measurements  # noqa: E402
 
 TRACKER_MM = 0.02
 """The tracker beside the camera: normal noise per axis (mm)."""
@@ -211,7 +213,29 @@ def point_scores(setup, study, q, fitted_flange, on_flange, tracker_robot) -> tu
     return rigid_rms(camera, truth), rigid_rms(tracker_robot.positions(q), truth)
 
 
-def one(name: str, images: int, seed: int, folder: Path) -> dict:
+def planned_rows(study, cell: dict, images: int, seed: int) -> MeasurementRows:
+    """Pixel rows (0.2 px) of the true robot at ``images`` poses chosen by ``partcal plan --measurement camera``
+    (D-optimal among its candidate images, at the nominal robot, the camera's and board's true poses and the true
+    intrinsics standing for the cell's approximate ones)."""
+    cameras, boards = true_cell(study.cell.sections)
+    planning = {**cell, "cameras": {c: {**cell["cameras"][c], "pose": cameras[c]["pose"],
+                                        "intrinsics": cameras[c]["intrinsics"]} for c in cell["cameras"]},
+                "boards": {b: {**cell["boards"][b], "pose": boards[b]["pose"]} for b in cell["boards"]}}
+    plan = plan_measurements(study.robot.nominal, images, planning, "camera", random_state=seed, floor=None)
+    image = list(plan.rows.texts["image"])
+    q = plan.rows.q_deg[[image.index(name) for name in dict.fromkeys(image)]]
+    seen, uv = seen_points(cameras["cam1"], boards["b1"], *study.robot.true_flange(q), board_points(boards["b1"]))
+    rng = np.random.default_rng(seed + 300)
+    k, point = np.nonzero(seen)
+    pixels = uv[k, point] + rng.normal(0.0, 0.2, (k.size, 2))
+    n = k.size
+    return MeasurementRows(q[k], ("camera",) * n, tuple(str(i + 1) for i in range(n)), tuple(range(1, n + 1)),
+                           "planned", {"point": point.astype(float), "u_px": pixels[:, 0], "v_px": pixels[:, 1]},
+                           {"image": tuple(f"image{i + 1}" for i in k), "camera": ("cam1",) * n,
+                            "board": ("b1",) * n})
+
+
+def one(name: str, images: int, seed: int, folder: Path, planned: bool = False) -> dict:
     setup = SETUPS[name]
     mount = setup["mount"]
     text = VIRTUAL.format(seed=seed, mount=mount, camera=setup["camera"], k=setup["k"], square=setup["square"],
@@ -221,8 +245,8 @@ def one(name: str, images: int, seed: int, folder: Path) -> dict:
         assert main(["simulate", str(folder / "virtual.yaml")]) == 0
     study = load_study(folder / "virtual.yaml")
     nominal = study.robot.nominal
-    rows = read_measurement_rows(folder / "data" / "images.csv")
     cell = read_cell(folder / "data" / "cell.yaml")
+    rows = planned_rows(study, cell, images, seed) if planned else read_measurement_rows(folder / "data" / "images.csv")
     start = time.perf_counter()
     table, _ = identify_measurements(nominal, rows, cell, parametrization=PARAMETRIZATION)
     seconds = time.perf_counter() - start
@@ -267,7 +291,7 @@ def one(name: str, images: int, seed: int, folder: Path) -> dict:
     return out
 
 
-def run(robots: int, setups=tuple(SETUPS), counts=(30, 60, 120)) -> None:
+def run(robots: int, setups=tuple(SETUPS), counts=(30, 60, 120), planned: bool = False) -> None:
     logging.getLogger("partcal").setLevel(logging.ERROR)
     table, beside = [], []
     for name in setups:
@@ -275,7 +299,7 @@ def run(robots: int, setups=tuple(SETUPS), counts=(30, 60, 120)) -> None:
             results = []
             for seed in range(robots):
                 with tempfile.TemporaryDirectory() as tmp:
-                    results.append(one(name, images, seed, Path(tmp)))
+                    results.append(one(name, images, seed, Path(tmp), planned))
                 r = results[-1]
                 print(f"  {name} {images} images, robot {seed}: hand-eye {r['he'][0]:.3f} mm {r['he'][1]:.4f} deg, "
                       f"no fit in view {r['view']:.3f} mm, rigid camera/tracker "
@@ -295,7 +319,8 @@ def run(robots: int, setups=tuple(SETUPS), counts=(30, 60, 120)) -> None:
                            f"{med(lambda r: r['rigid_random'][0]):.3f}", f"{med(lambda r: r['rigid_random'][1]):.3f}",
                            f"{med(lambda r: r['rigid_random'][0] / r['rigid_random'][1]):.2f}"])
     print_table(f"Camera: partcal (robot ({PARAMETRIZATION}) + hand-eye + board + intrinsics from pixels) vs OpenCV "
-                f"hand-eye on nominal poses; virtual UR10, 0.2 px, median of {robots} robots",
+                f"hand-eye on nominal poses; virtual UR10, 0.2 px, {'planned' if planned else 'random'} images, median of "
+                f"{robots} robots",
                 ["set-up", "images", "he mm", "he deg", "K px", "view mm", "s", "cv he mm", "cv he deg", "best",
                  "cv view mm", "OpenCV methods (he mm)"], table)
     print("he: the hand-eye against the truth (pose on the flange, in the gauge the images define); K: largest fx, fy, cx, cy "
@@ -318,6 +343,8 @@ if __name__ == "__main__":
     parser.add_argument("--parametrization", choices=("dh", "complete"), default="complete")
     parser.add_argument("--setups", nargs="+", choices=tuple(SETUPS), default=tuple(SETUPS), help="default: both")
     parser.add_argument("--images", nargs="+", type=int, default=(30, 60, 120), help="default: 30 60 120")
+    parser.add_argument("--planned", action="store_true",
+                        help="images at poses partcal plan chooses (D-optimal), not random poses with the board in view")
     args = parser.parse_args()
     PARAMETRIZATION = args.parametrization
-    run(args.robots, args.setups, args.images)
+    run(args.robots, args.setups, args.images, args.planned)

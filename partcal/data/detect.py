@@ -126,7 +126,7 @@ def detect_tags(image: NDArray[np.uint8], board: dict, unfitted: list[int] | Non
     """An AprilTag grid's tag corners found in a grey image: ids ``4 t + k`` (k: top left, top right, bottom
     right, bottom left) and pixels. ``cv2.aruco`` finds and reads the tags; each corner is then the meeting of
     two of the tag's border lines, each fitted to the pixels across its edge (:func:`edge_line`). OpenCV's own
-    corner refinements leave 0.6-0.9 px on rendered tags (a tag's corner is no saddle point, and its contour is
+    corner refinements leave 0.6-0.7 px on rendered tags (a tag's corner is no saddle point, and its contour is
     traced on whole pixels); the edges' lines about a tenth of that. A tag whose edges cannot be fitted (too small,
     blurred over more than a third of its cells, cut by the image's border) is left out and its id appended to
     ``unfitted``."""
@@ -163,13 +163,16 @@ def tag_corners(grey: NDArray[np.float64], quad: NDArray[np.float64], cells: int
     if any(line is None for line in lines):
         return None
     corners = np.array([_meet(lines[k - 1], lines[k]) for k in range(4)])        # corner k: edges k - 1 and k
-    return corners if np.all(np.abs(corners - quad) < 3.0) else None
+    return corners if np.all(np.abs(corners - quad) < 3.0) else None             # (NaN where two are parallel)
 
 
 def _meet(first, second) -> NDArray[np.float64]:
-    """Where two lines (a point and a direction each) meet."""
+    """Where two lines (a point and a direction each) meet; NaN where they are parallel."""
     (p, d), (q, e) = first, second
-    t = np.linalg.solve(np.column_stack([d, -e]), q - p)[0]
+    det = d[1] * e[0] - d[0] * e[1]
+    if abs(det) < 1e-9:
+        return np.full(2, np.nan)
+    t = ((q - p)[1] * e[0] - (q - p)[0] * e[1]) / det
     return p + t * d
 
 
@@ -177,8 +180,8 @@ def edge_line(grey: NDArray[np.float64], a: NDArray[np.float64], b: NDArray[np.f
               centre: NDArray[np.float64], cells: int, gap: float
               ) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
     """The line of a tag's border edge from ``a`` to ``b`` (a point and a unit direction): the pixels across the
-    edge (within 0.6 of a cell inside, the black border; within 0.6 of a cell or of the white gap outside) away
-    from its ends, fitted by least squares (Gauss-Newton) with a blurred step, ``dark + (light - dark) Phi(d /
+    edge (0.6 of a cell inside, within the black border; up to a cell outside, within 0.6 of the white gap) away
+    from its ends, fitted by least squares (Levenberg-Marquardt, :func:`_step_fit`) with a blurred step, ``dark + (light - dark) Phi(d /
     sigma)`` of the distance ``d`` to the line (offset and turn about the edge's middle): every pixel's grey
     counts, none is interpolated, and a blur symmetric about the edge moves it nowhere."""
     length = float(np.linalg.norm(b - a))
@@ -207,7 +210,7 @@ def edge_line(grey: NDArray[np.float64], a: NDArray[np.float64], b: NDArray[np.f
     dark, light = np.percentile(value, 5), np.percentile(value, 95)
     start = np.clip((light - value.mean()) / max(light - dark, 1.0) * (inner + outer) - inner, -inner, outer)
     x = np.array([start, 0.0, dark, light, 0.8])          # offset, turn, dark, light, sigma
-    x, cost = _step_fit(x, d, s, value)
+    x = _step_fit(x, d, s, value)
     if not (np.isfinite(x).all() and abs(x[0]) < 3.0 and x[3] - x[2] > 10 and x[4] < BLUR_CELLS * cell):
         return None
     direction = t + x[1] * n
@@ -215,8 +218,9 @@ def edge_line(grey: NDArray[np.float64], a: NDArray[np.float64], b: NDArray[np.f
 
 
 def _step_fit(x: NDArray[np.float64], d: NDArray[np.float64], s: NDArray[np.float64], value: NDArray[np.float64]
-              ) -> tuple[NDArray[np.float64], float]:
-    """Levenberg-Marquardt on a blurred step's five (:func:`edge_line`): the parameters and the sum of squares."""
+              ) -> NDArray[np.float64]:
+    """A blurred step's five (:func:`edge_line`: offset, turn, dark, light, sigma) fitted from ``x`` by
+    Levenberg-Marquardt to the greys ``value`` at distances ``d`` across the edge and ``s`` along it."""
 
     def model(x):
         z = (d - x[0] - x[1] * s) / x[4]
@@ -242,7 +246,7 @@ def _step_fit(x: NDArray[np.float64], d: NDArray[np.float64], s: NDArray[np.floa
             damping *= 4
             if damping > 1e8:
                 break
-    return x, cost
+    return x
 
 
 def chessboard_order(image: NDArray[np.uint8], grid: NDArray[np.float64]) -> NDArray[np.float64]:

@@ -344,7 +344,7 @@ if __name__ == "__main__":
     parser.add_argument("--setups", nargs="+", choices=tuple(SETUPS), default=tuple(SETUPS), help="default: both")
     parser.add_argument("--images", nargs="+", type=int, default=(30, 60, 120), help="default: 30 60 120")
     parser.add_argument("--planned", action="store_true",
-                        help="images at poses partcal plan chooses (D-optimal), not random poses with the board in view")
+                        help="images at the poses partcal plan chooses (D-optimal), not at random poses in view")
     args = parser.parse_args()
     PARAMETRIZATION = args.parametrization
     run(args.robots, args.setups, args.images, args.planned)

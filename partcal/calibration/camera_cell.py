@@ -68,7 +68,6 @@ def read_board(entry) -> dict:
         out["marker_mm"] = entry.get("marker_mm", "float", check=lambda v: _positive(v) or (
             None if v < out["square_mm"] else f"smaller than square_mm ({out['square_mm']:g})"))
     if out["type"] == "apriltag":
-        tags = out["rows"] * out["cols"]
         family = entry.get("family", "str", "36h11", check=lambda v: _family(v, out["rows"], out["cols"]))
         if family != "36h11":
             out["family"] = family
@@ -189,6 +188,7 @@ def candidate_rows(robot, cell: dict, count: int, rng, poses: NDArray[np.float64
     wanted = min(int(count), PLAN_IMAGES)
     each = [wanted // len(pairs) + (k < wanted % len(pairs)) for k in range(len(pairs))]
     q_all, points, uv_all, images, texts = [], [], [], [], {"camera": [], "board": []}
+    count_images = 0
     for (cam, board), want in zip(pairs, each):
         local = board_points(boards[board])
         least, taken = (local.shape[0] + 1) // 2, 0
@@ -199,8 +199,8 @@ def candidate_rows(robot, cell: dict, count: int, rng, poses: NDArray[np.float64
             seen, uv = seen_points(cameras[cam], boards[board], flange[:, :3, 3], flange[:, :3, :3], local)
             for i in np.flatnonzero(seen.sum(axis=1) >= least)[:want - taken]:
                 mine = np.flatnonzero(seen[i])
-                taken += 1
-                images += [f"{cam}-{len(images) + 1:04d}"] * mine.size
+                taken, count_images = taken + 1, count_images + 1
+                images += [f"{cam}-{count_images:04d}"] * mine.size
                 texts["camera"] += [cam] * mine.size
                 texts["board"] += [board] * mine.size
                 q_all.append(np.repeat(q[i][None], mine.size, axis=0))

@@ -1,8 +1,8 @@
 """Board images of a virtual robot: a board's printed pattern (a ChArUco board through ``cv2.aruco``, a chessboard
-and an AprilTag grid drawn here) seen by a camera of OpenCV's model (:func:`partcal.calibration.camera_model.project`) at a pose, each
-pixel the average of a few samples of the pattern (:func:`render_view`); a folder of such images with the joints
-CSV that :func:`partcal.data.detect.detect_folder` reads (:func:`render_folder`). Tests, benchmarks and the docs
-render their images with it: no image data is kept in the repository."""
+and an AprilTag grid drawn here) seen by a camera of OpenCV's model (:func:`partcal.calibration.camera_model.project`)
+at a pose, each pixel the average of a few samples of the pattern (:func:`render_view`); a folder of such images with
+the joints CSV that :func:`partcal.data.detect.detect_folder` reads (:func:`render_folder`). Tests, benchmarks and the
+docs render their images with it: no image data is kept in the repository."""
 
 from __future__ import annotations
 

@@ -181,9 +181,9 @@ def edge_line(grey: NDArray[np.float64], a: NDArray[np.float64], b: NDArray[np.f
               ) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
     """The line of a tag's border edge from ``a`` to ``b`` (a point and a unit direction): the pixels across the
     edge (0.6 of a cell inside, within the black border; up to a cell outside, within 0.6 of the white gap) away
-    from its ends, fitted by least squares (Levenberg-Marquardt, :func:`_step_fit`) with a blurred step, ``dark + (light - dark) Phi(d /
-    sigma)`` of the distance ``d`` to the line (offset and turn about the edge's middle): every pixel's grey
-    counts, none is interpolated, and a blur symmetric about the edge moves it nowhere."""
+    from its ends, fitted by least squares (Levenberg-Marquardt, :func:`_step_fit`) with a blurred step,
+    ``dark + (light - dark) Phi(d / sigma)`` of the distance ``d`` to the line (offset and turn about the edge's
+    middle): every pixel's grey counts, none is interpolated, and a blur symmetric about the edge moves it nowhere."""
     length = float(np.linalg.norm(b - a))
     if length < 8.0:
         return None

@@ -58,6 +58,8 @@ def test_planned_images_keep_the_board_in_view_and_beat_random_ones(tmp_path, ca
     planned = plan_measurements(robot, 10, cell, "camera", pool=60, random_state=0)
     image = np.array(planned.candidates.texts["image"])
     names = list(dict.fromkeys(image))
+    numbers = [int(name.removeprefix("cam1-")) for name in names]          # images numbered one by one (60 drawn,
+    assert numbers == sorted(numbers) and numbers[-1] <= 60                 # some dropped below the floor)
     rng = np.random.default_rng(1)
     for _ in range(2):
         pick = rng.choice(len(names), 10, replace=False)

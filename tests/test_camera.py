@@ -8,7 +8,7 @@ import pytest
 from partcal.calibration.camera import CameraPoints
 from partcal.calibration.camera_cell import half_turn_symmetric
 from partcal.calibration.camera_model import (board_points, focal_from_homographies, homography, pose_from_homography,
-                                              pose_matrix, project, solve_ax_yc)
+                                              pose_matrix, project, solve_ax_yc, undistorted)
 from partcal.calibration.measurement import MeasurementRows
 from partcal.calibration.registry import built_types
 from partcal.data.measurement_rows import read_cell
@@ -112,6 +112,43 @@ def test_homography_pose_and_focal_recover_a_view():
         truth.append(pose)
         assert np.allclose(pose_from_homography(homography(board[:, :2], uv)), pose, atol=1e-6)
     assert focal_from_homographies(views) == pytest.approx(1400.0, rel=1e-6)
+
+
+def test_a_negated_homography_gives_the_same_pose_in_front_of_the_camera_and_flat_views_no_focal():
+    """A homography is known up to its sign: -H gives the pose with the board in front (z > 0). Views square to
+    the optical axis say nothing of the focal length (Zhang's constraints vanish): None, not a guess."""
+    board = board_points({"type": "chessboard", "rows": 5, "cols": 6, "square_mm": 30.0})
+    pose = pose_matrix([40.0, -25.0, 800.0, 10.0, -20.0, 5.0])
+    cam = board @ pose[:3, :3].T + pose[:3, 3]
+    h = homography(board[:, :2], cam[:, :2] / cam[:, 2:])
+    assert np.allclose(pose_from_homography(-h), pose, atol=1e-6)
+    flat = [homography(board[:, :2], (board[:, :2] + shift) * 1400.0 / 900.0) for shift in ([0, 0], [30, -20])]
+    assert focal_from_homographies(flat) is None
+
+
+def test_undistorted_inverts_the_projection_as_opencv_does():
+    """Pixels of a camera with distortion (k1 -0.25: a wide lens) back to normalised coordinates: the points' own
+    x/Z, y/Z to 1e-9, and cv2.undistortPoints' answer (a second method)."""
+    k = np.array([1200.0, 1180.0, 640.0, 500.0, -0.25, 0.08, 0.001, -0.0007, -0.01])
+    rng = np.random.default_rng(2)
+    points = np.column_stack([rng.uniform(-300, 300, 50), rng.uniform(-250, 250, 50), rng.uniform(700, 900, 50)])
+    uv = project(points, k)[0]
+    back = undistorted(uv, k, steps=60)
+    assert np.allclose(back, points[:, :2] / points[:, 2:], atol=1e-9)
+    matrix = np.array([[k[0], 0, k[2]], [0, k[1], k[3]], [0, 0, 1.0]])
+    theirs = cv2.undistortPointsIter(uv.reshape(-1, 1, 2), matrix, k[4:], None, None,
+                                     (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-15))[:, 0]
+    assert np.allclose(back, theirs, atol=1e-7)
+
+
+def test_apriltag_grid_points_are_each_tags_corners_in_opencvs_order():
+    """Tag t = r cols + c centred in square (r, c) of the grid, its black border marker_mm wide: ids 4 t + k at the
+    top left, top right, bottom right, bottom left (worked by hand for a 2 x 3 grid at 50 mm, tags 40 mm)."""
+    points = board_points({"type": "apriltag", "rows": 2, "cols": 3, "square_mm": 50.0, "marker_mm": 40.0})
+    assert points.shape == (24, 3)
+    assert points[4 * 0:4 * 0 + 4, :2].tolist() == [[5.0, 5.0], [45.0, 5.0], [45.0, 45.0], [5.0, 45.0]]
+    assert points[4 * 5:4 * 5 + 4, :2].tolist() == [[105.0, 55.0], [145.0, 55.0], [145.0, 95.0], [105.0, 95.0]]
+    assert points[4 * 1, :2].tolist() == [55.0, 5.0] and np.all(points[:, 2] == 0.0)
 
 
 def test_ax_yc_recovers_both_poses():

@@ -113,6 +113,10 @@ def test_a_direction_is_null_when_the_jacobian_answers_it_below_the_square_root_
     direction = t / np.linalg.norm(weak, axis=0)                        # the same direction in the raw columns
     assert null_direction(weak, direction, np.ones(2, dtype=bool), 1e-6)       # below sqrt(1e-6) = 1e-3
     assert not null_direction(weak, direction, np.ones(2, dtype=bool), 1e-12)  # above sqrt(1e-12) = 1e-6
+    largest = np.linalg.svd(unit, compute_uv=False)[0]                  # sqrt(rcond) times it, not over it (1.414)
+    answer = np.linalg.norm(unit @ t)
+    assert null_direction(weak, direction, np.ones(2, dtype=bool), (1.2 * answer / largest) ** 2)
+    assert not null_direction(weak, direction, np.ones(2, dtype=bool), (0.8 * answer / largest) ** 2)
 
 
 def test_the_consistent_jacobian_answers_a_misfit_direction_with_nothing_and_leaves_the_others():

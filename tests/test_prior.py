@@ -688,3 +688,148 @@ def test_a_run_refuses_lists_of_both_granularities_and_prior_strengths(tmp_path)
         load_config(run_config(tmp_path, entry, "motoman_sk120"))
     cfg = load_config(run_config(tmp_path, "prior: plausible, prior_strength: auto", "motoman_sk120"))
     assert cfg.models[0].strengths == (0.1, 0.178, 0.316, 0.562, 1.0, 1.778, 3.162, 5.623, 10.0, 17.783, 31.623)
+
+
+# ---------------------------------------------------------------------- a prior's pieces, against values worked out by hand
+def rotation_z(deg):
+    c, s = np.cos(np.radians(deg)), np.sin(np.radians(deg))
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def test_a_prior_from_standard_deviations_weighs_each_row_by_the_noise_over_its_deviation():
+    prior = Prior.from_std([2, 0], [1.0, -3.0], [0.5, 4.0], 0.2)
+    np.testing.assert_allclose(prior.root, [[0.4, 0.0], [0.0, 0.05]])          # 0.2 / 0.5, 0.2 / 4
+    values = np.array([5.0, 7.0, 3.5])
+    np.testing.assert_allclose(prior.rows(values), [0.4 * (3.5 - 1.0), 0.05 * (5.0 + 3.0)])
+    assert prior.size == 2
+    assert Prior.from_std([0], [0.0], [0.5], 0.0).root.tolist() == [[0.0]]     # no noise: a prior of zero weight
+    for std, noise in (([0.0], 1.0), ([-1.0], 1.0), ([np.inf], 1.0), ([np.nan], 1.0), ([1.0], -0.5)):
+        with pytest.raises(ValueError, match="standard deviations > 0 and a noise >= 0"):
+            Prior.from_std([0], [0.0], std, noise)
+
+
+def test_a_prior_covariances_root_squares_to_the_noise_squared_over_the_covariance():
+    """``W^T W = sigma^2 C^-1`` for a covariance built from a known turn and known variances (4, 1, 0.25)."""
+    turn = rotation_z(30.0)
+    cov = turn @ np.diag([4.0, 1.0, 0.25]) @ turn.T
+    prior = Prior.from_covariance([0, 1, 2], [0.0, 0.0, 0.0], cov, 0.3)
+    expected = 0.09 * turn @ np.diag([0.25, 1.0, 4.0]) @ turn.T
+    np.testing.assert_allclose(prior.root.T @ prior.root, expected, atol=1e-12)
+    # one standard deviation along each principal axis costs a row of length sigma
+    for axis, std in zip(turn.T, [2.0, 1.0, 0.5]):
+        assert np.linalg.norm(prior.rows(std * axis)) == pytest.approx(0.3)
+    # only the symmetric part counts: an antisymmetric addition changes nothing
+    skew = np.array([[0.0, 0.7, -0.2], [-0.7, 0.0, 0.4], [0.2, -0.4, 0.0]])
+    skewed = Prior.from_covariance([0, 1, 2], [0.0, 0.0, 0.0], cov + skew, 0.3)
+    np.testing.assert_allclose(skewed.root.T @ skewed.root, expected, atol=1e-12)
+
+
+def test_a_singular_prior_covariance_holds_its_null_direction_at_the_eigenvalue_floor():
+    """A covariance singular to rounding (variances 4, 1 and 0 or -1e-20) is accepted; the null direction gets the
+    variance EIGEN_FLOOR times the largest (4e-12), so one unit along it costs sigma / 2e-6."""
+    from partcal.calibration.prior import EIGEN_FLOOR
+    assert EIGEN_FLOOR == 1e-12
+    turn = rotation_z(40.0)
+    for smallest in (0.0, -1e-20):
+        cov = turn @ np.diag([4.0, 1.0, smallest]) @ turn.T
+        prior = Prior.from_covariance([0, 1, 2], [0.0, 0.0, 0.0], cov, 0.5)
+        assert np.linalg.norm(prior.rows(np.array([0.0, 0.0, 1.0]))) == pytest.approx(0.5 / 2e-6, rel=1e-6)
+        assert np.linalg.norm(prior.rows(turn[:, 0])) == pytest.approx(0.5 / 2.0, rel=1e-9)
+    small = Prior.from_covariance([1], [0.0], [[0.5]], 1.0)                    # a largest variance below 1
+    assert small.root.tolist() == [[pytest.approx(np.sqrt(2.0))]]
+    empty = Prior.from_covariance([], [], np.zeros((0, 0)), 1.0)               # nothing held
+    assert empty.size == 0 and empty.rows(np.array([1.0, 2.0])).size == 0
+    for bad in (np.zeros((2, 2)), -0.5 * np.eye(2), -np.eye(1)):
+        with pytest.raises(ValueError, match="positive definite"):
+            Prior.from_covariance(list(range(len(bad))), np.zeros(len(bad)), bad, 1.0)
+    with pytest.raises(ValueError, match="finite"):
+        Prior.from_covariance([0, 1], [0.0, 0.0], [[1.0, 0.0], [0.0, np.nan]], 1.0)
+    for shape in ((1, 1), (2, 1), (2, 3), (3, 3)):                            # smaller or larger than (2, 2)
+        with pytest.raises(ValueError, match=r"\(2, 2\) matrix"):
+            Prior.from_covariance([0, 1], [0.0, 0.0], np.eye(*shape), 1.0)
+
+
+def test_a_priors_jacobian_is_its_rows_finite_differences_and_augmented_appends_both():
+    prior = Prior.from_covariance([3, 1], [0.5, -1.0], [[2.0, 0.3], [0.3, 0.5]], 0.1)
+    values = np.array([0.2, 0.7, -0.4, 1.9, 3.0])
+    step = 1e-6
+    numeric = np.column_stack([(prior.rows(values + step * e) - prior.rows(values - step * e)) / (2 * step)
+                               for e in np.eye(values.size)])
+    np.testing.assert_allclose(prior.jacobian(values.size), numeric, atol=1e-9)
+    assert prior.held(5).tolist() == [False, True, False, True, False]
+
+    def model(v, jacobian=True):                                 # two residuals: v0 + v4, 2 v2
+        return np.array([v[0] + v[4], 2 * v[2]]), (np.array([[1.0, 0, 0, 0, 1], [0, 0, 2, 0, 0]]) if jacobian else None)
+    resid, jac = prior.augmented(model)(values)
+    np.testing.assert_allclose(resid, np.concatenate([[3.2, -0.8], prior.rows(values)]))
+    np.testing.assert_allclose(jac, np.vstack([[[1.0, 0, 0, 0, 1], [0, 0, 2, 0, 0]], numeric]), atol=1e-9)
+    resid, jac = prior.augmented(model)(values, jacobian=False)
+    assert jac is None and resid.size == 4
+
+
+def test_a_prior_refuses_a_fit_of_other_parameters_or_fewer_than_it_holds():
+    prior = Prior.from_std([2], [0.0], [1.0], 1.0)
+    prior.check_names(["a", "b", "c"])                           # names unknown: not compared
+    named = Prior(prior.index, prior.mean, prior.root, names=("a", "b", "c"))
+    named.check_names(["a", "b", "c"])
+    for other in (["a", "b", "x"], ["a", "b", "b"], ["a", "b"]):
+        with pytest.raises(ValueError, match="made for the parameters a, b, c"):
+            named.check_names(other)
+    with pytest.raises(ValueError, match="holds parameter 2; this fit has 2"):
+        prior.check_names(["a", "b"])                            # index 2 == len: one beyond the last
+    with pytest.raises(ValueError, match="holds parameter 2; this fit has 1"):
+        prior.check_names(["a"])
+
+
+def test_the_auto_strength_grid_is_four_to_a_decade_from_a_tenth():
+    from partcal.calibration.prior import STRENGTH_GRID, strengths_of
+    assert STRENGTH_GRID == (0.1, 0.178, 0.316, 0.562, 1.0, 1.778, 3.162, 5.623, 10.0, 17.783, 31.623)
+    assert strengths_of("auto") == STRENGTH_GRID
+    assert strengths_of((2, 1.5, 2)) == (1.5, 2.0) and strengths_of(0) == (0.0,)
+
+
+def test_a_prior_strength_is_a_number_at_least_zero_auto_or_a_list_of_different_ones():
+    from partcal.calibration.prior import strength_problem
+    for good in (0, 0.5, 2, "auto", [0, 0.5], (1, 3)):
+        assert strength_problem(good) is None, good
+    for bad in (-0.5, -1, True, float("inf"), float("nan"), "automatic", "", [], None):
+        assert strength_problem(bad) == "a number >= 0, auto, or a non-empty list of numbers >= 0", bad
+    assert strength_problem([1, 1]) == "a list of different numbers (item 2 repeats 1)"
+    assert strength_problem([0.5, -0.5]) == "a non-empty list of numbers >= 0 (item 2 is -0.5)"
+    assert strength_problem([False]) == "a non-empty list of numbers >= 0 (item 1 is False)"
+
+
+def test_the_strongest_prior_within_one_standard_error_and_what_no_finite_score_chooses():
+    from partcal.calibration.prior import strongest_within
+    nan = float("nan")
+    assert strongest_within([1, 3, 10], [0.40, 0.405, 0.50], [0.01, 0.01, 0.01]) == 1    # 0.405 <= 0.41 < 0.50
+    assert strongest_within([10, 3, 1], [0.50, 0.405, 0.40], [0.01, 0.01, 0.01]) == 1    # order of the list aside
+    assert strongest_within([1, 3], [nan, nan], [nan, nan]) == 0                          # nothing to compare: the first
+    assert strongest_within([1, 1], [0.4, 0.4], [0.0, 0.0]) == 0                          # a tie: the first listed
+
+
+def test_the_strength_note_warns_only_when_the_lowest_score_is_at_a_weakest_strength_above_zero():
+    from partcal.calibration.prior import strength_note, strength_rows
+    warning = "the lowest is at the weakest strength tried: weaker ones, not tried, may do better"
+    best, table = strength_rows([3, 1], [0.415, 0.41], [0.001, 0.001])
+    assert best == 1 and [row["chosen"] for row in table] == [False, True]
+    assert strength_note(table, "CV").endswith(warning)                       # lowest at 1, the weakest
+    alone = strength_rows([3], [0.415], [0.001])[1]
+    assert not strength_note(alone, "CV").endswith(warning)                   # one strength: nothing weaker to try
+    zero = strength_rows([0, 1], [0.41, 0.415], [0.001, 0.001])[1]
+    assert not strength_note(zero, "CV").endswith(warning)                    # the weakest is no prior at all
+    for strengths, scores in (([0.5, 1], [0.415, 0.41]), ([1, 0.5], [0.41, 0.415])):
+        above = strength_rows(strengths, scores, [0.001, 0.001])[1]
+        assert not strength_note(above, "CV").endswith(warning)               # the lowest is not the weakest
+
+
+def test_the_plausible_prior_holds_the_first_rows_parameters_of_a_unit_it_knows():
+    units = ["mm", "deg", "count", "mm", "mm"]
+    nominal = np.array([10.0, 20.0, 30.0, 40.0, 50.0])
+    prior = plausible_prior(units, 4, nominal, 0.5, {"mm": 0.25, "deg": 0.1})
+    assert prior.index.tolist() == [0, 1, 3] and prior.mean.tolist() == [10.0, 20.0, 40.0]
+    np.testing.assert_allclose(np.diag(prior.root), [2.0, 5.0, 2.0])             # 0.5 / 0.25, 0.5 / 0.1
+    assert plausible_prior(units, 4, nominal, 0, {"mm": 0.25}) is None
+    assert plausible_prior(units, 4, nominal, 1, {"mm": 0.25}).index.tolist() == [0, 3]
+    with pytest.raises(ValueError, match="a noise >= 0"):
+        plausible_prior(units, 4, nominal, -1.0, {"mm": 0.25})                 # a negative strength is no prior

@@ -219,3 +219,13 @@ def test_urscript_joints_are_radians_and_a_set_tcp_pose_is_a_tool_in_millimetres
     np.testing.assert_allclose(pose.rotation, RZ90, atol=1e-15)
     np.testing.assert_allclose(p.frames["set_tcp at line 2"],
                                [[0, -1, 0, 0], [1, 0, 0, 10], [0, 0, 1, 100], [0, 0, 0, 1]], atol=1e-12)
+
+
+def test_urscript_a_joint_list_of_constant_arithmetic_is_read_as_its_value(tmp_path):
+    p = program(tmp_path, "one.script", "def prog():\n  movej([d2r(10), -pi/2, 0.5 * pi, 0, -d2r(45), pi], a=1.2)\nend\n")
+    np.testing.assert_allclose(p.targets[0].joints_deg, [10.0, -90.0, 90.0, 0.0, -45.0, 180.0], atol=1e-12)
+
+
+def test_urscript_a_program_cut_off_inside_a_joint_list_is_refused_where_the_list_opens(tmp_path):
+    with pytest.raises(ProgramSyntaxError, match=r"one.script: line 2, column 9: joint list: expected a closing '\]'"):
+        program(tmp_path, "one.script", "def prog():\n  movej([0, -1.57, 1.57, 0, 0, 0")

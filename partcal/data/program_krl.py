@@ -46,7 +46,7 @@ _ASSIGN = re.compile(r"([$A-Za-z_][\w$]*(?:\[[\d, ]*\])?)\s*=\s*$")
 _MOTION = re.compile(r"\b(PTP|LIN|CIRC|SPTP|SLIN|SCIRC|PTP_REL|LIN_REL)\s+$", re.IGNORECASE)
 _ABSOLUTE_MOTIONS = {"PTP", "LIN", "CIRC", "SPTP", "SLIN", "SCIRC"}
 _ITEM = re.compile(r"\s*([A-Za-z_]\w*)\s+(\S(?:.*\S)?)\s*$", re.DOTALL)
-_INT = re.compile(r"[-+]?\d+|'[BbHh][0-9A-Fa-f]+'")
+_INT = re.compile(r"[-+]?\d+|'[Bb][01]+'|'[Hh][0-9A-Fa-f]+'")
 SYSTEM_FRAMES = {"TOOL_CORR", "TOOL_CORR_W", "BASE_CORR", "M_BASE_CORR", "REF_TOOL", "REF_PT", "MACHINE_DEF",
                  "MACHINE_TOOL_DAT", "MACHINE_FRAME_DAT", "LOAD_DATA", "TOOL_DATA", "BASE_DATA"}  # $config.dat's: no targets
 EXTERNAL_KEYS = ("E1", "E2", "E3", "E4", "E5", "E6")

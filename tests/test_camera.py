@@ -8,7 +8,7 @@ import pytest
 from partcal.calibration.camera import CameraPoints
 from partcal.calibration.camera_cell import half_turn_symmetric
 from partcal.calibration.camera_model import (board_points, focal_from_homographies, homography, pose_from_homography,
-                                              pose_matrix, project, solve_ax_yc, undistorted)
+                                              pose_matrix, pose_values, project, solve_ax_yc, undistorted)
 from partcal.calibration.measurement import MeasurementRows
 from partcal.calibration.registry import built_types
 from partcal.data.measurement_rows import read_cell
@@ -122,8 +122,25 @@ def test_a_negated_homography_gives_the_same_pose_in_front_of_the_camera_and_fla
     cam = board @ pose[:3, :3].T + pose[:3, 3]
     h = homography(board[:, :2], cam[:, :2] / cam[:, 2:])
     assert np.allclose(pose_from_homography(-h), pose, atol=1e-6)
-    flat = [homography(board[:, :2], (board[:, :2] + shift) * 1400.0 / 900.0) for shift in ([0, 0], [30, -20])]
+    tiny = pose.copy()
+    tiny[:3, 3] /= 2000.0                                     # the same view of a board 2000 times smaller: z 0.4
+    cam = board / 2000.0 @ tiny[:3, :3].T + tiny[:3, 3]
+    h = homography(board[:, :2] / 2000.0, cam[:, :2] / cam[:, 2:])
+    assert np.allclose(pose_from_homography(h), tiny, atol=1e-9)
+    assert np.allclose(pose_from_homography(-h), tiny, atol=1e-9)
+    flat = [np.array([[1400.0, 0.0, 1400.0 * x], [0.0, 1400.0, 1400.0 * y], [0.0, 0.0, z]])   # K [r1 r2 t], R = I
+            for x, y, z in ((0.0, 0.0, 900.0), (30.0, -20.0, 800.0))]
     assert focal_from_homographies(flat) is None
+
+
+def test_pose_values_and_pose_matrix_are_each_others_inverse():
+    """x, y, z mm and a rotation vector in degrees, to a pose and back (and the pose's parts read by hand: a turn
+    of 90 degrees about z)."""
+    values = [12.5, -40.0, 700.0, 20.0, -35.0, 50.0]
+    assert np.allclose(pose_values(pose_matrix(values)), values, atol=1e-9)
+    turn = pose_matrix([1.0, 2.0, 3.0, 0.0, 0.0, 90.0])
+    assert np.allclose(turn, [[0, -1, 0, 1], [1, 0, 0, 2], [0, 0, 1, 3], [0, 0, 0, 1]], atol=1e-12)
+    assert np.allclose(pose_values(turn), [1.0, 2.0, 3.0, 0.0, 0.0, 90.0], atol=1e-9)
 
 
 def test_undistorted_inverts_the_projection_as_opencv_does():

@@ -236,7 +236,8 @@ class MeasurementType:
       what a simulated cell knows of it; ``extra_sections``: further sections it reads (a camera's ``boards``,
       :meth:`read_extra_section`, :meth:`given_extra_section`);
     - optional hooks: ``simulate(truth, spec, rng, noise)`` (rows of a virtual robot: ``partcal simulate``) and
-      ``candidates(robot, cell, count, rng)`` (rows to choose from: ``partcal plan --measurement``), and
+      ``candidates(robot, cell, count, rng)`` (rows to choose from: ``partcal plan --measurement``; with a keyword
+      ``poses=``, at the cell's own poses: ``plan --candidates``), and
       ``plans_by = "image"`` when the plan chooses whole groups of rows (a camera's images), not rows;
     - :meth:`fit_notes`: what the fit's residuals say of some of its rows (a camera's image paired with the wrong
       joints), notes of the run.

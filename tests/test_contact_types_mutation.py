@@ -1,0 +1,124 @@
+"""Refusals and starts of the fixed-point and distance types (partcal/calibration/fixed_points.py, distances.py)
+that a cosmic-ray run showed no test held: a point visited from one orientation only, or once, or a visit far from
+its point's others, refused naming the point and its first row; a distance that is no length refused naming the
+first bad row; the unit check's factor on long distances and its blindness to pivots; a pivot's start (the sphere
+through its tips) against the centre the tips were put around."""
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from partcal import load_robot
+from partcal.calibration.measurement import MeasurementRows
+from partcal.calibration.registry import MEASUREMENT_TYPES
+from partcal.calibration.stacked import identify_measurements
+from partcal.errors import DataError
+
+ROBOT = load_robot("universal_robots_ur10")
+
+
+def _rows(q, types, numbers=None, texts=None):
+    n = len(q)
+    return MeasurementRows(np.asarray(q, dtype=float), tuple(types), tuple(str(i + 1) for i in range(n)),
+                           tuple(range(2, n + 2)), "test.csv", numbers or {}, texts or {})
+
+
+def _visits(place, turns_deg):
+    """Joints putting the nominal UR10's tool tip at ``place`` (mm), pointing down and turned about x by each of
+    ``turns_deg``."""
+    poses = np.tile(np.eye(4), (len(turns_deg), 1, 1))
+    poses[:, :3, :3] = Rotation.from_euler("x", 180.0 + np.asarray(turns_deg, dtype=float)[:, None], degrees=True).as_matrix()
+    poses[:, :3, 3] = place
+    rng = np.random.default_rng(5)
+    q = np.full((len(turns_deg), 6), np.nan)
+    for _ in range(40):
+        seed = rng.uniform([-90, -150, -140, -180, -150, -180], [90, -30, 140, 180, 150, 180])
+        ik = ROBOT.inverse_pose(poses, np.tile(seed, (len(turns_deg), 1)))
+        todo = np.isnan(q[:, 0]) & ik.success
+        q[todo] = ik.q_deg[todo]
+        if np.isfinite(q).all():
+            return q
+    raise AssertionError("no joints for the visits")
+
+
+TURNS = [0.0, 10.0, 20.0, -10.0, -20.0, 5.0]
+
+
+def test_a_point_visited_from_one_orientation_is_refused_naming_it_and_its_first_row():
+    """Point a from six orientations, point b twice from one (rows 7 and 8, lines 8 and 9): refused naming b and
+    line 8; the same with b's two visits turned 20 degrees apart is identified from."""
+    a, b = _visits([800.0, 0.0, 400.0], TURNS), _visits([700.0, 200.0, 400.0], [0.0, 0.0])
+    rows = _rows(np.vstack([a, b]), ["fixed"] * 8, texts={"feature": ("a",) * 6 + ("b",) * 2})
+    with pytest.raises(DataError, match=r"^test.csv:8: column 'feature': fixed point 'b' is reached from one "
+                                        r"orientation of the tool only \(2 visits within 1 degree\)"):
+        identify_measurements(ROBOT, rows, {})
+    turned = _rows(np.vstack([a, _visits([700.0, 200.0, 400.0], [0.0, 20.0])]), ["fixed"] * 8, texts=rows.texts)
+    table, _ = identify_measurements(ROBOT, turned, {})
+    assert table.target_rms_mm["fixed"] < 1e-6
+
+
+def test_an_unknown_point_reached_once_is_refused_whatever_its_name_sorts_as():
+    """a once (line 2), b from six orientations: a is refused (a point of the name sorting first, as the bug that
+    counted every name >= 'a' as a's would not see)."""
+    rows = _rows(np.vstack([_visits([800.0, 0.0, 400.0], [0.0]), _visits([700.0, 200.0, 400.0], TURNS)]),
+                 ["fixed"] * 7, texts={"feature": ("a",) + ("b",) * 6})
+    with pytest.raises(DataError, match=r"^test.csv:2: column 'feature': fixed point 'a' is reached once"):
+        identify_measurements(ROBOT, rows, {})
+
+
+def test_a_visit_far_from_its_points_other_visits_is_refused_naming_it():
+    """The fourth visit commanded 50 mm away (line 5): refused, saying how far (the median of the visits is the
+    point, so 50 mm is what the message reads)."""
+    q = _visits([800.0, 0.0, 400.0], TURNS)
+    q[3] = _visits([850.0, 0.0, 400.0], [TURNS[3]])[0]
+    rows = _rows(q, ["fixed"] * 6, texts={"feature": ("a",) * 6})
+    with pytest.raises(DataError, match=r"^test.csv:5: column 'feature': the nominal robot puts this visit 50.0 mm "
+                                        r"from point 'a'"):
+        identify_measurements(ROBOT, rows, {})
+
+
+def _pivot_rows(measured, far_mm):
+    """Distance rows to an unknown pivot ``p`` and, last, one pose row: the type built on them."""
+    n = len(measured)
+    rows = _rows(np.zeros((n + 1, 6)), ["distance"] * n + ["pose"],
+                 {"distance_mm": np.r_[measured, np.nan]}, {"to": ("p",) * n + ("",)})
+    return MEASUREMENT_TYPES["distance"](rows, np.arange(n), {"points": {"p": {}}}, 0.01)
+
+
+def test_a_pivots_start_is_the_sphere_through_its_tips_and_the_unit_check_leaves_pivots_alone():
+    """Tips at 150 mm around a centre (eight of them, not on one plane): the start is the centre to 1e-9 mm (the
+    sphere's linear least squares solved here by hand, the centre known). A pose row 10 m away, last in the table:
+    the unit check judges tip-to-tip distances only, so the pivot's 150 mm against it (a factor of 67) is no unit
+    error."""
+    rng = np.random.default_rng(8)
+    centre = np.array([600.0, 100.0, 300.0])
+    directions = rng.normal(size=(8, 3))
+    tips = centre + 150.0 * directions / np.linalg.norm(directions, axis=1)[:, None]
+    positions = np.vstack([tips, [10600.0, 100.0, 300.0]])
+    names, start = _pivot_rows(np.full(8, 150.0), 10000.0).unknowns(positions, np.tile(np.eye(3), (9, 1, 1)))
+    assert len(names) == 3 and np.allclose(start, centre, atol=1e-9)
+
+
+def test_a_distance_that_is_no_length_is_refused_naming_the_first_such_row():
+    """Distances -5 (row 3, line 4) and 0 (row 5, line 6): the first is named, with its value."""
+    rows = _rows(np.zeros((6, 6)), ["pose"] + ["distance"] * 5,
+                 {"distance_mm": np.array([np.nan, 100.0, -5.0, 120.0, 0.0, 90.0])}, {"to": ("",) + ("1",) * 5})
+    with pytest.raises(DataError, match=r"^test.csv:4: column 'distance_mm': -5 is not a distance; expected a length "
+                                        r"above 0 mm"):
+        MEASUREMENT_TYPES["distance"](rows, np.arange(1, 6), {}, 0.01)
+
+
+@pytest.mark.parametrize("factor, refused", [(1 / 20, False), (1 / 40, True), (20.0, False), (40.0, True)])
+def test_a_long_distance_is_refused_only_beyond_thirty_times_its_nominal(factor, refused):
+    """Two tips 1000 mm apart at the nominal robot: 20 times shorter or longer is data (a tool can move a distance a
+    lot; only a factor no tool makes is a unit), 40 times is refused naming the row."""
+    positions = np.array([[0.0, 0.0, 0.0], [1000.0, 0.0, 0.0]])
+    rows = _rows(np.zeros((2, 6)), ["pose", "distance"], {"distance_mm": np.array([np.nan, 1000.0 * factor])},
+                 {"to": ("", "1")})
+    distances = MEASUREMENT_TYPES["distance"](rows, np.array([1]), {}, 0.01)
+    if refused:
+        with pytest.raises(DataError, match=r"^test.csv:3: column 'distance_mm': .* \(metres\?\)"):
+            distances.unknowns(positions, np.tile(np.eye(3), (2, 1, 1)))
+    else:
+        names, start = distances.unknowns(positions, np.tile(np.eye(3), (2, 1, 1)))
+        assert names == [] and len(start) == 0

@@ -122,3 +122,39 @@ def test_a_long_distance_is_refused_only_beyond_thirty_times_its_nominal(factor,
     else:
         names, start = distances.unknowns(positions, np.tile(np.eye(3), (2, 1, 1)))
         assert names == [] and len(start) == 0
+
+
+def test_the_point_checks_read_each_points_own_visits_whatever_the_names_sort_as():
+    """The same refusals with the names the other way round (a point's visits are its own, not those of every name
+    sorting before or after it): a reached from one orientation twice (line 2) beside b from six; b reached once
+    (line 8) beside a from six."""
+    one = _rows(np.vstack([_visits([700.0, 200.0, 400.0], [0.0, 0.0]), _visits([800.0, 0.0, 400.0], TURNS)]),
+                ["fixed"] * 8, texts={"feature": ("a",) * 2 + ("b",) * 6})
+    with pytest.raises(DataError, match=r"^test.csv:2: column 'feature': fixed point 'a' is reached from one"):
+        identify_measurements(ROBOT, one, {})
+    once = _rows(np.vstack([_visits([800.0, 0.0, 400.0], TURNS), _visits([700.0, 200.0, 400.0], [0.0])]),
+                 ["fixed"] * 7, texts={"feature": ("a",) * 6 + ("b",)})
+    with pytest.raises(DataError, match=r"^test.csv:8: column 'feature': fixed point 'b' is reached once"):
+        identify_measurements(ROBOT, once, {})
+
+
+def test_a_known_point_visited_once_and_visits_turned_a_degree_and_a_half_are_taken():
+    """A point known in the base frame needs one visit (its place is no unknown); two visits of an unknown point
+    turned 1.5 degrees apart are more than the 1 degree the rule asks."""
+    a, k = _visits([800.0, 0.0, 400.0], TURNS), _visits([700.0, 200.0, 400.0], [0.0])
+    rows = _rows(np.vstack([a, k]), ["fixed"] * 7, texts={"feature": ("a",) * 6 + ("k",)})
+    table, _ = identify_measurements(ROBOT, rows, {"points": {"k": {"known_mm": [700.0, 200.0, 400.0]}}})
+    assert table.target_rms_mm["fixed"] < 1e-6
+    rows = _rows(np.vstack([a, _visits([700.0, 200.0, 400.0], [0.0, 1.5])]), ["fixed"] * 8,
+                 texts={"feature": ("a",) * 6 + ("b",) * 2})
+    table, _ = identify_measurements(ROBOT, rows, {})
+    assert table.target_rms_mm["fixed"] < 1e-6
+
+
+def test_a_point_tied_by_distance_to_alone_is_refused_asking_for_its_distance(tmp_path):
+    from partcal.data.measurement_rows import read_cell
+    from partcal.errors import ConfigError
+    path = tmp_path / "cell.yaml"
+    path.write_text("points:\n  nest_a: {}\n  nest_b: {distance_to: nest_a}\n")
+    with pytest.raises(ConfigError, match=r"points.nest_b \(line 3\): missing required key 'distance_mm'"):
+        read_cell(path)

@@ -86,16 +86,16 @@ def _pivot_rows(measured, far_mm):
 
 
 def test_a_pivots_start_is_the_sphere_through_its_tips_and_the_unit_check_leaves_pivots_alone():
-    """Tips at 150 mm around a centre (eight of them, not on one plane): the start is the centre to 1e-9 mm (the
-    sphere's linear least squares solved here by hand, the centre known). A pose row 10 m away, last in the table:
-    the unit check judges tip-to-tip distances only, so the pivot's 150 mm against it (a factor of 67) is no unit
-    error."""
+    """Tips at 120 to 180 mm around a centre (eight of them, not on one plane): the start is the centre to 1e-9 mm
+    (the tips were put around it). A pose row 10 m away, last in the table: the unit check judges tip-to-tip
+    distances only, so a pivot's 150 mm against it (a factor of 67) is no unit error."""
     rng = np.random.default_rng(8)
     centre = np.array([600.0, 100.0, 300.0])
     directions = rng.normal(size=(8, 3))
-    tips = centre + 150.0 * directions / np.linalg.norm(directions, axis=1)[:, None]
+    radii = np.linspace(120.0, 180.0, 8)                      # a pivot's distances differ row by row
+    tips = centre + radii[:, None] * directions / np.linalg.norm(directions, axis=1)[:, None]
     positions = np.vstack([tips, [10600.0, 100.0, 300.0]])
-    names, start = _pivot_rows(np.full(8, 150.0), 10000.0).unknowns(positions, np.tile(np.eye(3), (9, 1, 1)))
+    names, start = _pivot_rows(radii, 10000.0).unknowns(positions, np.tile(np.eye(3), (9, 1, 1)))
     assert len(names) == 3 and np.allclose(start, centre, atol=1e-9)
 
 

@@ -49,7 +49,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _table import print_table  # noqa: E402
 
 from partcal.calibration.camera_cell import seen_points, true_cell  # noqa: E402
-from partcal.calibration.camera_model import board_points  # noqa: E402
+from partcal.calibration.camera_model import board_points, pose_matrix  # noqa: E402
 from partcal.calibration.measurement import MeasurementRows  # noqa: E402
 from partcal.calibration.parameters import geometric_size, robot_with  # noqa: E402
 from partcal.calibration.stacked import identify_measurements  # noqa: E402
@@ -58,6 +58,7 @@ from partcal.data.measurement_rows import read_cell, read_measurement_rows  # no
 from partcal.data.sampling import sample_configurations  # noqa: E402
 from partcal.data.simulate import load_study  # noqa: E402
 from partcal.robot.frames import kabsch  # noqa: E402
+from partcal.robot.rotations import poses_from  # noqa: E402
 from partcal.study.plan_measurements import plan_measurements  # noqa: E402
 
 TRACKER_MM = 0.02
@@ -97,19 +98,6 @@ cell:
 datasets:
   images: {{camera: {{images: {images}}}, noise: 0.2}}
 """
-
-
-def pose(values) -> np.ndarray:
-    out = np.eye(4)
-    out[:3, :3] = Rotation.from_rotvec(values[3:], degrees=True).as_matrix()
-    out[:3, 3] = values[:3]
-    return out
-
-
-def flanges(positions, rotations) -> np.ndarray:
-    out = np.tile(np.eye(4), (len(positions), 1, 1))
-    out[:, :3, :3], out[:, :3, 3] = rotations, positions
-    return out
 
 
 def error(expected, got) -> tuple[float, float]:
@@ -162,12 +150,12 @@ def opencv(setup: dict, rows, nominal_flange) -> dict[str, tuple[np.ndarray, np.
 def board_centre_miss(setup, study, q, fitted_flange, on_flange, in_cell) -> float:
     """RMS (mm) of the board's centre in the camera's frame, fitted chain against the true one, poses ``q``."""
     centre = np.array([5.5 * setup["square"], 4.0 * setup["square"], 0.0, 1.0])
-    true = flanges(*study.robot.true_flange(q))
+    true = poses_from(*study.robot.true_flange(q))
     if setup["mount"] == "cell":
-        truth = np.linalg.inv(pose(setup["camera"])) @ true @ pose(setup["board"]) @ centre
+        truth = np.linalg.inv(pose_matrix(setup["camera"])) @ true @ pose_matrix(setup["board"]) @ centre
         fitted = np.linalg.inv(in_cell) @ fitted_flange @ on_flange @ centre
     else:
-        truth = np.linalg.inv(true @ pose(setup["camera"])) @ pose(setup["board"]) @ centre
+        truth = np.linalg.inv(true @ pose_matrix(setup["camera"])) @ pose_matrix(setup["board"]) @ centre
         fitted = np.linalg.inv(fitted_flange @ on_flange) @ in_cell @ centre
     return float(np.sqrt(np.mean(np.sum((truth - fitted)[:, :3] ** 2, axis=1))))
 
@@ -182,7 +170,7 @@ def flange_point(setup) -> np.ndarray:
     """The point on the flange both fits are scored by (flange frame, true): the board's centre (eye-to-hand) or
     the camera's optical centre (eye-in-hand)."""
     if setup["mount"] == "cell":
-        return (pose(setup["board"]) @ np.array([5.5 * setup["square"], 4.0 * setup["square"], 0.0, 1.0]))[:3]
+        return (pose_matrix(setup["board"]) @ np.array([5.5 * setup["square"], 4.0 * setup["square"], 0.0, 1.0]))[:3]
     return np.asarray(setup["camera"][:3], dtype=float)
 
 
@@ -207,7 +195,7 @@ def point_scores(setup, study, q, fitted_flange, on_flange, tracker_robot) -> tu
     flange) and through the tracker's, RMS mm."""
     positions, rotations = study.robot.true_flange(q)
     truth = positions + rotations @ flange_point(setup)
-    local = np.linalg.inv(pose(setup["board"] if setup["mount"] == "cell" else setup["camera"])) @ np.r_[
+    local = np.linalg.inv(pose_matrix(setup["board"] if setup["mount"] == "cell" else setup["camera"])) @ np.r_[
         flange_point(setup), 1.0]                                     # the point in the pose on the flange's frame
     camera = (fitted_flange @ on_flange @ local)[:, :3]
     return rigid_rms(camera, truth), rigid_rms(tracker_robot.positions(q), truth)
@@ -252,8 +240,8 @@ def one(name: str, images: int, seed: int, folder: Path, planned: bool = False) 
     seconds = time.perf_counter() - start
     value = dict(zip(table.names, table.value))
     other = "flange" if mount == "cell" else "cell"
-    camera = pose([value[f"camera cam1@{mount}.{c}"] for c in ("x", "y", "z", "rx", "ry", "rz")])
-    board = pose([value[f"board b1@{other}.{c}"] for c in ("x", "y", "z", "rx", "ry", "rz")])
+    camera = pose_matrix([value[f"camera cam1@{mount}.{c}"] for c in ("x", "y", "z", "rx", "ry", "rz")])
+    board = pose_matrix([value[f"board b1@{other}.{c}"] for c in ("x", "y", "z", "rx", "ry", "rz")])
     on_flange, in_cell = (board, camera) if mount == "cell" else (camera, board)
     fitted_robot = robot_with(nominal, table.value[:geometric_size(nominal, PARAMETRIZATION)], PARAMETRIZATION)
     # random poses with the board in view (the true chain's view)
@@ -262,9 +250,9 @@ def one(name: str, images: int, seed: int, folder: Path, planned: bool = False) 
     seen = seen_points(cameras["cam1"], boards["b1"], *study.robot.true_flange(q), board_points(boards["b1"]))[0]
     q_random = q[:2000]
     q = q[seen.sum(axis=1) >= seen.shape[1] // 2][:2000]
-    true_on_flange = pose(setup["board"] if mount == "cell" else setup["camera"])
-    true_in_cell = pose(setup["camera"] if mount == "cell" else setup["board"])
-    true_flange = flanges(*study.robot.true_flange(q))
+    true_on_flange = pose_matrix(setup["board"] if mount == "cell" else setup["camera"])
+    true_in_cell = pose_matrix(setup["camera"] if mount == "cell" else setup["board"])
+    true_flange = poses_from(*study.robot.true_flange(q))
 
     def hand_eye_error(flange_q, on, cell_pose):
         """The pose on the flange against the truth carried into the fitted chain's frames: the cell's gauge

@@ -136,11 +136,11 @@ def detect_tags(image: NDArray[np.uint8], board: dict, unfitted: list[int] | Non
         return np.zeros(0, dtype=np.intp), np.zeros((0, 2))
     grey = image.astype(float)
     gap = (float(board["square_mm"]) - float(board["marker_mm"])) / float(board["marker_mm"])
-    out_ids, out_uv = [], []
+    out_ids, out_uv, cells = [], [], tag_cells(board)
     for tag, quad in zip(ids.ravel(), corners):
         if tag >= count:
             continue                                       # a tag of the family that is not the grid's
-        refined = tag_corners(grey, quad[0].astype(float), tag_cells(board), gap)
+        refined = tag_corners(grey, quad[0].astype(float), cells, gap)
         if refined is None:
             if unfitted is not None:
                 unfitted.append(int(tag))

@@ -371,3 +371,20 @@ def test_check_judges_a_payload_reading_model_at_each_poses_payload(cell):
                                atol=1e-12)
     np.testing.assert_allclose(check_arrays(model, q, errors, robot=virtual.nominal).z[:, 2],
                                (errors[:, 2]) / 0.05, atol=1e-12)
+
+
+def test_a_model_of_pose_errors_is_judged_on_its_positions(cell):
+    """A series model of six columns (the position error, then an orientation's three): check reads the first
+    three of the data and of the model's mean and spread, as computed here by hand (3 n coordinates)."""
+    _, _, virtual, _ = cell
+    rng = np.random.default_rng(5)
+    q = sample_configurations(virtual.nominal, 190, {1: (-90, 90), 2: (-150, -30), 3: (-140, 140)}, {}, rng)
+    nominal = virtual.nominal.positions(q)
+    errors = np.column_stack([virtual.measure(q, rng) - nominal, rng.normal(0.0, 0.1, (len(q), 3))])
+    model = calibrate_spread(ErrorModel(inputs="cartesian", degree=2, solver="lstsq"), nominal[:150], errors[:150],
+                             folds=5)
+    result = check_arrays(model, q[150:], errors[150:], robot=virtual.nominal)
+    mean, std = model.predict_with_std(nominal[150:])
+    assert mean.shape == (40, 6)
+    z = (errors[150:, :3] - mean[:, :3]) / std[:, :3]
+    assert result.dof == 120 and result.mean_z2 == pytest.approx(np.mean(z ** 2), rel=1e-12)

@@ -12,6 +12,7 @@ from partcal import load_robot
 from partcal.calibration.measurement import MeasurementRows
 from partcal.calibration.registry import MEASUREMENT_TYPES
 from partcal.calibration.stacked import identify_measurements
+from partcal.data.measurement_rows import read_measurement_rows
 from partcal.errors import DataError
 
 ROBOT = load_robot("universal_robots_ur10")
@@ -158,3 +159,89 @@ def test_a_point_tied_by_distance_to_alone_is_refused_asking_for_its_distance(tm
     path.write_text("points:\n  nest_a: {}\n  nest_b: {distance_to: nest_a}\n")
     with pytest.raises(ConfigError, match=r"points.nest_b \(line 3\): missing required key 'distance_mm'"):
         read_cell(path)
+
+
+def _distance_table():
+    """Rows 0-2 poses; rows 3-6 distances: 3 to row 0 (id 1), 4 to row 2 (id 3, a later row than its own would be
+    for row 1), 5 to the known pivot k, 6 to the unknown pivot p."""
+    return _rows(np.zeros((7, 6)), ["pose"] * 3 + ["distance"] * 4,
+                 {"distance_mm": np.array([np.nan] * 3 + [500.0, 700.0, 300.0, 400.0])},
+                 {"to": ("",) * 3 + ("1", "3", "k", "p")})
+
+
+def test_distance_residuals_read_the_other_row_a_known_pivot_or_the_unknown_one_by_hand():
+    """Tips put by hand; each residual is |tip - other end| - distance (the other end a row's tip, a known pivot
+    from the cell, or the unknown pivot's three values in ``u``), its gradients the unit vector from that end to the
+    tip (the unknown pivot's the opposite), and only the tip-to-tip rows name a second row."""
+    cell = {"points": {"k": {"known_mm": [0.0, 0.0, 1000.0]}, "p": {}}}
+    distances = MEASUREMENT_TYPES["distance"](_distance_table(), np.arange(3, 7), cell, 0.01)
+    assert distances.describe() == "4 distances (pivots k, p)"
+    tips = np.array([[0.0, 0.0, 0.0], [900.0, 0.0, 0.0], [0.0, 800.0, 0.0],
+                     [300.0, 400.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 600.0], [100.0, 200.0, 300.0]])
+    u = np.array([100.0, 200.0, 700.0])                        # p: 400 mm above row 6's tip
+    res = distances.residuals(tips, np.tile(np.eye(3), (7, 1, 1)), u)
+    # row 3 -> row 0: 500 apart (measured 500); row 4 -> row 2: 800 (700); row 5 -> k: 400 (300); row 6 -> p: 400
+    np.testing.assert_allclose(res.values, [0.0, 100.0, 100.0, 0.0], atol=1e-12)
+    assert res.rows_a.tolist() == [3, 4, 5, 6] and res.rows_b.tolist() == [0, 2, -1, -1]
+    directions = np.array([[0.6, 0.8, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [0.0, 0.0, -1.0]])
+    np.testing.assert_allclose(res.grad_a, directions, atol=1e-12)
+    np.testing.assert_allclose(res.grad_b, -directions, atol=1e-12)
+    np.testing.assert_allclose(res.du, [[0, 0, 0], [0, 0, 0], [0, 0, 0], [0, 0, 1.0]], atol=1e-12)
+
+
+def test_a_distance_to_a_later_row_is_taken_and_one_to_its_own_row_refused():
+    """Row 2 (id 3) measured to row 3 (id 4, after it) and row 3 to row 0: taken; row 3 to itself is refused
+    naming its line."""
+    rows = _rows(np.zeros((4, 6)), ["pose", "pose", "distance", "distance"],
+                 {"distance_mm": np.array([np.nan, np.nan, 500.0, 500.0])}, {"to": ("", "", "4", "1")})
+    assert MEASUREMENT_TYPES["distance"](rows, np.array([2, 3]), {}, 0.01).other.tolist() == [3, 0]
+    rows.texts["to"] = ("", "", "1", "4")
+    with pytest.raises(DataError, match=r"^test.csv:5: column 'to': the row refers to itself"):
+        MEASUREMENT_TYPES["distance"](rows, np.array([2, 3]), {}, 0.01)
+
+
+def test_a_pivots_start_is_the_tips_mean_where_they_do_not_fix_a_sphere():
+    """Three tips, or six on one plane, do not fix a sphere's centre: the start is their mean. Four tips off one plane
+    fix it: the start is the centre they were put around."""
+    centre = np.array([600.0, 100.0, 300.0])
+    on_circle = centre + 150.0 * np.array([[np.cos(a), np.sin(a), 0.0] for a in np.linspace(0, 5, 6)])
+    for tips in (on_circle[:3], on_circle):
+        positions = np.vstack([tips, [0.0, 0.0, 0.0]])
+        _, start = _pivot_rows(np.full(len(tips), 150.0), 0.0).unknowns(positions, np.tile(np.eye(3), (len(tips) + 1, 1, 1)))
+        np.testing.assert_allclose(start, tips.mean(axis=0), atol=1e-9)
+    tetra = centre + 150.0 * np.array([[1.0, 0, 0], [0, 1.0, 0], [0, 0, 1.0], [-0.6, -0.64, 0.48]])
+    _, start = _pivot_rows(np.full(4, 150.0), 0.0).unknowns(np.vstack([tetra, [0.0, 0, 0]]), np.tile(np.eye(3), (5, 1, 1)))
+    np.testing.assert_allclose(start, centre, atol=1e-9)
+
+
+@pytest.mark.parametrize("nominal, factor, refused", [(1000.0, 29.5, False), (1000.0, 30.5, True),
+                                                      (1000.0, 1 / 29.5, False), (1000.0, 1 / 30.5, True),
+                                                      (300.5, 40.0, True), (299.5, 40.0, False)])
+def test_the_unit_check_starts_at_thirty_times_and_at_three_hundred_mm(nominal, factor, refused):
+    """Its edges, half a step either side: a factor of 30 (either way) on a nominal distance of 300 mm or more."""
+    positions = np.array([[0.0, 0.0, 0.0], [nominal, 0.0, 0.0]])
+    rows = _rows(np.zeros((2, 6)), ["pose", "distance"], {"distance_mm": np.array([np.nan, nominal * factor])},
+                 {"to": ("", "1")})
+    distances = MEASUREMENT_TYPES["distance"](rows, np.array([1]), {}, 0.01)
+    if refused:
+        with pytest.raises(DataError, match=r"^test.csv:3: column 'distance_mm': .* \(metres\?\)"):
+            distances.unknowns(positions, np.tile(np.eye(3), (2, 1, 1)))
+    else:
+        assert distances.unknowns(positions, np.tile(np.eye(3), (2, 1, 1)))[0] == []
+
+
+@pytest.mark.parametrize("value, taken", [(0.0, False), (-0.5, False), (0.5, True)])
+def test_a_distance_of_zero_or_below_is_refused_by_the_reader_and_the_type(tmp_path, value, taken):
+    """Half a millimetre is a distance; zero and -0.5 are not, refused when the file is read (naming its line) and,
+    for rows built in Python, by the type."""
+    path = tmp_path / "m.csv"
+    path.write_text(f"q1,q2,q3,q4,q5,q6,measurement,distance_mm,to\n0,0,0,0,0,0,pose,,\n0,0,0,0,0,0,distance,{value},1\n")
+    rows = _rows(np.zeros((2, 6)), ["pose", "distance"], {"distance_mm": np.array([np.nan, value])}, {"to": ("", "1")})
+    if taken:
+        assert read_measurement_rows(path).numbers["distance_mm"][1] == value
+        assert MEASUREMENT_TYPES["distance"](rows, np.array([1]), {}, 0.01).measured.tolist() == [value]
+        return
+    with pytest.raises(DataError, match=rf"m.csv:3: column 'distance_mm': expected a distance > 0 mm, got '{value:g}'"):
+        read_measurement_rows(path)
+    with pytest.raises(DataError, match=rf"^test.csv:3: column 'distance_mm': {value:g} is not a distance"):
+        MEASUREMENT_TYPES["distance"](rows, np.array([1]), {}, 0.01)

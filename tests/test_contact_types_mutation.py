@@ -245,3 +245,42 @@ def test_a_distance_of_zero_or_below_is_refused_by_the_reader_and_the_type(tmp_p
         read_measurement_rows(path)
     with pytest.raises(DataError, match=rf"^test.csv:3: column 'distance_mm': {value:g} is not a distance"):
         MEASUREMENT_TYPES["distance"](rows, np.array([1]), {}, 0.01)
+
+
+@pytest.mark.parametrize("distance, to, column", [("", "1", "distance_mm"), ("500", "", "to")])
+def test_a_distance_row_without_its_length_or_its_other_end_is_refused_by_the_reader(tmp_path, distance, to, column):
+    """Both of a distance's columns are required, whatever the type's declaration is read as: the reader names
+    the empty one (not the type later, with a message about a nan length or an empty name)."""
+    path = tmp_path / "m.csv"
+    path.write_text(f"q1,q2,q3,q4,q5,q6,measurement,distance_mm,to\n0,0,0,0,0,0,pose,,\n"
+                    f"0,0,0,0,0,0,distance,{distance},{to}\n")
+    with pytest.raises(DataError, match=rf"m.csv:3: column '{column}': expected a value on a distance row"):
+        read_measurement_rows(path)
+
+
+def test_tips_at_one_place_give_no_direction_and_half_a_millimetre_apart_a_unit_one():
+    """Row 1's tip on row 0's (a length of 0: the residual is minus the distance, the gradient zero, never NaN);
+    row 2's 0.5 mm from row 0's along y: the gradient is the unit vector, not the 0.5 mm difference."""
+    rows = _rows(np.zeros((3, 6)), ["pose", "distance", "distance"],
+                 {"distance_mm": np.array([np.nan, 2.0, 0.75])}, {"to": ("", "1", "1")})
+    tips = np.array([[500.0, 0.0, 300.0], [500.0, 0.0, 300.0], [500.0, 0.5, 300.0]])
+    res = MEASUREMENT_TYPES["distance"](rows, np.array([1, 2]), {}, 0.01).residuals(tips, np.tile(np.eye(3), (3, 1, 1)),
+                                                                                  np.zeros(0))
+    np.testing.assert_allclose(res.values, [-2.0, -0.25], atol=1e-12)
+    np.testing.assert_array_equal(res.grad_a, [[0.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+
+
+def test_a_pivots_rows_are_found_by_its_name_not_by_one_text_object():
+    """The pivot's name read as a separate string on each row (as a file's cells are): every row's tip still
+    joins its sphere, and the start is the centre."""
+    rng = np.random.default_rng(8)
+    centre = np.array([600.0, 100.0, 300.0])
+    directions = rng.normal(size=(8, 3))
+    radii = np.linspace(120.0, 180.0, 8)
+    tips = centre + radii[:, None] * directions / np.linalg.norm(directions, axis=1)[:, None]
+    names = tuple("".join(["bar", str(1)]) for _ in range(8)) + ("",)
+    assert names[0] is not names[1]
+    rows = _rows(np.zeros((9, 6)), ["distance"] * 8 + ["pose"], {"distance_mm": np.r_[radii, np.nan]}, {"to": names})
+    distances = MEASUREMENT_TYPES["distance"](rows, np.arange(8), {"points": {"bar1": {}}}, 0.01)
+    _, start = distances.unknowns(np.vstack([tips, [0.0, 0.0, 0.0]]), np.tile(np.eye(3), (9, 1, 1)))
+    np.testing.assert_allclose(start, centre, atol=1e-9)

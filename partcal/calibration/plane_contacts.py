@@ -113,8 +113,8 @@ class PlaneContacts(MeasurementType):
             start += [float(normal @ t1 / (normal @ pole)), float(normal @ t2 / (normal @ pole)), offset]
         self.roots = roots
         start = np.array(start)
+        self._check_spacings(positions, start)     # first: a spacing in metres puts every touch far from its plane
         self._check_rows(positions, rotations, start)
-        self._check_spacings(positions, start)
         return names, start
 
     def _check_spacings(self, positions, u) -> None:

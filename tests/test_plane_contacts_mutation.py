@@ -1,0 +1,242 @@
+"""The plane contact type (partcal/calibration/plane_contacts.py) on touches put by hand, where a cosmic-ray run
+showed no test held it: a plane's parameter names and start, the refusals (too few touches, one orientation, a touch
+far from its plane, a given normal far from the touches, touches on a line), what a given plane starts from, the
+offset a tied plane's scale moves, and flush residuals against values computed here."""
+
+import re
+import warnings
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from partcal.calibration.measurement import MeasurementRows
+from partcal.calibration.registry import MEASUREMENT_TYPES
+from partcal.data.measurement_rows import read_cell
+from partcal.errors import ConfigError, DataError
+
+TURNS = [0.0, 10.0, 20.0, -10.0, -20.0, 5.0, 15.0, -5.0, -15.0]
+"""The tool's turn about x at each touch (degrees): touches from several orientations."""
+
+
+def _name(text: str) -> str:
+    """``text`` as a string object of its own (as each cell of a file is), never the interned literal."""
+    return "".join(list(text))
+
+
+def _planes(features, cell=None, flush=None):
+    """The plane type on rows touching ``features`` (one per row; lines from 2)."""
+    n = len(features)
+    numbers = {} if flush is None else {"flush": np.asarray(flush, dtype=float)}
+    rows = MeasurementRows(np.zeros((n, 6)), ("plane",) * n, tuple(str(i + 1) for i in range(n)),
+                           tuple(range(2, n + 2)), "test.csv", numbers, {"feature": tuple(features)})
+    return MEASUREMENT_TYPES["plane"](rows, np.arange(n), cell or {}, 0.01)
+
+
+def _pointing_down(turns_deg):
+    """Tool rotations pointing down (z along -z of the base) and turned about x by each of ``turns_deg``."""
+    return Rotation.from_euler("x", 180.0 + np.asarray(turns_deg, dtype=float)[:, None], degrees=True).as_matrix()
+
+
+def _on_plane(normal, offset, count, centre=None, spread=200.0):
+    """``count`` points on the plane ``normal . p = offset`` (a ring of them about its point nearest ``centre``)."""
+    normal = np.asarray(normal, dtype=float) / np.linalg.norm(normal)
+    a = np.cross(normal, [1.0, 0.0, 0.0] if abs(normal[0]) < 0.9 else [0.0, 1.0, 0.0])
+    a /= np.linalg.norm(a)
+    b = np.cross(normal, a)
+    foot = normal * offset if centre is None else centre + normal * (offset - normal @ centre)
+    angles = np.linspace(0.0, 2 * np.pi, count, endpoint=False)
+    return foot + spread * (np.cos(angles)[:, None] * a + np.sin(angles)[:, None] * b)
+
+
+def _unknowns(planes, positions, turns=None):
+    turns = TURNS * (len(positions) // len(TURNS) + 1) if turns is None else turns
+    return planes.unknowns(positions, _pointing_down(turns[:len(positions)]))
+
+
+def test_an_unknown_planes_normal_points_towards_the_base_origin_and_names_its_pole():
+    """The plane z = 400 (above the base) gets the normal -z: unknowns ``top.x/-z``, ``top.y/-z`` (its tilts) and
+    an offset of -400; the plane z = -300 (below) the normal +z, ``floor.x/+z``, offset -300."""
+    positions = np.vstack([_on_plane([0, 0, 1], 400.0, 6, centre=[800, 0, 0]),
+                           _on_plane([0, 0, 1], -300.0, 6, centre=[600, 0, 0])])
+    names, start = _unknowns(_planes(["top"] * 6 + ["floor"] * 6), positions)
+    assert names == [("plane top.x/-z", "1"), ("plane top.y/-z", "1"), ("plane top.offset", "mm"),
+                     ("plane floor.x/+z", "1"), ("plane floor.y/+z", "1"), ("plane floor.offset", "mm")]
+    np.testing.assert_allclose(start, [0.0, 0.0, -400.0, 0.0, 0.0, -300.0], atol=1e-9)
+
+
+def test_a_plane_with_too_few_touches_is_refused_whatever_its_name_sorts_as():
+    """Plane 'aa' touched twice (lines 2 and 3), 'bb' four times: 'aa' is refused, not given 'bb''s touches."""
+    with pytest.raises(DataError, match=r"^test.csv:2: column 'feature': plane 'aa' has 2 touches; its 3 unknowns"):
+        _planes(["aa", "aa", "bb", "bb", "bb", "bb"])
+
+
+def test_the_one_orientation_check_reads_each_planes_own_touches():
+    """'aa' touched four times from one orientation, 'bb' from four: 'aa' is refused naming its first line, the
+    names read as separate strings (as a file's cells are) and whatever they sort as."""
+    features = [_name("aa")] * 4 + [_name("bb") for _ in range(4)]
+    features[1:4] = [_name("aa") for _ in range(3)]
+    positions = np.vstack([_on_plane([0, 0, 1], 400.0, 4, [800, 0, 0]), _on_plane([1, 0, 0], 700.0, 4, [0, 0, 300])])
+    with pytest.raises(DataError, match=r"^test.csv:2: column 'feature': plane 'aa' is touched from one orientation"):
+        _unknowns(_planes(features), positions, [0.0] * 4 + [0.0, 10.0, 20.0, -10.0])
+
+
+TIED = {"planes": {"top": {}, "step": {"parallel_to": "top", "spacing_mm": -200.0}}}
+
+
+@pytest.mark.parametrize("turns, refused", [([0.0], False), ([0.0, 0.0], True), ([0.0, 10.0], False)])
+def test_a_tied_plane_touched_once_is_taken_and_twice_from_one_orientation_refused(turns, refused):
+    """'top' (z = 400) four times from four orientations, then the tied 'step' (z = 200): once, twice from one
+    orientation (refused, naming line 6) or twice turned 10 degrees."""
+    k = len(turns)
+    positions = np.vstack([_on_plane([0, 0, 1], 400.0, 4, [800, 0, 0]), _on_plane([0, 0, 1], 200.0, k, [700, 0, 0])])
+    planes = _planes(["top"] * 4 + ["step"] * k, TIED)
+    rotations = [0.0, 10.0, 20.0, -10.0] + turns
+    if refused:
+        with pytest.raises(DataError, match=r"^test.csv:6: column 'feature': plane 'step' is touched from one "):
+            _unknowns(planes, positions, rotations)
+    else:
+        names, start = _unknowns(planes, positions, rotations)     # the spacing orients the normal: +z
+        assert names[0] == ("plane top.x/+z", "1")
+        np.testing.assert_allclose(start, [0.0, 0.0, 400.0], atol=1e-9)
+
+
+def test_a_touch_far_from_its_plane_is_refused_saying_how_far():
+    """Eight touches on a ring of the plane z = 400 and a ninth (line 10) at its centre 50 mm above: the plane through
+    the nine sits 50 / 9 mm above the ring, so the ninth is 44.4 mm from it (beyond 20 mm); refused naming it."""
+    positions = np.vstack([_on_plane([0, 0, 1], 400.0, 8, [800, 0, 0]), [[800.0, 0.0, 450.0]]])
+    with pytest.raises(DataError, match=r"^test.csv:10: column 'feature': the nominal robot puts this touch 44.4 mm "
+                                        r"from plane 'top' \(1 touches beyond 20 mm\)"):
+        _unknowns(_planes(["top"] * 9), positions)
+
+
+def _given_plane_rows(tilt_deg):
+    """Planes 'wall' (x = 900) and 'side' (y = 500) touched first, then 'top' (z = 400); the cell gives top's
+    normal tilted ``tilt_deg`` about y from the touches' one."""
+    normal = [np.sin(np.radians(tilt_deg)), 0.0, np.cos(np.radians(tilt_deg))]
+    positions = np.vstack([_on_plane([1, 0, 0], 900.0, 4, [0, 0, 300]), _on_plane([0, 1, 0], 500.0, 4, [600, 0, 300]),
+                           _on_plane([0, 0, 1], 400.0, 4, [800, 0, 0])])
+    cell = {"planes": {"wall": {}, "side": {}, "top": {"normal": normal, "offset_mm": 400.0}}}
+    return _planes(["wall"] * 4 + ["side"] * 4 + ["top"] * 4, cell), positions, normal
+
+
+@pytest.mark.parametrize("tilt_deg", [9.5, 10.5])
+def test_a_given_normal_more_than_ten_degrees_from_the_touches_is_refused_naming_the_planes_first_touch(tilt_deg):
+    planes, positions, normal = _given_plane_rows(tilt_deg)
+    if tilt_deg < 10.0:
+        names, start = _unknowns(planes, positions, [0.0, 10.0, 20.0, -10.0] * 3)
+        np.testing.assert_allclose(start[-3:], [0.0, 0.0, 400.0], atol=1e-9)   # the touches' plane, +z as given
+        return
+    shown = str([round(float(v), 4) for v in normal])
+    with pytest.raises(DataError, match=rf"^test.csv:10: column 'feature': the nominal robot's touches of plane 'top' "
+                                        rf"put its normal 10.5 degrees from the cell's planes.top.normal "
+                                        rf"{re.escape(shown)} \(more than 10\)"):
+        _unknowns(planes, positions, [0.0, 10.0, 20.0, -10.0] * 3)
+    assert shown == "[0.1822, 0.0, 0.9833]"
+
+
+def test_a_group_two_spacings_orient_is_refused_when_the_given_normal_points_the_other_way():
+    """'top' (z = 400) and the tied 'step' (200 mm below it along the normal, z = 200) orient the normal +z by
+    themselves; a given normal -z is 180 degrees from it."""
+    positions = np.vstack([_on_plane([0, 0, 1], 400.0, 4, [800, 0, 0]), _on_plane([0, 0, 1], 200.0, 4, [700, 0, 0])])
+    cell = {"planes": {"top": {"normal": [0.0, 0.0, -1.0], "offset_mm": -400.0},
+                       "step": {"parallel_to": "top", "spacing_mm": -200.0}}}
+    with pytest.raises(DataError, match=r"^test.csv:2: .* put its normal 180.0 degrees from the cell's planes.top"):
+        _unknowns(_planes(["top"] * 4 + ["step"] * 4, cell), positions, [0.0, 10.0, 20.0, -10.0] * 2)
+
+
+def test_touches_on_one_line_fix_no_unknown_plane_and_a_given_one_starts_where_the_cell_puts_it():
+    """Four touches along a line of z = 400: refused for an unknown plane; with the plane given (normal +z, offset
+    410, 10 mm off) the start is the cell's, and each touch's residual is z - 410 (by hand)."""
+    line = np.column_stack([np.linspace(600.0, 900.0, 4), np.zeros(4), np.full(4, 400.0)])
+    with pytest.raises(DataError, match=r"^test.csv:2: column 'feature': the touches of plane 'top' lie on one line"):
+        _unknowns(_planes(["top"] * 4), line)
+    planes = _planes(["top"] * 4, {"planes": {"top": {"normal": [0.0, 0.0, 1.0], "offset_mm": 410.0}}})
+    names, start = _unknowns(planes, line)
+    np.testing.assert_allclose(start, [0.0, 0.0, 410.0], atol=1e-12)
+    residuals = planes.residuals(line, _pointing_down(TURNS[:4]), start)
+    np.testing.assert_allclose(residuals.values, [-10.0] * 4, atol=1e-12)
+
+
+def test_a_tied_plane_touched_alone_once_starts_from_its_given_root():
+    """Only 'step' touched (once, at z = 200), tied 200 mm below a given 'top' (z = 400): one touch fixes no plane,
+    the start is the cell's (normal +z, offset 400) and the touch's residual 200 - 400 + 200 = 0."""
+    cell = {"planes": {"top": {"normal": [0.0, 0.0, 1.0], "offset_mm": 400.0},
+                       "step": {"parallel_to": "top", "spacing_mm": -200.0}}}
+    planes = _planes(["step"], cell)
+    tip = np.array([[700.0, 0.0, 200.0]])
+    names, start = _unknowns(planes, tip)
+    np.testing.assert_allclose(start, [0.0, 0.0, 400.0], atol=1e-12)
+    np.testing.assert_allclose(planes.residuals(tip, _pointing_down([0.0]), start).values, [0.0], atol=1e-12)
+
+
+@pytest.mark.parametrize("entry, missing", [("{normal: [0, 0, 1]}", "offset_mm"), ("{offset_mm: 400}", "normal"),
+                                            ("{parallel_to: side}", "spacing_mm")])
+def test_half_a_planes_form_is_refused_naming_the_key_it_misses(tmp_path, entry, missing):
+    path = tmp_path / "cell.yaml"
+    path.write_text(f"planes:\n  side: {{}}\n  top: {entry}\n")
+    with pytest.raises(ConfigError, match=rf"cell.yaml: planes.top \(line 3\): missing required key '{missing}'"):
+        read_cell(path)
+
+
+def test_a_scale_moves_the_offset_of_a_tied_plane_touched_alone_and_no_offset_of_two_spacings():
+    """Root 'top' untouched: its tied 'step' (-200) touched alone scales as the plane it is, top's offset plus
+    -200; with 'step2' (-100) touched too, the two spacings measure a length and no offset moves. A second group,
+    'side' (unknown, x = 700) then its tied 'side2' (+50) touched alone: the second root's offset moves by +50.
+    The tie names are strings of their own, as a file's are."""
+    cell = {"planes": {"top": {}, "step": {"parallel_to": _name("top"), "spacing_mm": -200.0},
+                       "step2": {"parallel_to": _name("top"), "spacing_mm": -100.0},
+                       "side": {}, "side2": {"parallel_to": _name("side"), "spacing_mm": 50.0}}}
+    step = _on_plane([0, 0, 1], 200.0, 4, [800, 0, 0])
+    alone = _planes(["step"] * 4, cell)
+    start = _unknowns(alone, step)[1]
+    np.testing.assert_allclose(alone.scaled_lengths(start), start + [0.0, 0.0, -200.0], atol=1e-12)
+    both = _planes(["step"] * 4 + ["step2"] * 4 + ["side2"] * 4, cell)
+    positions = np.vstack([step, _on_plane([0, 0, 1], 300.0, 4, [700, 0, 0]), _on_plane([1, 0, 0], 750.0, 4, [0, 0, 300])])
+    start = _unknowns(both, positions)[1]
+    np.testing.assert_allclose(both.scaled_lengths(start), start + [0.0, 0.0, 0.0, 0.0, 0.0, 50.0], atol=1e-12)
+
+
+def test_a_spacing_in_metres_is_refused_naming_the_tied_planes_first_touch_and_an_untouched_root_checks_nothing():
+    """'top' (z = 400) and 'step' (z = 200, lines 3 and 5, interleaved) with a spacing of -0.2: refused naming line
+    3. 'step' touched with its root untouched: nothing to check, and no numpy warning of an empty mean."""
+    features = ["top", "step", "top", "step", "top", "top"]
+    positions = np.array([[800.0, 0.0, 400.0], [700.0, 0.0, 200.0], [900.0, 100.0, 400.0], [750.0, 50.0, 200.0],
+                          [700.0, -150.0, 400.0], [850.0, 150.0, 400.0]])
+    cell = {"planes": {"top": {}, "step": {"parallel_to": "top", "spacing_mm": -0.2}}}
+    with pytest.raises(DataError, match=r"^test.csv:3: planes.step.spacing_mm: -0.2 mm, but the nominal robot's "
+                                        r"touches of 'step' and 'top' say about -200.0 mm"):
+        _unknowns(_planes(features, cell), positions)
+    cell["planes"]["step"]["spacing_mm"] = -200.0
+    step = _on_plane([0, 0, 1], 200.0, 4, [700, 0, 0])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        planes = _planes(["step"] * 4, cell)
+        _unknowns(planes, step)
+    assert planes.suspicions == []
+
+
+def test_flush_residuals_on_a_tilted_plane_by_hand():
+    """A plane tilted 5 degrees about y and a flush touch whose tool z axis is exactly against its normal: the two
+    tilt residuals are zero; the tool turned 1 degree further about y: the rim of a 50 mm face rises by
+    50 (sin 5 - sin 6 degrees) along the first tangent (x) and not along the second (y). The same on the second of two planes (its own unknowns' columns)."""
+    tilt = np.radians(5.0)
+    normal = np.array([-np.sin(tilt), 0.0, -np.cos(tilt)])          # the plane z = 400 tilted, towards the origin
+    tips = _on_plane(-normal, 400.0, 4, [800, 0, 0])
+    wall = _on_plane([1, 0, 0], 900.0, 4, [0, 0, 300])
+    against = Rotation.from_rotvec([0.0, np.pi + tilt, 0.0]).as_matrix()   # z = (-sin 5, 0, -cos 5) = the normal...
+    assert np.allclose(against[:, 2] @ normal, 1.0)                 # ...so the face lies on it from the normal's side
+    planes = _planes(["wall"] * 4 + ["top"] * 4, flush=[0] * 4 + [1, 0, 0, 0])
+    rotations = np.concatenate([_pointing_down([0.0, 10.0, 20.0, -10.0]), _pointing_down([0.0, 10.0, 20.0, -10.0])])
+    rotations[4] = against
+    positions = np.vstack([wall, tips])
+    names, start = planes.unknowns(positions, rotations)
+    assert names[3:] == [("plane top.x/-z", "1"), ("plane top.y/-z", "1"), ("plane top.offset", "mm")]
+    res = planes.residuals(positions, rotations, start)
+    np.testing.assert_allclose(res.values[8:], [0.0, 0.0], atol=1e-9)
+    assert res.rows_a[8:].tolist() == [4, 4]
+    assert res.du.shape == (10, 6) and np.all(res.du[8:, :3] == 0.0) and np.all(res.du[8:, 5] == 0.0)
+    assert np.any(res.du[8:, 3:5] != 0.0)
+    rotations[4] = Rotation.from_rotvec([0.0, np.pi + tilt + np.radians(1.0), 0.0]).as_matrix()  # z: 6 degrees
+    res = planes.residuals(positions, rotations, start)
+    np.testing.assert_allclose(res.values[8:], [50.0 * (np.sin(tilt) - np.sin(np.radians(6.0))), 0.0], atol=1e-9)

@@ -20,7 +20,9 @@ TURNS = [0.0, 10.0, 20.0, -10.0, -20.0, 5.0, 15.0, -5.0, -15.0]
 
 
 def _name(text: str) -> str:
-    """``text`` as a string object of its own (as each cell of a file is), never the interned literal."""
+    """``text`` (two characters or more: CPython keeps one object per single character) as a string object of its
+    own, as each cell of a file is, never the interned literal."""
+    assert len(text) > 1
     return "".join(list(text))
 
 
@@ -192,7 +194,8 @@ def test_a_scale_moves_the_offset_of_a_tied_plane_touched_alone_and_no_offset_of
     start = _unknowns(alone, step)[1]
     np.testing.assert_allclose(alone.scaled_lengths(start), start + [0.0, 0.0, -200.0], atol=1e-12)
     both = _planes(["step"] * 4 + ["step2"] * 4 + ["side2"] * 4, cell)
-    positions = np.vstack([step, _on_plane([0, 0, 1], 300.0, 4, [700, 0, 0]), _on_plane([1, 0, 0], 750.0, 4, [0, 0, 300])])
+    positions = np.vstack([step, _on_plane([0, 0, 1], 300.0, 4, [700, 0, 0]),
+                           _on_plane([1, 0, 0], 750.0, 4, [0, 0, 300])])
     start = _unknowns(both, positions)[1]
     np.testing.assert_allclose(both.scaled_lengths(start), start + [0.0, 0.0, 0.0, 0.0, 0.0, 50.0], atol=1e-12)
 
@@ -219,7 +222,8 @@ def test_a_spacing_in_metres_is_refused_naming_the_tied_planes_first_touch_and_a
 def test_flush_residuals_on_a_tilted_plane_by_hand():
     """A plane tilted 5 degrees about y and a flush touch whose tool z axis is exactly against its normal: the two
     tilt residuals are zero; the tool turned 1 degree further about y: the rim of a 50 mm face rises by
-    50 (sin 5 - sin 6 degrees) along the first tangent (x) and not along the second (y). The same on the second of two planes (its own unknowns' columns)."""
+    50 (sin 5 - sin 6 degrees) along the first tangent (x) and not along the second (y). The plane is the second of
+    two: the flush residuals fill its own unknowns' columns."""
     tilt = np.radians(5.0)
     normal = np.array([-np.sin(tilt), 0.0, -np.cos(tilt)])          # the plane z = 400 tilted, towards the origin
     tips = _on_plane(-normal, 400.0, 4, [800, 0, 0])

@@ -27,7 +27,7 @@ rendered images is tests/test_detect.py's, under 0.1 px RMS), at random poses wi
   frame through the nominal robot and the best method's hand-eye.
 
     .venv/bin/python benchmarks/bench_camera.py [--robots 3] [--parametrization dh|complete]
-        [--setups eye-to-hand eye-in-hand] [--images 30 60 120] [--planned]     (about a minute per robot)
+        [--setups eye-to-hand eye-in-hand] [--images 30 60 120] [--planned] [--redraws 12]   (a minute per robot)
 """
 
 from __future__ import annotations
@@ -231,18 +231,23 @@ def planned_rows(study, cell: dict, images: int, seed: int) -> MeasurementRows:
     plan = plan_measurements(study.robot.nominal, images, planning, "camera", random_state=seed, floor=None)
     image = list(plan.rows.texts["image"])
     q = plan.rows.q_deg[[image.index(name) for name in dict.fromkeys(image)]]
+    return pixel_rows(study, q, np.random.default_rng(seed + 300))
+
+
+def pixel_rows(study, q, rng) -> MeasurementRows:
+    """Pixel rows of the true robot at poses ``q``: the board's corners in view, plus 0.2 px of normal noise."""
+    cameras, boards = true_cell(study.cell.sections)
     seen, uv = seen_points(cameras["cam1"], boards["b1"], *study.robot.true_flange(q), board_points(boards["b1"]))
-    rng = np.random.default_rng(seed + 300)
     k, point = np.nonzero(seen)
     pixels = uv[k, point] + rng.normal(0.0, 0.2, (k.size, 2))
     n = k.size
     return MeasurementRows(q[k], ("camera",) * n, tuple(str(i + 1) for i in range(n)), tuple(range(1, n + 1)),
-                           "planned", {"point": point.astype(float), "u_px": pixels[:, 0], "v_px": pixels[:, 1]},
+                           "pixels", {"point": point.astype(float), "u_px": pixels[:, 0], "v_px": pixels[:, 1]},
                            {"image": tuple(f"image{i + 1}" for i in k), "camera": ("cam1",) * n,
                             "board": ("b1",) * n})
 
 
-def one(name: str, images: int, seed: int, folder: Path, planned: bool = False) -> dict:
+def one(name: str, images: int, seed: int, folder: Path, planned: bool = False, redraws: int = 0) -> dict:
     setup = SETUPS[name]
     mount = setup["mount"]
     text = VIRTUAL.format(seed=seed, mount=mount, camera=setup["camera"], k=setup["k"], square=setup["square"],
@@ -287,7 +292,7 @@ def one(name: str, images: int, seed: int, folder: Path, planned: bool = False) 
            "random": board_centre_miss(setup, study, q_random, fitted_robot.flange(q_random), on_flange, in_cell)}
     q_images = np.unique(rows.q_deg, axis=0)
     tracker_nominal, tracker_table = tracker_fit(setup, study, q_images, seed)
-    local = np.linalg.inv(true_on_flange) @ np.r_[flange_point(setup), 1.0]   # the point in the pose on the flange's frame
+    local = np.linalg.inv(true_on_flange) @ np.r_[flange_point(setup), 1.0]   # in the frame of the pose on the flange
     pose_keys = [table.names.index(f"{'board b1@flange' if mount == 'cell' else 'camera cam1@flange'}.{c}")
                  for c in ("x", "y", "z", "rx", "ry", "rz")]
     size = geometric_size(nominal, PARAMETRIZATION)
@@ -303,6 +308,15 @@ def one(name: str, images: int, seed: int, folder: Path, planned: bool = False) 
     out["rigid_random"] = point_scores(setup, study, q_random, camera_points, tracker_points)
     out["expected_view"] = (expected_rigid_rms(lambda v: camera_points(q, v), table),
                             expected_rigid_rms(lambda v: tracker_points(q, v), tracker_table))
+    positions, rotations = study.robot.true_flange(q)
+    truth = positions + rotations @ flange_point(setup)
+    again = []
+    for k in range(redraws):           # the same poses, the noise drawn again: the spread the expected figure claims
+        redrawn = identify_measurements(nominal, pixel_rows(study, q_images, np.random.default_rng(seed + 1000 + k)),
+                                        cell, parametrization=PARAMETRIZATION)[0]
+        again.append((rigid_rms(camera_points(q, redrawn.value), truth),
+                      expected_rigid_rms(lambda v: camera_points(q, v), redrawn)))
+    out["redraws"] = np.array(again).reshape(-1, 2)
     methods = opencv(setup, rows, nominal.flange(rows.q_deg))
     scores = {m: hand_eye_error(nominal.flange(q), x, y) for m, (x, y) in methods.items()}
     best = min(scores, key=lambda m: scores[m][0])
@@ -312,7 +326,7 @@ def one(name: str, images: int, seed: int, folder: Path, planned: bool = False) 
     return out
 
 
-def run(robots: int, setups=tuple(SETUPS), counts=(30, 60, 120), planned: bool = False) -> None:
+def run(robots: int, setups=tuple(SETUPS), counts=(30, 60, 120), planned: bool = False, redraws: int = 0) -> None:
     logging.getLogger("partcal").setLevel(logging.ERROR)
     table, beside = [], []
     for name in setups:
@@ -320,13 +334,18 @@ def run(robots: int, setups=tuple(SETUPS), counts=(30, 60, 120), planned: bool =
             results = []
             for seed in range(robots):
                 with tempfile.TemporaryDirectory() as tmp:
-                    results.append(one(name, images, seed, Path(tmp), planned))
+                    results.append(one(name, images, seed, Path(tmp), planned, redraws))
                 r = results[-1]
                 print(f"  {name} {images} images, robot {seed}: hand-eye {r['he'][0]:.3f} mm {r['he'][1]:.4f} deg, "
                       f"no fit in view {r['view']:.3f} mm, rigid camera/tracker "
                       f"{r['rigid_view'][0] / r['rigid_view'][1]:.2f} (expected "
                       f"{r['expected_view'][0] / r['expected_view'][1]:.2f}), OpenCV best {r['cv_best'][1][0]:.3f} mm, "
                       f"{r['seconds']:.1f} s", file=sys.stderr, flush=True)
+                if redraws:
+                    d = r["redraws"]
+                    print(f"    {redraws} draws of the noise at the same poses: the camera's point after a rigid fit "
+                          f"{np.sqrt(np.mean(d[:, 0] ** 2)):.4f} mm RMS ({d[:, 0].min():.4f} to {d[:, 0].max():.4f}), "
+                          f"expected {np.mean(d[:, 1]):.4f} mm", file=sys.stderr, flush=True)
             med = lambda f: float(np.median([f(r) for r in results]))  # noqa: E731
             best = max(set(r["cv_best"][0] for r in results), key=[r["cv_best"][0] for r in results].count)
             table.append([name, images, f"{med(lambda r: r['he'][0]):.3f}", f"{med(lambda r: r['he'][1]):.4f}",
@@ -368,8 +387,10 @@ if __name__ == "__main__":
     parser.add_argument("--parametrization", choices=("dh", "complete"), default="complete")
     parser.add_argument("--setups", nargs="+", choices=tuple(SETUPS), default=tuple(SETUPS), help="default: both")
     parser.add_argument("--images", nargs="+", type=int, default=(30, 60, 120), help="default: 30 60 120")
+    parser.add_argument("--redraws", type=int, default=0, help="per robot, identify again from the same poses with "
+                        "the noise drawn anew this many times: the RMS the expected figure predicts (standard error)")
     parser.add_argument("--planned", action="store_true",
                         help="images at the poses partcal plan chooses (D-optimal), not at random poses in view")
     args = parser.parse_args()
     PARAMETRIZATION = args.parametrization
-    run(args.robots, args.setups, args.images, args.planned)
+    run(args.robots, args.setups, args.images, args.planned, args.redraws)

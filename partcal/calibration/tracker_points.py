@@ -83,8 +83,9 @@ class TrackerPoints(MeasurementType):
         std = np.column_stack([rows.number(c, index) for c in STD_COLUMNS])
         bad = np.flatnonzero(~np.all(std > 0, axis=1))
         if bad.size:
-            column = STD_COLUMNS[int(np.flatnonzero(~(std[bad[0]] > 0))[0])]
-            raise DataError(f"{rows.where(index[bad[0]])}: column {column!r}: {std[bad[0]].min():g} is not a standard "
+            row = bad[0]
+            j = int(np.flatnonzero(~(std[row] > 0))[0])
+            raise DataError(f"{rows.where(index[row])}: column {STD_COLUMNS[j]!r}: {std[row, j]:g} is not a standard "
                             "deviation; expected a number > 0 (mm)")
         return std
 

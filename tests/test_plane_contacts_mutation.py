@@ -244,3 +244,16 @@ def test_flush_residuals_on_a_tilted_plane_by_hand():
     rotations[4] = Rotation.from_rotvec([0.0, np.pi + tilt + np.radians(1.0), 0.0]).as_matrix()  # z: 6 degrees
     res = planes.residuals(positions, rotations, start)
     np.testing.assert_allclose(res.values[8:], [50.0 * (np.sin(tilt) - np.sin(np.radians(6.0))), 0.0], atol=1e-9)
+
+
+def test_a_group_is_fitted_from_its_plane_with_most_touches_whatever_the_names_sort_as_and_are_read():
+    """'top' touched three times along a line (it fixes no plane by itself) and the tied 'step' (sorting before
+    it, its tie named by a string of its own) five times over an area: the group's normal comes from step's
+    touches, +z as the spacing says, and top's offset is 400."""
+    cell = {"planes": {"top": {}, "step": {"parallel_to": _name("top"), "spacing_mm": -200.0}}}
+    line = np.column_stack([np.linspace(600.0, 900.0, 3), np.zeros(3), np.full(3, 400.0)])
+    positions = np.vstack([line, _on_plane([0, 0, 1], 200.0, 5, [700, 0, 0])])
+    names, start = _unknowns(_planes([_name("top") for _ in range(3)] + ["step"] * 5, cell), positions,
+                             [0.0, 10.0, 20.0, 0.0, 10.0, 20.0, -10.0, 5.0])
+    assert names[0] == ("plane top.x/+z", "1")
+    np.testing.assert_allclose(start, [0.0, 0.0, 400.0], atol=1e-9)

@@ -134,3 +134,31 @@ def test_the_largest_turn_is_read_against_the_first_rotation_and_its_rounding_is
     assert largest_turn_deg(np.array([np.eye(3), np.eye(3) * (1 + 1e-15)])) == 0.0
     assert largest_turn_deg(np.array([about_z(0)])) == 0.0
     assert largest_turn_deg(np.array([np.eye(3), about_z(180) * (1 + 1e-15)])) == pytest.approx(180.0)
+
+
+@pytest.mark.parametrize("count", [2, 4])
+def test_a_field_or_number_column_of_another_length_than_the_rows_is_refused(count):
+    """Three rows of joints, a text column or a number column of two or four entries: refused with both counts."""
+    with pytest.raises(DataError, match=rf"^Expected feature with 3 entries \(one per row of q_deg\), got {count}$"):
+        _rows(np.zeros((3, 6)), texts={"feature": ("a",) * count})
+    with pytest.raises(DataError, match=rf"^Expected numbers\['h'\] with shape \(3,\), got \({count},\)$"):
+        _rows(np.zeros((3, 6)), numbers={"h": np.zeros(count)})
+
+
+def test_rows_residuals_and_columns_are_frozen_and_rows_compare_by_identity():
+    """Rows, residuals and column declarations cannot be changed once made; rows (holding arrays) compare and hash
+    by identity, a column declaration by its fields."""
+    import dataclasses
+    rows = _rows(np.zeros((2, 6)))
+    residuals = Residuals(np.zeros(2), np.arange(2), np.zeros((2, 3)), np.zeros((2, 0)))
+    for value, field in ((rows, "types"), (residuals, "values"), (Column(), "unit")):
+        with pytest.raises(dataclasses.FrozenInstanceError):
+            setattr(value, field, None)
+    assert rows != rows.take([0, 1]) and len({rows, rows.take([0, 1])}) == 2 and {residuals: 1}[residuals] == 1
+    assert Column("mm") == Column("mm") and len({Column("mm"), Column("mm")}) == 1
+
+
+def test_a_type_with_no_unknowns_starts_none():
+    plain = Bare.build(_rows(np.zeros((2, 6)), ["bare"] * 2, numbers={"h": np.ones(2)}), {})
+    names, start = plain.unknowns(np.zeros((2, 3)), np.tile(np.eye(3), (2, 1, 1)))
+    assert names == [] and start.shape == (0,)

@@ -73,14 +73,39 @@ def test_a_plane_with_too_few_touches_is_refused_whatever_its_name_sorts_as():
         _planes(["aa", "aa", "bb", "bb", "bb", "bb"])
 
 
-def test_the_one_orientation_check_reads_each_planes_own_touches():
-    """'aa' touched four times from one orientation, 'bb' from four: 'aa' is refused naming its first line, the
-    names read as separate strings (as a file's cells are) and whatever they sort as."""
-    features = [_name("aa")] * 4 + [_name("bb") for _ in range(4)]
-    features[1:4] = [_name("aa") for _ in range(3)]
+@pytest.mark.parametrize("still, turned", [("aa", "bb"), ("bb", "aa")])
+def test_the_one_orientation_check_reads_each_planes_own_touches(still, turned):
+    """One plane touched four times from one orientation, the other from four: the first is refused naming its
+    first line, the names read as separate strings (as a file's cells are) and whichever sorts first."""
+    features = [_name(still) for _ in range(4)] + [_name(turned) for _ in range(4)]
     positions = np.vstack([_on_plane([0, 0, 1], 400.0, 4, [800, 0, 0]), _on_plane([1, 0, 0], 700.0, 4, [0, 0, 300])])
-    with pytest.raises(DataError, match=r"^test.csv:2: column 'feature': plane 'aa' is touched from one orientation"):
+    with pytest.raises(DataError, match=rf"^test.csv:2: column 'feature': plane '{still}' is touched from one "):
         _unknowns(_planes(features), positions, [0.0] * 4 + [0.0, 10.0, 20.0, -10.0])
+
+
+def test_touches_turned_a_degree_and_a_half_are_taken():
+    positions = _on_plane([0, 0, 1], 400.0, 4, [800, 0, 0])
+    assert _unknowns(_planes(["top"] * 4), positions, [0.0, 1.5, 0.0, 1.5])[0][2] == ("plane top.offset", "mm")
+
+
+def test_a_tilted_planes_start_slopes_give_back_its_normal():
+    """The plane z = 400 tilted 5 degrees about x (unknown): its start's slopes a, b rebuild the normal the touches
+    put it at, pole + a t1 + b t2 normalised (pole -z, towards the base origin; t1 x, t2 y)."""
+    tilt = np.radians(5.0)
+    normal = np.array([0.0, -np.sin(tilt), -np.cos(tilt)])
+    names, start = _unknowns(_planes(["top"] * 6), _on_plane(-normal, 400.0, 6, [800, 0, 0]))
+    rebuilt = np.array([0.0, 0.0, -1.0]) + start[0] * np.array([1.0, 0, 0]) + start[1] * np.array([0, 1.0, 0])
+    np.testing.assert_allclose(rebuilt / np.linalg.norm(rebuilt), normal, atol=1e-12)
+    assert start[2] == pytest.approx(-400.0)
+
+
+def test_a_given_normal_already_along_the_touches_is_not_turned_over():
+    """The floor z = -300 (its normal towards the base origin is +z) given 5 degrees from +z: taken as it is."""
+    floor = _on_plane([0, 0, 1], -300.0, 4, [700, 0, 0])
+    given = [np.sin(np.radians(5.0)), 0.0, np.cos(np.radians(5.0))]
+    cell = {"planes": {"floor": {"normal": given, "offset_mm": -300.0}}}
+    names, start = _unknowns(_planes(["floor"] * 4, cell), floor)
+    assert names[0] == ("plane floor.x/+z", "1") and start[2] == pytest.approx(-300.0)
 
 
 TIED = {"planes": {"top": {}, "step": {"parallel_to": "top", "spacing_mm": -200.0}}}
@@ -114,11 +139,11 @@ def test_a_touch_far_from_its_plane_is_refused_saying_how_far():
 
 def _given_plane_rows(tilt_deg):
     """Planes 'wall' (x = 900) and 'side' (y = 500) touched first, then 'top' (z = 400); the cell gives top's
-    normal tilted ``tilt_deg`` about y from the touches' one."""
+    normal tilted ``tilt_deg`` about y from the touches' one (given two units long: any length is a direction)."""
     normal = [np.sin(np.radians(tilt_deg)), 0.0, np.cos(np.radians(tilt_deg))]
     positions = np.vstack([_on_plane([1, 0, 0], 900.0, 4, [0, 0, 300]), _on_plane([0, 1, 0], 500.0, 4, [600, 0, 300]),
                            _on_plane([0, 0, 1], 400.0, 4, [800, 0, 0])])
-    cell = {"planes": {"wall": {}, "side": {}, "top": {"normal": normal, "offset_mm": 400.0}}}
+    cell = {"planes": {"wall": {}, "side": {}, "top": {"normal": [2.0 * v for v in normal], "offset_mm": 400.0}}}
     return _planes(["wall"] * 4 + ["side"] * 4 + ["top"] * 4, cell), positions, normal
 
 
@@ -142,17 +167,19 @@ def test_a_group_two_spacings_orient_is_refused_when_the_given_normal_points_the
     themselves; a given normal -z is 180 degrees from it."""
     positions = np.vstack([_on_plane([0, 0, 1], 400.0, 4, [800, 0, 0]), _on_plane([0, 0, 1], 200.0, 4, [700, 0, 0])])
     cell = {"planes": {"top": {"normal": [0.0, 0.0, -1.0], "offset_mm": -400.0},
-                       "step": {"parallel_to": "top", "spacing_mm": -200.0}}}
+                       "step": {"parallel_to": _name("top"), "spacing_mm": -200.0}}}
     with pytest.raises(DataError, match=r"^test.csv:2: .* put its normal 180.0 degrees from the cell's planes.top"):
         _unknowns(_planes(["top"] * 4 + ["step"] * 4, cell), positions, [0.0, 10.0, 20.0, -10.0] * 2)
 
 
 def test_touches_on_one_line_fix_no_unknown_plane_and_a_given_one_starts_where_the_cell_puts_it():
-    """Four touches along a line of z = 400: refused for an unknown plane; with the plane given (normal +z, offset
+    """Four touches along a line of z = 400 (after four of another plane): refused for an unknown plane, naming its
+    first touch; with the plane given (normal +z, offset
     410, 10 mm off) the start is the cell's, and each touch's residual is z - 410 (by hand)."""
     line = np.column_stack([np.linspace(600.0, 900.0, 4), np.zeros(4), np.full(4, 400.0)])
-    with pytest.raises(DataError, match=r"^test.csv:2: column 'feature': the touches of plane 'top' lie on one line"):
-        _unknowns(_planes(["top"] * 4), line)
+    side = _on_plane([1, 0, 0], 700.0, 4, [0, 0, 300])              # 'side' sorts before 'top' and comes first
+    with pytest.raises(DataError, match=r"^test.csv:6: column 'feature': the touches of plane 'top' lie on one line"):
+        _unknowns(_planes(["side"] * 4 + ["top"] * 4), np.vstack([side, line]))
     planes = _planes(["top"] * 4, {"planes": {"top": {"normal": [0.0, 0.0, 1.0], "offset_mm": 410.0}}})
     names, start = _unknowns(planes, line)
     np.testing.assert_allclose(start, [0.0, 0.0, 410.0], atol=1e-12)
@@ -253,7 +280,19 @@ def test_a_group_is_fitted_from_its_plane_with_most_touches_whatever_the_names_s
     cell = {"planes": {"top": {}, "step": {"parallel_to": _name("top"), "spacing_mm": -200.0}}}
     line = np.column_stack([np.linspace(600.0, 900.0, 3), np.zeros(3), np.full(3, 400.0)])
     positions = np.vstack([line, _on_plane([0, 0, 1], 200.0, 5, [700, 0, 0])])
-    names, start = _unknowns(_planes([_name("top") for _ in range(3)] + ["step"] * 5, cell), positions,
-                             [0.0, 10.0, 20.0, 0.0, 10.0, 20.0, -10.0, 5.0])
+    features = [_name("top") for _ in range(3)] + [_name("step") for _ in range(5)]
+    names, start = _unknowns(_planes(features, cell), positions, [0.0, 10.0, 20.0, 0.0, 10.0, 20.0, -10.0, 5.0])
     assert names[0] == ("plane top.x/+z", "1")
     np.testing.assert_allclose(start, [0.0, 0.0, 400.0], atol=1e-9)
+
+
+@pytest.mark.parametrize("flush, taken", [("0", True), ("1", True), ("", True), ("2", False), ("-1", False)])
+def test_a_touchs_flush_mark_is_0_1_or_empty(tmp_path, flush, taken):
+    from partcal.data.measurement_rows import read_measurement_rows
+    path = tmp_path / "m.csv"
+    path.write_text(f"q1,q2,q3,q4,q5,q6,measurement,feature,flush\n0,0,0,0,0,0,plane,top,{flush}\n")
+    if taken:
+        assert np.nan_to_num(read_measurement_rows(path).numbers["flush"][0]) == float(flush or 0)
+        return
+    with pytest.raises(DataError, match=rf"m.csv:2: column 'flush': expected 0 or 1 .*, got '{flush}'"):
+        read_measurement_rows(path)

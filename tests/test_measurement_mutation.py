@@ -55,6 +55,8 @@ def test_a_missing_column_or_value_is_named_with_the_first_row_that_lacks_it():
         rows.text("gauge", np.array([1]))
     with pytest.raises(DataError, match=r"^m.csv:3: column 'h': a gauge row needs a number here, got none"):
         rows.number("h", np.array([0, 1, 2]))
+    with pytest.raises(DataError, match=r"^m.csv:4: column 'h': a gauge row needs a number here, got none"):
+        rows.number("h", np.array([0, 2]))
     with pytest.raises(DataError, match=r"^m.csv:3: column 'name': a gauge row needs a name here, got none"):
         rows.text("name", np.array([0, 1, 2]))
 
@@ -100,7 +102,7 @@ def test_what_a_type_that_declares_nothing_else_gets_from_the_road():
     assert not plain.follows_tool("tool.x") and plain.stands_for(["base.x", "tool.x"]) == set()
     assert plain.unknowns(np.zeros((3, 3)), np.tile(np.eye(3), (3, 1, 1)))[0] == []
     assert list(plain.moved(np.array([1.0, 2.0]), np.ones(3), np.ones(3))) == [0.0, 0.0]
-    assert plain.describe() == "2 bare rows" and plain.notes() == [] and plain.files({}, [], []) == {}
+    assert plain.describe() == "2 bare rows" and plain.notes() == [] and Bare.files({}, [], []) == {}
     np.testing.assert_array_equal(plain.relative_weights(plain.residuals(np.zeros((3, 3)), None, np.zeros(0))), [1, 1])
 
 
@@ -162,3 +164,11 @@ def test_a_type_with_no_unknowns_starts_none():
     plain = Bare.build(_rows(np.zeros((2, 6)), ["bare"] * 2, numbers={"h": np.ones(2)}), {})
     names, start = plain.unknowns(np.zeros((2, 3)), np.tile(np.eye(3), (2, 1, 1)))
     assert names == [] and start.shape == (0,)
+
+
+def test_a_type_built_on_another_keeps_its_columns():
+    """A subclass that declares neither columns nor reads reads its parent's columns, units and checks kept."""
+    class Deeper(Bare):
+        name = "deeper"
+    assert Deeper.columns is Bare.columns and Deeper.columns["h"] == Column("mm", required=True)
+    assert Deeper.reads == ("h",)

@@ -67,10 +67,12 @@ def test_an_unknown_planes_normal_points_towards_the_base_origin_and_names_its_p
     np.testing.assert_allclose(start, [0.0, 0.0, -400.0, 0.0, 0.0, -300.0], atol=1e-9)
 
 
-def test_a_plane_with_too_few_touches_is_refused_whatever_its_name_sorts_as():
-    """Plane 'aa' touched twice (lines 2 and 3), 'bb' four times: 'aa' is refused, not given 'bb''s touches."""
-    with pytest.raises(DataError, match=r"^test.csv:2: column 'feature': plane 'aa' has 2 touches; its 3 unknowns"):
-        _planes(["aa", "aa", "bb", "bb", "bb", "bb"])
+@pytest.mark.parametrize("few, many", [("aa", "bb"), ("bb", "aa")])
+def test_a_plane_with_too_few_touches_is_refused_whatever_its_name_sorts_as(few, many):
+    """One plane touched twice (lines 2 and 3), the other four times: the first is refused, not given the other's
+    touches, whichever name sorts first."""
+    with pytest.raises(DataError, match=rf"^test.csv:2: column 'feature': plane '{few}' has 2 touches; its 3 "):
+        _planes([few, few, many, many, many, many])
 
 
 @pytest.mark.parametrize("still, turned", [("aa", "bb"), ("bb", "aa")])
@@ -173,13 +175,15 @@ def test_a_group_two_spacings_orient_is_refused_when_the_given_normal_points_the
 
 
 def test_touches_on_one_line_fix_no_unknown_plane_and_a_given_one_starts_where_the_cell_puts_it():
-    """Four touches along a line of z = 400 (after four of another plane): refused for an unknown plane, naming its
-    first touch; with the plane given (normal +z, offset
-    410, 10 mm off) the start is the cell's, and each touch's residual is z - 410 (by hand)."""
+    """Four touches along a line of z = 400, or a micrometre off it (after those of two other planes): refused for an
+    unknown plane, naming its first touch; with the plane given (normal +z, offset 410, 10 mm off) the start is the
+    cell's, and each touch's residual is z - 410 (by hand)."""
     line = np.column_stack([np.linspace(600.0, 900.0, 4), np.zeros(4), np.full(4, 400.0)])
-    side = _on_plane([1, 0, 0], 700.0, 4, [0, 0, 300])              # 'side' sorts before 'top' and comes first
-    with pytest.raises(DataError, match=r"^test.csv:6: column 'feature': the touches of plane 'top' lie on one line"):
-        _unknowns(_planes(["side"] * 4 + ["top"] * 4), np.vstack([side, line]))
+    side, wall = _on_plane([1, 0, 0], 700.0, 4, [0, 0, 300]), _on_plane([0, 1, 0], 500.0, 4, [600, 0, 300])
+    nearly = line + [[0.0, 1e-6, 0.0], [0.0, -1e-6, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 1e-6]]   # a micrometre off
+    for touches in (line, nearly):        # 'side' and 'wall' (sorting before and after 'top') touched first
+        with pytest.raises(DataError, match=r"^test.csv:10: column 'feature': the touches of plane 'top' lie on one "):
+            _unknowns(_planes(["side"] * 4 + ["wall"] * 4 + ["top"] * 4), np.vstack([side, wall, touches]))
     planes = _planes(["top"] * 4, {"planes": {"top": {"normal": [0.0, 0.0, 1.0], "offset_mm": 410.0}}})
     names, start = _unknowns(planes, line)
     np.testing.assert_allclose(start, [0.0, 0.0, 410.0], atol=1e-12)
@@ -296,3 +300,40 @@ def test_a_touchs_flush_mark_is_0_1_or_empty(tmp_path, flush, taken):
         return
     with pytest.raises(DataError, match=rf"m.csv:2: column 'flush': expected 0 or 1 .*, got '{flush}'"):
         read_measurement_rows(path)
+
+
+def test_a_given_root_is_oriented_by_its_own_groups_spacings_alone():
+    """'aa' given (normal +z, z = 400) touched alone; another group, 'zz' (x = 700) and its tied 'zz2' (50 mm on),
+    sorts after it: aa's normal still turns to the given +z (zz's two spacings orient zz alone)."""
+    cell = {"planes": {"aa": {"normal": [0.0, 0.0, 1.0], "offset_mm": 400.0}, "zz": {},
+                       "zz2": {"parallel_to": "zz", "spacing_mm": 50.0}}}
+    positions = np.vstack([_on_plane([0, 0, 1], 400.0, 4, [800, 0, 0]), _on_plane([1, 0, 0], 700.0, 4, [0, 0, 300]),
+                           _on_plane([1, 0, 0], 750.0, 4, [0, 0, 300])])
+    names, start = _unknowns(_planes(["aa"] * 4 + ["zz"] * 4 + ["zz2"] * 4, cell), positions)
+    assert names[0] == ("plane aa.x/+z", "1") and start[2] == pytest.approx(400.0)
+
+
+def test_three_spacings_touched_orient_their_group_against_a_given_normal():
+    """'top' (z = 400), 'step' (-200: z = 200) and 'step2' (-100: z = 300) touched orient the normal +z by
+    themselves; a given normal -z is 180 degrees from it."""
+    cell = {"planes": {"top": {"normal": [0.0, 0.0, -1.0], "offset_mm": -400.0},
+                       "step": {"parallel_to": "top", "spacing_mm": -200.0},
+                       "step2": {"parallel_to": "top", "spacing_mm": -100.0}}}
+    positions = np.vstack([_on_plane([0, 0, 1], z, 4, [800, 0, 0]) for z in (400.0, 200.0, 300.0)])
+    with pytest.raises(DataError, match=r"^test.csv:2: .* put its normal 180.0 degrees from the cell's planes.top"):
+        _unknowns(_planes(["top"] * 4 + ["step"] * 4 + ["step2"] * 4, cell), positions)
+
+
+def test_each_planes_unknowns_move_with_the_cell_as_refitting_the_moved_touches_does():
+    """Two planes (one tilted): the cell turned by a small w about the base origin and shifted by t moves each
+    touch p to p + w x p + t; the planes fitted again on the moved touches start where ``moved`` says, to first
+    order."""
+    tilt = np.radians(5.0)
+    positions = np.vstack([_on_plane([np.sin(tilt), 0.0, np.cos(tilt)], 400.0, 6, [800, 0, 0]),
+                           _on_plane([1, 0.1, 0], 700.0, 6, [0, 0, 300])])
+    planes = _planes(["top"] * 6 + ["side"] * 6)
+    start = _unknowns(planes, positions)[1]
+    omega, shift, eps = np.array([0.3, -0.2, 0.5]), np.array([2.0, -1.0, 3.0]), 1e-6
+    moved = positions + eps * (np.cross(omega, positions) + shift)
+    again = _unknowns(_planes(["top"] * 6 + ["side"] * 6), moved)[1]
+    np.testing.assert_allclose(planes.moved(start, omega, shift), (again - start) / eps, rtol=1e-4, atol=1e-6)

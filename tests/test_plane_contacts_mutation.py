@@ -337,3 +337,32 @@ def test_each_planes_unknowns_move_with_the_cell_as_refitting_the_moved_touches_
     moved = positions + eps * (np.cross(omega, positions) + shift)
     again = _unknowns(_planes(["top"] * 6 + ["side"] * 6), moved)[1]
     np.testing.assert_allclose(planes.moved(start, omega, shift), (again - start) / eps, rtol=1e-4, atol=1e-6)
+
+
+@pytest.mark.parametrize("entry, message", [
+    ("{normal: [0, 0, 1, 0], offset_mm: 400}", r"planes.top.normal \(line 3\): must be a list of three finite numbers; got a list \["),
+    ("{normal: [true, 0, 1], offset_mm: 400}", r"planes.top.normal \(line 3\): must be a list of three finite numbers; got a list \["),
+    ("{normal: [0, 0, up], offset_mm: 400}", r"planes.top.normal \(line 3\): must be a list of three finite numbers; got a list \["),
+    ("{normal: [0, 0, .nan], offset_mm: 400}", r"planes.top.normal \(line 3\): must be a list of three finite numbers; got a list \["),
+    ("{colour: red}", r"planes.top.colour \(line 3\): unknown key \(known: normal, offset_mm, parallel_to, spacing_mm\)"),
+    ("{normal: [0, 0, 1], offset_mm: 400, colour: red}",
+     r"planes.top.colour \(line 3\): unknown key beside 'normal' \(that form has normal, offset_mm; one form per "
+     r"feature\)$")])
+def test_a_cells_vectors_and_keys_are_checked_naming_path_and_line(tmp_path, entry, message):
+    """Four numbers, a boolean, a word or NaN in a normal; a key of no form (the keys of every form listed); a key
+    beside a form's (that form's keys named, no list of every key)."""
+    path = tmp_path / "cell.yaml"
+    path.write_text(f"planes:\n  side: {{}}\n  top: {entry}\n")
+    with pytest.raises(ConfigError, match=message):
+        read_cell(path)
+
+
+@pytest.mark.parametrize("noise, taken", [("0.05", True), ("0", False), ("-0.05", False)])
+def test_a_stated_noise_is_a_number_above_zero(tmp_path, noise, taken):
+    path = tmp_path / "cell.yaml"
+    path.write_text(f"noise: {{plane: {noise}}}\n")
+    if taken:
+        assert read_cell(path)["noise"]["plane"] == 0.05
+        return
+    with pytest.raises(ConfigError, match=rf"noise.plane \(line 1\): must be a finite number > 0; got {float(noise)}"):
+        read_cell(path)

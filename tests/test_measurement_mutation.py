@@ -172,3 +172,19 @@ def test_a_type_built_on_another_keeps_its_columns():
         name = "deeper"
     assert Deeper.columns is Bare.columns and Deeper.columns["h"] == Column("mm", required=True)
     assert Deeper.reads == ("h",)
+
+
+@pytest.mark.parametrize("name, taken", [("", True), ("".join(["po", "se"]), True), ("point", True), ("zzz", False)])
+def test_a_type_is_added_only_under_a_name_of_its_own(name, taken):
+    """An empty name, the rows' end type 'pose' (a string of its own) and a built-in type's name are refused; a new
+    name (sorting after 'pose') is added, then taken away again."""
+    from partcal.calibration.registry import MEASUREMENT_TYPES, add_measurement_type
+    kind = type("Added", (Bare,), {"name": name})
+    if taken:
+        with pytest.raises(ValueError, match="a measurement type needs a name of its own"):
+            add_measurement_type(kind)
+        return
+    try:
+        assert add_measurement_type(kind) is kind and MEASUREMENT_TYPES["zzz"] is kind
+    finally:
+        MEASUREMENT_TYPES.pop("zzz", None)

@@ -188,3 +188,33 @@ def test_a_type_is_added_only_under_a_name_of_its_own(name, taken):
         assert add_measurement_type(kind) is kind and MEASUREMENT_TYPES["zzz"] is kind
     finally:
         MEASUREMENT_TYPES.pop("zzz", None)
+
+
+def test_the_rows_folds_draw_from_measure_and_keep_the_ends_their_distances_name():
+    """Of rows pose, a type named after 'pose' ('zzz'), a distance to the pose and a point, the three that measure
+    are drawn into folds; a subset of the distance alone brings its end along as a pose row; no residual scores
+    nothing."""
+    from partcal.calibration.cv import cv_score, measuring, subset
+    rows = _rows(np.zeros((4, 6)), ["pose", "zzz", "distance", "point"], texts={"to": ("", "", "1", "")})
+    assert measuring(rows).tolist() == [1, 2, 3]
+    part = subset(rows, np.array([2]))
+    assert part.ids == ("1", "3") and part.types == ("pose", "distance")
+    assert subset(rows, np.array([3])).ids == ("4",)
+    assert all(np.isnan(cv_score({}, {}, {})))
+
+
+def test_rows_that_measure_no_length_leave_the_scale_free():
+    """Touches of two unknown planes: the scale is free (the first note says so, before the plane type's own); a
+    tracker's points in the base frame fix it."""
+    from test_measurement_types import ROBOT, _rows as rows_of, _touches, _true_robot
+
+    from partcal.calibration.cv import scale_free
+    from partcal.calibration.stacked import observability
+    rng = np.random.default_rng(11)
+    q, names = _touches(_true_robot(rng), rng, {"top": ([0, 0, 1], 300.0), "side": ([1, 0, 0], 700.0)}, 20, 0.01)
+    rows = rows_of(q, ["plane"] * len(q), texts={"feature": tuple(names)})
+    notes = observability(ROBOT, rows, {})[0]
+    assert len(notes) > 1 and scale_free(ROBOT, rows, {})
+    tips = ROBOT.positions(q)
+    points = rows_of(q, ["point"] * len(q), {"x_meas": tips[:, 0], "y_meas": tips[:, 1], "z_meas": tips[:, 2]})
+    assert not scale_free(ROBOT, points, {})

@@ -170,3 +170,69 @@ def test_the_consistent_jacobian_reads_a_direction_below_rcond_times_the_largest
     assert out is jac
     # rcond 1.5 s3 / s1: the third singular value is below rcond times the largest (1.5 s3), above rcond over it
     assert consistent_jacobian(jac, (jac @ weak)[:, None], weak[:, None], 1.5 * singular[2] / singular[0]) is jac
+
+
+def _problem(rows, cell):
+    from partcal import load_robot
+    from partcal.calibration.registry import built_types
+    from partcal.calibration.stacked import StackedProblem
+    robot = load_robot("universal_robots_ur10")
+    return StackedProblem(robot, None, rows, built_types(rows, cell), np.zeros(len(rows)), "dh")
+
+
+def test_a_uniform_scale_leaves_touches_of_unknown_planes_where_they_are():
+    """Touches of two unknown planes (one tilted) by the nominal UR10: consistent data, so the cell scaled by one
+    moves no residual (J s = 0, to rounding, with s not zero); the scale moves the robot's lengths and each plane's
+    offset by its own value, never a plane's slopes (which are no lengths)."""
+    from test_measurement_types import ROBOT, _rows as rows_of, _touches
+
+    from partcal.calibration.identifiability import scale_direction
+    rng = np.random.default_rng(4)
+    q, names = _touches(ROBOT, rng, {"top": ([0.1, 0.0, 1.0], 300.0), "side": ([1.0, 0.0, 0.0], 700.0)}, 20, 0.0)
+    problem = _problem(rows_of(q, ["plane"] * len(q), texts={"feature": tuple(names)}), {})
+    s = scale_direction(problem)
+    jac = problem(problem.start)[1]
+    assert np.linalg.norm(s) > 1.0
+    assert np.linalg.norm(jac @ s) < 1e-6 * np.linalg.norm(jac) * np.linalg.norm(s)
+    from partcal.calibration.parameters import parameter_names
+    units = np.array([u for _, u in parameter_names(ROBOT, None, "dh")])
+    assert np.all(s[:problem.own][units == "deg"] == 0.0)             # the robot's angles do not scale
+    planes = s[problem.own:]
+    assert planes[[0, 1, 3, 4]].tolist() == [0.0, 0.0, 0.0, 0.0]
+    np.testing.assert_allclose(planes[[2, 5]], problem.start[problem.own:][[2, 5]], rtol=1e-12)
+
+
+def test_the_misfits_parts_are_the_weighted_residuals_and_their_turns_by_hand():
+    """Tracker points 1, 2 and 3 mm off the nominal UR10 (inconsistent data) and touches of a plane, the first
+    flush: column 0 holds each residual that is a length, weighted (a flush touch's two tilts are not); columns 1-3
+    the point residuals' triples crossed by the base axes (e_k x r), weighted; a touch does not turn (zeros)."""
+    from test_measurement_types import ROBOT, _rows as rows_of, _touches
+
+    from partcal.calibration.identifiability import misfit_parts
+    rng = np.random.default_rng(4)
+    q_planes, names = _touches(ROBOT, rng, {"top": ([0.1, 0.0, 1.0], 300.0)}, 6, 0.0)
+    q_points = q_planes[:3]
+    off = np.array([[1.0, 0.0, 0.0], [0.0, 2.0, 0.0], [0.0, 0.0, 3.0]])
+    seen = ROBOT.positions(q_points) + off
+    nan3 = np.full(len(q_planes), np.nan)
+    flush = np.r_[np.full(3, np.nan), 1.0, np.zeros(len(q_planes) - 1)]
+    rows = rows_of(np.vstack([q_points, q_planes]), ["point"] * 3 + ["plane"] * len(q_planes),
+                   {"x_meas": np.r_[seen[:, 0], nan3], "y_meas": np.r_[seen[:, 1], nan3],
+                    "z_meas": np.r_[seen[:, 2], nan3], "flush": flush}, {"feature": ("",) * 3 + tuple(names)})
+    problem = _problem(rows, {"noise": {"point": 0.01, "plane": 0.04}})
+    parts = misfit_parts(problem, problem.start)
+    r = -off.ravel()                                       # the point residuals: nominal tip minus measured
+    w_point, w_plane = 0.02 / 0.01, 0.02 / 0.04
+    expected_points = np.zeros((9, 4))
+    expected_points[:, 0] = w_point * r
+    for k in range(3):
+        expected_points[:, 1 + k] = w_point * np.cross(np.eye(3)[k], r.reshape(3, 3)).ravel()
+    types = [m.name for m in problem.measurements]
+    first = 0 if types[0] == "point" else len(q_planes)
+    np.testing.assert_allclose(parts[first:first + 9], expected_points, atol=1e-9)
+    touches = parts[9:] if first == 0 else parts[:len(q_planes) + 2]
+    np.testing.assert_allclose(touches[:, 1:], 0.0, atol=1e-12)
+    plane_values = problem.each(problem.start)[types.index("plane")].values
+    assert plane_values.size == len(q_planes) + 2 and np.all(plane_values[-2:] != 0.0)      # the two tilts
+    np.testing.assert_allclose(touches[:, 0], w_plane * np.r_[plane_values[:-2], 0.0, 0.0], atol=1e-12)
+    assert parts.shape == (9 + len(q_planes) + 2, 4)

@@ -178,10 +178,8 @@ def tracker_fit(setup, study, q_images, seed):
     """A tracker (``TRACKER_MM`` per axis) measuring the flange point (:func:`flange_point`) at the images' poses,
     identified with the same parametrization (the point's designed offset the nominal tool, its error fitted): the
     nominal robot with that tool and the identification (the fitted robot's positions are the point's)."""
-    point = flange_point(setup)
-    nominal = study.robot.nominal.replace(tool_mm=point)
-    positions, rotations = study.robot.true_flange(q_images)
-    truth = positions + rotations @ point
+    nominal = study.robot.nominal.replace(tool_mm=flange_point(setup))
+    truth = true_points(setup, study, q_images)
     measured = truth + np.random.default_rng(seed + 200).normal(0.0, TRACKER_MM, truth.shape)
     n = len(q_images)
     rows = MeasurementRows(q_images, ("point",) * n, tuple(str(i + 1) for i in range(n)), tuple(range(1, n + 1)),
@@ -212,11 +210,16 @@ def expected_rigid_rms(points_of, table, step: float = 1e-4) -> float:
     return float(np.sqrt(np.trace(jac @ table.covariance @ jac.T) / len(base)))
 
 
+def true_points(setup, study, q) -> np.ndarray:
+    """The flange point (:func:`flange_point`) through the true chain at poses ``q``, (n, 3) mm."""
+    positions, rotations = study.robot.true_flange(q)
+    return positions + rotations @ flange_point(setup)
+
+
 def point_scores(setup, study, q, camera_points, tracker_points) -> tuple[float, float]:
     """The flange point after a rigid fit over poses ``q``: through the camera's fit (its chain and its pose on the
     flange) and through the tracker's (``*_points(q)``), RMS mm."""
-    positions, rotations = study.robot.true_flange(q)
-    truth = positions + rotations @ flange_point(setup)
+    truth = true_points(setup, study, q)
     return rigid_rms(camera_points(q), truth), rigid_rms(tracker_points(q), truth)
 
 
@@ -308,8 +311,7 @@ def one(name: str, images: int, seed: int, folder: Path, planned: bool = False, 
     out["rigid_random"] = point_scores(setup, study, q_random, camera_points, tracker_points)
     out["expected_view"] = (expected_rigid_rms(lambda v: camera_points(q, v), table),
                             expected_rigid_rms(lambda v: tracker_points(q, v), tracker_table))
-    positions, rotations = study.robot.true_flange(q)
-    truth = positions + rotations @ flange_point(setup)
+    truth = true_points(setup, study, q)
     again = []
     for k in range(redraws):           # the same poses, the noise drawn again: the spread the expected figure claims
         redrawn = identify_measurements(nominal, pixel_rows(study, q_images, np.random.default_rng(seed + 1000 + k)),

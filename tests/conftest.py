@@ -154,3 +154,10 @@ def random_row_prior(v0, seed: int = 4):
     a = rng.normal(size=(24, 24)) * 0.05
     cov = a @ a.T + np.diag(np.where(np.isin(np.arange(24) % 4, (1, 2)), 0.3, 0.03) ** 2)
     return index, v0[index] + rng.normal(size=24) * 0.1, cov
+
+
+def own_string(text: str) -> str:
+    """``text`` (two characters or more: CPython keeps one object per single character) as a string object of its
+    own, as each cell of a file is, never the interned literal: what a test of ``==`` against ``is`` needs."""
+    assert len(text) > 1
+    return "".join(list(text))

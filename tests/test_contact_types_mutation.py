@@ -6,6 +6,7 @@ through its tips) against the centre the tips were put around."""
 
 import numpy as np
 import pytest
+from conftest import own_string
 from scipy.spatial.transform import Rotation
 
 from partcal import load_robot
@@ -266,7 +267,7 @@ def test_a_pivots_rows_are_found_by_its_name_not_by_one_text_object():
     directions = rng.normal(size=(8, 3))
     radii = np.linspace(120.0, 180.0, 8)
     tips = centre + radii[:, None] * directions / np.linalg.norm(directions, axis=1)[:, None]
-    names = tuple("".join(["bar", str(1)]) for _ in range(8)) + ("",)
+    names = tuple(own_string("bar1") for _ in range(8)) + ("",)
     assert names[0] is not names[1]
     rows = _rows(np.zeros((9, 6)), ["distance"] * 8 + ["pose"], {"distance_mm": np.r_[radii, np.nan]}, {"to": names})
     distances = MEASUREMENT_TYPES["distance"](rows, np.arange(8), {"points": {"bar1": {}}}, 0.01)

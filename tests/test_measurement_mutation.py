@@ -199,6 +199,9 @@ def test_the_rows_folds_draw_from_measure_and_keep_the_ends_their_distances_name
     assert measuring(rows).tolist() == [1, 2, 3]
     part = subset(rows, np.array([2]))
     assert part.ids == ("1", "3") and part.types == ("pose", "distance")
+    chained = _rows(np.zeros((4, 6)), ["pose", "zzz", "distance", "distance"], texts={"to": ("", "", "1", "3")})
+    both = subset(chained, np.array([2, 3]))          # row 3 names row 2, which measures: it stays a distance
+    assert both.ids == ("1", "3", "4") and both.types == ("pose", "distance", "distance")
     assert subset(rows, np.array([3])).ids == ("4",)
     assert all(np.isnan(cv_score({}, {}, {})))
 

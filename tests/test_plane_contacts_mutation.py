@@ -8,6 +8,7 @@ import warnings
 
 import numpy as np
 import pytest
+from conftest import own_string
 from scipy.spatial.transform import Rotation
 
 from partcal.calibration.measurement import MeasurementRows
@@ -17,13 +18,6 @@ from partcal.errors import ConfigError, DataError
 
 TURNS = [0.0, 10.0, 20.0, -10.0, -20.0, 5.0, 15.0, -5.0, -15.0]
 """The tool's turn about x at each touch (degrees): touches from several orientations."""
-
-
-def _name(text: str) -> str:
-    """``text`` (two characters or more: CPython keeps one object per single character) as a string object of its
-    own, as each cell of a file is, never the interned literal."""
-    assert len(text) > 1
-    return "".join(list(text))
 
 
 def _planes(features, cell=None, flush=None):
@@ -79,7 +73,7 @@ def test_a_plane_with_too_few_touches_is_refused_whatever_its_name_sorts_as(few,
 def test_the_one_orientation_check_reads_each_planes_own_touches(still, turned):
     """One plane touched four times from one orientation, the other from four: the first is refused naming its
     first line, the names read as separate strings (as a file's cells are) and whichever sorts first."""
-    features = [_name(still) for _ in range(4)] + [_name(turned) for _ in range(4)]
+    features = [own_string(still) for _ in range(4)] + [own_string(turned) for _ in range(4)]
     positions = np.vstack([_on_plane([0, 0, 1], 400.0, 4, [800, 0, 0]), _on_plane([1, 0, 0], 700.0, 4, [0, 0, 300])])
     with pytest.raises(DataError, match=rf"^test.csv:2: column 'feature': plane '{still}' is touched from one "):
         _unknowns(_planes(features), positions, [0.0] * 4 + [0.0, 10.0, 20.0, -10.0])
@@ -169,7 +163,7 @@ def test_a_group_two_spacings_orient_is_refused_when_the_given_normal_points_the
     themselves; a given normal -z is 180 degrees from it."""
     positions = np.vstack([_on_plane([0, 0, 1], 400.0, 4, [800, 0, 0]), _on_plane([0, 0, 1], 200.0, 4, [700, 0, 0])])
     cell = {"planes": {"top": {"normal": [0.0, 0.0, -1.0], "offset_mm": -400.0},
-                       "step": {"parallel_to": _name("top"), "spacing_mm": -200.0}}}
+                       "step": {"parallel_to": own_string("top"), "spacing_mm": -200.0}}}
     with pytest.raises(DataError, match=r"^test.csv:2: .* put its normal 180.0 degrees from the cell's planes.top"):
         _unknowns(_planes(["top"] * 4 + ["step"] * 4, cell), positions, [0.0, 10.0, 20.0, -10.0] * 2)
 
@@ -217,9 +211,9 @@ def test_a_scale_moves_the_offset_of_a_tied_plane_touched_alone_and_no_offset_of
     -200; with 'step2' (-100) touched too, the two spacings measure a length and no offset moves. A second group,
     'side' (unknown, x = 700) then its tied 'side2' (+50) touched alone: the second root's offset moves by +50.
     The tie names are strings of their own, as a file's are."""
-    cell = {"planes": {"top": {}, "step": {"parallel_to": _name("top"), "spacing_mm": -200.0},
-                       "step2": {"parallel_to": _name("top"), "spacing_mm": -100.0},
-                       "side": {}, "side2": {"parallel_to": _name("side"), "spacing_mm": 50.0}}}
+    cell = {"planes": {"top": {}, "step": {"parallel_to": own_string("top"), "spacing_mm": -200.0},
+                       "step2": {"parallel_to": own_string("top"), "spacing_mm": -100.0},
+                       "side": {}, "side2": {"parallel_to": own_string("side"), "spacing_mm": 50.0}}}
     step = _on_plane([0, 0, 1], 200.0, 4, [800, 0, 0])
     alone = _planes(["step"] * 4, cell)
     start = _unknowns(alone, step)[1]
@@ -281,10 +275,10 @@ def test_a_group_is_fitted_from_its_plane_with_most_touches_whatever_the_names_s
     """'top' touched three times along a line (it fixes no plane by itself) and the tied 'step' (sorting before
     it, its tie named by a string of its own) five times over an area: the group's normal comes from step's
     touches, +z as the spacing says, and top's offset is 400."""
-    cell = {"planes": {"top": {}, "step": {"parallel_to": _name("top"), "spacing_mm": -200.0}}}
+    cell = {"planes": {"top": {}, "step": {"parallel_to": own_string("top"), "spacing_mm": -200.0}}}
     line = np.column_stack([np.linspace(600.0, 900.0, 3), np.zeros(3), np.full(3, 400.0)])
     positions = np.vstack([line, _on_plane([0, 0, 1], 200.0, 5, [700, 0, 0])])
-    features = [_name("top") for _ in range(3)] + [_name("step") for _ in range(5)]
+    features = [own_string("top") for _ in range(3)] + [own_string("step") for _ in range(5)]
     names, start = _unknowns(_planes(features, cell), positions, [0.0, 10.0, 20.0, 0.0, 10.0, 20.0, -10.0, 5.0])
     assert names[0] == ("plane top.x/+z", "1")
     np.testing.assert_allclose(start, [0.0, 0.0, 400.0], atol=1e-9)

@@ -6,19 +6,13 @@ nominal values the type gives the rest of partcal."""
 
 import numpy as np
 import pytest
+from conftest import own_string
 from scipy.spatial.transform import Rotation
 
 from partcal.calibration.measurement import MeasurementRows
 from partcal.calibration.registry import MEASUREMENT_TYPES
 from partcal.calibration.tracker_points import TRACKER_FRAME, target_nominal
 from partcal.errors import DataError
-
-
-def _name(text: str) -> str:
-    """``text`` (two characters or more: CPython keeps one object per single character) as a string object of its
-    own, as each cell of a file is, never the interned literal."""
-    assert len(text) > 1
-    return "".join(list(text))
 
 
 def _points(measured, numbers=None, texts=None, cell=None):
@@ -133,7 +127,7 @@ def test_a_further_targets_start_is_its_offset_on_the_flange_from_its_own_rows(f
     angles = np.full((9, 3), np.nan)
     angles[:2] = [[10.0, 20.0, 30.0], [-5.0, 15.0, 0.0]]
     numbers = {"rx_meas": angles[:, 0], "ry_meas": angles[:, 1], "rz_meas": angles[:, 2]}
-    texts = {"target": ("", "A", "", "") + tuple(_name("B1") for _ in range(3)) + tuple(_name("1B") for _ in range(2))}
+    texts = {"target": ("", "A", "", "") + tuple(own_string("B1") for _ in range(3)) + tuple(own_string("1B") for _ in range(2))}
     turn, shift = np.array([2.0, -3.0, 10.0]), np.array([2500.0, 100.0, -50.0])
     if frame == "tracker":
         measured, cell, numbers = _tracker_frame(base, turn, shift), {TRACKER_FRAME: True}, {}

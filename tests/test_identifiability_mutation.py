@@ -236,3 +236,22 @@ def test_the_misfits_parts_are_the_weighted_residuals_and_their_turns_by_hand():
     assert plane_values.size == len(q_planes) + 2 and np.all(plane_values[-2:] != 0.0)      # the two tilts
     np.testing.assert_allclose(touches[:, 0], w_plane * np.r_[plane_values[:-2], 0.0, 0.0], atol=1e-12)
     assert parts.shape == (9 + len(q_planes) + 2, 4)
+
+
+def test_a_uniform_scale_moves_a_cameras_and_boards_places_never_its_pixels(tmp_path):
+    """Camera rows (a cell camera seeing a board on the flange): the cell scaled by one moves each of the camera's
+    and the board's coordinates by its own value (mm) and leaves their turns (deg) and the camera's intrinsics
+    (px, and the unitless distortion) alone."""
+    from test_camera_misfit import _read_cell, _rows
+
+    from partcal.calibration.identifiability import scale_direction
+    from partcal.calibration.registry import built_types
+    from partcal.calibration.stacked import StackedProblem
+    study, rows = _rows(tmp_path)
+    problem = StackedProblem(study.robot.nominal, None, rows, built_types(rows, _read_cell(tmp_path)),
+                             np.zeros(len(rows)), "dh")
+    s, start = scale_direction(problem)[problem.own:], problem.start[problem.own:]
+    units = np.array([u for _, u in problem.names])
+    assert sorted(set(units)) == ["1", "deg", "mm", "px"] and (start[units == "px"] > 500).all()
+    np.testing.assert_array_equal(s[units == "mm"], start[units == "mm"])
+    assert np.all(s[units != "mm"] == 0.0)

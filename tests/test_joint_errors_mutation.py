@@ -24,7 +24,7 @@ def test_compliant_joints_are_distinct_joint_numbers_from_one(value, ok):
 
 
 @pytest.mark.parametrize("value, ok", [(0, True), (MAX_HARMONICS, True), (MAX_HARMONICS + 1, False), (-1, False),
-                                       ([0, 8, 1, 0, 0, 2], True), ([0, 9, 1, 0, 0, 2], False), ([1] * 5, False),
+                                       ([0, 8, 1, 0, 0, 2], True), ([0, 9, 1, 0, 0, 2], False), ([1] * 5, False), ([1] * 7, False),
                                        (True, False), (1.0, False)])
 def test_harmonics_are_ints_up_to_eight_for_every_joint_or_each(value, ok):
     assert MAX_HARMONICS == 8
@@ -48,10 +48,13 @@ def test_a_further_origin_moves_a_frame_only_by_its_shift(sk120, origin, moves):
 
 
 def test_a_row_moves_its_frame_by_an_offset_of_either_sign(sk120):
-    """Row 6 (q4) has a = 0 and d = 1300 mm: d = -1300 mm moves frame 6 as far; a = d = 0 would not move it."""
+    """Row 6 (q4) has a = 0 and d = 1300 mm: d = -1300 mm moves frame 6 as far; a = d = 0 would not move it. Row 5
+    has d = 0 and a = 250 mm: a = -250 mm moves frame 5."""
     for d, frames in ((-1300.0, (2, 3, 4, 5, 6, 8)), (0.0, (2, 3, 4, 5, 8))):
         robot = sk120.replace(d_mm=np.where(np.arange(8) == 5, d, sk120.d_mm))
         assert JointErrors.for_robot(robot, [3]).frames == (frames,)
+    robot = sk120.replace(a_mm=np.where(np.arange(8) == 4, -250.0, sk120.a_mm))
+    assert JointErrors.for_robot(robot, [3]).frames == ((2, 3, 4, 5, 6, 8),)
 
 
 def test_a_compliant_last_joint_with_no_frame_beyond_it_bends_by_the_payload_alone(sk120):

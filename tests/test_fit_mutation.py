@@ -1,0 +1,181 @@
+"""The rank-checked fit on linear problems whose answers are known independently: numpy's least squares, scipy's own
+count of evaluations, covariances and condition numbers written out, implausible values kept nominal or kept as
+fitted by the rule's own words (the survivors of mutation testing on ``partcal/calibration/fit.py``)."""
+
+import numpy as np
+import pytest
+from scipy.optimize import least_squares
+
+from partcal.calibration.fit import IMPLAUSIBLE, UNFIXED, fit_parameters, prior_variance
+from partcal.calibration.parameters import PLAUSIBLE_ERROR
+
+
+def _linear(a, b):
+    """``jac_at`` of the residuals ``a v - b``."""
+    def jac_at(v, jacobian=True):
+        return a @ v - b, (a.copy() if jacobian else None)
+    return jac_at
+
+
+def _fit(a, b, units, size=None, nominal=None, **options):
+    """``fit_parameters`` on ``a v - b`` from ``nominal`` (default zero), every parameter wanted; ``size`` geometric
+    parameters (default: all, the first ``size - 9`` of them the rows' that the implausibility rule reads)."""
+    p = a.shape[1]
+    names = [(f"p{k}", unit) for k, unit in enumerate(units)]
+    return fit_parameters(_linear(a, b), np.zeros(p) if nominal is None else nominal, a, np.ones(p, dtype=bool),
+                          names, 1e-6, p if size is None else size, len(b) // 3, **options)
+
+
+def test_the_rank_rule_reads_the_weighted_jacobian():
+    """Two parameters, the second seen only by rows weighed 1e-8: weighted, the unit columns are orthogonal and both
+    are identified, at numpy's weighted least squares. (Dividing by the weights instead would make the unit columns
+    agree to 1e-8, below rcond, and drop one.)"""
+    a = np.array([[1.0, 0.0]] * 3 + [[1.0, 1.0]] * 3)
+    b = np.array([1.0, 1.1, 0.9, 3.0, 3.2, 2.8])
+    w = np.array([1.0] * 3 + [1e-8] * 3)
+    table, resid = _fit(a, b, ["1", "1"], row_weight=w)
+    assert table.status == ("identified", "identified")
+    expected = np.linalg.lstsq(a * w[:, None], b * w, rcond=None)[0]
+    np.testing.assert_allclose(table.value, expected, rtol=1e-9)
+    np.testing.assert_allclose(resid, a @ expected - b, atol=1e-9)         # the residuals returned are unweighted
+
+
+def test_the_evaluations_are_scipys_count():
+    rng = np.random.default_rng(2)
+    a, b = rng.normal(size=(12, 3)), rng.normal(size=12)
+    table = _fit(a, b, ["1"] * 3)[0]
+    scipy = least_squares(lambda x: a @ x - b, np.zeros(3), jac=lambda x: a, method="lm", x_scale="jac",
+                          ftol=1e-15, xtol=1e-15, gtol=1e-15)
+    assert table.evaluations == scipy.nfev > 0
+    np.testing.assert_allclose(table.value, np.linalg.lstsq(a, b, rcond=None)[0], rtol=1e-9)
+
+
+def test_the_condition_number_is_that_of_the_unit_columns():
+    """Orthogonal columns of lengths 1 and 1000: scaled to unit length their condition number is 1 (the raw one,
+    1000); columns at 45 degrees give (1 + cos 45) / (1 - cos 45) under the root."""
+    a = np.zeros((6, 2))
+    a[:3, 0], a[3:, 1] = 1.0, 1000.0
+    assert _fit(a, np.arange(6.0), ["1", "1"])[0].condition == pytest.approx(1.0, rel=1e-12)
+    a = np.array([[1.0, 1.0], [0.0, 1.0], [0.0, 0.0]] * 2) * [[1.0, 50.0]]
+    c = np.cos(np.pi / 4)
+    assert _fit(a, np.arange(6.0), ["1", "1"])[0].condition == pytest.approx(np.sqrt((1 + c) / (1 - c)), rel=1e-9)
+
+
+def test_the_prior_variance_is_the_diagonal_of_j_p_j_transposed():
+    rng = np.random.default_rng(3)
+    j_i, j_u, absorbed, std = rng.normal(size=(5, 2)), rng.normal(size=(5, 3)), rng.normal(size=(2, 3)), [0.5, 2, 1]
+    j = j_u - j_i @ absorbed
+    np.testing.assert_allclose(prior_variance(j_i, j_u, absorbed, np.array(std)), np.diag(j @ np.diag(np.square(std))
+                                                                                           @ j.T), rtol=1e-12)
+
+
+def _implausible_problem(first, noise, seed=4):
+    """Twelve geometric parameters in mm (the first three rows' parameters, the rest tool and base) whose first two
+    columns agree to a part in a thousand. The least-squares answer is ``truth`` (the first parameter ``first``, the
+    second 0): the noise, of norm ``noise``, is made orthogonal to the columns. ``std``: the standard errors."""
+    rng = np.random.default_rng(seed)
+    a = rng.normal(size=(60, 12))
+    a[:, 1] = a[:, 0] + 1e-3 * rng.normal(size=60)
+    truth = np.r_[first, 0.0, rng.normal(size=10)]
+    r = rng.normal(size=60)
+    r -= a @ np.linalg.lstsq(a, r, rcond=None)[0]
+    std = np.sqrt(noise**2 / (60 - 12) * np.diag(np.linalg.inv(a.T @ a)))
+    return a, a @ truth + noise * r / np.linalg.norm(r), truth, std
+
+
+def test_a_row_parameter_just_beyond_its_plausible_range_that_the_data_do_not_fix_is_kept_nominal(caplog):
+    """10.5 mm is beyond ten plausible errors (10 mm) and within 3 standard errors (about 90 mm) of nominal: held
+    nominal (unidentifiable), said in the log, and the rest fitted again (numpy, without its column); 9.5 mm is
+    kept as fitted."""
+    limit = IMPLAUSIBLE * PLAUSIBLE_ERROR["mm"]
+    assert limit == 10.0
+    a, b, truth, std = _implausible_problem(60.5, 5.0)
+    assert UNFIXED * std[0] > 100.0
+    nominal = np.r_[50.0, np.zeros(11)]                        # 10.5 mm out
+    with caplog.at_level("INFO", logger="partcal.calibration.fit"):
+        table = _fit(a, b, ["mm"] * 12, nominal=nominal)[0]
+    assert table.value[0] == 50.0 and table.status[0] == "unidentifiable"
+    rest = np.linalg.lstsq(a[:, 1:], b - 50.0 * a[:, 0], rcond=None)[0]
+    np.testing.assert_allclose(table.value[1:], rest, rtol=1e-8)
+    assert "p0 comes out +10.5 mm from nominal" in caplog.text
+    a, b, truth, std = _implausible_problem(9.5, 5.0)
+    table = _fit(a, b, ["mm"] * 12)[0]
+    assert table.status[0] == "identified"
+    np.testing.assert_allclose(table.value, truth, rtol=1e-6, atol=1e-6)
+
+
+def test_a_row_parameter_far_out_that_the_data_fix_is_kept():
+    """The same columns, the first parameter at 30 mm and no noise: beyond the range, but fixed."""
+    a, b, truth, std = _implausible_problem(30.0, 0.0, seed=5)
+    table = _fit(a, b, ["mm"] * 12)[0]
+    np.testing.assert_allclose(table.value, truth, atol=1e-6)
+
+
+def test_with_nothing_wanted_the_values_stay_nominal():
+    rng = np.random.default_rng(6)
+    a, b = rng.normal(size=(9, 2)), rng.normal(size=9)
+    names = [("p0", "1"), ("p1", "1")]
+    table, resid = fit_parameters(_linear(a, b), np.array([0.5, -0.5]), a, np.zeros(2, dtype=bool), names, 1e-6, 2, 3)
+    assert table.value.tolist() == [0.5, -0.5] and table.status == ("fixed", "fixed") and table.condition == 1.0
+    np.testing.assert_allclose(resid, a @ [0.5, -0.5] - b)
+    assert table.sigma_mm == pytest.approx(np.sqrt(np.sum(resid**2) / 9), rel=1e-12)
+
+
+def test_an_unidentifiable_geometric_parameter_gets_its_plausible_error_and_is_absorbed_by_its_stand_in():
+    """Two equal columns: the second is held (ties go to the first), its prior standard deviation the plausible
+    error of its unit, and the identified parameters absorb it as numpy's least squares of its column on theirs
+    (the first parameter alone, one for one)."""
+    rng = np.random.default_rng(7)
+    a = rng.normal(size=(30, 12))
+    a[:, 1] = a[:, 0]
+    table = _fit(a, rng.normal(size=30), ["mm"] * 11 + ["deg"])[0]
+    free = np.flatnonzero(np.array(table.status) == "identified")
+    assert table.status[1] == "unidentifiable" and free.size == 11
+    np.testing.assert_array_equal(np.isnan(table.prior_std), np.arange(12) != 1)
+    assert table.prior_std[1] == PLAUSIBLE_ERROR["mm"]
+    expected = np.linalg.lstsq(a[:, free], a[:, [1]], rcond=None)[0]
+    np.testing.assert_allclose(table.prior_absorbed, expected, atol=1e-12)
+    assert table.prior_absorbed[0, 0] == pytest.approx(1.0)
+
+
+def _irls(a, b, scale, v):
+    """Cauchy's M-estimate at ``scale`` by iteratively reweighted least squares (a second method: scipy's fit is a
+    trust-region one): weights ``1 / (1 + (r / scale)^2)``, the derivative of its loss."""
+    for _ in range(500):
+        w = 1.0 / (1.0 + ((a @ v - b) / scale) ** 2)
+        new = np.linalg.lstsq(a * np.sqrt(w)[:, None], b * np.sqrt(w), rcond=None)[0]
+        if np.max(np.abs(new - v)) < 1e-13:
+            return new
+        v = new
+    raise AssertionError("IRLS did not converge")
+
+
+def test_the_robust_fit_re_estimates_its_scale_until_it_settles_and_names_the_far_row():
+    """Twenty rows of three residuals, row 4 pushed off: the scale is 3 x 1.4826 x the median absolute residual,
+    taken again after each robust fit until it moves by less than 5 % (at most four fits). Written here with IRLS
+    for the fits; the far row named with its residual's norm and its worst coordinate's weight."""
+    rng = np.random.default_rng(9)
+    a = rng.normal(size=(60, 3))
+    b = a @ [1.0, -2.0, 0.5] + rng.normal(0, 0.01, 60)
+    b[12:15] += [2.0, -1.0, 1.5]
+    v, scale, fits = np.linalg.lstsq(a, b, rcond=None)[0], None, 0
+    for _ in range(4):
+        new = 3.0 * 1.4826 * np.median(np.abs(a @ v - b))
+        if scale is not None and abs(new - scale) < 0.05 * scale:
+            break
+        scale, fits = new, fits + 1
+        v = _irls(a, b, scale, v)
+    assert fits == 2                                            # the rule stopped it early
+    table, resid = _fit(a, b, ["1"] * 3, loss="cauchy")
+    np.testing.assert_allclose(table.value, v, rtol=1e-7)
+    final = 3.0 * 1.4826 * np.median(np.abs(resid))
+    weight = 1.0 / (1.0 + (resid / final) ** 2)
+    assert table.robust["loss"] == "cauchy" and table.robust["scale_mm"] == pytest.approx(final, rel=1e-12)
+    assert [d["row"] for d in table.robust["downweighted"]] == [4]
+    (named,) = table.robust["downweighted"]
+    assert named["residual_mm"] == pytest.approx(np.linalg.norm(resid[12:15]), rel=1e-12)
+    assert named["weight"] == pytest.approx(weight[12:15].min(), rel=1e-9) and weight.reshape(-1, 3).min(axis=1)[
+        np.arange(20) != 4].min() >= 0.5
+    # the rows of the residuals as given: the far residuals are row 15's when the rows run backwards
+    backwards = _fit(a, b, ["1"] * 3, loss="cauchy", row_of=np.repeat(np.arange(20)[::-1], 3))[0]
+    assert [d["row"] for d in backwards.robust["downweighted"]] == [15]

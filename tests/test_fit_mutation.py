@@ -1,6 +1,7 @@
 """The rank-checked fit on linear problems whose answers are known independently: numpy's least squares, scipy's own
-count of evaluations, covariances and condition numbers written out, implausible values kept nominal or kept as
-fitted by the rule's own words (the survivors of mutation testing on ``partcal/calibration/fit.py``)."""
+count of evaluations, condition numbers and a prior's variance written out, a robust fit redone by iteratively
+reweighted least squares, implausible values kept nominal or kept as fitted by the rule's own words (the survivors
+of mutation testing on ``partcal/calibration/fit.py``)."""
 
 import numpy as np
 import pytest

@@ -1,5 +1,5 @@
-"""Joint errors against values put by hand: the joints and harmonics a config may name, which frames may carry a lumped mass, the parameters of a robot
-without any, and a compliant last joint whose only lever is the payload's (the survivors of mutation testing
+"""Joint errors against values put by hand: the joints and harmonics a config may name, which frames may carry a
+lumped mass, the parameters of a robot without any, and a compliant last joint whose only lever is the payload's (the survivors of mutation testing
 on ``partcal/calibration/joint_errors.py`` and ``chain.py``)."""
 
 import numpy as np
@@ -24,7 +24,8 @@ def test_compliant_joints_are_distinct_joint_numbers_from_one(value, ok):
 
 
 @pytest.mark.parametrize("value, ok", [(0, True), (MAX_HARMONICS, True), (MAX_HARMONICS + 1, False), (-1, False),
-                                       ([0, 8, 1, 0, 0, 2], True), ([0, 9, 1, 0, 0, 2], False), ([1] * 5, False), ([1] * 7, False),
+                                       ([0, 8, 1, 0, 0, 2], True), ([0, 9, 1, 0, 0, 2], False), ([1] * 5, False),
+                                       ([1] * 7, False),
                                        (True, False), (1.0, False)])
 def test_harmonics_are_ints_up_to_eight_for_every_joint_or_each(value, ok):
     assert MAX_HARMONICS == 8

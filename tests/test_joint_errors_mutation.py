@@ -1,6 +1,6 @@
 """Joint errors against values put by hand: the joints and harmonics a config may name, which frames may carry a
-lumped mass, the parameters of a robot without any, and a compliant last joint whose only lever is the payload's (the survivors of mutation testing
-on ``partcal/calibration/joint_errors.py`` and ``chain.py``)."""
+lumped mass, the parameters of a robot without any, and a compliant last joint whose only lever is the payload's
+(the survivors of mutation testing on ``partcal/calibration/joint_errors.py`` and ``chain.py``)."""
 
 import numpy as np
 import pytest

@@ -31,12 +31,14 @@ def test_point_rows_of_two_targets_are_numbered_by_pose_and_carry_their_payload(
 
 
 @pytest.mark.parametrize("rows", [2, 4])
-def test_further_targets_and_orientations_of_another_length_than_the_poses_are_refused(ur10, rows):
+def test_measured_points_further_targets_and_orientations_of_another_length_than_the_poses_are_refused(ur10, rows):
     q = np.zeros((3, 6))
     with pytest.raises(DataError, match=rf"targets\['B'\] has {rows} rows but X has 3"):
         extra_from(ur10, q, {"B": (TOOLS["B"], np.zeros((rows, 3)))}, None)
     with pytest.raises(DataError, match=rf"orientation_deg has {rows} rows but X has 3"):
         extra_from(ur10, q, None, np.zeros((rows, 3)))
+    with pytest.raises(DataError, match=rf"measured_mm has {rows} rows but q_deg has 3"):
+        identify(ur10, q, np.zeros((rows, 3)))
 
 
 def _truth(ur10, seed=1):
@@ -57,15 +59,16 @@ def test_identify_without_a_payload_reads_none_and_scales_a_robust_loss_at_three
     assert robust.robust["scale_mm"] == pytest.approx(3 * 0.02, rel=1e-12)
 
 
-def test_a_pose_with_two_far_targets_is_named_once_by_its_lower_weight(ur10):
-    """Pose 7's primary target 3 mm off and its target B 1 mm off: both rows are down-weighted, and the pose is named
-    once, with the primary's weight (the lower) and residual."""
+@pytest.mark.parametrize("primary, further", [(3.0, 1.0), (1.0, 3.0)])
+def test_a_pose_with_two_far_targets_is_named_once_by_its_lower_weight(ur10, primary, further):
+    """Pose 7's primary target and its target B pushed 3 and 1 mm off (or 1 and 3): both rows are down-weighted, and
+    the pose is named once, with the weight (the lower) and residual of the farther."""
     q = np.random.default_rng(4).uniform(-170, 170, (40, 6))
     true = _truth(ur10)
     measured = true.positions(q)
     b = true.replace(tool_mm=true.tool_mm + TOOLS["B"] - ur10.tool_mm).positions(q)
-    measured[7] += [3.0, 0.0, 0.0]
-    b[7] += [0.0, 1.0, 0.0]
+    measured[7] += [primary, 0.0, 0.0]
+    b[7] += [0.0, further, 0.0]
     rng = np.random.default_rng(5)
     measured += rng.normal(0, 0.01, measured.shape)
     b += rng.normal(0, 0.01, b.shape)

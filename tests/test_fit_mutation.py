@@ -30,15 +30,15 @@ def _fit(a, b, units, size=None, nominal=None, **options):
 def test_the_rank_rule_reads_the_weighted_jacobian():
     """Two parameters, the second seen only by rows weighed 1e-8: weighted, the unit columns are orthogonal and both
     are identified, at numpy's weighted least squares. (Dividing by the weights instead would make the unit columns
-    agree to 1e-8, below rcond, and drop one.)"""
-    a = np.array([[1.0, 0.0]] * 3 + [[1.0, 1.0]] * 3)
+    agree to 1e-8, below rcond, and drop one.) A third that no row moves stays unidentified."""
+    a = np.array([[1.0, 0.0, 0.0]] * 3 + [[1.0, 1.0, 0.0]] * 3)
     b = np.array([1.0, 1.1, 0.9, 3.0, 3.2, 2.8])
     w = np.array([1.0] * 3 + [1e-8] * 3)
-    table, resid = _fit(a, b, ["1", "1"], row_weight=w)
-    assert table.status == ("identified", "identified")
-    expected = np.linalg.lstsq(a * w[:, None], b * w, rcond=None)[0]
-    np.testing.assert_allclose(table.value, expected, rtol=1e-9)
-    np.testing.assert_allclose(resid, a @ expected - b, atol=1e-9)         # the residuals returned are unweighted
+    table, resid = _fit(a, b, ["1", "1", "1"], row_weight=w)
+    assert table.status == ("identified", "identified", "unidentifiable")      # no row moves the third
+    expected = np.linalg.lstsq(a[:, :2] * w[:, None], b * w, rcond=None)[0]
+    np.testing.assert_allclose(table.value, [*expected, 0.0], rtol=1e-9)
+    np.testing.assert_allclose(resid, a[:, :2] @ expected - b, atol=1e-9)   # the residuals returned are unweighted
 
 
 def test_the_evaluations_are_scipys_count():
@@ -105,6 +105,18 @@ def test_a_row_parameter_just_beyond_its_plausible_range_that_the_data_do_not_fi
     np.testing.assert_allclose(table.value, truth, rtol=1e-6, atol=1e-6)
 
 
+@pytest.mark.parametrize("errors, held", [(2.5, True), (3.5, False)])
+def test_the_data_fix_a_parameter_three_standard_errors_from_nominal(errors, held):
+    """10.5 mm out, the noise scaled so that this is 2.5 (or 3.5) of its standard errors: held nominal (kept)."""
+    unit = _implausible_problem(60.5, 1.0)[3][0]                # the standard error per unit of noise
+    a, b, truth, std = _implausible_problem(60.5, 10.5 / errors / unit)
+    assert 10.5 / std[0] == pytest.approx(errors)
+    table = _fit(a, b, ["mm"] * 12, nominal=np.r_[50.0, np.zeros(11)])[0]
+    assert (table.value[0] == 50.0) == held and (table.status[0] == "unidentifiable") == held
+    if not held:
+        assert table.value[0] == pytest.approx(60.5, rel=1e-9)
+
+
 def test_a_row_parameter_far_out_that_the_data_fix_is_kept():
     """The same columns, the first parameter at 30 mm and no noise: beyond the range, but fixed."""
     a, b, truth, std = _implausible_problem(30.0, 0.0, seed=5)
@@ -139,11 +151,15 @@ def test_an_unidentifiable_geometric_parameter_gets_its_plausible_error_and_is_a
     assert table.prior_absorbed[0, 0] == pytest.approx(1.0)
 
 
-def _irls(a, b, scale, v):
-    """Cauchy's M-estimate at ``scale`` by iteratively reweighted least squares (a second method: scipy's fit is a
-    trust-region one): weights ``1 / (1 + (r / scale)^2)``, the derivative of its loss."""
+WEIGHTS = {"cauchy": lambda z2: 1.0 / (1.0 + z2), "soft_l1": lambda z2: 1.0 / np.sqrt(1.0 + z2)}
+"""The derivative of each of scipy's losses, ``rho'(z^2)``: the weights of iteratively reweighted least squares."""
+
+
+def _irls(a, b, scale, v, loss="cauchy"):
+    """The M-estimate of ``loss`` at ``scale`` by iteratively reweighted least squares (a second method: scipy's fit
+    is a trust-region one)."""
     for _ in range(500):
-        w = 1.0 / (1.0 + ((a @ v - b) / scale) ** 2)
+        w = WEIGHTS[loss](((a @ v - b) / scale) ** 2)
         new = np.linalg.lstsq(a * np.sqrt(w)[:, None], b * np.sqrt(w), rcond=None)[0]
         if np.max(np.abs(new - v)) < 1e-13:
             return new
@@ -151,21 +167,33 @@ def _irls(a, b, scale, v):
     raise AssertionError("IRLS did not converge")
 
 
-def test_the_robust_fit_re_estimates_its_scale_until_it_settles_and_names_the_far_row():
-    """Twenty rows of three residuals, row 4 pushed off: the scale is 3 x 1.4826 x the median absolute residual,
-    taken again after each robust fit until it moves by less than 5 % (at most four fits). Written here with IRLS
-    for the fits; the far row named with its residual's norm and its worst coordinate's weight."""
-    rng = np.random.default_rng(9)
-    a = rng.normal(size=(60, 3))
-    b = a @ [1.0, -2.0, 0.5] + rng.normal(0, 0.01, 60)
-    b[12:15] += [2.0, -1.0, 1.5]
+def _robust_reference(a, b, loss):
+    """The robust fit as documented, with IRLS for each fit: the scale 3 x 1.4826 x the median absolute residual,
+    taken again after each fit until it moves by less than 5 %, at most four fits. The values and the fits made."""
     v, scale, fits = np.linalg.lstsq(a, b, rcond=None)[0], None, 0
     for _ in range(4):
         new = 3.0 * 1.4826 * np.median(np.abs(a @ v - b))
         if scale is not None and abs(new - scale) < 0.05 * scale:
             break
         scale, fits = new, fits + 1
-        v = _irls(a, b, scale, v)
+        v = _irls(a, b, scale, v, loss)
+    return v, fits
+
+
+def _one_far_row():
+    """Twenty rows of three residuals, row 4 pushed off."""
+    rng = np.random.default_rng(9)
+    a = rng.normal(size=(60, 3))
+    b = a @ [1.0, -2.0, 0.5] + rng.normal(0, 0.01, 60)
+    b[12:15] += [2.0, -1.0, 1.5]
+    return a, b
+
+
+def test_the_robust_fit_re_estimates_its_scale_until_it_settles_and_names_the_far_row():
+    """One row pushed off: the scale settles after two fits. The far row is named with its residual's norm and its
+    worst coordinate's weight."""
+    a, b = _one_far_row()
+    v, fits = _robust_reference(a, b, "cauchy")
     assert fits == 2                                            # the rule stopped it early
     table, resid = _fit(a, b, ["1"] * 3, loss="cauchy")
     np.testing.assert_allclose(table.value, v, rtol=1e-7)
@@ -180,3 +208,34 @@ def test_the_robust_fit_re_estimates_its_scale_until_it_settles_and_names_the_fa
     # the rows of the residuals as given: the far residuals are row 15's when the rows run backwards
     backwards = _fit(a, b, ["1"] * 3, loss="cauchy", row_of=np.repeat(np.arange(20)[::-1], 3))[0]
     assert [d["row"] for d in backwards.robust["downweighted"]] == [15]
+
+
+def test_the_robust_scale_is_taken_at_most_four_times_and_every_loss_is_its_own():
+    """Three of ten rows scattered by 2 (against 0.01): the scale still moves by more than 5 % after the fourth fit
+    (a fifth would move it by 29 %), and the fit stops there. soft_l1 is fitted as soft_l1; least squares names no
+    loss."""
+    rng = np.random.default_rng(0)
+    a = rng.normal(size=(30, 3))
+    b = a @ [1.0, -2.0, 0.5] + rng.normal(0, 0.01, 30)
+    b[:9] += rng.normal(0, 2.0, 9)
+    v, fits = _robust_reference(a, b, "cauchy")
+    assert fits == 4
+    np.testing.assert_allclose(_fit(a, b, ["1"] * 3, loss="cauchy")[0].value, v, rtol=1e-7)
+    a, b = _one_far_row()
+    v = _robust_reference(a, b, "soft_l1")[0]
+    table = _fit(a, b, ["1"] * 3, loss="soft_l1")[0]
+    assert table.robust["loss"] == "soft_l1"
+    np.testing.assert_allclose(table.value, v, rtol=1e-7)
+    assert np.abs(v - np.linalg.lstsq(a, b, rcond=None)[0]).max() > 1e-3     # not least squares
+    assert _fit(a, b, ["1"] * 3)[0].robust is None
+
+
+def test_a_robust_fit_of_data_it_fits_exactly_needs_no_stated_noise():
+    """No residual left: the robust spread is zero, and the fit still runs (on a floor of 1e-12) to the exact values;
+    so does a fit of one parameter."""
+    rng = np.random.default_rng(10)
+    a = rng.normal(size=(30, 3))
+    table = _fit(a, a @ [1.0, -2.0, 0.5], ["1"] * 3, loss="huber")[0]
+    np.testing.assert_allclose(table.value, [1.0, -2.0, 0.5], atol=1e-12)
+    one = _fit(a[:, :1], 2.0 * a[:, 0] + 0.1, ["1"])[0]
+    assert one.value[0] == pytest.approx(np.linalg.lstsq(a[:, :1], 2.0 * a[:, 0] + 0.1, rcond=None)[0][0], rel=1e-12)

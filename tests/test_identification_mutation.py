@@ -80,17 +80,19 @@ def test_a_pose_with_two_far_targets_is_named_once_by_its_lower_weight(ur10, pri
     assert named["residual_mm"] == pytest.approx(3.0, abs=0.05)
     weight = 1.0 / (1.0 + (named["residual_mm"] / table.robust["scale_mm"]) ** 2)
     assert named["weight"] == pytest.approx(weight, rel=0.05) and named["weight"] < 1.0 / (1.0 + (1.0 / 0.03) ** 2)
+    assert table.rms_mm == table.target_rms_mm["A"] != table.target_rms_mm["B"]     # the table's RMS is the primary's
 
 
 def test_what_the_primary_target_alone_identifies_is_a_fit_on_it_alone(ur10):
-    """With joint errors and the tool held: the count the table gives for the primary target is what identify
-    identifies on the primary target's rows alone, with the same settings."""
+    """With or without joint errors, the tool or the base held: the count the table gives for the primary target is
+    what identify identifies on the primary target's rows alone, with the same settings."""
     q = np.random.default_rng(6).uniform(-170, 170, (50, 6))
     true = _truth(ur10)
-    errors = JointErrors.for_robot(ur10, [2, 3], [1, 1, 1, 0, 0, 0])
     b = true.replace(tool_mm=true.tool_mm + TOOLS["B"] - ur10.tool_mm).positions(q)
     payload = np.random.default_rng(7).uniform(0, 20, 50)
-    for tool, base in ((False, True), (True, False)):
+    for errors, tool, base in ((JointErrors.for_robot(ur10, [2, 3], [1, 1, 1, 0, 0, 0]), False, True),
+                               (JointErrors.for_robot(ur10, [2, 3], [1, 1, 1, 0, 0, 0]), True, False),
+                               (None, False, True), (None, True, False)):
         both = identify(ur10, q, true.positions(q), extra=Extra({"B": TOOLS["B"]}, {"B": b}), errors=errors, tool=tool,
                         base=base, payload_kg=payload)
         alone = identify(ur10, q, true.positions(q), errors=errors, tool=tool, base=base, payload_kg=payload)

@@ -42,6 +42,14 @@ def test_measured_points_further_targets_and_orientations_of_another_length_than
         identify(ur10, q, np.zeros((rows, 3)))
 
 
+def test_hundreds_of_poses_of_one_length_are_accepted(ur10):
+    """Lengths compared as numbers: 300 poses (beyond the small ints CPython keeps one object of) pass."""
+    q = np.random.default_rng(8).uniform(-170, 170, (300, 6))
+    extra = extra_from(ur10, q, {"B": (TOOLS["B"], np.zeros((300, 3)))}, np.zeros((300, 3)))
+    assert extra.measured_mm["B"].shape == (300, 3) and extra.rotations.shape == (300, 3, 3)
+    assert identify(ur10, q, ur10.positions(q)).n_poses == 300
+
+
 def _truth(ur10, seed=1):
     rng = np.random.default_rng(seed)
     values = nominal_values(ur10)

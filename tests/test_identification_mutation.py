@@ -93,15 +93,18 @@ def test_a_pose_with_two_far_targets_is_named_once_by_its_lower_weight(ur10, pri
 
 def test_what_the_primary_target_alone_identifies_is_a_fit_on_it_alone(ur10):
     """With or without joint errors, the tool or the base held: the count the table gives for the primary target is
-    what identify identifies on the primary target's rows alone, with the same settings."""
+    what identify identifies on the primary target's rows alone, with the same settings. (With the tool point on the
+    flange, holding the tool identifies one parameter less: nothing else moves the point along the flange's y.)"""
     q = np.random.default_rng(6).uniform(-170, 170, (50, 6))
-    true = _truth(ur10)
-    b = true.replace(tool_mm=true.tool_mm + TOOLS["B"] - ur10.tool_mm).positions(q)
     payload = np.random.default_rng(7).uniform(0, 20, 50)
-    for errors, tool, base in ((JointErrors.for_robot(ur10, [2, 3], [1, 1, 1, 0, 0, 0]), False, True),
-                               (JointErrors.for_robot(ur10, [2, 3], [1, 1, 1, 0, 0, 0]), True, False),
-                               (None, False, True), (None, True, False)):
-        both = identify(ur10, q, true.positions(q), extra=Extra({"B": TOOLS["B"]}, {"B": b}), errors=errors, tool=tool,
-                        base=base, payload_kg=payload)
-        alone = identify(ur10, q, true.positions(q), errors=errors, tool=tool, base=base, payload_kg=payload)
+    flange = ur10.replace(tool_mm=np.zeros(3))
+    compliant = JointErrors.for_robot(ur10, [2, 3], [1, 1, 1, 0, 0, 0])
+    for robot, errors, tool, base in ((ur10, compliant, False, True), (ur10, compliant, True, False),
+                                      (ur10, None, False, True), (ur10, None, True, False), (flange, None, False, True)):
+        true = _truth(robot)
+        b = true.replace(tool_mm=true.tool_mm + TOOLS["B"]).positions(q)         # B 100 mm along x, 90 mm on
+        both = identify(robot, q, true.positions(q), extra=Extra({"B": robot.tool_mm + TOOLS["B"]}, {"B": b}),
+                        errors=errors, tool=tool, base=base, payload_kg=payload)
+        alone = identify(robot, q, true.positions(q), errors=errors, tool=tool, base=base, payload_kg=payload)
         assert both.primary_identifiable == alone.status.count("identified") < both.status.count("identified")
+    assert identify(flange, q, _truth(flange).positions(q)).status.count("identified") == 23 == 22 + 1

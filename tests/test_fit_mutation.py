@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
-from partcal.calibration.fit import IMPLAUSIBLE, UNFIXED, fit_parameters, prior_variance
+from partcal.calibration.fit import IMPLAUSIBLE, UNFIXED, fit_parameters, held_still, prior_variance
 from partcal.calibration.parameters import PLAUSIBLE_ERROR
 
 
@@ -239,3 +239,13 @@ def test_a_robust_fit_of_data_it_fits_exactly_needs_no_stated_noise():
     np.testing.assert_allclose(table.value, [1.0, -2.0, 0.5], atol=1e-12)
     one = _fit(a[:, :1], 2.0 * a[:, 0] + 0.1, ["1"])[0]
     assert one.value[0] == pytest.approx(np.linalg.lstsq(a[:, :1], 2.0 * a[:, 0] + 0.1, rcond=None)[0][0], rel=1e-12)
+
+
+def test_a_joint_held_with_jitter_is_set_to_its_median_from_two_poses_on():
+    """Readings within 0.01 degrees are one held angle: from two poses on, the middle of them; one pose is left as
+    read, and so is a joint that moves."""
+    q = np.array([[10.0, 0.0], [10.004, 30.0]])
+    np.testing.assert_allclose(held_still(q), [[10.002, 0.0], [10.002, 30.0]], rtol=0, atol=1e-12)
+    q3 = np.array([[10.0, 0.0], [10.004, 30.0], [10.001, 60.0]])
+    np.testing.assert_allclose(held_still(q3)[:, 0], 10.001, rtol=0, atol=1e-12)
+    assert held_still(q[:1]).tolist() == [[10.0, 0.0]]

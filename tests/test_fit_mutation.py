@@ -249,3 +249,20 @@ def test_a_joint_held_with_jitter_is_set_to_its_median_from_two_poses_on():
     q3 = np.array([[10.0, 0.0], [10.004, 30.0], [10.001, 60.0]])
     np.testing.assert_allclose(held_still(q3)[:, 0], 10.001, rtol=0, atol=1e-12)
     assert held_still(q[:1]).tolist() == [[10.0, 0.0]]
+
+
+def test_a_robust_fits_evaluations_are_every_solvers_count(monkeypatch):
+    """The table's evaluations add up what scipy reports for each fit made: least squares, then the two robust fits
+    that the scale settles in (see the test above)."""
+    import partcal.calibration.fit as fit
+
+    counts, solve = [], fit._solve
+
+    def counted(*args, **kwargs):
+        v, nfev = solve(*args, **kwargs)
+        counts.append(nfev)
+        return v, nfev
+    monkeypatch.setattr(fit, "_solve", counted)
+    a, b = _one_far_row()
+    table = _fit(a, b, ["1"] * 3, loss="cauchy")[0]
+    assert len(counts) == 3 and min(counts) > 0 and table.evaluations == sum(counts)

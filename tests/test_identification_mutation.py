@@ -99,8 +99,9 @@ def test_what_the_primary_target_alone_identifies_is_a_fit_on_it_alone(ur10):
     payload = np.random.default_rng(7).uniform(0, 20, 50)
     flange = ur10.replace(tool_mm=np.zeros(3))
     compliant = JointErrors.for_robot(ur10, [2, 3], [1, 1, 1, 0, 0, 0])
-    for robot, errors, tool, base in ((ur10, compliant, False, True), (ur10, compliant, True, False),
-                                      (ur10, None, False, True), (ur10, None, True, False), (flange, None, False, True)):
+    cases = ((ur10, compliant, False, True), (ur10, compliant, True, False), (ur10, None, False, True),
+             (ur10, None, True, False), (flange, None, False, True))
+    for robot, errors, tool, base in cases:
         true = _truth(robot)
         b = true.replace(tool_mm=true.tool_mm + TOOLS["B"]).positions(q)         # B 100 mm along x, 90 mm on
         both = identify(robot, q, true.positions(q), extra=Extra({"B": robot.tool_mm + TOOLS["B"]}, {"B": b}),

@@ -130,6 +130,7 @@ def test_with_nothing_wanted_the_values_stay_nominal():
     names = [("p0", "1"), ("p1", "1")]
     table, resid = fit_parameters(_linear(a, b), np.array([0.5, -0.5]), a, np.zeros(2, dtype=bool), names, 1e-6, 2, 3)
     assert table.value.tolist() == [0.5, -0.5] and table.status == ("fixed", "fixed") and table.condition == 1.0
+    assert table.covariance.shape == (0, 0)
     np.testing.assert_allclose(resid, a @ [0.5, -0.5] - b)
     assert table.sigma_mm == pytest.approx(np.sqrt(np.sum(resid**2) / 9), rel=1e-12)
 
@@ -237,6 +238,7 @@ def test_a_robust_fit_of_data_it_fits_exactly_needs_no_stated_noise():
     a = rng.normal(size=(30, 3))
     table = _fit(a, a @ [1.0, -2.0, 0.5], ["1"] * 3, loss="huber")[0]
     np.testing.assert_allclose(table.value, [1.0, -2.0, 0.5], atol=1e-12)
+    assert 0.0 < table.robust["scale_mm"] <= 3e-12
     one = _fit(a[:, :1], 2.0 * a[:, 0] + 0.1, ["1"])[0]
     assert one.value[0] == pytest.approx(np.linalg.lstsq(a[:, :1], 2.0 * a[:, 0] + 0.1, rcond=None)[0][0], rel=1e-12)
 
@@ -266,3 +268,49 @@ def test_a_robust_fits_evaluations_are_every_solvers_count(monkeypatch):
     a, b = _one_far_row()
     table = _fit(a, b, ["1"] * 3, loss="cauchy")[0]
     assert len(counts) == 3 and min(counts) > 0 and table.evaluations == sum(counts)
+
+
+def test_the_robust_fit_is_the_same_in_any_unit_and_with_a_stated_noise_fits_once():
+    """Everything a hundred times larger: the values a hundred times larger too (the 5 % rule is relative). With the
+    noise stated (0.01), one fit at three times it, IRLS's."""
+    a, b = _one_far_row()
+    small = _fit(a, b, ["1"] * 3, loss="cauchy")[0]
+    large = _fit(a, 100.0 * b, ["1"] * 3, loss="cauchy")[0]
+    np.testing.assert_allclose(large.value, 100.0 * small.value, rtol=1e-9)
+    assert large.robust["scale_mm"] == pytest.approx(100.0 * small.robust["scale_mm"], rel=1e-9)
+    stated = _fit(a, b, ["1"] * 3, loss="cauchy", reference_mm=0.01)[0]
+    lsq = np.linalg.lstsq(a, b, rcond=None)[0]
+    np.testing.assert_allclose(stated.value, _irls(a, b, 0.03, lsq), rtol=1e-7)
+    assert stated.robust["scale_mm"] == pytest.approx(0.03, rel=1e-12)
+
+
+def test_a_robust_fit_names_rows_by_their_own_map_and_their_residuals_in_mm():
+    """The far residuals mapped to row 0 are row 0's; mapped to no row (-1, as a prior's rows are) they name none.
+    With every residual weighed 2 (in ``row_weight`` and as ``weighted_by``) the far row's residual is still its miss
+    in the data's own unit."""
+    a, b = _one_far_row()
+    first = _fit(a, b, ["1"] * 3, loss="cauchy", row_of=np.repeat((np.arange(20) - 4) % 20, 3))[0]
+    assert [d["row"] for d in first.robust["downweighted"]] == [0]
+    row_of = np.repeat(np.arange(20), 3)
+    row_of[12:15] = -1
+    assert _fit(a, b, ["1"] * 3, loss="cauchy", row_of=row_of)[0].robust["downweighted"] == []
+    table, resid = _fit(a, b, ["1"] * 3, loss="cauchy")
+    weighted = _fit(a, b, ["1"] * 3, loss="cauchy", row_weight=np.full(60, 2.0))[0]
+    np.testing.assert_allclose(weighted.value, table.value, rtol=1e-7)
+    assert weighted.robust["downweighted"][0]["residual_mm"] == pytest.approx(np.linalg.norm(resid[12:15]), rel=1e-6)
+    jac_at = _linear(2.0 * a, 2.0 * b)                          # residuals already weighed 2 by the caller
+    names = [(f"p{k}", "1") for k in range(3)]
+    given = fit_parameters(jac_at, np.zeros(3), 2.0 * a, np.ones(3, dtype=bool), names, 1e-6, 3, 20, loss="cauchy",
+                           weighted_by=np.full(60, 2.0))[0]
+    assert given.robust["downweighted"][0]["residual_mm"] == pytest.approx(np.linalg.norm(resid[12:15]), rel=1e-6)
+
+
+def test_the_noise_needs_a_residual_beyond_the_parameters():
+    """As many residuals as parameters: no spread and no standard errors (NaN); one more: the residual's square."""
+    a = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    square = _fit(a, np.array([1.0, 2.0, 3.0]), ["1"] * 3)[0]
+    assert np.isnan(square.sigma_mm) and np.isnan(square.std_error).all()
+    b = np.array([1.0, 2.0, 3.0, 1.0])
+    one = _fit(np.vstack([a, [1.0, 1.0, 1.0]]), b, ["1"] * 3)[0]
+    rss = np.sum((np.vstack([a, [1.0, 1.0, 1.0]]) @ one.value - b) ** 2)
+    assert rss > 1.0 and one.sigma_mm == pytest.approx(np.sqrt(rss), rel=1e-9)

@@ -150,6 +150,9 @@ def test_an_unidentifiable_geometric_parameter_gets_its_plausible_error_and_is_a
     expected = np.linalg.lstsq(a[:, free], a[:, [1]], rcond=None)[0]
     np.testing.assert_allclose(table.prior_absorbed, expected, atol=1e-12)
     assert table.prior_absorbed[0, 0] == pytest.approx(1.0)
+    single = _fit(a[:, :2], rng.normal(size=30), ["mm", "mm"])[0]            # one identified, one held
+    assert single.status == ("identified", "unidentifiable")
+    np.testing.assert_allclose(single.prior_absorbed, [[1.0]], rtol=1e-12)
 
 
 WEIGHTS = {"cauchy": lambda z2: 1.0 / (1.0 + z2), "soft_l1": lambda z2: 1.0 / np.sqrt(1.0 + z2)}

@@ -99,6 +99,7 @@ def test_a_row_parameter_just_beyond_its_plausible_range_that_the_data_do_not_fi
     rest = np.linalg.lstsq(a[:, 1:], b - 50.0 * a[:, 0], rcond=None)[0]
     np.testing.assert_allclose(table.value[1:], rest, rtol=1e-8)
     assert "p0 comes out +10.5 mm from nominal" in caplog.text
+    assert "p0 comes out beyond 10 mm from nominal" in caplog.text
     a, b, truth, std = _implausible_problem(9.5, 5.0)
     table = _fit(a, b, ["mm"] * 12)[0]
     assert table.status[0] == "identified"

@@ -172,12 +172,17 @@ def _irls(a, b, scale, v, loss="cauchy"):
     raise AssertionError("IRLS did not converge")
 
 
+def _spread_scale(resid):
+    """The robust loss's scale read from residuals: 3 x 1.4826 x their median absolute value."""
+    return 3.0 * 1.4826 * np.median(np.abs(resid))
+
+
 def _robust_reference(a, b, loss):
     """The robust fit as documented, with IRLS for each fit: the scale 3 x 1.4826 x the median absolute residual,
     taken again after each fit until it moves by less than 5 %, at most four fits. The values and the fits made."""
     v, scale, fits = np.linalg.lstsq(a, b, rcond=None)[0], None, 0
     for _ in range(4):
-        new = 3.0 * 1.4826 * np.median(np.abs(a @ v - b))
+        new = _spread_scale(a @ v - b)
         if scale is not None and abs(new - scale) < 0.05 * scale:
             break
         scale, fits = new, fits + 1
@@ -202,8 +207,8 @@ def test_the_robust_fit_re_estimates_its_scale_until_it_settles_and_names_the_fa
     assert fits == 2                                            # the rule stopped it early
     table, resid = _fit(a, b, ["1"] * 3, loss="cauchy")
     np.testing.assert_allclose(table.value, v, rtol=1e-7)
-    final = 3.0 * 1.4826 * np.median(np.abs(resid))
-    weight = 1.0 / (1.0 + (resid / final) ** 2)
+    final = _spread_scale(resid)
+    weight = WEIGHTS["cauchy"]((resid / final) ** 2)
     assert table.robust["loss"] == "cauchy" and table.robust["scale_mm"] == pytest.approx(final, rel=1e-12)
     assert [d["row"] for d in table.robust["downweighted"]] == [4]
     (named,) = table.robust["downweighted"]
@@ -314,7 +319,7 @@ def test_the_noise_needs_a_residual_beyond_the_parameters():
     a = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
     square = _fit(a, np.array([1.0, 2.0, 3.0]), ["1"] * 3)[0]
     assert np.isnan(square.sigma_mm) and np.isnan(square.std_error).all()
-    b = np.array([1.0, 2.0, 3.0, 1.0])
-    one = _fit(np.vstack([a, [1.0, 1.0, 1.0]]), b, ["1"] * 3)[0]
-    rss = np.sum((np.vstack([a, [1.0, 1.0, 1.0]]) @ one.value - b) ** 2)
+    a, b = np.vstack([a, [1.0, 1.0, 1.0]]), np.array([1.0, 2.0, 3.0, 1.0])
+    one = _fit(a, b, ["1"] * 3)[0]
+    rss = np.sum((a @ one.value - b) ** 2)
     assert rss > 1.0 and one.sigma_mm == pytest.approx(np.sqrt(rss), rel=1e-9)
